@@ -1,0 +1,58 @@
+"""Reading and writing motion files: BVH and ASF/AMC, chosen by file extension."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from mocodec.errors import ConversionError, FormatError
+from mocodec.formats.asf_amc import CMU_FPS, find_asf, read_amc, read_asf, write_amc, write_asf
+from mocodec.formats.bvh import guess_units_per_metre, read_bvh, write_bvh
+from mocodec.formats.convert import to_asf_form, to_bvh_form, with_units
+from mocodec.motion import Motion
+
+READABLE = (".bvh", ".amc")
+
+
+def load(path: str | os.PathLike, *, asf: str | os.PathLike | None = None, fps: float | None = None,
+         units_per_metre: float | None = None) -> Motion:
+    """Read a ``.bvh`` or ``.amc`` file (the ASF is found beside an AMC unless given).
+
+    ``fps`` sets the rate of an AMC (default 120, the CMU rate) or overrides a BVH's
+    ``Frame Time``; ``units_per_metre`` overrides a BVH's guessed unit.
+    """
+    path = Path(path)
+    ext = path.suffix.lower()
+    if ext == ".bvh":
+        motion = read_bvh(path, units_per_metre=units_per_metre)
+        return motion if fps is None else Motion(motion.skeleton, fps, motion.channels)
+    if ext == ".amc":
+        return read_amc(path, asf, fps=CMU_FPS if fps is None else fps)
+    if ext == ".asf":
+        raise FormatError(path, None, "an ASF file holds a skeleton only; load its .amc motion instead")
+    raise FormatError(path, None, f"unknown file type {path.suffix or '(none)'!r}, expected .bvh or .amc")
+
+
+def save(motion: Motion, path: str | os.PathLike, *, asf: str | os.PathLike | None = None) -> list[Path]:
+    """Write ``motion`` as ``.bvh`` or ``.amc`` (plus its ``.asf``, by default beside it with the
+    same stem), converting the skeleton form as needed; returns the files written.
+
+    BVH does not state its unit, so a skeleton whose unit would not be recognised when read
+    back (e.g. CMU ASF units) is written in centimetres."""
+    path = Path(path)
+    ext = path.suffix.lower()
+    if ext == ".bvh":
+        bvh_motion = to_bvh_form(motion)
+        if guess_units_per_metre(bvh_motion.skeleton.height()) != bvh_motion.skeleton.units_per_metre:
+            bvh_motion = with_units(bvh_motion, 100.0)  # BVH cannot state its unit: write centimetres
+        write_bvh(bvh_motion, path)
+        return [path]
+    if ext == ".amc":
+        asf_path = Path(asf) if asf is not None else path.with_suffix(".asf")
+        write_amc(to_asf_form(motion), path, asf_path)
+        return [asf_path, path]
+    raise ConversionError(f"{path}: cannot write {path.suffix or 'files without extension'}, expected .bvh or .amc")
+
+
+__all__ = ["load", "save", "read_bvh", "write_bvh", "read_asf", "write_asf", "read_amc", "write_amc",
+           "find_asf", "to_asf_form", "to_bvh_form", "with_units", "READABLE"]

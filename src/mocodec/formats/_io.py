@@ -1,0 +1,108 @@
+"""Reading text files with clear errors, writing them atomically, and fast number parsing."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from mocodec.errors import FormatError
+
+
+def read_text(path: str | os.PathLike) -> str:
+    """The whole file as text; FormatError if it is missing, empty or binary."""
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise FormatError(path, None, "no such file") from None
+    except IsADirectoryError:
+        raise FormatError(path, None, "is a directory, expected a file") from None
+    except OSError as e:
+        raise FormatError(path, None, f"cannot read: {e.strerror}") from None
+    if not data.strip():
+        raise FormatError(path, None, "empty file")
+    if b"\0" in data[:65536]:
+        raise FormatError(path, None, "binary data (NUL bytes), expected a text file")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        try:
+            return data.decode("latin-1")
+        except UnicodeDecodeError:  # pragma: no cover - latin-1 decodes every byte
+            raise FormatError(path, None, f"not text: undecodable byte at offset {e.start}") from None
+
+
+def atomic_write(path: str | os.PathLike, text: str) -> None:
+    """Write ``text`` to a temporary file beside ``path``, then rename it into place, so a
+    reader never sees a half-written file and a failed write leaves the old file intact."""
+    path = Path(path)
+    directory = path.parent if str(path.parent) else Path(".")
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as f:
+            f.write(text)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+
+
+def parse_number(token: str, path, line: int, what: str = "a number") -> float:
+    try:
+        value = float(token)
+    except ValueError:
+        raise FormatError(path, line, f"{token!r} is not a number, expected {what}") from None
+    if not np.isfinite(value):
+        raise FormatError(path, line, f"{token!r} is not a finite number, expected {what}")
+    return value
+
+
+def parse_number_block(text: str, first_line: int, path, expected_per_line: int | None = None) -> np.ndarray:
+    """All numbers of a block of whitespace-separated values, one record per line.
+
+    With ``expected_per_line``, every non-blank line must hold exactly that many values; the
+    result is then ``(lines, expected_per_line)``. Errors name the file line (``first_line`` is
+    the line number of the block's first line).
+    """
+    raw = np.frombuffer(text.encode("latin-1", errors="replace"), dtype=np.uint8)
+    is_space = (raw == 32) | (raw == 9) | (raw == 10) | (raw == 13) | (raw == 11) | (raw == 12)
+    starts = ~is_space
+    starts[1:] &= is_space[:-1]
+    line_of_byte = np.concatenate(([0], np.cumsum(raw[:-1] == 10))) if raw.size else raw
+    token_lines = line_of_byte[starts]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        values = np.fromstring(text, sep=" ") if token_lines.size else np.zeros(0)
+    if values.size != token_lines.size:
+        bad_line = int(token_lines[values.size]) if values.size < token_lines.size else int(token_lines[-1])
+        for tok in text.split("\n")[bad_line].split():
+            parse_number(tok, path, first_line + bad_line)
+        raise FormatError(path, first_line + bad_line, "malformed number")
+    if not np.all(np.isfinite(values)):
+        bad_line = int(token_lines[np.flatnonzero(~np.isfinite(values))[0]])
+        raise FormatError(path, first_line + bad_line, "non-finite value (nan or inf), expected a number")
+    if expected_per_line is None:
+        return values
+    lines_with_tokens, counts = np.unique(token_lines, return_counts=True)
+    wrong = np.flatnonzero(counts != expected_per_line)
+    if wrong.size:
+        k = wrong[0]
+        raise FormatError(path, first_line + int(lines_with_tokens[k]),
+                          f"{counts[k]} values on the frame line, expected {expected_per_line}")
+    return values.reshape(-1, expected_per_line)
+
+
+def format_rows(values: np.ndarray, decimals: int) -> str:
+    """Rows of numbers, space separated, fixed decimals, ``-0`` written as ``0``."""
+    values = np.where(np.abs(values) < 0.5 * 10.0 ** -decimals, 0.0, values)
+    if values.size == 0:
+        return "\n" * values.shape[0]
+    fmt = " ".join([f"%.{decimals}f"] * values.shape[1])
+    return "\n".join(fmt % tuple(row) for row in values.tolist()) + "\n"

@@ -1,0 +1,192 @@
+"""A motion: a skeleton, a frame rate and the channel values of every frame."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from mocodec import kinematics, rotations
+from mocodec.skeleton import Skeleton
+
+
+def wrap_degrees(x: np.ndarray) -> np.ndarray:
+    """Map angles to [-180, 180)."""
+    return (np.asarray(x) + 180.0) % 360.0 - 180.0
+
+
+@dataclass(frozen=True, eq=False)
+class Motion:
+    """``channels`` is float64 ``(frames, skeleton.num_channels)``: degrees for rotations,
+    skeleton units for translations, in the channel order of the skeleton."""
+
+    skeleton: Skeleton
+    fps: float
+    channels: np.ndarray
+
+    def __post_init__(self):
+        ch = np.asarray(self.channels, dtype=np.float64)
+        if ch.ndim != 2 or ch.shape[1] != self.skeleton.num_channels:
+            raise ValueError(f"channels must be (frames, {self.skeleton.num_channels}), got {ch.shape}")
+        if not (np.isfinite(self.fps) and self.fps > 0):
+            raise ValueError(f"fps must be positive, got {self.fps}")
+        object.__setattr__(self, "channels", ch)
+        object.__setattr__(self, "fps", float(self.fps))
+
+    # ----- size -----------------------------------------------------------------------
+    @property
+    def num_frames(self) -> int:
+        return self.channels.shape[0]
+
+    def __len__(self) -> int:
+        return self.num_frames
+
+    @property
+    def num_channels(self) -> int:
+        return self.channels.shape[1]
+
+    @property
+    def duration(self) -> float:
+        """Seconds covered by the frames (``frames / fps``)."""
+        return self.num_frames / self.fps
+
+    @property
+    def raw_bits(self) -> int:
+        """Size at 32-bit floats for every channel of every frame: the compression reference."""
+        return 32 * self.channels.size
+
+    @property
+    def raw_bitrate(self) -> float:
+        """Bits per second at 32-bit floats."""
+        return 32.0 * self.num_channels * self.fps
+
+    # ----- selection ------------------------------------------------------------------
+    def __getitem__(self, frames: slice) -> "Motion":
+        """Frames by a slice: ``motion[100:200]`` (steps allowed; fps divides by the step)."""
+        if not isinstance(frames, slice):
+            raise TypeError("index a Motion with a slice of frames, e.g. motion[10:20]")
+        step = frames.step or 1
+        if step < 1:
+            raise ValueError("frame step must be positive")
+        return Motion(self.skeleton, self.fps / step, self.channels[frames].copy())
+
+    def slice(self, start: int, stop: int) -> "Motion":
+        return self[start:stop]
+
+    def channel_indices(self, keys) -> np.ndarray:
+        """Channel indices for ``keys``: ints, ``"joint.Xrotation"`` names or joint names (all
+        channels of that joint)."""
+        sk = self.skeleton
+        out: list[int] = []
+        for key in [keys] if isinstance(keys, (str, int, np.integer)) else keys:
+            if isinstance(key, (int, np.integer)):
+                if not -sk.num_channels <= key < sk.num_channels:
+                    raise IndexError(f"channel {key} out of range ({sk.num_channels} channels)")
+                out.append(int(key) % sk.num_channels)
+            elif "." in key:
+                out.append(sk.channel_index(key))
+            else:
+                j = sk.index(key)
+                out.extend(range(sk.channel_offsets[j], sk.channel_offsets[j + 1]))
+        return np.array(out, dtype=np.int64)
+
+    def select_channels(self, keys) -> np.ndarray:
+        """The ``(frames, k)`` values of the channels named by ``keys`` (see channel_indices)."""
+        return self.channels[:, self.channel_indices(keys)]
+
+    def with_channels(self, channels: np.ndarray) -> "Motion":
+        return replace(self, channels=np.asarray(channels, dtype=np.float64))
+
+    # ----- kinematics -----------------------------------------------------------------
+    def positions(self) -> np.ndarray:
+        """Global pivot positions ``(frames, joints, 3)`` in skeleton units."""
+        return kinematics.forward_kinematics(self.skeleton, self.channels)[0]
+
+    def positions_m(self) -> np.ndarray:
+        """Global pivot positions in metres."""
+        return self.positions() / self.skeleton.units_per_metre
+
+    def global_quaternions(self) -> np.ndarray:
+        return kinematics.forward_kinematics(self.skeleton, self.channels)[1]
+
+    # ----- comparison -----------------------------------------------------------------
+    def difference(self, other: "Motion", atol_degrees: float = 1e-6, atol_units: float = 1e-6) -> str | None:
+        """A one-line description of the first difference, or None. Angles compare modulo 360."""
+        d = self.skeleton.difference(other.skeleton, atol=atol_units)
+        if d:
+            return f"skeleton: {d}"
+        if not np.isclose(self.fps, other.fps, rtol=1e-9):
+            return f"fps {self.fps} vs {other.fps}"
+        if self.channels.shape != other.channels.shape:
+            return f"shape {self.channels.shape} vs {other.channels.shape}"
+        diff = self.channels - other.channels
+        rot = self.skeleton.rotation_mask
+        diff[:, rot] = wrap_degrees(diff[:, rot])
+        diff = np.abs(diff)
+        tol = np.where(rot, atol_degrees, atol_units)
+        bad = diff > tol
+        if bad.any():
+            f, c = np.argwhere(bad)[0]
+            return (f"frame {f}, channel {self.skeleton.channel_names[c]}: "
+                    f"{self.channels[f, c]!r} vs {other.channels[f, c]!r}")
+        return None
+
+    def isclose(self, other: "Motion", atol_degrees: float = 1e-6, atol_units: float = 1e-6) -> bool:
+        """Equal skeletons and fps, channels within the tolerances (angles modulo 360)."""
+        return self.difference(other, atol_degrees, atol_units) is None
+
+    # ----- resampling -----------------------------------------------------------------
+    def resample(self, fps: float) -> "Motion":
+        """The motion at another frame rate over the same time span.
+
+        Joints with three rotation channels are interpolated by quaternion slerp and turned
+        back into Euler angles, choosing of the two equivalent angle triples (and their 360
+        degree turns) the one nearest the linear interpolation, so curves stay continuous.
+        Translations and joints with one or two rotation axes interpolate linearly.
+        """
+        if not (np.isfinite(fps) and fps > 0):
+            raise ValueError(f"fps must be positive, got {fps}")
+        n_old = self.num_frames
+        if n_old < 2:
+            return replace(self, fps=float(fps))
+        n_new = int(np.floor((n_old - 1) * fps / self.fps + 1e-9)) + 1
+        src = np.arange(n_new) * (self.fps / fps)
+        i0 = np.minimum(np.floor(src).astype(np.int64), n_old - 2)
+        frac = src - i0
+        sk = self.skeleton
+        rot = sk.rotation_mask
+        unwrapped = self.channels.copy()
+        unwrapped[:, rot] = np.unwrap(unwrapped[:, rot], period=360.0, axis=0)
+        linear = unwrapped[i0] * (1 - frac)[:, None] + unwrapped[i0 + 1] * frac[:, None]
+        out = linear.copy()
+        for j, joint in enumerate(sk.joints):
+            if len(joint.rotation_order) != 3:
+                continue
+            first = sk.channel_offsets[j]
+            idx = first + np.array(joint.rotation_channel_indices())
+            q = rotations.euler_to_quat(self.channels[:, idx], joint.rotation_order)
+            qs = rotations.quat_slerp(q[i0], q[i0 + 1], frac)
+            out[:, idx] = _nearest_euler(rotations.quat_to_euler(qs, joint.rotation_order),
+                                         joint.rotation_order, linear[:, idx])
+        return Motion(sk, float(fps), out)
+
+
+def _nearest_euler(angles: np.ndarray, order: str, reference: np.ndarray) -> np.ndarray:
+    """Of the two Euler triples of each rotation, shifted by turns of 360, the one nearest
+    ``reference``. Tait-Bryan: (a, b, c) ~ (a+180, 180-b, c+180); proper: (a+180, -b, c+180)."""
+    alt = angles.copy()
+    alt[:, 0] += 180.0
+    alt[:, 2] += 180.0
+    alt[:, 1] = (-angles[:, 1]) if order[0] == order[2] else (180.0 - angles[:, 1])
+    best = None
+    best_cost = None
+    for cand in (angles, alt):
+        cand = reference + wrap_degrees(cand - reference)
+        cost = np.abs(cand - reference).sum(axis=1)
+        if best is None:
+            best, best_cost = cand, cost
+        else:
+            take = cost < best_cost
+            best[take] = cand[take]
+    return best
+

@@ -4,8 +4,9 @@ The perceptual coders weight channels by the kinematic chain they belong to (001
 every joint of a CMU ASF, a BVH or the built-in model needs a label. Labels come, in order of
 trust, from the joint itself (the built-in model states them), from its name (``lhumerus``,
 ``LeftArm``, ``rShldr``, ``mixamorig:LeftHand`` ...) and otherwise from the rest-pose
-topology: subtrees of the torso whose end points hang below the root are legs, subtrees
-reaching sideways are arms, the spine above the arms is the head.
+topology: subtrees of the torso whose end points hang below the root are legs, the subtree
+holding the top of the figure is the spine, other subtrees reaching sideways are arms, and the
+spine above the arms is the head.
 
 The wrist belongs to the arm as in 000 Table 5-1 (shoulder, elbow, wrist); the joints beyond it
 (palm, fingers, thumb) are the hand. A BVH ``Hand`` joint sits at the wrist (its offset is the
@@ -86,6 +87,8 @@ def _topology_chain(skeleton, joint: int) -> tuple[str, str | None]:
     side = "left" if mean_x > 0 else "right"
     if rest[leaves, 1].mean() < -0.15 * height:
         return "leg", side
+    if int(np.argmax(rest[:, 1])) in sub:  # the spine carries the top of the figure
+        return "torso", None
     if np.abs(rest[sub, 0]).max() > 0.12 * height:
         return "arm", side
     return "torso", None

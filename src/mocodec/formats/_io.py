@@ -77,14 +77,17 @@ def parse_number_block(text: str, first_line: int, path, expected_per_line: int 
     starts[1:] &= is_space[:-1]
     line_of_byte = np.concatenate(([0], np.cumsum(raw[:-1] == 10))) if raw.size else raw
     token_lines = line_of_byte[starts]
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        values = np.fromstring(text, sep=" ") if token_lines.size else np.zeros(0)
-    if values.size != token_lines.size:
-        bad_line = int(token_lines[values.size]) if values.size < token_lines.size else int(token_lines[-1])
-        for tok in text.split("\n")[bad_line].split():
-            parse_number(tok, path, first_line + bad_line)
-        raise FormatError(path, first_line + bad_line, "malformed number")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            values = np.fromstring(text, sep=" ") if token_lines.size else np.zeros(0)
+    except ValueError:  # numpy raises (or warns and stops early) at the first non-number
+        values = None
+    if values is None or values.size != token_lines.size:
+        for k, line in enumerate(text.split("\n")):
+            for tok in line.split():
+                parse_number(tok, path, first_line + k)
+        raise FormatError(path, first_line, "malformed number block")
     if not np.all(np.isfinite(values)):
         bad_line = int(token_lines[np.flatnonzero(~np.isfinite(values))[0]])
         raise FormatError(path, first_line + bad_line, "non-finite value (nan or inf), expected a number")

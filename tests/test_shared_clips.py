@@ -1,0 +1,62 @@
+"""Every clip of ../shared/data: loads, round-trips, keeps bone lengths; both formats agree."""
+
+import numpy as np
+import pytest
+
+from mocodec import load, save
+
+from conftest import SHARED
+
+pytestmark = [pytest.mark.shared_data, pytest.mark.skipif(SHARED is None, reason="../shared/data is absent")]
+
+CLIPS = sorted((SHARED / "cmu").glob("*/*.bvh")) + sorted((SHARED / "cmu").glob("*/*.amc")) if SHARED else []
+
+
+@pytest.mark.parametrize("path", CLIPS, ids=lambda p: p.name)
+def test_clip_loads_round_trips_and_keeps_bone_lengths(path, tmp_path):
+    motion = load(path)
+    assert motion.num_frames > 100 and motion.fps == 120.0
+    pos = motion.positions()
+    sk = motion.skeleton
+    bones = np.linalg.norm(pos[:, 1:] - pos[:, sk.parents[1:]], axis=2)
+    rest = np.linalg.norm(sk.offsets[1:], axis=1)
+    assert np.abs(bones - rest).max() < 1e-9 * sk.units_per_metre * 100
+    out = tmp_path / f"rt{path.suffix}"
+    save(motion, out)
+    back = load(out)
+    assert back.skeleton.isclose(sk, atol=1e-5)
+    assert back.isclose(motion, atol_degrees=1e-6, atol_units=1e-6), back.difference(motion)
+
+
+# ASF bone (pivot) -> BVH joint at the same anatomical point
+_SEGMENTS = [(("lfemur", "ltibia"), ("lThigh", "lShin")), (("ltibia", "lfoot"), ("lShin", "lFoot")),
+             (("lhumerus", "lradius"), ("lShldr", "lForeArm")), (("lradius", "lwrist"), ("lForeArm", "lHand")),
+             (("rfemur", "rtibia"), ("rThigh", "rShin")), (("rtibia", "rfoot"), ("rShin", "rFoot")),
+             (("rhumerus", "rradius"), ("rShldr", "rForeArm")), (("rradius", "rwrist"), ("rForeArm", "rHand"))]
+
+
+def _segment_directions(motion, pairs):
+    pos = motion.positions()
+    sk = motion.skeleton
+    d = np.stack([pos[:, sk.index(b)] - pos[:, sk.index(a)] for a, b in pairs], axis=1)
+    return d / np.linalg.norm(d, axis=2, keepdims=True)
+
+
+DUAL = sorted(p.stem for p in (SHARED / "cmu" / "asf_amc").glob("*.amc")
+              if (SHARED / "cmu" / "bvh" / f"{p.stem}.bvh").exists()) if SHARED else []
+
+
+@pytest.mark.parametrize("clip", DUAL)
+def test_both_formats_give_the_same_pose_sequence(clip):
+    """The BVH is a retargeting of the AMC onto another skeleton with one T-pose frame in front,
+    so positions differ but limb directions (thigh, shin, upper arm, forearm) must agree frame
+    by frame; a half-second misalignment must agree much worse."""
+    amc = load(SHARED / "cmu" / "asf_amc" / f"{clip}.amc")
+    bvh = load(SHARED / "cmu" / "bvh" / f"{clip}.bvh")
+    assert bvh.num_frames == amc.num_frames + 1
+    a = _segment_directions(amc, [s[0] for s in _SEGMENTS])
+    b = _segment_directions(bvh, [s[1] for s in _SEGMENTS])[1:]
+    angle = np.degrees(np.arccos(np.clip(np.sum(a * b, axis=2), -1, 1)))
+    shifted = np.degrees(np.arccos(np.clip(np.sum(a[60:] * b[:-60], axis=2), -1, 1)))
+    assert np.median(angle) < 8.0 and angle.mean() < 12.0
+    assert angle.mean() < 0.6 * shifted.mean()

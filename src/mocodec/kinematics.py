@@ -9,8 +9,9 @@ For joint ``i`` with parent ``p``, local rotation ``M_i`` (its Euler channels in
 
 This is the BVH rule (``C = I``) and the CMU ASF/AMC rule (offsets are bone ``direction *
 length`` in the rest frame, ``C`` the bone ``axis``). Translation channels add to the offset.
-Rotations are composed as quaternions and every joint of one tree depth is done in one numpy
-step, so the cost is a few dozen array operations whatever the clip length.
+Rotations are composed as quaternions held component by component, frames along the
+contiguous axis, and every joint of one tree depth is done in one numpy step, so the cost is a
+few hundred vector operations whatever the clip length.
 """
 
 from __future__ import annotations
@@ -58,24 +59,53 @@ def _plan(skeleton: Skeleton) -> _Plan:
     return _Plan(rot_index, rot_axis, pos_index, axis_quat, has_axis, levels)
 
 
-def _gather(channels: np.ndarray, index: np.ndarray) -> np.ndarray:
-    """``channels[:, index]`` with 0 where ``index`` is -1."""
-    out = channels[:, np.maximum(index, 0)]
-    out[:, index < 0] = 0.0
-    return out
+def _qmul(p: tuple, q: tuple) -> tuple:
+    """Hamilton product on quaternions held as four component arrays (w, x, y, z)."""
+    pw, px, py, pz = p
+    qw, qx, qy, qz = q
+    return (pw * qw - px * qx - py * qy - pz * qz,
+            pw * qx + px * qw + py * qz - pz * qy,
+            pw * qy - px * qz + py * qw + pz * qx,
+            pw * qz + px * qy - py * qx + pz * qw)
+
+
+def _rotate(q: tuple, v: tuple) -> tuple:
+    """Rotate vectors (three component arrays) by unit quaternions (four component arrays)."""
+    w, x, y, z = q
+    vx, vy, vz = v
+    tx, ty, tz = 2 * (y * vz - z * vy), 2 * (z * vx - x * vz), 2 * (x * vy - y * vx)
+    return (vx + w * tx + y * tz - z * ty, vy + w * ty + z * tx - x * tz, vz + w * tz + x * ty - y * tx)
+
+
+def _local_components(skeleton: Skeleton, channels: np.ndarray) -> tuple:
+    """Local rotations ``C M C^-1`` as four ``(joints, frames)`` component arrays.
+
+    Frames run along the last, contiguous axis so every step is a plain vector operation and a
+    tree level gathers whole rows.
+    """
+    plan = _plan(skeleton)
+    by_channel = np.vstack((channels.T, np.zeros((1, len(channels)))))  # row -1 reads zeros
+    half = np.deg2rad(by_channel[plan.rot_index]) * 0.5  # (J, 3, F)
+    cos, sin = np.cos(half), np.sin(half)
+    axis = plan.rot_axis[..., None]  # (J, 3, 3, 1)
+    q = None
+    for step in range(3):
+        e = (cos[:, step], sin[:, step] * axis[:, step, 0], sin[:, step] * axis[:, step, 1],
+             sin[:, step] * axis[:, step, 2])
+        q = e if q is None else _qmul(q, e)
+    if plan.has_axis.any():
+        rows = plan.has_axis
+        c = tuple(plan.axis_quat[rows, k][:, None] for k in range(4))
+        c_inv = (c[0], -c[1], -c[2], -c[3])
+        rotated = _qmul(_qmul(c, tuple(comp[rows] for comp in q)), c_inv)
+        for comp, new in zip(q, rotated):
+            comp[rows] = new
+    return q
 
 
 def local_quaternions(skeleton: Skeleton, channels: np.ndarray) -> np.ndarray:
     """Each joint's rotation relative to its parent, ``(frames, joints, 4)``: ``C M C^-1``."""
-    plan = _plan(skeleton)
-    half = np.deg2rad(_gather(channels, plan.rot_index)) * 0.5  # (F, J, 3)
-    steps = np.concatenate((np.cos(half)[..., None], np.sin(half)[..., None] * plan.rot_axis), axis=-1)
-    q = rotations.quat_multiply(rotations.quat_multiply(steps[:, :, 0], steps[:, :, 1]), steps[:, :, 2])
-    if plan.has_axis.any():
-        c = plan.axis_quat[plan.has_axis]
-        q[:, plan.has_axis] = rotations.quat_multiply(
-            rotations.quat_multiply(c, q[:, plan.has_axis]), rotations.quat_conjugate(c))
-    return q
+    return np.stack(_local_components(skeleton, np.asarray(channels, dtype=np.float64)), axis=-1).transpose(1, 0, 2)
 
 
 def forward_kinematics(skeleton: Skeleton, channels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -85,19 +115,23 @@ def forward_kinematics(skeleton: Skeleton, channels: np.ndarray) -> tuple[np.nda
     if channels.ndim != 2 or channels.shape[1] != skeleton.num_channels:
         raise ValueError(f"expected (frames, {skeleton.num_channels}) channels, got {channels.shape}")
     plan = _plan(skeleton)
-    local_q = local_quaternions(skeleton, channels)
-    local_pos = skeleton.offsets[None] + _gather(channels, plan.pos_index)
-    glob_q = np.empty_like(local_q)
-    glob_pos = np.empty_like(local_pos)
-    glob_q[:, 0] = local_q[:, 0]
-    glob_pos[:, 0] = local_pos[:, 0]
+    local_q = _local_components(skeleton, channels)
+    by_channel = np.vstack((channels.T, np.zeros((1, len(channels)))))
+    local_pos = skeleton.offsets[:, :, None] + by_channel[plan.pos_index]  # (J, 3, F)
+    glob_q = tuple(comp.copy() for comp in local_q)
+    glob_pos = tuple(local_pos[:, k].copy() for k in range(3))
     parents = skeleton.parents
     for level in plan.levels:
         par = parents[level]
-        parent_q = glob_q[:, par]
-        glob_q[:, level] = rotations.quat_multiply(parent_q, local_q[:, level])
-        glob_pos[:, level] = glob_pos[:, par] + rotations.quat_rotate(parent_q, local_pos[:, level])
-    return glob_pos, glob_q
+        parent_q = tuple(comp[par] for comp in glob_q)
+        for comp, new in zip(glob_q, _qmul(parent_q, tuple(comp[level] for comp in local_q))):
+            comp[level] = new
+        moved = _rotate(parent_q, tuple(local_pos[level, k] for k in range(3)))
+        for comp, new in zip(glob_pos, moved):
+            comp[level] = comp[par] + new
+    positions = np.ascontiguousarray(np.stack(glob_pos, axis=-1).transpose(1, 0, 2))
+    quats = np.ascontiguousarray(np.stack(glob_q, axis=-1).transpose(1, 0, 2))
+    return positions, quats
 
 
 def global_matrices(skeleton: Skeleton, channels: np.ndarray) -> np.ndarray:

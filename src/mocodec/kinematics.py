@@ -77,14 +77,18 @@ def _rotate(q: tuple, v: tuple) -> tuple:
     return (vx + w * tx + y * tz - z * ty, vy + w * ty + z * tx - x * tz, vz + w * tz + x * ty - y * tx)
 
 
-def _local_components(skeleton: Skeleton, channels: np.ndarray) -> tuple:
+def _by_channel(channels: np.ndarray) -> np.ndarray:
+    """Channels as ``(channels + 1, frames)`` rows; the extra zero row is what index -1 reads."""
+    return np.vstack((channels.T, np.zeros((1, len(channels)))))
+
+
+def _local_components(skeleton: Skeleton, by_channel: np.ndarray) -> tuple:
     """Local rotations ``C M C^-1`` as four ``(joints, frames)`` component arrays.
 
     Frames run along the last, contiguous axis so every step is a plain vector operation and a
     tree level gathers whole rows.
     """
     plan = _plan(skeleton)
-    by_channel = np.vstack((channels.T, np.zeros((1, len(channels)))))  # row -1 reads zeros
     half = np.deg2rad(by_channel[plan.rot_index]) * 0.5  # (J, 3, F)
     cos, sin = np.cos(half), np.sin(half)
     axis = plan.rot_axis[..., None]  # (J, 3, 3, 1)
@@ -105,7 +109,8 @@ def _local_components(skeleton: Skeleton, channels: np.ndarray) -> tuple:
 
 def local_quaternions(skeleton: Skeleton, channels: np.ndarray) -> np.ndarray:
     """Each joint's rotation relative to its parent, ``(frames, joints, 4)``: ``C M C^-1``."""
-    return np.stack(_local_components(skeleton, np.asarray(channels, dtype=np.float64)), axis=-1).transpose(1, 0, 2)
+    by_channel = _by_channel(np.asarray(channels, dtype=np.float64))
+    return np.stack(_local_components(skeleton, by_channel), axis=-1).transpose(1, 0, 2)
 
 
 def forward_kinematics(skeleton: Skeleton, channels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -115,8 +120,8 @@ def forward_kinematics(skeleton: Skeleton, channels: np.ndarray) -> tuple[np.nda
     if channels.ndim != 2 or channels.shape[1] != skeleton.num_channels:
         raise ValueError(f"expected (frames, {skeleton.num_channels}) channels, got {channels.shape}")
     plan = _plan(skeleton)
-    local_q = _local_components(skeleton, channels)
-    by_channel = np.vstack((channels.T, np.zeros((1, len(channels)))))
+    by_channel = _by_channel(channels)
+    local_q = _local_components(skeleton, by_channel)
     local_pos = skeleton.offsets[:, :, None] + by_channel[plan.pos_index]  # (J, 3, F)
     glob_q = tuple(comp.copy() for comp in local_q)
     glob_pos = tuple(local_pos[:, k].copy() for k in range(3))

@@ -70,9 +70,6 @@ class Motion:
             raise ValueError("frame step must be positive")
         return Motion(self.skeleton, self.fps / step, self.channels[frames].copy())
 
-    def slice(self, start: int, stop: int) -> "Motion":
-        return self[start:stop]
-
     def channel_indices(self, keys) -> np.ndarray:
         """Channel indices for ``keys``: ints, ``"joint.Xrotation"`` names or joint names (all
         channels of that joint)."""

@@ -18,7 +18,7 @@ One representation serves BVH, ASF/AMC and the built-in human model:
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
@@ -264,6 +264,3 @@ class Skeleton:
             if not np.allclose(ca, cb, atol=max(atol, 1e-9)):
                 return f"joint {a.name!r}: axis {a.axis} vs {b.axis}"
         return None
-
-    def with_joints(self, joints) -> "Skeleton":
-        return replace(self, joints=tuple(joints))

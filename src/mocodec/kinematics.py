@@ -22,6 +22,8 @@ from functools import lru_cache
 import numpy as np
 
 from mocodec import rotations
+from mocodec.rotations import quat_multiply_components as qmul
+from mocodec.rotations import quat_rotate_components as qrotate
 from mocodec.skeleton import Skeleton
 
 _UNIT = {"X": (1.0, 0.0, 0.0), "Y": (0.0, 1.0, 0.0), "Z": (0.0, 0.0, 1.0)}
@@ -59,24 +61,6 @@ def _plan(skeleton: Skeleton) -> _Plan:
     return _Plan(rot_index, rot_axis, pos_index, axis_quat, has_axis, levels)
 
 
-def _qmul(p: tuple, q: tuple) -> tuple:
-    """Hamilton product on quaternions held as four component arrays (w, x, y, z)."""
-    pw, px, py, pz = p
-    qw, qx, qy, qz = q
-    return (pw * qw - px * qx - py * qy - pz * qz,
-            pw * qx + px * qw + py * qz - pz * qy,
-            pw * qy - px * qz + py * qw + pz * qx,
-            pw * qz + px * qy - py * qx + pz * qw)
-
-
-def _rotate(q: tuple, v: tuple) -> tuple:
-    """Rotate vectors (three component arrays) by unit quaternions (four component arrays)."""
-    w, x, y, z = q
-    vx, vy, vz = v
-    tx, ty, tz = 2 * (y * vz - z * vy), 2 * (z * vx - x * vz), 2 * (x * vy - y * vx)
-    return (vx + w * tx + y * tz - z * ty, vy + w * ty + z * tx - x * tz, vz + w * tz + x * ty - y * tx)
-
-
 def _by_channel(channels: np.ndarray) -> np.ndarray:
     """Channels as ``(channels + 1, frames)`` rows; the extra zero row is what index -1 reads."""
     return np.vstack((channels.T, np.zeros((1, len(channels)))))
@@ -96,12 +80,12 @@ def _local_components(skeleton: Skeleton, by_channel: np.ndarray) -> tuple:
     for step in range(3):
         e = (cos[:, step], sin[:, step] * axis[:, step, 0], sin[:, step] * axis[:, step, 1],
              sin[:, step] * axis[:, step, 2])
-        q = e if q is None else _qmul(q, e)
+        q = e if q is None else qmul(q, e)
     if plan.has_axis.any():
         rows = plan.has_axis
         c = tuple(plan.axis_quat[rows, k][:, None] for k in range(4))
         c_inv = (c[0], -c[1], -c[2], -c[3])
-        rotated = _qmul(_qmul(c, tuple(comp[rows] for comp in q)), c_inv)
+        rotated = qmul(qmul(c, tuple(comp[rows] for comp in q)), c_inv)
         for comp, new in zip(q, rotated):
             comp[rows] = new
     return q
@@ -129,9 +113,9 @@ def forward_kinematics(skeleton: Skeleton, channels: np.ndarray) -> tuple[np.nda
     for level in plan.levels:
         par = parents[level]
         parent_q = tuple(comp[par] for comp in glob_q)
-        for comp, new in zip(glob_q, _qmul(parent_q, tuple(comp[level] for comp in local_q))):
+        for comp, new in zip(glob_q, qmul(parent_q, tuple(comp[level] for comp in local_q))):
             comp[level] = new
-        moved = _rotate(parent_q, tuple(local_pos[level, k] for k in range(3)))
+        moved = qrotate(parent_q, tuple(local_pos[level, k] for k in range(3)))
         for comp, new in zip(glob_pos, moved):
             comp[level] = comp[par] + new
     positions = np.ascontiguousarray(np.stack(glob_pos, axis=-1).transpose(1, 0, 2))

@@ -63,20 +63,22 @@ def euler_to_matrix(angles: np.ndarray, order: str, degrees: bool = True) -> np.
     return m
 
 
+def quat_multiply_components(p: tuple, q: tuple) -> tuple:
+    """Hamilton product ``p * q`` on quaternions held as four component arrays (w, x, y, z).
+
+    The component form lets callers keep each component contiguous (forward kinematics)."""
+    pw, px, py, pz = p
+    qw, qx, qy, qz = q
+    return (pw * qw - px * qx - py * qy - pz * qz,
+            pw * qx + px * qw + py * qz - pz * qy,
+            pw * qy - px * qz + py * qw + pz * qx,
+            pw * qz + px * qy - py * qx + pz * qw)
+
+
 def quat_multiply(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     """Hamilton product ``p * q`` (apply q, then p)."""
     p, q = np.asarray(p, dtype=np.float64), np.asarray(q, dtype=np.float64)
-    pw, px, py, pz = np.moveaxis(p, -1, 0)
-    qw, qx, qy, qz = np.moveaxis(q, -1, 0)
-    return np.stack(
-        (
-            pw * qw - px * qx - py * qy - pz * qz,
-            pw * qx + px * qw + py * qz - pz * qy,
-            pw * qy - px * qz + py * qw + pz * qx,
-            pw * qz + px * qy - py * qx + pz * qw,
-        ),
-        axis=-1,
-    )
+    return np.stack(quat_multiply_components(tuple(np.moveaxis(p, -1, 0)), tuple(np.moveaxis(q, -1, 0))), axis=-1)
 
 
 def quat_conjugate(q: np.ndarray) -> np.ndarray:
@@ -246,9 +248,16 @@ def quat_distance(q1: np.ndarray, q2: np.ndarray) -> np.ndarray:
     return np.arccos(np.clip(2.0 * dot * dot - 1.0, -1.0, 1.0))
 
 
+def quat_rotate_components(q: tuple, v: tuple) -> tuple:
+    """Rotate vectors (three component arrays) by unit quaternions (four component arrays):
+    ``v + w t + u x t`` with ``t = 2 u x v``."""
+    w, x, y, z = q
+    vx, vy, vz = v
+    tx, ty, tz = 2 * (y * vz - z * vy), 2 * (z * vx - x * vz), 2 * (x * vy - y * vx)
+    return (vx + w * tx + y * tz - z * ty, vy + w * ty + z * tx - x * tz, vz + w * tz + x * ty - y * tx)
+
+
 def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Rotate vectors ``(..., 3)`` by unit quaternions ``(..., 4)``."""
     q, v = np.asarray(q, dtype=np.float64), np.asarray(v, dtype=np.float64)
-    w, u = q[..., :1], q[..., 1:]
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
+    return np.stack(quat_rotate_components(tuple(np.moveaxis(q, -1, 0)), tuple(np.moveaxis(v, -1, 0))), axis=-1)

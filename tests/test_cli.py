@@ -45,3 +45,26 @@ def test_demo_runs(capsys):
     assert main(["demo"]) == 0
     out = capsys.readouterr().out
     assert "round trip  BVH" in out and "round trip  AMC" in out
+
+
+def test_compare_prints_every_measure(tmp_path, capsys):
+    import json
+
+    copy = tmp_path / "copy.bvh"
+    assert main(["convert", str(DATA / "07_03.bvh"), str(copy)]) == 0
+    capsys.readouterr()
+    assert main(["compare", str(DATA / "07_03.bvh"), str(copy), "--per-joint"]) == 0
+    out = capsys.readouterr().out
+    for word in ("PSNR", "VPSNR", "joint error", "shell error", "foot sliding", "jerk", "(6-9)", "rShldr"):
+        assert word in out
+    assert main(["compare", str(DATA / "07_03.amc"), str(DATA / "07_03.amc"), "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["summary"]["max_joint_error_cm"] == 0 and data["summary"]["psnr_db"] is None   # lossless
+
+
+def test_compare_rejects_mismatched_pairs(capsys):
+    assert main(["compare", str(DATA / "07_03.bvh"), str(DATA / "07_03.amc")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "different skeletons" in err
+    assert main(["compare", str(DATA / "07_03.bvh"), str(DATA / "09_02.bvh")]) == 2
+    assert "frame counts" in capsys.readouterr().err

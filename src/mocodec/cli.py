@@ -1,4 +1,4 @@
-"""The ``mocodec`` command line: ``info``, ``convert`` and ``demo``.
+"""The ``mocodec`` command line: ``info``, ``convert``, ``compare``, ``analyze`` and ``demo``.
 
 User errors (bad files, impossible conversions) print one line and exit with status 2.
 """
@@ -72,6 +72,47 @@ def cmd_convert(args) -> int:
     return 0
 
 
+def cmd_compare(args) -> int:
+    import json
+
+    from mocodec.metrics import compare
+
+    original = load(args.original, asf=args.asf, fps=args.fps)
+    decoded = load(args.decoded, asf=args.decoded_asf or args.asf, fps=args.fps)
+    result = compare(original, decoded, shell_cm=args.shell_cm)
+    if args.json:
+        print(json.dumps(result.as_dict(per_joint=args.per_joint), indent=2, allow_nan=False))
+        return 0
+    print(f"original    {args.original}\ndecoded     {args.decoded}\n")
+    print(result.table())
+    if args.per_joint:
+        print()
+        print(result.per_joint_table())
+    return 0
+
+
+def cmd_analyze(args) -> int:
+    import json
+
+    from mocodec.analysis import analyze, summary_text
+    from mocodec.formats._io import atomic_write
+
+    motion = load(args.file, asf=args.asf, fps=args.fps)
+    result = analyze(motion, noise_deg=args.noise_deg, noise_cm=args.noise_cm)
+    print(summary_text(result, args.file))
+    if args.out:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        atomic_write(out / "analysis.json", json.dumps(result, indent=1, allow_nan=False) + "\n")
+        written = [out / "analysis.json"]
+        if not args.no_plots:
+            from mocodec.analysis.plots import write_plots
+
+            written += write_plots(motion, out)
+        print(f"\nwrote {', '.join(str(p) for p in written)}")
+    return 0
+
+
 def cmd_demo(args) -> int:
     """Load the bundled sample, run forward kinematics, round-trip it through BVH and AMC."""
     import tempfile
@@ -126,6 +167,33 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out-asf", help="where to write the ASF when OUT is .amc")
     common(p)
     p.set_defaults(func=cmd_convert)
+
+    p = sub.add_parser("compare", help="every error measure of a decoded motion against its original",
+                       description="PSNR, NSNR, VPSNR (000 ch. 6), group measures (6-9 to 6-14), joint and "
+                                   "shell position errors in cm, foot sliding, jerk, joint-limit violations "
+                                   "and derivative outliers. Both files need the same skeleton, rate and "
+                                   "frame count.")
+    p.add_argument("original", metavar="ORIGINAL", help=".bvh or .amc file")
+    p.add_argument("decoded", metavar="DECODED", help=".bvh or .amc file")
+    p.add_argument("--decoded-asf", help="ASF skeleton of an .amc DECODED (default: as for ORIGINAL)")
+    p.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    p.add_argument("--per-joint", action="store_true", help="also list errors per joint (and per DOF in JSON)")
+    p.add_argument("--shell-cm", type=float, default=3.0, help="shell distance off each bone (default 3 cm)")
+    common(p)
+    p.set_defaults(func=cmd_compare)
+
+    p = sub.add_parser("analyze", help="statistics, spectra and bit-rate estimates of a motion (000 ch. 5)",
+                       description="Per-DOF ranges, usable resolution in bits and the raw bit rate; per body "
+                                   "part the spectra (Welch, Blackman-Tukey, AR) with their 99%% power "
+                                   "frequency and 40/50 dB cut-offs, the Markov fit of the autocorrelation, "
+                                   "a stationarity check and the shape of the first-difference PDF.")
+    p.add_argument("file", metavar="FILE", help=".bvh or .amc file")
+    p.add_argument("--out", metavar="DIR", help="write analysis.json and PNG plots here")
+    p.add_argument("--no-plots", action="store_true", help="with --out, write only the JSON")
+    p.add_argument("--noise-deg", type=float, default=0.1, help="sensor noise of angles (std, default 0.1 deg)")
+    p.add_argument("--noise-cm", type=float, default=0.1, help="sensor noise of positions (std, default 0.1 cm)")
+    common(p)
+    p.set_defaults(func=cmd_analyze)
 
     p = sub.add_parser("demo", help="run the main job on the bundled sample clip",
                        description="Load the bundled CMU walk, run forward kinematics and round-trip it "

@@ -1,0 +1,164 @@
+"""Pose measures in centimetres, via forward kinematics (beyond the theses).
+
+- Joint position error: |u(n) - u'(n)| of every pivot (joints and end sites), per joint and
+  overall, mean and max.
+- Shell error: the error at points a shell distance (3 cm by default) off each bone, along
+  the three axes of the joint's global frame, worst of the three: the points a skin or mesh
+  near the bone would follow. It sees twists about the bone that pivot positions miss.
+- Foot sliding: horizontal speed of the decoded foot while the original foot is planted
+  (near the ground and nearly still), beside the original's own speed in those frames.
+- Jerk: RMS third derivative of the pivot positions, original and decoded; a coder that adds
+  jitter raises it, one that over-smooths lowers it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from mocodec.skeleton import Skeleton
+
+SHELL_CM = 3.0
+CONTACT_HEIGHT_CM = 5.0
+CONTACT_SPEED_CM_S = 20.0
+
+
+@dataclass(frozen=True)
+class JointErrors:
+    """Distances in cm: ``per_frame (frames, joints)`` and its summaries."""
+
+    per_frame: np.ndarray
+
+    @property
+    def joint_mean(self) -> np.ndarray:
+        return self.per_frame.mean(axis=0)
+
+    @property
+    def joint_max(self) -> np.ndarray:
+        return self.per_frame.max(axis=0)
+
+    @property
+    def mean(self) -> float:
+        return float(self.per_frame.mean()) if self.per_frame.size else 0.0
+
+    @property
+    def max(self) -> float:
+        return float(self.per_frame.max()) if self.per_frame.size else 0.0
+
+
+def joint_errors(positions_cm: np.ndarray, decoded_positions_cm: np.ndarray) -> JointErrors:
+    """Pivot position errors (cm) of ``(frames, joints, 3)`` arrays."""
+    return JointErrors(np.linalg.norm(decoded_positions_cm - positions_cm, axis=2))
+
+
+def bone_joints(skeleton: Skeleton) -> np.ndarray:
+    """Joints that carry a bone (have children): the ones a shell surrounds."""
+    return np.flatnonzero(~skeleton.end_sites & (np.array([len(c) for c in skeleton.children]) > 0))
+
+
+def shell_errors(skeleton: Skeleton, positions_cm: np.ndarray, quats: np.ndarray, decoded_positions_cm: np.ndarray,
+                 decoded_quats: np.ndarray, shell_cm: float = SHELL_CM) -> JointErrors:
+    """Worst error (cm) of the three points ``shell_cm`` along each global axis of every bone
+    joint, ``per_frame (frames, bones)`` in the order of :func:`bone_joints`."""
+    idx = bone_joints(skeleton)
+    dp = np.moveaxis(decoded_positions_cm[:, idx] - positions_cm[:, idx], -1, 0)
+    axes = _frame_axes(np.moveaxis(quats[:, idx], -1, 0))
+    decoded_axes = _frame_axes(np.moveaxis(decoded_quats[:, idx], -1, 0))
+    worst = np.zeros(dp.shape[1:])
+    for axis, decoded_axis in zip(axes, decoded_axes):
+        sq = sum(np.square(d + shell_cm * (b - a)) for d, a, b in zip(dp, axis, decoded_axis))
+        np.maximum(worst, sq, out=worst)
+    return JointErrors(np.sqrt(worst))
+
+
+def _frame_axes(q: np.ndarray) -> tuple:
+    """The three columns of the rotation matrix of unit quaternions given as components
+    ``(w, x, y, z)``: the joint's x, y and z axes in the world, as component triples."""
+    w, x, y, z = q
+    return ((1 - 2 * (y * y + z * z), 2 * (x * y + z * w), 2 * (x * z - y * w)),
+            (2 * (x * y - z * w), 1 - 2 * (x * x + z * z), 2 * (y * z + x * w)),
+            (2 * (x * z + y * w), 2 * (y * z - x * w), 1 - 2 * (x * x + y * y)))
+
+
+def up_axis(skeleton: Skeleton) -> tuple[int, float]:
+    """(axis, sign) of 'up': opposite to the direction from the root to the leg ends in the
+    rest pose; Y up when the skeleton has no legs."""
+    legs = [i for i, p in enumerate(skeleton.body_parts) if p.endswith("_leg") and not skeleton.children[i]]
+    if not legs:
+        return 1, 1.0
+    down = skeleton.rest_positions[legs].mean(axis=0) - skeleton.rest_positions[0]
+    axis = int(np.argmax(np.abs(down)))
+    return axis, -float(np.sign(down[axis]) or -1.0)
+
+
+def foot_points(skeleton: Skeleton) -> np.ndarray:
+    """Leg joints in the lowest fifth of the legs' rest-pose height: ankles, toes, their ends."""
+    legs = np.array([p.endswith("_leg") for p in skeleton.body_parts])
+    if not legs.any():
+        return np.zeros(0, dtype=int)
+    axis, sign = up_axis(skeleton)
+    height = sign * skeleton.rest_positions[:, axis]
+    low, high = height[legs].min(), height[legs].max()
+    return np.flatnonzero(legs & (height <= low + 0.2 * (high - low)))
+
+
+@dataclass(frozen=True)
+class FootSliding:
+    contact_fraction: float     # share of foot-point samples planted in the original
+    original_cm_s: float        # mean horizontal speed of the original foot while planted
+    decoded_cm_s: float         # the same for the decoded foot
+
+    @property
+    def excess_cm_s(self) -> float:
+        return self.decoded_cm_s - self.original_cm_s
+
+
+def foot_sliding(skeleton: Skeleton, positions_cm: np.ndarray, decoded_positions_cm: np.ndarray, fps: float,
+                 contact_height_cm: float = CONTACT_HEIGHT_CM, contact_speed_cm_s: float = CONTACT_SPEED_CM_S) -> FootSliding | None:
+    """Foot sliding over the frames where the original foot is planted; None without feet.
+
+    A foot point is planted when it is within ``contact_height_cm`` of the ground (the lowest
+    foot point's 1st-percentile height, plus the point's own rest height above the sole) and
+    its horizontal speed is below ``contact_speed_cm_s``."""
+    feet = foot_points(skeleton)
+    if feet.size == 0 or positions_cm.shape[0] < 2:
+        return None
+    axis, sign = up_axis(skeleton)
+    flat = [k for k in range(3) if k != axis]
+    height = sign * positions_cm[:, feet, axis]
+    rest = sign * skeleton.rest_positions[feet, axis] * (100.0 / skeleton.units_per_metre)
+    lift = rest - rest.min()
+    ground = np.percentile(height, 1, axis=0).min()
+
+    def speed(p):
+        return np.linalg.norm(np.gradient(p[:, feet][:, :, flat], axis=0), axis=2) * fps
+
+    orig_speed = speed(positions_cm)
+    planted = (height - ground <= lift + contact_height_cm) & (orig_speed <= contact_speed_cm_s)
+    if not planted.any():
+        return FootSliding(0.0, float("nan"), float("nan"))
+    return FootSliding(float(planted.mean()), float(orig_speed[planted].mean()),
+                       float(speed(decoded_positions_cm)[planted].mean()))
+
+
+@dataclass(frozen=True)
+class Jerk:
+    original_m_s3: float    # RMS jerk of the original pivots
+    decoded_m_s3: float
+
+    @property
+    def ratio(self) -> float:
+        return self.decoded_m_s3 / self.original_m_s3 if self.original_m_s3 > 0 else float("nan")
+
+
+def rms_jerk(positions_cm: np.ndarray, fps: float) -> float:
+    """RMS over frames and pivots of |d^3 u / dt^3| in m/s^3 (third differences)."""
+    if positions_cm.shape[0] < 4:
+        return float("nan")
+    third = np.diff(positions_cm, n=3, axis=0) * (fps ** 3 / 100.0)
+    return float(np.sqrt(np.square(third).sum(axis=2).mean()))
+
+
+def jerk(positions_cm: np.ndarray, decoded_positions_cm: np.ndarray, fps: float) -> Jerk:
+    return Jerk(rms_jerk(positions_cm, fps), rms_jerk(decoded_positions_cm, fps))

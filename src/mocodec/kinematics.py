@@ -9,9 +9,10 @@ For joint ``i`` with parent ``p``, local rotation ``M_i`` (its Euler channels in
 
 This is the BVH rule (``C = I``) and the CMU ASF/AMC rule (offsets are bone ``direction *
 length`` in the rest frame, ``C`` the bone ``axis``). Translation channels add to the offset.
-Rotations are composed as quaternions held component by component, frames along the
-contiguous axis, and every joint of one tree depth is done in one numpy step, so the cost is a
-few hundred vector operations whatever the clip length.
+Rotations are composed as quaternions in a compiled (numba) loop over frames and joints;
+joints come after their parents (the skeleton guarantees it), so one pass suffices. Every
+error measure in centimetres and every error-bounded encoder runs it, so it is kept lean:
+about 10 ms for 10,000 frames of a 38-joint CMU skeleton.
 """
 
 from __future__ import annotations
@@ -19,108 +20,143 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import lru_cache
 
+import numba
 import numpy as np
 
 from mocodec import rotations
-from mocodec.rotations import quat_multiply_components as qmul
-from mocodec.rotations import quat_rotate_components as qrotate
 from mocodec.skeleton import Skeleton
 
-_UNIT = {"X": (1.0, 0.0, 0.0), "Y": (0.0, 1.0, 0.0), "Z": (0.0, 0.0, 1.0)}
+_AXIS_ID = {"X": 0, "Y": 1, "Z": 2}
 
 
 @dataclass(frozen=True)
 class _Plan:
     rot_index: np.ndarray  # (J, 3) channel of each rotation step, -1 = none
-    rot_axis: np.ndarray  # (J, 3, 3) unit axis of each step
+    rot_axis: np.ndarray  # (J, 3) axis (0 = X, 1 = Y, 2 = Z) of each step
     pos_index: np.ndarray  # (J, 3) channel of X/Y/Z translation, -1 = none
     axis_quat: np.ndarray  # (J, 4) pre-rotation C
     has_axis: np.ndarray  # (J,) bool
-    levels: tuple[np.ndarray, ...]  # joints of depth 1, 2, ...
+    offsets: np.ndarray  # (J, 3)
+    parents: np.ndarray  # (J,)
 
 
 @lru_cache(maxsize=64)
 def _plan(skeleton: Skeleton) -> _Plan:
     n = len(skeleton)
     rot_index = -np.ones((n, 3), dtype=np.int64)
-    rot_axis = np.zeros((n, 3, 3))
-    rot_axis[..., 0] = 1.0
+    rot_axis = np.zeros((n, 3), dtype=np.int64)
     pos_index = -np.ones((n, 3), dtype=np.int64)
     for i, j in enumerate(skeleton.joints):
         first = skeleton.channel_offsets[i]
         for step, (axis, channel) in enumerate(zip(j.rotation_order, j.rotation_channel_indices())):
             rot_index[i, step] = first + channel
-            rot_axis[i, step] = _UNIT[axis]
+            rot_axis[i, step] = _AXIS_ID[axis]
         for k, axis in enumerate("XYZ"):
             if f"{axis}position" in j.channels:
                 pos_index[i, k] = first + j.channels.index(f"{axis}position")
-    axis_quat = rotations.matrix_to_quat(skeleton.axis_matrices)
+    axis_quat = np.ascontiguousarray(rotations.matrix_to_quat(skeleton.axis_matrices))
     has_axis = np.array([j.has_axis for j in skeleton.joints])
-    depths = skeleton.depths
-    levels = tuple(np.flatnonzero(depths == d) for d in range(1, int(depths.max()) + 1))
-    return _Plan(rot_index, rot_axis, pos_index, axis_quat, has_axis, levels)
+    return _Plan(rot_index, rot_axis, pos_index, axis_quat, has_axis,
+                 np.ascontiguousarray(skeleton.offsets, dtype=np.float64), skeleton.parents.astype(np.int64))
 
 
-def _by_channel(channels: np.ndarray) -> np.ndarray:
-    """Channels as ``(channels + 1, frames)`` rows; the extra zero row is what index -1 reads."""
-    return np.vstack((channels.T, np.zeros((1, len(channels)))))
+@numba.njit(cache=True)
+def _fk_kernel(channels, cos_half, sin_half, rot_index, rot_axis, pos_index, axis_quat, has_axis, offsets, parents,
+               pos, quat, local, want_local):
+    """Global positions and rotations; with ``want_local`` also each joint's C M C^-1.
+
+    Each Euler step multiplies by (cos, sin * unit axis), written out per axis. Everything is
+    in this one function on purpose: split into numba helpers it runs six times slower."""
+    for f in range(channels.shape[0]):
+        for j in range(parents.shape[0]):
+            w, x, y, z = 1.0, 0.0, 0.0, 0.0
+            for step in range(3):
+                c = rot_index[j, step]
+                if c < 0:
+                    break
+                cs, sn = cos_half[f, c], sin_half[f, c]
+                a = rot_axis[j, step]
+                if a == 0:
+                    w, x, y, z = w * cs - x * sn, w * sn + x * cs, y * cs + z * sn, z * cs - y * sn
+                elif a == 1:
+                    w, x, y, z = w * cs - y * sn, x * cs - z * sn, w * sn + y * cs, x * sn + z * cs
+                else:
+                    w, x, y, z = w * cs - z * sn, x * cs + y * sn, y * cs - x * sn, w * sn + z * cs
+            if has_axis[j]:
+                cw, cx, cy, cz = axis_quat[j, 0], axis_quat[j, 1], axis_quat[j, 2], axis_quat[j, 3]
+                w, x, y, z = (cw * w - cx * x - cy * y - cz * z, cw * x + cx * w + cy * z - cz * y,
+                              cw * y - cx * z + cy * w + cz * x, cw * z + cx * y - cy * x + cz * w)
+                w, x, y, z = (w * cw + x * cx + y * cy + z * cz, -w * cx + x * cw - y * cz + z * cy,
+                              -w * cy + x * cz + y * cw - z * cx, -w * cz - x * cy + y * cx + z * cw)
+            if want_local:
+                local[f, j, 0] = w
+                local[f, j, 1] = x
+                local[f, j, 2] = y
+                local[f, j, 3] = z
+            tx, ty, tz = offsets[j, 0], offsets[j, 1], offsets[j, 2]
+            if pos_index[j, 0] >= 0:
+                tx += channels[f, pos_index[j, 0]]
+            if pos_index[j, 1] >= 0:
+                ty += channels[f, pos_index[j, 1]]
+            if pos_index[j, 2] >= 0:
+                tz += channels[f, pos_index[j, 2]]
+            p = parents[j]
+            if p < 0:
+                quat[f, j, 0] = w
+                quat[f, j, 1] = x
+                quat[f, j, 2] = y
+                quat[f, j, 3] = z
+                pos[f, j, 0] = tx
+                pos[f, j, 1] = ty
+                pos[f, j, 2] = tz
+                continue
+            pw, px, py, pz = quat[f, p, 0], quat[f, p, 1], quat[f, p, 2], quat[f, p, 3]
+            quat[f, j, 0] = pw * w - px * x - py * y - pz * z
+            quat[f, j, 1] = pw * x + px * w + py * z - pz * y
+            quat[f, j, 2] = pw * y - px * z + py * w + pz * x
+            quat[f, j, 3] = pw * z + px * y - py * x + pz * w
+            # v + w t + u x t with t = 2 u x v: the parent's rotation applied to the offset
+            ux, uy, uz = 2.0 * (py * tz - pz * ty), 2.0 * (pz * tx - px * tz), 2.0 * (px * ty - py * tx)
+            pos[f, j, 0] = pos[f, p, 0] + tx + pw * ux + py * uz - pz * uy
+            pos[f, j, 1] = pos[f, p, 1] + ty + pw * uy + pz * ux - px * uz
+            pos[f, j, 2] = pos[f, p, 2] + tz + pw * uz + px * uy - py * ux
 
 
-def _local_components(skeleton: Skeleton, by_channel: np.ndarray) -> tuple:
-    """Local rotations ``C M C^-1`` as four ``(joints, frames)`` component arrays.
+def _checked(skeleton: Skeleton, channels: np.ndarray) -> np.ndarray:
+    channels = np.ascontiguousarray(channels, dtype=np.float64)
+    if channels.ndim != 2 or channels.shape[1] != skeleton.num_channels:
+        raise ValueError(f"expected (frames, {skeleton.num_channels}) channels, got {channels.shape}")
+    return channels
 
-    Frames run along the last, contiguous axis so every step is a plain vector operation and a
-    tree level gathers whole rows.
-    """
+
+def _half_angles(channels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """cos and sin of every channel's half angle, by numpy's vectorised (SIMD) trigonometry,
+    which is several times faster than the scalar calls inside the loop."""
+    half = channels * (np.pi / 360.0)
+    return np.cos(half), np.sin(half)
+
+
+def _run(skeleton: Skeleton, channels: np.ndarray, want_local: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    channels = _checked(skeleton, channels)
     plan = _plan(skeleton)
-    half = np.deg2rad(by_channel[plan.rot_index]) * 0.5  # (J, 3, F)
-    cos, sin = np.cos(half), np.sin(half)
-    axis = plan.rot_axis[..., None]  # (J, 3, 3, 1)
-    q = None
-    for step in range(3):
-        e = (cos[:, step], sin[:, step] * axis[:, step, 0], sin[:, step] * axis[:, step, 1],
-             sin[:, step] * axis[:, step, 2])
-        q = e if q is None else qmul(q, e)
-    if plan.has_axis.any():
-        rows = plan.has_axis
-        c = tuple(plan.axis_quat[rows, k][:, None] for k in range(4))
-        c_inv = (c[0], -c[1], -c[2], -c[3])
-        rotated = qmul(qmul(c, tuple(comp[rows] for comp in q)), c_inv)
-        for comp, new in zip(q, rotated):
-            comp[rows] = new
-    return q
+    frames, joints = len(channels), len(skeleton)
+    pos, quat = np.empty((frames, joints, 3)), np.empty((frames, joints, 4))
+    local = np.empty((frames, joints, 4) if want_local else (0, 0, 4))
+    _fk_kernel(channels, *_half_angles(channels), plan.rot_index, plan.rot_axis, plan.pos_index, plan.axis_quat,
+               plan.has_axis, plan.offsets, plan.parents, pos, quat, local, want_local)
+    return pos, quat, local
 
 
 def local_quaternions(skeleton: Skeleton, channels: np.ndarray) -> np.ndarray:
     """Each joint's rotation relative to its parent, ``(frames, joints, 4)``: ``C M C^-1``."""
-    by_channel = _by_channel(np.asarray(channels, dtype=np.float64))
-    return np.stack(_local_components(skeleton, by_channel), axis=-1).transpose(1, 0, 2)
+    return _run(skeleton, channels, True)[2]
 
 
 def forward_kinematics(skeleton: Skeleton, channels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Global pivot positions ``(frames, joints, 3)`` (skeleton units) and global orientations
     as unit quaternions ``(frames, joints, 4)`` for a ``(frames, channels)`` array."""
-    channels = np.asarray(channels, dtype=np.float64)
-    if channels.ndim != 2 or channels.shape[1] != skeleton.num_channels:
-        raise ValueError(f"expected (frames, {skeleton.num_channels}) channels, got {channels.shape}")
-    plan = _plan(skeleton)
-    by_channel = _by_channel(channels)
-    local_q = _local_components(skeleton, by_channel)
-    local_pos = skeleton.offsets[:, :, None] + by_channel[plan.pos_index]  # (J, 3, F)
-    glob_q = tuple(comp.copy() for comp in local_q)
-    glob_pos = tuple(local_pos[:, k].copy() for k in range(3))
-    parents = skeleton.parents
-    for level in plan.levels:
-        par = parents[level]
-        parent_q = tuple(comp[par] for comp in glob_q)
-        for comp, new in zip(glob_q, qmul(parent_q, tuple(comp[level] for comp in local_q))):
-            comp[level] = new
-        moved = qrotate(parent_q, tuple(local_pos[level, k] for k in range(3)))
-        for comp, new in zip(glob_pos, moved):
-            comp[level] = comp[par] + new
-    positions = np.ascontiguousarray(np.stack(glob_pos, axis=-1).transpose(1, 0, 2))
-    quats = np.ascontiguousarray(np.stack(glob_q, axis=-1).transpose(1, 0, 2))
-    return positions, quats
+    pos, quat, _ = _run(skeleton, channels, False)
+    return pos, quat
 
 
 def global_matrices(skeleton: Skeleton, channels: np.ndarray) -> np.ndarray:

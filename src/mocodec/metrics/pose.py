@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from mocodec.skeleton import Skeleton
@@ -62,23 +63,35 @@ def shell_errors(skeleton: Skeleton, positions_cm: np.ndarray, quats: np.ndarray
     """Worst error (cm) of the three points ``shell_cm`` along each global axis of every bone
     joint, ``per_frame (frames, bones)`` in the order of :func:`bone_joints`."""
     idx = bone_joints(skeleton)
-    dp = np.moveaxis(decoded_positions_cm[:, idx] - positions_cm[:, idx], -1, 0)
-    axes = _frame_axes(np.moveaxis(quats[:, idx], -1, 0))
-    decoded_axes = _frame_axes(np.moveaxis(decoded_quats[:, idx], -1, 0))
-    worst = np.zeros(dp.shape[1:])
-    for axis, decoded_axis in zip(axes, decoded_axes):
-        sq = sum(np.square(d + shell_cm * (b - a)) for d, a, b in zip(dp, axis, decoded_axis))
-        np.maximum(worst, sq, out=worst)
-    return JointErrors(np.sqrt(worst))
+    out = np.empty((positions_cm.shape[0], idx.size))
+    _shell_kernel(np.ascontiguousarray(positions_cm), np.ascontiguousarray(quats),
+                  np.ascontiguousarray(decoded_positions_cm), np.ascontiguousarray(decoded_quats), idx,
+                  float(shell_cm), out)
+    return JointErrors(out)
 
 
-def _frame_axes(q: np.ndarray) -> tuple:
-    """The three columns of the rotation matrix of unit quaternions given as components
-    ``(w, x, y, z)``: the joint's x, y and z axes in the world, as component triples."""
-    w, x, y, z = q
-    return ((1 - 2 * (y * y + z * z), 2 * (x * y + z * w), 2 * (x * z - y * w)),
-            (2 * (x * y - z * w), 1 - 2 * (x * x + z * z), 2 * (y * z + x * w)),
-            (2 * (x * z + y * w), 2 * (y * z - x * w), 1 - 2 * (x * x + y * y)))
+@numba.njit(cache=True)
+def _shell_kernel(pos, quat, dpos, dquat, joints, d, out):
+    """For each frame and bone joint: max over k of |dp + d (R'_k - R_k)|, with R_k the k-th
+    column of the rotation matrix of the joint's global quaternion."""
+    for f in range(pos.shape[0]):
+        for b in range(joints.size):
+            j = joints[b]
+            w, x, y, z = quat[f, j, 0], quat[f, j, 1], quat[f, j, 2], quat[f, j, 3]
+            v, s, t, u = dquat[f, j, 0], dquat[f, j, 1], dquat[f, j, 2], dquat[f, j, 3]
+            ex, ey, ez = dpos[f, j, 0] - pos[f, j, 0], dpos[f, j, 1] - pos[f, j, 1], dpos[f, j, 2] - pos[f, j, 2]
+            # columns of the rotation matrices, decoded minus original, scaled by d
+            a0 = ex + d * (-2 * (t * t + u * u) + 2 * (y * y + z * z))
+            a1 = ey + d * (2 * (s * t + u * v) - 2 * (x * y + z * w))
+            a2 = ez + d * (2 * (s * u - t * v) - 2 * (x * z - y * w))
+            b0 = ex + d * (2 * (s * t - u * v) - 2 * (x * y - z * w))
+            b1 = ey + d * (-2 * (s * s + u * u) + 2 * (x * x + z * z))
+            b2 = ez + d * (2 * (t * u + s * v) - 2 * (y * z + x * w))
+            c0 = ex + d * (2 * (s * u + t * v) - 2 * (x * z + y * w))
+            c1 = ey + d * (2 * (t * u - s * v) - 2 * (y * z - x * w))
+            c2 = ez + d * (-2 * (s * s + t * t) + 2 * (x * x + y * y))
+            worst = max(a0 * a0 + a1 * a1 + a2 * a2, b0 * b0 + b1 * b1 + b2 * b2, c0 * c0 + c1 * c1 + c2 * c2)
+            out[f, b] = np.sqrt(worst)
 
 
 def up_axis(skeleton: Skeleton) -> tuple[int, float]:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from mocodec.analysis import density, spectrum, stats, temporal
+from mocodec.jsonable import jsonable
 from mocodec.motion import Motion
 from mocodec.skeleton import BODY_PARTS
 
@@ -32,6 +33,11 @@ def representative_dof(motion: Motion, idx: np.ndarray) -> int:
     return int(idx[np.argmax(motion.channels[:, idx].std(axis=0))])
 
 
+def _nanmedian(values: np.ndarray) -> float:
+    values = values[np.isfinite(values)]
+    return float(np.median(values)) if values.size else float("nan")
+
+
 def analyze(motion: Motion, noise_deg: float = DEFAULT_NOISE_DEG, noise_cm: float = DEFAULT_NOISE_CM) -> dict:
     """Every number of the chapter-5 analysis, per DOF and per group."""
     sk, fps = motion.skeleton, motion.fps
@@ -47,7 +53,7 @@ def analyze(motion: Motion, noise_deg: float = DEFAULT_NOISE_DEG, noise_cm: floa
         acfs = temporal.autocorrelation(x, max(10, int(fps)))
         fits = [temporal.markov_fit(acfs[:, k], max_lag=max(10, int(round(10 * fps / 30)))) for k in range(len(idx))]
         decay30 = [f.decay_at(fps) for f in fits if np.isfinite(f.decay)]
-        wss = temporal.stationarity(x, fps)
+        wss = temporal.stationarity(x, fps, max_lag_s=1 / 3)
         shape = density.laplace_or_gauss(density.first_difference(x))
         groups[part] = {
             "dofs": len(idx),
@@ -58,13 +64,13 @@ def analyze(motion: Motion, noise_deg: float = DEFAULT_NOISE_DEG, noise_cm: floa
             "cutoff_50db_hz_blackman_tukey": spectrum.cutoff_frequency(bt, 50),
             "cutoff_50db_hz_ar": spectrum.cutoff_frequency(ar, 50),
             "markov_decay_30hz_median": float(np.median(decay30)) if decay30 else None,
-            "mean_drift_median": float(np.nanmedian(wss.mean_drift)),
-            "acf_spread_median": float(np.nanmedian(wss.acf_spread)),
+            "mean_drift_median": _nanmedian(wss.mean_drift),
+            "acf_spread_median": _nanmedian(wss.acf_spread),
             "difference_shape": shape.best,
             "difference_excess_kurtosis": shape.excess_kurtosis,
             "difference_std_deg": float(density.first_difference(x).std()),
         }
-    return {
+    return jsonable({
         "frames": motion.num_frames,
         "fps": fps,
         "duration_s": motion.duration,
@@ -81,7 +87,7 @@ def analyze(motion: Motion, noise_deg: float = DEFAULT_NOISE_DEG, noise_cm: floa
              "mean": float(st.mean[c]), "std": float(st.std[c]), "usable_bits": int(bits[c]) if varying[c] else 0}
             for c, name in enumerate(st.names)
         ],
-    }
+    })
 
 
 def summary_text(result: dict, path: str) -> str:

@@ -58,7 +58,9 @@ def stationarity(x: np.ndarray, fps: float, window_s: float = 10.0, count: int =
     std = x.std(axis=0)
     with np.errstate(invalid="ignore", divide="ignore"):
         drift = means.std(axis=0) / std
-    spread = np.ptp(acfs, axis=0).max(axis=0) if len(starts) > 1 else np.zeros(x.shape[1])
+    finite = np.isfinite(acfs)              # a window where a DOF is constant has no ACF
+    per_lag = np.where(finite, acfs, -np.inf).max(axis=0) - np.where(finite, acfs, np.inf).min(axis=0)
+    spread = np.fmax.reduce(np.where(np.isfinite(per_lag), per_lag, np.nan), axis=0)
     return Stationarity(starts / fps, means, acfs, drift, spread)
 
 

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mocodec.errors import MocodecError
+from mocodec.jsonable import jsonable
 from mocodec.kinematics import forward_kinematics
 from mocodec.metrics import groups as grp
 from mocodec.metrics.natural import Naturalness, naturalness
@@ -98,17 +99,17 @@ class Comparison:
         """Plain JSON-ready data: the summary, group measures and (optionally) per-joint and
         per-DOF figures. Infinite or undefined numbers become None."""
         out = {
-            "summary": _clean(self.summary()),
+            "summary": jsonable(self.summary()),
             "groups": {
-                "vector_error_6_9": _clean(self.vector.as_dict()),
-                "max_vector_error_6_10": _clean(self.vector_max.as_dict()),
-                "joint_position_error_6_12_m2": _clean(self.position.as_dict()),
-                "configuration_error_6_14": _clean(self.configuration.as_dict()),
+                "vector_error_6_9": jsonable(self.vector.as_dict()),
+                "max_vector_error_6_10": jsonable(self.vector_max.as_dict()),
+                "joint_position_error_6_12_m2": jsonable(self.position.as_dict()),
+                "configuration_error_6_14": jsonable(self.configuration.as_dict()),
             },
         }
         if per_joint:
-            out["joints"] = _clean(self.per_joint())
-            out["dofs"] = _clean(self.per_dof())
+            out["joints"] = jsonable(self.per_joint())
+            out["dofs"] = jsonable(self.per_dof())
         return out
 
     def per_joint(self) -> list[dict]:
@@ -182,18 +183,6 @@ def _fmt(x) -> str:
 
 def _db(x: float) -> str:
     return f"{x:.2f} dB" if np.isfinite(x) else ("lossless" if x > 0 else "n/a")
-
-
-def _clean(obj):
-    if isinstance(obj, dict):
-        return {k: _clean(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_clean(v) for v in obj]
-    if isinstance(obj, (float, np.floating)):
-        return float(obj) if np.isfinite(obj) else None
-    if isinstance(obj, np.integer):
-        return int(obj)
-    return obj
 
 
 def compare(original: Motion, decoded: Motion, weights=None, ranges=None, shell_cm: float = SHELL_CM) -> Comparison:

@@ -60,3 +60,23 @@ def test_both_formats_give_the_same_pose_sequence(clip):
     shifted = np.degrees(np.arccos(np.clip(np.sum(a[60:] * b[:-60], axis=2), -1, 1)))
     assert np.median(angle) < 8.0 and angle.mean() < 12.0
     assert angle.mean() < 0.6 * shifted.mean()
+
+
+@pytest.mark.parametrize("path", CLIPS, ids=lambda p: p.name)
+def test_clip_measures_and_analysis(path):
+    """compare() of a float32 copy and analyze() run on every clip and give strict JSON."""
+    import json
+
+    from mocodec.analysis import analyze
+    from mocodec.metrics import compare
+
+    motion = load(path)
+    copy = motion.with_channels(motion.channels.astype(np.float32))
+    result = compare(motion, copy)
+    summary = result.summary()
+    assert summary["max_joint_error_cm"] < 1e-3 and summary["psnr_db"] > 90
+    assert summary["velocity_outliers"] == 0
+    json.dumps(result.as_dict(per_joint=True), allow_nan=False)
+    numbers = analyze(motion)
+    json.dumps(numbers, allow_nan=False)
+    assert numbers["groups"] and all(0 < g["power_99_hz"] <= 60 for g in numbers["groups"].values())

@@ -6,6 +6,12 @@ import os
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
+
+# No time limits in tests (shared machines, JIT compilation on first use); derandomised so a
+# failure reproduces and CI time is bounded.
+settings.register_profile("mocodec", deadline=None, derandomize=True, max_examples=60)
+settings.load_profile("mocodec")
 
 DATA = Path(__file__).parent / "data"
 ROOT = Path(__file__).parent.parent

@@ -24,3 +24,11 @@ class ConversionError(MocodecError):
 
 class SkeletonMismatchError(MocodecError):
     """Two motions (or a motion and a skeleton) that must match do not."""
+
+
+class CorruptStreamError(MocodecError):
+    """A coded stream or .moc file is truncated or damaged; the message says where."""
+
+
+class CodecError(MocodecError):
+    """A codec cannot do what was asked: unknown id, bad knob, unencodable input, unmet target."""

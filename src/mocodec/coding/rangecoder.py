@@ -7,8 +7,8 @@ halved when they pass 2^20, so the model follows slow drifts in the statistics. 
 decoder repeat exactly the same updates, so nothing but the coded words is sent.
 
 ``encode_ints`` is the general-purpose integer coder built on it: values are zigzag-mapped,
-the common ones (below an escape threshold chosen from the data) are range coded, the rare
-large ones are sent raw after an escape symbol. It is self-describing.
+split into a magnitude class (range coded) and the low bits below it (sent raw). It is
+self-describing.
 
 ``constriction`` decodes any words without complaint, so integrity comes from the container's
 CRC; the decoders here check every length they are given against the data.
@@ -30,7 +30,6 @@ FIRST_BLOCK = 16
 LAST_BLOCK = 2048
 COUNT_LIMIT = 1 << 20
 MAX_ALPHABET = 1 << 16
-MAX_THRESHOLD = 4096
 MAX_VALUES = 1 << 28
 
 
@@ -76,66 +75,63 @@ def decode_symbols(words: np.ndarray, count: int, alphabet_size: int) -> np.ndar
     return out
 
 
-_HEADER = struct.Struct("<IHII")   # count, escape threshold K, range-coded words, escapes
+_HEADER = struct.Struct("<II")     # count, range-coded words
+DIRECT = 16                          # zigzag values below this are symbols of their own
+ALPHABET = DIRECT + 2 * (64 - 4)     # then two symbols per octave up to 2^64
 
 
-def escape_threshold(u: np.ndarray) -> int:
-    """The power of two K (1..4096) that minimises the estimated size: the entropy of the
-    values below K plus the escape symbol, the raw bits of the escaped values, and about 8
-    bits for the adaptive model to learn each symbol of the alphabet."""
-    n = u.size
-    hist = np.bincount(np.minimum(u, MAX_THRESHOLD).astype(np.int64), minlength=MAX_THRESHOLD + 1)
-    top = int(u.max()).bit_length()
-    best, best_bits = 1, np.inf
-    k = 1
-    while k <= MAX_THRESHOLD:
-        counts = np.append(hist[:k], n - hist[:k].sum()).astype(np.float64)
-        c = counts[counts > 0]
-        bits = -np.sum(c * np.log2(c / n)) + counts[-1] * top + 8 * k
-        if bits < best_bits:
-            best, best_bits = k, bits
-        k *= 2
-    return best
+def int_symbols(u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(symbol, raw bits, raw width) of zigzagged values: small values are their own symbol;
+    a larger value with bit length b is symbol 16 + 2 (b - 5) + (its second-highest bit),
+    followed by its b - 2 lower bits raw. Like JPEG's magnitude categories, this keeps the
+    alphabet small and costs within a fraction of a bit of the entropy for Laplace data."""
+    u = np.asarray(u, dtype=np.uint64)
+    big = u >= DIRECT
+    length = np.zeros(u.shape, dtype=np.int64)
+    length[big] = np.floor(np.log2(u[big].astype(np.float64))).astype(np.int64) + 1
+    # log2 of a float can be off by one next to a power of two: fix exactly
+    length[big] += (u[big] >> length[big].astype(np.uint64)) > 0
+    length[big] -= (u[big] >> (length[big] - 1).astype(np.uint64)) == 0
+    width = np.maximum(length - 2, 0)
+    second = np.where(big, (u >> np.maximum(length - 2, 0).astype(np.uint64)) & np.uint64(1), 0).astype(np.int64)
+    symbols = np.where(big, DIRECT + 2 * (length - 5) + second, u.astype(np.int64))
+    raw = np.where(big, u & ((np.uint64(1) << width.astype(np.uint64)) - np.uint64(1)), 0).astype(np.uint64)
+    return symbols.astype(np.int32), raw, np.where(big, width, 0)
+
+
+def _from_symbols(symbols: np.ndarray, reader: BitReader) -> np.ndarray:
+    symbols = symbols.astype(np.int64)
+    big = symbols >= DIRECT
+    length = np.where(big, (symbols - DIRECT) // 2 + 5, 0)
+    second = np.where(big, (symbols - DIRECT) % 2, 0).astype(np.uint64)
+    width = np.where(big, length - 2, 0)
+    raw = reader.read_array(symbols.size, width)
+    top = (np.uint64(2) | second) << width.astype(np.uint64)
+    return np.where(big, top | raw, symbols.astype(np.uint64))
 
 
 def encode_ints(values: np.ndarray) -> bytes:
-    """Any int64 values -> a self-describing byte string."""
+    """Any int64 values -> a self-describing byte string: the magnitude classes range coded
+    adaptively, the bits below them raw."""
     u = zigzag(np.asarray(values, dtype=np.int64).ravel())
-    if u.size == 0:
-        return _HEADER.pack(0, 1, 0, 0)
-    k = escape_threshold(u)
-    escaped = u >= k
-    symbols = np.where(escaped, k, u).astype(np.int32)
-    words = encode_symbols(symbols, k + 1)
-    extra = u[escaped] - np.uint64(k)
+    symbols, raw, width = int_symbols(u)
+    words = encode_symbols(symbols, ALPHABET)
     w = BitWriter()
-    width = int(extra.max()).bit_length() if extra.size else 0
-    w.write(width, 7)
-    w.write_array(extra, width)
-    return _HEADER.pack(u.size, k, words.size, int(escaped.sum())) + words.tobytes() + w.getvalue()
+    w.write_array(raw, width)
+    return _HEADER.pack(u.size, words.size) + words.tobytes() + w.getvalue()
 
 
 def decode_ints(data: bytes) -> np.ndarray:
     """Inverse of :func:`encode_ints`."""
     if len(data) < _HEADER.size:
         raise CorruptStreamError(f"integer stream: {len(data)} bytes, shorter than its {_HEADER.size}-byte header")
-    count, k, nwords, nesc = _HEADER.unpack_from(data)
-    if count == 0:
-        return np.zeros(0, dtype=np.int64)
+    count, nwords = _HEADER.unpack_from(data)
     end = _HEADER.size + 4 * nwords
-    if k < 1 or end > len(data) or nesc > count:
-        raise CorruptStreamError(f"integer stream: header (count {count}, threshold {k}, {nwords} words) "
-                                 f"does not fit {len(data)} bytes")
+    if end > len(data):
+        raise CorruptStreamError(f"integer stream: {nwords} coded words do not fit {len(data)} bytes")
     if count > MAX_VALUES:
         raise CorruptStreamError(f"integer stream: {count} values, more than the limit {MAX_VALUES}")
-    symbols = decode_symbols(np.frombuffer(data, dtype=np.uint32, count=nwords, offset=_HEADER.size), count, k + 1)
-    u = symbols.astype(np.uint64)
-    escaped = symbols == k
-    if int(escaped.sum()) != nesc:
-        raise CorruptStreamError(f"integer stream: {int(escaped.sum())} escapes decoded, header says {nesc}")
-    r = BitReader(data[end:])
-    width = r.read(7)
-    if width > 64:
-        raise CorruptStreamError(f"integer stream: escape width {width} > 64")
-    u[escaped] = r.read_array(nesc, width) + np.uint64(k)
-    return unzigzag(u)
+    if count == 0:
+        return np.zeros(0, dtype=np.int64)
+    symbols = decode_symbols(np.frombuffer(data, dtype=np.uint32, count=nwords, offset=_HEADER.size), count, ALPHABET)
+    return unzigzag(_from_symbols(symbols, BitReader(data[end:])))

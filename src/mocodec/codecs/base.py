@@ -1,0 +1,179 @@
+"""The codec interface (design.md): knobs, payload envelope, streaming pair.
+
+Every codec subclasses :class:`Codec`, names its ``id``, ``description`` and ``knobs`` and
+implements ``_encode(motion) -> bytes`` and ``_decode(body, skeleton, frames, fps) ->
+channels``. The base class wraps the body in a small envelope (version, frame count, frame
+rate, CRC32 of the body), so a payload decodes on its own given the skeleton and damage is
+caught before the codec parses anything; any failure inside a decoder on a payload that passed
+its CRC is reported as :class:`~mocodec.errors.CorruptStreamError` too, never as another
+exception. Encoding refuses NaN and infinite channels.
+"""
+
+from __future__ import annotations
+
+import struct
+import zlib
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from mocodec.errors import CodecError, CorruptStreamError
+from mocodec.motion import Motion
+from mocodec.skeleton import Skeleton
+
+ENVELOPE_VERSION = 1
+_ENVELOPE = struct.Struct("<BIdI")     # version, frames, fps, CRC32 of the body
+MAX_FRAMES = 1 << 24                   # 39 hours at 120 fps per payload
+
+
+@dataclass(frozen=True)
+class Knob:
+    """A codec parameter: its type, default, valid range or choices, and what it does."""
+
+    name: str
+    kind: type
+    default: Any
+    help: str
+    low: float | None = None
+    high: float | None = None
+    choices: tuple | None = None
+
+    def parse(self, value: Any) -> Any:
+        try:
+            if self.kind is bool and isinstance(value, str):
+                v = value.lower() in ("1", "true", "yes", "on")
+            else:
+                v = self.kind(value)
+        except (TypeError, ValueError):
+            raise CodecError(f"knob {self.name}: expected {self.kind.__name__}, got {value!r}") from None
+        if self.kind in (int, float) and not np.isfinite(v):
+            raise CodecError(f"knob {self.name}: {value!r} is not a finite number")
+        if self.low is not None and v < self.low or self.high is not None and v > self.high:
+            raise CodecError(f"knob {self.name}: {v} is outside {self.low}..{self.high}")
+        if self.choices is not None and v not in self.choices:
+            raise CodecError(f"knob {self.name}: {v!r} is not one of {', '.join(map(str, self.choices))}")
+        return v
+
+    def describe(self) -> str:
+        span = f" {self.low:g}..{self.high:g}" if self.low is not None and self.high is not None else ""
+        choices = f" {{{','.join(map(str, self.choices))}}}" if self.choices else ""
+        return f"{self.name}={self.default}{span}{choices}"
+
+
+@dataclass(frozen=True)
+class QualityKnob:
+    """The knob rate control turns, and which way raises quality (and size)."""
+
+    name: str
+    higher_is_better: bool
+    log_scale: bool = False
+
+
+class StreamEncoder:
+    """Frames in, packets out (for codecs the theses call real-time)."""
+
+    def push(self, frames: np.ndarray) -> list[bytes]:
+        raise NotImplementedError
+
+    def flush(self) -> list[bytes]:
+        return []
+
+
+class StreamDecoder:
+    """Packets in, frames out."""
+
+    def push(self, packet: bytes) -> np.ndarray:
+        raise NotImplementedError
+
+
+class Codec:
+    """Base of every codec. Construct with knobs: ``get_codec("raw")``, ``Codec(**knobs)``."""
+
+    id: ClassVar[str] = ""
+    description: ClassVar[str] = ""
+    knobs: ClassVar[tuple[Knob, ...]] = ()
+    quality: ClassVar[QualityKnob | None] = None
+    lossless: ClassVar[bool] = False
+    streaming: ClassVar[bool] = False
+    delay_frames: ClassVar[int] = 0
+
+    def __init__(self, **knobs):
+        specs = {k.name: k for k in self.knobs}
+        unknown = sorted(set(knobs) - set(specs))
+        if unknown:
+            have = ", ".join(specs) or "none"
+            raise CodecError(f"codec {self.id}: unknown knob {unknown[0]!r} (knobs: {have})")
+        self.config = {name: spec.parse(knobs.get(name, spec.default)) for name, spec in specs.items()}
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({', '.join(f'{k}={v!r}' for k, v in self.config.items())})"
+
+    # ----- configuration ----------------------------------------------------------------
+    def get_config(self) -> dict:
+        return {"codec": self.id, "knobs": dict(self.config)}
+
+    @classmethod
+    def from_config(cls, config: dict) -> "Codec":
+        if config.get("codec") != cls.id:
+            raise CodecError(f"config is for codec {config.get('codec')!r}, not {cls.id!r}")
+        return cls(**config.get("knobs", {}))
+
+    def with_knob(self, name: str, value) -> "Codec":
+        return type(self)(**{**self.config, name: value})
+
+    # ----- whole clips ------------------------------------------------------------------
+    def encode(self, motion: Motion) -> bytes:
+        """The payload of ``motion``: envelope + codec body."""
+        if not np.isfinite(motion.channels).all():
+            f, c = np.argwhere(~np.isfinite(motion.channels))[0]
+            raise CodecError(f"cannot encode: frame {f}, channel {motion.skeleton.channel_names[c]} is "
+                             f"{motion.channels[f, c]}")
+        if motion.num_frames > MAX_FRAMES:
+            raise CodecError(f"cannot encode {motion.num_frames} frames in one payload (limit {MAX_FRAMES}); "
+                             "use the container, which splits clips into chunks")
+        body = self._encode(motion)
+        return _ENVELOPE.pack(ENVELOPE_VERSION, motion.num_frames, float(motion.fps), zlib.crc32(body)) + body
+
+    def decode(self, payload: bytes, skeleton: Skeleton) -> Motion:
+        """The motion in ``payload`` (from :meth:`encode`), on ``skeleton``."""
+        frames, fps, body = read_envelope(payload)
+        try:
+            channels = self._decode(body, skeleton, frames, fps)
+        except (CorruptStreamError, CodecError):
+            raise
+        except Exception as e:   # noqa: BLE001 - a payload that passed its CRC but does not parse
+            raise CorruptStreamError(f"{self.id} payload does not decode ({type(e).__name__}: {e})") from None
+        channels = np.asarray(channels, dtype=np.float64)
+        if channels.shape != (frames, skeleton.num_channels):
+            raise CorruptStreamError(f"{self.id} payload decodes to {channels.shape}, expected "
+                                     f"({frames}, {skeleton.num_channels}): wrong skeleton?")
+        return Motion(skeleton, fps, channels)
+
+    def _encode(self, motion: Motion) -> bytes:
+        raise NotImplementedError
+
+    def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:
+        raise NotImplementedError
+
+    # ----- streaming --------------------------------------------------------------------
+    def encoder(self, skeleton: Skeleton, fps: float) -> StreamEncoder:
+        raise CodecError(f"codec {self.id} does not stream")
+
+    def decoder(self, skeleton: Skeleton, fps: float) -> StreamDecoder:
+        raise CodecError(f"codec {self.id} does not stream")
+
+
+def read_envelope(payload: bytes) -> tuple[int, float, bytes]:
+    """(frames, fps, body) of a payload, with its CRC checked."""
+    if len(payload) < _ENVELOPE.size:
+        raise CorruptStreamError(f"payload of {len(payload)} bytes is shorter than its {_ENVELOPE.size}-byte header")
+    version, frames, fps, crc = _ENVELOPE.unpack_from(payload)
+    if version != ENVELOPE_VERSION:
+        raise CorruptStreamError(f"payload version {version}, this mocodec reads {ENVELOPE_VERSION}")
+    body = payload[_ENVELOPE.size:]
+    if zlib.crc32(body) != crc:
+        raise CorruptStreamError(f"payload CRC mismatch ({len(body)}-byte body): the data is damaged")
+    if frames > MAX_FRAMES or not (np.isfinite(fps) and fps > 0):
+        raise CorruptStreamError(f"payload header: {frames} frames at {fps} fps is not plausible")
+    return frames, fps, body

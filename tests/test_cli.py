@@ -44,7 +44,44 @@ def test_help_on_every_command():
 def test_demo_runs(capsys):
     assert main(["demo"]) == 0
     out = capsys.readouterr().out
-    assert "round trip  BVH" in out and "round trip  AMC" in out
+    for word in ("ratio", "bit rate", "PSNR", "joint error", "us per frame", "lossless"):
+        assert word in out
+
+
+def test_encode_decode_eval_codecs(tmp_path, capsys):
+    out = tmp_path / "walk.moc"
+    assert main(["encode", str(DATA / "07_03.amc"), "-o", str(out)]) == 0
+    assert "ratio" in capsys.readouterr().out and out.exists()
+    back = tmp_path / "back.bvh"
+    assert main(["decode", str(out), "-o", str(back), "--frames", "100:200"]) == 0
+    assert load(back).num_frames == 100
+    assert main(["decode", str(out), "-o", str(tmp_path / "tail.amc"), "--frames", "400:"]) == 0
+    assert load(tmp_path / "tail.amc").num_frames == 15
+    capsys.readouterr()
+    assert main(["encode", str(DATA / "07_03.amc"), str(DATA / "135_08.amc"), "-o", str(tmp_path),
+                 "--codec", "raw"]) == 0
+    assert (tmp_path / "135_08.moc").exists()
+    assert main(["eval", str(DATA / "07_03.bvh"), "--codec", "raw"]) == 0
+    text = capsys.readouterr().out
+    assert "ratio" in text and "VPSNR" in text and "us per frame" in text
+    assert main(["codecs"]) == 0
+    assert "lossless" in capsys.readouterr().out
+
+
+def test_coding_errors_are_one_line(tmp_path, capsys):
+    cases = [
+        (["encode", str(DATA / "07_03.amc"), "-o", str(tmp_path / "x.moc"), "--codec", "nope"], "unknown codec"),
+        (["encode", str(DATA / "07_03.amc"), "-o", str(tmp_path / "x.moc"), "--levels", "3"], "unknown knob"),
+        (["encode", str(DATA / "07_03.amc"), "-o", str(tmp_path / "x.moc"), "--ratio", "50"], "no quality knob"),
+        (["encode", str(DATA / "07_03.amc"), str(DATA / "135_08.amc"), "-o", str(tmp_path / "x.moc")], "directory"),
+        (["decode", str(DATA / "07_03.amc"), "-o", str(tmp_path / "x.bvh")], "not a .moc file"),
+        (["decode", str(tmp_path / "missing.moc"), "-o", str(tmp_path / "x.bvh")], "missing.moc"),
+    ]
+    for argv, message in cases:
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1, err
+    assert not list(tmp_path.glob("*.moc")) and not list(tmp_path.glob(".*tmp"))
 
 
 def test_compare_prints_every_measure(tmp_path, capsys):

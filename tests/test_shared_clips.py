@@ -80,3 +80,15 @@ def test_clip_measures_and_analysis(path):
     numbers = analyze(motion)
     json.dumps(numbers, allow_nan=False)
     assert numbers["groups"] and all(0 < g["power_99_hz"] <= 60 for g in numbers["groups"].values())
+
+
+@pytest.mark.parametrize("path", CLIPS, ids=lambda p: p.name)
+def test_reference_codecs_round_trip_through_the_container(path):
+    from mocodec import moc
+    from mocodec.codecs import get_codec
+
+    motion = load(path)
+    lossless = moc.unpack(moc.pack(motion, get_codec("lossless")))
+    assert np.array_equal(lossless.channels, motion.channels)
+    raw = moc.unpack(moc.pack(motion, get_codec("raw")), frames=(1, motion.num_frames))
+    assert np.array_equal(raw.channels, motion.channels[1:].astype(np.float32))

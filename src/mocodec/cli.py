@@ -1,4 +1,5 @@
-"""The ``mocodec`` command line: ``info``, ``convert``, ``compare``, ``analyze`` and ``demo``.
+"""The ``mocodec`` command line: ``info``, ``convert``, ``compare``, ``analyze``, ``demo``, and the
+coding commands of :mod:`mocodec.cli_coding` (``encode``, ``decode``, ``eval``, ``codecs``).
 
 User errors (bad files, impossible conversions) print one line and exit with status 2.
 """
@@ -7,13 +8,13 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
 from mocodec import __version__
+from mocodec.cli_coding import add_codec_options, add_commands, knobs_from
 from mocodec.errors import MocodecError
 from mocodec.formats import load, save
 from mocodec.motion import Motion
@@ -114,32 +115,16 @@ def cmd_analyze(args) -> int:
 
 
 def cmd_demo(args) -> int:
-    """Load the bundled sample, run forward kinematics, round-trip it through BVH and AMC."""
-    import tempfile
+    """``eval`` of the default codec on the bundled sample clip."""
+    from mocodec.cli_coding import evaluate
 
     sample = resources.files("mocodec") / "data" / "sample_walk_02_02.bvh"
     with resources.as_file(sample) as path:
-        t0 = time.perf_counter()
         motion = load(path)
-        t_load = time.perf_counter() - t0
         print(describe(motion, f"(bundled) {Path(path).name}"))
-    t0 = time.perf_counter()
-    pos = motion.positions_m()
-    t_fk = time.perf_counter() - t0
-    print(f"\nparse       {t_load * 1e3:.1f} ms; forward kinematics {t_fk * 1e3:.1f} ms "
-          f"({motion.num_frames * len(motion.skeleton) / max(t_fk, 1e-9) / 1e6:.1f} M joint-frames/s)")
-    with tempfile.TemporaryDirectory() as tmp:
-        for ext in (".bvh", ".amc"):
-            out = Path(tmp) / f"roundtrip{ext}"
-            save(motion, out)
-            back = load(out)
-            names = [n for n in motion.skeleton.names if n in back.skeleton.names]
-            a = pos[:, [motion.skeleton.index(n) for n in names]]
-            b = back.positions_m()[:, [back.skeleton.index(n) for n in names]]
-            size = sum(p.stat().st_size for p in Path(tmp).glob(f"roundtrip.*") if p.suffix in (ext, ".asf"))
-            print(f"round trip  {ext[1:].upper():<4} {_human_bytes(size):>9}  max joint error "
-                  f"{np.abs(a - b).max() * 1000:.4f} mm over {len(names)} joints")
-    print("\nCodecs arrive with the codec framework; `mocodec --help` lists what is here now.")
+    print()
+    print(evaluate(motion, args))
+    print("\nTry: mocodec codecs; mocodec eval FILE --codec ID; mocodec encode FILE -o out.moc")
     return 0
 
 
@@ -195,17 +180,23 @@ def build_parser() -> argparse.ArgumentParser:
     common(p)
     p.set_defaults(func=cmd_analyze)
 
+    add_commands(sub, common)
+
     p = sub.add_parser("demo", help="run the main job on the bundled sample clip",
-                       description="Load the bundled CMU walk, run forward kinematics and round-trip it "
-                                   "through BVH and ASF/AMC, reporting sizes, errors and speed.")
-    p.set_defaults(func=cmd_demo)
+                       description="Encode and decode the bundled CMU walk with the default codec and "
+                                   "report ratio, bit rate, error and speed (the `eval` table).")
+    add_codec_options(p)
+    p.set_defaults(func=cmd_demo, takes_knobs=True)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
     try:
+        if extra and not getattr(args, "takes_knobs", False):
+            parser.error(f"unrecognized arguments: {' '.join(extra)}")
+        args.knobs = knobs_from(extra)
         return args.func(args)
     except MocodecError as e:
         print(f"mocodec: error: {e}", file=sys.stderr)

@@ -3,7 +3,7 @@
 Every codec subclasses :class:`Codec`, names its ``id``, ``description`` and ``knobs`` and
 implements ``_encode(motion) -> bytes`` and ``_decode(body, skeleton, frames, fps) ->
 channels``. The base class wraps the body in a small envelope (version, frame count, frame
-rate, CRC32 of the body), so a payload decodes on its own given the skeleton and damage is
+rate, and a CRC32 over them and the body), so a payload decodes on its own given the skeleton and damage is
 caught before the codec parses anything; any failure inside a decoder on a payload that passed
 its CRC is reported as :class:`~mocodec.errors.CorruptStreamError` too, never as another
 exception. Encoding refuses NaN and infinite channels.
@@ -23,7 +23,7 @@ from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
 ENVELOPE_VERSION = 1
-_ENVELOPE = struct.Struct("<BIdI")     # version, frames, fps, CRC32 of the body
+_ENVELOPE = struct.Struct("<BIdI")     # version, frames, fps, CRC32 of those fields and the body
 MAX_FRAMES = 1 << 24                   # 39 hours at 120 fps per payload
 
 
@@ -107,7 +107,7 @@ class Codec:
         self.config = {name: spec.parse(knobs.get(name, spec.default)) for name, spec in specs.items()}
 
     def __repr__(self) -> str:
-        return f"{type(self).__name__}({', '.join(f'{k}={v!r}' for k, v in self.config.items())})"
+        return f"{self.id}({', '.join(f'{k}={v!r}' for k, v in self.config.items())})"
 
     # ----- configuration ----------------------------------------------------------------
     def get_config(self) -> dict:
@@ -133,7 +133,8 @@ class Codec:
             raise CodecError(f"cannot encode {motion.num_frames} frames in one payload (limit {MAX_FRAMES}); "
                              "use the container, which splits clips into chunks")
         body = self._encode(motion)
-        return _ENVELOPE.pack(ENVELOPE_VERSION, motion.num_frames, float(motion.fps), zlib.crc32(body)) + body
+        fields = _ENVELOPE.pack(ENVELOPE_VERSION, motion.num_frames, float(motion.fps), 0)[:-4]
+        return fields + struct.pack("<I", zlib.crc32(body, zlib.crc32(fields))) + body
 
     def decode(self, payload: bytes, skeleton: Skeleton) -> Motion:
         """The motion in ``payload`` (from :meth:`encode`), on ``skeleton``."""
@@ -172,7 +173,7 @@ def read_envelope(payload: bytes) -> tuple[int, float, bytes]:
     if version != ENVELOPE_VERSION:
         raise CorruptStreamError(f"payload version {version}, this mocodec reads {ENVELOPE_VERSION}")
     body = payload[_ENVELOPE.size:]
-    if zlib.crc32(body) != crc:
+    if zlib.crc32(body, zlib.crc32(payload[:_ENVELOPE.size - 4])) != crc:
         raise CorruptStreamError(f"payload CRC mismatch ({len(body)}-byte body): the data is damaged")
     if frames > MAX_FRAMES or not (np.isfinite(fps) and fps > 0):
         raise CorruptStreamError(f"payload header: {frames} frames at {fps} fps is not plausible")

@@ -1,0 +1,189 @@
+"""The coding commands of the CLI: ``encode``, ``decode``, ``eval`` and ``codecs``.
+
+Codec knobs are given as options named after them (``--levels 64`` for the knob ``levels``);
+``--ratio``, ``--bitrate``, ``--psnr``, ``--mean-error-cm`` and ``--max-error-cm`` ask rate
+control for the knob instead.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+from mocodec import moc, ratecontrol
+from mocodec.codecs import DEFAULT_CODEC, codec_class, codec_ids, get_codec
+from mocodec.errors import CodecError
+from mocodec.formats import load, save
+from mocodec.metrics import compare
+from mocodec.motion import Motion
+
+TARGET_OPTIONS = (("ratio", "ratio", "compression ratio vs 32-bit floats, e.g. 50"),
+                  ("bitrate", "bitrate", "bits per second"),
+                  ("psnr", "psnr", "whole-body PSNR in dB (mean over DOFs)"),
+                  ("mean-error-cm", "mean_error_cm", "mean joint position error bound in cm"),
+                  ("max-error-cm", "max_error_cm", "max joint position error bound in cm (guaranteed)"))
+
+
+def add_codec_options(p) -> None:
+    p.add_argument("--codec", default=DEFAULT_CODEC, help=f"codec id (default {DEFAULT_CODEC}; see `mocodec codecs`)")
+    group = p.add_mutually_exclusive_group()
+    for flag, dest, text in TARGET_OPTIONS:
+        group.add_argument(f"--{flag}", dest=dest, type=float, help=text)
+
+
+def knobs_from(extra: list[str]) -> dict[str, str]:
+    """``--name value`` pairs left over by argparse, as codec knobs."""
+    knobs, k = {}, 0
+    while k < len(extra):
+        flag = extra[k]
+        if not flag.startswith("--") or k + 1 >= len(extra):
+            raise CodecError(f"unexpected argument {flag!r} (codec knobs are given as --name value)")
+        name, _, value = flag[2:].partition("=")
+        if not value:
+            value, k = extra[k + 1], k + 1
+        knobs[name.replace("-", "_")] = value
+        k += 1
+    return knobs
+
+
+def configured(args, motion: Motion):
+    """The codec of the command line, tuned by rate control if a target was given:
+    (codec, measurement or None)."""
+    codec = get_codec(args.codec, **args.knobs)
+    for _, dest, _ in TARGET_OPTIONS:
+        value = getattr(args, dest)
+        if value is not None:
+            m = ratecontrol.tune(codec, motion, dest, value)
+            return m.codec, m
+    return codec, None
+
+
+def _progress(k: int, n: int, text: str) -> None:
+    if n > 1:
+        print(f"[{k}/{n}] {text}", file=sys.stderr, flush=True)
+
+
+def cmd_encode(args) -> int:
+    inputs = [Path(p) for p in args.inputs]
+    out = Path(args.output)
+    if len(inputs) > 1 and not out.is_dir():
+        raise CodecError(f"{out}: with several inputs, -o must be an existing directory")
+    for k, src in enumerate(inputs, 1):
+        motion = load(src, asf=args.asf, fps=args.fps)
+        codec, _ = configured(args, motion)
+        target = out / f"{src.stem}.moc" if out.is_dir() else out
+        t0 = time.perf_counter()
+        size = moc.encode(motion, target, codec, chunk_frames=args.chunk_frames)
+        line = (f"{target}: {motion.num_frames} frames, {size:,} bytes, ratio {motion.raw_bits / 8 / size:.2f} "
+                f"vs 32-bit floats, {size * 8 / motion.duration / 1000:.2f} kbit/s, {codec!r}, "
+                f"{time.perf_counter() - t0:.2f} s")
+        _progress(k, len(inputs), src.name)
+        print(line)
+    return 0
+
+
+def parse_frames(text: str | None) -> tuple[int, int] | None:
+    if text is None:
+        return None
+    a, sep, b = text.partition(":")
+    try:
+        if not sep:
+            raise ValueError
+        return int(a or 0), int(b) if b else -1
+    except ValueError:
+        raise CodecError(f"--frames wants FIRST:STOP (e.g. 120:240), got {text!r}") from None
+
+
+def cmd_decode(args) -> int:
+    frames = parse_frames(args.frames)
+    if frames and frames[1] == -1:
+        frames = (frames[0], moc.info(args.input).frames)
+    motion = moc.decode(args.input, frames=frames)
+    written = save(motion, args.output, asf=args.out_asf)
+    print(f"wrote {', '.join(str(p) for p in written)} ({motion.num_frames} frames)")
+    return 0
+
+
+def evaluate(motion: Motion, args) -> str:
+    """Encode and decode in memory; the table of ``eval``."""
+    codec, _ = configured(args, motion)
+    t0 = time.perf_counter()
+    data = moc.pack(motion, codec)
+    t1 = time.perf_counter()
+    decoded = moc.unpack(data)
+    t2 = time.perf_counter()
+    s = compare(motion, decoded).summary()
+    us = 1e6 / max(motion.num_frames, 1)
+    rows = [
+        ("codec", repr(codec)),
+        ("size", f"{len(data):,} bytes for {motion.num_frames} frames ({motion.duration:.2f} s)"),
+        ("ratio", f"{motion.raw_bits / 8 / len(data):.2f} : 1 vs 32-bit floats"),
+        ("bit rate", f"{len(data) * 8 / motion.duration / 1000:.2f} kbit/s "
+                     f"({len(data) * 8 / motion.channels.size:.3f} bits per DOF sample)"),
+        ("PSNR / VPSNR", f"{_db(s['psnr_db'])} / {_db(s['vpsnr_db'])} (mean over DOFs)"),
+        ("joint error mean / max", f"{s['mean_joint_error_cm']:.4g} / {s['max_joint_error_cm']:.4g} cm"),
+        ("shell error max", f"{s['max_shell_error_cm']:.4g} cm"),
+        ("encode / decode", f"{(t1 - t0) * us:.1f} / {(t2 - t1) * us:.1f} us per frame"),
+    ]
+    return "\n".join(f"{k:<24}{v}" for k, v in rows)
+
+
+def _db(x: float) -> str:
+    return f"{x:.2f} dB" if x != float("inf") else "lossless"
+
+
+def cmd_eval(args) -> int:
+    inputs = args.inputs
+    for k, path in enumerate(inputs, 1):
+        motion = load(path, asf=args.asf, fps=args.fps)
+        _progress(k, len(inputs), Path(path).name)
+        print(f"{'file':<24}{path}")
+        print(evaluate(motion, args))
+        if k < len(inputs):
+            print()
+    return 0
+
+
+def cmd_codecs(args) -> int:
+    for cid in codec_ids():
+        cls = codec_class(cid)
+        flags = ", ".join(f for f, on in (("lossless", cls.lossless), ("streaming", cls.streaming)) if on)
+        knobs = " ".join(k.describe() for k in cls.knobs) or "-"
+        quality = f"; quality knob {cls.quality.name}" if cls.quality else ""
+        print(f"{cid:<12}{cls.description}")
+        print(f"{'':<12}knobs: {knobs}{quality}; delay {cls.delay_frames} frames{'; ' + flags if flags else ''}")
+    return 0
+
+
+def add_commands(sub, common) -> None:
+    p = sub.add_parser("encode", help="code motion files into .moc files",
+                       description="Code each input into a .moc container. Codec knobs are options named "
+                                   "after them (--name value); a target (--ratio, --bitrate, --psnr, "
+                                   "--mean-error-cm, --max-error-cm) makes rate control choose the knob.")
+    p.add_argument("inputs", nargs="+", metavar="IN", help=".bvh or .amc file(s)")
+    p.add_argument("-o", "--output", required=True, help="output .moc file, or a directory for several inputs")
+    p.add_argument("--chunk-frames", type=int, default=moc.CHUNK_FRAMES,
+                   help=f"frames per independently decodable chunk (default {moc.CHUNK_FRAMES})")
+    add_codec_options(p)
+    common(p)
+    p.set_defaults(func=cmd_encode, takes_knobs=True)
+
+    p = sub.add_parser("decode", help="decode a .moc file to BVH or ASF/AMC",
+                       description="Decode a .moc file (only the chunks --frames needs) and write it.")
+    p.add_argument("input", metavar="IN", help=".moc file")
+    p.add_argument("-o", "--output", required=True, help=".bvh or .amc file to write")
+    p.add_argument("--frames", help="FIRST:STOP, a frame range (e.g. 120:240)")
+    p.add_argument("--out-asf", help="where to write the ASF when the output is .amc")
+    p.set_defaults(func=cmd_decode)
+
+    p = sub.add_parser("eval", help="encode and decode in memory and report ratio, rate, error and speed",
+                       description="Ratio vs 32-bit floats, bits per second, PSNR, VPSNR, mean/max joint "
+                                   "error (cm), encode and decode time per frame.")
+    p.add_argument("inputs", nargs="+", metavar="IN", help=".bvh or .amc file(s)")
+    add_codec_options(p)
+    common(p)
+    p.set_defaults(func=cmd_eval, takes_knobs=True)
+
+    p = sub.add_parser("codecs", help="list the codecs with their knobs and delay")
+    p.set_defaults(func=cmd_codecs)

@@ -1,0 +1,199 @@
+"""The .moc container: a coded motion that decodes on its own, with random access.
+
+Layout (little-endian)::
+
+    "MOC1"  u16 version  u16 flags
+    u32 header length, header (zlib-compressed JSON: codec config, fps, frame count, chunk
+        size, the skeleton), u32 CRC32 of the header bytes
+    chunks: u32 first frame, u32 frame count, u32 payload length, payload,
+            u32 CRC32 of those 12 header bytes and the payload
+    index:  u32 chunk count, per chunk (u64 file offset, u32 first frame, u32 frame count),
+            u32 CRC32 of the index
+    footer: u64 index offset, "MOCX"
+
+The index at the end lets a reader fetch only the chunks that cover a frame range. Every
+part is length-checked and CRC-checked before it is used, and a failure raises
+:class:`~mocodec.errors.CorruptStreamError` naming the part (chunk number) and byte offset.
+This module handles bytes and the skeleton only; codecs are applied by :mod:`mocodec.moc`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+import zlib
+from dataclasses import dataclass
+from typing import BinaryIO
+
+from mocodec.errors import CorruptStreamError
+from mocodec.skeleton import Joint, Skeleton
+
+MAGIC = b"MOC1"
+FOOTER_MAGIC = b"MOCX"
+VERSION = 1
+MAX_HEADER = 1 << 24
+MAX_CHUNKS = 1 << 20
+_START = struct.Struct("<4sHHI")
+_CHUNK = struct.Struct("<III")
+_ENTRY = struct.Struct("<QII")
+_FOOTER = struct.Struct("<Q4s")
+_U32 = struct.Struct("<I")
+
+
+# ----- skeleton <-> JSON ------------------------------------------------------------------------
+def _number(x: float):
+    return x if math.isfinite(x) else ("inf" if x > 0 else "-inf")
+
+
+def _from_number(x) -> float:
+    return float(x)
+
+
+def skeleton_to_dict(skeleton: Skeleton) -> dict:
+    return {
+        "name": skeleton.name,
+        "units_per_metre": skeleton.units_per_metre,
+        "joints": [
+            {"name": j.name, "parent": j.parent, "offset": list(j.offset), "channels": list(j.channels),
+             "rotation_order": j.rotation_order, "axis": list(j.axis), "axis_order": j.axis_order,
+             "limits": [[_number(a), _number(b)] for a, b in j.limits], "body_part": j.body_part}
+            for j in skeleton.joints
+        ],
+    }
+
+
+def skeleton_from_dict(data: dict) -> Skeleton:
+    joints = [Joint(j["name"], int(j["parent"]), tuple(map(float, j["offset"])), tuple(j["channels"]),
+                    j["rotation_order"], tuple(map(float, j["axis"])), j["axis_order"],
+                    tuple((_from_number(a), _from_number(b)) for a, b in j["limits"]), j["body_part"])
+              for j in data["joints"]]
+    return Skeleton(joints, float(data["units_per_metre"]), data.get("name", ""))
+
+
+# ----- writing --------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Chunk:
+    first: int
+    count: int
+    payload: bytes
+
+
+def pack(header: dict, chunks: list[Chunk]) -> bytes:
+    """The whole container as bytes. ``header`` holds codec, fps, frames, chunk_frames and
+    ``skeleton`` (a :class:`Skeleton`)."""
+    meta = dict(header, skeleton=skeleton_to_dict(header["skeleton"]))
+    head = zlib.compress(json.dumps(meta, separators=(",", ":"), allow_nan=False).encode(), 9)
+    out = bytearray(_START.pack(MAGIC, VERSION, 0, len(head)) + head + _U32.pack(zlib.crc32(head)))
+    entries = []
+    for chunk in chunks:
+        entries.append(_ENTRY.pack(len(out), chunk.first, chunk.count))
+        body = _CHUNK.pack(chunk.first, chunk.count, len(chunk.payload)) + chunk.payload
+        out += body + _U32.pack(zlib.crc32(body))
+    index = _U32.pack(len(entries)) + b"".join(entries)
+    index_offset = len(out)
+    out += index + _U32.pack(zlib.crc32(index)) + _FOOTER.pack(index_offset, FOOTER_MAGIC)
+    return bytes(out)
+
+
+# ----- reading --------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class IndexEntry:
+    offset: int
+    first: int
+    count: int
+
+
+@dataclass(frozen=True)
+class Container:
+    """An open container: its header and index; chunks are read on demand."""
+
+    source: BinaryIO
+    size: int
+    name: str
+    header: dict
+    skeleton: Skeleton
+    index: tuple[IndexEntry, ...]
+
+    @property
+    def frames(self) -> int:
+        return int(self.header["frames"])
+
+    @property
+    def fps(self) -> float:
+        return float(self.header["fps"])
+
+    def chunks_for(self, first: int, stop: int) -> list[int]:
+        """Numbers of the chunks that cover frames first..stop-1."""
+        return [k for k, e in enumerate(self.index) if e.first < stop and e.first + e.count > first]
+
+    def read_chunk(self, k: int) -> bytes:
+        """Payload of chunk ``k``, length- and CRC-checked."""
+        e = self.index[k]
+        where = f"{self.name}: chunk {k} at byte {e.offset}"
+        raw = _read_at(self.source, e.offset, _CHUNK.size, self.size, where)
+        first, count, length = _CHUNK.unpack(raw)
+        if (first, count) != (e.first, e.count):
+            raise CorruptStreamError(f"{where}: holds frames {first}+{count}, the index says {e.first}+{e.count}")
+        if e.offset + _CHUNK.size + length + 4 > self.size:
+            raise CorruptStreamError(f"{where}: a {length}-byte payload runs past the end of the file "
+                                     f"({self.size} bytes)")
+        body = raw + _read_at(self.source, e.offset + _CHUNK.size, length + 4, self.size, where)
+        (crc,) = _U32.unpack(body[-4:])
+        if zlib.crc32(body[:-4]) != crc:
+            raise CorruptStreamError(f"{where}: CRC mismatch, the chunk is damaged")
+        return body[_CHUNK.size:-4]
+
+
+def _read_at(source: BinaryIO, offset: int, length: int, size: int, where: str) -> bytes:
+    if offset < 0 or offset + length > size:
+        raise CorruptStreamError(f"{where}: needs bytes {offset}..{offset + length} but the file has {size}")
+    source.seek(offset)
+    data = source.read(length)
+    if len(data) != length:
+        raise CorruptStreamError(f"{where}: file ends at byte {offset + len(data)}")
+    return data
+
+
+def open_container(source: BinaryIO, size: int, name: str) -> Container:
+    """Read and check the header, footer and index of a container."""
+    start = _read_at(source, 0, _START.size, size, f"{name}: header")
+    magic, version, _, head_len = _START.unpack(start)
+    if magic != MAGIC:
+        raise CorruptStreamError(f"{name}: not a .moc file (starts with {magic!r}, expected {MAGIC!r})")
+    if version != VERSION:
+        raise CorruptStreamError(f"{name}: .moc version {version}; this mocodec reads version {VERSION}")
+    if head_len > MAX_HEADER:
+        raise CorruptStreamError(f"{name}: header length {head_len} at byte 8 is implausible")
+    head = _read_at(source, _START.size, head_len + 4, size, f"{name}: header")
+    if zlib.crc32(head[:-4]) != _U32.unpack(head[-4:])[0]:
+        raise CorruptStreamError(f"{name}: header CRC mismatch at byte {_START.size}, the header is damaged")
+    try:
+        header = json.loads(zlib.decompress(head[:-4]))
+        skeleton = skeleton_from_dict(header.pop("skeleton"))
+        frames, fps = int(header["frames"]), float(header["fps"])
+        header["codec"]["codec"]
+    except (ValueError, KeyError, TypeError, zlib.error) as e:
+        raise CorruptStreamError(f"{name}: header at byte {_START.size} does not parse ({e})") from None
+    if frames < 0 or not (math.isfinite(fps) and fps > 0):
+        raise CorruptStreamError(f"{name}: header says {frames} frames at {fps} fps")
+    foot_at = size - _FOOTER.size
+    index_offset, foot_magic = _FOOTER.unpack(_read_at(source, foot_at, _FOOTER.size, size, f"{name}: footer"))
+    if foot_magic != FOOTER_MAGIC:
+        raise CorruptStreamError(f"{name}: footer at byte {foot_at} is damaged or the file is truncated")
+    where = f"{name}: index at byte {index_offset}"
+    (n,) = _U32.unpack(_read_at(source, index_offset, 4, size, where))
+    if n > MAX_CHUNKS or index_offset + 4 + n * _ENTRY.size + 4 != foot_at:
+        raise CorruptStreamError(f"{where}: {n} entries do not fit before the footer")
+    raw = _read_at(source, index_offset, 4 + n * _ENTRY.size + 4, size, where)
+    if zlib.crc32(raw[:-4]) != _U32.unpack(raw[-4:])[0]:
+        raise CorruptStreamError(f"{where}: CRC mismatch, the index is damaged")
+    index = tuple(IndexEntry(*_ENTRY.unpack_from(raw, 4 + k * _ENTRY.size)) for k in range(n))
+    expected = 0
+    for k, e in enumerate(index):
+        if e.first != expected or e.count == 0 or not _START.size + head_len + 4 <= e.offset < index_offset:
+            raise CorruptStreamError(f"{where}: entry {k} (frames {e.first}+{e.count} at byte {e.offset}) is invalid")
+        expected += e.count
+    if expected != frames:
+        raise CorruptStreamError(f"{where}: chunks cover {expected} frames, the header says {frames}")
+    return Container(source, size, name, header, skeleton, index)

@@ -1,0 +1,85 @@
+"""Coded motion files: ``encode(motion, path, codec)`` writes a .moc container, ``decode(path,
+frames=(a, b))`` reads back the whole clip or only the chunks a frame range needs.
+
+Each chunk of ``chunk_frames`` frames is coded on its own by the codec (so chunks decode
+independently and a range costs only its chunks); the container stores the codec's config and
+the skeleton, so a file decodes without anything else.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+from pathlib import Path
+
+import numpy as np
+
+from mocodec.codecs import DEFAULT_CODEC, Codec, codec_from_config, get_codec
+from mocodec.errors import CodecError, CorruptStreamError
+from mocodec.formats import container
+from mocodec.formats._io import atomic_write_bytes
+from mocodec.motion import Motion
+
+CHUNK_FRAMES = 1024
+
+
+def pack(motion: Motion, codec: Codec | None = None, chunk_frames: int = CHUNK_FRAMES) -> bytes:
+    """The .moc bytes of ``motion`` coded by ``codec`` (default: the default codec)."""
+    codec = codec or get_codec(DEFAULT_CODEC)
+    if chunk_frames < 1:
+        raise CodecError(f"chunk_frames must be at least 1, got {chunk_frames}")
+    chunks = [container.Chunk(a, min(chunk_frames, motion.num_frames - a), codec.encode(motion[a:a + chunk_frames]))
+              for a in range(0, motion.num_frames, chunk_frames)]
+    header = {"codec": codec.get_config(), "fps": float(motion.fps), "frames": motion.num_frames,
+              "chunk_frames": chunk_frames, "skeleton": motion.skeleton}
+    return container.pack(header, chunks)
+
+
+def encode(motion: Motion, path: str | os.PathLike, codec: Codec | None = None,
+           chunk_frames: int = CHUNK_FRAMES) -> int:
+    """Write ``motion`` to ``path`` (atomically); return the file size in bytes."""
+    data = pack(motion, codec, chunk_frames)
+    atomic_write_bytes(path, data)
+    return len(data)
+
+
+def unpack(data: bytes, frames: tuple[int, int] | None = None, name: str = "<bytes>") -> Motion:
+    """Decode .moc bytes (all frames, or ``frames=(first, stop)``)."""
+    return _decode(container.open_container(io.BytesIO(data), len(data), name), frames)
+
+
+def decode(path: str | os.PathLike, frames: tuple[int, int] | None = None) -> Motion:
+    """Decode a .moc file, reading only the chunks that ``frames=(first, stop)`` needs."""
+    path = Path(path)
+    with open(path, "rb") as f:
+        return _decode(container.open_container(f, path.stat().st_size, str(path)), frames)
+
+
+def info(path: str | os.PathLike) -> container.Container:
+    """The header and index of a .moc file (the file is closed; chunks cannot be read)."""
+    path = Path(path)
+    with open(path, "rb") as f:
+        return container.open_container(f, path.stat().st_size, str(path))
+
+
+def _decode(c: container.Container, frames: tuple[int, int] | None) -> Motion:
+    first, stop = (0, c.frames) if frames is None else frames
+    if not 0 <= first <= stop <= c.frames:
+        raise CodecError(f"{c.name}: frames {first}:{stop} are outside 0:{c.frames}")
+    try:
+        codec = codec_from_config(c.header["codec"])
+    except CodecError as e:
+        raise CorruptStreamError(f"{c.name}: header names a codec this mocodec cannot build ({e})") from None
+    parts = []
+    for k in c.chunks_for(first, stop):
+        e = c.index[k]
+        try:
+            motion = codec.decode(c.read_chunk(k), c.skeleton)
+        except CorruptStreamError as err:
+            raise CorruptStreamError(f"{c.name}: chunk {k} at byte {e.offset}: {err}") from None
+        if motion.num_frames != e.count:
+            raise CorruptStreamError(f"{c.name}: chunk {k} at byte {e.offset} decodes to {motion.num_frames} "
+                                     f"frames, the index says {e.count}")
+        parts.append(motion.channels[max(first - e.first, 0):stop - e.first])
+    channels = np.concatenate(parts) if parts else np.zeros((0, c.skeleton.num_channels))
+    return Motion(c.skeleton, c.fps, channels)

@@ -1,0 +1,119 @@
+"""Generic rate control: the knob setting of any codec for a target compression ratio, bit
+rate, PSNR, or joint position error (mean or max, cm).
+
+The codec's quality knob (:class:`~mocodec.codecs.QualityKnob`) is searched by bisection
+(in log space for log-scaled knobs), each candidate encoded into the real container and
+decoded again, so every figure is measured, never estimated. Error targets return the
+smallest file whose decoded output meets the bound, and the bound is verified on the very
+bytes returned. Ratio and bit-rate targets stop within ``tolerance`` (2%) of the target when
+the knob can get there, and otherwise report the closest setting.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from mocodec import moc
+from mocodec.codecs import Codec
+from mocodec.errors import CodecError
+from mocodec.kinematics import forward_kinematics
+from mocodec.metrics.waveform import dof_errors
+from mocodec.motion import Motion
+
+TARGETS = ("ratio", "bitrate", "psnr", "mean_error_cm", "max_error_cm")
+MAX_STEPS = 40
+KNOB_RESOLUTION = 1e-3          # relative: finer knob steps change a file by less than this
+
+
+@dataclass(frozen=True)
+class Measurement:
+    codec: Codec
+    data: bytes                 # the .moc bytes
+    ratio: float                # vs 32-bit floats
+    bitrate: float              # bits per second
+    psnr: float
+    mean_error_cm: float
+    max_error_cm: float
+
+
+def measure(codec: Codec, motion: Motion, positions_cm: np.ndarray | None = None) -> Measurement:
+    """Encode into a container, decode it back and measure everything rate control needs."""
+    data = moc.pack(motion, codec)
+    decoded = moc.unpack(data)
+    sk = motion.skeleton
+    if positions_cm is None:
+        positions_cm = forward_kinematics(sk, motion.channels)[0] * (100.0 / sk.units_per_metre)
+    err = np.linalg.norm(forward_kinematics(sk, decoded.channels)[0] * (100.0 / sk.units_per_metre) - positions_cm, axis=2)
+    psnr = dof_errors(motion.channels, decoded.channels, sk.rotation_mask).body_psnr
+    return Measurement(codec, data, motion.raw_bits / 8 / len(data), len(data) * 8 / max(motion.duration, 1e-12),
+                       psnr, float(err.mean()) if err.size else 0.0, float(err.max()) if err.size else 0.0)
+
+
+def _meets(m: Measurement, target: str, value: float) -> bool:
+    return {"ratio": m.ratio >= value, "bitrate": m.bitrate <= value, "psnr": m.psnr >= value,
+            "mean_error_cm": m.mean_error_cm <= value, "max_error_cm": m.max_error_cm <= value}[target]
+
+
+def _achieved(m: Measurement, target: str) -> float:
+    return getattr(m, target)
+
+
+def tune(codec: Codec, motion: Motion, target: str, value: float, tolerance: float = 0.02) -> Measurement:
+    """The measured setting of ``codec``'s quality knob for the target (see the module doc)."""
+    if target not in TARGETS:
+        raise CodecError(f"unknown target {target!r} (one of {', '.join(TARGETS)})")
+    if not (math.isfinite(value) and value > 0):
+        raise CodecError(f"target {target} needs a positive number, got {value}")
+    positions = forward_kinematics(motion.skeleton, motion.channels)[0] * (100.0 / motion.skeleton.units_per_metre)
+    q = codec.quality
+    if q is None:
+        m = measure(codec, motion, positions)
+        if _meets(m, target, value):
+            return m
+        raise CodecError(f"codec {codec.id} has no quality knob and gives {target} {_achieved(m, target):.4g}, "
+                         f"not {value:g}")
+    knob = next(k for k in codec.knobs if k.name == q.name)
+    lo, hi = float(knob.low), float(knob.high)
+    integer = knob.kind is int
+
+    def at(x: float) -> Measurement:
+        return measure(codec.with_knob(q.name, int(round(x)) if integer else x), motion, positions)
+
+    def mid(a: float, b: float) -> float:
+        m = math.sqrt(a * b) if q.log_scale and a > 0 and b > 0 else (a + b) / 2
+        return math.floor(m) if integer and m not in (a, b) else m
+
+    # orient so that "good" (more quality, bigger file) is at `best`
+    best_x, worst_x = (hi, lo) if q.higher_is_better else (lo, hi)
+    best, worst = at(best_x), at(worst_x)
+    size_target = target in ("ratio", "bitrate")
+    if size_target:
+        if _meets(best, target, value):
+            return best                       # even full quality is small enough
+        if not _meets(worst, target, value):
+            raise CodecError(f"codec {codec.id} cannot reach {target} {value:g}: at its smallest it gives "
+                             f"{_achieved(worst, target):.4g}")
+    else:
+        if _meets(worst, target, value):
+            return worst                      # even the lowest quality is good enough
+        if not _meets(best, target, value):
+            raise CodecError(f"codec {codec.id} cannot reach {target} {value:g}: at its best it gives "
+                             f"{_achieved(best, target):.4g}")
+    # invariant: `good` meets the target, `bad` does not; error targets want the smallest good
+    # file, size targets the largest good file, i.e. both move `good` towards `bad`.
+    good_x, good, bad_x = (worst_x, worst, best_x) if size_target else (best_x, best, worst_x)
+    for _ in range(MAX_STEPS):
+        if size_target and abs(_achieved(good, target) - value) <= tolerance * value:
+            break
+        x = mid(good_x, bad_x)
+        if x in (good_x, bad_x) or abs(x - good_x) <= KNOB_RESOLUTION * max(abs(good_x), 1e-12):
+            break
+        m = at(x)
+        if _meets(m, target, value):
+            good_x, good = x, m
+        else:
+            bad_x = x
+    return good

@@ -1,0 +1,122 @@
+"""Codec interface and registry, the reference codecs, streaming, and robustness of every
+registered decoder against damaged payloads."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import stepcodec  # noqa: F401  (registers test-step)
+from mocodec.codecs import codec_class, codec_from_config, codec_ids, get_codec
+from mocodec.errors import CodecError, CorruptStreamError
+
+
+def test_registry_and_knobs():
+    assert {"raw", "lossless"} <= set(codec_ids())
+    with pytest.raises(CodecError, match="unknown codec 'nope'"):
+        get_codec("nope")
+    with pytest.raises(CodecError, match="unknown knob"):
+        get_codec("raw", levels=3)
+    codec = get_codec("test-step", step="0.5")
+    assert codec.config == {"step": 0.5}
+    with pytest.raises(CodecError, match="outside"):
+        get_codec("test-step", step=1000)
+    with pytest.raises(CodecError, match="expected float"):
+        get_codec("test-step", step="fine")
+    assert codec_from_config(codec.get_config()).config == codec.config
+    with pytest.raises(CodecError):
+        codec_class("raw").from_config({"codec": "lossless"})
+
+
+@pytest.mark.parametrize("cid", ["raw", "lossless"])
+def test_reference_codecs_round_trip(cid, walk_bvh, walk_amc):
+    for motion in (walk_bvh, walk_amc, walk_amc[:1], walk_amc[:0]):
+        codec = get_codec(cid)
+        decoded = codec.decode(codec.encode(motion), motion.skeleton)
+        assert decoded.channels.shape == motion.channels.shape and decoded.fps == motion.fps
+        if cid == "lossless":
+            assert np.array_equal(decoded.channels, motion.channels)
+        else:
+            assert np.array_equal(decoded.channels, motion.channels.astype(np.float32).astype(np.float64))
+
+
+def test_lossless_is_exact_on_awkward_values(walk_amc):
+    rng = np.random.default_rng(0)
+    ch = walk_amc.channels.copy()
+    ch[:, 0] = rng.normal(size=len(ch))                      # full-precision floats
+    ch[::7, 1] = 1e-300                                       # exceptions inside a decimal channel
+    ch[:, 2] = np.round(rng.normal(size=len(ch)) * 1e6)       # large integers
+    ch[5, 3] = -0.0
+    ch[:, 4] = 1e15 + np.arange(len(ch))
+    motion = walk_amc.with_channels(ch)
+    codec = get_codec("lossless")
+    assert np.array_equal(codec.decode(codec.encode(motion), motion.skeleton).channels, ch)
+
+
+def test_lossless_compresses_real_clips(walk_bvh, walk_amc):
+    for motion in (walk_bvh, walk_amc):
+        assert len(get_codec("lossless").encode(motion)) < 0.8 * len(get_codec("raw").encode(motion))
+
+
+def test_encoding_refuses_nan(walk_amc):
+    bad = walk_amc.channels.copy()
+    bad[10, 5] = np.inf
+    for cid in codec_ids():
+        with pytest.raises(CodecError, match="frame 10"):
+            get_codec(cid).encode(walk_amc.with_channels(bad))
+
+
+def test_raw_streams_frame_by_frame(walk_amc):
+    codec = get_codec("raw")
+    enc, dec = codec.encoder(walk_amc.skeleton, walk_amc.fps), codec.decoder(walk_amc.skeleton, walk_amc.fps)
+    got = [dec.push(p) for k in range(0, 40, 7) for p in enc.push(walk_amc.channels[k:k + 7])]
+    assert np.allclose(np.concatenate(got), walk_amc.channels[:42], atol=1e-4)
+    with pytest.raises(CorruptStreamError):
+        dec.push(b"\x00" * 5)
+    with pytest.raises(CodecError, match="does not stream"):
+        get_codec("lossless").encoder(walk_amc.skeleton, 120.0)
+
+
+@pytest.fixture(scope="module")
+def payloads(walk_amc):
+    clip = walk_amc[:60]
+    return clip, {cid: get_codec(cid).encode(clip) for cid in codec_ids()}
+
+
+def _decode_or_our_error(cid, data, skeleton):
+    try:
+        get_codec(cid).decode(data, skeleton)
+    except CorruptStreamError:
+        pass
+
+
+@settings(max_examples=30)
+@given(data=st.binary(max_size=400))
+def test_random_bytes_raise_only_our_error(payloads, data):
+    clip, _ = payloads
+    for cid in codec_ids():
+        _decode_or_our_error(cid, data, clip.skeleton)
+
+
+def test_every_truncation_and_bit_flip_is_caught(payloads):
+    clip, coded = payloads
+    rng = np.random.default_rng(1)
+    for cid, data in coded.items():
+        for cut in range(0, len(data), max(1, len(data) // 200)):
+            with pytest.raises(CorruptStreamError):
+                get_codec(cid).decode(data[:cut], clip.skeleton)
+        header_bits = range(17 * 8)                          # every bit of the envelope, and a sample
+        for bit in [*header_bits, *rng.choice(len(data) * 8, size=min(200, len(data) * 8), replace=False)]:
+            flipped = bytearray(data)
+            flipped[bit // 8] ^= 1 << (bit % 8)
+            with pytest.raises(CorruptStreamError):
+                get_codec(cid).decode(bytes(flipped), clip.skeleton)
+
+
+def test_payload_for_another_skeleton_is_refused(payloads, walk_bvh):
+    _, coded = payloads
+    for cid, data in coded.items():
+        with pytest.raises(CorruptStreamError):
+            get_codec(cid).decode(data, walk_bvh.skeleton)

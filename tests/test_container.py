@@ -1,0 +1,109 @@
+"""The .moc container: round trips, random access, overhead, and damaged files."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from mocodec import Motion, moc
+from mocodec.codecs import get_codec
+from mocodec.errors import CodecError, CorruptStreamError
+from mocodec.formats import container
+
+
+@pytest.fixture(scope="module")
+def long_walk(walk_amc):
+    """2490 frames: the walk six times over."""
+    return Motion(walk_amc.skeleton, walk_amc.fps, np.tile(walk_amc.channels, (6, 1)))
+
+
+@pytest.mark.parametrize("cid", ["raw", "lossless"])
+def test_file_round_trip_and_frame_ranges(cid, long_walk, tmp_path):
+    path = tmp_path / "walk.moc"
+    size = moc.encode(long_walk, path, get_codec(cid), chunk_frames=500)
+    assert path.stat().st_size == size and not list(tmp_path.glob("*.tmp"))
+    whole = moc.decode(path)
+    assert whole.skeleton.isclose(long_walk.skeleton, atol=0) and whole.fps == long_walk.fps
+    expected = long_walk.channels if cid == "lossless" else long_walk.channels.astype(np.float32)
+    assert np.array_equal(whole.channels, expected)
+    for first, stop in ((0, 1), (499, 501), (1234, 2490), (2489, 2490), (700, 700)):
+        part = moc.decode(path, frames=(first, stop))
+        assert np.array_equal(part.channels, expected[first:stop])
+    info = moc.info(path)
+    assert info.chunks_for(499, 501) == [0, 1] and len(info.index) == 5
+    with pytest.raises(CodecError, match="outside"):
+        moc.decode(path, frames=(0, 9999))
+
+
+def test_skeleton_survives_exactly(walk_amc, walk_bvh):
+    for motion in (walk_amc, walk_bvh):
+        back = container.skeleton_from_dict(container.skeleton_to_dict(motion.skeleton))
+        assert back.isclose(motion.skeleton, atol=0) and back.body_parts == motion.skeleton.body_parts
+
+
+def test_overhead_is_under_one_percent(long_walk):
+    codec = get_codec("lossless")
+    data = moc.pack(long_walk, codec)
+    chunks = moc.unpack(data)                                   # decodes
+    assert chunks.num_frames == long_walk.num_frames
+    payload = sum(len(codec.encode(long_walk[a:a + moc.CHUNK_FRAMES]))
+                  for a in range(0, long_walk.num_frames, moc.CHUNK_FRAMES))
+    framing = len(data) - payload - len(_skeleton_bytes(long_walk))
+    assert framing < 0.01 * payload
+
+
+def _skeleton_bytes(motion) -> bytes:
+    import json
+    import zlib
+    return zlib.compress(json.dumps(container.skeleton_to_dict(motion.skeleton), separators=(",", ":")).encode(), 9)
+
+
+@pytest.fixture(scope="module")
+def small_file(walk_amc):
+    return moc.pack(walk_amc[:50], get_codec("lossless"), chunk_frames=20)
+
+
+def test_every_truncation_is_caught(small_file):
+    for cut in range(len(small_file)):
+        with pytest.raises(CorruptStreamError):
+            moc.unpack(small_file[:cut])
+
+
+def test_bit_flips_name_the_damaged_part(small_file):
+    rng = np.random.default_rng(2)
+    for bit in rng.choice(len(small_file) * 8, size=400, replace=False):
+        data = bytearray(small_file)
+        data[bit // 8] ^= 1 << (bit % 8)
+        with pytest.raises(CorruptStreamError) as err:
+            moc.unpack(bytes(data), name="f.moc")
+        assert str(err.value).startswith("f.moc: ")
+
+
+def test_damaged_chunk_is_reported_with_its_number_and_offset(small_file):
+    c = container.open_container(__import__("io").BytesIO(small_file), len(small_file), "f.moc")
+    e = c.index[1]
+    data = bytearray(small_file)
+    data[e.offset + 20] ^= 0xFF
+    with pytest.raises(CorruptStreamError, match=f"chunk 1 at byte {e.offset}: CRC mismatch"):
+        moc.unpack(bytes(data), name="f.moc")
+    moc.unpack(bytes(data), frames=(0, 20), name="f.moc")        # chunk 0 alone still decodes
+
+
+@settings(max_examples=50)
+@given(st.binary(max_size=300))
+def test_random_bytes_raise_only_our_error(data):
+    try:
+        moc.unpack(data)
+    except CorruptStreamError:
+        pass
+    try:
+        moc.unpack(b"MOC1" + data)
+    except CorruptStreamError:
+        pass
+
+
+def test_not_a_moc_file(tmp_path, walk_amc):
+    with pytest.raises(CorruptStreamError, match="not a .moc file"):
+        moc.unpack(b"BVH nonsense" * 10)

@@ -24,7 +24,7 @@ from mocodec.skeleton import Skeleton
 
 ENVELOPE_VERSION = 1
 _ENVELOPE = struct.Struct("<BIdI")     # version, frames, fps, CRC32 of those fields and the body
-MAX_FRAMES = 1 << 24                   # 39 hours at 120 fps per payload
+MAX_FRAMES = 1 << 20                   # 2.4 hours at 120 fps per payload; the container chunks clips
 
 
 @dataclass(frozen=True)

@@ -25,6 +25,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_foundation.py
 	$(BIN)/python benchmarks/bench_measures.py
 	$(BIN)/python benchmarks/bench_coding.py
+	$(BIN)/python benchmarks/bench_lossless.py
 
 clean:
 	rm -rf $(VENV) build src/*.egg-info .pytest_cache

@@ -4,7 +4,6 @@ even lossless for these float64 values. Run: `.venv/bin/python benchmarks/bench_
 
 from __future__ import annotations
 
-import sys
 import time
 from pathlib import Path
 
@@ -20,7 +19,8 @@ SHARED = next((p for p in (ROOT.parent / "shared" / "data", Path("/work/shared/d
 
 def main() -> None:
     if SHARED is None:
-        sys.exit("../shared/data is not here")
+        print("bench_lossless: ../shared/data is not here; skipped")
+        return
     codec = get_codec("lossless")
     rows = []
     for path in sorted((SHARED / "cmu").glob("*/*.bvh")) + sorted((SHARED / "cmu").glob("*/*.amc")):

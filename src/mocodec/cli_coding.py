@@ -152,7 +152,8 @@ def cmd_codecs(args) -> int:
         knobs = " ".join(k.describe() for k in cls.knobs) or "-"
         quality = f"; quality knob {cls.quality.name}" if cls.quality else ""
         print(f"{cid:<12}{cls.description}")
-        print(f"{'':<12}knobs: {knobs}{quality}; delay {cls.delay_frames} frames{'; ' + flags if flags else ''}")
+        delay = cls().delay_frames
+        print(f"{'':<12}knobs: {knobs}{quality}; delay {delay} frames{'; ' + flags if flags else ''}")
     return 0
 
 

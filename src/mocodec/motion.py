@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+import numba
 import numpy as np
 
 from mocodec import kinematics, rotations
@@ -133,6 +134,30 @@ class Motion:
         """Equal skeletons and fps, channels within the tolerances (angles modulo 360)."""
         return self.difference(other, atol_degrees, atol_units) is None
 
+    def continuous(self) -> "Motion":
+        """The same poses with every angle curve as continuous as the Euler form allows.
+
+        Each joint with three rotation channels takes, frame by frame, whichever of its two
+        equivalent angle triples (shifted by turns of 360) lies nearest the previous frame's;
+        other rotation channels are unwrapped. Forward kinematics is unchanged, but the 180
+        and 360 degree jumps of captured data (gimbal flips, wraps at +-180) are gone, which
+        is what transform and predictive coders need."""
+        sk = self.skeleton
+        out = self.channels.copy()
+        rot = sk.rotation_mask
+        out[:, rot] = np.unwrap(out[:, rot], period=360.0, axis=0)
+        if self.num_frames < 2:
+            return replace(self, channels=out)
+        for j, joint in enumerate(sk.joints):
+            if len(joint.rotation_order) != 3 or len(set(joint.rotation_order)) < 2:
+                continue
+            idx = sk.channel_offsets[j] + np.array(joint.rotation_channel_indices())
+            angles = self.channels[:, idx]
+            alt = angles + np.array([180.0, 0.0, 180.0])
+            alt[:, 1] = -angles[:, 1] if joint.rotation_order[0] == joint.rotation_order[2] else 180.0 - angles[:, 1]
+            out[:, idx] = _follow(np.ascontiguousarray(angles), np.ascontiguousarray(alt))
+        return replace(self, channels=out)
+
     # ----- resampling -----------------------------------------------------------------
     def resample(self, fps: float) -> "Motion":
         """The motion at another frame rate over the same time span.
@@ -167,6 +192,27 @@ class Motion:
             out[:, idx] = _nearest_euler(rotations.quat_to_euler(qs, joint.rotation_order),
                                          joint.rotation_order, linear[:, idx])
         return Motion(sk, float(fps), out)
+
+
+@numba.njit(cache=True)
+def _follow(angles, alt):
+    """Frame by frame, the candidate triple (shifted by turns of 360) nearest the previous."""
+    out = np.empty_like(angles)
+    out[0] = angles[0]
+    for f in range(1, angles.shape[0]):
+        best = np.inf
+        for cand in (angles[f], alt[f]):
+            cost = 0.0
+            shifted = np.empty(3)
+            for k in range(3):
+                d = cand[k] - out[f - 1, k]
+                d -= 360.0 * np.floor((d + 180.0) / 360.0)
+                shifted[k] = out[f - 1, k] + d
+                cost += abs(d)
+            if cost < best:
+                best = cost
+                out[f] = shifted
+    return out
 
 
 def _nearest_euler(angles: np.ndarray, order: str, reference: np.ndarray) -> np.ndarray:

@@ -1,0 +1,56 @@
+"""Multi-level 1-D wavelet transforms of many channels at once (PyWavelets).
+
+``periodization`` makes a segment of N frames give about N coefficients (exactly N when N is
+divisible by 2^levels), which is what bit-plane coders (001 ch. 6) need; but it joins the end
+of a segment to its start, so a motion that ends elsewhere than it began (any walk) gets a jump
+that costs coefficients at every scale. ``symmetric`` mirrors the ends instead: a few more
+coefficients, no jump; coders that send only their largest coefficients prefer it. Names:
+``db2`` is Daubechies D4 (4 taps), ``bior4.4`` is CDF 9/7. Coefficients of a channel are laid
+out coarsest first: [approximation, details of the coarsest level, ..., finest details].
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pywt
+
+WAVELETS = {"d4": "db2", "cdf97": "bior4.4", "haar": "haar"}
+
+
+def max_levels(frames: int, wavelet: str) -> int:
+    """The deepest decomposition PyWavelets does without boundary warnings (0 for tiny segments)."""
+    return pywt.dwt_max_level(frames, pywt.Wavelet(WAVELETS.get(wavelet, wavelet)).dec_len)
+
+
+def band_lengths(frames: int, wavelet: str, levels: int, mode: str = "periodization") -> list[int]:
+    """Lengths of the bands of a ``frames``-long signal, coarsest first."""
+    taps = pywt.Wavelet(WAVELETS.get(wavelet, wavelet)).dec_len
+    lengths, n = [], frames
+    for _ in range(levels):
+        n = pywt.dwt_coeff_len(n, taps, mode)
+        lengths.append(n)
+    return [lengths[-1], *lengths[::-1]] if levels else [frames]
+
+
+def forward(x: np.ndarray, wavelet: str, levels: int, mode: str = "periodization") -> np.ndarray:
+    """Wavelet coefficients of every row of ``x`` ``(channels, frames)``, concatenated."""
+    x = np.asarray(x, dtype=np.float64)
+    if levels == 0:
+        return x.copy()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)       # deep levels on short segments
+        bands = pywt.wavedec(x, WAVELETS.get(wavelet, wavelet), mode=mode, level=levels, axis=-1)
+    return np.concatenate(bands, axis=-1)
+
+
+def inverse(coeffs: np.ndarray, frames: int, wavelet: str, levels: int, mode: str = "periodization") -> np.ndarray:
+    """Inverse of :func:`forward` for signals of ``frames`` samples."""
+    coeffs = np.asarray(coeffs, dtype=np.float64)
+    if levels == 0:
+        return coeffs.copy()
+    bounds = np.cumsum(band_lengths(frames, wavelet, levels, mode))[:-1]
+    bands = np.split(coeffs, bounds, axis=-1)
+    out = pywt.waverec(bands, WAVELETS.get(wavelet, wavelet), mode=mode, axis=-1)
+    return out[..., :frames]

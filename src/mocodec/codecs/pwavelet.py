@@ -21,9 +21,9 @@
    (:func:`mocodec.coding.rangecoder.encode_ints`) on the run lengths, the values and the steps.
 
 ``allocation`` selects the ablations of tables 3.2 and 3.3: ``uniform`` (the same share for
-every channel, "standard wavelet compression") and ``bone`` (bone length only). Rotation
-channels are unwrapped (period 360) before the transform, so a wrap from 180 to -180 is not a
-step for the wavelets; decoded angles are equivalent modulo 360. The D4 transform mirrors the
+every channel, "standard wavelet compression") and ``bone`` (bone length only). The angles are
+made continuous first (:meth:`Motion.continuous`: no wraps at +-180, no gimbal flips), so
+those jumps are not steps for the wavelets; decoded poses are the same, angles equivalent. The D4 transform mirrors the
 slice ends (``symmetric``; the thesis does not say): periodisation would join a walk's end to
 its start, and that jump alone eats the coefficient budget.
 """
@@ -134,9 +134,7 @@ class PWaveletCodec(Codec):
 
     def _encode(self, motion) -> bytes:
         sk, cfg = motion.skeleton, self.config
-        ch = motion.channels.copy()
-        rot = sk.rotation_mask
-        ch[:, rot] = np.unwrap(ch[:, rot], period=360.0, axis=0)
+        ch = motion.continuous().channels
         bone = channel_bone_lengths(sk)
         qs, exps = [], []
         for a, b in self._slices(len(ch)):

@@ -158,6 +158,22 @@ class Motion:
             out[:, idx] = _follow(np.ascontiguousarray(angles), np.ascontiguousarray(alt))
         return replace(self, channels=out)
 
+    def aligned_to(self, reference: "Motion") -> "Motion":
+        """The same poses, each 3-axis joint's angles given as whichever equivalent triple
+        (shifted by turns of 360) lies nearest ``reference``'s in that frame, and other angles
+        wrapped to within 180 degrees of it. Channel-space errors then measure pose differences
+        only, not the choice between equivalent Euler angles."""
+        sk = self.skeleton
+        rot = sk.rotation_mask
+        out = self.channels.copy()
+        out[:, rot] = reference.channels[:, rot] + wrap_degrees(out[:, rot] - reference.channels[:, rot])
+        for j, joint in enumerate(sk.joints):
+            if len(joint.rotation_order) != 3 or len(set(joint.rotation_order)) < 2:
+                continue
+            idx = sk.channel_offsets[j] + np.array(joint.rotation_channel_indices())
+            out[:, idx] = _nearest_euler(self.channels[:, idx], joint.rotation_order, reference.channels[:, idx])
+        return replace(self, channels=out)
+
     # ----- resampling -----------------------------------------------------------------
     def resample(self, fps: float) -> "Motion":
         """The motion at another frame rate over the same time span.

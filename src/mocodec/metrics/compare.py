@@ -1,5 +1,9 @@
 """``compare``: every measure of an original motion against its decoded version, at once.
 
+The decoded angles are first expressed as the equivalent Euler triples nearest the original's
+(:meth:`Motion.aligned_to`): a coder that returns (a+180, 180-b, c+180) for (a, b, c) has made
+no error, and channel-space measures (PSNR, VPSNR, group errors) must not say otherwise.
+
 Forward kinematics runs once per motion and feeds the joint, shell, foot, jerk and group
 position measures. The result prints as a table (``table()``) or serialises to plain JSON
 types (``as_dict()``); ``per_joint_table()`` lists the errors joint by joint.
@@ -189,6 +193,7 @@ def compare(original: Motion, decoded: Motion, weights=None, ranges=None, shell_
     """Every measure of ``decoded`` against ``original``. ``weights`` and ``ranges`` are the
     a and b of the group measures (6-9), (6-10), (6-14) (see :mod:`mocodec.metrics.groups`)."""
     check_pair(original, decoded)
+    decoded = decoded.aligned_to(original)        # equivalent Euler triples are not errors
     sk = original.skeleton
     err = channel_error(original.channels, decoded.channels, sk.rotation_mask)
     dof = errors_of(original.channels, err)

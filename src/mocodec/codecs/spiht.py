@@ -1,0 +1,196 @@
+"""``spiht``: 1-D SPIHT with perceptual bit allocation, 001 ch. 6.
+
+Per segment of W frames (a power of two, 128 by default) and per channel:
+
+1. Anchors. The channel's value at every segment start (and at the last frame) is sent at 0.01
+   degree or 0.01 cm, delta coded; the segment's residual is taken from the straight line
+   between its anchors. This is how the root (and every other channel) cannot drift: the
+   figure is pinned to the anchors to 0.01 cm, whatever the budget, and a segment's residual
+   starts and ends near zero, so the periodised wavelet sees no jump where a walk ends away
+   from where it began.
+2. The residual, zero-padded to W, goes through a periodised multi-level wavelet (CDF 9/7 by
+   default, D4 available; ``levels`` deep, coarsest band of W / 2^levels), is quantised to a
+   fine quantum (1/256 degree or cm) and coded by 1-D SPIHT (:mod:`mocodec.coding.spiht`).
+3. Bit allocation (6.1): B_c = F_c B_T / sum F_i, with B_T = bits_per_second x W / fps and F_c
+   the importance of :mod:`mocodec.perception` (``perceptual``: body part, depth, energy, bone
+   length; ``energy``; ``uniform``). F_c is sent as a half-octave level (4 bits before entropy
+   coding) so the decoder derives the same budgets (a channel with no coefficient above the
+   quantum gets F = 0: the encoder knows it, and the budget goes where it is used); each
+   channel's stream stops exactly at
+   its budget, so the SPIHT part of a segment is exactly B_T bits (less only when a channel is
+   coded to the quantum before its budget ends).
+
+Every channel stream is embedded: cutting each to a smaller budget (``truncate``) gives a
+valid, coarser file without re-encoding. Angles are made continuous first
+(:meth:`Motion.continuous`).
+"""
+
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+
+from mocodec import perception
+from mocodec.codecs.base import Codec, Knob, QualityKnob
+from mocodec.codecs.registry import register
+from mocodec.coding import spiht, wavelets
+from mocodec.coding.rangecoder import decode_ints, encode_ints
+from mocodec.errors import CodecError, CorruptStreamError
+from mocodec.skeleton import Skeleton
+
+QUANTUM = 1.0 / 256          # degrees, or cm for translations: the finest SPIHT plane
+ANCHOR_QUANTUM = 0.01        # degrees, or cm
+N0_BITS = 6                  # each channel stream starts with its top plane + 1 (0: all zero)
+F_LEVELS = 16                # importance sent as half-octave levels 1..15 below the segment's top; 0 = none
+_U32 = struct.Struct("<I")
+
+
+def channel_scale(skeleton: Skeleton) -> np.ndarray:
+    """Per channel, skeleton units (or degrees) per cm (or degree)."""
+    return np.where(skeleton.rotation_mask, 1.0, skeleton.units_per_metre / 100.0)
+
+
+def importance_levels(f: np.ndarray) -> np.ndarray:
+    """F as levels: 15 for the largest, one less per half octave below it, 1 at least; 0 for 0."""
+    top = f.max() if f.size else 0.0
+    if top <= 0:
+        return np.zeros(f.size, dtype=np.int64)
+    with np.errstate(divide="ignore"):
+        level = F_LEVELS - 1 + np.round(2 * np.log2(f / top))
+    return np.where(f > 0, np.clip(level, 1, F_LEVELS - 1), 0).astype(np.int64)
+
+
+def level_weights(levels: np.ndarray) -> np.ndarray:
+    return np.where(levels > 0, 2.0 ** ((levels - (F_LEVELS - 1)) / 2.0), 0.0)
+
+
+def anchor_frames(frames: int, window: int) -> np.ndarray:
+    starts = np.arange(0, frames, window)
+    return starts if frames - 1 in starts else np.append(starts, frames - 1)
+
+
+@register
+class SpihtCodec(Codec):
+    id = "spiht"
+    description = "001 ch. 6: wavelet + 1-D SPIHT per channel, perceptual bit allocation, embedded streams"
+    knobs = (
+        Knob("bits_per_second", float, 8000.0, "SPIHT bits per second for the whole figure", low=1.0, high=1e8),
+        Knob("window", int, 128, "frames per segment W (a power of two)", low=4, high=1 << 14),
+        Knob("wavelet", str, "cdf97", "wavelet", choices=("cdf97", "d4")),
+        Knob("levels", int, 0, "decomposition levels (0: log2(W) - 2)", low=0, high=14),
+        Knob("allocation", str, "perceptual", "bit allocation (6.1)", choices=perception.ALLOCATIONS),
+        Knob("leg_score", float, 1.0, "body-part score of the legs", low=0.0, high=1.0),
+        Knob("upper_score", float, 0.5, "body-part score of arms, torso and head", low=0.0, high=1.0),
+    )
+    quality = QualityKnob("bits_per_second", higher_is_better=True, log_scale=True)
+
+    def __init__(self, **knobs):
+        super().__init__(**knobs)
+        w = self.config["window"]
+        if w & (w - 1):
+            raise CodecError(f"codec spiht: window must be a power of two, got {w}")
+        levels = self.config["levels"] or max(int(np.log2(w)) - 2, 0)
+        if levels > int(np.log2(w)):
+            raise CodecError(f"codec spiht: {levels} levels need a window of at least {1 << levels}")
+        self.n_levels = levels
+
+    @property
+    def delay_frames(self) -> int:
+        return self.config["window"]
+
+    def _scores(self) -> dict[str, float]:
+        legs, upper = self.config["leg_score"], self.config["upper_score"]
+        return {p: (legs if p.endswith("_leg") else upper) for p in perception.DEFAULT_SCORES}
+
+    def _segments(self, frames: int) -> list[tuple[int, int]]:
+        w = self.config["window"]
+        return [(a, min(a + w, frames)) for a in range(0, frames, w)]
+
+    def _lines(self, anchors: np.ndarray, frames: int) -> np.ndarray:
+        """The anchor-to-anchor lines for every frame ``(frames, channels)``."""
+        idx = anchor_frames(frames, self.config["window"])
+        t = np.arange(frames)
+        return np.stack([np.interp(t, idx, anchors[:, c]) for c in range(anchors.shape[1])], axis=1)
+
+    def _budget(self, n: int, fps: float) -> int:
+        return int(np.floor(self.config["bits_per_second"] * n / fps))
+
+    def _encode(self, motion) -> bytes:
+        sk, cfg = motion.skeleton, self.config
+        ch = motion.continuous().channels
+        frames = len(ch)
+        if frames == 0:
+            return b""
+        scale = channel_scale(sk)
+        anchor_q = ANCHOR_QUANTUM * scale
+        a_int = np.round(ch[anchor_frames(frames, cfg["window"])] / anchor_q).astype(np.int64)
+        residual = ch - self._lines(a_int * anchor_q, frames)
+        w, approx = cfg["window"], cfg["window"] >> self.n_levels
+        levels_f, streams = [], []
+        for a, b in self._segments(frames):
+            seg = np.zeros((w, ch.shape[1]))
+            seg[:b - a] = residual[a:b]
+            coeffs = np.round(wavelets.forward(seg.T, cfg["wavelet"], self.n_levels) / (QUANTUM * scale[:, None]))
+            f = perception.channel_importance(sk, ch[a:b], cfg["allocation"], self._scores())
+            f[~coeffs.any(axis=1)] = 0.0          # nothing above the quantum: no budget to waste
+            lv = importance_levels(f)
+            budgets = perception.allocate(level_weights(lv), self._budget(b - a, motion.fps))
+            levels_f.append(lv)
+            for c in range(ch.shape[1]):
+                if budgets[c] <= N0_BITS:
+                    continue
+                bits, n0 = spiht.encode(coeffs[c].astype(np.int64), approx, int(budgets[c]) - N0_BITS)
+                head = np.array([(n0 + 1) >> k & 1 for k in range(N0_BITS - 1, -1, -1)], dtype=np.uint8)
+                streams += [head, bits]
+        bits = np.concatenate(streams) if streams else np.zeros(0, dtype=np.uint8)
+        parts = [encode_ints(np.diff(a_int, axis=0, prepend=0).T), encode_ints(np.concatenate(levels_f)),
+                 _U32.pack(bits.size) + np.packbits(bits).tobytes()]
+        return b"".join(_U32.pack(len(p)) + p for p in parts)
+
+    def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:
+        cfg = self.config
+        n_ch = skeleton.num_channels
+        if frames == 0:
+            return np.zeros((0, n_ch))
+        parts, pos = [], 0
+        for _ in range(3):
+            (size,) = _U32.unpack_from(body, pos)
+            if pos + 4 + size > len(body):
+                raise CorruptStreamError(f"spiht payload: a {size}-byte part at byte {pos} overruns the end")
+            parts.append(body[pos + 4:pos + 4 + size])
+            pos += 4 + size
+        idx = anchor_frames(frames, cfg["window"])
+        deltas = decode_ints(parts[0])
+        levels_f = decode_ints(parts[1])
+        segments = self._segments(frames)
+        if deltas.size != idx.size * n_ch or levels_f.size != len(segments) * n_ch \
+                or levels_f.min(initial=0) < 0 or levels_f.max(initial=0) >= F_LEVELS:
+            raise CorruptStreamError("spiht payload: anchor or allocation streams do not match the frames")
+        (n_bits,) = _U32.unpack_from(parts[2])
+        bits = np.unpackbits(np.frombuffer(parts[2], dtype=np.uint8, offset=4))[:n_bits]
+        if bits.size != n_bits:
+            raise CorruptStreamError(f"spiht payload: {n_bits} bits announced, {bits.size} present")
+        scale = channel_scale(skeleton)
+        anchors = np.cumsum(deltas.reshape(n_ch, idx.size).T, axis=0) * (ANCHOR_QUANTUM * scale)
+        out = self._lines(anchors, frames)
+        w, approx = cfg["window"], cfg["window"] >> self.n_levels
+        cursor = 0
+        for k, (a, b) in enumerate(segments):
+            lv = levels_f[k * n_ch:(k + 1) * n_ch]
+            budgets = perception.allocate(level_weights(lv), self._budget(b - a, fps))
+            coeffs = np.zeros((n_ch, w))
+            for c in range(n_ch):
+                if budgets[c] <= N0_BITS:
+                    continue
+                if cursor + N0_BITS > n_bits:
+                    raise CorruptStreamError(f"spiht payload: bits end in segment {k}, channel {c}")
+                n0 = int(np.dot(bits[cursor:cursor + N0_BITS], 1 << np.arange(N0_BITS - 1, -1, -1))) - 1
+                cursor += N0_BITS
+                coeffs[c], used = spiht.decode(bits, cursor, int(budgets[c]) - N0_BITS, w, approx, n0)
+                cursor += used
+            seg = wavelets.inverse(coeffs * (QUANTUM * scale[:, None]), w, cfg["wavelet"], self.n_levels)
+            out[a:b] += seg.T[:b - a]
+        if cursor != n_bits:
+            raise CorruptStreamError(f"spiht payload: {n_bits - cursor} bits left over after the last segment")
+        return out

@@ -1,0 +1,84 @@
+"""The spiht codec (001 ch. 6): exact budgets, quality rising with the rate, allocation modes,
+the perceptual factors (6.1)-(6.3), and anchors that keep the root in place."""
+
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+import pytest
+
+from mocodec import perception
+from mocodec.codecs import get_codec
+from mocodec.codecs import spiht as sp
+from mocodec.errors import CodecError
+from mocodec.metrics import compare
+
+
+def test_perceptual_factors_follow_6_1_to_6_3(walk_amc):
+    sk = walk_amc.skeleton
+    seg = np.array([[0.0, 5.0], [1.0, 5.0], [3.0, 5.0], [4.0, 5.0]])
+    # steps 1, 2, 1: sum of squares 6, largest 4, W = 4 -> 6 / 16
+    assert perception.channel_energy(seg).tolist() == [6 / 16, 0.0]
+    p = perception.depth_factors(sk)
+    femur, foot = sk.index("lfemur"), sk.index("lfoot")
+    assert p[femur] > p[foot] and p[0] == 1.0
+    assert perception.allocate(np.array([1.0, 3.0, 0.0]), 100).tolist() == [25, 75, 0]
+    assert perception.bone_factors(sk)[sk.index("lhumerus")] == pytest.approx(1.0, abs=0.35)
+
+
+def _spiht_bits(payload: bytes) -> int:
+    body = payload[17:]
+    pos = 0
+    for _ in range(2):
+        pos += 4 + struct.unpack_from("<I", body, pos)[0]
+    return struct.unpack_from("<I", body, pos + 4)[0]
+
+
+def test_each_segment_spends_its_budget_exactly(walk_amc):
+    codec = get_codec("spiht", bits_per_second=3000, allocation="uniform")
+    payload = codec.encode(walk_amc)
+    budgets = 0
+    for a, b in codec._segments(walk_amc.num_frames):
+        budgets += perception.allocate(np.ones(walk_amc.num_channels - 6), int(3000 * (b - a) / 120)).sum()
+    used = _spiht_bits(payload)
+    assert used <= budgets and used >= budgets - 6 * walk_amc.num_channels    # only all-zero channels stop early
+
+
+@pytest.mark.parametrize("allocation", ["perceptual", "energy", "uniform"])
+def test_error_falls_as_the_rate_rises(walk_amc, allocation):
+    errors = [compare(walk_amc, (c := get_codec("spiht", bits_per_second=bps, allocation=allocation))
+                      .decode(c.encode(walk_amc), walk_amc.skeleton)).joints.mean for bps in (2000, 8000, 60000)]
+    assert errors[0] > errors[1] > errors[2]
+
+
+def test_high_rate_is_near_lossless(walk_bvh, walk_amc):
+    for motion in (walk_bvh, walk_amc):
+        codec = get_codec("spiht", bits_per_second=2e6)
+        result = compare(motion, codec.decode(codec.encode(motion), motion.skeleton))
+        assert result.joints.max < 0.2
+
+
+def test_anchors_pin_the_root(walk_amc):
+    """Even at a starvation rate the root passes through its anchors (0.01 cm)."""
+    codec = get_codec("spiht", bits_per_second=50)
+    decoded = codec.decode(codec.encode(walk_amc), walk_amc.skeleton)
+    k = walk_amc.skeleton.channel_index("root.Xposition")
+    idx = sp.anchor_frames(walk_amc.num_frames, 128)
+    cm = 100 / walk_amc.skeleton.units_per_metre
+    assert np.abs(decoded.channels[idx, k] - walk_amc.channels[idx, k]).max() * cm <= 0.005 + 1e-9
+
+
+def test_knob_checks():
+    with pytest.raises(CodecError, match="power of two"):
+        get_codec("spiht", window=100)
+    assert get_codec("spiht", window=64).delay_frames == 64
+    assert get_codec("spiht").n_levels == 5
+
+
+def test_short_and_odd_clips(walk_bvh):
+    for frames in (1, 2, 127, 129):
+        clip = walk_bvh[:frames]
+        codec = get_codec("spiht", bits_per_second=1e6)
+        decoded = codec.decode(codec.encode(clip), clip.skeleton)
+        assert decoded.num_frames == frames and compare(clip, decoded).joints.max < 0.5

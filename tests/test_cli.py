@@ -105,3 +105,12 @@ def test_compare_rejects_mismatched_pairs(capsys):
     assert err.count("\n") == 1 and "different skeletons" in err
     assert main(["compare", str(DATA / "07_03.bvh"), str(DATA / "09_02.bvh")]) == 2
     assert "frame counts" in capsys.readouterr().err
+
+
+def test_truncate_command(tmp_path, capsys):
+    full = tmp_path / "full.moc"
+    assert main(["encode", str(DATA / "07_03.amc"), "-o", str(full), "--codec", "spiht",
+                 "--bits-per-second", "30000"]) == 0
+    assert main(["truncate", str(full), "--ratio", "25", "-o", str(tmp_path / "small.moc")]) == 0
+    assert "ratio 2" in capsys.readouterr().out
+    assert main(["decode", str(tmp_path / "small.moc"), "-o", str(tmp_path / "small.bvh")]) == 0

@@ -82,3 +82,26 @@ def test_short_and_odd_clips(walk_bvh):
         codec = get_codec("spiht", bits_per_second=1e6)
         decoded = codec.decode(codec.encode(clip), clip.skeleton)
         assert decoded.num_frames == frames and compare(clip, decoded).joints.max < 0.5
+
+
+def test_truncation_equals_encoding_at_the_lower_rate(walk_amc):
+    codec = get_codec("spiht", bits_per_second=20000)
+    payload = codec.encode(walk_amc)
+    for bps in (20000, 5000, 700):
+        smaller, cut = codec.truncate(payload, walk_amc.skeleton, bps)
+        assert cut == smaller.encode(walk_amc)
+    with pytest.raises(CodecError, match="above"):
+        codec.truncate(payload, walk_amc.skeleton, 40000)
+
+
+def test_file_truncation_hits_the_ratio(walk_amc):
+    from mocodec import moc
+
+    data = moc.pack(walk_amc, get_codec("spiht", bits_per_second=40000))
+    cut = moc.truncate(data, ratio=30)
+    raw = walk_amc.raw_bits / 8
+    assert 30 <= raw / len(cut) <= 30 * 1.02 + 1e-9
+    coarse = moc.unpack(cut)
+    assert compare(walk_amc, coarse).joints.mean > compare(walk_amc, moc.unpack(data)).joints.mean
+    with pytest.raises(CodecError, match="not embedded"):
+        moc.truncate(moc.pack(walk_amc, get_codec("raw")), ratio=2)

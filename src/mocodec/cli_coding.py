@@ -105,6 +105,19 @@ def cmd_decode(args) -> int:
     return 0
 
 
+def cmd_truncate(args) -> int:
+    data = Path(args.input).read_bytes()
+    out = moc.truncate(data, ratio=args.ratio, bitrate=args.bitrate, name=args.input)
+    from mocodec.formats._io import atomic_write_bytes
+
+    atomic_write_bytes(args.output, out)
+    info = moc.info(args.output)
+    raw = info.frames * info.skeleton.num_channels * 4
+    print(f"{args.output}: {len(out):,} bytes (was {len(data):,}), ratio {raw / len(out):.2f} vs 32-bit floats, "
+          f"{len(out) * 8 * info.fps / max(info.frames, 1) / 1000:.2f} kbit/s")
+    return 0
+
+
 def evaluate(motion: Motion, args) -> str:
     """Encode and decode in memory; the table of ``eval``."""
     codec, _ = configured(args, motion)
@@ -185,6 +198,16 @@ def add_commands(sub, common) -> None:
     add_codec_options(p)
     common(p)
     p.set_defaults(func=cmd_eval, takes_knobs=True)
+
+    p = sub.add_parser("truncate", help="cut an embedded (spiht) .moc file to a lower rate without re-encoding",
+                       description="Every channel stream of an embedded file is cut to the prefix a smaller "
+                                   "budget allows; the result decodes to a coarser motion.")
+    p.add_argument("input", metavar="IN", help=".moc file coded by an embedded codec (spiht)")
+    p.add_argument("-o", "--output", required=True, help=".moc file to write")
+    target = p.add_mutually_exclusive_group(required=True)
+    target.add_argument("--ratio", type=float, help="compression ratio vs 32-bit floats")
+    target.add_argument("--bitrate", type=float, help="bits per second")
+    p.set_defaults(func=cmd_truncate)
 
     p = sub.add_parser("codecs", help="list the codecs with their knobs and delay")
     p.set_defaults(func=cmd_codecs)

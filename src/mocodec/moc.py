@@ -83,3 +83,46 @@ def _decode(c: container.Container, frames: tuple[int, int] | None) -> Motion:
         parts.append(motion.channels[max(first - e.first, 0):stop - e.first])
     channels = np.concatenate(parts) if parts else np.zeros((0, c.skeleton.num_channels))
     return Motion(c.skeleton, c.fps, channels)
+
+
+def truncate(data: bytes, ratio: float | None = None, bitrate: float | None = None, name: str = "<bytes>",
+             tolerance: float = 0.02) -> bytes:
+    """A smaller .moc from an embedded one (``spiht``) without re-encoding: every chunk's
+    streams are cut to the rate that makes the file ``ratio`` : 1 (vs 32-bit floats) or
+    ``bitrate`` bits per second, within ``tolerance`` below the target size."""
+    if (ratio is None) == (bitrate is None):
+        raise CodecError("truncate needs exactly one of ratio and bitrate")
+    c = container.open_container(io.BytesIO(data), len(data), name)
+    codec = codec_from_config(c.header["codec"])
+    if not hasattr(codec, "truncate"):
+        raise CodecError(f"{name}: codec {codec.id} is not embedded; encode again with a smaller target")
+    payloads = [c.read_chunk(k) for k in range(len(c.index))]
+    duration = c.frames / c.fps
+    raw = c.frames * c.skeleton.num_channels * 4
+    target = raw / ratio if ratio is not None else bitrate * duration / 8
+    if not target > 0:
+        raise CodecError(f"truncate target must be positive, got {ratio if ratio is not None else bitrate}")
+
+    def at(bps: float) -> bytes:
+        cut = [codec.truncate(p, c.skeleton, bps) for p in payloads]
+        chunks = [container.Chunk(e.first, e.count, payload) for e, (_, payload) in zip(c.index, cut)]
+        new_codec = cut[0][0] if cut else codec
+        header = dict(c.header, codec=new_codec.get_config(), skeleton=c.skeleton)
+        return container.pack(header, chunks)
+
+    if len(data) <= target:
+        return data
+    high = codec.config["bits_per_second"]
+    low, best = 0.0, None
+    for _ in range(40):
+        mid = (low + high) / 2
+        out = at(mid)
+        if len(out) <= target:
+            low, best = mid, out
+            if len(out) >= target * (1 - tolerance):
+                break
+        else:
+            high = mid
+    if best is None:
+        raise CodecError(f"{name}: cannot cut to {target:.0f} bytes (the skeleton and side data alone are larger)")
+    return best

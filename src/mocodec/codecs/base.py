@@ -132,8 +132,12 @@ class Codec:
         if motion.num_frames > MAX_FRAMES:
             raise CodecError(f"cannot encode {motion.num_frames} frames in one payload (limit {MAX_FRAMES}); "
                              "use the container, which splits clips into chunks")
-        body = self._encode(motion)
-        fields = _ENVELOPE.pack(ENVELOPE_VERSION, motion.num_frames, float(motion.fps), 0)[:-4]
+        return self.wrap(self._encode(motion), motion.num_frames, motion.fps)
+
+    @staticmethod
+    def wrap(body: bytes, frames: int, fps: float) -> bytes:
+        """Envelope + body: version, frames, fps and the CRC over them and the body."""
+        fields = _ENVELOPE.pack(ENVELOPE_VERSION, frames, float(fps), 0)[:-4]
         return fields + struct.pack("<I", zlib.crc32(body, zlib.crc32(fields))) + body
 
     def decode(self, payload: bytes, skeleton: Skeleton) -> Motion:

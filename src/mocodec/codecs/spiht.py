@@ -148,11 +148,9 @@ class SpihtCodec(Codec):
                  _U32.pack(bits.size) + np.packbits(bits).tobytes()]
         return b"".join(_U32.pack(len(p)) + p for p in parts)
 
-    def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:
-        cfg = self.config
+    def _parse(self, body: bytes, skeleton: Skeleton, frames: int):
+        """(anchor deltas, importance levels, bits) of a body, checked against the frames."""
         n_ch = skeleton.num_channels
-        if frames == 0:
-            return np.zeros((0, n_ch))
         parts, pos = [], 0
         for _ in range(3):
             (size,) = _U32.unpack_from(body, pos)
@@ -160,37 +158,79 @@ class SpihtCodec(Codec):
                 raise CorruptStreamError(f"spiht payload: a {size}-byte part at byte {pos} overruns the end")
             parts.append(body[pos + 4:pos + 4 + size])
             pos += 4 + size
-        idx = anchor_frames(frames, cfg["window"])
         deltas = decode_ints(parts[0])
         levels_f = decode_ints(parts[1])
-        segments = self._segments(frames)
-        if deltas.size != idx.size * n_ch or levels_f.size != len(segments) * n_ch \
+        if deltas.size != anchor_frames(frames, self.config["window"]).size * n_ch \
+                or levels_f.size != len(self._segments(frames)) * n_ch \
                 or levels_f.min(initial=0) < 0 or levels_f.max(initial=0) >= F_LEVELS:
             raise CorruptStreamError("spiht payload: anchor or allocation streams do not match the frames")
         (n_bits,) = _U32.unpack_from(parts[2])
         bits = np.unpackbits(np.frombuffer(parts[2], dtype=np.uint8, offset=4))[:n_bits]
         if bits.size != n_bits:
             raise CorruptStreamError(f"spiht payload: {n_bits} bits announced, {bits.size} present")
-        scale = channel_scale(skeleton)
-        anchors = np.cumsum(deltas.reshape(n_ch, idx.size).T, axis=0) * (ANCHOR_QUANTUM * scale)
-        out = self._lines(anchors, frames)
-        w, approx = cfg["window"], cfg["window"] >> self.n_levels
+        return parts, deltas, levels_f, bits
+
+    def _walk(self, levels_f, bits, frames: int, fps: float, n_ch: int):
+        """Decode every channel stream: yields (segment, channel, start bit, bits used, coeffs)."""
+        w, approx = self.config["window"], self.config["window"] >> self.n_levels
         cursor = 0
-        for k, (a, b) in enumerate(segments):
-            lv = levels_f[k * n_ch:(k + 1) * n_ch]
-            budgets = perception.allocate(level_weights(lv), self._budget(b - a, fps))
-            coeffs = np.zeros((n_ch, w))
+        for k, (a, b) in enumerate(self._segments(frames)):
+            budgets = perception.allocate(level_weights(levels_f[k * n_ch:(k + 1) * n_ch]), self._budget(b - a, fps))
             for c in range(n_ch):
                 if budgets[c] <= N0_BITS:
                     continue
-                if cursor + N0_BITS > n_bits:
+                if cursor + N0_BITS > bits.size:
                     raise CorruptStreamError(f"spiht payload: bits end in segment {k}, channel {c}")
                 n0 = int(np.dot(bits[cursor:cursor + N0_BITS], 1 << np.arange(N0_BITS - 1, -1, -1))) - 1
-                cursor += N0_BITS
-                coeffs[c], used = spiht.decode(bits, cursor, int(budgets[c]) - N0_BITS, w, approx, n0)
-                cursor += used
-            seg = wavelets.inverse(coeffs * (QUANTUM * scale[:, None]), w, cfg["wavelet"], self.n_levels)
+                coeffs, used = spiht.decode(bits, cursor + N0_BITS, int(budgets[c]) - N0_BITS, w, approx, n0)
+                yield k, c, cursor, N0_BITS + used, coeffs
+                cursor += N0_BITS + used
+        if cursor != bits.size:
+            raise CorruptStreamError(f"spiht payload: {bits.size - cursor} bits left over after the last segment")
+
+    def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:
+        cfg = self.config
+        n_ch = skeleton.num_channels
+        if frames == 0:
+            return np.zeros((0, n_ch))
+        _, deltas, levels_f, bits = self._parse(body, skeleton, frames)
+        scale = channel_scale(skeleton)
+        idx = anchor_frames(frames, cfg["window"])
+        anchors = np.cumsum(deltas.reshape(n_ch, idx.size).T, axis=0) * (ANCHOR_QUANTUM * scale)
+        out = self._lines(anchors, frames)
+        w = cfg["window"]
+        segments = self._segments(frames)
+        coeffs = np.zeros((len(segments), n_ch, w))
+        for k, c, _, _, values in self._walk(levels_f, bits, frames, fps, n_ch):
+            coeffs[k, c] = values
+        for k, (a, b) in enumerate(segments):
+            seg = wavelets.inverse(coeffs[k] * (QUANTUM * scale[:, None]), w, cfg["wavelet"], self.n_levels)
             out[a:b] += seg.T[:b - a]
-        if cursor != n_bits:
-            raise CorruptStreamError(f"spiht payload: {n_bits - cursor} bits left over after the last segment")
         return out
+
+    def truncate(self, payload: bytes, skeleton: Skeleton, bits_per_second: float) -> tuple["SpihtCodec", bytes]:
+        """The payload cut to a lower rate without re-encoding: every channel stream keeps the
+        prefix its new budget allows. Returns the codec for the new rate and its payload."""
+        from mocodec.codecs.base import read_envelope
+
+        if bits_per_second > self.config["bits_per_second"]:
+            raise CodecError(f"cannot truncate to {bits_per_second:g} bit/s, above the coded "
+                             f"{self.config['bits_per_second']:g}")
+        frames, fps, body = read_envelope(payload)
+        smaller = self.with_knob("bits_per_second", bits_per_second)
+        if frames == 0:
+            return smaller, payload
+        parts, _, levels_f, bits = self._parse(body, skeleton, frames)
+        n_ch = skeleton.num_channels
+        keep = []
+        budgets = {}
+        for k, (a, b) in enumerate(self._segments(frames)):
+            budgets[k] = perception.allocate(level_weights(levels_f[k * n_ch:(k + 1) * n_ch]),
+                                             smaller._budget(b - a, fps))
+        for k, c, start, used, _ in self._walk(levels_f, bits, frames, fps, n_ch):
+            if budgets[k][c] > N0_BITS:
+                keep.append(bits[start:start + min(used, int(budgets[k][c]))])
+        new_bits = np.concatenate(keep) if keep else np.zeros(0, dtype=np.uint8)
+        new_parts = [parts[0], parts[1], _U32.pack(new_bits.size) + np.packbits(new_bits).tobytes()]
+        new_body = b"".join(_U32.pack(len(p)) + p for p in new_parts)
+        return smaller, smaller.wrap(new_body, frames, fps)

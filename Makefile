@@ -26,6 +26,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_measures.py
 	$(BIN)/python benchmarks/bench_coding.py
 	$(BIN)/python benchmarks/bench_lossless.py
+	$(BIN)/python benchmarks/bench_codec_speed.py
 	$(BIN)/python benchmarks/bench_perceptual.py --set amc
 
 clean:

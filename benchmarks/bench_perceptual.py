@@ -37,11 +37,11 @@ CODECS = {
 }
 
 
-def sz3_at_ratio(motion: Motion, ratio: float) -> tuple[Motion, int] | None:
+def sz3_at_ratio(motion: Motion, ratio: float, with_skeleton: bool = True) -> tuple[Motion, int] | None:
     """SZ3 per channel with one absolute bound (degrees; cm for translations), bisected to
     the ratio; the compressed skeleton counts towards the size like in a .moc file."""
     sk = motion.skeleton
-    skeleton_bytes = len(zlib.compress(json.dumps(container.skeleton_to_dict(sk)).encode(), 9))
+    skeleton_bytes = len(zlib.compress(json.dumps(container.skeleton_to_dict(sk)).encode(), 9)) if with_skeleton else 0
     scale = np.where(sk.rotation_mask, 1.0, sk.units_per_metre / 100.0)
     target = motion.raw_bits / 8 / ratio
     data = motion.continuous().channels.astype(np.float32)
@@ -78,6 +78,8 @@ def main() -> None:
     ap.add_argument("--set", choices=("amc", "bvh", "all"), default="amc")
     ap.add_argument("--ratios", type=float, nargs="+", default=[20, 40, 60, 80])
     ap.add_argument("--limit", type=int, default=0, help="at most this many clips")
+    ap.add_argument("--motion-only", action="store_true",
+                    help="count only the coded motion (no skeleton, no container), as the theses do")
     args = ap.parse_args()
     if SHARED is None:
         print("../shared/data is not here; skipped")
@@ -95,24 +97,27 @@ def main() -> None:
         for ratio in args.ratios:
             for name, (cid, knobs) in CODECS.items():
                 try:
-                    m = ratecontrol.tune(get_codec(cid, **knobs), motion, "ratio", ratio)
+                    m = ratecontrol.tune(get_codec(cid, **knobs), motion, "ratio", ratio,
+                                         whole_file=not args.motion_only)
                 except Exception as e:      # noqa: BLE001 - a codec that cannot reach the ratio is reported
                     rows.append({"clip": path.name, "codec": name, "ratio_target": ratio, "note": str(e)})
                     continue
-                decoded, size = moc.unpack(m.data), len(m.data)
+                decoded, size = moc.unpack(m.data), ratecontrol.coded_size(m.data, not args.motion_only)
                 rows.append(_row(path.name, name, ratio, motion, decoded, size))
-            result = sz3_at_ratio(motion, ratio)
+            result = sz3_at_ratio(motion, ratio, with_skeleton=not args.motion_only)
             if result is None:
                 rows.append({"clip": path.name, "codec": "sz3", "ratio_target": ratio, "note": "unreachable"})
             else:
                 rows.append(_row(path.name, "sz3", ratio, motion, *result))
         print(f"{path.name} done ({time.perf_counter() - t0:.0f} s)", flush=True)
-    with open(out_dir / "perceptual.csv", "w", newline="") as f:
+    csv_path = out_dir / ("perceptual-motion-only.csv" if args.motion_only else "perceptual.csv")
+    with open(csv_path, "w", newline="") as f:
         keys = sorted({k for r in rows for k in r})
         w = csv.DictWriter(f, fieldnames=keys)
         w.writeheader()
         w.writerows(rows)
-    print(f"\n{len(clips)} clips ({args.set}); medians over clips")
+    counted = "coded motion only" if args.motion_only else "whole .moc file, skeleton included"
+    print(f"\n{len(clips)} clips ({args.set}); ratios count the {counted}; medians over clips")
     print(f"{'codec':<18}{'target':>7}{'ratio':>7}{'mean cm':>9}{'max cm':>8}{'shell max':>10}{'PSNR':>7}{'VPSNR':>7}")
     for ratio in args.ratios:
         for name in [*CODECS, "sz3"]:
@@ -125,7 +130,7 @@ def main() -> None:
             print(f"{name:<18}{ratio:>7.0f}{med['ratio']:>7.1f}{med['mean_cm']:>9.3f}{med['max_cm']:>8.2f}"
                   f"{med['shell_cm']:>10.2f}{med['psnr']:>7.1f}{med['vpsnr']:>7.1f}"
                   + (f"   ({missing} clips could not reach it)" if missing else ""))
-    print(f"\nwrote {out_dir / 'perceptual.csv'}")
+    print(f"\nwrote {csv_path}")
 
 
 def _row(clip, codec, target, motion, decoded, size):

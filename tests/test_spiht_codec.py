@@ -60,13 +60,13 @@ def test_high_rate_is_near_lossless(walk_bvh, walk_amc):
 
 
 def test_anchors_pin_the_root(walk_amc):
-    """Even at a starvation rate the root passes through its anchors (0.01 cm)."""
+    """Even at a starvation rate the root passes through its anchors (0.05 cm)."""
     codec = get_codec("spiht", bits_per_second=50)
     decoded = codec.decode(codec.encode(walk_amc), walk_amc.skeleton)
     k = walk_amc.skeleton.channel_index("root.Xposition")
     idx = sp.anchor_frames(walk_amc.num_frames, 128)
     cm = 100 / walk_amc.skeleton.units_per_metre
-    assert np.abs(decoded.channels[idx, k] - walk_amc.channels[idx, k]).max() * cm <= 0.005 + 1e-9
+    assert np.abs(decoded.channels[idx, k] - walk_amc.channels[idx, k]).max() * cm <= 0.05 + 1e-9
 
 
 def test_knob_checks():

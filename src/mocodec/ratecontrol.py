@@ -11,12 +11,14 @@ the knob can get there, and otherwise report the closest setting.
 
 from __future__ import annotations
 
+import io
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from mocodec import moc
+from mocodec.formats import container
 from mocodec.codecs import Codec
 from mocodec.errors import CodecError
 from mocodec.kinematics import forward_kinematics
@@ -39,16 +41,27 @@ class Measurement:
     max_error_cm: float
 
 
-def measure(codec: Codec, motion: Motion, positions_cm: np.ndarray | None = None) -> Measurement:
-    """Encode into a container, decode it back and measure everything rate control needs."""
+def coded_size(data: bytes, whole_file: bool = True) -> int:
+    """Bytes of a .moc file, or only of its chunk payloads (the coded motion without the
+    skeleton and header, the convention of the theses' ratios)."""
+    if whole_file:
+        return len(data)
+    c = container.open_container(io.BytesIO(data), len(data), "<bytes>")
+    return sum(len(c.read_chunk(k)) for k in range(len(c.index)))
+
+
+def measure(codec: Codec, motion: Motion, positions_cm: np.ndarray | None = None, whole_file: bool = True) -> Measurement:
+    """Encode into a container, decode it back and measure everything rate control needs;
+    sizes count the whole file, or with ``whole_file=False`` the coded motion only."""
     data = moc.pack(motion, codec)
+    size = coded_size(data, whole_file)
     decoded = moc.unpack(data)
     sk = motion.skeleton
     if positions_cm is None:
         positions_cm = forward_kinematics(sk, motion.channels)[0] * (100.0 / sk.units_per_metre)
     err = np.linalg.norm(forward_kinematics(sk, decoded.channels)[0] * (100.0 / sk.units_per_metre) - positions_cm, axis=2)
     psnr = dof_errors(motion.channels, decoded.channels, sk.rotation_mask).body_psnr
-    return Measurement(codec, data, motion.raw_bits / 8 / len(data), len(data) * 8 / max(motion.duration, 1e-12),
+    return Measurement(codec, data, motion.raw_bits / 8 / size, size * 8 / max(motion.duration, 1e-12),
                        psnr, float(err.mean()) if err.size else 0.0, float(err.max()) if err.size else 0.0)
 
 
@@ -61,8 +74,10 @@ def _achieved(m: Measurement, target: str) -> float:
     return getattr(m, target)
 
 
-def tune(codec: Codec, motion: Motion, target: str, value: float, tolerance: float = 0.02) -> Measurement:
-    """The measured setting of ``codec``'s quality knob for the target (see the module doc)."""
+def tune(codec: Codec, motion: Motion, target: str, value: float, tolerance: float = 0.02,
+         whole_file: bool = True) -> Measurement:
+    """The measured setting of ``codec``'s quality knob for the target (see the module doc).
+    Ratio and bit-rate targets count the whole file unless ``whole_file`` is False."""
     if target not in TARGETS:
         raise CodecError(f"unknown target {target!r} (one of {', '.join(TARGETS)})")
     if not (math.isfinite(value) and value > 0):
@@ -70,7 +85,7 @@ def tune(codec: Codec, motion: Motion, target: str, value: float, tolerance: flo
     positions = forward_kinematics(motion.skeleton, motion.channels)[0] * (100.0 / motion.skeleton.units_per_metre)
     q = codec.quality
     if q is None:
-        m = measure(codec, motion, positions)
+        m = measure(codec, motion, positions, whole_file)
         if _meets(m, target, value):
             return m
         raise CodecError(f"codec {codec.id} has no quality knob and gives {target} {_achieved(m, target):.4g}, "
@@ -80,7 +95,7 @@ def tune(codec: Codec, motion: Motion, target: str, value: float, tolerance: flo
     integer = knob.kind is int
 
     def at(x: float) -> Measurement:
-        return measure(codec.with_knob(q.name, int(round(x)) if integer else x), motion, positions)
+        return measure(codec.with_knob(q.name, int(round(x)) if integer else x), motion, positions, whole_file)
 
     def mid(a: float, b: float) -> float:
         m = math.sqrt(a * b) if q.log_scale and a > 0 and b > 0 else (a + b) / 2

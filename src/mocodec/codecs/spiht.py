@@ -2,10 +2,10 @@
 
 Per segment of W frames (a power of two, 128 by default) and per channel:
 
-1. Anchors. The channel's value at every segment start (and at the last frame) is sent at 0.01
-   degree or 0.01 cm, delta coded; the segment's residual is taken from the straight line
+1. Anchors. The channel's value at every segment start (and at the last frame) is sent at 0.1
+   degree or 0.1 cm, delta coded; the segment's residual is taken from the straight line
    between its anchors. This is how the root (and every other channel) cannot drift: the
-   figure is pinned to the anchors to 0.01 cm, whatever the budget, and a segment's residual
+   figure is pinned to the anchors to 0.05 cm, whatever the budget, and a segment's residual
    starts and ends near zero, so the periodised wavelet sees no jump where a walk ends away
    from where it began.
 2. The residual, zero-padded to W, goes through a periodised multi-level wavelet (CDF 9/7 by
@@ -14,11 +14,11 @@ Per segment of W frames (a power of two, 128 by default) and per channel:
 3. Bit allocation (6.1): B_c = F_c B_T / sum F_i, with B_T = bits_per_second x W / fps and F_c
    the importance of :mod:`mocodec.perception` (``perceptual``: body part, depth, energy, bone
    length; ``energy``; ``uniform``). F_c is sent as a half-octave level (4 bits before entropy
-   coding) so the decoder derives the same budgets (a channel with no coefficient above the
-   quantum gets F = 0: the encoder knows it, and the budget goes where it is used); each
-   channel's stream stops exactly at
-   its budget, so the SPIHT part of a segment is exactly B_T bits (less only when a channel is
-   coded to the quantum before its budget ends).
+   coding, as changes from the channel's previous segment) so the decoder derives the same
+   budgets. A channel the anchor line already gives to within the anchors' precision gets
+   F = 0: the encoder knows it, and the budget goes where it is used. Each channel's stream
+   stops exactly at its budget, so the SPIHT part of a segment is exactly B_T bits (less only
+   when a channel is coded to the quantum before its budget ends).
 
 Every channel stream is embedded: cutting each to a smaller budget (``truncate``) gives a
 valid, coarser file without re-encoding. Angles are made continuous first
@@ -40,7 +40,7 @@ from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.skeleton import Skeleton
 
 QUANTUM = 1.0 / 256          # degrees, or cm for translations: the finest SPIHT plane
-ANCHOR_QUANTUM = 0.01        # degrees, or cm
+ANCHOR_QUANTUM = 0.1         # degrees, or cm: the root is pinned to within 0.05 cm
 N0_BITS = 6                  # each channel stream starts with its top plane + 1 (0: all zero)
 F_LEVELS = 16                # importance sent as half-octave levels 1..15 below the segment's top; 0 = none
 _U32 = struct.Struct("<I")
@@ -133,7 +133,8 @@ class SpihtCodec(Codec):
             seg[:b - a] = residual[a:b]
             coeffs = np.round(wavelets.forward(seg.T, cfg["wavelet"], self.n_levels) / (QUANTUM * scale[:, None]))
             f = perception.channel_importance(sk, ch[a:b], cfg["allocation"], self._scores())
-            f[~coeffs.any(axis=1)] = 0.0          # nothing above the quantum: no budget to waste
+            # a channel the anchors already give to within their precision gets no budget
+            f[np.abs(seg[:b - a]).max(axis=0) <= 0.5 * anchor_q + 1e-12] = 0.0
             lv = importance_levels(f)
             budgets = perception.allocate(level_weights(lv), self._budget(b - a, motion.fps))
             levels_f.append(lv)
@@ -144,7 +145,8 @@ class SpihtCodec(Codec):
                 head = np.array([(n0 + 1) >> k & 1 for k in range(N0_BITS - 1, -1, -1)], dtype=np.uint8)
                 streams += [head, bits]
         bits = np.concatenate(streams) if streams else np.zeros(0, dtype=np.uint8)
-        parts = [encode_ints(np.diff(a_int, axis=0, prepend=0).T), encode_ints(np.concatenate(levels_f)),
+        levels = np.stack(levels_f)                          # (segments, channels), sent per channel as changes
+        parts = [encode_ints(np.diff(a_int, axis=0, prepend=0).T), encode_ints(np.diff(levels, axis=0, prepend=0).T),
                  _U32.pack(bits.size) + np.packbits(bits).tobytes()]
         return b"".join(_U32.pack(len(p)) + p for p in parts)
 
@@ -159,9 +161,12 @@ class SpihtCodec(Codec):
             parts.append(body[pos + 4:pos + 4 + size])
             pos += 4 + size
         deltas = decode_ints(parts[0])
-        levels_f = decode_ints(parts[1])
-        if deltas.size != anchor_frames(frames, self.config["window"]).size * n_ch \
-                or levels_f.size != len(self._segments(frames)) * n_ch \
+        level_changes = decode_ints(parts[1])
+        n_seg = len(self._segments(frames))
+        if deltas.size != anchor_frames(frames, self.config["window"]).size * n_ch or level_changes.size != n_seg * n_ch:
+            raise CorruptStreamError("spiht payload: anchor or allocation streams do not match the frames")
+        levels_f = np.cumsum(level_changes.reshape(n_ch, n_seg).T, axis=0).ravel()
+        if levels_f.size != n_seg * n_ch \
                 or levels_f.min(initial=0) < 0 or levels_f.max(initial=0) >= F_LEVELS:
             raise CorruptStreamError("spiht payload: anchor or allocation streams do not match the frames")
         (n_bits,) = _U32.unpack_from(parts[2])

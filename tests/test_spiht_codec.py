@@ -30,7 +30,7 @@ def test_perceptual_factors_follow_6_1_to_6_3(walk_amc):
 def _spiht_bits(payload: bytes) -> int:
     body = payload[17:]
     pos = 0
-    for _ in range(2):
+    for _ in range(3):
         pos += 4 + struct.unpack_from("<I", body, pos)[0]
     return struct.unpack_from("<I", body, pos + 4)[0]
 

@@ -113,10 +113,23 @@ class SpihtCodec(Codec):
         t = np.arange(frames)
         return np.stack([np.interp(t, idx, anchors[:, c]) for c in range(anchors.shape[1])], axis=1)
 
-    def _budget(self, n: int, fps: float) -> int:
-        return int(np.floor(self.config["bits_per_second"] * n / fps))
+    def segment_budgets(self, frames: int, fps: float) -> np.ndarray:
+        """B_T of every segment at the codec's bit rate."""
+        return np.array([int(np.floor(self.config["bits_per_second"] * (b - a) / fps))
+                         for a, b in self._segments(frames)], dtype=np.int64)
 
     def _encode(self, motion) -> bytes:
+        return self.encode_body(motion, self.segment_budgets(motion.num_frames, motion.fps))
+
+    def encode_with_budgets(self, motion, segment_bits: np.ndarray) -> bytes:
+        """A payload whose segments get the given SPIHT budgets B_T (crowd allocation, 6.5),
+        instead of the codec's constant bit rate."""
+        segment_bits = np.asarray(segment_bits, dtype=np.int64)
+        if segment_bits.shape != (len(self._segments(motion.num_frames)),) or segment_bits.min(initial=0) < 0:
+            raise CodecError(f"need {len(self._segments(motion.num_frames))} non-negative segment budgets")
+        return self.wrap(self.encode_body(motion, segment_bits), motion.num_frames, motion.fps)
+
+    def encode_body(self, motion, segment_bits: np.ndarray) -> bytes:
         sk, cfg = motion.skeleton, self.config
         ch = motion.continuous().channels
         frames = len(ch)
@@ -128,7 +141,7 @@ class SpihtCodec(Codec):
         residual = ch - self._lines(a_int * anchor_q, frames)
         w, approx = cfg["window"], cfg["window"] >> self.n_levels
         levels_f, streams = [], []
-        for a, b in self._segments(frames):
+        for (a, b), total in zip(self._segments(frames), segment_bits):
             seg = np.zeros((w, ch.shape[1]))
             seg[:b - a] = residual[a:b]
             coeffs = np.round(wavelets.forward(seg.T, cfg["wavelet"], self.n_levels) / (QUANTUM * scale[:, None]))
@@ -136,7 +149,7 @@ class SpihtCodec(Codec):
             # a channel the anchors already give to within their precision gets no budget
             f[np.abs(seg[:b - a]).max(axis=0) <= 0.5 * anchor_q + 1e-12] = 0.0
             lv = importance_levels(f)
-            budgets = perception.allocate(level_weights(lv), self._budget(b - a, motion.fps))
+            budgets = perception.allocate(level_weights(lv), int(total))
             levels_f.append(lv)
             for c in range(ch.shape[1]):
                 if budgets[c] <= N0_BITS:
@@ -147,14 +160,15 @@ class SpihtCodec(Codec):
         bits = np.concatenate(streams) if streams else np.zeros(0, dtype=np.uint8)
         levels = np.stack(levels_f)                          # (segments, channels), sent per channel as changes
         parts = [encode_ints(np.diff(a_int, axis=0, prepend=0).T), encode_ints(np.diff(levels, axis=0, prepend=0).T),
-                 _U32.pack(bits.size) + np.packbits(bits).tobytes()]
+                 encode_ints(np.diff(segment_bits, prepend=0)), _U32.pack(bits.size) + np.packbits(bits).tobytes()]
         return b"".join(_U32.pack(len(p)) + p for p in parts)
 
     def _parse(self, body: bytes, skeleton: Skeleton, frames: int):
-        """(anchor deltas, importance levels, bits) of a body, checked against the frames."""
+        """(parts, anchor deltas, importance levels, segment budgets, bits) of a body, checked
+        against the frames."""
         n_ch = skeleton.num_channels
         parts, pos = [], 0
-        for _ in range(3):
+        for _ in range(4):
             (size,) = _U32.unpack_from(body, pos)
             if pos + 4 + size > len(body):
                 raise CorruptStreamError(f"spiht payload: a {size}-byte part at byte {pos} overruns the end")
@@ -169,18 +183,21 @@ class SpihtCodec(Codec):
         if levels_f.size != n_seg * n_ch \
                 or levels_f.min(initial=0) < 0 or levels_f.max(initial=0) >= F_LEVELS:
             raise CorruptStreamError("spiht payload: anchor or allocation streams do not match the frames")
-        (n_bits,) = _U32.unpack_from(parts[2])
-        bits = np.unpackbits(np.frombuffer(parts[2], dtype=np.uint8, offset=4))[:n_bits]
-        if bits.size != n_bits:
+        totals = np.cumsum(decode_ints(parts[2]))
+        if totals.size != n_seg or totals.min(initial=0) < 0:
+            raise CorruptStreamError("spiht payload: segment budgets do not match the frames")
+        (n_bits,) = _U32.unpack_from(parts[3])
+        bits = np.unpackbits(np.frombuffer(parts[3], dtype=np.uint8, offset=4))[:n_bits]
+        if bits.size != n_bits or n_bits > totals.sum():
             raise CorruptStreamError(f"spiht payload: {n_bits} bits announced, {bits.size} present")
-        return parts, deltas, levels_f, bits
+        return parts, deltas, levels_f, totals, bits
 
-    def _walk(self, levels_f, bits, frames: int, fps: float, n_ch: int):
+    def _walk(self, levels_f, totals, bits, n_ch: int):
         """Decode every channel stream: yields (segment, channel, start bit, bits used, coeffs)."""
         w, approx = self.config["window"], self.config["window"] >> self.n_levels
         cursor = 0
-        for k, (a, b) in enumerate(self._segments(frames)):
-            budgets = perception.allocate(level_weights(levels_f[k * n_ch:(k + 1) * n_ch]), self._budget(b - a, fps))
+        for k, total in enumerate(totals):
+            budgets = perception.allocate(level_weights(levels_f[k * n_ch:(k + 1) * n_ch]), int(total))
             for c in range(n_ch):
                 if budgets[c] <= N0_BITS:
                     continue
@@ -198,7 +215,7 @@ class SpihtCodec(Codec):
         n_ch = skeleton.num_channels
         if frames == 0:
             return np.zeros((0, n_ch))
-        _, deltas, levels_f, bits = self._parse(body, skeleton, frames)
+        _, deltas, levels_f, totals, bits = self._parse(body, skeleton, frames)
         scale = channel_scale(skeleton)
         idx = anchor_frames(frames, cfg["window"])
         anchors = np.cumsum(deltas.reshape(n_ch, idx.size).T, axis=0) * (ANCHOR_QUANTUM * scale)
@@ -206,7 +223,7 @@ class SpihtCodec(Codec):
         w = cfg["window"]
         segments = self._segments(frames)
         coeffs = np.zeros((len(segments), n_ch, w))
-        for k, c, _, _, values in self._walk(levels_f, bits, frames, fps, n_ch):
+        for k, c, _, _, values in self._walk(levels_f, totals, bits, n_ch):
             coeffs[k, c] = values
         for k, (a, b) in enumerate(segments):
             seg = wavelets.inverse(coeffs[k] * (QUANTUM * scale[:, None]), w, cfg["wavelet"], self.n_levels)
@@ -214,8 +231,9 @@ class SpihtCodec(Codec):
         return out
 
     def truncate(self, payload: bytes, skeleton: Skeleton, bits_per_second: float) -> tuple["SpihtCodec", bytes]:
-        """The payload cut to a lower rate without re-encoding: every channel stream keeps the
-        prefix its new budget allows. Returns the codec for the new rate and its payload."""
+        """The payload cut to a lower rate without re-encoding: every segment budget shrinks by
+        bits_per_second / the codec's rate, and every channel stream keeps the prefix its new
+        budget allows. Returns the codec for the new rate and its payload."""
         from mocodec.codecs.base import read_envelope
 
         if bits_per_second > self.config["bits_per_second"]:
@@ -225,17 +243,18 @@ class SpihtCodec(Codec):
         smaller = self.with_knob("bits_per_second", bits_per_second)
         if frames == 0:
             return smaller, payload
-        parts, _, levels_f, bits = self._parse(body, skeleton, frames)
+        parts, _, levels_f, totals, bits = self._parse(body, skeleton, frames)
+        if np.array_equal(totals, self.segment_budgets(frames, fps)):
+            new_totals = smaller.segment_budgets(frames, fps)         # as if encoded at the new rate
+        else:                                                          # explicit (crowd) budgets scale
+            new_totals = np.floor(totals * (bits_per_second / self.config["bits_per_second"])).astype(np.int64)
         n_ch = skeleton.num_channels
-        keep = []
-        budgets = {}
-        for k, (a, b) in enumerate(self._segments(frames)):
-            budgets[k] = perception.allocate(level_weights(levels_f[k * n_ch:(k + 1) * n_ch]),
-                                             smaller._budget(b - a, fps))
-        for k, c, start, used, _ in self._walk(levels_f, bits, frames, fps, n_ch):
-            if budgets[k][c] > N0_BITS:
-                keep.append(bits[start:start + min(used, int(budgets[k][c]))])
+        budgets = [perception.allocate(level_weights(levels_f[k * n_ch:(k + 1) * n_ch]), int(t))
+                   for k, t in enumerate(new_totals)]
+        keep = [bits[start:start + min(used, int(budgets[k][c]))]
+                for k, c, start, used, _ in self._walk(levels_f, totals, bits, n_ch) if budgets[k][c] > N0_BITS]
         new_bits = np.concatenate(keep) if keep else np.zeros(0, dtype=np.uint8)
-        new_parts = [parts[0], parts[1], _U32.pack(new_bits.size) + np.packbits(new_bits).tobytes()]
+        new_parts = [parts[0], parts[1], encode_ints(np.diff(new_totals, prepend=0)),
+                     _U32.pack(new_bits.size) + np.packbits(new_bits).tobytes()]
         new_body = b"".join(_U32.pack(len(p)) + p for p in new_parts)
         return smaller, smaller.wrap(new_body, frames, fps)

@@ -11,7 +11,7 @@ import pytest
 from mocodec import perception
 from mocodec.codecs import get_codec
 from mocodec.codecs import spiht as sp
-from mocodec.errors import CodecError
+from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.metrics import compare
 
 
@@ -72,7 +72,7 @@ def test_anchors_pin_the_root(walk_amc):
 def test_knob_checks():
     with pytest.raises(CodecError, match="power of two"):
         get_codec("spiht", window=100)
-    assert get_codec("spiht", window=64).delay_frames == 64
+    assert get_codec("spiht", window=64).delay_frames == 64 + 1 + 11
     assert get_codec("spiht").n_levels == 5
 
 
@@ -105,3 +105,32 @@ def test_file_truncation_hits_the_ratio(walk_amc):
     assert compare(walk_amc, coarse).joints.mean > compare(walk_amc, moc.unpack(data)).joints.mean
     with pytest.raises(CodecError, match="not embedded"):
         moc.truncate(moc.pack(walk_amc, get_codec("raw")), ratio=2)
+
+
+def test_streaming_decodes_exactly_like_the_whole_clip(walk_amc):
+    codec = get_codec("spiht", bits_per_second=6000)
+    whole = codec.decode(codec.encode(walk_amc), walk_amc.skeleton).channels
+    enc, dec = codec.encoder(walk_amc.skeleton, walk_amc.fps), codec.decoder(walk_amc.skeleton, walk_amc.fps)
+    out, pushed = [], 0
+    for k in range(0, walk_amc.num_frames, 37):
+        for packet in enc.push(walk_amc.channels[k:k + 37]):
+            out.append(dec.push(packet))
+        pushed = min(k + 37, walk_amc.num_frames)
+        assert pushed - sum(len(o) for o in out) <= codec.delay_frames
+    out += [dec.push(p) for p in enc.flush()]
+    assert np.abs(np.concatenate(out) - whole).max() < 1e-9
+    fresh = codec.decoder(walk_amc.skeleton, walk_amc.fps)
+    with pytest.raises(CorruptStreamError):
+        fresh.push(enc.push(walk_amc.channels[:300])[1])          # a second packet first: no anchors
+
+
+def test_seams_are_smoothed():
+    from mocodec.coding.seams import smooth_seams
+
+    t = np.arange(64, dtype=float)[:, None]
+    curve = 0.01 * t ** 2
+    assert np.allclose(smooth_seams(curve, [32], 8), curve)      # no step: untouched
+    stepped = curve + (t >= 32) * 1.0
+    smoothed = smooth_seams(stepped, [32], 8)
+    assert np.abs(np.diff(smoothed[:, 0], 2)).max() < 0.5 * np.abs(np.diff(stepped[:, 0], 2)).max()
+    assert np.allclose(smoothed[:20], stepped[:20]) and np.allclose(smoothed[44:], stepped[44:])

@@ -20,6 +20,16 @@ Per segment of W frames (a power of two, 128 by default) and per channel:
    stops exactly at its budget, so the SPIHT part of a segment is exactly B_T bits (less only
    when a channel is coded to the quantum before its budget ends).
 
+Segments are coded independently, so their errors meet with a small step at every seam; the
+decoder spreads the part of each step beyond what the motion itself shows over W/16 frames on
+either side (:mod:`mocodec.coding.seams`). That cuts the jerk at seams about tenfold (131_04
+at 15 kbit/s: 5.3 -> 0.46 cm/frame^3, the rest of a segment 0.095) and lowers the mean error a
+little; finely coded motion is left as it is.
+
+Streaming: ``encoder``/``decoder`` send one packet per segment, W + 1 + 11 frames behind (the
+next segment's first frame is the end anchor; the seam estimate reads 11 frames on each
+side), and decode exactly as the whole clip does.
+
 Every channel stream is embedded: cutting each to a smaller budget (``truncate``) gives a
 valid, coarser file without re-encoding. Angles are made continuous first
 (:meth:`Motion.continuous`).
@@ -32,11 +42,13 @@ import struct
 import numpy as np
 
 from mocodec import perception
-from mocodec.codecs.base import Codec, Knob, QualityKnob
+from mocodec.codecs.base import Codec, Knob, QualityKnob, StreamDecoder, StreamEncoder
 from mocodec.codecs.registry import register
 from mocodec.coding import spiht, wavelets
 from mocodec.coding.rangecoder import decode_ints, encode_ints
+from mocodec.coding import seams
 from mocodec.errors import CodecError, CorruptStreamError
+from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
 QUANTUM = 1.0 / 256          # degrees, or cm for translations: the finest SPIHT plane
@@ -84,6 +96,7 @@ class SpihtCodec(Codec):
         Knob("upper_score", float, 0.5, "body-part score of arms, torso and head", low=0.0, high=1.0),
     )
     quality = QualityKnob("bits_per_second", higher_is_better=True, log_scale=True)
+    streaming = True
 
     def __init__(self, **knobs):
         super().__init__(**knobs)
@@ -96,8 +109,21 @@ class SpihtCodec(Codec):
         self.n_levels = levels
 
     @property
+    def seam_frames(self) -> int:
+        """Half width of the seam smoothing: W / 16 (8 frames for W = 128)."""
+        return max(self.config["window"] // 16, 1)
+
+    @property
     def delay_frames(self) -> int:
-        return self.config["window"]
+        """A segment goes out when the first frame of the next one (its end anchor) is in, and
+        its last frames once the next segment has smoothed the seam."""
+        return self.config["window"] + 1 + max(self.seam_frames, seams.CONTEXT)
+
+    def encoder(self, skeleton: Skeleton, fps: float) -> StreamEncoder:
+        return _StreamEncoder(self, skeleton, fps)
+
+    def decoder(self, skeleton: Skeleton, fps: float) -> StreamDecoder:
+        return _StreamDecoder(self, skeleton, fps)
 
     def _scores(self) -> dict[str, float]:
         legs, upper = self.config["leg_score"], self.config["upper_score"]
@@ -139,29 +165,61 @@ class SpihtCodec(Codec):
         anchor_q = ANCHOR_QUANTUM * scale
         a_int = np.round(ch[anchor_frames(frames, cfg["window"])] / anchor_q).astype(np.int64)
         residual = ch - self._lines(a_int * anchor_q, frames)
-        w, approx = cfg["window"], cfg["window"] >> self.n_levels
         levels_f, streams = [], []
         for (a, b), total in zip(self._segments(frames), segment_bits):
-            seg = np.zeros((w, ch.shape[1]))
-            seg[:b - a] = residual[a:b]
-            coeffs = np.round(wavelets.forward(seg.T, cfg["wavelet"], self.n_levels) / (QUANTUM * scale[:, None]))
-            f = perception.channel_importance(sk, ch[a:b], cfg["allocation"], self._scores())
-            # a channel the anchors already give to within their precision gets no budget
-            f[np.abs(seg[:b - a]).max(axis=0) <= 0.5 * anchor_q + 1e-12] = 0.0
-            lv = importance_levels(f)
-            budgets = perception.allocate(level_weights(lv), int(total))
+            lv, bits = self._code_segment(sk, ch[a:b], residual[a:b], int(total))
             levels_f.append(lv)
-            for c in range(ch.shape[1]):
-                if budgets[c] <= N0_BITS:
-                    continue
-                bits, n0 = spiht.encode(coeffs[c].astype(np.int64), approx, int(budgets[c]) - N0_BITS)
-                head = np.array([(n0 + 1) >> k & 1 for k in range(N0_BITS - 1, -1, -1)], dtype=np.uint8)
-                streams += [head, bits]
+            streams += bits
         bits = np.concatenate(streams) if streams else np.zeros(0, dtype=np.uint8)
         levels = np.stack(levels_f)                          # (segments, channels), sent per channel as changes
         parts = [encode_ints(np.diff(a_int, axis=0, prepend=0).T), encode_ints(np.diff(levels, axis=0, prepend=0).T),
                  encode_ints(np.diff(segment_bits, prepend=0)), _U32.pack(bits.size) + np.packbits(bits).tobytes()]
         return b"".join(_U32.pack(len(p)) + p for p in parts)
+
+    def _code_segment(self, sk: Skeleton, values: np.ndarray, residual: np.ndarray, total: int):
+        """(importance levels, bit arrays) of one segment: its values and their residual from
+        the anchor line, ``(frames, channels)``, under a budget of ``total`` bits."""
+        cfg = self.config
+        w, approx = cfg["window"], cfg["window"] >> self.n_levels
+        scale = channel_scale(sk)
+        seg = np.zeros((w, values.shape[1]))
+        seg[:len(residual)] = residual
+        coeffs = np.round(wavelets.forward(seg.T, cfg["wavelet"], self.n_levels) / (QUANTUM * scale[:, None]))
+        f = perception.channel_importance(sk, values, cfg["allocation"], self._scores())
+        # a channel the anchors already give to within their precision gets no budget
+        f[np.abs(residual).max(axis=0, initial=0) <= 0.5 * ANCHOR_QUANTUM * scale + 1e-12] = 0.0
+        lv = importance_levels(f)
+        budgets = perception.allocate(level_weights(lv), total)
+        streams = []
+        for c in range(values.shape[1]):
+            if budgets[c] <= N0_BITS:
+                continue
+            bits, n0 = spiht.encode(coeffs[c].astype(np.int64), approx, int(budgets[c]) - N0_BITS)
+            head = np.array([(n0 + 1) >> k & 1 for k in range(N0_BITS - 1, -1, -1)], dtype=np.uint8)
+            streams += [head, bits]
+        return lv, streams
+
+    def _segment_streams(self, levels: np.ndarray, total: int, bits: np.ndarray, cursor: int, where: str):
+        """Decode one segment's channel streams from ``bits[cursor:]``: yields (channel, start
+        bit, bits used, coefficients)."""
+        w, approx = self.config["window"], self.config["window"] >> self.n_levels
+        budgets = perception.allocate(level_weights(levels), int(total))
+        for c in range(levels.size):
+            if budgets[c] <= N0_BITS:
+                continue
+            if cursor + N0_BITS > bits.size:
+                raise CorruptStreamError(f"spiht payload: bits end in {where}, channel {c}")
+            n0 = int(np.dot(bits[cursor:cursor + N0_BITS], 1 << np.arange(N0_BITS - 1, -1, -1))) - 1
+            coeffs, used = spiht.decode(bits, cursor + N0_BITS, int(budgets[c]) - N0_BITS, w, approx, n0)
+            yield c, cursor, N0_BITS + used, coeffs
+            cursor += N0_BITS + used
+
+    def _residual(self, coeffs: np.ndarray, skeleton: Skeleton, frames: int) -> np.ndarray:
+        """The decoded residual of one segment ``(frames, channels)`` from its coefficients."""
+        scale = channel_scale(skeleton)
+        seg = wavelets.inverse(coeffs * (QUANTUM * scale[:, None]), self.config["window"], self.config["wavelet"],
+                               self.n_levels)
+        return seg.T[:frames]
 
     def _parse(self, body: bytes, skeleton: Skeleton, frames: int):
         """(parts, anchor deltas, importance levels, segment budgets, bits) of a body, checked
@@ -194,19 +252,12 @@ class SpihtCodec(Codec):
 
     def _walk(self, levels_f, totals, bits, n_ch: int):
         """Decode every channel stream: yields (segment, channel, start bit, bits used, coeffs)."""
-        w, approx = self.config["window"], self.config["window"] >> self.n_levels
         cursor = 0
         for k, total in enumerate(totals):
-            budgets = perception.allocate(level_weights(levels_f[k * n_ch:(k + 1) * n_ch]), int(total))
-            for c in range(n_ch):
-                if budgets[c] <= N0_BITS:
-                    continue
-                if cursor + N0_BITS > bits.size:
-                    raise CorruptStreamError(f"spiht payload: bits end in segment {k}, channel {c}")
-                n0 = int(np.dot(bits[cursor:cursor + N0_BITS], 1 << np.arange(N0_BITS - 1, -1, -1))) - 1
-                coeffs, used = spiht.decode(bits, cursor + N0_BITS, int(budgets[c]) - N0_BITS, w, approx, n0)
-                yield k, c, cursor, N0_BITS + used, coeffs
-                cursor += N0_BITS + used
+            for c, start, used, coeffs in self._segment_streams(levels_f[k * n_ch:(k + 1) * n_ch], total, bits,
+                                                                cursor, f"segment {k}"):
+                yield k, c, start, used, coeffs
+                cursor = start + used
         if cursor != bits.size:
             raise CorruptStreamError(f"spiht payload: {bits.size - cursor} bits left over after the last segment")
 
@@ -220,15 +271,13 @@ class SpihtCodec(Codec):
         idx = anchor_frames(frames, cfg["window"])
         anchors = np.cumsum(deltas.reshape(n_ch, idx.size).T, axis=0) * (ANCHOR_QUANTUM * scale)
         out = self._lines(anchors, frames)
-        w = cfg["window"]
         segments = self._segments(frames)
-        coeffs = np.zeros((len(segments), n_ch, w))
+        coeffs = np.zeros((len(segments), n_ch, cfg["window"]))
         for k, c, _, _, values in self._walk(levels_f, totals, bits, n_ch):
             coeffs[k, c] = values
         for k, (a, b) in enumerate(segments):
-            seg = wavelets.inverse(coeffs[k] * (QUANTUM * scale[:, None]), w, cfg["wavelet"], self.n_levels)
-            out[a:b] += seg.T[:b - a]
-        return out
+            out[a:b] += self._residual(coeffs[k], skeleton, b - a)
+        return seams.smooth_seams(out, [a for a, _ in segments[1:]], self.seam_frames)
 
     def truncate(self, payload: bytes, skeleton: Skeleton, bits_per_second: float) -> tuple["SpihtCodec", bytes]:
         """The payload cut to a lower rate without re-encoding: every segment budget shrinks by
@@ -258,3 +307,127 @@ class SpihtCodec(Codec):
                      _U32.pack(new_bits.size) + np.packbits(new_bits).tobytes()]
         new_body = b"".join(_U32.pack(len(p)) + p for p in new_parts)
         return smaller, smaller.wrap(new_body, frames, fps)
+
+
+_PACKET = struct.Struct("<BI")      # flags (1: carries the start anchors, 2: last segment), frames
+
+
+def _line(start: np.ndarray, end: np.ndarray, frames: int, span: int) -> np.ndarray:
+    t = np.arange(frames)[:, None] / max(span, 1)
+    return start + (end - start) * t
+
+
+class _StreamEncoder(StreamEncoder):
+    """Frames in, one packet per segment out, W + 1 frames behind (the batch coder's anchors,
+    lines and budgets, so the frames decode exactly as the whole clip would)."""
+
+    def __init__(self, codec: SpihtCodec, skeleton: Skeleton, fps: float):
+        self.codec, self.skeleton, self.fps = codec, skeleton, fps
+        self.window = codec.config["window"]
+        self.anchor_q = ANCHOR_QUANTUM * channel_scale(skeleton)
+        self.buffer = np.zeros((0, skeleton.num_channels))
+        self.previous: np.ndarray | None = None           # last continuous frame seen
+        self.start: np.ndarray | None = None              # the current segment's start anchor (ints)
+
+    def push(self, frames: np.ndarray) -> list[bytes]:
+        frames = np.atleast_2d(np.asarray(frames, dtype=np.float64))
+        if frames.shape[1] != self.skeleton.num_channels or not np.isfinite(frames).all():
+            raise CodecError(f"spiht stream: frames must be finite (n, {self.skeleton.num_channels}) arrays")
+        if not len(frames):
+            return []
+        head = frames if self.previous is None else np.vstack((self.previous, frames))
+        cont = Motion(self.skeleton, self.fps, head).continuous().channels
+        cont = cont if self.previous is None else cont[1:]
+        self.previous = cont[-1]
+        self.buffer = np.vstack((self.buffer, cont))
+        packets = []
+        while len(self.buffer) > self.window:
+            packets.append(self._packet(self.buffer[:self.window + 1], last=False))
+            self.buffer = self.buffer[self.window:]
+        return packets
+
+    def flush(self) -> list[bytes]:
+        if not len(self.buffer):
+            return []
+        packet = self._packet(self.buffer, last=True)
+        self.buffer = self.buffer[:0]
+        return [packet]
+
+    def _packet(self, values: np.ndarray, last: bool) -> bytes:
+        n = len(values) if last else self.window
+        first = self.start is None
+        if first:
+            self.start = np.round(values[0] / self.anchor_q).astype(np.int64)
+        end = np.round(values[-1] / self.anchor_q).astype(np.int64)
+        residual = values[:n] - _line(self.start * self.anchor_q, end * self.anchor_q, n, n - 1 if last else n)
+        total = int(np.floor(self.codec.config["bits_per_second"] * n / self.fps))
+        levels, streams = self.codec._code_segment(self.skeleton, values[:n], residual, total)
+        bits = np.concatenate(streams) if streams else np.zeros(0, dtype=np.uint8)
+        parts = ([encode_ints(self.start)] if first else []) + [
+            encode_ints(end - self.start), encode_ints(levels), encode_ints([total]),
+            _U32.pack(bits.size) + np.packbits(bits).tobytes()]
+        self.start = end
+        return _PACKET.pack(int(first) | 2 * int(last), n) + b"".join(_U32.pack(len(p)) + p for p in parts)
+
+
+class _StreamDecoder(StreamDecoder):
+    """Packets in, frames out, exactly as the whole clip decodes; a damaged or out-of-order
+    packet raises CorruptStreamError and leaves the decoder as it was."""
+
+    def __init__(self, codec: SpihtCodec, skeleton: Skeleton, fps: float):
+        self.codec, self.skeleton, self.fps = codec, skeleton, fps
+        self.anchor_q = ANCHOR_QUANTUM * channel_scale(skeleton)
+        self.start: np.ndarray | None = None
+        self.held = np.zeros((0, skeleton.num_channels))   # last frames, until their seam is smoothed
+
+    def push(self, packet: bytes) -> np.ndarray:
+        """The frames this packet completes: the previous segment's held tail and this
+        segment but its own last frames, which wait for the next seam (all of it for the last
+        segment)."""
+        try:
+            frames, last = self._push(packet)
+        except CorruptStreamError:
+            raise
+        except Exception as e:   # noqa: BLE001 - a packet that does not parse
+            raise CorruptStreamError(f"spiht packet does not decode ({type(e).__name__}: {e})") from None
+        joined = np.vstack((self.held, frames))
+        if len(self.held):
+            joined = seams.smooth_seams(joined, [len(self.held)], self.codec.seam_frames)
+        keep = 0 if last else min(max(self.codec.seam_frames, seams.CONTEXT), len(joined))
+        self.held = joined[len(joined) - keep:]
+        return joined[:len(joined) - keep]
+
+    def _push(self, packet: bytes) -> tuple[np.ndarray, bool]:
+        flags, n = _PACKET.unpack_from(packet)
+        n_ch = self.skeleton.num_channels
+        if not 0 < n <= self.codec.config["window"]:
+            raise CorruptStreamError(f"spiht packet: {n} frames in a segment of {self.codec.config['window']}")
+        parts, pos = [], _PACKET.size
+        while pos < len(packet):
+            (size,) = _U32.unpack_from(packet, pos)
+            parts.append(packet[pos + 4:pos + 4 + size])
+            pos += 4 + size
+        start = self.start
+        if flags & 1:
+            start = decode_ints(parts.pop(0))
+        if start is None or len(parts) != 4 or start.size != n_ch:
+            raise CorruptStreamError("spiht packet: no start anchors (a packet is missing) or wrong layout")
+        end = start + decode_ints(parts[0])
+        levels = decode_ints(parts[1])
+        (total,) = decode_ints(parts[2])
+        (n_bits,) = _U32.unpack_from(parts[3])
+        bits = np.unpackbits(np.frombuffer(parts[3], dtype=np.uint8, offset=4))[:n_bits]
+        if end.size != n_ch or levels.size != n_ch or bits.size != n_bits or n_bits > total \
+                or levels.min(initial=0) < 0 or levels.max(initial=0) >= F_LEVELS:
+            raise CorruptStreamError("spiht packet: anchors, levels or bits do not fit the skeleton")
+        coeffs = np.zeros((n_ch, self.codec.config["window"]))
+        cursor = 0
+        for c, first, used, values in self.codec._segment_streams(levels, total, bits, 0, "the packet"):
+            coeffs[c] = values
+            cursor = first + used
+        if cursor != n_bits:
+            raise CorruptStreamError(f"spiht packet: {n_bits - cursor} bits left over")
+        out = _line(start * self.anchor_q, end * self.anchor_q, n, n - 1 if flags & 2 else n)
+        out += self.codec._residual(coeffs, self.skeleton, n)
+        self.start = end
+        return out, bool(flags & 2)

@@ -19,6 +19,7 @@ import numpy as np
 
 from mocodec import moc
 from mocodec.codecs import get_codec
+from mocodec.coding.parts import join_parts, split_parts
 from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.formats import container
 from mocodec.motion import Motion
@@ -91,7 +92,7 @@ def encode_scene(motions: list[Motion], bits_per_second: float, distances, weigh
         header = {"codec": codec.get_config(), "fps": float(motion.fps), "frames": motion.num_frames,
                   "chunk_frames": chunk_frames, "skeleton": motion.skeleton}
         parts.append(container.pack(header, chunks))
-    body = _HEAD.pack(MAGIC, VERSION, len(parts)) + b"".join(_U32.pack(len(p)) + p for p in parts)
+    body = _HEAD.pack(MAGIC, VERSION, len(parts)) + join_parts(parts)
     return body + _U32.pack(zlib.crc32(body))
 
 
@@ -104,16 +105,7 @@ def scene_parts(data: bytes, name: str = "<bytes>") -> list[bytes]:
     _, version, count = _HEAD.unpack_from(data)
     if version != VERSION:
         raise CorruptStreamError(f"{name}: scene version {version}; this mocodec reads {VERSION}")
-    parts, pos = [], _HEAD.size
-    for k in range(count):
-        if pos + 4 > len(data) - 4:
-            raise CorruptStreamError(f"{name}: character {k} at byte {pos} is missing")
-        (size,) = _U32.unpack_from(data, pos)
-        if pos + 4 + size > len(data) - 4:
-            raise CorruptStreamError(f"{name}: character {k} at byte {pos} overruns the file")
-        parts.append(data[pos + 4:pos + 4 + size])
-        pos += 4 + size
-    return parts
+    return split_parts(data[:-4], count, f"{name}: scene", start=_HEAD.size)
 
 
 def decode_scene(data: bytes, name: str = "<bytes>") -> list[Motion]:

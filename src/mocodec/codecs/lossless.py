@@ -26,6 +26,7 @@ import zstandard
 
 from mocodec.codecs.base import Codec
 from mocodec.codecs.registry import register
+from mocodec.coding.parts import join_parts, split_parts
 from mocodec.coding.rangecoder import decode_ints, encode_ints
 from mocodec.errors import CorruptStreamError
 from mocodec.skeleton import Skeleton
@@ -111,20 +112,18 @@ def _encode_channel(x: np.ndarray) -> bytes | None:
     classes = np.where(exception, top + 1, top - np.maximum(dec, 0))     # 0 = finest, top+1 = exception
     parts = [encode_ints(classes), encode_ints(r), x[exception].astype("<f8").tobytes()]
     header = struct.pack("<BBI", top, order, int(exception.sum()))
-    return header + b"".join(_U32.pack(len(p)) + p for p in parts[:2]) + parts[2]
+    return header + join_parts(parts)
 
 
 def _decode_channel(data: bytes, frames: int) -> np.ndarray:
     top, order, n_exc = struct.unpack_from("<BBI", data)
     if top > MAX_DECIMALS or order not in (0, 1, 2) or n_exc > frames:
         raise CorruptStreamError(f"lossless channel header (scale {top}, order {order}, {n_exc} exceptions) is invalid")
-    pos, parts = 6, []
-    for _ in range(2):
-        (size,) = _U32.unpack_from(data, pos)
-        parts.append(decode_ints(data[pos + 4:pos + 4 + size]))
-        pos += 4 + size
-    classes, r = parts
-    exc_values = np.frombuffer(data, dtype="<f8", count=n_exc, offset=pos) if n_exc else np.zeros(0)
+    classes, r, exc = split_parts(data, 3, "lossless channel", start=6)
+    classes, r = decode_ints(classes), decode_ints(r)
+    if len(exc) != 8 * n_exc:
+        raise CorruptStreamError(f"lossless channel: {len(exc)} bytes of exceptions for {n_exc} values")
+    exc_values = np.frombuffer(exc, dtype="<f8")
     exception = classes == top + 1
     if classes.size != frames or classes.min(initial=0) < 0 or classes.max(initial=0) > top + 1 \
             or int(exception.sum()) != n_exc or r.size != frames - n_exc:
@@ -167,11 +166,10 @@ class LosslessCodec(Codec):
                 floats.append(c)
             else:
                 modes.append(0)
-                parts.append(_U32.pack(len(data)) + data)
+                parts.append(data)
         if floats and len(ch):
-            data = _float_bits(ch[:, floats])
-            parts.append(_U32.pack(len(data)) + data)
-        return _U32.pack(ch.shape[1]) + bytes(modes) + b"".join(parts)
+            parts.append(_float_bits(ch[:, floats]))
+        return _U32.pack(ch.shape[1]) + bytes(modes) + join_parts(parts)
 
     def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:
         n = skeleton.num_channels
@@ -179,25 +177,16 @@ class LosslessCodec(Codec):
         if count != n:
             raise CorruptStreamError(f"lossless payload has {count} channels, the skeleton {n}")
         modes = body[4:4 + n]
-        pos = 4 + n
         out = np.zeros((frames, n))
         if frames == 0:
             return out
-
-        def part() -> bytes:
-            nonlocal pos
-            (size,) = _U32.unpack_from(body, pos)
-            if pos + 4 + size > len(body):
-                raise CorruptStreamError(f"lossless payload: a {size}-byte part at byte {pos} overruns the end")
-            pos += 4 + size
-            return body[pos - size:pos]
-
+        parts = iter(split_parts(body, None, "lossless payload", start=4 + n))
         floats = [c for c, mode in enumerate(modes) if mode == FLOAT_CHANNEL]
         for c, mode in enumerate(modes):
             if mode == 0:
-                out[:, c] = _decode_channel(part(), frames)
+                out[:, c] = _decode_channel(next(parts), frames)
             elif mode != FLOAT_CHANNEL:
                 raise CorruptStreamError(f"lossless payload: channel {c} has an invalid mode {mode}")
         if floats:
-            out[:, floats] = _from_float_bits(part(), frames, len(floats))
+            out[:, floats] = _from_float_bits(next(parts), frames, len(floats))
         return out

@@ -30,13 +30,12 @@ its start, and that jump alone eats the coefficient budget.
 
 from __future__ import annotations
 
-import struct
-
 import numpy as np
 
 from mocodec.codecs.base import Codec, Knob, QualityKnob
 from mocodec.codecs.registry import register
 from mocodec.coding import wavelets
+from mocodec.coding.parts import join_parts, split_parts
 from mocodec.coding.rangecoder import decode_ints, encode_ints
 from mocodec.coding.rle import ZeroRuns, decode_zero_runs, encode_zero_runs
 from mocodec.errors import CorruptStreamError
@@ -47,7 +46,6 @@ MODE = "symmetric"                # mirrored ends: no jump where a slice ends el
 NO_STEP = -(1 << 20)              # step exponent of a channel with nothing kept
 FINEST_STEP = -40                 # 2^(-40/4) = 0.001 degree (or unit): channels that vary less
                                   # than this (float noise in unused channels) quantise to zero
-_U32 = struct.Struct("<I")
 
 
 def channel_bone_lengths(skeleton: Skeleton) -> np.ndarray:
@@ -154,17 +152,10 @@ class PWaveletCodec(Codec):
         runs = encode_zero_runs(np.concatenate(qs) if qs else np.zeros(0, dtype=np.int64))
         parts = [encode_ints(np.concatenate(exps) if exps else np.zeros(0, np.int64)), encode_ints(runs.runs),
                  encode_ints(runs.values), encode_ints([runs.tail])]
-        return b"".join(_U32.pack(len(p)) + p for p in parts)
+        return join_parts(parts)
 
     def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:
-        parts, pos = [], 0
-        for _ in range(4):
-            (size,) = _U32.unpack_from(body, pos)
-            if pos + 4 + size > len(body):
-                raise CorruptStreamError(f"pwavelet payload: a {size}-byte stream at byte {pos} overruns the end")
-            parts.append(decode_ints(body[pos + 4:pos + 4 + size]))
-            pos += 4 + size
-        exps, run_lengths, values, tail = parts
+        exps, run_lengths, values, tail = (decode_ints(p) for p in split_parts(body, 4, "pwavelet payload"))
         if tail.size != 1 or run_lengths.size != values.size:
             raise CorruptStreamError("pwavelet payload: run and value streams do not pair up")
         n_ch = skeleton.num_channels

@@ -44,9 +44,9 @@ import numpy as np
 from mocodec import perception
 from mocodec.codecs.base import Codec, Knob, QualityKnob, StreamDecoder, StreamEncoder
 from mocodec.codecs.registry import register
-from mocodec.coding import spiht, wavelets
+from mocodec.coding import seams, spiht, wavelets
+from mocodec.coding.parts import join_parts, split_parts
 from mocodec.coding.rangecoder import decode_ints, encode_ints
-from mocodec.coding import seams
 from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
@@ -174,7 +174,7 @@ class SpihtCodec(Codec):
         levels = np.stack(levels_f)                          # (segments, channels), sent per channel as changes
         parts = [encode_ints(np.diff(a_int, axis=0, prepend=0).T), encode_ints(np.diff(levels, axis=0, prepend=0).T),
                  encode_ints(np.diff(segment_bits, prepend=0)), _U32.pack(bits.size) + np.packbits(bits).tobytes()]
-        return b"".join(_U32.pack(len(p)) + p for p in parts)
+        return join_parts(parts)
 
     def _code_segment(self, sk: Skeleton, values: np.ndarray, residual: np.ndarray, total: int):
         """(importance levels, bit arrays) of one segment: its values and their residual from
@@ -225,13 +225,7 @@ class SpihtCodec(Codec):
         """(parts, anchor deltas, importance levels, segment budgets, bits) of a body, checked
         against the frames."""
         n_ch = skeleton.num_channels
-        parts, pos = [], 0
-        for _ in range(4):
-            (size,) = _U32.unpack_from(body, pos)
-            if pos + 4 + size > len(body):
-                raise CorruptStreamError(f"spiht payload: a {size}-byte part at byte {pos} overruns the end")
-            parts.append(body[pos + 4:pos + 4 + size])
-            pos += 4 + size
+        parts = split_parts(body, 4, "spiht payload")
         deltas = decode_ints(parts[0])
         level_changes = decode_ints(parts[1])
         n_seg = len(self._segments(frames))
@@ -305,7 +299,7 @@ class SpihtCodec(Codec):
         new_bits = np.concatenate(keep) if keep else np.zeros(0, dtype=np.uint8)
         new_parts = [parts[0], parts[1], encode_ints(np.diff(new_totals, prepend=0)),
                      _U32.pack(new_bits.size) + np.packbits(new_bits).tobytes()]
-        new_body = b"".join(_U32.pack(len(p)) + p for p in new_parts)
+        new_body = join_parts(new_parts)
         return smaller, smaller.wrap(new_body, frames, fps)
 
 
@@ -367,7 +361,7 @@ class _StreamEncoder(StreamEncoder):
             encode_ints(end - self.start), encode_ints(levels), encode_ints([total]),
             _U32.pack(bits.size) + np.packbits(bits).tobytes()]
         self.start = end
-        return _PACKET.pack(int(first) | 2 * int(last), n) + b"".join(_U32.pack(len(p)) + p for p in parts)
+        return _PACKET.pack(int(first) | 2 * int(last), n) + join_parts(parts)
 
 
 class _StreamDecoder(StreamDecoder):
@@ -402,11 +396,7 @@ class _StreamDecoder(StreamDecoder):
         n_ch = self.skeleton.num_channels
         if not 0 < n <= self.codec.config["window"]:
             raise CorruptStreamError(f"spiht packet: {n} frames in a segment of {self.codec.config['window']}")
-        parts, pos = [], _PACKET.size
-        while pos < len(packet):
-            (size,) = _U32.unpack_from(packet, pos)
-            parts.append(packet[pos + 4:pos + 4 + size])
-            pos += 4 + size
+        parts = split_parts(packet, None, "spiht packet", start=_PACKET.size)
         start = self.start
         if flags & 1:
             start = decode_ints(parts.pop(0))

@@ -5,7 +5,7 @@ For each clip and ratio (vs 32-bit floats, whole file: container and skeleton in
 gets the same compressed skeleton added) the codec's knob is set by rate control and the
 decoded motion measured: mean and max joint error (cm), max shell error (cm), PSNR, VPSNR.
 Prints one row per (codec, ratio) with medians over clips, and writes every measurement to
-bench-out/perceptual.csv.
+bench-out/perceptual-SET[-motion-only].csv.
 
 Run: `.venv/bin/python benchmarks/bench_perceptual.py [--set amc|bvh|all] [--ratios 20 40 60 80]`.
 """
@@ -110,7 +110,7 @@ def main() -> None:
             else:
                 rows.append(_row(path.name, "sz3", ratio, motion, *result))
         print(f"{path.name} done ({time.perf_counter() - t0:.0f} s)", flush=True)
-    csv_path = out_dir / ("perceptual-motion-only.csv" if args.motion_only else "perceptual.csv")
+    csv_path = out_dir / f"perceptual-{args.set}{'-motion-only' if args.motion_only else ''}.csv"
     with open(csv_path, "w", newline="") as f:
         keys = sorted({k for r in rows for k in r})
         w = csv.DictWriter(f, fieldnames=keys)

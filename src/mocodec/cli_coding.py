@@ -15,6 +15,7 @@ from mocodec import moc, ratecontrol
 from mocodec.codecs import DEFAULT_CODEC, codec_class, codec_ids, get_codec
 from mocodec.errors import CodecError
 from mocodec.formats import load, save
+from mocodec.formats._io import atomic_write_bytes
 from mocodec.metrics import compare
 from mocodec.motion import Motion
 
@@ -108,8 +109,6 @@ def cmd_decode(args) -> int:
 def cmd_truncate(args) -> int:
     data = Path(args.input).read_bytes()
     out = moc.truncate(data, ratio=args.ratio, bitrate=args.bitrate, name=args.input)
-    from mocodec.formats._io import atomic_write_bytes
-
     atomic_write_bytes(args.output, out)
     info = moc.info(args.output)
     raw = info.frames * info.skeleton.num_channels * 4

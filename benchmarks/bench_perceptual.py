@@ -1,4 +1,5 @@
-"""Quality at fixed compression ratios: spiht (each allocation mode), pwavelet, and SZ3 (pysz,
+"""Quality at fixed compression ratios: spiht (each allocation mode of the thesis, and ours,
+``impact``), pwavelet, and SZ3 (pysz,
 one channel at a time, absolute error bound) in the same run, on the shared CMU clips.
 
 For each clip and ratio (vs 32-bit floats, whole file: container and skeleton included; SZ3
@@ -33,6 +34,7 @@ CODECS = {
     "spiht-perceptual": ("spiht", {"allocation": "perceptual"}),
     "spiht-energy": ("spiht", {"allocation": "energy"}),
     "spiht-uniform": ("spiht", {"allocation": "uniform"}),
+    "spiht-impact": ("spiht", {"allocation": "impact"}),
     "pwavelet": ("pwavelet", {}),
 }
 

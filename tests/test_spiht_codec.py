@@ -134,3 +134,17 @@ def test_seams_are_smoothed():
     smoothed = smooth_seams(stepped, [32], 8)
     assert np.abs(np.diff(smoothed[:, 0], 2)).max() < 0.5 * np.abs(np.diff(stepped[:, 0], 2)).max()
     assert np.allclose(smoothed[:20], stepped[:20]) and np.allclose(smoothed[44:], stepped[44:])
+
+
+def test_impact_allocation_beats_uniform_and_the_thesis_rule(walk_bvh):
+    errors = {}
+    for mode in ("uniform", "perceptual", "impact"):
+        codec = get_codec("spiht", bits_per_second=4000, allocation=mode)
+        errors[mode] = compare(walk_bvh, codec.decode(codec.encode(walk_bvh), walk_bvh.skeleton)).joints.mean
+    assert errors["impact"] < errors["uniform"] and errors["impact"] < errors["perceptual"]
+
+
+def test_lever_arms(walk_amc):
+    sk = walk_amc.skeleton
+    arms = perception.lever_arms(sk)
+    assert arms[sk.index("lhumerus")] > arms[sk.index("lradius")] > arms[sk.index("lhand")] >= 0.03

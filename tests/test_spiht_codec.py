@@ -73,7 +73,7 @@ def test_knob_checks():
     with pytest.raises(CodecError, match="power of two"):
         get_codec("spiht", window=100)
     assert get_codec("spiht", window=64).delay_frames == 64 + 1 + 11
-    assert get_codec("spiht").n_levels == 5
+    assert get_codec("spiht").n_levels == 6
 
 
 def test_short_and_odd_clips(walk_bvh):

@@ -114,3 +114,12 @@ def test_truncate_command(tmp_path, capsys):
     assert main(["truncate", str(full), "--ratio", "25", "-o", str(tmp_path / "small.moc")]) == 0
     assert "ratio 2" in capsys.readouterr().out
     assert main(["decode", str(tmp_path / "small.moc"), "-o", str(tmp_path / "small.bvh")]) == 0
+
+
+def test_skeleton_reference_on_the_command_line(tmp_path, capsys):
+    out = tmp_path / "ref.moc"
+    assert main(["encode", str(DATA / "07_03.amc"), "-o", str(out), "--skeleton-ref"]) == 0
+    assert main(["decode", str(out), "-o", str(tmp_path / "x.bvh")]) == 2
+    assert "--skeleton" in capsys.readouterr().err
+    assert main(["decode", str(out), "-o", str(tmp_path / "x.bvh"), "--skeleton", str(DATA / "07.asf")]) == 0
+    assert load(tmp_path / "x.bvh").num_frames == 415

@@ -107,3 +107,20 @@ def test_random_bytes_raise_only_our_error(data):
 def test_not_a_moc_file(tmp_path, walk_amc):
     with pytest.raises(CorruptStreamError, match="not a .moc file"):
         moc.unpack(b"BVH nonsense" * 10)
+
+
+def test_skeleton_by_reference(walk_amc, tmp_path):
+    from mocodec.errors import SkeletonMismatchError
+
+    full = moc.pack(walk_amc, get_codec("lossless"))
+    ref = moc.pack(walk_amc, get_codec("lossless"), embed_skeleton=False)
+    assert len(full) - len(ref) > 1000
+    assert np.array_equal(moc.unpack(ref, skeleton=walk_amc.skeleton).channels, walk_amc.channels)
+    with pytest.raises(SkeletonMismatchError, match="without holding it"):
+        moc.unpack(ref)
+    other = container.skeleton_from_dict(container.skeleton_to_dict(walk_amc.skeleton))
+    assert container.skeleton_id(other) == container.skeleton_id(walk_amc.skeleton)
+    from mocodec import load
+    from conftest import DATA
+    with pytest.raises(SkeletonMismatchError, match="coded for skeleton"):
+        moc.unpack(ref, skeleton=load(DATA / "135_08.amc").skeleton)

@@ -75,7 +75,7 @@ def cmd_encode(args) -> int:
         codec, _ = configured(args, motion)
         target = out / f"{src.stem}.moc" if out.is_dir() else out
         t0 = time.perf_counter()
-        size = moc.encode(motion, target, codec, chunk_frames=args.chunk_frames)
+        size = moc.encode(motion, target, codec, chunk_frames=args.chunk_frames, embed_skeleton=not args.skeleton_ref)
         line = (f"{target}: {motion.num_frames} frames, {size:,} bytes, ratio {motion.raw_bits / 8 / size:.2f} "
                 f"vs 32-bit floats, {size * 8 / motion.duration / 1000:.2f} kbit/s, {codec!r}, "
                 f"{time.perf_counter() - t0:.2f} s")
@@ -96,11 +96,23 @@ def parse_frames(text: str | None) -> tuple[int, int] | None:
         raise CodecError(f"--frames wants FIRST:STOP (e.g. 120:240), got {text!r}") from None
 
 
+def skeleton_from(path: str | None):
+    """The skeleton of an .asf file, or of a .bvh or .amc motion file; None for no path."""
+    if path is None:
+        return None
+    if Path(path).suffix.lower() == ".asf":
+        from mocodec.formats.asf_amc import read_asf
+
+        return read_asf(path)
+    return load(path).skeleton
+
+
 def cmd_decode(args) -> int:
+    skeleton = skeleton_from(args.skeleton)
     frames = parse_frames(args.frames)
     if frames and frames[1] == -1:
-        frames = (frames[0], moc.info(args.input).frames)
-    motion = moc.decode(args.input, frames=frames)
+        frames = (frames[0], moc.info(args.input, skeleton).frames)
+    motion = moc.decode(args.input, frames=frames, skeleton=skeleton)
     written = save(motion, args.output, asf=args.out_asf)
     print(f"wrote {', '.join(str(p) for p in written)} ({motion.num_frames} frames)")
     return 0
@@ -108,9 +120,10 @@ def cmd_decode(args) -> int:
 
 def cmd_truncate(args) -> int:
     data = Path(args.input).read_bytes()
-    out = moc.truncate(data, ratio=args.ratio, bitrate=args.bitrate, name=args.input)
+    skeleton = skeleton_from(args.skeleton)
+    out = moc.truncate(data, ratio=args.ratio, bitrate=args.bitrate, name=args.input, skeleton=skeleton)
     atomic_write_bytes(args.output, out)
-    info = moc.info(args.output)
+    info = moc.info(args.output, skeleton)
     raw = info.frames * info.skeleton.num_channels * 4
     print(f"{args.output}: {len(out):,} bytes (was {len(data):,}), ratio {raw / len(out):.2f} vs 32-bit floats, "
           f"{len(out) * 8 * info.fps / max(info.frames, 1) / 1000:.2f} kbit/s")
@@ -178,6 +191,8 @@ def add_commands(sub, common) -> None:
     p.add_argument("-o", "--output", required=True, help="output .moc file, or a directory for several inputs")
     p.add_argument("--chunk-frames", type=int, default=moc.CHUNK_FRAMES,
                    help=f"frames per independently decodable chunk (default {moc.CHUNK_FRAMES})")
+    p.add_argument("--skeleton-ref", action="store_true",
+                   help="store only the skeleton's id (1-2 KB smaller); decoding then needs --skeleton")
     add_codec_options(p)
     common(p)
     p.set_defaults(func=cmd_encode, takes_knobs=True)
@@ -187,6 +202,7 @@ def add_commands(sub, common) -> None:
     p.add_argument("input", metavar="IN", help=".moc file")
     p.add_argument("-o", "--output", required=True, help=".bvh or .amc file to write")
     p.add_argument("--frames", help="FIRST:STOP, a frame range (e.g. 120:240)")
+    p.add_argument("--skeleton", help="the skeleton (.asf, .bvh or .amc) of a file encoded with --skeleton-ref")
     p.add_argument("--out-asf", help="where to write the ASF when the output is .amc")
     p.set_defaults(func=cmd_decode)
 
@@ -206,6 +222,7 @@ def add_commands(sub, common) -> None:
     target = p.add_mutually_exclusive_group(required=True)
     target.add_argument("--ratio", type=float, help="compression ratio vs 32-bit floats")
     target.add_argument("--bitrate", type=float, help="bits per second")
+    p.add_argument("--skeleton", help="the skeleton (.asf, .bvh or .amc) of a file encoded with --skeleton-ref")
     p.set_defaults(func=cmd_truncate)
 
     p = sub.add_parser("codecs", help="list the codecs with their knobs and delay")

@@ -19,12 +19,15 @@ from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.formats import container
 from mocodec.formats._io import atomic_write_bytes
 from mocodec.motion import Motion
+from mocodec.skeleton import Skeleton
 
 CHUNK_FRAMES = 1024
 
 
-def pack(motion: Motion, codec: Codec | None = None, chunk_frames: int = CHUNK_FRAMES) -> bytes:
-    """The .moc bytes of ``motion`` coded by ``codec`` (default: the default codec)."""
+def pack(motion: Motion, codec: Codec | None = None, chunk_frames: int = CHUNK_FRAMES,
+         embed_skeleton: bool = True) -> bytes:
+    """The .moc bytes of ``motion`` coded by ``codec`` (default: the default codec); with
+    ``embed_skeleton=False`` the file holds only the skeleton's id."""
     codec = codec or get_codec(DEFAULT_CODEC)
     if chunk_frames < 1:
         raise CodecError(f"chunk_frames must be at least 1, got {chunk_frames}")
@@ -32,34 +35,36 @@ def pack(motion: Motion, codec: Codec | None = None, chunk_frames: int = CHUNK_F
               for a in range(0, motion.num_frames, chunk_frames)]
     header = {"codec": codec.get_config(), "fps": float(motion.fps), "frames": motion.num_frames,
               "chunk_frames": chunk_frames, "skeleton": motion.skeleton}
-    return container.pack(header, chunks)
+    return container.pack(header, chunks, embed_skeleton)
 
 
 def encode(motion: Motion, path: str | os.PathLike, codec: Codec | None = None,
-           chunk_frames: int = CHUNK_FRAMES) -> int:
+           chunk_frames: int = CHUNK_FRAMES, embed_skeleton: bool = True) -> int:
     """Write ``motion`` to ``path`` (atomically); return the file size in bytes."""
-    data = pack(motion, codec, chunk_frames)
+    data = pack(motion, codec, chunk_frames, embed_skeleton)
     atomic_write_bytes(path, data)
     return len(data)
 
 
-def unpack(data: bytes, frames: tuple[int, int] | None = None, name: str = "<bytes>") -> Motion:
-    """Decode .moc bytes (all frames, or ``frames=(first, stop)``)."""
-    return _decode(container.open_container(io.BytesIO(data), len(data), name), frames)
+def unpack(data: bytes, frames: tuple[int, int] | None = None, name: str = "<bytes>",
+           skeleton: Skeleton | None = None) -> Motion:
+    """Decode .moc bytes (all frames, or ``frames=(first, stop)``); ``skeleton`` for a file
+    that holds only its skeleton's id."""
+    return _decode(container.open_container(io.BytesIO(data), len(data), name, skeleton), frames)
 
 
-def decode(path: str | os.PathLike, frames: tuple[int, int] | None = None) -> Motion:
+def decode(path: str | os.PathLike, frames: tuple[int, int] | None = None, skeleton: Skeleton | None = None) -> Motion:
     """Decode a .moc file, reading only the chunks that ``frames=(first, stop)`` needs."""
     path = Path(path)
     with open(path, "rb") as f:
-        return _decode(container.open_container(f, path.stat().st_size, str(path)), frames)
+        return _decode(container.open_container(f, path.stat().st_size, str(path), skeleton), frames)
 
 
-def info(path: str | os.PathLike) -> container.Container:
+def info(path: str | os.PathLike, skeleton: Skeleton | None = None) -> container.Container:
     """The header and index of a .moc file (the file is closed; chunks cannot be read)."""
     path = Path(path)
     with open(path, "rb") as f:
-        return container.open_container(f, path.stat().st_size, str(path))
+        return container.open_container(f, path.stat().st_size, str(path), skeleton)
 
 
 def _decode(c: container.Container, frames: tuple[int, int] | None) -> Motion:
@@ -86,13 +91,14 @@ def _decode(c: container.Container, frames: tuple[int, int] | None) -> Motion:
 
 
 def truncate(data: bytes, ratio: float | None = None, bitrate: float | None = None, name: str = "<bytes>",
-             tolerance: float = 0.02) -> bytes:
+             tolerance: float = 0.02, skeleton: Skeleton | None = None) -> bytes:
     """A smaller .moc from an embedded one (``spiht``) without re-encoding: every chunk's
     streams are cut to the rate that makes the file ``ratio`` : 1 (vs 32-bit floats) or
     ``bitrate`` bits per second, within ``tolerance`` below the target size."""
     if (ratio is None) == (bitrate is None):
         raise CodecError("truncate needs exactly one of ratio and bitrate")
-    c = container.open_container(io.BytesIO(data), len(data), name)
+    c = container.open_container(io.BytesIO(data), len(data), name, skeleton)
+    embedded = "skeleton_id" not in c.header
     codec = codec_from_config(c.header["codec"])
     if not hasattr(codec, "truncate"):
         raise CodecError(f"{name}: codec {codec.id} is not embedded; encode again with a smaller target")
@@ -107,8 +113,8 @@ def truncate(data: bytes, ratio: float | None = None, bitrate: float | None = No
         cut = [codec.truncate(p, c.skeleton, bps) for p in payloads]
         chunks = [container.Chunk(e.first, e.count, payload) for e, (_, payload) in zip(c.index, cut)]
         new_codec = cut[0][0] if cut else codec
-        header = dict(c.header, codec=new_codec.get_config(), skeleton=c.skeleton)
-        return container.pack(header, chunks)
+        header = {k: v for k, v in c.header.items() if k != "skeleton_id"}
+        return container.pack(dict(header, codec=new_codec.get_config(), skeleton=c.skeleton), chunks, embedded)
 
     if len(data) <= target:
         return data

@@ -4,7 +4,7 @@ Layout (little-endian)::
 
     "MOC1"  u16 version  u16 flags
     u32 header length, header (zlib-compressed JSON: codec config, fps, frame count, chunk
-        size, the skeleton), u32 CRC32 of the header bytes
+        size, the skeleton or only its id), u32 CRC32 of the header bytes
     chunks: u32 first frame, u32 frame count, u32 payload length, payload,
             u32 CRC32 of those 12 header bytes and the payload
     index:  u32 chunk count, per chunk (u64 file offset, u32 first frame, u32 frame count),
@@ -14,11 +14,17 @@ Layout (little-endian)::
 The index at the end lets a reader fetch only the chunks that cover a frame range. Every
 part is length-checked and CRC-checked before it is used, and a failure raises
 :class:`~mocodec.errors.CorruptStreamError` naming the part (chunk number) and byte offset.
+A file can hold its skeleton (1-2 KB for CMU skeletons, self-contained) or only the skeleton's
+id, a hash of its canonical form: a library of clips on one skeleton, or a stream whose receiver
+already has it, then pays 32 bytes instead; the reader must be given the skeleton, and a
+skeleton with another id is refused.
+
 This module handles bytes and the skeleton only; codecs are applied by :mod:`mocodec.moc`.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import struct
@@ -26,7 +32,7 @@ import zlib
 from dataclasses import dataclass
 from typing import BinaryIO
 
-from mocodec.errors import CorruptStreamError
+from mocodec.errors import CorruptStreamError, SkeletonMismatchError
 from mocodec.skeleton import Joint, Skeleton
 
 MAGIC = b"MOC1"
@@ -63,6 +69,12 @@ def skeleton_to_dict(skeleton: Skeleton) -> dict:
     }
 
 
+def skeleton_id(skeleton: Skeleton) -> str:
+    """A 128-bit hash (hex) of the skeleton's canonical JSON form."""
+    text = json.dumps(skeleton_to_dict(skeleton), sort_keys=True, separators=(",", ":"), allow_nan=False)
+    return hashlib.sha256(text.encode()).hexdigest()[:32]
+
+
 def skeleton_from_dict(data: dict) -> Skeleton:
     joints = [Joint(j["name"], int(j["parent"]), tuple(map(float, j["offset"])), tuple(j["channels"]),
                     j["rotation_order"], tuple(map(float, j["axis"])), j["axis_order"],
@@ -79,10 +91,16 @@ class Chunk:
     payload: bytes
 
 
-def pack(header: dict, chunks: list[Chunk]) -> bytes:
+def pack(header: dict, chunks: list[Chunk], embed_skeleton: bool = True) -> bytes:
     """The whole container as bytes. ``header`` holds codec, fps, frames, chunk_frames and
-    ``skeleton`` (a :class:`Skeleton`)."""
-    meta = dict(header, skeleton=skeleton_to_dict(header["skeleton"]))
+    ``skeleton`` (a :class:`Skeleton`), which is stored whole or, with ``embed_skeleton=False``,
+    as its id."""
+    skeleton = header["skeleton"]
+    meta = {k: v for k, v in header.items() if k != "skeleton"}
+    if embed_skeleton:
+        meta["skeleton"] = skeleton_to_dict(skeleton)
+    else:
+        meta["skeleton_id"] = skeleton_id(skeleton)
     head = zlib.compress(json.dumps(meta, separators=(",", ":"), allow_nan=False).encode(), 9)
     out = bytearray(_START.pack(MAGIC, VERSION, 0, len(head)) + head + _U32.pack(zlib.crc32(head)))
     entries = []
@@ -155,8 +173,9 @@ def _read_at(source: BinaryIO, offset: int, length: int, size: int, where: str) 
     return data
 
 
-def open_container(source: BinaryIO, size: int, name: str) -> Container:
-    """Read and check the header, footer and index of a container."""
+def open_container(source: BinaryIO, size: int, name: str, skeleton: Skeleton | None = None) -> Container:
+    """Read and check the header, footer and index of a container. ``skeleton`` is needed for
+    a file that holds only its skeleton's id (and is ignored for one that holds the skeleton)."""
     start = _read_at(source, 0, _START.size, size, f"{name}: header")
     magic, version, _, head_len = _START.unpack(start)
     if magic != MAGIC:
@@ -170,11 +189,20 @@ def open_container(source: BinaryIO, size: int, name: str) -> Container:
         raise CorruptStreamError(f"{name}: header CRC mismatch at byte {_START.size}, the header is damaged")
     try:
         header = json.loads(zlib.decompress(head[:-4]))
-        skeleton = skeleton_from_dict(header.pop("skeleton"))
+        embedded = skeleton_from_dict(header.pop("skeleton")) if "skeleton" in header else None
+        wanted = None if embedded else str(header["skeleton_id"])
         frames, fps = int(header["frames"]), float(header["fps"])
         header["codec"]["codec"]
     except (ValueError, KeyError, TypeError, zlib.error) as e:
         raise CorruptStreamError(f"{name}: header at byte {_START.size} does not parse ({e})") from None
+    if embedded is None:
+        if skeleton is None:
+            raise SkeletonMismatchError(f"{name}: the file refers to skeleton {wanted} without holding it; "
+                                        "give the skeleton it was coded with (decode --skeleton FILE)")
+        if skeleton_id(skeleton) != wanted:
+            raise SkeletonMismatchError(f"{name}: the file was coded for skeleton {wanted}, the one given is "
+                                        f"{skeleton_id(skeleton)}")
+    skeleton = embedded or skeleton
     if frames < 0 or not (math.isfinite(fps) and fps > 0):
         raise CorruptStreamError(f"{name}: header says {frames} frames at {fps} fps")
     foot_at = size - _FOOTER.size

@@ -148,3 +148,13 @@ def test_lever_arms(walk_amc):
     sk = walk_amc.skeleton
     arms = perception.lever_arms(sk)
     assert arms[sk.index("lhumerus")] > arms[sk.index("lradius")] > arms[sk.index("lhand")] >= 0.03
+
+
+def test_seam_smoothing_can_be_switched_off(walk_amc):
+    on = get_codec("spiht", bits_per_second=4000)
+    off = get_codec("spiht", bits_per_second=4000, smooth_seams=False)
+    payload = on.encode(walk_amc)
+    assert payload == off.encode(walk_amc)                    # decoder-side only
+    a, b = on.decode(payload, walk_amc.skeleton).channels, off.decode(payload, walk_amc.skeleton).channels
+    assert not np.allclose(a, b) and np.allclose(a[:100], b[:100])
+    assert off.delay_frames == 129

@@ -97,6 +97,7 @@ class SpihtCodec(Codec):
         Knob("allocation", str, "perceptual", "bit allocation (6.1)", choices=perception.ALLOCATIONS),
         Knob("leg_score", float, 1.0, "body-part score of the legs", low=0.0, high=1.0),
         Knob("upper_score", float, 0.5, "body-part score of arms, torso and head", low=0.0, high=1.0),
+        Knob("smooth_seams", bool, True, "smooth the steps where segments meet (decoder side)"),
     )
     quality = QualityKnob("bits_per_second", higher_is_better=True, log_scale=True)
     streaming = True
@@ -113,14 +114,14 @@ class SpihtCodec(Codec):
 
     @property
     def seam_frames(self) -> int:
-        """Half width of the seam smoothing: W / 16 (8 frames for W = 128)."""
-        return max(self.config["window"] // 16, 1)
+        """Half width of the seam smoothing: W / 16 (8 frames for W = 128); 0 when it is off."""
+        return max(self.config["window"] // 16, 1) if self.config["smooth_seams"] else 0
 
     @property
     def delay_frames(self) -> int:
         """A segment goes out when the first frame of the next one (its end anchor) is in, and
         its last frames once the next segment has smoothed the seam."""
-        return self.config["window"] + 1 + max(self.seam_frames, seams.CONTEXT)
+        return self.config["window"] + 1 + (max(self.seam_frames, seams.CONTEXT) if self.seam_frames else 0)
 
     def encoder(self, skeleton: Skeleton, fps: float) -> StreamEncoder:
         return _StreamEncoder(self, skeleton, fps)
@@ -274,6 +275,8 @@ class SpihtCodec(Codec):
             coeffs[k, c] = values
         for k, (a, b) in enumerate(segments):
             out[a:b] += self._residual(coeffs[k], skeleton, b - a)
+        if not self.seam_frames:
+            return out
         return seams.smooth_seams(out, [a for a, _ in segments[1:]], self.seam_frames)
 
     def truncate(self, payload: bytes, skeleton: Skeleton, bits_per_second: float) -> tuple["SpihtCodec", bytes]:
@@ -390,7 +393,8 @@ class _StreamDecoder(StreamDecoder):
         joined = np.vstack((self.held, frames))
         if len(self.held):
             joined = seams.smooth_seams(joined, [len(self.held)], self.codec.seam_frames)
-        keep = 0 if last else min(max(self.codec.seam_frames, seams.CONTEXT), len(joined))
+        hold = max(self.codec.seam_frames, seams.CONTEXT) if self.codec.seam_frames else 0
+        keep = 0 if last else min(hold, len(joined))
         self.held = joined[len(joined) - keep:]
         return joined[:len(joined) - keep]
 

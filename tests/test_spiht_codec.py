@@ -158,3 +158,24 @@ def test_seam_smoothing_can_be_switched_off(walk_amc):
     a, b = on.decode(payload, walk_amc.skeleton).channels, off.decode(payload, walk_amc.skeleton).channels
     assert not np.allclose(a, b) and np.allclose(a[:100], b[:100])
     assert off.delay_frames == 129
+
+
+def test_stream_decoder_survives_garbage(walk_amc):
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    codec = get_codec("spiht", bits_per_second=6000)
+    good = codec.encoder(walk_amc.skeleton, walk_amc.fps).push(walk_amc.channels[:200])[0]
+
+    @settings(max_examples=40)
+    @given(st.binary(max_size=300), st.integers(0, len(good) * 8 - 1))
+    def check(junk, bit):
+        for packet in (junk, good[:len(junk) % len(good)], bytes(b ^ (1 << (bit % 8)) if i == bit // 8 else b
+                                                                for i, b in enumerate(good))):
+            dec = codec.decoder(walk_amc.skeleton, walk_amc.fps)
+            try:
+                dec.push(packet)
+            except CorruptStreamError:
+                pass
+
+    check()

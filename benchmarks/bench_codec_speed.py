@@ -8,17 +8,15 @@ import os
 import subprocess
 import sys
 import tempfile
-import time
-from pathlib import Path
 
-import numpy as np
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
-from mocodec import Motion, load  # noqa: E402
+from common import DATA, best_of, tile  # noqa: E402
+
+from mocodec import load  # noqa: E402
 from mocodec.codecs import codec_ids, get_codec  # noqa: E402
 
-DATA = Path(__file__).resolve().parent.parent / "tests" / "data"
 FRAMES = 10_000
 SETTINGS = {"pwavelet": {"alpha": 0.02}, "spiht": {"bits_per_second": 4000}}
 FIRST_CALL = """
@@ -35,7 +33,7 @@ print(time.perf_counter() - t0)
 
 def main() -> None:
     clip = load(DATA / "135_08.amc")
-    motion = Motion(clip.skeleton, clip.fps, np.tile(clip.channels, (-(-FRAMES // clip.num_frames), 1))[:FRAMES])
+    motion = tile(clip, FRAMES)
     print(f"{FRAMES} frames x {motion.num_channels} channels; frames per second, best of 3")
     print(f"{'codec':<10}{'encode':>12}{'decode':>12}{'ratio':>8}{'first call: cached':>20}{'compiling':>11}")
     for cid in codec_ids():
@@ -43,8 +41,8 @@ def main() -> None:
             continue
         codec = get_codec(cid, **SETTINGS.get(cid, {}))
         payload = codec.encode(motion)
-        enc = min(_time(lambda: codec.encode(motion)) for _ in range(3))
-        dec = min(_time(lambda: codec.decode(payload, motion.skeleton)) for _ in range(3))
+        enc = best_of(lambda: codec.encode(motion), 3)
+        dec = best_of(lambda: codec.decode(payload, motion.skeleton), 3)
         script = FIRST_CALL.format(path=str(DATA / "135_08.amc"), cid=cid)
         cached = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True).stdout.strip()
         with tempfile.TemporaryDirectory() as empty:
@@ -52,12 +50,6 @@ def main() -> None:
                                   env={**os.environ, "NUMBA_CACHE_DIR": empty}).stdout.strip()
         print(f"{cid:<10}{FRAMES / enc:>12,.0f}{FRAMES / dec:>12,.0f}{motion.raw_bits / 8 / len(payload):>8.1f}"
               f"{float(cached):>18.2f} s{float(cold):>9.2f} s")
-
-
-def _time(fn) -> float:
-    t0 = time.perf_counter()
-    fn()
-    return time.perf_counter() - t0
 
 
 if __name__ == "__main__":

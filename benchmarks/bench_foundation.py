@@ -10,38 +10,20 @@ from __future__ import annotations
 
 import argparse
 import tempfile
-import time
 from pathlib import Path
 
-import numpy as np
+from common import DATA, ROOT, SHARED, best_of, tile
 
-from mocodec import Motion, load, save
+from mocodec import load, save
 from mocodec.kinematics import forward_kinematics
-
-HERE = Path(__file__).resolve().parent
-DEFAULT_SHARED = HERE.parent.parent / "shared" / "data"
-
-
-def best_of(fn, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return min(times)
-
-
-def tile(motion: Motion, frames: int) -> Motion:
-    reps = -(-frames // motion.num_frames)
-    return motion.with_channels(np.tile(motion.channels, (reps, 1))[:frames])
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--shared", type=Path, default=DEFAULT_SHARED)
+    ap.add_argument("--shared", type=Path, default=SHARED or ROOT.parent / "shared" / "data")
     ap.add_argument("--repeats", type=int, default=5)
     args = ap.parse_args()
-    tests = HERE.parent / "tests" / "data"
+    tests = DATA
     amc_src = load(tests / "07_03.amc")
     bvh_src = load(tests / "07_03.bvh")
     with tempfile.TemporaryDirectory() as tmp:

@@ -5,16 +5,15 @@ even lossless for these float64 values. Run: `.venv/bin/python benchmarks/bench_
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import numpy as np
 import zstandard
 
+from common import SHARED
+
 from mocodec import load, moc
 from mocodec.codecs import get_codec
 
-ROOT = Path(__file__).resolve().parent.parent
-SHARED = next((p for p in (ROOT.parent / "shared" / "data", Path("/work/shared/data")) if (p / "cmu").is_dir()), None)
 
 
 def main() -> None:

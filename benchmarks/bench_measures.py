@@ -6,33 +6,22 @@ each part so regressions are easy to place. Run: `.venv/bin/python benchmarks/be
 
 from __future__ import annotations
 
-import time
-from pathlib import Path
 
 import numpy as np
 
-from mocodec import Motion, load
+from common import DATA, best_of, tile
+
+from mocodec import load
 from mocodec.kinematics import forward_kinematics
 from mocodec.metrics import compare, dof_errors, visual_errors
 from mocodec.metrics.waveform import channel_error
 
-DATA = Path(__file__).resolve().parent.parent / "tests" / "data"
 FRAMES = 10_000
-
-
-def best_of(fn, repeat=5):
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return min(times)
 
 
 def main() -> None:
     clip = load(DATA / "135_08.amc")
-    reps = -(-FRAMES // clip.num_frames)
-    original = Motion(clip.skeleton, clip.fps, np.tile(clip.channels, (reps, 1))[:FRAMES])
+    original = tile(clip, FRAMES)
     noise = np.random.default_rng(0).normal(0, 0.3, original.channels.shape)
     decoded = original.with_channels(original.channels + noise)
     sk = original.skeleton

@@ -18,18 +18,17 @@ import csv
 import json
 import time
 import zlib
-from pathlib import Path
 
 import numpy as np
 from pysz import sz, szConfig, szErrorBoundMode
+
+from common import ROOT, SHARED
 
 from mocodec import Motion, load, moc, ratecontrol
 from mocodec.codecs import get_codec
 from mocodec.formats import container
 from mocodec.metrics import compare
 
-ROOT = Path(__file__).resolve().parent.parent
-SHARED = next((p for p in (ROOT.parent / "shared" / "data", Path("/work/shared/data")) if (p / "cmu").is_dir()), None)
 CODECS = {
     "spiht-perceptual": ("spiht", {"allocation": "perceptual"}),
     "spiht-energy": ("spiht", {"allocation": "energy"}),

@@ -10,13 +10,13 @@ from pathlib import Path
 
 import numpy as np
 
+from common import SHARED
+
 from mocodec import load
 from mocodec.codecs import get_codec
 from mocodec.kinematics import forward_kinematics
 from mocodec.metrics import compare
 
-ROOT = Path(__file__).resolve().parent.parent
-SHARED = next((p for p in (ROOT.parent / "shared" / "data", Path("/work/shared/data")) if (p / "cmu").is_dir()), None)
 CLIPS = ("asf_amc/131_04.amc", "asf_amc/05_02.amc", "bvh/61_04.bvh", "bvh/02_02.bvh")
 
 

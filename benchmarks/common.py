@@ -1,0 +1,31 @@
+"""Pieces every benchmark script uses: where the shared clips are, timing, and long clips made
+by repeating a short one."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from mocodec import Motion
+
+ROOT = Path(__file__).resolve().parent.parent
+DATA = ROOT / "tests" / "data"
+SHARED = next((p for p in (ROOT.parent / "shared" / "data", Path("/work/shared/data")) if (p / "cmu").is_dir()), None)
+
+
+def best_of(fn, repeats: int = 5) -> float:
+    """The fastest of ``repeats`` runs of ``fn``, in seconds (the least disturbed by others)."""
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return min(times)
+
+
+def tile(motion: Motion, frames: int) -> Motion:
+    """``motion`` repeated to exactly ``frames`` frames."""
+    reps = -(-frames // motion.num_frames)
+    return motion.with_channels(np.tile(motion.channels, (reps, 1))[:frames])

@@ -28,6 +28,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_lossless.py
 	$(BIN)/python benchmarks/bench_codec_speed.py
 	$(BIN)/python benchmarks/bench_seams.py
+	$(BIN)/python benchmarks/bench_ratecontrol.py
 	$(BIN)/python benchmarks/bench_perceptual.py --set amc
 
 clean:

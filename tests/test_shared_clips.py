@@ -92,3 +92,15 @@ def test_reference_codecs_round_trip_through_the_container(path):
     assert np.array_equal(lossless.channels, motion.channels)
     raw = moc.unpack(moc.pack(motion, get_codec("raw")), frames=(1, motion.num_frames))
     assert np.array_equal(raw.channels, motion.channels[1:].astype(np.float32))
+
+
+@pytest.mark.skipif(SHARED is None or not (SHARED / "cmu" / "bvh" / "02_03.bvh").exists(), reason="clip absent")
+def test_seam_smoothing_leaves_finely_coded_motion_alone():
+    """02_03 turns near gimbal lock right at a seam: the smoothing must not mistake that for a
+    coding step when the coding is fine."""
+    from mocodec.codecs import get_codec
+    from mocodec.metrics import compare
+
+    motion = load(SHARED / "cmu" / "bvh" / "02_03.bvh")
+    codec = get_codec("spiht", bits_per_second=1e8)
+    assert compare(motion, codec.decode(codec.encode(motion), motion.skeleton)).joints.max < 0.05

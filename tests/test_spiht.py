@@ -109,14 +109,15 @@ def test_decoding_a_whole_stream_is_exact_and_prefixes_decode(case):
     rng = np.random.default_rng(seed)
     c = np.round(rng.laplace(0, 40, n)).astype(np.int64)
     bits, n0 = spiht.encode(c, approx, 1 << 20)
-    full, used = spiht.decode(bits, 0, len(bits), n, approx, n0)
-    assert used == len(bits) and np.array_equal(full, c)
+    full, used, plane = spiht.decode(bits, 0, len(bits), n, approx, n0)
+    assert used == len(bits) and np.array_equal(full, c) and plane == -1
     errors = []
     for cut in np.linspace(0, len(bits), 6).astype(int):
-        prefix, used = spiht.decode(bits, 0, cut, n, approx, n0)
+        prefix, used, plane = spiht.decode(bits, 0, cut, n, approx, n0)
         assert used <= cut
+        assert np.abs(prefix - c).max() <= 2.0 ** (plane + 1)       # the promised uncertainty
         errors.append(np.square(prefix - c).sum())
-        again, _ = spiht.decode(spiht.encode(c, approx, cut)[0], 0, cut, n, approx, n0)
+        again, _, _ = spiht.decode(spiht.encode(c, approx, cut)[0], 0, cut, n, approx, n0)
         assert np.array_equal(prefix, again)                # a budget-limited encoding is the prefix
     assert errors[-1] == 0 and errors[0] >= errors[-1]
     assert all(a >= b for a, b in zip(errors, errors[1:]))
@@ -125,7 +126,7 @@ def test_decoding_a_whole_stream_is_exact_and_prefixes_decode(case):
 def test_all_zero_and_empty_budget():
     bits, n0 = spiht.encode(np.zeros(16, dtype=np.int64), 2, 100)
     assert n0 == -1 and bits.size == 0
-    out, used = spiht.decode(bits, 0, 100, 16, 2, n0)
+    out, used, _ = spiht.decode(bits, 0, 100, 16, 2, n0)
     assert used == 0 and not out.any()
     bits, n0 = spiht.encode(np.arange(16, dtype=np.int64), 2, 0)
     assert bits.size == 0 and n0 == 3
@@ -138,6 +139,6 @@ def test_streams_concatenate(approx):
     bits_a, n0a = spiht.encode(a, approx, 90)
     bits_b, n0b = spiht.encode(b, approx, 10 ** 6)
     joined = np.concatenate([bits_a, bits_b])
-    da, used = spiht.decode(joined, 0, 90, 32, approx, n0a)
-    db, _ = spiht.decode(joined, used, 10 ** 6, 32, approx, n0b)
+    da, used, _ = spiht.decode(joined, 0, 90, 32, approx, n0a)
+    db, _, _ = spiht.decode(joined, used, 10 ** 6, 32, approx, n0b)
     assert used == len(bits_a) and np.array_equal(db, b)

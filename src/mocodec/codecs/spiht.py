@@ -57,6 +57,7 @@ from mocodec.skeleton import Skeleton
 QUANTUM = 1.0 / 256          # degrees, or cm for translations: the finest SPIHT plane
 ANCHOR_QUANTUM = 0.1         # degrees, or cm: the root is pinned to within 0.05 cm
 N0_BITS = 6                  # each channel stream starts with its top plane + 1 (0: all zero)
+SEAM_LIMIT = 2.0             # a seam step is removed up to twice the two sides' coding uncertainty
 F_LEVELS = 16                # importance sent as half-octave levels 1..15 below the segment's top; 0 = none
 _U32 = struct.Struct("<I")
 
@@ -205,7 +206,7 @@ class SpihtCodec(Codec):
 
     def _segment_streams(self, levels: np.ndarray, total: int, bits: np.ndarray, cursor: int, where: str):
         """Decode one segment's channel streams from ``bits[cursor:]``: yields (channel, start
-        bit, bits used, coefficients)."""
+        bit, bits used, coefficients, the bit plane it stopped in or -1)."""
         w, approx = self.config["window"], self.config["window"] >> self.n_levels
         budgets = perception.allocate(level_weights(levels), int(total))
         for c in range(levels.size):
@@ -214,8 +215,8 @@ class SpihtCodec(Codec):
             if cursor + N0_BITS > bits.size:
                 raise CorruptStreamError(f"spiht payload: bits end in {where}, channel {c}")
             n0 = int(np.dot(bits[cursor:cursor + N0_BITS], 1 << np.arange(N0_BITS - 1, -1, -1))) - 1
-            coeffs, used = spiht.decode(bits, cursor + N0_BITS, int(budgets[c]) - N0_BITS, w, approx, n0)
-            yield c, cursor, N0_BITS + used, coeffs
+            coeffs, used, plane = spiht.decode(bits, cursor + N0_BITS, int(budgets[c]) - N0_BITS, w, approx, n0)
+            yield c, cursor, N0_BITS + used, coeffs, plane
             cursor += N0_BITS + used
 
     def _residual(self, coeffs: np.ndarray, skeleton: Skeleton, frames: int) -> np.ndarray:
@@ -249,12 +250,13 @@ class SpihtCodec(Codec):
         return parts, deltas, levels_f, totals, bits
 
     def _walk(self, levels_f, totals, bits, n_ch: int):
-        """Decode every channel stream: yields (segment, channel, start bit, bits used, coeffs)."""
+        """Decode every channel stream: yields (segment, channel, start bit, bits used, coeffs,
+        stop plane)."""
         cursor = 0
         for k, total in enumerate(totals):
-            for c, start, used, coeffs in self._segment_streams(levels_f[k * n_ch:(k + 1) * n_ch], total, bits,
-                                                                cursor, f"segment {k}"):
-                yield k, c, start, used, coeffs
+            for c, start, used, coeffs, plane in self._segment_streams(levels_f[k * n_ch:(k + 1) * n_ch], total,
+                                                                       bits, cursor, f"segment {k}"):
+                yield k, c, start, used, coeffs, plane
                 cursor = start + used
         if cursor != bits.size:
             raise CorruptStreamError(f"spiht payload: {bits.size - cursor} bits left over after the last segment")
@@ -271,13 +273,22 @@ class SpihtCodec(Codec):
         out = self._lines(anchors, frames)
         segments = self._segments(frames)
         coeffs = np.zeros((len(segments), n_ch, cfg["window"]))
-        for k, c, _, _, values in self._walk(levels_f, totals, bits, n_ch):
+        uncertainty = np.stack([self._uncertainty(levels_f[k * n_ch:(k + 1) * n_ch], skeleton)
+                                for k in range(len(segments))])
+        for k, c, _, _, values, plane in self._walk(levels_f, totals, bits, n_ch):
             coeffs[k, c] = values
+            uncertainty[k, c] = 2.0 ** (plane + 1) * QUANTUM * scale[c]
         for k, (a, b) in enumerate(segments):
             out[a:b] += self._residual(coeffs[k], skeleton, b - a)
         if not self.seam_frames:
             return out
-        return seams.smooth_seams(out, [a for a, _ in segments[1:]], self.seam_frames)
+        limits = SEAM_LIMIT * (uncertainty[:-1] + uncertainty[1:])
+        return seams.smooth_seams(out, [a for a, _ in segments[1:]], self.seam_frames, limits)
+
+    def _uncertainty(self, levels: np.ndarray, skeleton: Skeleton) -> np.ndarray:
+        """How far each channel's decoded residual may be off before its stream is read: half
+        an anchor step for a channel with no budget by choice (level 0), unknown otherwise."""
+        return np.where(levels == 0, 0.5 * ANCHOR_QUANTUM * channel_scale(skeleton), np.inf)
 
     def truncate(self, payload: bytes, skeleton: Skeleton, bits_per_second: float) -> tuple["SpihtCodec", bytes]:
         """The payload cut to a lower rate without re-encoding: every segment budget shrinks by
@@ -301,7 +312,7 @@ class SpihtCodec(Codec):
         budgets = [perception.allocate(level_weights(levels_f[k * n_ch:(k + 1) * n_ch]), int(t))
                    for k, t in enumerate(new_totals)]
         keep = [bits[start:start + min(used, int(budgets[k][c]))]
-                for k, c, start, used, _ in self._walk(levels_f, totals, bits, n_ch) if budgets[k][c] > N0_BITS]
+                for k, c, start, used, _, _ in self._walk(levels_f, totals, bits, n_ch) if budgets[k][c] > N0_BITS]
         new_bits = np.concatenate(keep) if keep else np.zeros(0, dtype=np.uint8)
         new_parts = [parts[0], parts[1], encode_ints(np.diff(new_totals, prepend=0)),
                      _U32.pack(new_bits.size) + np.packbits(new_bits).tobytes()]
@@ -379,26 +390,29 @@ class _StreamDecoder(StreamDecoder):
         self.anchor_q = ANCHOR_QUANTUM * channel_scale(skeleton)
         self.start: np.ndarray | None = None
         self.held = np.zeros((0, skeleton.num_channels))   # last frames, until their seam is smoothed
+        self.held_uncertainty = np.zeros(skeleton.num_channels)
 
     def push(self, packet: bytes) -> np.ndarray:
         """The frames this packet completes: the previous segment's held tail and this
         segment but its own last frames, which wait for the next seam (all of it for the last
         segment)."""
         try:
-            frames, last = self._push(packet)
+            frames, last, uncertainty = self._push(packet)
         except CorruptStreamError:
             raise
         except Exception as e:   # noqa: BLE001 - a packet that does not parse
             raise CorruptStreamError(f"spiht packet does not decode ({type(e).__name__}: {e})") from None
         joined = np.vstack((self.held, frames))
         if len(self.held):
-            joined = seams.smooth_seams(joined, [len(self.held)], self.codec.seam_frames)
+            limits = SEAM_LIMIT * (self.held_uncertainty + uncertainty)[None, :]
+            joined = seams.smooth_seams(joined, [len(self.held)], self.codec.seam_frames, limits)
+        self.held_uncertainty = uncertainty
         hold = max(self.codec.seam_frames, seams.CONTEXT) if self.codec.seam_frames else 0
         keep = 0 if last else min(hold, len(joined))
         self.held = joined[len(joined) - keep:]
         return joined[:len(joined) - keep]
 
-    def _push(self, packet: bytes) -> tuple[np.ndarray, bool]:
+    def _push(self, packet: bytes) -> tuple[np.ndarray, bool, np.ndarray]:
         flags, n = _PACKET.unpack_from(packet)
         n_ch = self.skeleton.num_channels
         if not 0 < n <= self.codec.config["window"]:
@@ -418,13 +432,16 @@ class _StreamDecoder(StreamDecoder):
                 or levels.min(initial=0) < 0 or levels.max(initial=0) >= F_LEVELS:
             raise CorruptStreamError("spiht packet: anchors, levels or bits do not fit the skeleton")
         coeffs = np.zeros((n_ch, self.codec.config["window"]))
+        uncertainty = self.codec._uncertainty(levels, self.skeleton)
+        scale = channel_scale(self.skeleton)
         cursor = 0
-        for c, first, used, values in self.codec._segment_streams(levels, total, bits, 0, "the packet"):
+        for c, first, used, values, plane in self.codec._segment_streams(levels, total, bits, 0, "the packet"):
             coeffs[c] = values
+            uncertainty[c] = 2.0 ** (plane + 1) * QUANTUM * scale[c]
             cursor = first + used
         if cursor != n_bits:
             raise CorruptStreamError(f"spiht packet: {n_bits - cursor} bits left over")
         out = _line(start * self.anchor_q, end * self.anchor_q, n, n - 1 if flags & 2 else n)
         out += self.codec._residual(coeffs, self.skeleton, n)
         self.start = end
-        return out, bool(flags & 2)
+        return out, bool(flags & 2), uncertainty

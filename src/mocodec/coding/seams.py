@@ -36,18 +36,22 @@ def natural_steps(x: np.ndarray, seam: int) -> np.ndarray:
     return np.median(np.abs([seam_steps(x, p) for p in probes]), axis=0)
 
 
-def smooth_seams(x: np.ndarray, seams, half_width: int) -> np.ndarray:
+def smooth_seams(x: np.ndarray, seams, half_width: int, limits: np.ndarray | None = None) -> np.ndarray:
     """``x`` (frames, channels) with the step at every seam spread over 2 ``half_width`` frames.
-    Only the part of a step beyond four times the motion's own (:func:`natural_steps`) is removed,
-    so finely coded or naturally jerky motion keeps its detail."""
+    Only the part of a step beyond four times the motion's own (:func:`natural_steps`) is
+    removed, and at most ``limits[k]`` per channel at the k-th seam (what the coder's error can
+    explain there), so finely coded or naturally jerky motion keeps its detail."""
     out = np.array(x, dtype=np.float64, copy=True)
     h = max(int(half_width), 1)
     weight = 0.5 * (1 + np.cos(np.pi * (np.arange(h) + 0.5) / h))        # 1 next to the seam -> 0
-    for s in seams:
+    for k, s in enumerate(seams):
         if s < 3 or s + 3 > len(out):
             continue
         step = seam_steps(out, s)
-        step = np.sign(step) * np.maximum(np.abs(step) - 4.0 * natural_steps(out, s), 0.0)
+        size = np.maximum(np.abs(step) - 4.0 * natural_steps(out, s), 0.0)
+        if limits is not None:
+            size = np.minimum(size, limits[k])
+        step = np.sign(step) * size
         n_left, n_right = min(h, s), min(h, len(out) - s)
         out[s - n_left:s] += 0.5 * step * weight[:n_left][::-1, None]
         out[s:s + n_right] -= 0.5 * step * weight[:n_right][:, None]

@@ -177,15 +177,19 @@ def encode(coeffs, approx, budget):
 
 @numba.njit(cache=True)
 def decode(bits, start, budget, n, approx, n0):
-    """Coefficients (float, in quantum units) from ``bits[start:start + budget]`` and the number
-    of bits used. Unknown low bits are filled with the midpoint of what remains possible."""
+    """Coefficients (float, in quantum units) from ``bits[start:start + budget]``, the number
+    of bits used, and the bit plane the stream stopped in (-1 when it was complete): every
+    coefficient is then known to within 2^(plane + 1) quanta. Unknown low bits are filled with
+    the midpoint of what remains possible."""
     known = np.zeros(n, dtype=np.int64)
     low = np.full(n, -1, dtype=np.int64)       # lowest known plane of a significant coefficient
     negative = np.zeros(n, dtype=np.bool_)
     out = np.zeros(n)
     end = min(start + max(budget, 0), bits.size)
-    if n0 < 0 or end <= start:
-        return out, 0
+    if n0 < 0:
+        return out, 0, -1
+    if end <= start:
+        return out, 0, n0 + 1
     lip = np.empty(n, dtype=np.int64)
     lsp = np.empty(n, dtype=np.int64)
     lis = np.empty(2 * n, dtype=np.int64)
@@ -200,7 +204,9 @@ def decode(bits, start, budget, n, approx, n0):
             n_lis += 1
     pos = start
     done = False
+    stopped = -1
     for plane in range(n0, -1, -1):
+        stopped = plane
         t = np.int64(1) << plane
         lsp_before = n_lsp
         keep = 0
@@ -307,4 +313,4 @@ def decode(bits, start, budget, n, approx, n0):
         if low[j] >= 0:
             mag = known[j] + ((np.int64(1) << low[j]) >> 1)
             out[j] = -mag if negative[j] else mag
-    return out, pos - start
+    return out, pos - start, stopped if done else -1

@@ -106,9 +106,9 @@ def _encode_channel(x: np.ndarray) -> bytes | None:
         return None
     gran = _granularity(np.where(exception, 0, top - dec))
     v = np.where(exception, 0, mantissa.astype(np.int64) * gran)
-    costs = [np.log2(1.0 + np.abs(_residuals(v, gran, exception, order))).sum() for order in (0, 1, 2)]
-    order = int(np.argmin(costs))
-    r = _residuals(v, gran, exception, order)[~exception]
+    candidates = [_residuals(v, gran, exception, order) for order in (0, 1, 2)]
+    order = int(np.argmin([np.log2(1.0 + np.abs(c)).sum() for c in candidates]))
+    r = candidates[order][~exception]
     classes = np.where(exception, top + 1, top - np.maximum(dec, 0))     # 0 = finest, top+1 = exception
     parts = [encode_ints(classes), encode_ints(r), x[exception].astype("<f8").tobytes()]
     header = struct.pack("<BBI", top, order, int(exception.sum()))

@@ -160,16 +160,16 @@ class PWaveletCodec(Codec):
             raise CorruptStreamError("pwavelet payload: run and value streams do not pair up")
         n_ch = skeleton.num_channels
         slices = self._slices(frames)
-        sizes = [sum(wavelets.band_lengths(b - a, WAVELET, wavelets.max_levels(b - a, WAVELET), MODE))
-                 for a, b in slices]
+        levels = [wavelets.max_levels(b - a, WAVELET) for a, b in slices]
+        sizes = [sum(wavelets.band_lengths(b - a, WAVELET, lv, MODE)) for (a, b), lv in zip(slices, levels)]
         runs = ZeroRuns(run_lengths, values, int(tail[0]))
         if runs.length != n_ch * sum(sizes) or exps.size != n_ch * len(slices):
             raise CorruptStreamError("pwavelet payload: coefficient count does not match the frames")
         q = decode_zero_runs(runs).astype(np.float64)
         out = np.empty((frames, n_ch))
         pos = 0
-        for k, ((a, b), m) in enumerate(zip(slices, sizes)):
+        for k, ((a, b), m, lv) in enumerate(zip(slices, sizes, levels)):
             coeffs = q[pos:pos + n_ch * m].reshape(n_ch, m) * steps(exps[k * n_ch:(k + 1) * n_ch])[:, None]
-            out[a:b] = wavelets.inverse(coeffs, b - a, WAVELET, wavelets.max_levels(b - a, WAVELET), MODE).T
+            out[a:b] = wavelets.inverse(coeffs, b - a, WAVELET, lv, MODE).T
             pos += n_ch * m
         return out

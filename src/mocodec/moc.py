@@ -100,9 +100,9 @@ def truncate(data: bytes, ratio: float | None = None, bitrate: float | None = No
     c = container.open_container(io.BytesIO(data), len(data), name, skeleton)
     embedded = "skeleton_id" not in c.header
     codec = codec_from_config(c.header["codec"])
-    if not hasattr(codec, "truncate"):
+    if not hasattr(codec, "truncator"):
         raise CodecError(f"{name}: codec {codec.id} is not embedded; encode again with a smaller target")
-    payloads = [c.read_chunk(k) for k in range(len(c.index))]
+    cutters = [codec.truncator(c.read_chunk(k), c.skeleton) for k in range(len(c.index))]
     duration = c.frames / c.fps
     raw = c.frames * c.skeleton.num_channels * 4
     target = raw / ratio if ratio is not None else bitrate * duration / 8
@@ -110,7 +110,7 @@ def truncate(data: bytes, ratio: float | None = None, bitrate: float | None = No
         raise CodecError(f"truncate target must be positive, got {ratio if ratio is not None else bitrate}")
 
     def at(bps: float) -> bytes:
-        cut = [codec.truncate(p, c.skeleton, bps) for p in payloads]
+        cut = [cutter(bps) for cutter in cutters]
         chunks = [container.Chunk(e.first, e.count, payload) for e, (_, payload) in zip(c.index, cut)]
         new_codec = cut[0][0] if cut else codec
         header = {k: v for k, v in c.header.items() if k != "skeleton_id"}

@@ -294,30 +294,43 @@ class SpihtCodec(Codec):
         """The payload cut to a lower rate without re-encoding: every segment budget shrinks by
         bits_per_second / the codec's rate, and every channel stream keeps the prefix its new
         budget allows. Returns the codec for the new rate and its payload."""
+        return self.truncator(payload, skeleton)(bits_per_second)
+
+    def truncator(self, payload: bytes, skeleton: Skeleton):
+        """A function bits_per_second -> (codec, payload) for :meth:`truncate`. The streams are
+        decoded once to find where each ends, so a rate search cuts many times cheaply."""
         from mocodec.codecs.base import read_envelope
 
+        frames, fps, body = read_envelope(payload)
+        if frames == 0:
+            return lambda bps: (self._smaller(bps), payload)
+        parts, _, levels_f, totals, bits = self._parse(body, skeleton, frames)
+        n_ch = skeleton.num_channels
+        streams = [(k, c, start, used) for k, c, start, used, _, _ in self._walk(levels_f, totals, bits, n_ch)]
+        rate_coded = np.array_equal(totals, self.segment_budgets(frames, fps))
+
+        def cut(bits_per_second: float) -> tuple["SpihtCodec", bytes]:
+            smaller = self._smaller(bits_per_second)
+            if rate_coded:
+                new_totals = smaller.segment_budgets(frames, fps)          # as if encoded at the new rate
+            else:                                                           # explicit (crowd) budgets scale
+                new_totals = np.floor(totals * (bits_per_second / self.config["bits_per_second"])).astype(np.int64)
+            budgets = [perception.allocate(level_weights(levels_f[k * n_ch:(k + 1) * n_ch]), int(t))
+                       for k, t in enumerate(new_totals)]
+            keep = [bits[start:start + min(used, int(budgets[k][c]))]
+                    for k, c, start, used in streams if budgets[k][c] > N0_BITS]
+            new_bits = np.concatenate(keep) if keep else np.zeros(0, dtype=np.uint8)
+            new_parts = [parts[0], parts[1], encode_ints(np.diff(new_totals, prepend=0)),
+                         _U32.pack(new_bits.size) + np.packbits(new_bits).tobytes()]
+            return smaller, smaller.wrap(join_parts(new_parts), frames, fps)
+
+        return cut
+
+    def _smaller(self, bits_per_second: float) -> "SpihtCodec":
         if bits_per_second > self.config["bits_per_second"]:
             raise CodecError(f"cannot truncate to {bits_per_second:g} bit/s, above the coded "
                              f"{self.config['bits_per_second']:g}")
-        frames, fps, body = read_envelope(payload)
-        smaller = self.with_knob("bits_per_second", bits_per_second)
-        if frames == 0:
-            return smaller, payload
-        parts, _, levels_f, totals, bits = self._parse(body, skeleton, frames)
-        if np.array_equal(totals, self.segment_budgets(frames, fps)):
-            new_totals = smaller.segment_budgets(frames, fps)         # as if encoded at the new rate
-        else:                                                          # explicit (crowd) budgets scale
-            new_totals = np.floor(totals * (bits_per_second / self.config["bits_per_second"])).astype(np.int64)
-        n_ch = skeleton.num_channels
-        budgets = [perception.allocate(level_weights(levels_f[k * n_ch:(k + 1) * n_ch]), int(t))
-                   for k, t in enumerate(new_totals)]
-        keep = [bits[start:start + min(used, int(budgets[k][c]))]
-                for k, c, start, used, _, _ in self._walk(levels_f, totals, bits, n_ch) if budgets[k][c] > N0_BITS]
-        new_bits = np.concatenate(keep) if keep else np.zeros(0, dtype=np.uint8)
-        new_parts = [parts[0], parts[1], encode_ints(np.diff(new_totals, prepend=0)),
-                     _U32.pack(new_bits.size) + np.packbits(new_bits).tobytes()]
-        new_body = join_parts(new_parts)
-        return smaller, smaller.wrap(new_body, frames, fps)
+        return self.with_knob("bits_per_second", bits_per_second)
 
 
 _PACKET = struct.Struct("<BI")      # flags (1: carries the start anchors, 2: last segment), frames

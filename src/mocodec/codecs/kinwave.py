@@ -1,0 +1,406 @@
+"""``kinwave``: the project's own error-bounded, skeleton-aware wavelet codec (kinwave.md).
+
+Per payload of T frames:
+
+1. Angles are made continuous (:meth:`Motion.continuous`); channels constant to 1e-6 are
+   collapsed to one knot; a frame 0 that jumps far from frame 1 (the T-pose of many clips) is
+   coded as its own one-frame segment (keyframe).
+2. Joints are coded parents first. Each joint's angles are the *closed-loop* target: the
+   angles that restore its original global orientation on top of its parent's decoded one
+   (:mod:`mocodec.coding.closedloop`), so errors do not pile up along chains. Translations
+   (the root's, in cm) are coded as they are.
+3. Every channel becomes knots at segment starts plus a wavelet-coded residual per segment of
+   ``window`` frames (:mod:`mocodec.coding.trendwave`: CDF 9/7, ``levels`` deep, periodised),
+   quantised with a dead zone by its joint's step, and the integers go through the
+   context-adaptive binary arithmetic coder of :mod:`mocodec.coding.coefcoder`.
+4. Steps: the shape per joint comes from the convex allocation of
+   :mod:`mocodec.coding.kinalloc` for the chosen error measure; one scale multiplies it. With
+   ``max_error_cm`` the scale is predicted from the model and corrected by a secant in log-log
+   space on the *decoded* output (the encoder reconstructs through the decoder's own
+   functions), so the bound holds on what the decoder will produce, verified on the final bytes;
+   with ``bits_per_second`` the same search aims at the payload's byte budget within 2%.
+
+Payload body: u8 version, u8 flags (bit 0 keyframe, bits 1-2 wavelet), u8 log2 window, u8
+levels, one u8 step code per joint with rotation channels and one for translations (step =
+2^(code/8 - 20) degrees or cm), then the arithmetic-coded stream.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from mocodec.codecs.base import Codec, Knob, QualityKnob, StreamDecoder, StreamEncoder
+from mocodec.codecs.registry import register
+from mocodec.coding import closedloop, coefcoder, kinalloc, trendwave
+from mocodec.errors import CodecError, CorruptStreamError
+from mocodec.kinematics import _plan, forward_kinematics
+from mocodec.metrics.pose import shell_errors
+from mocodec.motion import Motion
+from mocodec.skeleton import Skeleton
+
+FORMAT = 1
+WAVELET_IDS = ("cdf97", "d4", "haar")
+CONSTANT = 1e-6                 # a channel whose range is below this is one knot
+MAX_PASSES = 8                  # secant passes before falling back to halving
+ACCEPT = 0.9                    # an error bound is met well enough at 90-100% of it
+RATE_TOLERANCE = 0.02
+
+
+def _code(step: float) -> int:
+    return int(np.clip(np.round((math.log2(step) + 20.0) * 8.0), 0, 255))
+
+
+def _step(code: int) -> float:
+    return 2.0 ** (code / 8.0 - 20.0)
+
+
+@dataclass(frozen=True)
+class _Group:
+    """Channels coded together with one step: a joint's rotation steps, or its translations."""
+
+    joint: int
+    rotation: bool
+    channels: np.ndarray        # channel indices (rotation: in rotation-order steps)
+    axes: np.ndarray            # rotation axes of the steps
+
+
+@lru_cache(maxsize=64)
+def _groups(skeleton: Skeleton) -> tuple[_Group, ...]:
+    plan = _plan(skeleton)
+    out = []
+    for j in range(len(skeleton)):
+        pos = plan.pos_index[j][plan.pos_index[j] >= 0]
+        if pos.size:
+            out.append(_Group(j, False, pos, np.zeros(0, dtype=np.int64)))
+        k = int((plan.rot_index[j] >= 0).sum())
+        if k:
+            out.append(_Group(j, True, plan.rot_index[j, :k].copy(), plan.rot_axis[j, :k].copy()))
+    return tuple(out)
+
+
+def _rotation_joints(skeleton: Skeleton) -> list[int]:
+    return [g.joint for g in _groups(skeleton) if g.rotation]
+
+
+def _has_translation(skeleton: Skeleton) -> bool:
+    return any(not g.rotation for g in _groups(skeleton))
+
+
+def _reconstruct(knots: np.ndarray, coeffs: np.ndarray, step: float, lay: trendwave.Layout) -> np.ndarray:
+    """Decoded channels ``(k, T)`` of a group: the same arithmetic on both ends."""
+    return trendwave.trend(knots * step, lay) + trendwave.synthesise(coeffs * step, lay)
+
+
+def _keyframe(positions_cm: np.ndarray) -> bool:
+    """Frame 0 jumps far from frame 1 compared with the clip's own frame-to-frame motion."""
+    if len(positions_cm) < 8:
+        return False
+    moves = np.linalg.norm(np.diff(positions_cm, axis=0), axis=2).max(axis=1)
+    return bool(moves[0] > 4.0 * np.percentile(moves[1:], 99) + 1.0)
+
+
+@dataclass
+class _Pass:
+    steps: np.ndarray           # u8 codes: rotation joints, then translation
+    const: np.ndarray
+    knots: np.ndarray
+    coeffs: np.ndarray
+    decoded: np.ndarray         # (T, C)
+
+
+@register
+class KinwaveCodec(Codec):
+    id = "kinwave"
+    description = ("project codec: closed-loop wavelet coding down the kinematic tree, convex step allocation, "
+                   "context-adaptive arithmetic coding, guaranteed error bound (kinwave.md)")
+    knobs = (
+        Knob("max_error_cm", float, 0.5, "error bound in cm, held on the decoded output", 1e-4, 1000.0),
+        Knob("error_measure", str, "joint", "what the bound limits: shell = points 3 cm off every bone (worst), "
+             "joint = max joint position error, mean = mean joint position error", choices=kinalloc.MODES),
+        Knob("bits_per_second", float, 0.0, "code to this bit rate instead of an error bound (0: off)", 0.0, 1e9),
+        Knob("window", int, 128, "segment length in frames (a power of two): the streaming delay", 8, 4096),
+        Knob("levels", int, 4, "wavelet levels per segment", 1, 10),
+        Knob("wavelet", str, "cdf97", "segment transform", choices=WAVELET_IDS),
+        Knob("deadzone", float, 0.4, "rounding offset of the dead-zone quantiser (0.5: plain rounding)", 0.0, 0.5),
+        Knob("closed_loop", bool, True, "code each joint against its parent's decoded orientation"),
+        Knob("allocation", str, "convex", "per-joint steps: convex program, or one step for every angle",
+             choices=("convex", "uniform")),
+        Knob("keyframes", bool, True, "code a frame 0 that jumps away from frame 1 on its own"),
+    )
+    quality = QualityKnob("max_error_cm", higher_is_better=False, log_scale=True)
+    streaming = True
+
+    def __init__(self, **knobs):
+        super().__init__(**knobs)
+        w = self.config["window"]
+        if w & (w - 1):
+            raise CodecError(f"codec kinwave: window must be a power of two, got {w}")
+
+    @property
+    def delay_frames(self) -> int:          # type: ignore[override]
+        return self.config["window"]
+
+    def target_knobs(self, target: str, value: float, motion: Motion, overhead_bytes: int = 0) -> dict | None:
+        """Knobs that make the encoder itself meet a rate-control target (:mod:`ratecontrol`)."""
+        if target == "max_error_cm":
+            measure = self.config["error_measure"]
+            return {"max_error_cm": value, "bits_per_second": 0.0,
+                    "error_measure": "joint" if measure == "mean" else measure}
+        if target == "mean_error_cm":
+            return {"max_error_cm": value, "bits_per_second": 0.0, "error_measure": "mean"}
+        if target in ("ratio", "bitrate"):
+            bits = motion.raw_bits / value if target == "ratio" else value * motion.duration
+            return {"bits_per_second": max((bits - 8 * overhead_bytes) / max(motion.duration, 1e-9), 1.0)}
+        return None
+
+    # ----- encoding -----------------------------------------------------------------------
+    def _encode(self, motion: Motion) -> bytes:
+        return _Encoder(self, motion).run()
+
+    # ----- decoding -----------------------------------------------------------------------
+    def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:
+        rot_joints = _rotation_joints(skeleton)
+        trans = _has_translation(skeleton)
+        head = 4 + len(rot_joints) + trans
+        if len(body) < head:
+            raise CorruptStreamError(f"kinwave payload of {len(body)} bytes is shorter than its {head}-byte header")
+        version, flags, log_w, levels = body[0], body[1], body[2], body[3]
+        if version != FORMAT:
+            raise CorruptStreamError(f"kinwave payload format {version}, this mocodec reads {FORMAT}")
+        if log_w > 16 or not 1 <= levels <= 10 or (flags >> 1) & 3 >= len(WAVELET_IDS):
+            raise CorruptStreamError(f"kinwave payload header is damaged (window 2^{log_w}, levels {levels})")
+        codes = np.frombuffer(body, dtype=np.uint8, count=head - 4, offset=4)
+        lay = trendwave.layout(frames, 1 << log_w, levels, bool(flags & 1), WAVELET_IDS[(flags >> 1) & 3])
+        const, knots, coeffs, _ = coefcoder.decode(body[head:], skeleton.num_channels, lay.num_knots, lay.padded,
+                                                   lay.levels)
+        knots[const == 1] = knots[const == 1, :1]
+        return _decoded(skeleton, codes, knots, coeffs, lay).T if frames else np.zeros((0, skeleton.num_channels))
+
+    # ----- streaming ------------------------------------------------------------------------
+    def encoder(self, skeleton: Skeleton, fps: float) -> StreamEncoder:
+        return _SegmentEncoder(self, skeleton, fps)
+
+    def decoder(self, skeleton: Skeleton, fps: float) -> StreamDecoder:
+        return _SegmentDecoder(self, skeleton)
+
+
+def _decoded(skeleton: Skeleton, codes: np.ndarray, knots: np.ndarray, coeffs: np.ndarray,
+             lay: trendwave.Layout) -> np.ndarray:
+    """Channels ``(C, T)`` from the integers, group by group as the encoder reconstructs them."""
+    out = np.empty((skeleton.num_channels, lay.frames))
+    rot_code = dict(zip(_rotation_joints(skeleton), codes))
+    for g in _groups(skeleton):
+        step = _step(rot_code[g.joint] if g.rotation else codes[-1])
+        out[g.channels] = _reconstruct(knots[g.channels], coeffs[g.channels], step, lay)
+    return out
+
+
+class _Encoder:
+    """One payload: the passes of the scale search and the final bytes."""
+
+    def __init__(self, codec: KinwaveCodec, motion: Motion):
+        self.cfg = codec.config
+        self.skeleton = sk = motion.skeleton
+        self.motion = motion.continuous() if motion.num_frames else motion
+        self.values = self.motion.channels.T.copy()                         # (C, T)
+        self.frames = motion.num_frames
+        pos, quat = forward_kinematics(sk, self.motion.channels)
+        self.cm = 100.0 / sk.units_per_metre
+        self.positions = pos * self.cm
+        self.quats = quat
+        self.const = (np.ptp(self.values, axis=1) <= CONSTANT) if self.frames else np.ones(sk.num_channels, bool)
+        keyframe = self.cfg["keyframes"] and _keyframe(self.positions)
+        self.lay = trendwave.layout(self.frames, self.cfg["window"], self.cfg["levels"], keyframe, self.cfg["wavelet"])
+        self.header = bytes([FORMAT, int(keyframe) | WAVELET_IDS.index(self.cfg["wavelet"]) << 1,
+                             int(math.log2(self.cfg["window"])), self.cfg["levels"]])
+        self.plan = _plan(sk)
+        self.rot_joints = _rotation_joints(sk)
+        self.trans = _has_translation(sk)
+        self.shape_rot, self.shape_trans = self._shape()
+
+    def _shape(self) -> tuple[np.ndarray, float]:
+        """Steps (degrees per rotation joint, cm for translations) whose modelled bound is 1 cm."""
+        sk = self.skeleton
+        coded = [0] * len(sk)
+        translations = 0
+        for g in _groups(sk):
+            n = int((~self.const[g.channels]).sum())
+            if g.rotation:
+                coded[g.joint] = n
+            else:
+                translations += n
+        measure = self.cfg["error_measure"]
+        if self.cfg["allocation"] == "uniform":
+            rot, trans = kinalloc.steps(sk, tuple(int(c > 0) for c in coded), int(translations > 0), measure,
+                                        self.cfg["closed_loop"])
+            finite = rot[np.isfinite(rot)]
+            rot = np.full(len(sk), finite.min() if finite.size else 1.0)
+        else:
+            rot, trans = kinalloc.steps(sk, tuple(coded), translations, measure, self.cfg["closed_loop"])
+        rot = np.where(np.isfinite(rot), rot, np.nanmax(rot) if np.isfinite(rot).any() else 1.0)
+        return rot[self.rot_joints], trans
+
+    # ----- one pass -------------------------------------------------------------------------
+    def codes(self, scale: float) -> np.ndarray:
+        steps = np.append(self.shape_rot * scale, self.shape_trans * scale if self.trans else [])
+        return np.array([_code(s) for s in steps], dtype=np.uint8)
+
+    def run_pass(self, codes: np.ndarray) -> _Pass:
+        sk, lay, values = self.skeleton, self.lay, self.values
+        C = sk.num_channels
+        knots = np.zeros((C, lay.num_knots), dtype=np.int64)
+        coeffs = np.zeros((C, lay.num_coeffs), dtype=np.int64)
+        decoded = np.empty((C, self.frames))
+        glob = np.empty((len(sk), self.frames, 4))
+        rot_code = dict(zip(self.rot_joints, codes))
+        identity = np.tile([1.0, 0.0, 0.0, 0.0], (self.frames, 1))
+        children = sk.children
+        theta = self.cfg["deadzone"]
+        groups = _groups(sk)
+        for j in range(len(sk)):
+            p = sk.parents[j]
+            parent = glob[p] if p >= 0 else identity
+            glob[j] = parent
+            for g in (g for g in groups if g.joint == j):
+                if g.rotation:
+                    step = _step(rot_code[j])
+                    target = values[g.channels].T
+                    active = ~self.const[g.channels]
+                    if self.cfg["closed_loop"] and p >= 0 and active.any():
+                        target = closedloop.target_angles(target, g.axes, active, self.plan.axis_quat[j],
+                                                          self.plan.has_axis[j], parent, self.quats[:, j])
+                    target = target.T
+                else:
+                    step = _step(codes[-1]) / self.cm
+                    target = values[g.channels]
+                k_int, c_int = self._quantise(target, self.const[g.channels], step, theta)
+                knots[g.channels], coeffs[g.channels] = k_int, c_int
+                decoded[g.channels] = _reconstruct(k_int, c_int, step, lay)
+                if g.rotation and children[j]:
+                    glob[j] = closedloop.compose(decoded[g.channels].T, g.axes, self.plan.axis_quat[j],
+                                                 self.plan.has_axis[j], parent)
+        return _Pass(codes, self.const.astype(np.int64), knots, coeffs, decoded)
+
+    def _quantise(self, target: np.ndarray, const: np.ndarray, step: float, theta: float):
+        lay = self.lay
+        k_int = np.round(target[:, lay.knot_frames] / step).astype(np.int64)
+        k_int[const] = k_int[const, :1]
+        residual = target - trendwave.trend(k_int * step, lay)
+        residual[const] = 0.0
+        c = trendwave.analyse(residual, lay) / step
+        c_int = (np.sign(c) * np.floor(np.abs(c) + theta)).astype(np.int64)
+        c_int[const] = 0
+        return k_int, c_int
+
+    # ----- measures and bytes ---------------------------------------------------------------
+    def error(self, decoded: np.ndarray) -> float:
+        measure = self.cfg["error_measure"]
+        pos, quat = forward_kinematics(self.skeleton, decoded.T)
+        pos = pos * self.cm
+        if measure == "shell":
+            return shell_errors(self.skeleton, self.positions, self.quats, pos, quat).max
+        err = np.linalg.norm(pos - self.positions, axis=2)
+        return float(err.max() if measure == "joint" else err.mean())
+
+    def body(self, ps: _Pass) -> bytes:
+        return self.header + ps.steps.tobytes() + coefcoder.encode(ps.const, ps.knots, ps.coeffs, self.lay.padded,
+                                                                   self.lay.levels)
+
+    def run(self) -> bytes:
+        if self.frames == 0:
+            return self.body(self.run_pass(self.codes(1.0)))
+        if self.cfg["bits_per_second"] > 0:
+            return self._to_rate(self.cfg["bits_per_second"] * self.frames / self.motion.fps / 8.0)
+        return self._to_bound(self.cfg["max_error_cm"])
+
+    def _search(self, measure, goal: float, accept: float, scale: float, exponent: float, sign: float = 1.0):
+        """Find x = log(scale) / sign with ``measure`` (rising with x) in [accept * goal, goal]:
+        extrapolate with ``exponent`` (d log measure / dx) until the target is bracketed, then
+        secant steps inside the bracket. Returns (best pass meeting the goal or None, last x)."""
+        lo = hi = None                                  # (x, log value, pass)
+        seen: dict[bytes, tuple[float, _Pass]] = {}
+        x = math.log(scale) / sign
+        aim = math.log(goal * (1.0 + accept) / 2.0)
+        for _ in range(MAX_PASSES):
+            codes = self.codes(math.exp(sign * x))
+            if codes.tobytes() not in seen:
+                ps = self.run_pass(codes)
+                seen[codes.tobytes()] = (measure(ps), ps)
+            value, ps = seen[codes.tobytes()]
+            y = math.log(max(value, 1e-300))
+            if value <= goal:
+                if lo is None or x > lo[0]:
+                    lo = (x, y, ps)
+                if value >= accept * goal:
+                    break
+            elif hi is None or x < hi[0]:
+                hi = (x, y, ps)
+            if lo is not None and hi is not None:
+                if hi[0] - lo[0] < 1e-3:
+                    break
+                slope = (hi[1] - lo[1]) / (hi[0] - lo[0])
+                x = lo[0] + (aim - lo[1]) / slope if slope > 0 else (lo[0] + hi[0]) / 2
+                if not lo[0] < x < hi[0]:
+                    x = (lo[0] + hi[0]) / 2
+            else:
+                ref = lo or hi
+                x = ref[0] + float(np.clip((aim - ref[1]) / exponent, -3.0, 3.0))
+        return (lo[2] if lo else None), x
+
+    def _to_bound(self, bound: float) -> bytes:
+        guess = bound / (0.3 if self.cfg["error_measure"] == "mean" else 0.8)
+        best, x = self._search(lambda ps: self.error(ps.decoded), bound, ACCEPT, guess, 1.0)
+        for _ in range(60):
+            if best is not None:
+                body = self.body(best)
+                if self.error(self._decode_body(body)) <= bound:        # the guarantee, on the real decoder
+                    return body
+            x -= math.log(2.0)
+            ps = self.run_pass(self.codes(math.exp(x)))
+            best = ps if self.error(ps.decoded) <= bound else None
+        raise CodecError(f"kinwave cannot reach {self.cfg['error_measure']} error {bound:g} cm")
+
+    def _decode_body(self, body: bytes) -> np.ndarray:
+        return KinwaveCodec()._decode(body, self.skeleton, self.frames, self.motion.fps).T
+
+    def _to_rate(self, budget_bytes: float) -> bytes:
+        # size / budget falls as the scale rises: search on x = -log(scale)
+        best, _ = self._search(lambda ps: len(self.body(ps)) / budget_bytes, 1.0, 1 - RATE_TOLERANCE, 1.0, 0.8,
+                               sign=-1.0)
+        return self.body(best if best is not None else self.run_pass(self.codes(2.0 ** 40)))
+
+
+class _SegmentEncoder(StreamEncoder):
+    """One payload per ``window`` frames (each decodes on its own)."""
+
+    def __init__(self, codec: KinwaveCodec, skeleton: Skeleton, fps: float):
+        self.codec, self.skeleton, self.fps = codec, skeleton, fps
+        self.pending = np.zeros((0, skeleton.num_channels))
+
+    def push(self, frames: np.ndarray) -> list[bytes]:
+        self.pending = np.vstack([self.pending, np.atleast_2d(frames)])
+        w = self.codec.config["window"]
+        out = []
+        while len(self.pending) >= w:
+            out.append(self.codec.encode(Motion(self.skeleton, self.fps, self.pending[:w])))
+            self.pending = self.pending[w:]
+        return out
+
+    def flush(self) -> list[bytes]:
+        if not len(self.pending):
+            return []
+        out = [self.codec.encode(Motion(self.skeleton, self.fps, self.pending))]
+        self.pending = self.pending[:0]
+        return out
+
+
+class _SegmentDecoder(StreamDecoder):
+    def __init__(self, codec: KinwaveCodec, skeleton: Skeleton):
+        self.codec, self.skeleton = codec, skeleton
+
+    def push(self, packet: bytes) -> np.ndarray:
+        return self.codec.decode(packet, self.skeleton).channels

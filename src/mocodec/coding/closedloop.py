@@ -1,0 +1,149 @@
+"""Closed-loop coding down the kinematic tree (kinwave.md, "what mattered" 1).
+
+A joint is coded so that, on top of its parent's *decoded* global orientation, it restores
+its *original* global orientation: the target local rotation is ``conj(G'_p) G_j``. The
+encoder therefore needs, per joint, the Euler angles (in the joint's own channels, order and
+ASF pre-rotation ``C``) of that target, near the original angles; :func:`target_angles` finds
+them by two damped Gauss-Newton steps from the original angles (exact for three-DOF joints,
+the least-squares best rotation for one- and two-DOF joints). Quantisation errors then stop
+accumulating from the hips to the fingertips, as in a DPCM coder that predicts from the
+decoded signal. :func:`compose` gives the decoded global orientation for the children.
+
+Quaternions are (w, x, y, z), Hamilton products, the conventions of
+:mod:`mocodec.kinematics`: ``L = C R_1 R_2 R_3 C^-1`` with ``R_k`` about axis ``a_k``.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+_DAMPING = 1e-9
+_ITERATIONS = 2
+
+
+@numba.njit(inline="always")
+def _mul(aw, ax, ay, az, bw, bx, by, bz):
+    return (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
+
+
+@numba.njit(inline="always")
+def _rotate(w, x, y, z, vx, vy, vz):
+    """Vector (vx, vy, vz) rotated by the unit quaternion (w, x, y, z)."""
+    tx, ty, tz = 2.0 * (y * vz - z * vy), 2.0 * (z * vx - x * vz), 2.0 * (x * vy - y * vx)
+    return vx + w * tx + y * tz - z * ty, vy + w * ty + z * tx - x * tz, vz + w * tz + x * ty - y * tx
+
+
+@numba.njit(inline="always")
+def _axis_quat(axis, angle):
+    c, s = np.cos(0.5 * angle), np.sin(0.5 * angle)
+    if axis == 0:
+        return c, s, 0.0, 0.0
+    if axis == 1:
+        return c, 0.0, s, 0.0
+    return c, 0.0, 0.0, s
+
+
+@numba.njit(cache=True)
+def _targets(angles, axes, active, cq, has_axis, parent, goal, out):
+    k = axes.size
+    theta = np.empty(3)
+    steps = np.empty((3, 4))
+    jac = np.empty((3, 3))
+    for f in range(angles.shape[0]):
+        for i in range(k):
+            theta[i] = angles[f, i] * (np.pi / 180.0)
+        # wanted local rotation M = conj(parent) * goal
+        mw, mx, my, mz = _mul(parent[f, 0], -parent[f, 1], -parent[f, 2], -parent[f, 3],
+                              goal[f, 0], goal[f, 1], goal[f, 2], goal[f, 3])
+        for _ in range(_ITERATIONS):
+            for i in range(k):
+                steps[i, 0], steps[i, 1], steps[i, 2], steps[i, 3] = _axis_quat(axes[i], theta[i])
+            # suffix products S_i = R_{i+1} ... R_k give the body-frame axis of step i
+            sw, sx, sy, sz = 1.0, 0.0, 0.0, 0.0
+            for i in range(k - 1, -1, -1):
+                ex, ey, ez = (1.0 if axes[i] == 0 else 0.0), (1.0 if axes[i] == 1 else 0.0), (1.0 if axes[i] == 2 else 0.0)
+                jx, jy, jz = _rotate(sw, -sx, -sy, -sz, ex, ey, ez)
+                if has_axis:
+                    jx, jy, jz = _rotate(cq[0], cq[1], cq[2], cq[3], jx, jy, jz)
+                jac[i, 0], jac[i, 1], jac[i, 2] = jx, jy, jz
+                sw, sx, sy, sz = _mul(steps[i, 0], steps[i, 1], steps[i, 2], steps[i, 3], sw, sx, sy, sz)
+            lw, lx, ly, lz = sw, sx, sy, sz
+            if has_axis:
+                lw, lx, ly, lz = _mul(cq[0], cq[1], cq[2], cq[3], lw, lx, ly, lz)
+                lw, lx, ly, lz = _mul(lw, lx, ly, lz, cq[0], -cq[1], -cq[2], -cq[3])
+            # remaining rotation in the body frame: E = conj(L) M, as a rotation vector r
+            ew, ex, ey, ez = _mul(lw, -lx, -ly, -lz, mw, mx, my, mz)
+            if ew < 0.0:
+                ew, ex, ey, ez = -ew, -ex, -ey, -ez
+            norm = np.sqrt(ex * ex + ey * ey + ez * ez)
+            scale = 2.0 if norm < 1e-12 else 2.0 * np.arctan2(norm, ew) / norm
+            rx, ry, rz = ex * scale, ey * scale, ez * scale
+            # damped normal equations over the active steps: (J^T J + d I) delta = J^T r
+            a = np.zeros((3, 4))
+            for i in range(k):
+                if not active[i]:
+                    a[i, i] = 1.0
+                    continue
+                for m in range(k):
+                    if active[m]:
+                        a[i, m] = jac[i, 0] * jac[m, 0] + jac[i, 1] * jac[m, 1] + jac[i, 2] * jac[m, 2]
+                a[i, i] += _DAMPING
+                a[i, 3] = jac[i, 0] * rx + jac[i, 1] * ry + jac[i, 2] * rz
+            for i in range(k):                       # Gaussian elimination with partial pivoting
+                piv = i
+                for m in range(i + 1, k):
+                    if abs(a[m, i]) > abs(a[piv, i]):
+                        piv = m
+                if piv != i:
+                    for col in range(4):
+                        a[i, col], a[piv, col] = a[piv, col], a[i, col]
+                for m in range(i + 1, k):
+                    factor = a[m, i] / a[i, i]
+                    for col in range(i, 4):
+                        a[m, col] -= factor * a[i, col]
+            for i in range(k - 1, -1, -1):
+                v = a[i, 3]
+                for m in range(i + 1, k):
+                    v -= a[i, m] * a[m, 3]
+                a[i, 3] = v / a[i, i]
+                if active[i]:
+                    theta[i] += a[i, 3]
+        for i in range(k):
+            out[f, i] = theta[i] * (180.0 / np.pi)
+
+
+@numba.njit(cache=True)
+def _compose(angles, axes, cq, has_axis, parent, out):
+    for f in range(angles.shape[0]):
+        w, x, y, z = 1.0, 0.0, 0.0, 0.0
+        for i in range(axes.size):
+            sw, sx, sy, sz = _axis_quat(axes[i], angles[f, i] * (np.pi / 180.0))
+            w, x, y, z = _mul(w, x, y, z, sw, sx, sy, sz)
+        if has_axis:
+            w, x, y, z = _mul(cq[0], cq[1], cq[2], cq[3], w, x, y, z)
+            w, x, y, z = _mul(w, x, y, z, cq[0], -cq[1], -cq[2], -cq[3])
+        out[f, 0], out[f, 1], out[f, 2], out[f, 3] = _mul(parent[f, 0], parent[f, 1], parent[f, 2], parent[f, 3],
+                                                          w, x, y, z)
+
+
+def target_angles(angles: np.ndarray, axes: np.ndarray, active: np.ndarray, axis_quat: np.ndarray, has_axis: bool,
+                  parent: np.ndarray, goal: np.ndarray) -> np.ndarray:
+    """Euler angles ``(T, k)`` (degrees, in rotation-order steps) whose local rotation on top
+    of the decoded ``parent (T, 4)`` global orientation comes closest to ``goal (T, 4)``,
+    starting from ``angles``; inactive steps keep their value."""
+    out = np.empty_like(angles)
+    _targets(np.ascontiguousarray(angles, dtype=np.float64), np.ascontiguousarray(axes, dtype=np.int64),
+             np.ascontiguousarray(active, dtype=np.bool_), np.ascontiguousarray(axis_quat, dtype=np.float64),
+             bool(has_axis), np.ascontiguousarray(parent), np.ascontiguousarray(goal), out)
+    return out
+
+
+def compose(angles: np.ndarray, axes: np.ndarray, axis_quat: np.ndarray, has_axis: bool,
+            parent: np.ndarray) -> np.ndarray:
+    """Global orientation ``(T, 4)`` of a joint with local Euler ``angles`` under ``parent``."""
+    out = np.empty((angles.shape[0], 4))
+    _compose(np.ascontiguousarray(angles, dtype=np.float64), np.ascontiguousarray(axes, dtype=np.int64),
+             np.ascontiguousarray(axis_quat, dtype=np.float64), bool(has_axis), np.ascontiguousarray(parent), out)
+    return out

@@ -1,0 +1,120 @@
+"""Quantiser steps per joint from a small convex program (kinwave.md, "what mattered" 3).
+
+Model: the rotation error ``e_j`` (radians) of joint ``j`` moves every point below it. In open
+loop it rotates the whole subtree, so a point ``p`` moves by ``e_j`` times its distance along
+the chain; in closed loop (children restore their original global orientation) it only
+shifts the subtree by ``e_j`` times the length of the bone from ``j`` towards ``p``, and the
+shell around ``j``'s own bone (points 3 cm off its axes) by ``e_j`` times 3 cm. Errors of
+independent joints add in quadrature; a joint with ``m`` coded angles of step ``s`` has
+``e^2 ~ m s^2``, the root translation (3 channels, step ``s_T`` cm) moves everything.
+
+The rate of a joint falls by ``m log2 s`` bits per frame (high-rate approximation), so:
+
+* ``mean`` (mean joint error): minimise rate subject to the mean over points of the squared
+  error; Lagrange gives the closed form ``s_j ~ 1 / sqrt(mean_p lever_jp^2)``;
+* ``joint`` / ``shell`` (max error): subject to every point's (every shell's) squared error
+  at most 1 — a convex program in ``u = s^2`` solved by SLSQP.
+
+Steps are scaled so that the model's error bound is 1 cm; the codec scales them to the
+requested bound and verifies the real error.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+from scipy.optimize import minimize
+
+from mocodec.skeleton import Skeleton
+
+MODES = ("shell", "joint", "mean")
+SHELL_CM = 3.0
+_DEG = np.pi / 180.0
+
+
+def levers(skeleton: Skeleton, closed_loop: bool) -> np.ndarray:
+    """``(joints, joints)`` cm: how far a unit rotation error of joint ``j`` (rows) moves the
+    pivot of joint ``p`` (columns)."""
+    parents = skeleton.parents
+    cm = 100.0 / skeleton.units_per_metre
+    bone = np.linalg.norm(skeleton.offsets, axis=1) * cm
+    n = len(parents)
+    out = np.zeros((n, n))
+    for p in range(n):
+        child, j, path = p, parents[p], bone[p]
+        while j >= 0:
+            out[j, p] = path if not closed_loop else bone[child]
+            child, j = j, parents[j]
+            path += bone[child] if j >= 0 else 0.0
+    return out
+
+
+def _points(skeleton: Skeleton, closed_loop: bool, mode: str) -> np.ndarray:
+    """Squared levers ``(joints, points)`` of the points the mode bounds."""
+    lev = levers(skeleton, closed_loop)
+    if mode != "shell":
+        return lev ** 2
+    has_bone = np.array([len(c) > 0 for c in skeleton.children])
+    shell = lev[:, has_bone] ** 2
+    own = np.flatnonzero(has_bone)
+    # the shell of joint b turns with b and with every ancestor (open loop) / b alone (closed)
+    for k, b in enumerate(own):
+        shell[b, k] += SHELL_CM ** 2
+        if not closed_loop:
+            j = skeleton.parents[b]
+            while j >= 0:
+                shell[j, k] += SHELL_CM ** 2 + 2 * SHELL_CM * lev[j, b]
+                j = skeleton.parents[j]
+    return shell
+
+
+@lru_cache(maxsize=64)
+def steps(skeleton: Skeleton, angles: tuple[int, ...], translations: int, mode: str, closed_loop: bool
+          ) -> tuple[np.ndarray, float]:
+    """Rotation steps per joint (degrees; NaN for joints without coded angles) and the
+    translation step (cm) whose modelled error bound is 1 cm. ``angles[j]`` is the number of
+    coded angles of joint ``j``; ``translations`` the number of coded translation channels."""
+    if mode not in MODES:
+        raise ValueError(f"unknown allocation mode {mode!r} (one of {', '.join(MODES)})")
+    m = np.asarray(angles, dtype=float)
+    coded = np.flatnonzero(m > 0)
+    sq = _points(skeleton, closed_loop, mode)
+    # per variable (coded joints, then the translation): rate weight and squared lever per point
+    weight = np.append(m[coded], translations) if translations else m[coded]
+    lever2 = sq[coded] * (m[coded, None] * _DEG ** 2)
+    if translations:
+        lever2 = np.vstack([lever2, np.full(sq.shape[1], float(translations))])
+    lever2 = lever2[:, lever2.max(axis=0) > 0] if lever2.size else lever2
+    if weight.size == 0 or lever2.shape[1] == 0:
+        return np.full(len(m), np.nan), 1.0
+    mean = lever2.mean(axis=1)
+    useful = mean > 0
+    u = np.where(useful, 1.0 / (weight.sum() * np.where(useful, mean, 1.0)), 1.0)
+    if mode != "mean" and useful.any():
+        u[useful] = _max_program(weight[useful], lever2[useful], u[useful])
+    s = np.sqrt(u)
+    rot = np.full(len(m), np.nan)
+    rot[coded] = s[:coded.size]
+    return rot, float(s[-1]) if translations else 1.0
+
+
+def _max_program(weight: np.ndarray, lever2: np.ndarray, start: np.ndarray) -> np.ndarray:
+    """maximise sum w log u subject to lever2^T u <= 1 (every point), in x = log u."""
+    x0 = np.log(start / max((lever2.T @ start).max(), 1e-300))
+
+    def objective(x):
+        return -weight @ x, -weight
+
+    def slack(x):
+        return 1.0 - lever2.T @ np.exp(x)
+
+    def slack_jac(x):
+        return -(lever2.T * np.exp(x))
+
+    res = minimize(objective, x0, jac=True, method="SLSQP",
+                   constraints=[{"type": "ineq", "fun": slack, "jac": slack_jac}],
+                   options={"maxiter": 200, "ftol": 1e-10})
+    x = res.x if np.isfinite(res.x).all() else x0
+    u = np.exp(x)
+    return u / max((lever2.T @ u).max(), 1e-300)     # feasible whatever SLSQP returned

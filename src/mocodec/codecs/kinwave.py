@@ -21,13 +21,14 @@ Per payload of T frames:
    with ``bits_per_second`` the same search aims at the payload's byte budget within 2%.
 
 Payload body: u8 version, u8 flags (bit 0 keyframe, bits 1-2 wavelet), u8 log2 window, u8
-levels, one u8 step code per joint with rotation channels and one for translations (step =
+levels, u16 channels (a payload for another skeleton is refused), one u8 step code per joint with rotation channels and one for translations (step =
 2^(code/8 - 20) degrees or cm), then the arithmetic-coded stream.
 """
 
 from __future__ import annotations
 
 import math
+import struct
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -43,6 +44,7 @@ from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
 FORMAT = 1
+_HEAD = struct.Struct("<BBBBH")     # format, flags, log2 window, levels, channels
 WAVELET_IDS = ("cdf97", "d4", "haar")
 CONSTANT = 1e-6                 # a channel whose range is below this is one knot
 MAX_PASSES = 8                  # secant passes before falling back to halving
@@ -165,15 +167,18 @@ class KinwaveCodec(Codec):
     def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:
         rot_joints = _rotation_joints(skeleton)
         trans = _has_translation(skeleton)
-        head = 4 + len(rot_joints) + trans
+        head = _HEAD.size + len(rot_joints) + trans
         if len(body) < head:
             raise CorruptStreamError(f"kinwave payload of {len(body)} bytes is shorter than its {head}-byte header")
-        version, flags, log_w, levels = body[0], body[1], body[2], body[3]
+        version, flags, log_w, levels, channels = _HEAD.unpack_from(body)
         if version != FORMAT:
             raise CorruptStreamError(f"kinwave payload format {version}, this mocodec reads {FORMAT}")
+        if channels != skeleton.num_channels:
+            raise CorruptStreamError(f"kinwave payload has {channels} channels, the skeleton {skeleton.num_channels}: "
+                                     "wrong skeleton?")
         if log_w > 16 or not 1 <= levels <= 10 or (flags >> 1) & 3 >= len(WAVELET_IDS):
             raise CorruptStreamError(f"kinwave payload header is damaged (window 2^{log_w}, levels {levels})")
-        codes = np.frombuffer(body, dtype=np.uint8, count=head - 4, offset=4)
+        codes = np.frombuffer(body, dtype=np.uint8, count=head - _HEAD.size, offset=_HEAD.size)
         lay = trendwave.layout(frames, 1 << log_w, levels, bool(flags & 1), WAVELET_IDS[(flags >> 1) & 3])
         const, knots, coeffs, _ = coefcoder.decode(body[head:], skeleton.num_channels, lay.num_knots, lay.padded,
                                                    lay.levels)
@@ -194,7 +199,7 @@ def _decoded(skeleton: Skeleton, codes: np.ndarray, knots: np.ndarray, coeffs: n
     out = np.empty((skeleton.num_channels, lay.frames))
     rot_code = dict(zip(_rotation_joints(skeleton), codes))
     for g in _groups(skeleton):
-        step = _step(rot_code[g.joint] if g.rotation else codes[-1])
+        step = _step(rot_code[g.joint]) if g.rotation else _step(codes[-1]) * skeleton.units_per_metre / 100.0
         out[g.channels] = _reconstruct(knots[g.channels], coeffs[g.channels], step, lay)
     return out
 
@@ -215,8 +220,8 @@ class _Encoder:
         self.const = (np.ptp(self.values, axis=1) <= CONSTANT) if self.frames else np.ones(sk.num_channels, bool)
         keyframe = self.cfg["keyframes"] and _keyframe(self.positions)
         self.lay = trendwave.layout(self.frames, self.cfg["window"], self.cfg["levels"], keyframe, self.cfg["wavelet"])
-        self.header = bytes([FORMAT, int(keyframe) | WAVELET_IDS.index(self.cfg["wavelet"]) << 1,
-                             int(math.log2(self.cfg["window"])), self.cfg["levels"]])
+        self.header = _HEAD.pack(FORMAT, int(keyframe) | WAVELET_IDS.index(self.cfg["wavelet"]) << 1,
+                                 int(math.log2(self.cfg["window"])), self.cfg["levels"], sk.num_channels)
         self.plan = _plan(sk)
         self.rot_joints = _rotation_joints(sk)
         self.trans = _has_translation(sk)
@@ -275,7 +280,7 @@ class _Encoder:
                                                           self.plan.has_axis[j], parent, self.quats[:, j])
                     target = target.T
                 else:
-                    step = _step(codes[-1]) / self.cm
+                    step = _step(codes[-1]) * sk.units_per_metre / 100.0
                     target = values[g.channels]
                 k_int, c_int = self._quantise(target, self.const[g.channels], step, theta)
                 knots[g.channels], coeffs[g.channels] = k_int, c_int

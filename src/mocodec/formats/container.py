@@ -2,9 +2,11 @@
 
 Layout (little-endian)::
 
-    "MOC1"  u16 version  u16 flags
-    u32 header length, header (zlib-compressed JSON: codec config, fps, frame count, chunk
-        size, the skeleton or only its id), u32 CRC32 of the header bytes
+    "MOC1"  u16 version  u16 flags (bit 0: the header holds a compact skeleton)
+    u32 header length, header (zlib-compressed: JSON with the codec config, fps, frame count,
+        chunk size and, without flag 0, the skeleton's id; with flag 0, a zero byte and the
+        compact skeleton of :mod:`mocodec.formats.skeleton_bin` follow the JSON),
+        u32 CRC32 of the header bytes
     chunks: u32 first frame, u32 frame count, u32 payload length, payload,
             u32 CRC32 of those 12 header bytes and the payload
     index:  u32 chunk count, per chunk (u64 file offset, u32 first frame, u32 frame count),
@@ -14,7 +16,7 @@ Layout (little-endian)::
 The index at the end lets a reader fetch only the chunks that cover a frame range. Every
 part is length-checked and CRC-checked before it is used, and a failure raises
 :class:`~mocodec.errors.CorruptStreamError` naming the part (chunk number) and byte offset.
-A file can hold its skeleton (1-2 KB for CMU skeletons, self-contained) or only the skeleton's
+A file can hold its skeleton (about 300-700 bytes for CMU skeletons, self-contained) or only the skeleton's
 id, a hash of its canonical form: a library of clips on one skeleton, or a stream whose receiver
 already has it, then pays 32 bytes instead; the reader must be given the skeleton, and a
 skeleton with another id is refused.
@@ -33,6 +35,7 @@ from dataclasses import dataclass
 from typing import BinaryIO
 
 from mocodec.errors import CorruptStreamError, SkeletonMismatchError
+from mocodec.formats.skeleton_bin import pack_skeleton, unpack_skeleton
 from mocodec.skeleton import Joint, Skeleton
 
 MAGIC = b"MOC1"
@@ -40,6 +43,7 @@ FOOTER_MAGIC = b"MOCX"
 VERSION = 1
 MAX_HEADER = 1 << 24
 MAX_CHUNKS = 1 << 20
+FLAG_SKELETON = 1
 _START = struct.Struct("<4sHHI")
 _CHUNK = struct.Struct("<III")
 _ENTRY = struct.Struct("<QII")
@@ -97,12 +101,14 @@ def pack(header: dict, chunks: list[Chunk], embed_skeleton: bool = True) -> byte
     as its id."""
     skeleton = header["skeleton"]
     meta = {k: v for k, v in header.items() if k != "skeleton"}
-    if embed_skeleton:
-        meta["skeleton"] = skeleton_to_dict(skeleton)
-    else:
+    if not embed_skeleton:
         meta["skeleton_id"] = skeleton_id(skeleton)
-    head = zlib.compress(json.dumps(meta, separators=(",", ":"), allow_nan=False).encode(), 9)
-    out = bytearray(_START.pack(MAGIC, VERSION, 0, len(head)) + head + _U32.pack(zlib.crc32(head)))
+    text = json.dumps(meta, separators=(",", ":"), allow_nan=False).encode()
+    if embed_skeleton:
+        text += b"\0" + pack_skeleton(skeleton)
+    head = zlib.compress(text, 9)
+    flags = FLAG_SKELETON if embed_skeleton else 0
+    out = bytearray(_START.pack(MAGIC, VERSION, flags, len(head)) + head + _U32.pack(zlib.crc32(head)))
     entries = []
     for chunk in chunks:
         entries.append(_ENTRY.pack(len(out), chunk.first, chunk.count))
@@ -177,7 +183,7 @@ def open_container(source: BinaryIO, size: int, name: str, skeleton: Skeleton | 
     """Read and check the header, footer and index of a container. ``skeleton`` is needed for
     a file that holds only its skeleton's id (and is ignored for one that holds the skeleton)."""
     start = _read_at(source, 0, _START.size, size, f"{name}: header")
-    magic, version, _, head_len = _START.unpack(start)
+    magic, version, flags, head_len = _START.unpack(start)
     if magic != MAGIC:
         raise CorruptStreamError(f"{name}: not a .moc file (starts with {magic!r}, expected {MAGIC!r})")
     if version != VERSION:
@@ -188,8 +194,14 @@ def open_container(source: BinaryIO, size: int, name: str, skeleton: Skeleton | 
     if zlib.crc32(head[:-4]) != _U32.unpack(head[-4:])[0]:
         raise CorruptStreamError(f"{name}: header CRC mismatch at byte {_START.size}, the header is damaged")
     try:
-        header = json.loads(zlib.decompress(head[:-4]))
-        embedded = skeleton_from_dict(header.pop("skeleton")) if "skeleton" in header else None
+        text = zlib.decompress(head[:-4])
+        if flags & FLAG_SKELETON:
+            text, _, compact = text.partition(b"\0")
+        header = json.loads(text)
+        if flags & FLAG_SKELETON:
+            embedded = unpack_skeleton(compact)
+        else:
+            embedded = skeleton_from_dict(header.pop("skeleton")) if "skeleton" in header else None
         wanted = None if embedded else str(header["skeleton_id"])
         frames, fps = int(header["frames"]), float(header["fps"])
         header["codec"]["codec"]

@@ -1,0 +1,185 @@
+"""A compact, exact binary form of a skeleton for .moc headers (a few hundred bytes for a CMU
+skeleton instead of 1-2 KB of JSON), so short clips stay small.
+
+Every number is written as the shortest decimal ``n / 10^k`` (k = 0..12) that gives back the
+very same float64 (BVH and ASF values come from decimal text, so almost all do), else as its
+eight raw bytes; 0 and the infinities of unlimited joints have one-byte tags. Names, parents (as
+the distance back to the parent), channel layouts, rotation and axis orders, limits and body
+parts follow as small integers. The result is not compressed here: the container compresses
+its whole header at once. The round trip is exact, so :func:`~mocodec.formats.container.skeleton_id`
+is unchanged.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+
+from mocodec.errors import CorruptStreamError
+from mocodec.skeleton import BODY_PARTS, CHANNEL_NAMES, Joint, Skeleton
+
+VERSION = 1
+_AXES = "XYZ"
+_ZERO, _POS_INF, _NEG_INF, _RAW = 0, 1, 2, 3
+_DECIMAL = 4                    # tags 4..16: decimal with k = tag - 4 places
+_MAX_PLACES = 12
+
+
+class _Writer:
+    def __init__(self):
+        self.out = bytearray()
+
+    def uint(self, v: int) -> None:
+        while True:
+            byte = v & 0x7F
+            v >>= 7
+            self.out.append(byte | (0x80 if v else 0))
+            if not v:
+                return
+
+    def sint(self, v: int) -> None:
+        self.uint(2 * v if v >= 0 else -2 * v - 1)
+
+    def text(self, s: str) -> None:
+        raw = s.encode()
+        self.uint(len(raw))
+        self.out += raw
+
+    def number(self, x: float) -> None:
+        x = float(x)
+        if x == 0.0 and math.copysign(1.0, x) > 0:
+            self.out.append(_ZERO)
+            return
+        if math.isinf(x):
+            self.out.append(_POS_INF if x > 0 else _NEG_INF)
+            return
+        if math.isfinite(x):
+            for k in range(_MAX_PLACES + 1):
+                n = round(x * 10 ** k)
+                if abs(n) < 1 << 62 and n / 10 ** k == x:
+                    self.out.append(_DECIMAL + k)
+                    self.sint(n)
+                    return
+        self.out.append(_RAW)
+        self.out += struct.pack("<d", x)
+
+
+class _Reader:
+    def __init__(self, data: bytes):
+        self.data, self.pos = data, 0
+
+    def byte(self) -> int:
+        if self.pos >= len(self.data):
+            raise CorruptStreamError(f"compact skeleton ends early at byte {self.pos}")
+        self.pos += 1
+        return self.data[self.pos - 1]
+
+    def uint(self) -> int:
+        v, shift = 0, 0
+        while True:
+            b = self.byte()
+            v |= (b & 0x7F) << shift
+            if not b & 0x80:
+                return v
+            shift += 7
+            if shift > 70:
+                raise CorruptStreamError(f"compact skeleton: bad number at byte {self.pos}")
+
+    def sint(self) -> int:
+        v = self.uint()
+        return v // 2 if v % 2 == 0 else -(v + 1) // 2
+
+    def text(self) -> str:
+        n = self.uint()
+        if self.pos + n > len(self.data):
+            raise CorruptStreamError(f"compact skeleton: a {n}-byte name runs past the end at byte {self.pos}")
+        self.pos += n
+        return self.data[self.pos - n:self.pos].decode()
+
+    def number(self) -> float:
+        tag = self.byte()
+        if tag == _ZERO:
+            return 0.0
+        if tag in (_POS_INF, _NEG_INF):
+            return math.inf if tag == _POS_INF else -math.inf
+        if tag == _RAW:
+            if self.pos + 8 > len(self.data):
+                raise CorruptStreamError(f"compact skeleton ends early at byte {self.pos}")
+            self.pos += 8
+            return struct.unpack("<d", self.data[self.pos - 8:self.pos])[0]
+        if _DECIMAL <= tag <= _DECIMAL + _MAX_PLACES:
+            return self.sint() / 10 ** (tag - _DECIMAL)
+        raise CorruptStreamError(f"compact skeleton: unknown number tag {tag} at byte {self.pos - 1}")
+
+
+def _default_order(channels: tuple[str, ...]) -> str:
+    return "".join(c[0] for c in channels if c.endswith("rotation"))
+
+
+def pack_skeleton(skeleton: Skeleton) -> bytes:
+    """Column by column (all names, then all parents, ...), which compresses best; fields at
+    their usual value (rotation order = channel order, axis order ZYX, no axis, no limits)
+    cost one byte per joint."""
+    w = _Writer()
+    joints = skeleton.joints
+    w.uint(VERSION)
+    w.text(skeleton.name)
+    w.number(skeleton.units_per_metre)
+    w.uint(len(joints))
+    for j in joints:
+        w.text(j.name)
+    for i, j in enumerate(joints):
+        w.uint(i - j.parent if j.parent >= 0 else 0)
+    for j in joints:
+        w.uint(len(j.channels))
+        for c in j.channels:
+            w.uint(CHANNEL_NAMES.index(c))
+    for j in joints:
+        w.text("" if j.rotation_order == _default_order(j.channels) else j.rotation_order)
+    for j in joints:
+        w.text("" if j.axis_order == "ZYX" else j.axis_order)
+    for j in joints:
+        w.uint(BODY_PARTS.index(j.body_part) + 1 if j.body_part else 0)
+    for j in joints:
+        for x in j.offset:
+            w.number(x)
+    for j in joints:
+        w.uint(int(j.has_axis))
+        if j.has_axis:
+            for x in j.axis:
+                w.number(x)
+    for j in joints:
+        limited = any(math.isfinite(x) for pair in j.limits for x in pair)
+        w.uint(int(limited))
+        if limited:
+            for low, high in j.limits:
+                w.number(low)
+                w.number(high)
+    return bytes(w.out)
+
+
+def unpack_skeleton(data: bytes) -> Skeleton:
+    r = _Reader(data)
+    try:
+        if (version := r.uint()) != VERSION:
+            raise CorruptStreamError(f"compact skeleton version {version}, this mocodec reads {VERSION}")
+        name, units = r.text(), r.number()
+        n = r.uint()
+        if n > len(data):
+            raise CorruptStreamError(f"compact skeleton: {n} joints cannot fit in {len(data)} bytes")
+        names = [r.text() for _ in range(n)]
+        parents = [i - back if (back := r.uint()) else -1 for i in range(n)]
+        channels = [tuple(CHANNEL_NAMES[r.uint()] for _ in range(r.uint())) for _ in range(n)]
+        orders = [r.text() or _default_order(channels[i]) for i in range(n)]
+        axis_orders = [r.text() or "ZYX" for _ in range(n)]
+        parts = [BODY_PARTS[p - 1] if (p := r.uint()) else None for _ in range(n)]
+        offsets = [tuple(r.number() for _ in range(3)) for _ in range(n)]
+        axes = [tuple(r.number() for _ in range(3)) if r.uint() else (0.0, 0.0, 0.0) for _ in range(n)]
+        limits = [tuple((r.number(), r.number()) for _ in channels[i]) if r.uint() else () for i in range(n)]
+        if r.pos != len(data):
+            raise CorruptStreamError(f"compact skeleton: {len(data) - r.pos} bytes left over")
+        joints = [Joint(names[i], parents[i], offsets[i], channels[i], orders[i], axes[i], axis_orders[i], limits[i],
+                        parts[i]) for i in range(n)]
+        return Skeleton(joints, units, name)
+    except (IndexError, ValueError, UnicodeDecodeError) as e:
+        raise CorruptStreamError(f"compact skeleton does not parse at byte {r.pos} ({e})") from None

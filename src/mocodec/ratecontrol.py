@@ -83,6 +83,10 @@ def tune(codec: Codec, motion: Motion, target: str, value: float, tolerance: flo
     if not (math.isfinite(value) and value > 0):
         raise CodecError(f"target {target} needs a positive number, got {value}")
     positions = forward_kinematics(motion.skeleton, motion.channels)[0] * (100.0 / motion.skeleton.units_per_metre)
+    if hasattr(codec, "target_knobs"):
+        direct = _direct(codec, motion, target, value, tolerance, whole_file, positions)
+        if direct is not None:
+            return direct
     q = codec.quality
     if q is None:
         m = measure(codec, motion, positions, whole_file)
@@ -132,3 +136,30 @@ def tune(codec: Codec, motion: Motion, target: str, value: float, tolerance: flo
         else:
             bad_x = x
     return good
+
+
+DIRECT_PASSES = 5
+
+
+def _direct(codec: Codec, motion: Motion, target: str, value: float, tolerance: float, whole_file: bool,
+            positions: np.ndarray) -> Measurement | None:
+    """For a codec that meets targets itself (``target_knobs``: kinwave's error bound and
+    bit-rate knobs), one encoding for an error bound, or a few corrected ones for a size, instead
+    of a bisection; None if it does not get there (the caller bisects)."""
+    overhead = 0
+    best = None
+    for _ in range(DIRECT_PASSES):
+        knobs = codec.target_knobs(target, value, motion, overhead)
+        if knobs is None:
+            return None
+        m = measure(type(codec)(**{**codec.config, **knobs}), motion, positions, whole_file)
+        if target not in ("ratio", "bitrate"):
+            return m if _meets(m, target, value) else None
+        if _meets(m, target, value) and (best is None or m.ratio < best.ratio):
+            best = m
+        if _meets(m, target, value) and abs(_achieved(m, target) - value) <= tolerance * value:
+            return m
+        # the file came out (size - wanted) bytes off: take that much more (or less) off the payloads
+        wanted = motion.raw_bits / 8 / value if target == "ratio" else value * motion.duration / 8
+        overhead += coded_size(m.data, whole_file) - wanted
+    return best

@@ -104,3 +104,17 @@ def test_seam_smoothing_leaves_finely_coded_motion_alone():
     motion = load(SHARED / "cmu" / "bvh" / "02_03.bvh")
     codec = get_codec("spiht", bits_per_second=1e8)
     assert compare(motion, codec.decode(codec.encode(motion), motion.skeleton)).joints.max < 0.05
+
+
+@pytest.mark.parametrize("path", CLIPS, ids=lambda p: p.name)
+def test_kinwave_holds_its_bound_on_every_clip(path):
+    from mocodec.codecs import get_codec
+    from mocodec.kinematics import forward_kinematics
+
+    motion = load(path)
+    codec = get_codec("kinwave", max_error_cm=0.5)
+    decoded = codec.decode(codec.encode(motion), motion.skeleton)
+    cm = 100.0 / motion.skeleton.units_per_metre
+    err = np.linalg.norm(forward_kinematics(motion.skeleton, decoded.channels)[0]
+                         - forward_kinematics(motion.skeleton, motion.channels)[0], axis=2) * cm
+    assert err.max() <= 0.5

@@ -159,7 +159,8 @@ def _direct(codec: Codec, motion: Motion, target: str, value: float, tolerance: 
             best = m
         if _meets(m, target, value) and abs(_achieved(m, target) - value) <= tolerance * value:
             return m
-        # the file came out (size - wanted) bytes off: take that much more (or less) off the payloads
+        # the file came out (size - wanted) bytes off: take that much more (or less) off the
+        # payloads, aiming at the middle of the tolerance
         wanted = motion.raw_bits / 8 / value if target == "ratio" else value * motion.duration / 8
-        overhead += coded_size(m.data, whole_file) - wanted
+        overhead += coded_size(m.data, whole_file) - wanted * (1 - tolerance / 2)
     return best

@@ -92,9 +92,13 @@ def _has_translation(skeleton: Skeleton) -> bool:
     return any(not g.rotation for g in _groups(skeleton))
 
 
-def _reconstruct(knots: np.ndarray, coeffs: np.ndarray, step: float, lay: trendwave.Layout) -> np.ndarray:
-    """Decoded channels ``(k, T)`` of a group: the same arithmetic on both ends."""
-    return trendwave.trend(knots * step, lay) + trendwave.synthesise(coeffs * step, lay)
+def _reconstruct(knots: np.ndarray, coeffs: np.ndarray, const: np.ndarray, step: float,
+                 lay: trendwave.Layout) -> np.ndarray:
+    """Decoded channels ``(k, T)`` of a group: the same arithmetic on both ends. A constant
+    channel is its first knot at the plain step."""
+    values = knots * (step * lay.knot_quantum)
+    values[const] = knots[const, :1] * step
+    return trendwave.trend(values, lay) + trendwave.synthesise(coeffs * step, lay)
 
 
 def _keyframe(positions_cm: np.ndarray) -> bool:
@@ -131,7 +135,8 @@ class KinwaveCodec(Codec):
         Knob("closed_loop", bool, True, "code each joint against its parent's decoded orientation"),
         Knob("allocation", str, "convex", "per-joint steps: convex program, or one step for every angle",
              choices=("convex", "uniform")),
-        Knob("keyframes", bool, True, "code a frame 0 that jumps away from frame 1 on its own"),
+        Knob("keyframes", bool, False, "code a frame 0 that jumps away from frame 1 on its own (the knot at "
+             "frame 0 already keeps such a T-pose out of the transform: off by default, see docs/kinwave.md)"),
     )
     quality = QualityKnob("max_error_cm", higher_is_better=False, log_scale=True)
     streaming = True
@@ -183,7 +188,7 @@ class KinwaveCodec(Codec):
         const, knots, coeffs, _ = coefcoder.decode(body[head:], skeleton.num_channels, lay.num_knots, lay.padded,
                                                    lay.levels)
         knots[const == 1] = knots[const == 1, :1]
-        return _decoded(skeleton, codes, knots, coeffs, lay).T if frames else np.zeros((0, skeleton.num_channels))
+        return _decoded(skeleton, codes, const, knots, coeffs, lay).T if frames else np.zeros((0, skeleton.num_channels))
 
     # ----- streaming ------------------------------------------------------------------------
     def encoder(self, skeleton: Skeleton, fps: float) -> StreamEncoder:
@@ -193,14 +198,14 @@ class KinwaveCodec(Codec):
         return _SegmentDecoder(self, skeleton)
 
 
-def _decoded(skeleton: Skeleton, codes: np.ndarray, knots: np.ndarray, coeffs: np.ndarray,
+def _decoded(skeleton: Skeleton, codes: np.ndarray, const: np.ndarray, knots: np.ndarray, coeffs: np.ndarray,
              lay: trendwave.Layout) -> np.ndarray:
     """Channels ``(C, T)`` from the integers, group by group as the encoder reconstructs them."""
     out = np.empty((skeleton.num_channels, lay.frames))
     rot_code = dict(zip(_rotation_joints(skeleton), codes))
     for g in _groups(skeleton):
         step = _step(rot_code[g.joint]) if g.rotation else _step(codes[-1]) * skeleton.units_per_metre / 100.0
-        out[g.channels] = _reconstruct(knots[g.channels], coeffs[g.channels], step, lay)
+        out[g.channels] = _reconstruct(knots[g.channels], coeffs[g.channels], const[g.channels] == 1, step, lay)
     return out
 
 
@@ -284,7 +289,7 @@ class _Encoder:
                     target = values[g.channels]
                 k_int, c_int = self._quantise(target, self.const[g.channels], step, theta)
                 knots[g.channels], coeffs[g.channels] = k_int, c_int
-                decoded[g.channels] = _reconstruct(k_int, c_int, step, lay)
+                decoded[g.channels] = _reconstruct(k_int, c_int, self.const[g.channels], step, lay)
                 if g.rotation and children[j]:
                     glob[j] = closedloop.compose(decoded[g.channels].T, g.axes, self.plan.axis_quat[j],
                                                  self.plan.has_axis[j], parent)
@@ -292,9 +297,10 @@ class _Encoder:
 
     def _quantise(self, target: np.ndarray, const: np.ndarray, step: float, theta: float):
         lay = self.lay
-        k_int = np.round(target[:, lay.knot_frames] / step).astype(np.int64)
-        k_int[const] = k_int[const, :1]
-        residual = target - trendwave.trend(k_int * step, lay)
+        quantum = step * lay.knot_quantum
+        k_int = np.round(target[:, lay.knot_frames] / quantum).astype(np.int64)
+        k_int[const] = np.round(target[const, :1] / step).astype(np.int64)
+        residual = target - trendwave.trend(k_int * quantum, lay)
         residual[const] = 0.0
         c = trendwave.analyse(residual, lay) / step
         c_int = (np.sign(c) * np.floor(np.abs(c) + theta)).astype(np.int64)

@@ -90,7 +90,7 @@ def steps(skeleton: Skeleton, angles: tuple[int, ...], translations: int, mode: 
         return np.full(len(m), np.nan), 1.0
     mean = lever2.mean(axis=1)
     useful = mean > 0
-    u = np.where(useful, 1.0 / (weight.sum() * np.where(useful, mean, 1.0)), 1.0)
+    u = np.where(useful, weight / (weight[useful].sum() * np.where(useful, mean, 1.0)), 1.0)
     if mode != "mean" and useful.any():
         u[useful] = _max_program(weight[useful], lever2[useful], u[useful])
     s = np.sqrt(u)

@@ -21,6 +21,8 @@ import numpy as np
 
 from mocodec.coding import wavelets
 
+KEYFRAME_QUANTUM = 0.5
+
 
 @dataclass(frozen=True, eq=False)
 class Layout:
@@ -33,6 +35,7 @@ class Layout:
     knot_frames: np.ndarray     # (K,)
     left: np.ndarray            # (T,) knot index before each frame
     frac: np.ndarray            # (T,) position between knot `left` and the next one
+    knot_quantum: np.ndarray    # (K,) knot step relative to the channel's step
 
     @property
     def num_knots(self) -> int:
@@ -64,7 +67,11 @@ def layout(frames: int, window: int, levels: int, keyframe: bool, wavelet: str =
         left[a:a + n] = s
         if end > a:
             frac[a:a + n] = (np.arange(n) / (end - a))
-    return Layout(frames, wavelet, starts, lengths, padded.astype(np.int64), seg_levels, knots, left, frac)
+    # a keyframe has no residual to correct its knot: it gets an twice finer step
+    quantum = np.ones(knots.size)
+    if first:
+        quantum[0] = KEYFRAME_QUANTUM
+    return Layout(frames, wavelet, starts, lengths, padded.astype(np.int64), seg_levels, knots, left, frac, quantum)
 
 
 def trend(knot_values: np.ndarray, lay: Layout) -> np.ndarray:

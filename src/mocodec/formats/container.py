@@ -53,6 +53,8 @@ _U32 = struct.Struct("<I")
 
 # ----- skeleton <-> JSON ------------------------------------------------------------------------
 def _number(x: float):
+    """A float (never an int, so equal skeletons have equal ids) or "inf"/"-inf" for JSON."""
+    x = float(x)
     return x if math.isfinite(x) else ("inf" if x > 0 else "-inf")
 
 
@@ -63,10 +65,10 @@ def _from_number(x) -> float:
 def skeleton_to_dict(skeleton: Skeleton) -> dict:
     return {
         "name": skeleton.name,
-        "units_per_metre": skeleton.units_per_metre,
+        "units_per_metre": float(skeleton.units_per_metre),
         "joints": [
-            {"name": j.name, "parent": j.parent, "offset": list(j.offset), "channels": list(j.channels),
-             "rotation_order": j.rotation_order, "axis": list(j.axis), "axis_order": j.axis_order,
+            {"name": j.name, "parent": j.parent, "offset": [_number(x) for x in j.offset],
+             "channels": list(j.channels), "rotation_order": j.rotation_order, "axis": [_number(x) for x in j.axis], "axis_order": j.axis_order,
              "limits": [[_number(a), _number(b)] for a, b in j.limits], "body_part": j.body_part}
             for j in skeleton.joints
         ],

@@ -53,7 +53,7 @@ class _Writer:
         if math.isinf(x):
             self.out.append(_POS_INF if x > 0 else _NEG_INF)
             return
-        if math.isfinite(x):
+        if math.isfinite(x) and x != 0.0:               # -0.0 goes raw, keeping its sign
             for k in range(_MAX_PLACES + 1):
                 n = round(x * 10 ** k)
                 if abs(n) < 1 << 62 and n / 10 ** k == x:

@@ -1,0 +1,134 @@
+"""kinwave: the error bound holds on the decoded output for every measure, rate targets are
+hit, the encoder knows the decoder's output bit for bit, streaming and frame ranges work, and
+each technique the codec claims does what it claims."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mocodec import moc, ratecontrol
+from mocodec.codecs import get_codec
+from mocodec.codecs.kinwave import _Encoder
+from mocodec.errors import CodecError
+from mocodec.kinematics import forward_kinematics
+from mocodec.metrics.pose import shell_errors
+
+
+def _errors(original, decoded):
+    sk = original.skeleton
+    cm = 100.0 / sk.units_per_metre
+    p0, q0 = forward_kinematics(sk, original.channels)
+    p1, q1 = forward_kinematics(sk, decoded.channels)
+    joint = np.linalg.norm((p1 - p0) * cm, axis=2)
+    return {"joint": joint.max(), "mean": joint.mean(),
+            "shell": shell_errors(sk, p0 * cm, q0, p1 * cm, q1).max}
+
+
+@pytest.mark.parametrize("measure", ["joint", "shell", "mean"])
+@pytest.mark.parametrize("bound", [0.1, 1.0])
+def test_error_bound_holds_on_the_decoded_file(walk_bvh, walk_amc, measure, bound):
+    for motion in (walk_bvh, walk_amc):
+        codec = get_codec("kinwave", max_error_cm=bound, error_measure=measure)
+        decoded = moc.unpack(moc.pack(motion, codec))
+        err = _errors(motion, decoded)[measure]
+        assert err <= bound
+        assert err >= 0.5 * bound            # and the search does not waste bits far below it
+
+
+def test_looser_bounds_give_smaller_files(walk_amc):
+    sizes = [len(get_codec("kinwave", max_error_cm=b).encode(walk_amc)) for b in (0.05, 0.2, 1.0, 4.0)]
+    assert sizes == sorted(sizes, reverse=True) and sizes[0] > 3 * sizes[-1]
+
+
+def test_encoder_model_is_the_decoders_output_bit_for_bit(walk_bvh):
+    codec = get_codec("kinwave", max_error_cm=0.3)
+    enc = _Encoder(codec, walk_bvh)
+    ps = enc.run_pass(enc.codes(0.4))
+    decoded = enc._decode_body(enc.body(ps))
+    assert np.array_equal(decoded, ps.decoded)
+
+
+def test_same_input_same_bytes(walk_amc):
+    a = get_codec("kinwave", max_error_cm=0.4).encode(walk_amc)
+    b = get_codec("kinwave", max_error_cm=0.4).encode(walk_amc.with_channels(walk_amc.channels.copy()))
+    assert a == b
+
+
+def test_bit_rate_is_hit_within_two_percent(walk_amc):
+    for bps in (3000, 12000):
+        codec = get_codec("kinwave", bits_per_second=bps)
+        payload = codec.encode(walk_amc)
+        achieved = len(payload) * 8 / walk_amc.duration
+        assert abs(achieved - bps) <= 0.02 * bps + 8 * 20 / walk_amc.duration      # + the 17-byte envelope
+
+
+@pytest.mark.parametrize("target,value", [("ratio", 40.0), ("bitrate", 9000.0)])
+def test_rate_control_hits_whole_file_targets(walk_bvh, target, value):
+    m = ratecontrol.tune(get_codec("kinwave"), walk_bvh, target, value)
+    achieved = m.ratio if target == "ratio" else m.bitrate
+    assert abs(achieved - value) <= 0.02 * value
+
+
+def test_rate_control_error_targets_use_the_encoder_bound(walk_amc):
+    m = ratecontrol.tune(get_codec("kinwave"), walk_amc, "mean_error_cm", 0.3)
+    assert 0.15 <= m.mean_error_cm <= 0.3 and m.codec.config["error_measure"] == "mean"
+    m = ratecontrol.tune(get_codec("kinwave"), walk_amc, "max_error_cm", 0.3)
+    assert m.max_error_cm <= 0.3
+
+
+def test_closed_loop_beats_open_loop_at_equal_error(walk_bvh):
+    closed = len(get_codec("kinwave", max_error_cm=0.5).encode(walk_bvh))
+    opened = len(get_codec("kinwave", max_error_cm=0.5, closed_loop=False).encode(walk_bvh))
+    assert closed < 0.95 * opened
+
+
+def test_keyframe_finds_the_t_pose_and_keeps_the_bound(walk_bvh):
+    """CMU BVH files start with a T-pose frame; coded apart it still meets the bound."""
+    codec = get_codec("kinwave", keyframes=True, max_error_cm=0.3)
+    assert _Encoder(codec, walk_bvh).lay.starts[:2].tolist() == [0, 1]
+    decoded = codec.decode(codec.encode(walk_bvh), walk_bvh.skeleton)
+    assert _errors(walk_bvh, decoded)["joint"] <= 0.3
+
+
+def test_constant_channels_cost_almost_nothing(walk_amc):
+    still = walk_amc.with_channels(np.tile(walk_amc.channels[5], (walk_amc.num_frames, 1)))
+    payload = get_codec("kinwave", max_error_cm=0.01).encode(still)
+    assert len(payload) < 300
+    decoded = get_codec("kinwave").decode(payload, still.skeleton)
+    assert _errors(still, decoded)["joint"] <= 0.01
+
+
+@pytest.mark.parametrize("frames", [1, 2, 3, 130])
+def test_short_clips(walk_amc, frames):
+    clip = walk_amc[:frames]
+    decoded = get_codec("kinwave").decode(get_codec("kinwave").encode(clip), clip.skeleton)
+    assert decoded.num_frames == frames and _errors(clip, decoded)["joint"] <= 0.5
+
+
+def test_streaming_sends_one_payload_per_window_within_the_bound(walk_amc):
+    codec = get_codec("kinwave", window=64, max_error_cm=0.5)
+    enc, dec = codec.encoder(walk_amc.skeleton, walk_amc.fps), codec.decoder(walk_amc.skeleton, walk_amc.fps)
+    packets = []
+    for f in range(0, walk_amc.num_frames, 10):
+        packets += enc.push(walk_amc.channels[f:f + 10])
+        assert len(packets) == (f + 10) // 64 or f + 10 > walk_amc.num_frames
+    packets += enc.flush()
+    out = np.vstack([dec.push(p) for p in packets])
+    assert out.shape == walk_amc.channels.shape
+    assert _errors(walk_amc, walk_amc.with_channels(out))["joint"] <= 0.5
+    assert codec.delay_frames == 64
+
+
+def test_frame_range_decoding(walk_bvh):
+    data = moc.pack(walk_bvh, get_codec("kinwave"), chunk_frames=128)
+    part = moc.unpack(data, frames=(200, 300))
+    whole = moc.unpack(data)
+    assert np.array_equal(part.channels, whole.channels[200:300])
+
+
+def test_bad_knobs_are_refused():
+    with pytest.raises(CodecError, match="power of two"):
+        get_codec("kinwave", window=100)
+    with pytest.raises(CodecError):
+        get_codec("kinwave", error_measure="psnr")

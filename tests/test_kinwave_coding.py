@@ -1,0 +1,155 @@
+"""The coding blocks under kinwave: the context-adaptive arithmetic coder, trend + wavelet
+segments, closed-loop target angles, the convex step allocation and the compact skeleton."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from mocodec import rotations
+from mocodec.coding import closedloop, coefcoder, kinalloc, trendwave
+from mocodec.errors import CorruptStreamError
+from mocodec.formats import container
+from mocodec.formats.skeleton_bin import pack_skeleton, unpack_skeleton
+from mocodec.human import human_model
+from mocodec.kinematics import _plan, forward_kinematics
+
+
+def _layout_arrays(lay):
+    return lay.padded, lay.levels
+
+
+@given(seed=st.integers(0, 2**32 - 1), frames=st.integers(1, 700), keyframe=st.booleans(),
+       spread=st.sampled_from([0.0, 0.3, 3.0, 1e5]))
+def test_coefficient_coder_round_trips(seed, frames, keyframe, spread):
+    rng = np.random.default_rng(seed)
+    lay = trendwave.layout(frames, 128, 4, keyframe)
+    channels = 5
+    const = (rng.random(channels) < 0.3).astype(np.int64)
+    knots = np.cumsum(rng.integers(-3000, 3000, (channels, lay.num_knots)), axis=1)
+    coeffs = np.round(rng.laplace(0, spread, (channels, lay.num_coeffs)) if spread else
+                      np.zeros((channels, lay.num_coeffs))).astype(np.int64)
+    coeffs[const == 1] = 0
+    data = coefcoder.encode(const, knots, coeffs, lay.padded, lay.levels)
+    c2, k2, co2, used = coefcoder.decode(data, channels, lay.num_knots, lay.padded, lay.levels)
+    assert used >= len(data) - 1 and np.array_equal(c2, const)
+    live = const == 0
+    assert np.array_equal(k2[live], knots[live]) and np.array_equal(k2[~live, 0], knots[~live, 0])
+    assert np.array_equal(co2, coeffs)
+
+
+def test_coefficient_coder_adapts_to_sparse_data():
+    """Mostly-zero coefficients cost a small fraction of a bit each; random bytes decode
+    to something of the right shape without reading outside the buffer."""
+    lay = trendwave.layout(1024, 128, 4, False)
+    coeffs = np.zeros((10, lay.num_coeffs), dtype=np.int64)
+    coeffs[:, ::97] = 3
+    data = coefcoder.encode(np.zeros(10, np.int64), np.zeros((10, lay.num_knots), np.int64), coeffs, lay.padded,
+                            lay.levels)
+    assert len(data) * 8 < 0.2 * coeffs.size       # 1% nonzero: about 0.09 bits of entropy each for the zero flags
+    const, knots, out, _ = coefcoder.decode(bytes(range(256)) * 3, 10, lay.num_knots, lay.padded, lay.levels)
+    assert out.shape == coeffs.shape
+
+
+def test_layout_keyframe_and_knots():
+    lay = trendwave.layout(300, 128, 4, True)
+    assert lay.starts.tolist() == [0, 1, 129, 257]
+    assert lay.knot_frames.tolist() == [0, 1, 129, 257, 299]
+    assert lay.padded.tolist() == [0, 128, 128, 48] and lay.levels.tolist() == [0, 4, 4, 4]
+    one = trendwave.layout(1, 128, 4, True)
+    assert one.starts.tolist() == [0] and one.num_coeffs == 0 and one.num_knots == 1
+
+
+def test_trend_and_wavelets_reconstruct_exactly():
+    rng = np.random.default_rng(1)
+    lay = trendwave.layout(333, 64, 4, False)
+    x = np.cumsum(rng.normal(size=(3, 333)), axis=1)
+    knots = x[:, lay.knot_frames]
+    tr = trendwave.trend(knots, lay)
+    assert np.allclose(tr[:, lay.knot_frames], knots)                       # passes through its knots
+    assert np.abs(np.diff(tr, axis=1)).max() < np.abs(np.diff(x, axis=1)).max() + np.ptp(x)   # no jumps
+    residual = x - tr
+    back = trendwave.synthesise(trendwave.analyse(residual, lay), lay)
+    assert np.allclose(back, residual, atol=1e-10)
+    # with the knots, a segment's residual is zero at its start
+    assert np.allclose(residual[:, lay.starts], 0.0)
+
+
+def test_closed_loop_targets_restore_the_global_orientation(walk_bvh, walk_amc):
+    rng = np.random.default_rng(2)
+    for motion in (walk_bvh[:50], walk_amc[:50]):
+        sk = motion.skeleton
+        plan = _plan(sk)
+        _, quat = forward_kinematics(sk, motion.channels)
+        for j in range(1, len(sk)):
+            k = int((plan.rot_index[j] >= 0).sum())
+            if not k:
+                continue
+            idx, axes = plan.rot_index[j, :k], plan.rot_axis[j, :k]
+            p = sk.parents[j]
+            # a parent decoded 2 degrees off about a random axis
+            axis = rng.normal(size=3)
+            wrong = rotations.quat_multiply(quat[:, p], rotations.axis_angle_to_quat(axis / np.linalg.norm(axis), 2.0))
+            angles = closedloop.target_angles(motion.channels[:, idx], axes, np.ones(k, bool), plan.axis_quat[j],
+                                              plan.has_axis[j], wrong, quat[:, j])
+            glob = closedloop.compose(angles, axes, plan.axis_quat[j], plan.has_axis[j], wrong)
+            err = np.degrees(rotations.quat_distance(glob, quat[:, j]))
+            before = np.degrees(rotations.quat_distance(
+                closedloop.compose(motion.channels[:, idx], axes, plan.axis_quat[j], plan.has_axis[j], wrong),
+                quat[:, j]))
+            if k == 3:
+                assert err.max() < 1e-4, sk.names[j]          # arccos resolution
+            else:      # fewer DOFs: the best reachable rotation, never worse than doing nothing
+                assert (err <= before + 1e-9).all(), sk.names[j]
+
+
+def test_compose_matches_forward_kinematics(walk_amc):
+    sk = walk_amc.skeleton
+    plan = _plan(sk)
+    _, quat = forward_kinematics(sk, walk_amc.channels)
+    for j in range(1, len(sk)):
+        k = int((plan.rot_index[j] >= 0).sum())
+        if k:
+            q = closedloop.compose(walk_amc.channels[:, plan.rot_index[j, :k]], plan.rot_axis[j, :k],
+                                   plan.axis_quat[j], plan.has_axis[j], quat[:, sk.parents[j]])
+            assert np.degrees(rotations.quat_distance(q, quat[:, j])).max() < 1e-4
+
+
+@pytest.mark.parametrize("mode", kinalloc.MODES)
+def test_allocation_meets_its_model_bound_and_favours_long_levers(walk_amc, mode):
+    sk = walk_amc.skeleton
+    angles = tuple(sum(c.endswith("rotation") for c in j.channels) for j in sk.joints)
+    rot, trans = kinalloc.steps(sk, angles, 3, mode, True)
+    coded = np.array(angles) > 0
+    assert np.isfinite(rot[coded]).all() and np.isnan(rot[~coded]).all() and trans > 0
+    # modelled squared error of every point (or their mean) is at most 1
+    lev2 = kinalloc._points(sk, True, mode)
+    u = np.where(coded, np.array(angles) * np.radians(np.nan_to_num(rot)) ** 2, 0.0)
+    err2 = u @ lev2 + 3 * trans ** 2
+    worst = err2.mean() if mode == "mean" else err2.max()
+    assert worst == pytest.approx(1.0, rel=1e-3)
+    # a femur (long bones below) gets a finer step than a toe
+    assert rot[sk.index("lfemur")] < rot[sk.index("ltoes")]
+    # open loop must protect the hips more than closed loop does
+    open_rot, _ = kinalloc.steps(sk, angles, 3, mode, False)
+    assert open_rot[sk.index("lfemur")] < rot[sk.index("lfemur")]
+
+
+@pytest.mark.parametrize("which", ["bvh", "amc", "human"])
+def test_compact_skeleton_is_exact_and_small(which, walk_bvh, walk_amc):
+    sk = {"bvh": walk_bvh.skeleton, "amc": walk_amc.skeleton, "human": human_model()}[which]
+    data = pack_skeleton(sk)
+    back = unpack_skeleton(data)
+    assert container.skeleton_id(back) == container.skeleton_id(sk)
+    import zlib
+    assert len(zlib.compress(data, 9)) < 0.75 * len(zlib.compress(
+        str(container.skeleton_to_dict(sk)).encode(), 9))
+
+
+def test_compact_skeleton_rejects_damage(walk_bvh):
+    data = pack_skeleton(walk_bvh.skeleton)
+    for bad in (data[:-3], data + b"\x00", b"\x07" + data[1:], data[:40]):
+        with pytest.raises(CorruptStreamError):
+            unpack_skeleton(bad)

@@ -1,0 +1,121 @@
+"""kinwave against SZ3 (pysz, one channel at a time, absolute bound) at equal max shell error,
+its ratio at a mean joint error bound, the guarantee on every clip, and its speed.
+
+    python benchmarks/bench_kinwave.py [--set bvh|amc|all] [--limit N]
+
+SZ3's bound (degrees, and cm for translations) is bisected per clip to the largest one whose
+decoded max shell error is within the target; kinwave is given the target as its bound. Sizes
+are the coded motion (payload bytes, no container); ratios at a mean error include the whole
+.moc file with its skeleton.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+from pysz import sz, szConfig, szErrorBoundMode
+
+from common import SHARED
+
+from mocodec import load, moc
+from mocodec.codecs import get_codec
+from mocodec.kinematics import forward_kinematics
+from mocodec.metrics.pose import shell_errors
+
+
+def errors(motion, channels):
+    sk = motion.skeleton
+    cm = 100.0 / sk.units_per_metre
+    p0, q0 = forward_kinematics(sk, motion.channels)
+    p1, q1 = forward_kinematics(sk, channels)
+    joint = np.linalg.norm((p1 - p0) * cm, axis=2)
+    return {"shell": shell_errors(sk, p0 * cm, q0, p1 * cm, q1).max, "joint": joint.max(), "mean": joint.mean()}
+
+
+def sz3(motion, bound):
+    sk = motion.skeleton
+    scale = np.where(sk.rotation_mask, 1.0, sk.units_per_metre / 100.0)
+    data = motion.continuous().channels.astype(np.float32)
+    size, out = 0, np.empty_like(motion.channels)
+    for c in range(data.shape[1]):
+        cfg = szConfig()
+        cfg.errorBoundMode = szErrorBoundMode.ABS
+        cfg.absErrorBound = float(bound * scale[c])
+        comp, _ = sz.compress(np.ascontiguousarray(data[:, c]), cfg)
+        size += len(comp)
+        out[:, c] = sz.decompress(comp, np.float32, (len(data),))[0]
+    return size, out
+
+
+def sz3_at_shell(motion, target):
+    lo, hi, best = 1e-5, 100.0, None
+    for _ in range(30):
+        mid = np.sqrt(lo * hi)
+        size, out = sz3(motion, mid)
+        if errors(motion, out)["shell"] <= target:
+            lo, best = mid, size
+        else:
+            hi = mid
+        if hi / lo < 1.02:
+            break
+    return best
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--set", choices=("bvh", "amc", "all"), default="all")
+    ap.add_argument("--limit", type=int, default=0, help="only the first N clips of each set")
+    args = ap.parse_args()
+    sets = {"bvh": ["bvh"], "amc": ["asf_amc"], "all": ["bvh", "asf_amc"]}[args.set]
+    clips = []
+    for s in sets:
+        found = sorted((SHARED / "cmu" / s).glob("*.bvh" if s == "bvh" else "*.amc"))
+        clips += found[:args.limit] if args.limit else found
+    rel = {0.1: [], 1.0: []}
+    ratio = {0.5: [], 1.0: []}
+    over = {}
+    enc_fps, dec_fps = [], []
+    print(f"{'clip':12s} {'frames':>6s} | shell 0.1: kinwave/SZ3 | shell 1.0: kinwave/SZ3 | mean 0.5 / 1.0 ratio")
+    for path in clips:
+        motion = load(path)
+        row = [f"{path.name:12s} {motion.num_frames:6d}"]
+        for bound in (0.1, 1.0):
+            codec = get_codec("kinwave", max_error_cm=bound, error_measure="shell")
+            payload = codec.encode(motion)
+            err = errors(motion, codec.decode(payload, motion.skeleton).channels)["shell"]
+            over.setdefault(("shell", bound), []).append(err > bound)
+            ref = sz3_at_shell(motion, bound)
+            rel[bound].append(len(payload) / ref)
+            row.append(f"{len(payload):7d}/{ref:7d} = {len(payload) / ref:.2f}")
+        for bound in (0.5, 1.0):
+            data = moc.pack(motion, get_codec("kinwave", max_error_cm=bound, error_measure="mean"))
+            ratio[bound].append(motion.raw_bits / 8 / len(data))
+            row.append(f"{ratio[bound][-1]:6.1f}")
+        for bound in (0.1, 0.5, 1.0):
+            codec = get_codec("kinwave", max_error_cm=bound, error_measure="joint")
+            t0 = time.perf_counter()
+            payload = codec.encode(motion)
+            t1 = time.perf_counter()
+            decoded = codec.decode(payload, motion.skeleton)
+            t2 = time.perf_counter()
+            over.setdefault(("joint", bound), []).append(errors(motion, decoded.channels)["joint"] > bound)
+            if motion.num_channels == 62 and bound == 0.5:
+                enc_fps.append(motion.num_frames / (t1 - t0))
+                dec_fps.append(motion.num_frames / (t2 - t1))
+        print(" | ".join(row), flush=True)
+    print(f"\n{len(clips)} clips")
+    for bound, r in rel.items():
+        print(f"max shell error {bound} cm: kinwave bytes / SZ3 bytes median {np.median(r):.2f}, worst {max(r):.2f}")
+    for bound, r in ratio.items():
+        print(f"mean joint error {bound} cm: median ratio {np.median(r):.0f}:1 (whole file, skeleton included)")
+    for (measure, bound), flags in sorted(over.items()):
+        print(f"guarantee {measure} {bound} cm: {sum(flags)} of {len(flags)} clips over the bound")
+    if enc_fps:
+        print(f"62-channel clips, joint 0.5 cm: encode median {np.median(enc_fps):,.0f} frames/s, "
+              f"decode {np.median(dec_fps):,.0f} frames/s (one core, after compilation)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,55 @@
+"""What each kinwave technique is worth: payload bytes at equal error bounds, one knob changed
+at a time, relative to the default (geometric mean over the clips).
+
+    python benchmarks/bench_kinwave_ablation.py [--clips N]
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from common import SHARED
+
+from mocodec import load
+from mocodec.codecs import get_codec
+
+VARIANTS = {
+    "open loop (closed_loop=False)": {"closed_loop": False},
+    "one step for all angles (allocation=uniform)": {"allocation": "uniform"},
+    "D4 instead of CDF 9/7": {"wavelet": "d4"},
+    "Haar instead of CDF 9/7": {"wavelet": "haar"},
+    "plain rounding (deadzone=0.5)": {"deadzone": 0.5},
+    "stronger dead zone (deadzone=0.3)": {"deadzone": 0.3},
+    "T-pose keyframe apart (keyframes=True)": {"keyframes": True},
+    "window 256": {"window": 256},
+    "window 64": {"window": 64},
+    "3 levels": {"levels": 3},
+    "5 levels": {"levels": 5},
+}
+BOUNDS = (("mean", 0.5), ("shell", 0.1))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--clips", type=int, default=4, help="clips per set (BVH and AMC)")
+    args = ap.parse_args()
+    clips = sorted((SHARED / "cmu" / "bvh").glob("*.bvh"))[::8][:args.clips] + \
+        sorted((SHARED / "cmu" / "asf_amc").glob("*.amc"))[::4][:args.clips]
+    motions = [load(p) for p in clips]
+    print(f"{len(motions)} clips: {', '.join(p.name for p in clips)}")
+    print(f"| variant | {' | '.join(f'{m} {b} cm' for m, b in BOUNDS)} |\n|---|" + "---|" * len(BOUNDS))
+    base = {mb: [len(get_codec("kinwave", max_error_cm=mb[1], error_measure=mb[0]).encode(m)) for m in motions]
+            for mb in BOUNDS}
+    for name, knobs in VARIANTS.items():
+        cells = []
+        for mb in BOUNDS:
+            sizes = [len(get_codec("kinwave", max_error_cm=mb[1], error_measure=mb[0], **knobs).encode(m))
+                     for m in motions]
+            cells.append(f"{np.exp(np.mean(np.log(np.array(sizes) / base[mb]))) - 1:+.1%}")
+        print(f"| {name} | {' | '.join(cells)} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()

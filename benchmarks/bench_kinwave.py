@@ -15,8 +15,7 @@ import argparse
 import time
 
 import numpy as np
-from pysz import sz, szConfig, szErrorBoundMode
-
+from baselines import sz3_per_channel
 from common import SHARED
 
 from mocodec import load, moc
@@ -34,26 +33,11 @@ def errors(motion, channels):
     return {"shell": shell_errors(sk, p0 * cm, q0, p1 * cm, q1).max, "joint": joint.max(), "mean": joint.mean()}
 
 
-def sz3(motion, bound):
-    sk = motion.skeleton
-    scale = np.where(sk.rotation_mask, 1.0, sk.units_per_metre / 100.0)
-    data = motion.continuous().channels.astype(np.float32)
-    size, out = 0, np.empty_like(motion.channels)
-    for c in range(data.shape[1]):
-        cfg = szConfig()
-        cfg.errorBoundMode = szErrorBoundMode.ABS
-        cfg.absErrorBound = float(bound * scale[c])
-        comp, _ = sz.compress(np.ascontiguousarray(data[:, c]), cfg)
-        size += len(comp)
-        out[:, c] = sz.decompress(comp, np.float32, (len(data),))[0]
-    return size, out
-
-
 def sz3_at_shell(motion, target):
     lo, hi, best = 1e-5, 100.0, None
     for _ in range(30):
         mid = np.sqrt(lo * hi)
-        size, out = sz3(motion, mid)
+        size, out = sz3_per_channel(motion, mid)
         if errors(motion, out)["shell"] <= target:
             lo, best = mid, size
         else:

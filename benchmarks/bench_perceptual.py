@@ -22,6 +22,7 @@ import zlib
 import numpy as np
 from pysz import sz, szConfig, szErrorBoundMode
 
+from baselines import sz3_per_channel
 from common import ROOT, SHARED
 
 from mocodec import Motion, load, moc, ratecontrol
@@ -71,20 +72,11 @@ def sz3_at_ratio(motion: Motion, ratio: float, with_skeleton: bool = True) -> tu
     the ratio; the compressed skeleton counts towards the size like in a .moc file."""
     sk = motion.skeleton
     skeleton_bytes = len(zlib.compress(json.dumps(container.skeleton_to_dict(sk)).encode(), 9)) if with_skeleton else 0
-    scale = np.where(sk.rotation_mask, 1.0, sk.units_per_metre / 100.0)
     target = motion.raw_bits / 8 / ratio
-    data = motion.continuous().channels.astype(np.float32)
 
     def run(bound: float):
-        size, out = skeleton_bytes, np.empty_like(motion.channels)
-        for c in range(data.shape[1]):
-            cfg = szConfig()
-            cfg.errorBoundMode = szErrorBoundMode.ABS
-            cfg.absErrorBound = float(bound * scale[c])
-            comp, _ = sz.compress(np.ascontiguousarray(data[:, c]), cfg)
-            size += len(comp)
-            out[:, c] = sz.decompress(comp, np.float32, (len(data),))[0]
-        return size, out
+        size, out = sz3_per_channel(motion, bound)
+        return size + skeleton_bytes, out
 
     lo, hi = 1e-4, 1e3
     best = None

@@ -17,10 +17,6 @@ from mocodec.human import human_model
 from mocodec.kinematics import _plan, forward_kinematics
 
 
-def _layout_arrays(lay):
-    return lay.padded, lay.levels
-
-
 @given(seed=st.integers(0, 2**32 - 1), frames=st.integers(1, 700), keyframe=st.booleans(),
        spread=st.sampled_from([0.0, 0.3, 3.0, 1e5]))
 def test_coefficient_coder_round_trips(seed, frames, keyframe, spread):

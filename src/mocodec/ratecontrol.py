@@ -155,10 +155,11 @@ def _direct(codec: Codec, motion: Motion, target: str, value: float, tolerance: 
         m = measure(type(codec)(**{**codec.config, **knobs}), motion, positions, whole_file)
         if target not in ("ratio", "bitrate"):
             return m if _meets(m, target, value) else None
-        if _meets(m, target, value) and (best is None or m.ratio < best.ratio):
-            best = m
-        if _meets(m, target, value) and abs(_achieved(m, target) - value) <= tolerance * value:
-            return m
+        if _meets(m, target, value):
+            if abs(_achieved(m, target) - value) <= tolerance * value:
+                return m
+            if best is None or m.ratio < best.ratio:
+                best = m
         # the file came out (size - wanted) bytes off: take that much more (or less) off the
         # payloads, aiming at the middle of the tolerance
         wanted = motion.raw_bits / 8 / value if target == "ratio" else value * motion.duration / 8

@@ -84,6 +84,20 @@ def _groups(skeleton: Skeleton) -> tuple[_Group, ...]:
     return tuple(out)
 
 
+@lru_cache(maxsize=64)
+def _joint_groups(skeleton: Skeleton) -> tuple[tuple[_Group, ...], ...]:
+    """The groups of each joint, in joint order (translations before rotations)."""
+    return tuple(tuple(g for g in _groups(skeleton) if g.joint == j) for j in range(len(skeleton)))
+
+
+def _group_step(g: _Group, codes: np.ndarray, skeleton: Skeleton) -> float:
+    """A group's quantiser step from the payload's step codes (one per rotation joint, then
+    the translation code in cm): degrees, or skeleton units for translations."""
+    if g.rotation:
+        return _step(codes[_rotation_joints(skeleton).index(g.joint)])
+    return _step(codes[-1]) * skeleton.units_per_metre / 100.0
+
+
 def _rotation_joints(skeleton: Skeleton) -> list[int]:
     return [g.joint for g in _groups(skeleton) if g.rotation]
 
@@ -187,7 +201,6 @@ class KinwaveCodec(Codec):
         lay = trendwave.layout(frames, 1 << log_w, levels, bool(flags & 1), WAVELET_IDS[(flags >> 1) & 3])
         const, knots, coeffs, _ = coefcoder.decode(body[head:], skeleton.num_channels, lay.num_knots, lay.padded,
                                                    lay.levels)
-        knots[const == 1] = knots[const == 1, :1]
         return _decoded(skeleton, codes, const, knots, coeffs, lay).T if frames else np.zeros((0, skeleton.num_channels))
 
     # ----- streaming ------------------------------------------------------------------------
@@ -202,9 +215,8 @@ def _decoded(skeleton: Skeleton, codes: np.ndarray, const: np.ndarray, knots: np
              lay: trendwave.Layout) -> np.ndarray:
     """Channels ``(C, T)`` from the integers, group by group as the encoder reconstructs them."""
     out = np.empty((skeleton.num_channels, lay.frames))
-    rot_code = dict(zip(_rotation_joints(skeleton), codes))
     for g in _groups(skeleton):
-        step = _step(rot_code[g.joint]) if g.rotation else _step(codes[-1]) * skeleton.units_per_metre / 100.0
+        step = _group_step(g, codes, skeleton)
         out[g.channels] = _reconstruct(knots[g.channels], coeffs[g.channels], const[g.channels] == 1, step, lay)
     return out
 
@@ -266,18 +278,16 @@ class _Encoder:
         coeffs = np.zeros((C, lay.num_coeffs), dtype=np.int64)
         decoded = np.empty((C, self.frames))
         glob = np.empty((len(sk), self.frames, 4))
-        rot_code = dict(zip(self.rot_joints, codes))
         identity = np.tile([1.0, 0.0, 0.0, 0.0], (self.frames, 1))
         children = sk.children
         theta = self.cfg["deadzone"]
-        groups = _groups(sk)
-        for j in range(len(sk)):
+        for j, joint_groups in enumerate(_joint_groups(sk)):
             p = sk.parents[j]
             parent = glob[p] if p >= 0 else identity
             glob[j] = parent
-            for g in (g for g in groups if g.joint == j):
+            for g in joint_groups:
+                step = _group_step(g, codes, sk)
                 if g.rotation:
-                    step = _step(rot_code[j])
                     target = values[g.channels].T
                     active = ~self.const[g.channels]
                     if self.cfg["closed_loop"] and p >= 0 and active.any():
@@ -285,7 +295,6 @@ class _Encoder:
                                                           self.plan.has_axis[j], parent, self.quats[:, j])
                     target = target.T
                 else:
-                    step = _step(codes[-1]) * sk.units_per_metre / 100.0
                     target = values[g.channels]
                 k_int, c_int = self._quantise(target, self.const[g.channels], step, theta)
                 knots[g.channels], coeffs[g.channels] = k_int, c_int

@@ -51,6 +51,7 @@ def _targets(angles, axes, active, cq, has_axis, parent, goal, out):
     theta = np.empty(3)
     steps = np.empty((3, 4))
     jac = np.empty((3, 3))
+    a = np.empty((3, 4))                     # normal equations | right-hand side
     for f in range(angles.shape[0]):
         for i in range(k):
             theta[i] = angles[f, i] * (np.pi / 180.0)
@@ -81,7 +82,7 @@ def _targets(angles, axes, active, cq, has_axis, parent, goal, out):
             scale = 2.0 if norm < 1e-12 else 2.0 * np.arctan2(norm, ew) / norm
             rx, ry, rz = ex * scale, ey * scale, ez * scale
             # damped normal equations over the active steps: (J^T J + d I) delta = J^T r
-            a = np.zeros((3, 4))
+            a[:] = 0.0
             for i in range(k):
                 if not active[i]:
                     a[i, i] = 1.0

@@ -36,6 +36,7 @@ class Layout:
     left: np.ndarray            # (T,) knot index before each frame
     frac: np.ndarray            # (T,) position between knot `left` and the next one
     knot_quantum: np.ndarray    # (K,) knot step relative to the channel's step
+    blocks: tuple               # segments with a block, grouped by (length, levels): (n, levels, segs, offsets)
 
     @property
     def num_knots(self) -> int:
@@ -71,7 +72,9 @@ def layout(frames: int, window: int, levels: int, keyframe: bool, wavelet: str =
     quantum = np.ones(knots.size)
     if first:
         quantum[0] = KEYFRAME_QUANTUM
-    return Layout(frames, wavelet, starts, lengths, padded.astype(np.int64), seg_levels, knots, left, frac, quantum)
+    padded = padded.astype(np.int64)
+    return Layout(frames, wavelet, starts, lengths, padded, seg_levels, knots, left, frac, quantum,
+                  _blocks(padded, seg_levels))
 
 
 def trend(knot_values: np.ndarray, lay: Layout) -> np.ndarray:
@@ -81,13 +84,14 @@ def trend(knot_values: np.ndarray, lay: Layout) -> np.ndarray:
     return a + (b - a) * lay.frac
 
 
-def _groups(lay: Layout):
-    """Segments with a block, grouped by (padded length, levels), with their coefficient offsets."""
-    offsets = np.concatenate([[0], np.cumsum(lay.padded)[:-1]])
+def _blocks(padded: np.ndarray, levels: np.ndarray) -> tuple:
+    """Segments with a block, grouped by (padded length, levels), with their coefficient
+    offsets: each group is transformed in one call."""
+    offsets = np.concatenate([[0], np.cumsum(padded)[:-1]]).astype(np.int64)
     groups: dict[tuple[int, int], list[int]] = {}
-    for s in np.flatnonzero(lay.padded):
-        groups.setdefault((int(lay.padded[s]), int(lay.levels[s])), []).append(int(s))
-    return [(n, lev, np.array(segs), offsets[segs]) for (n, lev), segs in groups.items()]
+    for s in np.flatnonzero(padded):
+        groups.setdefault((int(padded[s]), int(levels[s])), []).append(int(s))
+    return tuple((n, lev, np.array(segs), offsets[segs]) for (n, lev), segs in groups.items())
 
 
 def analyse(residual: np.ndarray, lay: Layout) -> np.ndarray:
@@ -95,7 +99,7 @@ def analyse(residual: np.ndarray, lay: Layout) -> np.ndarray:
     zero-padded to its block length, coarsest band first."""
     channels = residual.shape[0]
     out = np.zeros((channels, lay.num_coeffs))
-    for n, lev, segs, offs in _groups(lay):
+    for n, lev, segs, offs in lay.blocks:
         block = np.zeros((channels, segs.size, n))
         for k, s in enumerate(segs):
             a, m = lay.starts[s], lay.lengths[s]
@@ -110,7 +114,7 @@ def synthesise(coeffs: np.ndarray, lay: Layout) -> np.ndarray:
     """Inverse of :func:`analyse`: the residual ``(channels, T)`` (zero where no block)."""
     channels = coeffs.shape[0]
     out = np.zeros((channels, lay.frames))
-    for n, lev, segs, offs in _groups(lay):
+    for n, lev, segs, offs in lay.blocks:
         block = np.stack([coeffs[:, o:o + n] for o in offs], axis=1).reshape(-1, n)
         signal = wavelets.inverse(block, n, lay.wavelet, lev).reshape(channels, segs.size, n)
         for k, s in enumerate(segs):

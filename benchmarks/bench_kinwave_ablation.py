@@ -25,8 +25,8 @@ VARIANTS = {
     "T-pose keyframe apart (keyframes=True)": {"keyframes": True},
     "window 256": {"window": 256},
     "window 64": {"window": 64},
-    "3 levels": {"levels": 3},
-    "5 levels": {"levels": 5},
+    "4 levels": {"levels": 4},
+    "6 levels": {"levels": 6},
 }
 BOUNDS = (("mean", 0.5), ("shell", 0.1))
 

@@ -44,7 +44,7 @@ def test_help_on_every_command():
 def test_demo_runs(capsys):
     assert main(["demo"]) == 0
     out = capsys.readouterr().out
-    for word in ("ratio", "bit rate", "PSNR", "joint error", "us per frame", "lossless"):
+    for word in ("ratio", "bit rate", "PSNR", "joint error", "us per frame", "kinwave"):
         assert word in out
 
 
@@ -71,8 +71,8 @@ def test_encode_decode_eval_codecs(tmp_path, capsys):
 def test_coding_errors_are_one_line(tmp_path, capsys):
     cases = [
         (["encode", str(DATA / "07_03.amc"), "-o", str(tmp_path / "x.moc"), "--codec", "nope"], "unknown codec"),
-        (["encode", str(DATA / "07_03.amc"), "-o", str(tmp_path / "x.moc"), "--levels", "3"], "unknown knob"),
-        (["encode", str(DATA / "07_03.amc"), "-o", str(tmp_path / "x.moc"), "--ratio", "50"], "no quality knob"),
+        (["encode", str(DATA / "07_03.amc"), "-o", str(tmp_path / "x.moc"), "--colour", "3"], "unknown knob"),
+        (["encode", str(DATA / "07_03.amc"), "-o", str(tmp_path / "x.moc"), "--codec", "lossless", "--ratio", "50"], "no quality knob"),
         (["encode", str(DATA / "07_03.amc"), str(DATA / "135_08.amc"), "-o", str(tmp_path / "x.moc")], "directory"),
         (["decode", str(DATA / "07_03.amc"), "-o", str(tmp_path / "x.bvh")], "not a .moc file"),
         (["decode", str(tmp_path / "missing.moc"), "-o", str(tmp_path / "x.bvh")], "missing.moc"),

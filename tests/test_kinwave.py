@@ -78,9 +78,11 @@ def test_rate_control_error_targets_use_the_encoder_bound(walk_amc):
 
 
 def test_closed_loop_beats_open_loop_at_equal_error(walk_bvh):
-    closed = len(get_codec("kinwave", max_error_cm=0.5).encode(walk_bvh))
-    opened = len(get_codec("kinwave", max_error_cm=0.5, closed_loop=False).encode(walk_bvh))
-    assert closed < 0.95 * opened
+    # at a mean-error bound every joint's error counts, and the closed loop stops them adding
+    # up down the chains (docs/kinwave.md ablation: about a quarter)
+    closed = len(get_codec("kinwave", max_error_cm=0.5, error_measure="mean").encode(walk_bvh))
+    opened = len(get_codec("kinwave", max_error_cm=0.5, error_measure="mean", closed_loop=False).encode(walk_bvh))
+    assert closed < 0.9 * opened
 
 
 def test_keyframe_finds_the_t_pose_and_keeps_the_bound(walk_bvh):

@@ -106,12 +106,14 @@ def _has_translation(skeleton: Skeleton) -> bool:
     return any(not g.rotation for g in _groups(skeleton))
 
 
-def _reconstruct(knots: np.ndarray, coeffs: np.ndarray, const: np.ndarray, step: float,
+def _reconstruct(knots: np.ndarray, coeffs: np.ndarray, const: np.ndarray, step: np.ndarray,
                  lay: trendwave.Layout) -> np.ndarray:
-    """Decoded channels ``(k, T)`` of a group: the same arithmetic on both ends. A constant
-    channel is its first knot at the plain step."""
+    """Decoded channels ``(k, T)`` from their integers and steps ``(k, 1)``: the same arithmetic
+    on both ends (the encoder calls it a group at a time, the decoder for all channels at
+    once; each row's floats are the same either way). A constant channel is its first knot at
+    the plain step."""
     values = knots * (step * lay.knot_quantum)
-    values[const] = knots[const, :1] * step
+    values[const] = knots[const, :1] * step[const]
     return trendwave.trend(values, lay) + trendwave.synthesise(coeffs * step, lay)
 
 
@@ -143,7 +145,7 @@ class KinwaveCodec(Codec):
              "joint = max joint position error, mean = mean joint position error", choices=kinalloc.MODES),
         Knob("bits_per_second", float, 0.0, "code to this bit rate instead of an error bound (0: off)", 0.0, 1e9),
         Knob("window", int, 128, "segment length in frames (a power of two): the streaming delay", 8, 4096),
-        Knob("levels", int, 4, "wavelet levels per segment", 1, 10),
+        Knob("levels", int, 5, "wavelet levels per segment", 1, 10),
         Knob("wavelet", str, "cdf97", "segment transform", choices=WAVELET_IDS),
         Knob("deadzone", float, 0.4, "rounding offset of the dead-zone quantiser (0.5: plain rounding)", 0.0, 0.5),
         Knob("closed_loop", bool, True, "code each joint against its parent's decoded orientation"),
@@ -213,12 +215,11 @@ class KinwaveCodec(Codec):
 
 def _decoded(skeleton: Skeleton, codes: np.ndarray, const: np.ndarray, knots: np.ndarray, coeffs: np.ndarray,
              lay: trendwave.Layout) -> np.ndarray:
-    """Channels ``(C, T)`` from the integers, group by group as the encoder reconstructs them."""
-    out = np.empty((skeleton.num_channels, lay.frames))
+    """Channels ``(C, T)`` from the integers, in one reconstruction of all channels."""
+    steps = np.empty((skeleton.num_channels, 1))
     for g in _groups(skeleton):
-        step = _group_step(g, codes, skeleton)
-        out[g.channels] = _reconstruct(knots[g.channels], coeffs[g.channels], const[g.channels] == 1, step, lay)
-    return out
+        steps[g.channels] = _group_step(g, codes, skeleton)
+    return _reconstruct(knots, coeffs, const == 1, steps, lay)
 
 
 class _Encoder:
@@ -298,7 +299,8 @@ class _Encoder:
                     target = values[g.channels]
                 k_int, c_int = self._quantise(target, self.const[g.channels], step, theta)
                 knots[g.channels], coeffs[g.channels] = k_int, c_int
-                decoded[g.channels] = _reconstruct(k_int, c_int, self.const[g.channels], step, lay)
+                decoded[g.channels] = _reconstruct(k_int, c_int, self.const[g.channels],
+                                                   np.full((g.channels.size, 1), step), lay)
                 if g.rotation and children[j]:
                     glob[j] = closedloop.compose(decoded[g.channels].T, g.axes, self.plan.axis_quat[j],
                                                  self.plan.has_axis[j], parent)

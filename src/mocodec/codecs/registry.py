@@ -6,7 +6,7 @@ from mocodec.codecs.base import Codec
 from mocodec.errors import CodecError
 
 _CODECS: dict[str, type[Codec]] = {}
-DEFAULT_CODEC = "lossless"
+DEFAULT_CODEC = "kinwave"
 
 
 def register(cls: type[Codec]) -> type[Codec]:

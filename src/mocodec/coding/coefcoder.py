@@ -1,10 +1,7 @@
 """Context-adaptive binary arithmetic coding of quantised wavelet coefficients and knots.
 
-The range coder is the carry-less byte-wise binary coder of LZMA (32-bit range, 64-bit low
-with a cached carry byte), with 16-bit probabilities that mix a fast (1/16) and a slow (1/128)
-adaptation rate. Each integer becomes binary decisions: zero or not, a size class
-``k = floor(log2 |v|)`` in unary, the ``k`` mantissa bits below the leading one (the top one
-adaptive, the rest at probability 1/2) and the sign. Contexts (kinwave.md, "what mattered" 2):
+The binary range coder and the binarisation of integers are :mod:`mocodec.coding.binarycoder`'s
+(zero flag, size class in unary, mantissa, sign). Contexts (kinwave.md, "what mattered" 2):
 
 * zero flag: subband (approximation, then detail bands counted from the finest), local
   activity (``2|v[i-1]| + |v[i-2]|`` in the same band, four classes) and the parent
@@ -25,11 +22,9 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-_TOP = 1 << 24
-_HALF = 1 << 15
-_FAST, _SLOW = 4, 7
-_INIT = 1 << 15
-_MAX_CLASS = 62             # |v| < 2^62
+from mocodec.coding.binarycoder import (INIT, MAX_CLASS, buffer_for, encoder_state, finish, get, get_int,
+                                        int_decisions, put, put_int, start_decoder)
+
 
 # context layout
 _BANDS = 6                  # approximation, detail 1 (finest) .. detail 5+ (coarser)
@@ -39,142 +34,14 @@ _UNARY = 8
 _Z0 = 0                                         # zero flags: band x activity x parent
 _U0 = _Z0 + _BANDS * _ACT * _PAR                # unary: band x activity x position
 _M0 = _U0 + _BANDS * _ACT * _UNARY              # top mantissa bit: class
-_S0 = _M0 + _MAX_CLASS                          # sign: band
+_S0 = _M0 + MAX_CLASS                          # sign: band
 _KZ = _S0 + _BANDS                              # knots: zero flag (first knot, later knots)
 _KU = _KZ + 2                                   # knots: unary position (x2)
 _KM = _KU + 2 * 24                              # knots: top mantissa bit per class
-_KS = _KM + _MAX_CLASS                          # knots: sign
+_KS = _KM + MAX_CLASS                          # knots: sign
 _CONST = _KS + 2                                # channel is constant
 _BLOCK = _CONST + 1                             # block has a nonzero coefficient (prev block: 0/1)
 _CONTEXTS = _BLOCK + 2
-
-
-# ----- the binary range coder ---------------------------------------------------------------
-@numba.njit(inline="always")
-def _shift_low(st, buf):
-    low = st[0]
-    if low < 0xFF000000 or low >= (1 << 32):
-        carry = low >> 32
-        temp = st[2]
-        while True:
-            buf[st[4]] = (temp + carry) & 0xFF
-            st[4] += 1
-            temp = 0xFF
-            st[3] -= 1
-            if st[3] == 0:
-                break
-        st[2] = (low >> 24) & 0xFF
-    st[3] += 1
-    st[0] = (low & 0x00FFFFFF) << 8
-
-
-@numba.njit(inline="always")
-def _put(st, buf, pf, ps, ctx, bit):
-    p = (pf[ctx] + ps[ctx]) >> 1
-    bound = (st[1] >> 16) * p
-    if bit == 0:
-        st[1] = bound
-        pf[ctx] += (65536 - pf[ctx]) >> _FAST
-        ps[ctx] += (65536 - ps[ctx]) >> _SLOW
-    else:
-        st[0] += bound
-        st[1] -= bound
-        pf[ctx] -= pf[ctx] >> _FAST
-        ps[ctx] -= ps[ctx] >> _SLOW
-    while st[1] < _TOP:
-        st[1] <<= 8
-        _shift_low(st, buf)
-
-
-@numba.njit(inline="always")
-def _put_even(st, buf, bit):
-    bound = (st[1] >> 16) * _HALF
-    if bit == 0:
-        st[1] = bound
-    else:
-        st[0] += bound
-        st[1] -= bound
-    while st[1] < _TOP:
-        st[1] <<= 8
-        _shift_low(st, buf)
-
-
-@numba.njit(inline="always")
-def _get(st, data, pf, ps, ctx):
-    p = (pf[ctx] + ps[ctx]) >> 1
-    bound = (st[1] >> 16) * p
-    if st[0] < bound:
-        st[1] = bound
-        pf[ctx] += (65536 - pf[ctx]) >> _FAST
-        ps[ctx] += (65536 - ps[ctx]) >> _SLOW
-        bit = 0
-    else:
-        st[0] -= bound
-        st[1] -= bound
-        pf[ctx] -= pf[ctx] >> _FAST
-        ps[ctx] -= ps[ctx] >> _SLOW
-        bit = 1
-    while st[1] < _TOP:
-        st[1] <<= 8
-        nxt = data[st[2]] if st[2] < data.size else 0
-        st[2] += 1
-        st[0] = ((st[0] << 8) | nxt) & 0xFFFFFFFF
-    return bit
-
-
-@numba.njit(inline="always")
-def _get_even(st, data):
-    bound = (st[1] >> 16) * _HALF
-    if st[0] < bound:
-        st[1] = bound
-        bit = 0
-    else:
-        st[0] -= bound
-        st[1] -= bound
-        bit = 1
-    while st[1] < _TOP:
-        st[1] <<= 8
-        nxt = data[st[2]] if st[2] < data.size else 0
-        st[2] += 1
-        st[0] = ((st[0] << 8) | nxt) & 0xFFFFFFFF
-    return bit
-
-
-# ----- integers -----------------------------------------------------------------------------
-@numba.njit(inline="always")
-def _put_int(st, buf, pf, ps, v, zctx, uctx, ulen, mctx, sctx):
-    if v == 0:
-        _put(st, buf, pf, ps, zctx, 0)
-        return
-    _put(st, buf, pf, ps, zctx, 1)
-    m = -v if v < 0 else v
-    k = 0
-    while (m >> (k + 1)) != 0:
-        k += 1
-    for i in range(k):
-        _put(st, buf, pf, ps, uctx + min(i, ulen - 1), 1)
-    if k < _MAX_CLASS:
-        _put(st, buf, pf, ps, uctx + min(k, ulen - 1), 0)
-    if k > 0:
-        _put(st, buf, pf, ps, mctx + k, (m >> (k - 1)) & 1)
-        for b in range(k - 2, -1, -1):
-            _put_even(st, buf, (m >> b) & 1)
-    _put(st, buf, pf, ps, sctx, 1 if v < 0 else 0)
-
-
-@numba.njit(inline="always")
-def _get_int(st, data, pf, ps, zctx, uctx, ulen, mctx, sctx):
-    if _get(st, data, pf, ps, zctx) == 0:
-        return 0
-    k = 0
-    while k < _MAX_CLASS and _get(st, data, pf, ps, uctx + min(k, ulen - 1)) == 1:
-        k += 1
-    m = 1
-    if k > 0:
-        m = (m << 1) | _get(st, data, pf, ps, mctx + k)
-        for _ in range(k - 1):
-            m = (m << 1) | _get_even(st, data)
-    return -m if _get(st, data, pf, ps, sctx) == 1 else m
 
 
 @numba.njit(inline="always")
@@ -192,16 +59,16 @@ def _parent_class(v):
 # ----- payloads -----------------------------------------------------------------------------
 @numba.njit(cache=True)
 def _encode(const, knots, coeffs, seg_pad, seg_lev, buf):
-    st = np.array([0, 0xFFFFFFFF, 0, 1, 0], dtype=np.int64)
-    pf = np.full(_CONTEXTS, _INIT, dtype=np.int64)
-    ps = np.full(_CONTEXTS, _INIT, dtype=np.int64)
+    st = encoder_state()
+    pf = np.full(_CONTEXTS, INIT, dtype=np.int64)
+    ps = np.full(_CONTEXTS, INIT, dtype=np.int64)
     for c in range(const.size):
-        _put(st, buf, pf, ps, _CONST, const[c])
+        put(st, buf, pf, ps, _CONST, const[c])
         prev = 0
         nk = 1 if const[c] else knots.shape[1]
         for i in range(nk):
             first = 1 if i == 0 else 0
-            _put_int(st, buf, pf, ps, knots[c, i] - prev, _KZ + 1 - first, _KU + 24 * (1 - first), 24, _KM,
+            put_int(st, buf, pf, ps, knots[c, i] - prev, _KZ + 1 - first, _KU + 24 * (1 - first), 24, _KM,
                      _KS + 1 - first)
             prev = knots[c, i]
         if const[c]:
@@ -217,7 +84,7 @@ def _encode(const, knots, coeffs, seg_pad, seg_lev, buf):
                 if coeffs[c, i] != 0:
                     nz = 1
                     break
-            _put(st, buf, pf, ps, _BLOCK + last_nz, nz)
+            put(st, buf, pf, ps, _BLOCK + last_nz, nz)
             last_nz = nz
             if nz:
                 L = seg_lev[s]
@@ -236,7 +103,7 @@ def _encode(const, knots, coeffs, seg_pad, seg_lev, buf):
                             par = _parent_class(coeffs[c, start - (blen >> 1) + (i >> 1)])
                         act = _activity(p1, p2)
                         v = coeffs[c, start + i]
-                        _put_int(st, buf, pf, ps, v, _Z0 + (band * _ACT + act) * _PAR + par,
+                        put_int(st, buf, pf, ps, v, _Z0 + (band * _ACT + act) * _PAR + par,
                                  _U0 + (band * _ACT + act) * _UNARY, _UNARY, _M0, _S0 + band)
                         p2 = p1
                         p1 = v
@@ -244,27 +111,21 @@ def _encode(const, knots, coeffs, seg_pad, seg_lev, buf):
                     if b > 0:
                         blen <<= 1
             off += n
-    for _ in range(5):
-        _shift_low(st, buf)
-    return st[4]
+    return finish(st, buf)
 
 
 @numba.njit(cache=True)
 def _decode(data, channels, num_knots, num_coeffs, seg_pad, seg_lev, const, knots, coeffs):
-    st = np.array([0, 0xFFFFFFFF, 0], dtype=np.int64)       # code, range, read position
-    for _ in range(5):
-        nxt = data[st[2]] if st[2] < data.size else 0
-        st[2] += 1
-        st[0] = ((st[0] << 8) | nxt) & 0xFFFFFFFF
-    pf = np.full(_CONTEXTS, _INIT, dtype=np.int64)
-    ps = np.full(_CONTEXTS, _INIT, dtype=np.int64)
+    st = start_decoder(data)
+    pf = np.full(_CONTEXTS, INIT, dtype=np.int64)
+    ps = np.full(_CONTEXTS, INIT, dtype=np.int64)
     for c in range(channels):
-        const[c] = _get(st, data, pf, ps, _CONST)
+        const[c] = get(st, data, pf, ps, _CONST)
         prev = 0
         nk = 1 if const[c] else num_knots
         for i in range(nk):
             first = 1 if i == 0 else 0
-            prev += _get_int(st, data, pf, ps, _KZ + 1 - first, _KU + 24 * (1 - first), 24, _KM, _KS + 1 - first)
+            prev += get_int(st, data, pf, ps, _KZ + 1 - first, _KU + 24 * (1 - first), 24, _KM, _KS + 1 - first)
             knots[c, i] = prev
         if const[c]:
             continue
@@ -274,7 +135,7 @@ def _decode(data, channels, num_knots, num_coeffs, seg_pad, seg_lev, const, knot
             n = seg_pad[s]
             if n == 0:
                 continue
-            nz = _get(st, data, pf, ps, _BLOCK + last_nz)
+            nz = get(st, data, pf, ps, _BLOCK + last_nz)
             last_nz = nz
             if nz:
                 L = seg_lev[s]
@@ -292,7 +153,7 @@ def _decode(data, channels, num_knots, num_coeffs, seg_pad, seg_lev, const, knot
                         else:
                             par = _parent_class(coeffs[c, start - (blen >> 1) + (i >> 1)])
                         act = _activity(p1, p2)
-                        v = _get_int(st, data, pf, ps, _Z0 + (band * _ACT + act) * _PAR + par,
+                        v = get_int(st, data, pf, ps, _Z0 + (band * _ACT + act) * _PAR + par,
                                      _U0 + (band * _ACT + act) * _UNARY, _UNARY, _M0, _S0 + band)
                         coeffs[c, start + i] = v
                         p2 = p1
@@ -312,14 +173,7 @@ def encode(const: np.ndarray, knots: np.ndarray, coeffs: np.ndarray, seg_pad: np
     knots = np.ascontiguousarray(knots, dtype=np.int64)
     coeffs = np.ascontiguousarray(coeffs, dtype=np.int64)
     values = np.concatenate([coeffs.ravel(), knots[:, :1].ravel(), np.diff(knots, axis=1).ravel()])
-    magnitude = np.abs(values)
-    if magnitude.size and magnitude.max() >= 1 << _MAX_CLASS:
-        raise ValueError("coefficient too large to code")
-    # at most about 10 bits per decision (probabilities stay above 2^-10)
-    decisions = const.size + values.size + 2 * int(np.ceil(np.log2(magnitude[magnitude > 0] + 1)).sum()) \
-        + 2 * int(np.count_nonzero(magnitude)) + 2 * len(seg_pad) * const.size
-    bound = 64 + (10 * decisions) // 8
-    buf = np.empty(bound, dtype=np.uint8)
+    buf = buffer_for(const.size + int_decisions(values) + 2 * len(seg_pad) * const.size)
     n = _encode(const, knots, coeffs, np.asarray(seg_pad, dtype=np.int64), np.asarray(seg_lev, dtype=np.int64), buf)
     return buf[:n].tobytes()
 

@@ -62,6 +62,11 @@ class UniformQuantizer:
         """r_i = (d_i + d_(i+1)) / 2 (7-3)."""
         return self.low + (np.asarray(index, dtype=np.float64) + 0.5) * self.step
 
+    def table(self) -> tuple[np.ndarray, np.ndarray]:
+        """(the N-1 inner decision levels, the N reconstruction levels), for table-driven
+        quantisers (:func:`mocodec.coding.predictive.run_table`)."""
+        return self.decision_levels()[1:-1], self.reconstruct(np.arange(self.levels))
+
 
 @dataclass(frozen=True)
 class MuLawQuantizer:
@@ -94,6 +99,11 @@ class MuLawQuantizer:
         half = self.levels // 2
         return np.where(index >= half, mid[np.clip(index - half, 0, half - 1)],
                         -mid[np.clip(half - 1 - index, 0, half - 1)])
+
+    def table(self) -> tuple[np.ndarray, np.ndarray]:
+        """(the N-1 inner decision levels, the N reconstruction levels), mirrored about 0."""
+        d = self.decision_levels()[:-1]
+        return np.r_[-d[:0:-1], d], self.reconstruct(np.arange(self.levels))
 
 
 def multipliers(levels: int) -> np.ndarray:

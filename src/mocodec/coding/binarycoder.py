@@ -1,0 +1,187 @@
+"""The binary range coder shared by the context-adaptive coders (coefcoder, intcoder).
+
+The carry-less byte-wise binary coder of LZMA (32-bit range, 64-bit low with a cached carry
+byte), with 16-bit probabilities that mix a fast (1/16) and a slow (1/128) adaptation rate.
+An integer becomes binary decisions (:func:`put_int`): zero or not, a size class
+``k = floor(log2 |v|)`` in unary, the ``k`` mantissa bits below the leading one (the top one
+adaptive, the rest at probability 1/2) and the sign; the caller names the context of each.
+
+State: the encoder's ``st`` is [low, range, cache, cache size, bytes written] and it writes
+into a caller-sized buffer; the decoder's is [code, range, read position] and it reads zeros
+past the end of its data, so damaged input gives garbage, never an out-of-bounds read.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+TOP = 1 << 24
+HALF = 1 << 15
+FAST, SLOW = 4, 7
+INIT = 1 << 15
+MAX_CLASS = 62             # |v| < 2^62
+
+
+@numba.njit(inline="always")
+def encoder_state():
+    return np.array([0, 0xFFFFFFFF, 0, 1, 0], dtype=np.int64)
+
+
+@numba.njit(inline="always")
+def shift_low(st, buf):
+    low = st[0]
+    if low < 0xFF000000 or low >= (1 << 32):
+        carry = low >> 32
+        temp = st[2]
+        while True:
+            buf[st[4]] = (temp + carry) & 0xFF
+            st[4] += 1
+            temp = 0xFF
+            st[3] -= 1
+            if st[3] == 0:
+                break
+        st[2] = (low >> 24) & 0xFF
+    st[3] += 1
+    st[0] = (low & 0x00FFFFFF) << 8
+
+
+@numba.njit(inline="always")
+def put(st, buf, pf, ps, ctx, bit):
+    p = (pf[ctx] + ps[ctx]) >> 1
+    bound = (st[1] >> 16) * p
+    if bit == 0:
+        st[1] = bound
+        pf[ctx] += (65536 - pf[ctx]) >> FAST
+        ps[ctx] += (65536 - ps[ctx]) >> SLOW
+    else:
+        st[0] += bound
+        st[1] -= bound
+        pf[ctx] -= pf[ctx] >> FAST
+        ps[ctx] -= ps[ctx] >> SLOW
+    while st[1] < TOP:
+        st[1] <<= 8
+        shift_low(st, buf)
+
+
+@numba.njit(inline="always")
+def put_even(st, buf, bit):
+    bound = (st[1] >> 16) * HALF
+    if bit == 0:
+        st[1] = bound
+    else:
+        st[0] += bound
+        st[1] -= bound
+    while st[1] < TOP:
+        st[1] <<= 8
+        shift_low(st, buf)
+
+
+@numba.njit(inline="always")
+def get(st, data, pf, ps, ctx):
+    p = (pf[ctx] + ps[ctx]) >> 1
+    bound = (st[1] >> 16) * p
+    if st[0] < bound:
+        st[1] = bound
+        pf[ctx] += (65536 - pf[ctx]) >> FAST
+        ps[ctx] += (65536 - ps[ctx]) >> SLOW
+        bit = 0
+    else:
+        st[0] -= bound
+        st[1] -= bound
+        pf[ctx] -= pf[ctx] >> FAST
+        ps[ctx] -= ps[ctx] >> SLOW
+        bit = 1
+    while st[1] < TOP:
+        st[1] <<= 8
+        nxt = data[st[2]] if st[2] < data.size else 0
+        st[2] += 1
+        st[0] = ((st[0] << 8) | nxt) & 0xFFFFFFFF
+    return bit
+
+
+@numba.njit(inline="always")
+def get_even(st, data):
+    bound = (st[1] >> 16) * HALF
+    if st[0] < bound:
+        st[1] = bound
+        bit = 0
+    else:
+        st[0] -= bound
+        st[1] -= bound
+        bit = 1
+    while st[1] < TOP:
+        st[1] <<= 8
+        nxt = data[st[2]] if st[2] < data.size else 0
+        st[2] += 1
+        st[0] = ((st[0] << 8) | nxt) & 0xFFFFFFFF
+    return bit
+
+
+# ----- integers -----------------------------------------------------------------------------
+@numba.njit(inline="always")
+def put_int(st, buf, pf, ps, v, zctx, uctx, ulen, mctx, sctx):
+    if v == 0:
+        put(st, buf, pf, ps, zctx, 0)
+        return
+    put(st, buf, pf, ps, zctx, 1)
+    m = -v if v < 0 else v
+    k = 0
+    while (m >> (k + 1)) != 0:
+        k += 1
+    for i in range(k):
+        put(st, buf, pf, ps, uctx + min(i, ulen - 1), 1)
+    if k < MAX_CLASS:
+        put(st, buf, pf, ps, uctx + min(k, ulen - 1), 0)
+    if k > 0:
+        put(st, buf, pf, ps, mctx + k, (m >> (k - 1)) & 1)
+        for b in range(k - 2, -1, -1):
+            put_even(st, buf, (m >> b) & 1)
+    put(st, buf, pf, ps, sctx, 1 if v < 0 else 0)
+
+
+@numba.njit(inline="always")
+def get_int(st, data, pf, ps, zctx, uctx, ulen, mctx, sctx):
+    if get(st, data, pf, ps, zctx) == 0:
+        return 0
+    k = 0
+    while k < MAX_CLASS and get(st, data, pf, ps, uctx + min(k, ulen - 1)) == 1:
+        k += 1
+    m = 1
+    if k > 0:
+        m = (m << 1) | get(st, data, pf, ps, mctx + k)
+        for _ in range(k - 1):
+            m = (m << 1) | get_even(st, data)
+    return -m if get(st, data, pf, ps, sctx) == 1 else m
+
+
+@numba.njit(inline="always")
+def start_decoder(data):
+    st = np.array([0, 0xFFFFFFFF, 0], dtype=np.int64)       # code, range, read position
+    for _ in range(5):
+        nxt = data[st[2]] if st[2] < data.size else 0
+        st[2] += 1
+        st[0] = ((st[0] << 8) | nxt) & 0xFFFFFFFF
+    return st
+
+
+@numba.njit(inline="always")
+def finish(st, buf):
+    for _ in range(5):
+        shift_low(st, buf)
+    return st[4]
+
+
+def int_decisions(values: np.ndarray) -> int:
+    """An upper bound on the decisions :func:`put_int` makes for ``values``."""
+    m = np.abs(np.asarray(values, dtype=np.int64)).ravel()
+    if m.size and m.max() >= 1 << MAX_CLASS:
+        raise ValueError("integer too large to code")
+    nz = m[m > 0]
+    return m.size + 2 * int(np.ceil(np.log2(nz + 1)).sum()) + 2 * nz.size
+
+
+def buffer_for(decisions: int) -> np.ndarray:
+    """An output buffer for that many decisions (probabilities stay above 2^-10, so a decision
+    costs at most about 10 bits)."""
+    return np.empty(64 + (10 * decisions) // 8, dtype=np.uint8)

@@ -31,13 +31,14 @@ from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
-_PACKET = struct.Struct("<BI")          # flags (1: carries the header), frames
+_PACKET = struct.Struct("<BI")          # flags (1: carries the header, 2: ends the stream), frames
 Reader = Callable[[int, int], np.ndarray]
 
 
 class FramewiseCodec(Codec):
     streaming = True
     lookahead: ClassVar[int] = 0        # frames the encoder must see past the ones it codes
+    holds_frames: ClassVar[bool] = False    # the decoder keeps frames back until the next packet or the end
 
     @property
     def delay_frames(self) -> int:      # type: ignore[override]
@@ -60,10 +61,15 @@ class FramewiseCodec(Codec):
         codes, decoded = state.code(frames)
         return [codes], decoded
 
-    def _uncode(self, state: Any, n: int, read: Reader) -> np.ndarray:
-        """The ``n`` decoded frames, reading the integer arrays with ``read(rows, cols)`` in the
-        order ``_code`` made them."""
+    def _uncode(self, state: Any, n: int, read: Reader, last: bool) -> np.ndarray:
+        """The decoded frames of a packet of ``n`` frames (``last``: the stream ends with it),
+        reading the integer arrays with ``read(rows, cols)`` in the order ``_code`` made them.
+        A coder that ``holds_frames`` may return fewer or more than ``n``."""
         return state.uncode(read(n, state.active.size))
+
+    def _ready(self, pending: int) -> int:
+        """How many of the ``pending`` frames to code now (all but the lookahead)."""
+        return pending - self.lookahead
 
     # ----- clips are streams ---------------------------------------------------------------
     def _encode(self, motion: Motion) -> bytes:
@@ -101,7 +107,7 @@ class _FrameEncoder(StreamEncoder):
         cont = cont if self.last is None else cont[1:]
         self.last = cont[-1]
         self.pending = np.vstack((self.pending, cont))
-        n = len(self.pending) - self.codec.lookahead
+        n = self.codec._ready(len(self.pending))
         if n <= 0:
             return []
         packet = self._packet(self.pending[:n], self.pending[n:])
@@ -109,13 +115,13 @@ class _FrameEncoder(StreamEncoder):
         return [packet]
 
     def flush(self) -> list[bytes]:
-        if not len(self.pending):
+        if not len(self.pending) and not (self.codec.holds_frames and self.state is not None):
             return []
-        packet = self._packet(self.pending, self.pending[:0])
+        packet = self._packet(self.pending, self.pending[:0], last=True)
         self.pending = self.pending[:0]
         return [packet]
 
-    def _packet(self, frames: np.ndarray, ahead: np.ndarray) -> bytes:
+    def _packet(self, frames: np.ndarray, ahead: np.ndarray, last: bool = False) -> bytes:
         header = []
         if self.state is None:
             setup, self.state = self.codec._setup(np.vstack((frames, ahead)), self.skeleton, self.fps)
@@ -124,7 +130,7 @@ class _FrameEncoder(StreamEncoder):
         while len(self.models) < len(arrays):
             self.models.append(intcoder.Model(arrays[len(self.models)].shape[1]))
         coded = [intcoder.encode(a, m) for a, m in zip(arrays, self.models)]
-        return _PACKET.pack(int(bool(header)), len(frames)) + join_parts(header + coded)
+        return _PACKET.pack(int(bool(header)) | 2 * int(last), len(frames)) + join_parts(header + coded)
 
 
 class _FrameDecoder(StreamDecoder):
@@ -167,7 +173,7 @@ class _FrameDecoder(StreamDecoder):
                 self.models.append(intcoder.Model(cols))
             return intcoder.decode(parts[k], rows, cols, self.models[k])
 
-        out = self.codec._uncode(self.state, n, read)
-        if out.shape != (n, self.skeleton.num_channels):
+        out = self.codec._uncode(self.state, n, read, bool(flags & 2))
+        if out.shape[1:] != (self.skeleton.num_channels,) or (out.shape[0] != n and not self.codec.holds_frames):
             raise CorruptStreamError(f"{self.codec.id} packet decodes to {out.shape}")
         return out

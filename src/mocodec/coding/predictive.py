@@ -175,7 +175,7 @@ def best_range(values: np.ndarray, fps: float, coefficient: np.ndarray, decision
 class ChannelParams:
     """Per-channel side information of a waveform coder's first packet: which channels are
     constant (only their value is sent), a centre (float32: the first value, or the middle of
-    the range), a scale (float16: the quantiser's range or first step) and a predictor
+    the range), a scale (float16 rounded up: the quantiser's range or first step) and a predictor
     coefficient (float16). Encoder and decoder both work with the rounded values."""
 
     constant: np.ndarray                # (C,) bool
@@ -185,8 +185,10 @@ class ChannelParams:
 
     def __post_init__(self):
         self.centre = np.asarray(self.centre, dtype=np.float32).astype(np.float64)
-        scale = np.clip(np.asarray(self.scale, dtype=np.float64), 0.0, _HALF_MAX)
-        self.scale = np.maximum(scale.astype(np.float16).astype(np.float64), 2.0 ** -24)
+        scale = np.clip(np.asarray(self.scale, dtype=np.float64), 2.0 ** -24, _HALF_MAX)
+        half = scale.astype(np.float16)
+        half = np.where(half.astype(np.float64) < scale, np.nextafter(half, np.float16(np.inf)), half)
+        self.scale = half.astype(np.float64)        # rounded up: a range still covers the data
         self.coefficient = np.asarray(self.coefficient, dtype=np.float16).astype(np.float64)
         self.constant = np.asarray(self.constant, dtype=bool)
 

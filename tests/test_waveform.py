@@ -1,0 +1,225 @@
+"""The waveform coders of 000 ch. 7: quant, dpcm, adpcm, deadreckoning, dct."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mocodec import ratecontrol
+from mocodec.codecs import get_codec
+from mocodec.codecs.deadreckoning import update_intervals
+from mocodec.coding import blockdct, intcoder, predictive
+from mocodec.coding.quantizers import MuLawQuantizer, UniformQuantizer
+from mocodec.metrics import compare
+from mocodec.motion import Motion
+
+WAVEFORM = ("quant", "dpcm", "adpcm", "deadreckoning", "dct")
+
+
+def _sine(walk_amc, frames=600, amplitude=40.0, period=90.0):
+    """The walk's skeleton with every channel a slow sine (different phases), at 30 fps."""
+    t = np.arange(frames)[:, None]
+    phase = np.arange(walk_amc.num_channels)[None, :]
+    return Motion(walk_amc.skeleton, 30.0, amplitude * np.sin(2 * np.pi * t / period + phase))
+
+
+# ----- entropy coder and kernels ------------------------------------------------------------
+def test_intcoder_round_trips_and_models_carry_across_packets():
+    rng = np.random.default_rng(0)
+    values = np.round(rng.laplace(0, [0.2, 3, 12, 0.0], (3000, 4))).astype(np.int64)
+    data = intcoder.encode(values)
+    assert np.array_equal(intcoder.decode(data, *values.shape), values)
+    counts = [np.unique(values[:, c], return_counts=True)[1] for c in range(4)]
+    entropy_bytes = sum(-(n * np.log2(n / n.sum())).sum() for n in counts) / 8
+    assert len(data) < 1.06 * entropy_bytes + 16        # adaptive, per-channel: near the entropy
+    enc, dec = intcoder.Model(4), intcoder.Model(4)
+    parts = [intcoder.decode(intcoder.encode(values[a:a + 250], enc), len(values[a:a + 250]), 4, dec)
+             for a in range(0, 3000, 250)]
+    assert np.array_equal(np.vstack(parts), values)
+
+
+@pytest.mark.parametrize("quantizer", [UniformQuantizer(-1.0, 1.0, 8), UniformQuantizer(-1.0, 1.0, 5),
+                                       MuLawQuantizer(8.0, 1.0, 16)])
+def test_quantiser_tables_agree_with_the_quantisers(quantizer):
+    decisions, levels = quantizer.table()
+    x = np.linspace(-1.3, 1.3, 1001)
+    assert np.array_equal(np.searchsorted(decisions, x, side="right"), quantizer.quantize(x))
+    assert np.allclose(levels, quantizer.reconstruct(np.arange(quantizer.levels)))
+
+
+def test_closed_loop_does_not_accumulate_error():
+    # a random walk: open-loop DPCM would drift by the sum of the errors; fig. 7-4's loop
+    # keeps every sample within half a step of the input while the steps are not overloaded
+    rng = np.random.default_rng(2)
+    x = np.cumsum(rng.uniform(-0.9, 0.9, (5000, 3)), axis=0)    # |d| <= 0.9 + 1/16: no overload
+    decisions, levels = UniformQuantizer(-1.0, 1.0, 16).table()
+    codes = np.zeros(x.shape, dtype=np.int64)
+    centre = np.zeros(3)
+    out = predictive.run_table(x, codes, False, centre.copy(), centre, np.ones(3), np.ones(3), decisions, levels)
+    assert np.abs(out - x).max() <= 1.0 / 16 + 1e-12          # half of the step 2/16
+    again = predictive.run_table(np.zeros((5000, 0)), codes, True, centre.copy(), centre, np.ones(3),
+                                 np.ones(3), decisions, levels)
+    assert np.array_equal(again, out)                          # the decoder's output, bit for bit
+
+
+def test_adaptive_predictor_uses_the_autocorrelation_method():
+    x = np.sin(2 * np.pi * np.arange(400) / 37.0)[:, None] * 30.0
+    beta = np.r_[np.full(4, 0.9), np.geomspace(1.1, 2.4, 4)]
+    params = predictive.ChannelParams([False], [0.0], [0.5], [0.0])
+    coder = predictive.AdaptiveCoder(params, 16, 2, 60, 4, beta)
+    codes, out = coder.code(x)
+    # the last update (at sample 396) solved (7-16) with the autocorrelations (7-17, 7-18) of
+    # the 60 decoded samples before it, about their mean
+    v = out[336:396, 0] - out[336:396, 0].mean()
+    r = [np.dot(v[k:], v[:v.size - k]) for k in range(3)]
+    expected = np.linalg.solve([[r[0], r[1]], [r[1], r[0]]], [r[1], r[2]])
+    assert np.allclose(coder.coef[0, 1:], expected) and np.isclose(coder.coef[0, 0], out[336:396, 0].mean())
+    # and it predicts better than the first-order adaptive predictor
+    first = predictive.AdaptiveCoder(params, 16, 1, 60, 4, beta)
+    _, out1 = first.code(x)
+    assert np.abs(out - x)[200:].mean() < np.abs(out1 - x)[200:].mean()
+    again = predictive.AdaptiveCoder(params, 16, 2, 60, 4, beta).uncode(codes)
+    assert np.array_equal(again, out)
+
+
+# ----- codecs ---------------------------------------------------------------------------------
+@pytest.mark.parametrize("cid", WAVEFORM)
+def test_round_trips_real_clips(cid, walk_amc, walk_bvh):
+    for motion in (walk_amc.resample(30.0), walk_bvh):
+        codec = get_codec(cid)
+        payload = codec.encode(motion)
+        decoded = codec.decode(payload, motion.skeleton)
+        assert decoded.channels.shape == motion.channels.shape
+        assert payload == codec.encode(motion)                 # deterministic
+        assert compare(motion, decoded).summary()["psnr_db"] > 20
+        assert len(payload) < motion.num_frames * motion.num_channels * 4
+
+
+def test_quant_uniform_error_is_half_a_step(walk_amc):
+    for levels in (8, 64):
+        codec = get_codec("quant", levels=levels)
+        decoded = codec.decode(codec.encode(walk_amc), walk_amc.skeleton).channels
+        ch = walk_amc.continuous().channels
+        half_step = np.ptp(ch, axis=0) / (2 * levels)
+        assert (np.abs(decoded - ch) <= half_step * (1 + 1e-3) + 1e-4).all()
+
+
+def test_quant_laws_and_limits(walk_amc):
+    for knobs in ({"law": "mulaw"}, {"law": "adaptive"}, {"range": "limits"}):
+        codec = get_codec("quant", levels=32, **knobs)
+        decoded = codec.decode(codec.encode(walk_amc), walk_amc.skeleton)
+        assert compare(walk_amc, decoded).summary()["psnr_db"] > 20, knobs
+
+
+@pytest.mark.parametrize("cid", ("quant", "dpcm", "adpcm"))
+def test_more_levels_more_bits_less_error(cid, walk_amc):
+    clip = walk_amc.resample(30.0)
+    sizes, errors = [], []
+    for levels in (4, 16, 64):
+        codec = get_codec(cid, levels=levels)
+        payload = codec.encode(clip)
+        sizes.append(len(payload))
+        errors.append(compare(clip, codec.decode(payload, clip.skeleton)).summary()["psnr_db"])
+    assert sizes[0] < sizes[1] < sizes[2] and errors[0] < errors[1] < errors[2]
+
+
+def test_dpcm_beats_direct_quantisation(walk_amc):
+    # 000 7.5: 8-level prediction about as good as 64-level direct quantisation, in fewer bits
+    clip = walk_amc.resample(30.0)
+    q, d = get_codec("quant", levels=64), get_codec("dpcm", levels=8)
+    pq, pd = q.encode(clip), d.encode(clip)
+    assert len(pd) < 0.7 * len(pq)
+    assert compare(clip, d.decode(pd, clip.skeleton)).summary()["psnr_db"] > 30
+
+
+@pytest.mark.parametrize("threshold", (0.2, 2.0))
+def test_dead_reckoning_holds_its_threshold(walk_amc, threshold):
+    codec = get_codec("deadreckoning", threshold=threshold)
+    decoded = codec.decode(codec.encode(walk_amc), walk_amc.skeleton).channels
+    err = np.abs(decoded - walk_amc.continuous().channels)
+    rot = walk_amc.skeleton.rotation_mask
+    assert err[:, rot].max() <= threshold * (1 + 1e-9)
+    cm = walk_amc.skeleton.units_per_metre / 100.0
+    assert err[:, ~rot].max() <= threshold * cm * (1 + 1e-9)
+
+
+def test_dead_reckoning_groups_and_update_histogram(walk_amc):
+    group = get_codec("deadreckoning", threshold=1.0, measure="group")
+    decoded = group.decode(group.encode(walk_amc), walk_amc.skeleton).channels
+    sk = walk_amc.skeleton
+    err = decoded - walk_amc.continuous().channels
+    for j, joint in enumerate(sk.joints):
+        idx = [c for c in range(sk.channel_offsets[j], sk.channel_offsets[j] + len(joint.channels))
+               if sk.rotation_mask[c]]
+        if idx:
+            assert np.linalg.norm(err[:, idx], axis=1).max() <= 1.0 + 1e-9
+    fine = update_intervals(get_codec("deadreckoning", threshold=0.1), walk_amc)
+    coarse = update_intervals(get_codec("deadreckoning", threshold=2.0), walk_amc)
+    assert coarse.sum() < fine.sum()
+    mean_interval = lambda h: (np.arange(h.size) * h).sum() / h.sum()       # noqa: E731
+    assert mean_interval(coarse) > mean_interval(fine)
+
+
+def test_dct_tables_order_rate_and_quality(walk_amc):
+    clip = walk_amc.resample(30.0)
+    sizes, psnr = [], []
+    for table in range(5):
+        codec = get_codec("dct", table=table)
+        payload = codec.encode(clip)
+        sizes.append(len(payload))
+        psnr.append(compare(clip, codec.decode(payload, clip.skeleton)).summary()["psnr_db"])
+    assert sizes == sorted(sizes, reverse=True) and psnr == sorted(psnr, reverse=True)
+
+
+def test_dct_constant_and_linear_blocks():
+    values = np.array([[1.0, 2.0, 3.0, 4.0], [5.0, 5.0, 5.0, 5.0]]).T
+    assert np.allclose(blockdct.inverse(blockdct.forward(values[None]))[0], values)
+    assert np.allclose(blockdct.forward(values[None])[0, 1:, 1], 0.0)       # a constant block is all DC
+    assert blockdct.bits(1, 16).tolist() == blockdct.BITS[1].tolist()
+    assert blockdct.bits(1, 32)[::2].tolist() == blockdct.BITS[1].tolist()
+
+
+@pytest.mark.parametrize("cid", WAVEFORM)
+def test_streams_frame_by_frame_within_the_delay(cid, walk_amc):
+    codec = get_codec(cid)
+    clip = walk_amc
+    whole = codec.encode(clip)
+    enc = codec.encoder(clip.skeleton, clip.fps)
+    assert codec.wrap(b"".join(_joined(enc.push(clip.channels) + enc.flush())), clip.num_frames,
+                      clip.fps) == whole                     # a clip is its stream pushed at once
+    enc, dec = codec.encoder(clip.skeleton, clip.fps), codec.decoder(clip.skeleton, clip.fps)
+    out, pushed = [], 0
+    for k in range(0, clip.num_frames, 40):
+        for packet in enc.push(clip.channels[k:k + 40]):
+            out.append(dec.push(packet))
+        pushed = min(k + 40, clip.num_frames)
+        assert pushed - sum(len(o) for o in out) <= codec.delay_frames
+    out += [dec.push(p) for p in enc.flush()]
+    streamed = Motion(clip.skeleton, clip.fps, np.concatenate(out))
+    assert streamed.num_frames == clip.num_frames
+    # ranges come from the first push (40 frames here), so quant clips what lies beyond
+    assert compare(clip, streamed).summary()["psnr_db"] > (15 if cid == "quant" else 20)
+
+
+def _joined(packets):
+    from mocodec.coding.parts import join_parts
+
+    return [join_parts(packets)]
+
+
+@pytest.mark.parametrize("cid", WAVEFORM)
+def test_rate_control_turns_the_quality_knob(cid, walk_amc):
+    clip = walk_amc.resample(30.0)
+    coarse = ratecontrol.tune(get_codec(cid), clip, "ratio", 6.0)
+    fine = ratecontrol.tune(get_codec(cid), clip, "ratio", 3.0)
+    assert coarse.ratio > fine.ratio
+    assert coarse.mean_error_cm > fine.mean_error_cm
+
+
+def test_slow_sines_are_coded_closely(walk_amc):
+    clip = _sine(walk_amc)
+    for cid, knobs in (("dpcm", {"levels": 64}), ("adpcm", {"levels": 64}), ("dct", {"table": 0, "adaptive": False})):
+        codec = get_codec(cid, **knobs)
+        decoded = codec.decode(codec.encode(clip), clip.skeleton)
+        err = np.abs(decoded.channels - clip.continuous().channels)
+        assert err.max() < 0.02 * 80 and err.mean() < 0.005 * 80, cid       # of the 80-degree swing

@@ -30,6 +30,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_seams.py
 	$(BIN)/python benchmarks/bench_ratecontrol.py
 	$(BIN)/python benchmarks/bench_perceptual.py --set amc
+	$(BIN)/python benchmarks/bench_waveform.py --set amc
 
 clean:
 	rm -rf $(VENV) build src/*.egg-info .pytest_cache

@@ -144,12 +144,12 @@ def difference_range(values: np.ndarray, fps: float) -> np.ndarray:
     return np.abs(np.diff(values, axis=0)).max(axis=0)
 
 
-RANGE_FRACTIONS = 2.0 ** -np.arange(0.0, 4.01, 0.5)
+RANGE_FRACTIONS = 2.0 ** -np.arange(5.0)
 
 
 def best_range(values: np.ndarray, fps: float, coefficient: np.ndarray, decisions: np.ndarray,
                levels_out: np.ndarray) -> np.ndarray:
-    """Per channel the quantiser range, a fraction (1 down to 1/16) of the largest
+    """Per channel the quantiser range, a fraction (1, 1/2, .. 1/16) of the largest
     frame-to-frame change, whose closed loop codes ``values`` with the least squared error:
     the step a fixed quantiser should have for these data, in the spirit of Max's optimum
     quantiser (7.2) but measured on the coder itself. The largest change alone sets a coarse

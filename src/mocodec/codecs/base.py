@@ -80,6 +80,21 @@ class StreamEncoder:
         return []
 
 
+def continuous_frames(codec_id: str, skeleton: Skeleton, fps: float, frames: np.ndarray,
+                      previous: np.ndarray | None) -> np.ndarray:
+    """Pushed ``frames`` checked and made continuous (:meth:`Motion.continuous`) carrying on
+    from ``previous``, the last continuous frame of the earlier pushes (None at the start):
+    what stream encoders of predictive and transform coders work on."""
+    frames = np.atleast_2d(np.asarray(frames, dtype=np.float64))
+    if frames.shape[1] != skeleton.num_channels or not np.isfinite(frames).all():
+        raise CodecError(f"{codec_id} stream: frames must be finite (n, {skeleton.num_channels}) arrays")
+    if not len(frames):
+        return frames
+    head = frames if previous is None else np.vstack((previous, frames))
+    cont = Motion(skeleton, fps, head).continuous().channels
+    return cont if previous is None else cont[1:]
+
+
 class StreamDecoder:
     """Packets in, frames out."""
 

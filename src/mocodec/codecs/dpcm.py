@@ -18,7 +18,7 @@ import numpy as np
 from mocodec.codecs.base import Knob, QualityKnob
 from mocodec.codecs.framewise import FramewiseCodec
 from mocodec.codecs.registry import register
-from mocodec.coding.predictive import ChannelParams, TableCoder, best_range, first_order
+from mocodec.coding.predictive import ChannelParams, TableCoder, best_range, difference_range, first_order
 from mocodec.coding.quantizers import MuLawQuantizer, UniformQuantizer
 
 @register
@@ -35,8 +35,10 @@ class DpcmCodec(FramewiseCodec):
 
     def _setup(self, values, skeleton, fps):
         constant = np.ptp(values, axis=0) <= 0
-        a = first_order(values).astype(np.float16).astype(np.float64)
-        params = ChannelParams(constant, values[0], best_range(values, fps, a, *self._table()), a)
+        top, a = difference_range(values, fps), first_order(values)
+        draft = ChannelParams(constant, values[0], top, a)
+        params = ChannelParams(constant, values[0], best_range(values, top, draft.centre, draft.coefficient,
+                                                               *self._table()), a)
         return params.pack(), TableCoder(params, *self._table())
 
     def _load(self, header, skeleton, fps):

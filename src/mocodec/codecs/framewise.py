@@ -24,10 +24,10 @@ from typing import Any, Callable, ClassVar
 
 import numpy as np
 
-from mocodec.codecs.base import Codec, StreamDecoder, StreamEncoder
+from mocodec.codecs.base import Codec, StreamDecoder, StreamEncoder, continuous_frames
 from mocodec.coding import intcoder
 from mocodec.coding.parts import join_parts, split_parts
-from mocodec.errors import CodecError, CorruptStreamError
+from mocodec.errors import CorruptStreamError
 from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
@@ -97,14 +97,9 @@ class _FrameEncoder(StreamEncoder):
         self.models: list[intcoder.Model] = []
 
     def push(self, frames: np.ndarray) -> list[bytes]:
-        frames = np.atleast_2d(np.asarray(frames, dtype=np.float64))
-        if frames.shape[1] != self.skeleton.num_channels or not np.isfinite(frames).all():
-            raise CodecError(f"{self.codec.id} stream: frames must be finite (n, {self.skeleton.num_channels}) arrays")
-        if not len(frames):
+        cont = continuous_frames(self.codec.id, self.skeleton, self.fps, frames, self.last)
+        if not len(cont):
             return []
-        head = frames if self.last is None else np.vstack((self.last, frames))
-        cont = Motion(self.skeleton, self.fps, head).continuous().channels
-        cont = cont if self.last is None else cont[1:]
         self.last = cont[-1]
         self.pending = np.vstack((self.pending, cont))
         n = self.codec._ready(len(self.pending))

@@ -45,13 +45,12 @@ import struct
 import numpy as np
 
 from mocodec import perception
-from mocodec.codecs.base import Codec, Knob, QualityKnob, StreamDecoder, StreamEncoder
+from mocodec.codecs.base import Codec, Knob, QualityKnob, StreamDecoder, StreamEncoder, continuous_frames
 from mocodec.codecs.registry import register
 from mocodec.coding import seams, spiht, wavelets
 from mocodec.coding.parts import join_parts, split_parts
 from mocodec.coding.rangecoder import decode_ints, encode_ints
 from mocodec.errors import CodecError, CorruptStreamError
-from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
 QUANTUM = 1.0 / 256          # degrees, or cm for translations: the finest SPIHT plane
@@ -354,14 +353,9 @@ class _StreamEncoder(StreamEncoder):
         self.start: np.ndarray | None = None              # the current segment's start anchor (ints)
 
     def push(self, frames: np.ndarray) -> list[bytes]:
-        frames = np.atleast_2d(np.asarray(frames, dtype=np.float64))
-        if frames.shape[1] != self.skeleton.num_channels or not np.isfinite(frames).all():
-            raise CodecError(f"spiht stream: frames must be finite (n, {self.skeleton.num_channels}) arrays")
-        if not len(frames):
+        cont = continuous_frames("spiht", self.skeleton, self.fps, frames, self.previous)
+        if not len(cont):
             return []
-        head = frames if self.previous is None else np.vstack((self.previous, frames))
-        cont = Motion(self.skeleton, self.fps, head).continuous().channels
-        cont = cont if self.previous is None else cont[1:]
         self.previous = cont[-1]
         self.buffer = np.vstack((self.buffer, cont))
         packets = []

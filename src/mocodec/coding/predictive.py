@@ -147,19 +147,19 @@ def difference_range(values: np.ndarray, fps: float) -> np.ndarray:
 RANGE_FRACTIONS = 2.0 ** -np.arange(5.0)
 
 
-def best_range(values: np.ndarray, fps: float, coefficient: np.ndarray, decisions: np.ndarray,
-               levels_out: np.ndarray) -> np.ndarray:
+def best_range(values: np.ndarray, top: np.ndarray, centre: np.ndarray, coefficient: np.ndarray,
+               decisions: np.ndarray, levels_out: np.ndarray) -> np.ndarray:
     """Per channel the quantiser range, a fraction (1, 1/2, .. 1/16) of the largest
     frame-to-frame change, whose closed loop codes ``values`` with the least squared error:
     the step a fixed quantiser should have for these data, in the spirit of Max's optimum
     quantiser (7.2) but measured on the coder itself. The largest change alone sets a coarse
     step that every quiet frame pays for as idle noise; too fine a step overloads on fast
-    moves, and in a closed loop an overload lasts until the output catches up."""
-    top = difference_range(values, fps)
+    moves, and in a closed loop an overload lasts until the output catches up. ``top`` is the
+    largest change (:func:`difference_range`); ``centre`` and ``coefficient`` are the
+    predictor's, as the side information carries them."""
     if len(values) < 3:
         return top
     x = np.ascontiguousarray(values)
-    centre = values[0].astype(np.float32).astype(np.float64)
     codes = np.zeros(x.shape, dtype=np.int64)
     best, best_err = top.copy(), np.full(top.size, np.inf)
     for f in RANGE_FRACTIONS:
@@ -221,21 +221,21 @@ class ChannelParams:
         return cls(constant, centre, scale, coefficient)
 
 
-class TableCoder:
-    """:func:`run_table` over all channels with its state: constant channels are their centre
-    and send nothing; the others start from their centre."""
+class _SampleCoder:
+    """A kernel over all channels with its state: constant channels are their centre and send
+    nothing; codes are -N/2..(N-1)/2, one column per active channel."""
 
-    def __init__(self, params: ChannelParams, decisions: np.ndarray, levels_out: np.ndarray):
-        self.params, self.decisions, self.levels_out = params, decisions, levels_out
+    def __init__(self, params: ChannelParams, levels: int):
+        self.params, self.levels = params, levels
         self.active = params.active
-        self.prev = params.centre[self.active].copy()
+
+    def _kernel(self, x: np.ndarray, codes: np.ndarray, decode: bool) -> np.ndarray:
+        raise NotImplementedError
 
     def _run(self, x: np.ndarray, codes: np.ndarray, decode: bool) -> np.ndarray:
-        p, a = self.params, self.active
-        out = np.empty((len(codes), p.centre.size))
-        out[:] = p.centre
-        out[:, a] = run_table(x, codes, decode, self.prev, p.centre[a], p.scale[a], p.coefficient[a],
-                              self.decisions, self.levels_out)
+        out = np.empty((len(codes), self.params.centre.size))
+        out[:] = self.params.centre
+        out[:, self.active] = self._kernel(x, codes, decode)
         return out
 
     def code(self, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -243,36 +243,40 @@ class TableCoder:
         return codes, self._run(np.ascontiguousarray(frames[:, self.active]), codes, False)
 
     def uncode(self, codes: np.ndarray) -> np.ndarray:
-        codes = np.clip(codes, -(self.levels_out.size // 2), (self.levels_out.size - 1) // 2)
+        codes = np.clip(codes, -(self.levels // 2), (self.levels - 1) // 2)
         return self._run(np.zeros((len(codes), 0)), np.ascontiguousarray(codes), True)
 
 
-class AdaptiveCoder:
-    """:func:`run_adaptive` over all channels with its state. ``params.scale`` is each
-    channel's first step; the step stays within 2^-10..2^6 of it."""
+class TableCoder(_SampleCoder):
+    """:func:`run_table`; each active channel starts from its centre."""
+
+    def __init__(self, params: ChannelParams, decisions: np.ndarray, levels_out: np.ndarray):
+        super().__init__(params, levels_out.size)
+        self.decisions, self.levels_out = decisions, levels_out
+        self.prev = params.centre[self.active].copy()
+
+    def _kernel(self, x, codes, decode):
+        p, a = self.params, self.active
+        return run_table(x, codes, decode, self.prev, p.centre[a], p.scale[a], p.coefficient[a], self.decisions,
+                         self.levels_out)
+
+
+class AdaptiveCoder(_SampleCoder):
+    """:func:`run_adaptive`. ``params.scale`` is each channel's first step; the step stays
+    within 2^-10..2^6 of it."""
 
     def __init__(self, params: ChannelParams, levels: int, order: int, window: int, update: int,
                  beta: np.ndarray):
-        self.params, self.levels, self.order, self.update, self.beta = params, levels, order, update, beta
-        a = self.active = params.active
+        super().__init__(params, levels)
+        self.order, self.update, self.beta = order, update, beta
+        a = self.active
         self.hist = np.zeros((max(window, 3), a.size))
         self.counters = np.zeros(2, dtype=np.int64)
         self.coef = np.tile([0.0, 1.0, 0.0], (a.size, 1))
         self.step = params.scale[a].copy()
         self.step_lo, self.step_hi = self.step * 2.0 ** -10, self.step * 2.0 ** 6
 
-    def _run(self, x: np.ndarray, codes: np.ndarray, decode: bool) -> np.ndarray:
-        p, a = self.params, self.active
-        out = np.empty((len(codes), p.centre.size))
-        out[:] = p.centre
-        out[:, a] = run_adaptive(x, codes, decode, self.hist, self.counters, self.coef, self.step, p.centre[a],
-                                 self.step_lo, self.step_hi, self.beta, self.levels, self.order, self.update)
-        return out
-
-    def code(self, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        codes = np.zeros((len(frames), self.active.size), dtype=np.int64)
-        return codes, self._run(np.ascontiguousarray(frames[:, self.active]), codes, False)
-
-    def uncode(self, codes: np.ndarray) -> np.ndarray:
-        codes = np.clip(codes, -(self.levels // 2), self.levels // 2 - 1)
-        return self._run(np.zeros((len(codes), 0)), np.ascontiguousarray(codes), True)
+    def _kernel(self, x, codes, decode):
+        return run_adaptive(x, codes, decode, self.hist, self.counters, self.coef, self.step,
+                            self.params.centre[self.active], self.step_lo, self.step_hi, self.beta, self.levels,
+                            self.order, self.update)

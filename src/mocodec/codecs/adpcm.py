@@ -18,7 +18,7 @@ from mocodec.codecs.base import Knob, QualityKnob
 from mocodec.codecs.framewise import FramewiseCodec
 from mocodec.codecs.registry import register
 from mocodec.coding.predictive import AdaptiveCoder, ChannelParams, difference_range
-from mocodec.coding.quantizers import multipliers
+from mocodec.coding.quantizers import even_levels, multipliers
 
 
 @register
@@ -42,7 +42,7 @@ class AdpcmCodec(FramewiseCodec):
         return self._coder(ChannelParams.unpack(header, skeleton.num_channels), fps)
 
     def _coder(self, params: ChannelParams, fps: float) -> AdaptiveCoder:
-        n = max(2, self.config["levels"] + self.config["levels"] % 2)
+        n = even_levels(self.config["levels"])
         window = max(3, int(round(self.config["window_s"] * fps)))
         first = ChannelParams(params.constant, params.centre, 2.0 * params.scale / n, params.coefficient)
         return AdaptiveCoder(first, n, self.config["order"], window, max(1, window // 8), multipliers(n))

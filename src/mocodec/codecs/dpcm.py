@@ -19,7 +19,7 @@ from mocodec.codecs.base import Knob, QualityKnob
 from mocodec.codecs.framewise import FramewiseCodec
 from mocodec.codecs.registry import register
 from mocodec.coding.predictive import ChannelParams, TableCoder, best_range, difference_range, first_order
-from mocodec.coding.quantizers import MuLawQuantizer, UniformQuantizer
+from mocodec.coding.quantizers import table
 
 @register
 class DpcmCodec(FramewiseCodec):
@@ -45,7 +45,4 @@ class DpcmCodec(FramewiseCodec):
         return TableCoder(ChannelParams.unpack(header, skeleton.num_channels), *self._table())
 
     def _table(self) -> tuple[np.ndarray, np.ndarray]:
-        n = self.config["levels"]
-        if self.config["law"] == "uniform":
-            return UniformQuantizer(-1.0, 1.0, n).table()
-        return MuLawQuantizer(self.config["mu"], 1.0, max(2, n + n % 2)).table()
+        return table(self.config["law"], self.config["levels"], self.config["mu"])

@@ -22,7 +22,7 @@ from mocodec.codecs.base import Knob, QualityKnob
 from mocodec.codecs.framewise import FramewiseCodec
 from mocodec.codecs.registry import register
 from mocodec.coding.predictive import AdaptiveCoder, ChannelParams, TableCoder
-from mocodec.coding.quantizers import MuLawQuantizer, UniformQuantizer, multipliers
+from mocodec.coding.quantizers import even_levels, multipliers, table
 
 LAWS = ("uniform", "mulaw", "adaptive")
 
@@ -41,11 +41,6 @@ class QuantCodec(FramewiseCodec):
     )
     quality = QualityKnob("levels", higher_is_better=True, log_scale=True)
 
-    @property
-    def levels(self) -> int:
-        n = self.config["levels"]
-        return n if self.config["law"] == "uniform" else max(2, n + n % 2)
-
     def _setup(self, values, skeleton, fps):
         low, high = values.min(axis=0), values.max(axis=0)
         if self.config["range"] == "limits":
@@ -61,9 +56,9 @@ class QuantCodec(FramewiseCodec):
         return self._coder(ChannelParams.unpack(header, skeleton.num_channels))
 
     def _coder(self, params: ChannelParams):
-        n, law = self.levels, self.config["law"]
+        law = self.config["law"]
         if law == "adaptive":
+            n = even_levels(self.config["levels"])
             return AdaptiveCoder(ChannelParams(params.constant, params.centre, 2.0 * params.scale / n, 0.0),
                                  n, 0, 3, 1, multipliers(n))
-        q = UniformQuantizer(-1.0, 1.0, n) if law == "uniform" else MuLawQuantizer(self.config["mu"], 1.0, n)
-        return TableCoder(params, *q.table())
+        return TableCoder(params, *table(law, self.config["levels"], self.config["mu"]))

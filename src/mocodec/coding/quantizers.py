@@ -106,6 +106,20 @@ class MuLawQuantizer:
         return np.r_[-d[:0:-1], d], self.reconstruct(np.arange(self.levels))
 
 
+def even_levels(levels: int) -> int:
+    """The level count of a bipolar (mu-law) or mid-rise adaptive quantiser: N rounded up to
+    even, as these need N/2 levels each side of zero."""
+    return max(2, levels + levels % 2)
+
+
+def table(law: str, levels: int, mu: float) -> tuple[np.ndarray, np.ndarray]:
+    """The normalised table (inner decision levels, reconstruction levels) over [-1, 1] of a
+    ``uniform`` quantiser with N levels or a ``mulaw`` one with N rounded up to even."""
+    if law == "uniform":
+        return UniformQuantizer(-1.0, 1.0, levels).table()
+    return MuLawQuantizer(mu, 1.0, even_levels(levels)).table()
+
+
 def multipliers(levels: int) -> np.ndarray:
     """beta for each code magnitude 0..N/2-1 (7-7): Jayant's table for 4, 8 and 16 levels,
     otherwise from 0.85 up to 2.4 geometrically (for 2 levels: shrink 0.9 / grow 1.5 is

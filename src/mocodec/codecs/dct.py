@@ -18,17 +18,10 @@ import numpy as np
 from mocodec.codecs.base import Knob, QualityKnob
 from mocodec.codecs.framewise import FramewiseCodec
 from mocodec.codecs.registry import register
-from mocodec.coding import blockdct
+from mocodec.coding import blockdct, blocks as blockcut
 from mocodec.coding.parts import join_parts, split_parts
 from mocodec.coding.predictive import ChannelParams
 from mocodec.errors import CodecError, CorruptStreamError
-
-
-def _blocks(x: np.ndarray, n: int) -> np.ndarray:
-    """``x (frames, K)`` as ``(blocks, n, K)``, the last block padded with its last frame."""
-    m = -(-len(x) // n)
-    padded = np.vstack((x, np.repeat(x[-1:], m * n - len(x), axis=0))) if m * n > len(x) else x
-    return padded.reshape(m, n, x.shape[1])
 
 
 class _State:
@@ -44,7 +37,7 @@ class _State:
         self.dc_range = params.coefficient[self.active]
         self.top_speed = top_speed
         self.dc = params.centre[self.active] * math.sqrt(self.n)      # the decoded DC of the last block
-        self.tail: np.ndarray | None = None       # decoder: last two unsmoothed frames (the last one not yet out)
+        self.smoother = blockcut.EdgeSmoother(self.n)     # decoder side
 
     def multipliers(self, classes: np.ndarray) -> np.ndarray:
         return self.scale * blockdct.class_scale(classes)
@@ -98,7 +91,7 @@ class DctCodec(FramewiseCodec):
     def _setup(self, values, skeleton, fps):
         n = self.config["block"]
         constant = np.ptp(values, axis=0) <= 0
-        blocks = _blocks(values, n)
+        blocks = blockcut.split(values, n)
         coeffs = blockdct.forward(blocks)
         ac = np.abs(coeffs[:, 1:]).max(axis=(0, 1)) if n > 1 else np.zeros(values.shape[1])
         dc = np.concatenate([values[:1] * math.sqrt(n), coeffs[:, 0]])
@@ -119,7 +112,7 @@ class DctCodec(FramewiseCodec):
         x = frames[:, state.active]
         if not len(x):
             return [np.zeros((0, x.shape[1]), dtype=np.int64)] * 2, frames
-        blocks = _blocks(x, state.n)
+        blocks = blockcut.split(x, state.n)
         coeffs = blockdct.forward(blocks)
         classes = (blockdct.speed_classes(blockdct.block_speed(blocks), state.top_speed, state.thresholds)
                    if state.adaptive else np.zeros(blocks[:, 0].shape, dtype=np.int64))
@@ -145,18 +138,4 @@ class DctCodec(FramewiseCodec):
             state.dc = state.dc + codes[b, 0] * state.dc_step(mult[b])
             coeffs[b, 0] = state.dc
         frames = state.rebuild(coeffs, n)
-        return self._smoothed(state, frames, last) if state.smooth else frames
-
-    def _smoothed(self, state, frames: np.ndarray, last: bool) -> np.ndarray:
-        """Smooth every block edge, holding the newest frame back until the next packet shows
-        what follows it."""
-        held = 0 if state.tail is None else len(state.tail)
-        seq = frames if state.tail is None else np.vstack((state.tail, frames))
-        edges = [held + i for i in range(0 if held else state.n, len(frames), state.n)]
-        out = blockdct.smooth_seams(seq, edges)
-        start = 1 if held == 2 else 0
-        if last:
-            state.tail = None
-            return out[start:]
-        state.tail = seq[-2:] if len(seq) >= 2 else seq
-        return out[start:len(seq) - 1]
+        return state.smoother.push(frames, last) if state.smooth else frames

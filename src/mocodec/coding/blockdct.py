@@ -12,7 +12,8 @@ is the finest, as its bits say; the benchmark prints the thesis's rows beside ou
 mid-tread grid of step ``2 R / 2^b_k`` over the channel's AC range ``R`` (``b_k = 0``: not
 sent; ``scale`` and the speed class change the step, not the range); the DC coefficient is predicted from the previous block's decoded DC (the thesis's
 "inter-frame prediction for the coefficients") and its difference quantised with ``b_0``
-bits over the largest DC change.
+bits over the largest DC change. Cutting into blocks and the edge smoothing are in
+:mod:`mocodec.coding.blocks`.
 """
 
 from __future__ import annotations
@@ -80,15 +81,3 @@ def mid_tread(x: np.ndarray, step: np.ndarray, span: np.ndarray) -> np.ndarray:
     limit = np.ceil(np.divide(span, step, out=np.zeros(np.broadcast(span, step).shape), where=step > 0))
     ratio = np.divide(x, step, out=np.zeros(np.broadcast(x, step).shape), where=step > 0)
     return np.clip(np.round(ratio), -limit, limit).astype(np.int64)
-
-
-def smooth_seams(values: np.ndarray, seams: list[int]) -> np.ndarray:
-    """The samples either side of each seam (a seam at i lies between i - 1 and i) replaced by
-    [1 2 1] / 4 of their neighbours, from the unsmoothed values: the block-edge smoothing of
-    §7.8.1, which trades a little MSE for the periodic jerk of block edges."""
-    out = values.copy()
-    for i in seams:
-        if 2 <= i <= len(values) - 2:
-            out[i - 1] = (values[i - 2] + 2 * values[i - 1] + values[i]) / 4
-            out[i] = (values[i - 1] + 2 * values[i] + values[i + 1]) / 4
-    return out

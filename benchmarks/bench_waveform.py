@@ -8,7 +8,7 @@ channels, BVH: 132). Rates are therefore compared per DOF-sample as well as per 
 thesis's column is its conversation sequence (whole body). PSNR is the whole-body average of
 000 ch. 6 (docs/measures.md). Medians over the clips.
 
-    python benchmarks/bench_waveform.py [--set amc|bvh] [--limit N]
+    python benchmarks/bench_waveform.py [--set amc|bvh] [--limit N] [--codecs ID ...]
 """
 
 from __future__ import annotations
@@ -40,6 +40,10 @@ GRID = [
        (0.05, 13048.7, 28.0), (0.025, 14996.4, 33.1), (0.0125, 16140.5, 35.5))],
     *[("dct", {"table": i}, r, p) for i, r, p in
       ((0, 1669.5, 20.0), (1, 2507.8, 24.8), (2, 3295.5, 28.3), (3, 4019.4, 30.5), (4, 4784.7, 31.1))],
+    # 7.8.2 prints no table: the thesis found the time-frequency coders "roughly the same as the DCT"
+    *[("subband", {"step": s}, None, None) for s in (0.32, 0.16, 0.08, 0.04, 0.02)],
+    *[("subband", {"step": s, "emphasis": e}, None, None) for e in (0.0, 1.0) for s in (0.16, 0.08, 0.04)],
+    *[("subband", {"variant": "wavelet", "keep": m, "step": 0.04}, None, None) for m in (2, 4, 8)],
 ]
 
 
@@ -47,6 +51,7 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--set", choices=("amc", "bvh"), default="amc")
     ap.add_argument("--limit", type=int, default=0, help="only the first N clips")
+    ap.add_argument("--codecs", nargs="*", help="only these codecs")
     args = ap.parse_args()
     folder = SHARED / "cmu" / ("asf_amc" if args.set == "amc" else "bvh")
     paths = sorted(folder.glob("*.amc" if args.set == "amc" else "*.bvh"))
@@ -58,6 +63,8 @@ def main() -> None:
           "thesis bit/s | thesis bits/DOF-sample | thesis PSNR dB |")
     print("|---|---|---|---|---|---|---|---|---|---|")
     for cid, knobs, t_rate, t_psnr in GRID:
+        if args.codecs and cid not in args.codecs:
+            continue
         codec = get_codec(cid, **knobs)
         rows = []
         for clip in clips:

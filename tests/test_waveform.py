@@ -1,4 +1,4 @@
-"""The waveform coders of 000 ch. 7: quant, dpcm, adpcm, deadreckoning, dct."""
+"""The waveform coders of 000 ch. 7: quant, dpcm, adpcm, deadreckoning, dct, subband."""
 
 from __future__ import annotations
 
@@ -8,12 +8,12 @@ import pytest
 from mocodec import ratecontrol
 from mocodec.codecs import get_codec
 from mocodec.codecs.deadreckoning import update_intervals
-from mocodec.coding import blockdct, intcoder, predictive
+from mocodec.coding import blockdct, blocks, intcoder, predictive, subbands
 from mocodec.coding.quantizers import MuLawQuantizer, UniformQuantizer
 from mocodec.metrics import compare
 from mocodec.motion import Motion
 
-WAVEFORM = ("quant", "dpcm", "adpcm", "deadreckoning", "dct")
+WAVEFORM = ("quant", "dpcm", "adpcm", "deadreckoning", "dct", "subband")
 
 
 def _sine(walk_amc, frames=600, amplitude=40.0, period=90.0):
@@ -177,6 +177,53 @@ def test_dct_constant_and_linear_blocks():
     assert np.allclose(blockdct.forward(values[None])[0, 1:, 1], 0.0)       # a constant block is all DC
     assert blockdct.bits(1, 16).tolist() == blockdct.BITS[1].tolist()
     assert blockdct.bits(1, 32)[::2].tolist() == blockdct.BITS[1].tolist()
+
+
+def test_subband_split_is_exact_and_follows_the_visual_bands():
+    rng = np.random.default_rng(4)
+    for n, levels in ((16, 3), (16, 4), (2, 1), (64, 5), (8, 0)):
+        x = rng.normal(size=(3, n, 5))
+        assert np.allclose(subbands.inverse(subbands.forward(x, levels), levels), x, atol=1e-12)
+    ramp = np.arange(16.0)[None, :, None]
+    assert np.allclose(subbands.forward(ramp, 3)[0, 8:15, 0], 0.0)     # a ramp has no fine detail (but at the mirror)
+    assert subbands.band_bounds(16, 3) == [(0, 2), (2, 4), (4, 8), (8, 16)]
+    assert subbands.visual_levels(16, 30.0, 1.0) == 3 and subbands.visual_levels(64, 120.0, 1.0) == 5
+    weights = subbands.visual_weights(16, 3, 30.0, (1.0, 3.0, 7.0), (0.25, 0.5, 1.0, 2.25))
+    assert weights.tolist() == [0.25, 0.5, 1.0, 2.25]
+    with pytest.raises(ValueError, match="power of two"):
+        subbands.forward(np.zeros((1, 12, 1)), 2)
+
+
+@pytest.mark.parametrize("emphasis", (0.0, 0.5, 1.0))
+def test_subband_coefficient_errors_are_within_half_a_step(walk_amc, emphasis):
+    # each band's closed loop keeps every coefficient within half its step (6-15 weighting)
+    clip = walk_amc.resample(30.0).continuous()
+    step = 0.05
+    codec = get_codec("subband", step=step, emphasis=emphasis, smooth=False)
+    decoded = codec.decode(codec.encode(clip), clip.skeleton).channels
+    n = 16
+    gains = subbands.synthesis_gains(n, 3)
+    weights = np.array([0.25, 0.5, 1.0, 2.25]) ** emphasis
+    live = np.ptp(clip.channels, axis=0) > 0
+    spread = np.ptp(clip.channels, axis=0)[live] * (1 + 1e-3)       # float16 rounds the range up
+    error = subbands.forward(blocks.split(decoded[:, live] - clip.channels[:, live], n), 3)
+    for (a, b), w, g in zip(subbands.band_bounds(n, 3), weights, gains):
+        bound = step * spread / (w * g) / 2
+        assert (np.abs(error[:-1, a:b]) <= bound + 1e-9).all()        # the last block is padded
+    assert (np.abs(error[:-1, 8:]) > 0.3 * step * spread / (2.25 ** emphasis * gains[3]) / 2).any()
+
+
+def test_subband_wavelet_variant_keeps_the_largest(walk_amc):
+    clip = walk_amc.resample(30.0)
+    sizes, errors = [], []
+    for keep in (2, 6, 16):
+        codec = get_codec("subband", variant="wavelet", keep=keep, step=0.03)
+        payload = codec.encode(clip)
+        sizes.append(len(payload))
+        errors.append(compare(clip, codec.decode(payload, clip.skeleton)).summary()["psnr_db"])
+    assert sizes == sorted(sizes) and errors == sorted(errors)
+    everything = get_codec("subband", variant="wavelet", keep=0, step=0.03).encode(clip)
+    assert len(everything) == sizes[-1]                  # keeping all 16 of 16 is keeping all
 
 
 @pytest.mark.parametrize("cid", WAVEFORM)

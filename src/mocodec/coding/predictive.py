@@ -280,3 +280,21 @@ class AdaptiveCoder(_SampleCoder):
         return run_adaptive(x, codes, decode, self.hist, self.counters, self.coef, self.step,
                             self.params.centre[self.active], self.step_lo, self.step_hi, self.beta, self.levels,
                             self.order, self.update)
+
+
+@numba.njit(cache=True)
+def run_uniform(x, codes, decode, prev, a, step):
+    """First-order closed-loop prediction ``p = a y(n-1)`` (7-12) and a uniform mid-tread
+    quantiser without overload (its codes are entropy coded, so large ones are rare, not
+    forbidden): code (or decode) ``x (n, K)`` / ``codes (n, K)``; ``prev (K,)`` is advanced."""
+    n, k = codes.shape
+    out = np.empty((n, k))
+    for t in range(n):
+        for c in range(k):
+            p = a[c] * prev[c]
+            if not decode:
+                codes[t, c] = np.int64(np.round((x[t, c] - p) / step[c]))
+            y = p + codes[t, c] * step[c]
+            out[t, c] = y
+            prev[c] = y
+    return out

@@ -6,7 +6,8 @@ The clips differ: the thesis coded its own four sequences (conversation, wave, d
 gestures) on an 80-DOF model of which about 52 DOFs move; ours are CMU clips (AMC: 62
 channels, BVH: 132). Rates are therefore compared per DOF-sample as well as per second. The
 thesis's column is its conversation sequence (whole body). PSNR is the whole-body average of
-000 ch. 6 (docs/measures.md). Medians over the clips.
+000 ch. 6 (docs/measures.md). Medians over the clips. The VQ coders' codebooks are trained on
+every other clip and measured on the rest (the thesis does not say it held clips out).
 
     python benchmarks/bench_waveform.py [--set amc|bvh] [--limit N] [--codecs ID ...]
 """
@@ -14,6 +15,8 @@ thesis's column is its conversation sequence (whole body). PSNR is the whole-bod
 from __future__ import annotations
 
 import argparse
+import tempfile
+from pathlib import Path
 
 import numpy as np
 
@@ -21,6 +24,7 @@ from common import SHARED
 
 from mocodec import load
 from mocodec.codecs import get_codec
+from mocodec.coding import vqbook
 from mocodec.metrics import compare
 
 THESIS_DOFS = 52
@@ -44,7 +48,26 @@ GRID = [
     *[("subband", {"step": s}, None, None) for s in (0.32, 0.16, 0.08, 0.04, 0.02)],
     *[("subband", {"step": s, "emphasis": e}, None, None) for e in (0.0, 1.0) for s in (0.16, 0.08, 0.04)],
     *[("subband", {"variant": "wavelet", "keep": m, "step": 0.04}, None, None) for m in (2, 4, 8)],
+    # VQ codebooks are trained on every other clip and evaluated on the others (held out)
+    *[("svq", {"size": n, "predictive": p}, r, q) for p in (False, True) for n, r, q in
+      ((16, 747.3, -0.8), (32, 959.6, 0.5), (64, 1519.1, 1.7), (128, 2145.1, 3.2), (256, 2569.6, 4.6),
+       (512, 2910.3, 6.1))],
+    *[("tvq", {"size": n, "predictive": p}, r, q) for p in (False, True) for n, r, q in
+      ((16, 988.4, 7.5), (32, 1254.7, 10.0), (64, 1586.8, 12.7), (128, 1972.5, 15.3), (256, 2412.3, 18.4),
+       (512, 2906.4, 22.0))],
 ]
+VQ_KIND = {"svq": "spatial", "tvq": "temporal"}
+
+
+def trained_codebooks(clips, folder: Path) -> dict[tuple[str, bool], str]:
+    """Codebook files for svq and tvq, both modes, trained on ``clips``."""
+    out = {}
+    for cid, kind in VQ_KIND.items():
+        for predictive in (False, True):
+            path = folder / f"{cid}_{int(predictive)}.mocvq"
+            vqbook.train(kind, clips, [16, 32, 64, 128, 256, 512], predictive=predictive).save(path)
+            out[cid, predictive] = str(path)
+    return out
 
 
 def main() -> None:
@@ -57,6 +80,8 @@ def main() -> None:
     paths = sorted(folder.glob("*.amc" if args.set == "amc" else "*.bvh"))
     paths = paths[:args.limit] if args.limit else paths
     clips = [load(p).resample(30.0) for p in paths]
+    held_out = clips[1::2]
+    books = trained_codebooks(clips[0::2], Path(tempfile.mkdtemp()))
     print(f"{len(clips)} {args.set.upper()} clips at 30 Hz, {clips[0].num_channels} channels; "
           f"thesis: conversation sequence, about {THESIS_DOFS} DOFs (the clips differ)")
     print("| codec | setting | bit/s | bits/DOF-sample | PSNR dB | VPSNR dB | mean joint cm | "
@@ -65,9 +90,10 @@ def main() -> None:
     for cid, knobs, t_rate, t_psnr in GRID:
         if args.codecs and cid not in args.codecs:
             continue
-        codec = get_codec(cid, **knobs)
+        vq = cid in VQ_KIND
+        codec = get_codec(cid, **knobs, **({"codebook": books[cid, knobs["predictive"]]} if vq else {}))
         rows = []
-        for clip in clips:
+        for clip in held_out if vq else clips:
             payload = codec.encode(clip)
             s = compare(clip, codec.decode(payload, clip.skeleton)).summary()
             bps = len(payload) * 8 / clip.duration

@@ -40,3 +40,28 @@ def walk_amc():
     from mocodec import load
 
     return load(DATA / "07_03.amc")
+
+
+@pytest.fixture(scope="session")
+def martial_amc():
+    """Another subject and motion than the walk: training data for the walk's VQ codebooks."""
+    from mocodec import load
+
+    return load(DATA / "135_08.amc")
+
+
+@pytest.fixture(scope="session")
+def codebooks(martial_amc, tmp_path_factory):
+    """{(codec id, predictive): codebook file} trained at 30 Hz on ``martial_amc`` (and, for the
+    temporal ones, which serve any skeleton, on the BVH clip 09_02 too), never on the walk."""
+    from mocodec import load
+    from mocodec.coding import vqbook
+
+    folder, out = tmp_path_factory.mktemp("codebooks"), {}
+    clips = [martial_amc.resample(30.0), load(DATA / "09_02.bvh").resample(30.0)]
+    for cid, kind, training in (("svq", "spatial", clips[:1]), ("tvq", "temporal", clips)):
+        for predictive in (False, True):
+            path = folder / f"{cid}_{int(predictive)}.mocvq"
+            vqbook.train(kind, training, [16, 32, 64, 256], predictive=predictive).save(path)
+            out[cid, predictive] = str(path)
+    return out

@@ -1,4 +1,4 @@
-"""The coding commands of the CLI: ``encode``, ``decode``, ``eval`` and ``codecs``.
+"""The coding commands of the CLI: ``encode``, ``decode``, ``eval``, ``codecs`` and ``codebook``.
 
 Codec knobs are given as options named after them (``--levels 64`` for the knob ``levels``);
 ``--ratio``, ``--bitrate``, ``--psnr``, ``--mean-error-cm`` and ``--max-error-cm`` ask rate
@@ -13,6 +13,7 @@ from pathlib import Path
 
 from mocodec import moc, ratecontrol
 from mocodec.codecs import DEFAULT_CODEC, codec_class, codec_ids, get_codec
+from mocodec.coding import vqbook
 from mocodec.errors import CodecError
 from mocodec.formats import load, save
 from mocodec.formats._io import atomic_write_bytes
@@ -112,7 +113,8 @@ def cmd_decode(args) -> int:
     frames = parse_frames(args.frames)
     if frames and frames[1] == -1:
         frames = (frames[0], moc.info(args.input, skeleton).frames)
-    motion = moc.decode(args.input, frames=frames, skeleton=skeleton)
+    knobs = {"codebook": args.codebook} if args.codebook else None
+    motion = moc.decode(args.input, frames=frames, skeleton=skeleton, knobs=knobs)
     written = save(motion, args.output, asf=args.out_asf)
     print(f"wrote {', '.join(str(p) for p in written)} ({motion.num_frames} frames)")
     return 0
@@ -156,6 +158,30 @@ def evaluate(motion: Motion, args) -> str:
 
 def _db(x: float) -> str:
     return f"{x:.2f} dB" if x != float("inf") else "lossless"
+
+
+def cmd_codebook(args) -> int:
+    if args.action == "info":
+        for path in args.inputs:
+            book = vqbook.Codebook.load(path)
+            print(f"{path}: {book.kind}, {'predictive' if book.predictive else 'plain'}, length {book.length}, "
+                  f"{book.fps:g} Hz, sizes {sorted(book.books)}, groups {', '.join(n for n, _ in book.groups)}, "
+                  f"trained on {len(book.trained_on)} clips")
+        return 0
+    if not args.output:
+        raise CodecError("codebook train needs -o FILE")
+    if args.max_size < 16 or args.max_size & (args.max_size - 1):
+        raise CodecError(f"--max-size must be a power of two >= 16, got {args.max_size}")
+    clips = []
+    for k, path in enumerate(args.inputs, 1):
+        _progress(k, len(args.inputs), Path(path).name)
+        clips.append(load(path, asf=args.asf, fps=args.fps).resample(args.rate))
+    sizes = [1 << k for k in range(4, args.max_size.bit_length())]
+    book = vqbook.train(args.kind, clips, sizes, predictive=not args.plain, length=args.length,
+                        names=[Path(p).name for p in args.inputs])
+    book.save(args.output)
+    print(f"wrote {args.output}: {args.kind} codebook, sizes {sizes}, {Path(args.output).stat().st_size:,} bytes")
+    return 0
 
 
 def cmd_eval(args) -> int:
@@ -204,7 +230,24 @@ def add_commands(sub, common) -> None:
     p.add_argument("--frames", help="FIRST:STOP, a frame range (e.g. 120:240)")
     p.add_argument("--skeleton", help="the skeleton (.asf, .bvh or .amc) of a file encoded with --skeleton-ref")
     p.add_argument("--out-asf", help="where to write the ASF when the output is .amc")
+    p.add_argument("--codebook", help="the VQ codebook file (svq, tvq) here, if not where the encoder had it")
     p.set_defaults(func=cmd_decode)
+
+    p = sub.add_parser("codebook", help="train VQ codebooks for svq and tvq (000 7.9)",
+                       description="Train LBG codebooks of every size from 16 to --max-size on the clips "
+                                   "(resampled to --rate) and write them to one file that encoder and "
+                                   "decoder share (--codebook FILE).")
+    p.add_argument("action", choices=("train", "info"), help="train: make a codebook; info: describe one")
+    p.add_argument("inputs", nargs="+", metavar="IN", help="train: .bvh or .amc clips; info: the codebook file")
+    p.add_argument("-o", "--output", help="codebook file to write (train)")
+    p.add_argument("--kind", choices=vqbook.KINDS, default="temporal", help="temporal (tvq) or spatial (svq)")
+    p.add_argument("--max-size", type=int, default=512, help="largest codebook (power of two, default 512)")
+    p.add_argument("--length", type=int, default=6, help="samples per temporal vector (default 6)")
+    p.add_argument("--plain", action="store_true", help="quantise the vectors themselves, not their change "
+                                                        "(the codec's --predictive false)")
+    p.add_argument("--rate", type=float, default=30.0, help="resample clips to this frame rate (default 30 Hz)")
+    common(p)
+    p.set_defaults(func=cmd_codebook)
 
     p = sub.add_parser("eval", help="encode and decode in memory and report ratio, rate, error and speed",
                        description="Ratio vs 32-bit floats, bits per second, PSNR, VPSNR, mean/max joint "

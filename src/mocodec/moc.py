@@ -53,11 +53,13 @@ def unpack(data: bytes, frames: tuple[int, int] | None = None, name: str = "<byt
     return _decode(container.open_container(io.BytesIO(data), len(data), name, skeleton), frames)
 
 
-def decode(path: str | os.PathLike, frames: tuple[int, int] | None = None, skeleton: Skeleton | None = None) -> Motion:
-    """Decode a .moc file, reading only the chunks that ``frames=(first, stop)`` needs."""
+def decode(path: str | os.PathLike, frames: tuple[int, int] | None = None, skeleton: Skeleton | None = None,
+           knobs: dict | None = None) -> Motion:
+    """Decode a .moc file, reading only the chunks that ``frames=(first, stop)`` needs;
+    ``knobs`` override the stored codec's (a codebook file's path on this machine, say)."""
     path = Path(path)
     with open(path, "rb") as f:
-        return _decode(container.open_container(f, path.stat().st_size, str(path), skeleton), frames)
+        return _decode(container.open_container(f, path.stat().st_size, str(path), skeleton), frames, knobs)
 
 
 def info(path: str | os.PathLike, skeleton: Skeleton | None = None) -> container.Container:
@@ -67,12 +69,13 @@ def info(path: str | os.PathLike, skeleton: Skeleton | None = None) -> container
         return container.open_container(f, path.stat().st_size, str(path), skeleton)
 
 
-def _decode(c: container.Container, frames: tuple[int, int] | None) -> Motion:
+def _decode(c: container.Container, frames: tuple[int, int] | None, knobs: dict | None = None) -> Motion:
     first, stop = (0, c.frames) if frames is None else frames
     if not 0 <= first <= stop <= c.frames:
         raise CodecError(f"{c.name}: frames {first}:{stop} are outside 0:{c.frames}")
     try:
-        codec = codec_from_config(c.header["codec"])
+        config = c.header["codec"]
+        codec = codec_from_config({**config, "knobs": {**config.get("knobs", {}), **(knobs or {})}})
     except CodecError as e:
         raise CorruptStreamError(f"{c.name}: header names a codec this mocodec cannot build ({e})") from None
     parts = []

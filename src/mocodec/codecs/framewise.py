@@ -27,7 +27,7 @@ import numpy as np
 from mocodec.codecs.base import Codec, StreamDecoder, StreamEncoder, continuous_frames
 from mocodec.coding import intcoder
 from mocodec.coding.parts import join_parts, split_parts
-from mocodec.errors import CorruptStreamError
+from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
@@ -130,7 +130,8 @@ class _FrameEncoder(StreamEncoder):
 
 class _FrameDecoder(StreamDecoder):
     """Packets in, frames out. A packet that does not parse raises CorruptStreamError; the
-    stream cannot go on after it (the coders' state depends on every packet)."""
+    stream cannot go on after it (the coders' state depends on every packet). A decoder that
+    lacks what the stream needs (the codebook file a header names) raises CodecError."""
 
     def __init__(self, codec: FramewiseCodec, skeleton: Skeleton, fps: float):
         self.codec, self.skeleton, self.fps = codec, skeleton, fps
@@ -140,7 +141,7 @@ class _FrameDecoder(StreamDecoder):
     def push(self, packet: bytes) -> np.ndarray:
         try:
             return self._push(packet)
-        except CorruptStreamError:
+        except (CorruptStreamError, CodecError):
             raise
         except Exception as e:   # noqa: BLE001 - a packet that does not parse
             raise CorruptStreamError(f"{self.codec.id} packet does not decode ({type(e).__name__}: {e})") from None

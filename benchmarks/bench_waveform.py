@@ -84,9 +84,9 @@ def main() -> None:
     books = trained_codebooks(clips[0::2], Path(tempfile.mkdtemp()))
     print(f"{len(clips)} {args.set.upper()} clips at 30 Hz, {clips[0].num_channels} channels; "
           f"thesis: conversation sequence, about {THESIS_DOFS} DOFs (the clips differ)")
-    print("| codec | setting | bit/s | bits/DOF-sample | PSNR dB | VPSNR dB | mean joint cm | "
+    print("| codec | setting | delay ms | bit/s | bits/DOF-sample | PSNR dB | VPSNR dB | mean joint cm | "
           "thesis bit/s | thesis bits/DOF-sample | thesis PSNR dB |")
-    print("|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
     for cid, knobs, t_rate, t_psnr in GRID:
         if args.codecs and cid not in args.codecs:
             continue
@@ -103,7 +103,7 @@ def main() -> None:
         setting = ", ".join(f"{k}={v}" for k, v in knobs.items())
         thesis = (f"{t_rate:.0f} | {t_rate / 30 / THESIS_DOFS:.2f} | {t_psnr:.1f}" if t_rate
                   else "not printed | | ")
-        print(f"| {cid} | {setting} | {med[0]:.0f} | {med[1]:.2f} | {med[2]:.1f} | {med[3]:.1f} | {med[4]:.2f} | "
+        print(f"| {cid} | {setting} | {1000 * codec.delay_frames / 30:.0f} | {med[0]:.0f} | {med[1]:.2f} | {med[2]:.1f} | {med[3]:.1f} | {med[4]:.2f} | "
               f"{thesis} |", flush=True)
 
 

@@ -11,7 +11,7 @@ delay) are split into bands by the 5/3 lifting wavelet (:mod:`mocodec.coding.sub
 
 Each band, its coefficients of consecutive blocks in order, is a signal of its own, coded by
 its own closed-loop first-order predictive coder (fig. 7-4; the coefficient per band and
-channel from the first frames, (7-14)) with a uniform quantiser, its codes range coded with
+channel from the first frames, (7-14), within [-1, 1]) with a uniform quantiser, its codes range coded with
 their own adaptive models. The bit allocation favours the VPSNR: band b's step is
 ``step R / (a_b^e g_b)``, with R the channel's range, a_b the VMSE weight of the band (6-15),
 g_b the weight of a coefficient error in the signal (the split's synthesis gain) and e the
@@ -35,7 +35,7 @@ from mocodec.codecs.framewise import FramewiseCodec
 from mocodec.codecs.registry import register
 from mocodec.coding import blocks, subbands
 from mocodec.coding.parts import join_parts, split_parts
-from mocodec.coding.predictive import ChannelParams, run_uniform
+from mocodec.coding.predictive import ChannelParams, lag_one, run_uniform
 from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.metrics.visual import BAND_EDGES_HZ, BAND_WEIGHTS
 
@@ -48,7 +48,7 @@ class _State:
     def __init__(self, codec: "SubbandCodec", params: ChannelParams, coefficients: np.ndarray, fps: float):
         cfg = codec.config
         self.params, self.active = params, params.active
-        self.n, self.levels = codec.block_frames(fps), codec.levels(fps)
+        self.n, self.levels = cfg["block"], codec.levels(fps)
         self.bounds = subbands.band_bounds(self.n, self.levels)
         gains = subbands.synthesis_gains(self.n, self.levels)
         weights = subbands.visual_weights(self.n, self.levels, fps, BAND_EDGES_HZ, BAND_WEIGHTS) ** cfg["emphasis"]
@@ -108,9 +108,6 @@ class SubbandCodec(FramewiseCodec):
         if n & (n - 1):
             raise CodecError(f"codec subband: block must be a power of two, got {n}")
 
-    def block_frames(self, fps: float) -> int:
-        return self.config["block"]
-
     def levels(self, fps: float) -> int:
         n = self.config["block"]
         if self.config["variant"] == "wavelet":
@@ -134,7 +131,7 @@ class SubbandCodec(FramewiseCodec):
         params = ChannelParams(spread <= 0, values[0], spread, np.zeros(values.shape[1]))
         draft = _State(self, params, np.zeros((1, 0)), fps)
         coeffs = draft.split(values[:, params.active])
-        coefficients = np.array([_first_order(draft.band_signal(coeffs, b)) for b in range(len(draft.bounds))])
+        coefficients = np.clip([lag_one(draft.band_signal(coeffs, b), 0.0) for b in range(len(draft.bounds))], -1.0, 1.0)
         packed = np.round(coefficients * _COEFFICIENT_SCALE).astype(np.int8)
         state = _State(self, params, packed / _COEFFICIENT_SCALE, fps)
         return join_parts([params.pack(), packed.tobytes()]), state
@@ -142,7 +139,7 @@ class SubbandCodec(FramewiseCodec):
     def _load(self, header, skeleton, fps):
         packed, coefficients = split_parts(header, 2, "subband header")
         params = ChannelParams.unpack(packed, skeleton.num_channels)
-        bands = len(subbands.band_bounds(self.block_frames(fps), self.levels(fps)))
+        bands = len(subbands.band_bounds(self.config["block"], self.levels(fps)))
         if len(coefficients) != bands * params.active.size:
             raise CorruptStreamError("subband header: the predictor coefficients do not match the channels")
         packed = np.frombuffer(coefficients, dtype=np.int8).reshape(bands, params.active.size)
@@ -171,11 +168,3 @@ class SubbandCodec(FramewiseCodec):
         frames = state.rebuild(coeffs, n)
         return state.smoother.push(frames, last) if state.smoother else frames
 
-
-def _first_order(signal: np.ndarray) -> np.ndarray:
-    """Per column the least-squares a of s(n) ~ a s(n-1) (7-14), within [-1, 1]."""
-    if len(signal) < 3:
-        return np.zeros(signal.shape[1])
-    r0 = (signal[:-1] ** 2).sum(axis=0)
-    r1 = (signal[1:] * signal[:-1]).sum(axis=0)
-    return np.clip(np.divide(r1, r0, out=np.zeros_like(r1), where=r0 > 0), -1.0, 1.0)

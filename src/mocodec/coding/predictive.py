@@ -126,15 +126,19 @@ _HALF_MAX = 65504.0                     # the largest float16
 FIRST_STEP_DEG_S = 90.0     # range per second when the first frames show no change to go by
 
 
-def first_order(values: np.ndarray) -> np.ndarray:
-    """Per channel the least-squares coefficient a of x(n) - x0 ~ a (x(n-1) - x0) (7-14),
-    within [0, 1]."""
-    if len(values) < 3:
-        return np.ones(values.shape[1])
-    d = values - values[:1]
+def lag_one(d: np.ndarray, default: float = 1.0) -> np.ndarray:
+    """Per column the least-squares coefficient a of d(n) ~ a d(n-1) (7-14): R(1)/R(0), or
+    ``default`` where there is nothing to go by (fewer than 3 samples, or d(n-1) all zero)."""
+    if len(d) < 3:
+        return np.full(d.shape[1], default)
     r0 = (d[:-1] ** 2).sum(axis=0)
     r1 = (d[1:] * d[:-1]).sum(axis=0)
-    return np.clip(np.where(r0 > 0, r1 / np.where(r0 > 0, r0, 1.0), 1.0), 0.0, 1.0)
+    return np.where(r0 > 0, r1 / np.where(r0 > 0, r0, 1.0), default)
+
+
+def first_order(values: np.ndarray) -> np.ndarray:
+    """Per channel :func:`lag_one` of x(n) - x0, within [0, 1]."""
+    return np.clip(lag_one(values - values[:1]), 0.0, 1.0)
 
 
 def difference_range(values: np.ndarray, fps: float) -> np.ndarray:

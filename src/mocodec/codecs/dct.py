@@ -16,12 +16,12 @@ import math
 import numpy as np
 
 from mocodec.codecs.base import Knob, QualityKnob
-from mocodec.codecs.framewise import FramewiseCodec
+from mocodec.codecs.framewise import BlockwiseCodec
 from mocodec.codecs.registry import register
 from mocodec.coding import blockdct, blocks as blockcut
 from mocodec.coding.parts import join_parts, split_parts
 from mocodec.coding.predictive import ChannelParams
-from mocodec.errors import CodecError, CorruptStreamError
+from mocodec.errors import CorruptStreamError
 
 
 class _State:
@@ -58,7 +58,7 @@ class _State:
 
 
 @register
-class DctCodec(FramewiseCodec):
+class DctCodec(BlockwiseCodec):
     id = "dct"
     description = "block DCT (N=16) with Appendix III bit tables, speed-adaptive steps, edge smoothing (000 7.8.1)"
     knobs = (
@@ -69,23 +69,6 @@ class DctCodec(FramewiseCodec):
         Knob("smooth", bool, True, "smooth the samples either side of each block edge on decoding"),
     )
     quality = QualityKnob("scale", higher_is_better=False, log_scale=True)
-
-    def __init__(self, **knobs):
-        super().__init__(**knobs)
-        n = self.config["block"]
-        if n & (n - 1):
-            raise CodecError(f"codec dct: block must be a power of two, got {n}")
-
-    @property
-    def holds_frames(self) -> bool:       # type: ignore[override]
-        return self.config["smooth"]
-
-    @property
-    def delay_frames(self) -> int:        # type: ignore[override]
-        return self.config["block"] - 1 + int(self.config["smooth"])
-
-    def _ready(self, pending: int) -> int:
-        return pending - pending % self.config["block"]
 
     # ----- side information --------------------------------------------------------------
     def _setup(self, values, skeleton, fps):

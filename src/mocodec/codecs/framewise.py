@@ -88,6 +88,29 @@ class FramewiseCodec(Codec):
         return _FrameDecoder(self, skeleton, fps)
 
 
+class BlockwiseCodec(FramewiseCodec):
+    """A frame-recursive coder of whole blocks (dct, subband): knobs ``block`` (frames, a power
+    of two) and ``smooth`` (the decoder's block-edge smoothing, which holds the newest frame
+    back). Frames go out a block at a time; the delay is a block, plus the held frame."""
+
+    def __init__(self, **knobs):
+        super().__init__(**knobs)
+        n = self.config["block"]
+        if n & (n - 1):
+            raise CodecError(f"codec {self.id}: block must be a power of two, got {n}")
+
+    @property
+    def holds_frames(self) -> bool:       # type: ignore[override]
+        return self.config["smooth"]
+
+    @property
+    def delay_frames(self) -> int:        # type: ignore[override]
+        return self.config["block"] - 1 + int(self.config["smooth"])
+
+    def _ready(self, pending: int) -> int:
+        return pending - pending % self.config["block"]
+
+
 class _FrameEncoder(StreamEncoder):
     def __init__(self, codec: FramewiseCodec, skeleton: Skeleton, fps: float):
         self.codec, self.skeleton, self.fps = codec, skeleton, fps

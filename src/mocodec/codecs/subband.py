@@ -31,12 +31,12 @@ import math
 import numpy as np
 
 from mocodec.codecs.base import Knob, QualityKnob
-from mocodec.codecs.framewise import FramewiseCodec
+from mocodec.codecs.framewise import BlockwiseCodec
 from mocodec.codecs.registry import register
 from mocodec.coding import blocks, subbands
 from mocodec.coding.parts import join_parts, split_parts
 from mocodec.coding.predictive import ChannelParams, lag_one, run_uniform
-from mocodec.errors import CodecError, CorruptStreamError
+from mocodec.errors import CorruptStreamError
 from mocodec.metrics.visual import BAND_EDGES_HZ, BAND_WEIGHTS
 
 _COEFFICIENT_SCALE = 127.0              # predictor coefficients travel as int8 / 127
@@ -86,7 +86,7 @@ class _State:
 
 
 @register
-class SubbandCodec(FramewiseCodec):
+class SubbandCodec(BlockwiseCodec):
     id = "subband"
     description = "subband (VMSE bands) or wavelet (M largest) split of 16-frame blocks, a predictive coder per band (000 7.8.2)"
     knobs = (
@@ -102,28 +102,11 @@ class SubbandCodec(FramewiseCodec):
     )
     quality = QualityKnob("step", higher_is_better=False, log_scale=True)
 
-    def __init__(self, **knobs):
-        super().__init__(**knobs)
-        n = self.config["block"]
-        if n & (n - 1):
-            raise CodecError(f"codec subband: block must be a power of two, got {n}")
-
     def levels(self, fps: float) -> int:
         n = self.config["block"]
         if self.config["variant"] == "wavelet":
             return int(math.log2(n))
         return subbands.visual_levels(n, fps, BAND_EDGES_HZ[0])
-
-    @property
-    def holds_frames(self) -> bool:       # type: ignore[override]
-        return self.config["smooth"]
-
-    @property
-    def delay_frames(self) -> int:        # type: ignore[override]
-        return self.config["block"] - 1 + int(self.config["smooth"])
-
-    def _ready(self, pending: int) -> int:
-        return pending - pending % self.config["block"]
 
     # ----- side information --------------------------------------------------------------
     def _setup(self, values, skeleton, fps):

@@ -46,7 +46,7 @@ def test_temporal_closed_loop_rebuilds_code_vectors_exactly():
         x[b] = prev + book[choice[b]].T
         prev = x[b, -1]
     codes = np.zeros((4, 2), dtype=np.int64)
-    out = vq.run_temporal(x, codes, False, True, start.copy(), np.zeros(2), book)
+    out = vq.run_temporal(x, codes, False, True, start.copy(), book)
     assert np.array_equal(codes, choice) and np.allclose(out, x)
 
 

@@ -22,8 +22,6 @@ from mocodec.codecs.base import Knob, QualityKnob
 from mocodec.codecs.framewise import FramewiseCodec
 from mocodec.codecs.registry import register
 from mocodec.coding import vq, vqbook
-from mocodec.coding.parts import join_parts, split_parts
-from mocodec.errors import CorruptStreamError
 
 
 class _State:
@@ -38,10 +36,9 @@ class _State:
         for b, a in zip(books, self.book_starts):
             self.books[a:a + len(b), :b.shape[1]] = b
         self.prev = first.copy()
-        self.centre = np.zeros_like(first)          # plain vectors are the values themselves
 
     def run(self, x: np.ndarray, codes: np.ndarray, decode: bool) -> np.ndarray:
-        return vq.run_spatial(x, codes, decode, self.predictive, self.prev, self.centre, self.columns, self.starts,
+        return vq.run_spatial(x, codes, decode, self.predictive, self.prev, self.columns, self.starts,
                               self.books, self.book_starts)
 
 
@@ -70,17 +67,13 @@ class SvqCodec(FramewiseCodec):
                 vectors = vectors if len(vectors) else np.zeros((1, cols.size))
                 books.append(vq.lbg(vectors, [cfg["size"]])[cfg["size"]])
             books, source = vqbook.inband_books(books)
-        first = x[0].astype(np.float32)
-        header = join_parts([source, first.astype("<f4").tobytes()])
-        return header, _State(books, groups, first.astype(np.float64), units, cfg["predictive"])
+        header, first = vqbook.pack_header(source, x)
+        return header, _State(books, groups, first, units, cfg["predictive"])
 
     def _load(self, header, skeleton, fps):
-        source, first = split_parts(header, 2, "svq header")
         groups = [cols for _, cols in vqbook.spatial_groups(skeleton)]
-        books = vqbook.read_books(source, [len(g) for g in groups], self.config["codebook"], "svq header")
-        first = np.frombuffer(first, "<f4").astype(np.float64)
-        if first.size != skeleton.num_channels or not np.isfinite(first).all():
-            raise CorruptStreamError("svq header: the first frame does not match the skeleton")
+        books, first = vqbook.read_header(header, [len(g) for g in groups], self.config["codebook"], skeleton,
+                                          "svq header")
         return _State(books, groups, first, vqbook.channel_units(skeleton), self.config["predictive"])
 
     def _code(self, state, frames, ahead):

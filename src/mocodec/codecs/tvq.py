@@ -24,15 +24,12 @@ from mocodec.codecs.base import Knob, QualityKnob
 from mocodec.codecs.framewise import FramewiseCodec
 from mocodec.codecs.registry import register
 from mocodec.coding import blocks, vq, vqbook
-from mocodec.coding.parts import join_parts, split_parts
-from mocodec.errors import CorruptStreamError
 
 
 class _State:
     def __init__(self, book: np.ndarray, first: np.ndarray, units: np.ndarray, predictive: bool):
         self.book, self.units, self.predictive = np.ascontiguousarray(book), units, predictive
         self.prev = first.copy()
-        self.centre = np.zeros_like(first)          # plain vectors are the values themselves
 
 
 @register
@@ -66,28 +63,23 @@ class TvqCodec(FramewiseCodec):
             if not len(vectors):
                 vectors = np.zeros((1, cfg["length"]))
             books, source = vqbook.inband_books([vq.lbg(vectors, [cfg["size"]])[cfg["size"]]])
-        first = x[0].astype(np.float32)
-        header = join_parts([source, first.astype("<f4").tobytes()])
-        return header, _State(books[0], first.astype(np.float64), units, cfg["predictive"])
+        header, first = vqbook.pack_header(source, x)
+        return header, _State(books[0], first, units, cfg["predictive"])
 
     def _load(self, header, skeleton, fps):
-        source, first = split_parts(header, 2, "tvq header")
-        books = vqbook.read_books(source, [self.config["length"]], self.config["codebook"], "tvq header")
-        first = np.frombuffer(first, "<f4").astype(np.float64)
-        if first.size != skeleton.num_channels or not np.isfinite(first).all():
-            raise CorruptStreamError("tvq header: the first frame does not match the skeleton")
+        books, first = vqbook.read_header(header, [self.config["length"]], self.config["codebook"], skeleton,
+                                          "tvq header")
         return _State(books[0], first, vqbook.channel_units(skeleton), self.config["predictive"])
 
     def _code(self, state, frames, ahead):
         x = blocks.split(frames * state.units, self.config["length"])
         codes = np.zeros((len(x), x.shape[2]), dtype=np.int64)
         if len(frames):
-            vq.run_temporal(x, codes, False, state.predictive, state.prev, state.centre, state.book)
+            vq.run_temporal(x, codes, False, state.predictive, state.prev, state.book)
         return [codes], frames
 
     def _uncode(self, state, n, read, last):
         length, k = self.config["length"], state.units.size
         codes = np.clip(read(-(-n // length), k), 0, len(state.book) - 1)
-        out = vq.run_temporal(np.zeros((0, length, k)), codes, True, state.predictive, state.prev, state.centre,
-                              state.book)
+        out = vq.run_temporal(np.zeros((0, length, k)), codes, True, state.predictive, state.prev, state.book)
         return out.reshape(-1, k)[:n] / state.units

@@ -119,9 +119,9 @@ def _closest(v, book, rows):
 
 
 @numba.njit(cache=True)
-def run_temporal(x, codes, decode, predictive, prev, centre, book):
+def run_temporal(x, codes, decode, predictive, prev, book):
     """Temporal VQ (7.9.2) of ``x (blocks, L, K)``: per block and channel the vector of its L
-    samples, minus the channel's last decoded sample (``predictive``) or its ``centre``;
+    samples, minus the channel's last decoded sample (``predictive``; else the vector itself);
     ``codes (blocks, K)``; ``prev (K,)`` advanced. Returns the decoded ``(blocks, L, K)``."""
     m, k = codes.shape
     length = book.shape[1]
@@ -129,7 +129,7 @@ def run_temporal(x, codes, decode, predictive, prev, centre, book):
     v = np.empty(length)
     for b in range(m):
         for c in range(k):
-            base = prev[c] if predictive else centre[c]
+            base = prev[c] if predictive else 0.0
             if decode:
                 i = codes[b, c]
             else:
@@ -144,10 +144,10 @@ def run_temporal(x, codes, decode, predictive, prev, centre, book):
 
 
 @numba.njit(cache=True)
-def run_spatial(x, codes, decode, predictive, prev, centre, columns, starts, books, book_starts):
+def run_spatial(x, codes, decode, predictive, prev, columns, starts, books, book_starts):
     """Spatial VQ (7.9.1) of ``x (n, C)``: per frame and group g the vector of its channels
-    ``columns[starts[g]:starts[g + 1]]``, minus their last decoded values (``predictive``) or
-    their ``centre``, against the group's rows ``book_starts[g]:book_starts[g + 1]`` of
+    ``columns[starts[g]:starts[g + 1]]``, minus their last decoded values (``predictive``; else
+    the vector itself), against the group's rows ``book_starts[g]:book_starts[g + 1]`` of
     ``books``; ``codes (n, G)``; ``prev (C,)`` advanced. Returns the decoded ``(n, C)``."""
     n, groups = codes.shape
     out = np.empty(x.shape if not decode else (n, prev.size))
@@ -161,12 +161,12 @@ def run_spatial(x, codes, decode, predictive, prev, centre, columns, starts, boo
             else:
                 for j in range(cols.size):
                     c = cols[j]
-                    v[j] = x[t, c] - (prev[c] if predictive else centre[c])
+                    v[j] = x[t, c] - (prev[c] if predictive else 0.0)
                 i = _closest(v[:cols.size], book, book.shape[0])
                 codes[t, g] = i
             for j in range(cols.size):
                 c = cols[j]
-                y = (prev[c] if predictive else centre[c]) + book[i, j]
+                y = (prev[c] if predictive else 0.0) + book[i, j]
                 out[t, c] = y
                 prev[c] = y
     return out

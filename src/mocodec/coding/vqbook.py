@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from mocodec.coding import vq
+from mocodec.coding.parts import join_parts, split_parts
 from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.formats._io import atomic_write_bytes
 from mocodec.metrics.groups import group_channels
@@ -208,6 +209,24 @@ def read_books(part: bytes, dims: list[int], path: str, where: str) -> list[np.n
     if offset != len(part) or any(len(b) == 0 or not np.isfinite(b).all() for b in books):
         raise CorruptStreamError(f"{where}: codebook part does not parse")
     return books
+
+
+def pack_header(source: bytes, x: np.ndarray) -> tuple[bytes, np.ndarray]:
+    """A VQ coder's header (the codebook part and the first frame ``x[0]`` in float32, where a
+    predictive loop starts) and that first frame as both ends have it."""
+    first = x[0].astype("<f4")
+    return join_parts([source, first.tobytes()]), first.astype(np.float64)
+
+
+def read_header(header: bytes, dims: list[int], path: str, skeleton: Skeleton,
+                where: str) -> tuple[list[np.ndarray], np.ndarray]:
+    """The books and first frame of a header made by :func:`pack_header`."""
+    source, first = split_parts(header, 2, where)
+    books = read_books(source, dims, path, where)
+    first = np.frombuffer(first, "<f4").astype(np.float64)
+    if first.size != skeleton.num_channels or not np.isfinite(first).all():
+        raise CorruptStreamError(f"{where}: the first frame does not match the skeleton")
+    return books, first
 
 
 def train(kind: str, clips: list[Motion], sizes: list[int], predictive: bool = True, length: int = 6,

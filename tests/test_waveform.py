@@ -38,6 +38,27 @@ def test_intcoder_round_trips_and_models_carry_across_packets():
     assert np.array_equal(np.vstack(parts), values)
 
 
+@pytest.mark.parametrize("levels", [2, 5, 64, 1000])
+def test_intcoder_bounded_codes_round_trip_across_packets_near_their_conditional_entropy(levels):
+    rng = np.random.default_rng(1)
+    half = levels // 2
+    walk = np.cumsum(rng.integers(-1, 2, (4000, 3)), axis=0)         # slow: the previous code helps
+    values = np.clip(walk, -half, levels - half - 1)
+    values[:, 2] = rng.integers(-half, levels - half, 4000)               # the whole range, uniform
+    enc, dec = intcoder.Model(3, levels), intcoder.Model(3, levels)
+    data = [intcoder.encode(values[a:a + 500], enc) for a in range(0, 4000, 500)]
+    parts = [intcoder.decode(d, 500, 3, dec) for d in data]
+    assert np.array_equal(np.vstack(parts), values)
+    assert np.array_equal(intcoder.decode(intcoder.encode(values, intcoder.Model(3, levels)), 4000, 3,
+                                          intcoder.Model(3, levels)), values)
+    fixed = 4000 * np.log2(levels) / 8                  # bytes of fixed-length codes for one channel
+    cost = [len(intcoder.encode(values[:, [c]], intcoder.Model(1, levels))) / fixed for c in range(3)]
+    assert cost[0] < 0.6 and cost[1] < 0.6              # slow channels: the previous code's context pays
+    assert cost[2] < 1.06                               # uniform codes: little above fixed length
+    with pytest.raises(ValueError, match="outside"):
+        intcoder.encode(np.array([[levels - half]]), intcoder.Model(1, levels))
+
+
 @pytest.mark.parametrize("quantizer", [UniformQuantizer(-1.0, 1.0, 8), UniformQuantizer(-1.0, 1.0, 5),
                                        MuLawQuantizer(8.0, 1.0, 16)])
 def test_quantiser_tables_agree_with_the_quantisers(quantizer):

@@ -5,9 +5,10 @@ The closed loop of fig. 7-4 with both parts adapted backwards, from the decoded 
 ``window_s`` seconds of decoded samples by the autocorrelation method (7-16 to 7-18), updated
 every eighth of a window, and the feedback adaptive quantiser (7-7) on the prediction error,
 starting from the step a uniform quantiser would have over the largest frame-to-frame change
-of the first frames. Codes range coded with adaptive per-channel models. As the thesis found,
-it beats ``dpcm`` at higher rates and loses at 4-8 levels, where the coefficients are
-computed from a coarsely quantised signal. Delay: none.
+of the first frames. Codes range coded as an alphabet of N symbols with adaptive per-channel
+models in the context of the previous code. As the thesis found, it beats ``dpcm`` at higher
+rates and loses at 4-8 levels, where the coefficients are computed from a coarsely quantised
+signal. Delay: none.
 """
 
 from __future__ import annotations
@@ -46,3 +47,6 @@ class AdpcmCodec(FramewiseCodec):
         window = max(3, int(round(self.config["window_s"] * fps)))
         first = ChannelParams(params.constant, params.centre, 2.0 * params.scale / n, params.coefficient)
         return AdaptiveCoder(first, n, self.config["order"], window, max(1, window // 8), multipliers(n))
+
+    def _levels(self, state, part):
+        return state.levels

@@ -71,6 +71,11 @@ class FramewiseCodec(Codec):
         """How many of the ``pending`` frames to code now (all but the lookahead)."""
         return pending - self.lookahead
 
+    def _levels(self, state: Any, part: int) -> int:
+        """The number of values integer array ``part`` can take (a quantiser's levels), so it
+        is coded as a bounded alphabet (:class:`~mocodec.coding.intcoder.Model`); 0: unbounded."""
+        return 0
+
     # ----- clips are streams ---------------------------------------------------------------
     def _encode(self, motion: Motion) -> bytes:
         enc = self.encoder(motion.skeleton, motion.fps)
@@ -146,7 +151,8 @@ class _FrameEncoder(StreamEncoder):
             header = [setup]
         arrays, _ = self.codec._code(self.state, frames, ahead)
         while len(self.models) < len(arrays):
-            self.models.append(intcoder.Model(arrays[len(self.models)].shape[1]))
+            k = len(self.models)
+            self.models.append(intcoder.Model(arrays[k].shape[1], self.codec._levels(self.state, k)))
         coded = [intcoder.encode(a, m) for a, m in zip(arrays, self.models)]
         return _PACKET.pack(int(bool(header)) | 2 * int(last), len(frames)) + join_parts(header + coded)
 
@@ -189,7 +195,7 @@ class _FrameDecoder(StreamDecoder):
             if k >= len(parts):
                 raise CorruptStreamError(f"{self.codec.id} packet has {len(parts)} coded parts, the coder reads more")
             if k == len(self.models):
-                self.models.append(intcoder.Model(cols))
+                self.models.append(intcoder.Model(cols, self.codec._levels(self.state, k)))
             return intcoder.decode(parts[k], rows, cols, self.models[k])
 
         out = self.codec._uncode(self.state, n, read, bool(flags & 2))

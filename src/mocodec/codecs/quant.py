@@ -9,8 +9,8 @@ Each channel is quantised on its own, frame by frame, with no prediction:
 * ``adaptive`` (7-7): the feedback adaptive quantiser about the middle of the range, starting
   from the uniform step; the step follows the codes, so nothing more is sent.
 
-The codes are range coded with adaptive per-channel models (the thesis's statistical coder,
-7.4). The thesis's finding holds: below 64 levels the error is visible, and the ratio stays
+The codes are range coded as an alphabet of N symbols, with adaptive per-channel models in the
+context of the previous code (the thesis's statistical coder, 7.4; ``intcoder.Model``). The thesis's finding holds: below 64 levels the error is visible, and the ratio stays
 low; this is the baseline the other coders of chapter 7 are measured against. Delay: none.
 """
 
@@ -54,6 +54,9 @@ class QuantCodec(FramewiseCodec):
 
     def _load(self, header, skeleton, fps):
         return self._coder(ChannelParams.unpack(header, skeleton.num_channels))
+
+    def _levels(self, state, part):
+        return state.levels
 
     def _coder(self, params: ChannelParams):
         law = self.config["law"]

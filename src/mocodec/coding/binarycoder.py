@@ -47,21 +47,26 @@ def shift_low(st, buf):
 
 
 @numba.njit(inline="always")
+def _adapt(pf, ps, ctx, mask):
+    """Move the context's probabilities of a 0 towards 0 (mask -1: a 1 was coded) or 65536
+    (mask 0), without a branch: coded bits are unpredictable, so branches cost more."""
+    f, s = pf[ctx], ps[ctx]
+    pf[ctx] = f + (((65536 - f) >> FAST) & ~mask) - ((f >> FAST) & mask)
+    ps[ctx] = s + (((65536 - s) >> SLOW) & ~mask) - ((s >> SLOW) & mask)
+
+
+@numba.njit(inline="always")
 def put(st, buf, pf, ps, ctx, bit):
-    p = (pf[ctx] + ps[ctx]) >> 1
-    bound = (st[1] >> 16) * p
-    if bit == 0:
-        st[1] = bound
-        pf[ctx] += (65536 - pf[ctx]) >> FAST
-        ps[ctx] += (65536 - ps[ctx]) >> SLOW
-    else:
-        st[0] += bound
-        st[1] -= bound
-        pf[ctx] -= pf[ctx] >> FAST
-        ps[ctx] -= ps[ctx] >> SLOW
-    while st[1] < TOP:
-        st[1] <<= 8
+    rng = st[1]
+    bound = (rng >> 16) * ((pf[ctx] + ps[ctx]) >> 1)
+    mask = -np.int64(bit)
+    st[0] += bound & mask
+    rng = (bound & ~mask) | ((rng - bound) & mask)
+    _adapt(pf, ps, ctx, mask)
+    while rng < TOP:
+        rng <<= 8
         shift_low(st, buf)
+    st[1] = rng
 
 
 @numba.njit(inline="always")
@@ -79,24 +84,19 @@ def put_even(st, buf, bit):
 
 @numba.njit(inline="always")
 def get(st, data, pf, ps, ctx):
-    p = (pf[ctx] + ps[ctx]) >> 1
-    bound = (st[1] >> 16) * p
-    if st[0] < bound:
-        st[1] = bound
-        pf[ctx] += (65536 - pf[ctx]) >> FAST
-        ps[ctx] += (65536 - ps[ctx]) >> SLOW
-        bit = 0
-    else:
-        st[0] -= bound
-        st[1] -= bound
-        pf[ctx] -= pf[ctx] >> FAST
-        ps[ctx] -= ps[ctx] >> SLOW
-        bit = 1
-    while st[1] < TOP:
-        st[1] <<= 8
+    rng = st[1]
+    bound = (rng >> 16) * ((pf[ctx] + ps[ctx]) >> 1)
+    bit = np.int64(st[0] >= bound)
+    mask = -bit
+    st[0] -= bound & mask
+    rng = (bound & ~mask) | ((rng - bound) & mask)
+    _adapt(pf, ps, ctx, mask)
+    while rng < TOP:
+        rng <<= 8
         nxt = data[st[2]] if st[2] < data.size else 0
         st[2] += 1
         st[0] = ((st[0] << 8) | nxt) & 0xFFFFFFFF
+    st[1] = rng
     return bit
 
 

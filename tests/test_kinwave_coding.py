@@ -144,6 +144,17 @@ def test_compact_skeleton_is_exact_and_small(which, walk_bvh, walk_amc):
         str(container.skeleton_to_dict(sk)).encode(), 9))
 
 
+def test_compact_skeleton_keeps_mirrored_and_signed_zero_offsets_exact():
+    from mocodec.skeleton import Joint, Skeleton
+    joints = (Joint("root", -1, (0.0, 0.0, 0.0)), Joint("a", 0, (1.25, -0.0, 2.0)), Joint("b", 0, (-1.25, 0.0, 2.0)),
+              Joint("c", 0, (-1.25, -0.0, 2.0)), Joint("d", 0, (0.6 * 2.68184, 0.1 * 2.68184, 0.3 * 2.68184)))
+    sk = Skeleton(joints, 100.0, "mirrors")
+    back = unpack_skeleton(pack_skeleton(sk))
+    assert [np.copysign(1.0, j.offset) .tolist() for j in back.joints] == \
+        [np.copysign(1.0, j.offset).tolist() for j in joints]
+    assert container.skeleton_id(back) == container.skeleton_id(sk)
+
+
 def test_compact_skeleton_rejects_damage(walk_bvh):
     data = pack_skeleton(walk_bvh.skeleton)
     for bad in (data[:-3], data + b"\x00", b"\x07" + data[1:], data[:40]):

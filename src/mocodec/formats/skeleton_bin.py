@@ -5,7 +5,10 @@ Every number is written as the shortest decimal ``n / 10^k`` (k = 0..12) that gi
 very same float64 (BVH and ASF values come from decimal text, so almost all do), else as its
 eight raw bytes; 0 and the infinities of unlimited joints have one-byte tags. Names, parents (as
 the distance back to the parent), channel layouts, rotation and axis orders, limits and body
-parts follow as small integers. The result is not compressed here: the container compresses
+parts follow as small integers. A joint whose offset is an earlier joint's with some signs
+flipped (the other side of a symmetric skeleton) refers to it instead, and one that is a
+decimal length times a decimal direction (as ASF files give bones) is written as those
+(version 2; version 1, which has neither, is still read). The result is not compressed here: the container compresses
 its whole header at once. The round trip is exact, so :func:`~mocodec.formats.container.skeleton_id`
 is unchanged.
 """
@@ -18,11 +21,13 @@ import struct
 from mocodec.errors import CorruptStreamError
 from mocodec.skeleton import BODY_PARTS, CHANNEL_NAMES, Joint, Skeleton
 
-VERSION = 1
+VERSION = 2
+VERSIONS = (1, 2)                # the versions this module reads
 _AXES = "XYZ"
 _ZERO, _POS_INF, _NEG_INF, _RAW = 0, 1, 2, 3
 _DECIMAL = 4                    # tags 4..16: decimal with k = tag - 4 places
 _MAX_PLACES = 12
+_PLAIN, _PRODUCT = 0, 1         # an offset's form; >= 8: a mirror reference (back << 3 | signs)
 
 
 class _Writer:
@@ -116,6 +121,49 @@ def _default_order(channels: tuple[str, ...]) -> str:
     return "".join(c[0] for c in channels if c.endswith("rotation"))
 
 
+def _numbers(values) -> bytes:
+    w = _Writer()
+    for x in values:
+        w.number(x)
+    return bytes(w.out)
+
+
+def _as_product(offset: tuple[float, ...]) -> bytes | None:
+    """The shortest ``length, direction`` (decimals) whose products are ``offset`` bit for bit
+    (the ASF reader computes ``direction * length``), or None."""
+    size = math.sqrt(sum(x * x for x in offset))
+    if not math.isfinite(size) or size == 0.0:
+        return None
+    best = None
+    for places in range(_MAX_PLACES + 1):
+        length = round(size, places)
+        if length == 0.0:
+            continue
+        direction = []
+        for x in offset:
+            d = next((d for k in range(_MAX_PLACES + 1) if (d := round(x / length, k)) * length == x), None)
+            if d is None:
+                break
+            direction.append(d)
+        else:
+            coded = _numbers([length, *direction])
+            if best is None or len(coded) < len(best):
+                best = coded
+    return best
+
+
+def _mirror(offsets: list[tuple[float, ...]], i: int) -> int:
+    """``back << 3 | signs``: joint ``i``'s offset is joint ``i - back``'s with the coordinates
+    in ``signs`` (bit a for axis a) negated, bit for bit; 0 if no earlier joint's is."""
+    mine = struct.pack("<3d", *offsets[i])
+    for k in range(i - 1, -1, -1):
+        for signs in range(8):
+            flipped = tuple(-x if signs >> a & 1 else x for a, x in enumerate(offsets[k]))
+            if any(flipped) and struct.pack("<3d", *flipped) == mine:
+                return (i - k) << 3 | signs
+    return 0
+
+
 def pack_skeleton(skeleton: Skeleton) -> bytes:
     """Column by column (all names, then all parents, ...), which compresses best; fields at
     their usual value (rotation order = channel order, axis order ZYX, no axis, no limits)
@@ -140,9 +188,18 @@ def pack_skeleton(skeleton: Skeleton) -> bytes:
         w.text("" if j.axis_order == "ZYX" else j.axis_order)
     for j in joints:
         w.uint(BODY_PARTS.index(j.body_part) + 1 if j.body_part else 0)
-    for j in joints:
-        for x in j.offset:
-            w.number(x)
+    offsets = [tuple(float(x) for x in j.offset) for j in joints]
+    for i, offset in enumerate(offsets):
+        mirror = _mirror(offsets, i)
+        plain, product = _numbers(offset), None if mirror else _as_product(offset)
+        if mirror:
+            w.uint(mirror)
+        elif product is not None and len(product) < len(plain):
+            w.uint(_PRODUCT)
+            w.out += product
+        else:
+            w.uint(_PLAIN)
+            w.out += plain
     for j in joints:
         w.uint(int(j.has_axis))
         if j.has_axis:
@@ -161,8 +218,8 @@ def pack_skeleton(skeleton: Skeleton) -> bytes:
 def unpack_skeleton(data: bytes) -> Skeleton:
     r = _Reader(data)
     try:
-        if (version := r.uint()) != VERSION:
-            raise CorruptStreamError(f"compact skeleton version {version}, this mocodec reads {VERSION}")
+        if (version := r.uint()) not in VERSIONS:
+            raise CorruptStreamError(f"compact skeleton version {version}, this mocodec reads {VERSIONS}")
         name, units = r.text(), r.number()
         n = r.uint()
         if n > len(data):
@@ -173,7 +230,19 @@ def unpack_skeleton(data: bytes) -> Skeleton:
         orders = [r.text() or _default_order(channels[i]) for i in range(n)]
         axis_orders = [r.text() or "ZYX" for _ in range(n)]
         parts = [BODY_PARTS[p - 1] if (p := r.uint()) else None for _ in range(n)]
-        offsets = [tuple(r.number() for _ in range(3)) for _ in range(n)]
+        offsets = []
+        for i in range(n):
+            form = r.uint() if version >= 2 else _PLAIN
+            back, signs = form >> 3, form & 7
+            if form == _PLAIN:
+                offsets.append(tuple(r.number() for _ in range(3)))
+            elif form == _PRODUCT:
+                length = r.number()
+                offsets.append(tuple(r.number() * length for _ in range(3)))
+            elif 0 < back <= i:
+                offsets.append(tuple(-x if signs >> a & 1 else x for a, x in enumerate(offsets[i - back])))
+            else:
+                raise CorruptStreamError(f"compact skeleton: joint {i} has offset form {form} at byte {r.pos}")
         axes = [tuple(r.number() for _ in range(3)) if r.uint() else (0.0, 0.0, 0.0) for _ in range(n)]
         limits = [tuple((r.number(), r.number()) for _ in channels[i]) if r.uint() else () for i in range(n)]
         if r.pos != len(data):

@@ -18,41 +18,55 @@ _PROBES = (-8, -6, -4, 4, 6, 8)
 CONTEXT = 11                                          # frames each side of a seam the estimates read
 
 
-def seam_steps(x: np.ndarray, seam: int) -> np.ndarray:
-    """The step at ``seam`` (first frame of the right block), per column: the difference of
-    each side's quadratic extrapolation to the midpoint between the blocks (quadratic, so a
-    smoothly accelerating curve shows no step)."""
-    left = _EXTRAPOLATE @ x[seam - 3:seam]
-    right = _EXTRAPOLATE @ x[seam:seam + 3][::-1]
+def seam_steps(x: np.ndarray, seams) -> np.ndarray:
+    """The step at each of ``seams`` (first frame of the right block), per column
+    ``(seams, columns)``: the difference of each side's quadratic extrapolation to the midpoint
+    between the blocks (quadratic, so a smoothly accelerating curve shows no step). Elementwise,
+    so a column's floats do not depend on the other columns."""
+    s = np.asarray(seams)
+    a, b, c = _EXTRAPOLATE
+    left = a * x[s - 3] + b * x[s - 2] + c * x[s - 1]
+    right = a * x[s + 2] + b * x[s + 1] + c * x[s]
     return right - left
 
 
-def natural_steps(x: np.ndarray, seam: int) -> np.ndarray:
-    """The same estimate at frames 4 to 8 away from the seam, inside the blocks: how big a
-    "step" the motion itself shows here (noise, sharp moves); the median per column."""
-    probes = [seam + d for d in _PROBES if 3 <= seam + d <= len(x) - 3]
-    if not probes:
-        return np.zeros(x.shape[1])
-    return np.median(np.abs([seam_steps(x, p) for p in probes]), axis=0)
+def natural_steps(x: np.ndarray, seams) -> np.ndarray:
+    """The same estimate at frames 4 to 8 away from each seam, inside the blocks: how big a
+    "step" the motion itself shows there (noise, sharp moves); the median per seam and column
+    over the probes that fit in ``x`` (0 where none does)."""
+    probes = np.asarray(seams)[:, None] + np.array(_PROBES)[None, :]
+    fits = (probes >= 3) & (probes <= len(x) - 3)
+    sizes = np.abs(seam_steps(x, np.where(fits, probes, 3).ravel())).reshape(*probes.shape, -1)
+    sizes[~fits] = np.nan
+    out = np.zeros(sizes[:, 0].shape)
+    some = fits.any(axis=1)
+    if some.any():
+        out[some] = np.nanmedian(sizes[some], axis=1)
+    return out
 
 
 def smooth_seams(x: np.ndarray, seams, half_width: int, limits: np.ndarray | None = None) -> np.ndarray:
     """``x`` (frames, channels) with the step at every seam spread over 2 ``half_width`` frames.
     Only the part of a step beyond four times the motion's own (:func:`natural_steps`) is
     removed, and at most ``limits[k]`` per channel at the k-th seam (what the coder's error can
-    explain there), so finely coded or naturally jerky motion keeps its detail."""
+    explain there), so finely coded or naturally jerky motion keeps its detail. Steps are
+    measured on ``x`` as given: seams closer than ``half_width`` plus :data:`CONTEXT` frames
+    see each other's input, not each other's output."""
     out = np.array(x, dtype=np.float64, copy=True)
+    seams = np.asarray(seams, dtype=np.int64)
+    inside = (seams >= 3) & (seams + 3 <= len(out))
+    if not inside.any():
+        return out
+    where = seams[inside]
+    step = seam_steps(out, where)
+    size = np.maximum(np.abs(step) - 4.0 * natural_steps(out, where), 0.0)
+    if limits is not None:
+        size = np.minimum(size, np.asarray(limits)[inside])
+    half = 0.5 * np.sign(step) * size                                     # (seams, channels)
     h = max(int(half_width), 1)
     weight = 0.5 * (1 + np.cos(np.pi * (np.arange(h) + 0.5) / h))        # 1 next to the seam -> 0
-    for k, s in enumerate(seams):
-        if s < 3 or s + 3 > len(out):
-            continue
-        step = seam_steps(out, s)
-        size = np.maximum(np.abs(step) - 4.0 * natural_steps(out, s), 0.0)
-        if limits is not None:
-            size = np.minimum(size, limits[k])
-        step = np.sign(step) * size
-        n_left, n_right = min(h, s), min(h, len(out) - s)
-        out[s - n_left:s] += 0.5 * step * weight[:n_left][::-1, None]
-        out[s:s + n_right] -= 0.5 * step * weight[:n_right][:, None]
+    for side, rows in ((1.0, where[:, None] - 1 - np.arange(h)), (-1.0, where[:, None] + np.arange(h))):
+        ok = (rows >= 0) & (rows < len(out))
+        k, i = np.nonzero(ok)
+        np.add.at(out, rows[k, i], side * half[k] * weight[i][:, None])
     return out

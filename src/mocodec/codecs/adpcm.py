@@ -33,6 +33,7 @@ class AdpcmCodec(FramewiseCodec):
         Knob("order", int, 2, "predictor order", low=1, high=2),
     )
     quality = QualityKnob("levels", higher_is_better=True, log_scale=True)
+    bounded_codes = True
 
     def _setup(self, values, skeleton, fps):
         constant = np.ptp(values, axis=0) <= 0
@@ -47,6 +48,3 @@ class AdpcmCodec(FramewiseCodec):
         window = max(3, int(round(self.config["window_s"] * fps)))
         first = ChannelParams(params.constant, params.centre, 2.0 * params.scale / n, params.coefficient)
         return AdaptiveCoder(first, n, self.config["order"], window, max(1, window // 8), multipliers(n))
-
-    def _levels(self, state, part):
-        return state.levels

@@ -38,6 +38,7 @@ Reader = Callable[[int, int], np.ndarray]
 class FramewiseCodec(Codec):
     streaming = True
     lookahead: ClassVar[int] = 0        # frames the encoder must see past the ones it codes
+    bounded_codes: ClassVar[bool] = False   # the sample coder's codes are coded as its N levels
     holds_frames: ClassVar[bool] = False    # the decoder keeps frames back until the next packet or the end
 
     @property
@@ -73,8 +74,9 @@ class FramewiseCodec(Codec):
 
     def _levels(self, state: Any, part: int) -> int:
         """The number of values integer array ``part`` can take (a quantiser's levels), so it
-        is coded as a bounded alphabet (:class:`~mocodec.coding.intcoder.Model`); 0: unbounded."""
-        return 0
+        is coded as a bounded alphabet (:class:`~mocodec.coding.intcoder.Model`); 0: unbounded.
+        By default, with ``bounded_codes``, the sample coder's levels."""
+        return state.levels if self.bounded_codes else 0
 
     # ----- clips are streams ---------------------------------------------------------------
     def _encode(self, motion: Motion) -> bytes:

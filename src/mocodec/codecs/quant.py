@@ -10,8 +10,9 @@ Each channel is quantised on its own, frame by frame, with no prediction:
   from the uniform step; the step follows the codes, so nothing more is sent.
 
 The codes are range coded as an alphabet of N symbols, with adaptive per-channel models in the
-context of the previous code (the thesis's statistical coder, 7.4; ``intcoder.Model``). The thesis's finding holds: below 64 levels the error is visible, and the ratio stays
-low; this is the baseline the other coders of chapter 7 are measured against. Delay: none.
+context of the previous code (the thesis's statistical coder, 7.4; ``intcoder.Model``). The
+thesis's finding holds: below 64 levels the error is visible, and the ratio stays low; this is
+the baseline the other coders of chapter 7 are measured against. Delay: none.
 """
 
 from __future__ import annotations
@@ -40,6 +41,7 @@ class QuantCodec(FramewiseCodec):
              choices=("data", "limits")),
     )
     quality = QualityKnob("levels", higher_is_better=True, log_scale=True)
+    bounded_codes = True
 
     def _setup(self, values, skeleton, fps):
         low, high = values.min(axis=0), values.max(axis=0)
@@ -54,9 +56,6 @@ class QuantCodec(FramewiseCodec):
 
     def _load(self, header, skeleton, fps):
         return self._coder(ChannelParams.unpack(header, skeleton.num_channels))
-
-    def _levels(self, state, part):
-        return state.levels
 
     def _coder(self, params: ChannelParams):
         law = self.config["law"]

@@ -8,8 +8,8 @@ the distance back to the parent), channel layouts, rotation and axis orders, lim
 parts follow as small integers. A joint whose offset is an earlier joint's with some signs
 flipped (the other side of a symmetric skeleton) refers to it instead, and one that is a
 decimal length times a decimal direction (as ASF files give bones) is written as those
-(version 2; version 1, which has neither, is still read). The result is not compressed here: the container compresses
-its whole header at once. The round trip is exact, so :func:`~mocodec.formats.container.skeleton_id`
+(version 2; version 1, which has neither, is still read). The result is not compressed here:
+the container compresses its whole header at once. The round trip is exact, so :func:`~mocodec.formats.container.skeleton_id`
 is unchanged.
 """
 
@@ -190,11 +190,11 @@ def pack_skeleton(skeleton: Skeleton) -> bytes:
         w.uint(BODY_PARTS.index(j.body_part) + 1 if j.body_part else 0)
     offsets = [tuple(float(x) for x in j.offset) for j in joints]
     for i, offset in enumerate(offsets):
-        mirror = _mirror(offsets, i)
-        plain, product = _numbers(offset), None if mirror else _as_product(offset)
-        if mirror:
+        if mirror := _mirror(offsets, i):
             w.uint(mirror)
-        elif product is not None and len(product) < len(plain):
+            continue
+        plain, product = _numbers(offset), _as_product(offset)
+        if product is not None and len(product) < len(plain):
             w.uint(_PRODUCT)
             w.out += product
         else:

@@ -98,6 +98,12 @@ def _decode(data, frames, channels, out, pf, ps, prev):
     return st[2]
 
 
+@numba.njit(inline="always")
+def _tree_base(c, prev_u, shift, size):
+    """The first context of channel c's tree for a previous code ``prev_u`` (0..levels-1)."""
+    return MAX_CLASS + (c * _PREV_SETS + (prev_u >> shift)) * size
+
+
 @numba.njit(cache=True)
 def _encode_tree(values, buf, pf, ps, prev, half, bits, tree_bits):
     frames, channels = values.shape
@@ -107,7 +113,7 @@ def _encode_tree(values, buf, pf, ps, prev, half, bits, tree_bits):
     for t in range(frames):
         for c in range(channels):
             u = values[t, c] + half
-            base = MAX_CLASS + (c * _PREV_SETS + ((prev[c] + half) >> shift)) * size
+            base = _tree_base(c, prev[c] + half, shift, size)
             node = 1
             for i in range(bits - 1, bits - 1 - tree_bits, -1):
                 b = (u >> i) & 1
@@ -127,7 +133,7 @@ def _decode_tree(data, out, pf, ps, prev, half, bits, tree_bits):
     shift = max(bits - _PREV_BITS, 0)
     for t in range(frames):
         for c in range(channels):
-            base = MAX_CLASS + (c * _PREV_SETS + ((prev[c] + half) >> shift)) * size
+            base = _tree_base(c, prev[c] + half, shift, size)
             node = 1
             for _ in range(tree_bits):
                 node = 2 * node + get(st, data, pf, ps, base + node)

@@ -1,4 +1,5 @@
-"""The coding commands of the CLI: ``encode``, ``decode``, ``eval``, ``codecs`` and ``codebook``.
+"""The coding commands of the CLI: ``encode``, ``decode``, ``eval``, ``codecs``, ``codebook`` and
+``primitives``.
 
 Codec knobs are given as options named after them (``--levels 64`` for the knob ``levels``);
 ``--ratio``, ``--bitrate``, ``--psnr``, ``--mean-error-cm`` and ``--max-error-cm`` ask rate
@@ -13,7 +14,7 @@ from pathlib import Path
 
 from mocodec import moc, ratecontrol
 from mocodec.codecs import DEFAULT_CODEC, codec_class, codec_ids, get_codec
-from mocodec.coding import vqbook
+from mocodec.coding import primdb, vqbook
 from mocodec.errors import CodecError
 from mocodec.formats import load, save
 from mocodec.formats._io import atomic_write_bytes
@@ -113,8 +114,8 @@ def cmd_decode(args) -> int:
     frames = parse_frames(args.frames)
     if frames and frames[1] == -1:
         frames = (frames[0], moc.info(args.input, skeleton).frames)
-    knobs = {"codebook": args.codebook} if args.codebook else None
-    motion = moc.decode(args.input, frames=frames, skeleton=skeleton, knobs=knobs)
+    knobs = {name: path for name, path in (("codebook", args.codebook), ("db", args.db)) if path}
+    motion = moc.decode(args.input, frames=frames, skeleton=skeleton, knobs=knobs or None)
     written = save(motion, args.output, asf=args.out_asf)
     print(f"wrote {', '.join(str(p) for p in written)} ({motion.num_frames} frames)")
     return 0
@@ -184,6 +185,31 @@ def cmd_codebook(args) -> int:
     return 0
 
 
+def cmd_primitives(args) -> int:
+    if args.action == "info":
+        for path in args.inputs:
+            db = primdb.PrimitiveDB.load(path)
+            worst = max(db.errors.values(), default=0.0)
+            print(f"{path}: {db.count} primitives for {len(db.primitives)} joints, {Path(path).stat().st_size:,} bytes, "
+                  f"{db.fps:g} Hz, S_M {db.max_segment}, seed {db.seed}, largest clustering error {worst:.3f} rad, "
+                  f"fingerprint {db.fingerprint:08x}, trained on {', '.join(db.trained_on) or '?'}")
+        return 0
+    if not args.output:
+        raise CodecError("primitives train needs -o FILE")
+    clips = []
+    for k, path in enumerate(args.inputs, 1):
+        _progress(k, len(args.inputs), Path(path).name)
+        clips.append(load(path, asf=args.asf, fps=args.fps))
+    t0 = time.perf_counter()
+    db = primdb.train(clips, max_segment=args.max_segment, seed=args.seed, threshold=args.threshold,
+                      max_clusters=args.max_clusters, names=[Path(p).name for p in args.inputs])
+    db.save(args.output)
+    print(f"wrote {args.output}: {db.count} primitives for {len(db.primitives)} joints from "
+          f"{sum(db.segments.values()):,} segments, {Path(args.output).stat().st_size:,} bytes, "
+          f"{time.perf_counter() - t0:.1f} s")
+    return 0
+
+
 def cmd_eval(args) -> int:
     inputs = args.inputs
     for k, path in enumerate(inputs, 1):
@@ -231,6 +257,7 @@ def add_commands(sub, common) -> None:
     p.add_argument("--skeleton", help="the skeleton (.asf, .bvh or .amc) of a file encoded with --skeleton-ref")
     p.add_argument("--out-asf", help="where to write the ASF when the output is .amc")
     p.add_argument("--codebook", help="the VQ codebook file (svq, tvq) here, if not where the encoder had it")
+    p.add_argument("--db", help="the primitive database (primitives) here, if not where the encoder had it")
     p.set_defaults(func=cmd_decode)
 
     p = sub.add_parser("codebook", help="train VQ codebooks for svq and tvq (000 7.9)",
@@ -248,6 +275,23 @@ def add_commands(sub, common) -> None:
     p.add_argument("--rate", type=float, default=30.0, help="resample clips to this frame rate (default 30 Hz)")
     common(p)
     p.set_defaults(func=cmd_codebook)
+
+    p = sub.add_parser("primitives", help="train primitive databases for the primitives codec (001 5.3.3)",
+                       description="Cluster the quaternion segments of every joint of the clips into primitives "
+                                   "(k-means++, K from 5 until the clustering error is below --threshold or K "
+                                   "reaches --max-clusters) and write the database encoder and decoder share "
+                                   "(--db FILE). Joints go by name; clips must share a frame rate.")
+    p.add_argument("action", choices=("train", "info"), help="train: make a database; info: describe one")
+    p.add_argument("inputs", nargs="+", metavar="IN", help="train: .bvh or .amc clips; info: the database file")
+    p.add_argument("-o", "--output", help="database file to write (train), e.g. db.mocdb")
+    p.add_argument("--max-segment", type=int, default=32, help="S_M used to cut the training clips (default 32)")
+    p.add_argument("--threshold", type=float, default=primdb.ERROR_THRESHOLD,
+                   help=f"clustering error (rad) that stops K growing (default {primdb.ERROR_THRESHOLD})")
+    p.add_argument("--max-clusters", type=int, default=primdb.MAX_CLUSTERS,
+                   help=f"largest K per joint (default {primdb.MAX_CLUSTERS})")
+    p.add_argument("--seed", type=int, default=0, help="seed of the k-means++ draws (default 0)")
+    common(p)
+    p.set_defaults(func=cmd_primitives)
 
     p = sub.add_parser("eval", help="encode and decode in memory and report ratio, rate, error and speed",
                        description="Ratio vs 32-bit floats, bits per second, PSNR, VPSNR, mean/max joint "

@@ -196,6 +196,38 @@ def quat_to_euler(q: np.ndarray, order: str, degrees: bool = True) -> np.ndarray
     return np.rad2deg(angles) if degrees else angles
 
 
+def quat_to_partial_euler(q: np.ndarray, order: str, degrees: bool = True) -> np.ndarray:
+    """Unit quaternions to the angles of a joint with one, two or three rotation axes.
+
+    Three axes: :func:`quat_to_euler`. Two axes ``"AB"``: the Tait-Bryan order ``"ABC"`` with the
+    missing axis last, its angle dropped (it is zero for a rotation the joint can make). One axis:
+    the twist about it, ``2 atan2(q_axis, w)``. For rotations the joint cannot make exactly (a
+    coded approximation), the dropped part is the error.
+    """
+    order = _check_order(order, allow_partial=True)
+    if len(order) == 3:
+        return quat_to_euler(q, order, degrees)
+    if len(order) == 2:
+        missing = next(c for c in "XYZ" if c not in order)
+        return quat_to_euler(q, order + missing, degrees)[..., :2]
+    q = np.asarray(q, dtype=np.float64)
+    angle = 2.0 * np.arctan2(q[..., 1 + _AXIS[order]], q[..., 0])
+    angle = (angle + np.pi) % (2 * np.pi) - np.pi
+    return (np.rad2deg(angle) if degrees else angle)[..., None]
+
+
+def quat_continuous(q: np.ndarray, axis: int = 0) -> np.ndarray:
+    """``q`` with signs flipped along ``axis`` (time) so each quaternion lies in the hemisphere of
+    the one before: the same rotations, with no jump between ``q`` and ``-q``."""
+    q = np.moveaxis(np.asarray(q, dtype=np.float64), axis, 0)
+    if len(q) < 2:
+        return np.moveaxis(q.copy(), 0, axis)
+    flips = np.sum(q[1:] * q[:-1], axis=-1) < 0
+    sign = np.ones(q.shape[:-1])
+    sign[1:] = np.where(np.cumsum(flips, axis=0) % 2 == 1, -1.0, 1.0)
+    return np.moveaxis(q * sign[..., None], 0, axis)
+
+
 def matrix_to_euler(m: np.ndarray, order: str, degrees: bool = True) -> np.ndarray:
     """Rotation matrices to intrinsic Euler angles ``(..., 3)``."""
     return quat_to_euler(matrix_to_quat(m), order, degrees)

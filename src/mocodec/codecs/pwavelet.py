@@ -36,6 +36,7 @@ from mocodec.codecs.base import Codec, Knob, QualityKnob
 from mocodec.codecs.registry import register
 from mocodec.coding import wavelets
 from mocodec.coding.parts import join_parts, split_parts
+from mocodec.coding.quantizers import step_exponents, steps
 from mocodec.coding.rangecoder import decode_ints, encode_ints
 from mocodec.coding.rle import ZeroRuns, decode_zero_runs, encode_zero_runs
 from mocodec.errors import CorruptStreamError
@@ -43,9 +44,6 @@ from mocodec.skeleton import Skeleton
 
 WAVELET = "d4"
 MODE = "symmetric"                # mirrored ends: no jump where a slice ends elsewhere than it began
-NO_STEP = -(1 << 20)              # step exponent of a channel with nothing kept
-FINEST_STEP = -40                 # 2^(-40/4) = 0.001 degree (or unit): channels that vary less
-                                  # than this (float noise in unused channels) quantise to zero
 
 
 def channel_bone_lengths(skeleton: Skeleton) -> np.ndarray:
@@ -95,18 +93,6 @@ def keep_largest(coeffs: np.ndarray, counts: np.ndarray, always: int = 0) -> np.
     rank = np.empty_like(order)
     np.put_along_axis(rank, order, np.arange(coeffs.shape[1])[None, :].repeat(len(coeffs), 0), axis=1)
     return np.where(rank < counts[:, None], coeffs, 0.0)
-
-
-def step_exponents(kept: np.ndarray, qp: int) -> np.ndarray:
-    """Quarter-octave exponent e of each row's step 2^(e/4) >= max|kept| / (2^(QP-1) - 1)."""
-    peak = np.abs(kept).max(axis=1)
-    with np.errstate(divide="ignore"):
-        e = np.ceil(4 * np.log2(peak / (2 ** (qp - 1) - 1)))
-    return np.where(peak > 0, np.maximum(e, FINEST_STEP), NO_STEP).astype(np.int64)
-
-
-def steps(exponents: np.ndarray) -> np.ndarray:
-    return np.where(exponents == NO_STEP, 0.0, 2.0 ** (exponents / 4.0))
 
 
 @register

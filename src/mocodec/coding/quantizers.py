@@ -22,6 +22,10 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+NO_STEP = -(1 << 20)              # step exponent of a row with nothing to quantise
+FINEST_STEP = -40                 # 2^(-40/4) = 0.001 degree (or unit): rows that vary less
+                                  # than this (float noise in unused channels) quantise to zero
+
 JAYANT = {
     4: (0.8, 1.6),
     8: (0.9, 0.9, 1.25, 1.75),
@@ -186,3 +190,15 @@ class AdaptiveQuantizer:
             return np.zeros(0)
         return _adaptive(np.zeros(0), self.levels, self.step, self.step_min, self.step_max,
                          multipliers(self.levels), codes)[1]
+
+
+def step_exponents(kept: np.ndarray, qp: int) -> np.ndarray:
+    """Quarter-octave exponent e of each row's step 2^(e/4) >= max|kept| / (2^(QP-1) - 1)."""
+    peak = np.abs(kept).max(axis=1)
+    with np.errstate(divide="ignore"):
+        e = np.ceil(4 * np.log2(peak / (2 ** (qp - 1) - 1)))
+    return np.where(peak > 0, np.maximum(e, FINEST_STEP), NO_STEP).astype(np.int64)
+
+
+def steps(exponents: np.ndarray) -> np.ndarray:
+    return np.where(exponents == NO_STEP, 0.0, 2.0 ** (exponents / 4.0))

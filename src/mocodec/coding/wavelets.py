@@ -12,6 +12,7 @@ out coarsest first: [approximation, details of the coarsest level, ..., finest d
 from __future__ import annotations
 
 import warnings
+from functools import lru_cache
 
 import numpy as np
 import pywt
@@ -54,3 +55,15 @@ def inverse(coeffs: np.ndarray, frames: int, wavelet: str, levels: int, mode: st
     bands = np.split(coeffs, bounds, axis=-1)
     out = pywt.waverec(bands, WAVELETS.get(wavelet, wavelet), mode=mode, axis=-1)
     return out[..., :frames]
+
+
+@lru_cache(maxsize=64)
+def matrices(frames: int, wavelet: str, levels: int, mode: str = "periodization") -> tuple[np.ndarray, np.ndarray]:
+    """(analysis ``(m, frames)``, synthesis ``(frames, m)``) matrices of the transform, so that
+    coefficients are ``A @ x`` and the signal ``S @ c``: short segments of many channels
+    transform as one matrix product."""
+    analysis = forward(np.eye(frames), wavelet, levels, mode).T
+    synthesis = inverse(np.eye(analysis.shape[0]), frames, wavelet, levels, mode).T
+    analysis.setflags(write=False)
+    synthesis.setflags(write=False)
+    return analysis, synthesis

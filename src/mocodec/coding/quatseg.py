@@ -1,0 +1,202 @@
+"""Joint orientations as quaternion segments: the representation and segmentation of the
+motion-primitive coders (001 §4.2.1, §5.3.1, §5.3.2).
+
+A motion is its translation channels (the root position) plus one unit quaternion per joint
+with rotation channels, from its Euler angles (one, two or three axes; the ASF ``axis``
+pre-rotation is not part of it, it is fixed). Each joint's signal is cut into segments at
+zero crossings of its angular acceleration: (5.1) gives the angular velocity
+``w(i) = 2 log(q(i-1)^-1 q(i)) / h``, (5.2) the acceleration ``a(i) = (w(i) - w(i-1)) / h``.
+The acceleration is a vector; "zero crossing" is read as a sign change of its component
+along the velocity, ``a . w``, which is the derivative of the squared speed: segments end
+where the joint's speed peaks or bottoms out (the beats of a rhythmic motion). A segment ends
+at the first crossing at least :data:`MIN_SEGMENT` frames after its start, or after at most
+``max_len`` frames (S_M). Beyond the thesis, a segment also ends before a jump, a frame
+that turns a joint faster than :data:`JUMP_SPEED` (the T-pose that starts many BVH clips):
+a 16-frame resampling cannot hold a step, and would smear it over the frames after it. Every segment is resampled by slerp to :data:`NORMAL_FRAMES`
+frames (its first and last frame kept exactly) for comparison with primitives, and back.
+
+Whether frame ``e`` ends a segment depends on frames up to ``e`` only, so a segment is known
+``max_len`` frames after its start at the latest: the coding delay of a streaming coder.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numba
+import numpy as np
+
+from mocodec import rotations
+from mocodec.skeleton import Skeleton
+
+NORMAL_FRAMES = 16
+MIN_SEGMENT = 15
+LOWER_BODY = ("left_leg", "right_leg")
+JUMP_SPEED = 30.0               # rad/s: about four times a fast kick's peak joint speed
+
+
+@dataclass(frozen=True, eq=False)
+class Layout:
+    """Which channels of a skeleton are which joint's rotation, and which are translations."""
+
+    joints: np.ndarray              # (R,) skeleton index of every joint with rotation channels
+    names: tuple[str, ...]
+    orders: tuple[str, ...]
+    columns: tuple[np.ndarray, ...]  # channel columns of each joint's angles, in rotation order
+    translation: np.ndarray         # translation channel columns
+    lower: np.ndarray               # (R,) bool: the joint is the root or in a leg (threshold t_L)
+
+    @property
+    def count(self) -> int:
+        return len(self.joints)
+
+
+@lru_cache(maxsize=32)
+def layout(skeleton: Skeleton) -> Layout:
+    joints, columns = [], []
+    for j, joint in enumerate(skeleton.joints):
+        if joint.rotation_order:
+            joints.append(j)
+            columns.append(skeleton.channel_offsets[j] + np.array(joint.rotation_channel_indices(), dtype=np.int64))
+    joints = np.array(joints, dtype=np.int64)
+    parts = skeleton.body_parts
+    lower = np.array([j == 0 or parts[j] in LOWER_BODY for j in joints], dtype=bool)
+    return Layout(joints, tuple(skeleton.joints[j].name for j in joints),
+                  tuple(skeleton.joints[j].rotation_order for j in joints), tuple(columns),
+                  np.flatnonzero(~skeleton.rotation_mask), lower)
+
+
+def joint_quaternions(lay: Layout, channels: np.ndarray) -> np.ndarray:
+    """``(frames, R, 4)`` unit quaternions of every joint, each continuous in time (no flips
+    between ``q`` and ``-q``)."""
+    channels = np.atleast_2d(channels)
+    q = np.empty((len(channels), lay.count, 4))
+    for r, (order, cols) in enumerate(zip(lay.orders, lay.columns)):
+        q[:, r] = rotations.euler_to_quat(channels[:, cols], order)
+    return rotations.quat_continuous(q, axis=0)
+
+
+def quaternions_to_channels(lay: Layout, q: np.ndarray, translation: np.ndarray, num_channels: int) -> np.ndarray:
+    """Channels ``(frames, num_channels)`` from joint quaternions and translation values; the
+    angles are each rotation's principal Euler angles (the caller makes them continuous)."""
+    out = np.zeros((len(q), num_channels))
+    out[:, lay.translation] = translation
+    for r, (order, cols) in enumerate(zip(lay.orders, lay.columns)):
+        out[:, cols] = rotations.quat_to_partial_euler(q[:, r], order)
+    return out
+
+
+def speed_change(q: np.ndarray, fps: float) -> np.ndarray:
+    """``a(i) . w(i)`` per frame and joint ``(frames, R)`` from (5.1) and (5.2), zero for the
+    first two frames, where the acceleration is not defined; ``inf`` where the joint jumps
+    (turns faster than :data:`JUMP_SPEED` since the frame before)."""
+    out = np.zeros(q.shape[:2])
+    if len(q) < 2:
+        return out
+    w = 2.0 * fps * rotations.quat_log(rotations.quat_multiply(rotations.quat_conjugate(q[:-1]), q[1:]))   # (5.1)
+    a = np.diff(w, axis=0) * fps                                                                             # (5.2)
+    out[2:] = np.sum(a * w[1:], axis=-1)
+    out[1:][np.linalg.norm(w, axis=-1) > JUMP_SPEED] = np.inf
+    return out
+
+
+@numba.njit(cache=True)
+def _chop(g, starts, available, max_len, final, ends_out, joint_out):
+    """Segments of every joint from its open start, as far as ``available`` frames decide:
+    (joint, end) pairs written to the outputs; returns their count and updates ``starts``."""
+    count = 0
+    for r in range(g.shape[1]):
+        s = starts[r]
+        while s < available:
+            end = -1
+            limit = min(s + max_len, available - 1)
+            for i in range(s + 1, limit + 1):
+                if g[i, r] == np.inf or (i >= s + 15 and g[i, r] * g[i - 1, r] < 0.0):
+                    end = i
+                    break
+            if end < 0:
+                if s + max_len <= available - 1:
+                    end = s + max_len
+                elif final:
+                    end = available
+                else:
+                    break
+            ends_out[count] = end
+            joint_out[count] = r
+            count += 1
+            s = end
+        starts[r] = s
+    return count
+
+
+def chop(g: np.ndarray, starts: np.ndarray, max_len: int, final: bool) -> list[tuple[int, int, int]]:
+    """New segments ``(joint, start, end)`` of speed-change signal ``g (frames, R)`` (absolute
+    frame indices), each joint continuing from ``starts[r]`` (updated in place). Without
+    ``final`` a segment is cut only once the frames decide it; with it, the rest of each
+    joint's frames form its last segments."""
+    if max_len < MIN_SEGMENT:
+        raise ValueError(f"segments of at most {max_len} frames cannot be {MIN_SEGMENT} long")
+    room = g.shape[1] * (len(g) + 1)
+    ends, joints = np.empty(room, dtype=np.int64), np.empty(room, dtype=np.int64)
+    before = starts.copy()
+    n = _chop(np.ascontiguousarray(g, dtype=np.float64), starts, len(g), int(max_len), bool(final), ends, joints)
+    out, last = [], before.copy()
+    for r, e in zip(joints[:n], ends[:n]):
+        out.append((int(r), int(last[r]), int(e)))
+        last[r] = e
+    return out
+
+
+def normal_positions(length: int) -> np.ndarray:
+    """Where the :data:`NORMAL_FRAMES` samples of a ``length``-frame segment fall, in frames."""
+    return np.linspace(0.0, max(length - 1, 0), NORMAL_FRAMES)
+
+
+def _slerp_at(q: np.ndarray, index0: np.ndarray, frac: np.ndarray, last: np.ndarray) -> np.ndarray:
+    return rotations.quat_slerp(q[index0], q[np.minimum(index0 + 1, last)], frac)
+
+
+def normalise(q: np.ndarray, segments: np.ndarray) -> np.ndarray:
+    """``(n, 16, 4)`` time-normalised segments of joint signals ``q (frames, R, 4)`` for
+    ``segments (n, 3)`` rows (joint, start, end), by slerp between neighbouring frames."""
+    r, s, e = segments.T
+    pos = s[:, None] + np.linspace(0.0, 1.0, NORMAL_FRAMES)[None, :] * (e - s - 1)[:, None]
+    i0 = np.floor(pos).astype(np.int64)
+    flat = q.reshape(-1, 4)
+    width = q.shape[1]
+    base = i0 * width + r[:, None]
+    last = (e - 1)[:, None] * width + r[:, None]
+    nxt = np.minimum(base + width, last)
+    return rotations.quat_slerp(flat[base], flat[nxt], pos - i0)
+
+
+def denormalise(normal: np.ndarray, lengths: np.ndarray) -> list[np.ndarray]:
+    """Each ``(16, 4)`` segment back to its length in frames (slerp), as ``(length, 4)`` arrays."""
+    total = int(lengths.sum())
+    seg = np.repeat(np.arange(len(lengths)), lengths)
+    offset = np.arange(total) - np.repeat(np.cumsum(lengths) - lengths, lengths)
+    scale = (NORMAL_FRAMES - 1) / np.maximum(lengths - 1, 1)
+    u = offset * scale[seg]
+    i0 = np.minimum(np.floor(u).astype(np.int64), NORMAL_FRAMES - 2)
+    flat = normal.reshape(-1, 4)
+    base = seg * NORMAL_FRAMES + i0
+    q = rotations.quat_slerp(flat[base], flat[base + 1], u - i0)
+    return np.split(q, np.cumsum(lengths)[:-1])
+
+
+def min_abs_dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The smallest ``|a(i) . b(i)|`` over the frames of segments (broadcast over leading axes):
+    the segment distance (5.4) is ``arccos(2 m^2 - 1)`` of it, monotone, so comparing this is
+    comparing distances."""
+    return np.abs(np.sum(a * b, axis=-1)).min(axis=-1)
+
+
+def distance_of_dot(m: np.ndarray) -> np.ndarray:
+    """Distance (5.3) for a quaternion dot product ``m``."""
+    return np.arccos(np.clip(2.0 * m * m - 1.0, -1.0, 1.0))
+
+
+def segment_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(5.4): the largest distance (5.3) between corresponding frames of two segments."""
+    return distance_of_dot(min_abs_dot(a, b))

@@ -210,7 +210,7 @@ class _Encoder(StreamEncoder, _Shared):
         w = self.window
         lengths, exps, ints = [], [], []
         first = b""
-        if self.before is None:     # the first packet: the database's fingerprint, the first translation
+        if self.before is None and len(self.t):   # the first frame: database fingerprint, translation
             first = struct.pack("<I", self.fingerprint) + self.t[0].astype("<f4").tobytes()
             self.before = np.frombuffer(first, "<f4", offset=4).astype(np.float64)
         while len(self.t) >= w or (final and len(self.t)):
@@ -239,7 +239,7 @@ class _Decoder(StreamDecoder, _Shared):
         p = split_parts(packet, _PARTS, where)
         counts, lengths, index, exps, runs, values, tail = (decode_ints(x) for x in p[:7])
         t_exps, t_runs, t_values, t_tail, t_lengths = (decode_ints(x) for x in p[8:])
-        self._start(p[7], where)
+        self._start(p[7], where, bool(counts.sum() or t_lengths.size))
         if counts.size != self.lay.count or counts.min(initial=0) < 0 or lengths.size != counts.sum():
             raise CorruptStreamError(f"{where}: segment counts do not match the skeleton")
         if index.size != lengths.size or exps.size != lengths.size or lengths.min(initial=1) < 1:
@@ -248,10 +248,12 @@ class _Decoder(StreamDecoder, _Shared):
         self._windows(t_lengths, t_exps, ZeroRuns(t_runs, t_values, int(t_tail[0])), where)
         return self._ready()
 
-    def _start(self, part: bytes, where: str) -> None:
-        if (self.before is None) != bool(part):
-            raise CorruptStreamError(f"{where}: the stream's start is {'missing' if part else 'repeated'}")
+    def _start(self, part: bytes, where: str, carries_frames: bool) -> None:
+        if part and self.before is not None:
+            raise CorruptStreamError(f"{where}: the stream's start is repeated")
         if not part:
+            if self.before is None and carries_frames:
+                raise CorruptStreamError(f"{where}: the stream's start is missing")
             return
         if len(part) != 4 + 4 * len(self.lay.translation):
             raise CorruptStreamError(f"{where}: a {len(part)}-byte stream start does not match the skeleton")

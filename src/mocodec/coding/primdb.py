@@ -196,8 +196,8 @@ class PrimitiveDB:
             offset, prims, errors, segments = head + size, {}, {}, {}
             for j in meta["joints"]:
                 n = int(j["count"]) * quatseg.NORMAL_FRAMES * 4
-                p = np.frombuffer(data, "<f4", n, offset).reshape(-1, quatseg.NORMAL_FRAMES, 4).astype(np.float64)
-                prims[str(j["name"])] = p / np.linalg.norm(p, axis=-1, keepdims=True)
+                prims[str(j["name"])] = np.frombuffer(data, "<f4", n, offset).reshape(
+                    -1, quatseg.NORMAL_FRAMES, 4).astype(np.float64)
                 errors[str(j["name"])] = float(j["error"])
                 segments[str(j["name"])] = int(j["segments"])
                 offset += 4 * n
@@ -257,6 +257,7 @@ def train(clips: list[Motion], max_segment: int = 32, seed: int = 0, threshold: 
         if len(segs) == 0:
             continue
         segs = segs[np.linspace(0, len(segs) - 1, min(len(segs), MAX_SEGMENTS)).astype(np.int64)]
-        prims[name], errors[name] = cluster(segs, np.random.default_rng([seed, r]), threshold, max_clusters)
+        centres, errors[name] = cluster(segs, np.random.default_rng([seed, r]), threshold, max_clusters)
+        prims[name] = centres.astype("<f4").astype(np.float64)      # as the file holds them
     return PrimitiveDB(prims, errors, {n: counts[n] for n in prims}, max_segment, seed, threshold, max_clusters,
                        float(fps), list(names or []))

@@ -2,7 +2,7 @@
 (CMU 135_08 tiled), and the first call's time in a fresh process, imports included: with the
 numba cache in place, and compiling every kernel from scratch. The VQ coders use codebooks
 trained beforehand on another clip (07_03), so LBG training is not timed; their first call
-trains on the clip. Run: `.venv/bin/python benchmarks/bench_codec_speed.py [--codecs ID ...]`."""
+trains on the clip. primitives uses a database trained on 07_03 as well. Run: `.venv/bin/python benchmarks/bench_codec_speed.py [--codecs ID ...]`."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ from common import DATA, best_of, tile  # noqa: E402
 
 from mocodec import load  # noqa: E402
 from mocodec.codecs import codec_ids, get_codec  # noqa: E402
-from mocodec.coding import vqbook  # noqa: E402
+from mocodec.coding import primdb, vqbook  # noqa: E402
 
 FRAMES = 10_000
 SETTINGS = {"pwavelet": {"alpha": 0.02}, "spiht": {"bits_per_second": 4000}}
@@ -46,6 +46,8 @@ def main() -> None:
         path = os.path.join(books, f"{cid}.mocvq")
         vqbook.train(kind, training, [32, 256]).save(path)
         SETTINGS[cid] = {"codebook": path}
+    primdb.train(training).save(os.path.join(books, "primitives.mocdb"))
+    SETTINGS["primitives"] = {"db": os.path.join(books, "primitives.mocdb")}
     motion = tile(clip, FRAMES)
     print(f"{FRAMES} frames x {motion.num_channels} channels; frames per second, best of 3")
     print(f"{'codec':<10}{'encode':>12}{'decode':>12}{'ratio':>8}{'first call: cached':>20}{'compiling':>11}")

@@ -88,7 +88,7 @@ def test_normalising_keeps_ends_and_linear_motion():
     segs = np.array([[0, 0, 23], [0, 23, 40]])
     normal = quatseg.normalise(q, segs)
     assert np.allclose(normal[0, 0], q[0, 0]) and np.allclose(normal[1, -1], q[39, 0])
-    back = np.concatenate(quatseg.denormalise(normal, segs[:, 2] - segs[:, 1]))
+    back = quatseg.denormalise(normal, segs[:, 2] - segs[:, 1])
     assert rotations.quat_distance(back, q[:, 0]).max() < 1e-9        # constant speed: slerp is exact
 
 
@@ -128,7 +128,7 @@ def test_residuals_bring_segments_within_the_bound():
     bound = np.full(30, 0.01)
     exps, q, recon = primresidual.fit(target, ref, bound, 10)
     assert np.all(quatseg.segment_distance(target, recon) <= bound)
-    assert np.allclose(primresidual.rebuild(ref, exps, q), recon)
+    assert np.allclose(rotations.quat_multiply(ref, primresidual.differences(exps, q)), recon)
     assert (q != 0).sum(axis=1).mean() < primresidual.COEFFS          # thresholding kept fewer than all
     same = primresidual.fit(ref, ref, bound, 10)
     assert np.all(same[0] == primresidual.NO_RESIDUAL) and not same[1].any()

@@ -35,6 +35,7 @@ import struct
 
 import numpy as np
 
+from mocodec import rotations
 from mocodec.codecs.base import Codec, Knob, QualityKnob, StreamDecoder, StreamEncoder, continuous_frames
 from mocodec.codecs.registry import register
 from mocodec.coding import primresidual, quatseg
@@ -275,18 +276,17 @@ class _Decoder(StreamDecoder, _Shared):
         cands = self.candidates
         if len(index) and (index.min() < 0 or index.max() >= cands.cand.shape[1]):
             raise CorruptStreamError(f"{where}: a candidate index is out of range")
-        decoded = np.zeros((len(joints), quatseg.NORMAL_FRAMES, 4))
+        decoded = primresidual.differences(exps, coeffs)
         for rows in _rounds(joints):
             r = joints[rows]
             if not cands.valid[r, index[rows]].all():
                 raise CorruptStreamError(f"{where}: a segment refers to a candidate not yet sent")
-            decoded[rows] = primresidual.rebuild(cands.cand[r, index[rows]], exps[rows], coeffs[rows])
+            decoded[rows] = rotations.quat_multiply(cands.cand[r, index[rows]], decoded[rows])       # (5.8)
             cands.update(r, decoded[rows])
-        pieces = quatseg.denormalise(decoded, lengths)
-        for r in range(self.lay.count):
-            mine = [pieces[k] for k in np.flatnonzero(joints == r)]
-            if mine:
-                self.pending[r] = np.concatenate([self.pending[r], *mine])
+        frames = quatseg.denormalise(decoded, lengths)           # joint-major, like the segments
+        bounds = np.concatenate(([0], np.cumsum(np.bincount(joints, lengths, self.lay.count)))).astype(np.int64)
+        for r in np.flatnonzero(counts):
+            self.pending[r] = np.concatenate((self.pending[r], frames[bounds[r]:bounds[r + 1]]))
 
     def _windows(self, lengths, exps, runs, where) -> None:
         channels = len(self.lay.translation)

@@ -42,30 +42,6 @@ MAX_SEGMENTS = 3000          # training segments per joint, evenly taken
 MAX_ITERATIONS = 30
 
 
-@numba.njit(inline="always")
-def _slerp_into(out, a, b, t):
-    """``out = slerp(a, b, t)`` for one quaternion, along the shorter arc."""
-    dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]
-    sign = 1.0
-    if dot < 0.0:
-        dot, sign = -dot, -1.0
-    if dot > 1.0:
-        dot = 1.0
-    theta = np.arccos(dot)
-    s = np.sin(theta)
-    if s < 1e-9:
-        w0, w1 = 1.0 - t, t
-    else:
-        w0, w1 = np.sin((1.0 - t) * theta) / s, np.sin(t * theta) / s
-    norm = 0.0
-    for c in range(4):
-        out[c] = w0 * a[c] + w1 * sign * b[c]
-        norm += out[c] * out[c]
-    norm = np.sqrt(norm)
-    for c in range(4):
-        out[c] /= norm
-
-
 @numba.njit(cache=True)
 def _assign(segs, centres, labels, best):
     """Nearest centre (5.4) of every segment; ``best`` = its smallest frame |dot| there."""
@@ -97,7 +73,7 @@ def _centres(segs, labels, centres):
             centres[k] = segs[i]
         else:
             for f in range(segs.shape[1]):
-                _slerp_into(tmp, centres[k, f], segs[i, f], 1.0 / (count[k] + 1))
+                quatseg.slerp_into(tmp, centres[k, f], segs[i, f], 1.0 / (count[k] + 1))
                 centres[k, f] = tmp
         count[k] += 1
 

@@ -44,11 +44,16 @@ def _logs(target: np.ndarray, ref: np.ndarray) -> np.ndarray:
     return rotations.quat_log(d)
 
 
-def _rebuild(ref: np.ndarray, coeffs: np.ndarray) -> np.ndarray:
-    """``ref * exp(S c)`` (5.8) for coefficients ``(n, 48)``."""
+def _differences(coeffs: np.ndarray) -> np.ndarray:
+    """The differences ``exp(S c)`` (5.7) that coefficients ``(n, 48)`` give, ``(n, 16, 4)``."""
     _, synthesis = _segment_matrices()
     v = coeffs.reshape(len(coeffs), 3, -1) @ synthesis.T                                      # (n, 3, 16)
-    return rotations.quat_multiply(ref, rotations.quat_exp(v.transpose(0, 2, 1)))
+    return rotations.quat_exp(v.transpose(0, 2, 1))
+
+
+def _rebuild(ref: np.ndarray, coeffs: np.ndarray) -> np.ndarray:
+    """``ref * exp(S c)`` (5.8) for coefficients ``(n, 48)``."""
+    return rotations.quat_multiply(ref, _differences(coeffs))
 
 
 def fit(target: np.ndarray, ref: np.ndarray, bound: np.ndarray, bits: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -93,12 +98,15 @@ def fit(target: np.ndarray, ref: np.ndarray, bound: np.ndarray, bits: int) -> tu
     return exps, q, recon
 
 
-def rebuild(ref: np.ndarray, exps: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """The decoder's side of :func:`fit`: segments from references, exponents, coefficients."""
-    out = ref.copy()
+def differences(exps: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """The decoder's side of :func:`fit`: per segment the rotations ``(n, 16, 4)`` that take
+    its reference to the decoded segment (5.8), the identity where no residual was sent; they
+    do not depend on the reference, so a decoder finds them all at once."""
+    out = np.zeros((len(exps), quatseg.NORMAL_FRAMES, 4))
+    out[..., 0] = 1.0
     has = exps != NO_RESIDUAL
     if has.any():
-        out[has] = _rebuild(ref[has], q[has] * steps(exps[has])[:, None])
+        out[has] = _differences(q[has] * steps(exps[has])[:, None])
     return out
 
 

@@ -171,18 +171,48 @@ def normalise(q: np.ndarray, segments: np.ndarray) -> np.ndarray:
     return rotations.quat_slerp(flat[base], flat[nxt], pos - i0)
 
 
-def denormalise(normal: np.ndarray, lengths: np.ndarray) -> list[np.ndarray]:
-    """Each ``(16, 4)`` segment back to its length in frames (slerp), as ``(length, 4)`` arrays."""
-    total = int(lengths.sum())
-    seg = np.repeat(np.arange(len(lengths)), lengths)
-    offset = np.arange(total) - np.repeat(np.cumsum(lengths) - lengths, lengths)
-    scale = (NORMAL_FRAMES - 1) / np.maximum(lengths - 1, 1)
-    u = offset * scale[seg]
-    i0 = np.minimum(np.floor(u).astype(np.int64), NORMAL_FRAMES - 2)
-    flat = normal.reshape(-1, 4)
-    base = seg * NORMAL_FRAMES + i0
-    q = rotations.quat_slerp(flat[base], flat[base + 1], u - i0)
-    return np.split(q, np.cumsum(lengths)[:-1])
+@numba.njit(inline="always")
+def slerp_into(out, a, b, t):
+    """``out = slerp(a, b, t)`` for one quaternion, along the shorter arc."""
+    dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]
+    sign = 1.0
+    if dot < 0.0:
+        dot, sign = -dot, -1.0
+    if dot > 1.0:
+        dot = 1.0
+    theta = np.arccos(dot)
+    s = np.sin(theta)
+    if s < 1e-9:
+        w0, w1 = 1.0 - t, t
+    else:
+        w0, w1 = np.sin((1.0 - t) * theta) / s, np.sin(t * theta) / s
+    norm = 0.0
+    for c in range(4):
+        out[c] = w0 * a[c] + w1 * sign * b[c]
+        norm += out[c] * out[c]
+    norm = np.sqrt(norm)
+    for c in range(4):
+        out[c] /= norm
+
+
+@numba.njit(cache=True)
+def _denormalise(normal, lengths, out):
+    f = 0
+    for k in range(len(lengths)):
+        scale = (NORMAL_FRAMES - 1) / max(lengths[k] - 1, 1)
+        for i in range(lengths[k]):
+            u = i * scale
+            i0 = min(int(np.floor(u)), NORMAL_FRAMES - 2)
+            slerp_into(out[f], normal[k, i0], normal[k, i0 + 1], u - i0)
+            f += 1
+
+
+def denormalise(normal: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """Each ``(16, 4)`` segment back to its length in frames (slerp), one after the other:
+    ``(sum(lengths), 4)``."""
+    out = np.empty((int(lengths.sum()), 4))
+    _denormalise(np.ascontiguousarray(normal, dtype=np.float64), lengths.astype(np.int64), out)
+    return out
 
 
 def min_abs_dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:

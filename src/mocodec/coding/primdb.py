@@ -19,16 +19,13 @@ fingerprint that a payload coded with it carries. Training is deterministic for 
 
 from __future__ import annotations
 
-import json
-import struct
-import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numba
 import numpy as np
 
-from mocodec.coding import quatseg
+from mocodec.coding import modelfile, quatseg
 from mocodec.errors import CodecError
 from mocodec.formats._io import atomic_write_bytes
 from mocodec.motion import Motion
@@ -139,14 +136,12 @@ class PrimitiveDB:
                 "trained_on": self.trained_on,
                 "joints": [{"name": n, "count": len(self.primitives[n]), "error": self.errors[n],
                             "segments": self.segments[n]} for n in names]}
-        text = json.dumps(meta, sort_keys=True).encode()
-        body = MAGIC + struct.pack("<BI", VERSION, len(text)) + text + b"".join(
-            np.asarray(self.primitives[n], dtype="<f4").tobytes() for n in names)
-        return body + struct.pack("<I", zlib.crc32(body))
+        return modelfile.pack(MAGIC, VERSION, meta, b"".join(
+            np.asarray(self.primitives[n], dtype="<f4").tobytes() for n in names))
 
     @property
     def fingerprint(self) -> int:
-        return zlib.crc32(self.to_bytes()[:-4])
+        return modelfile.fingerprint(self.to_bytes())
 
     @property
     def count(self) -> int:
@@ -157,19 +152,11 @@ class PrimitiveDB:
 
     @classmethod
     def from_bytes(cls, data: bytes, where: str) -> "PrimitiveDB":
-        head = len(MAGIC) + 5
-        if len(data) < head + 4 or not data.startswith(MAGIC):
-            raise CodecError(f"{where}: not a mocodec primitive database (expected {MAGIC!r} at byte 0)")
-        version, size = struct.unpack_from("<BI", data, len(MAGIC))
-        if version != VERSION:
-            raise CodecError(f"{where}: primitive database version {version}, this mocodec reads version {VERSION}")
-        if zlib.crc32(data[:-4]) != struct.unpack_from("<I", data, len(data) - 4)[0]:
-            raise CodecError(f"{where}: checksum mismatch (the file is damaged or truncated)")
+        meta, offset = modelfile.unpack(data, MAGIC, VERSION, "primitive database", where)
         try:
-            meta = json.loads(data[head:head + size])
             if meta["frames"] != quatseg.NORMAL_FRAMES:
                 raise ValueError(f"primitives of {meta['frames']} frames, expected {quatseg.NORMAL_FRAMES}")
-            offset, prims, errors, segments = head + size, {}, {}, {}
+            prims, errors, segments = {}, {}, {}
             for j in meta["joints"]:
                 n = int(j["count"]) * quatseg.NORMAL_FRAMES * 4
                 prims[str(j["name"])] = np.frombuffer(data, "<f4", n, offset).reshape(
@@ -186,11 +173,7 @@ class PrimitiveDB:
 
     @classmethod
     def load(cls, path: str | Path) -> "PrimitiveDB":
-        try:
-            data = Path(path).read_bytes()
-        except OSError as e:
-            raise CodecError(f"primitive database {path}: {e.strerror}") from None
-        return cls.from_bytes(data, f"primitive database {path}")
+        return cls.from_bytes(modelfile.read(path, "primitive database"), f"primitive database {path}")
 
     def for_layout(self, lay: quatseg.Layout, where: str) -> list[np.ndarray]:
         """Each joint's primitives ``(K, 16, 4)`` (none for joints the database lacks); an error

@@ -18,15 +18,13 @@ coded with it carries.
 
 from __future__ import annotations
 
-import json
 import struct
-import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from mocodec.coding import vq
+from mocodec.coding import modelfile, vq
 from mocodec.coding.parts import join_parts, split_parts
 from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.formats._io import atomic_write_bytes
@@ -90,33 +88,23 @@ class Codebook:
         meta = {"kind": self.kind, "predictive": self.predictive, "length": self.length, "fps": self.fps,
                 "sizes": sizes, "groups": [{"name": n, "channels": c} for n, c in self.groups],
                 "entries": {str(s): [len(b) for b in self.books[s]] for s in sizes}, "trained_on": self.trained_on}
-        text = json.dumps(meta, sort_keys=True).encode()
-        body = MAGIC + struct.pack("<BI", VERSION, len(text)) + text + b"".join(
-            np.asarray(b, dtype="<f4").tobytes() for s in sizes for b in self.books[s])
-        return body + struct.pack("<I", zlib.crc32(body))
+        return modelfile.pack(MAGIC, VERSION, meta, b"".join(
+            np.asarray(b, dtype="<f4").tobytes() for s in sizes for b in self.books[s]))
 
     @property
     def fingerprint(self) -> int:
-        return zlib.crc32(self.to_bytes()[:-4])
+        return modelfile.fingerprint(self.to_bytes())
 
     def save(self, path: str | Path) -> None:
         atomic_write_bytes(path, self.to_bytes())
 
     @classmethod
     def from_bytes(cls, data: bytes, where: str) -> "Codebook":
-        head = len(MAGIC) + 5
-        if len(data) < head + 4 or not data.startswith(MAGIC):
-            raise CodecError(f"{where}: not a mocodec VQ codebook (expected {MAGIC!r} at byte 0)")
-        version, size = struct.unpack_from("<BI", data, len(MAGIC))
-        if version != VERSION:
-            raise CodecError(f"{where}: codebook version {version}, this mocodec reads version {VERSION}")
-        if zlib.crc32(data[:-4]) != struct.unpack_from("<I", data, len(data) - 4)[0]:
-            raise CodecError(f"{where}: checksum mismatch (the file is damaged or truncated)")
+        meta, offset = modelfile.unpack(data, MAGIC, VERSION, "VQ codebook", where)
         try:
-            meta = json.loads(data[head:head + size])
             groups = [(g["name"], list(g["channels"])) for g in meta["groups"]]
             dims = [meta["length"]] if meta["kind"] == "temporal" else [len(c) for _, c in groups]
-            books, offset = {}, head + size
+            books = {}
             for s in meta["sizes"]:
                 books[int(s)] = []
                 for entries, dim in zip(meta["entries"][str(s)], dims):
@@ -132,11 +120,7 @@ class Codebook:
 
     @classmethod
     def load(cls, path: str | Path) -> "Codebook":
-        try:
-            data = Path(path).read_bytes()
-        except OSError as e:
-            raise CodecError(f"codebook {path}: {e.strerror}") from None
-        return cls.from_bytes(data, f"codebook {path}")
+        return cls.from_bytes(modelfile.read(path, "codebook"), f"codebook {path}")
 
     def book(self, size: int) -> list[np.ndarray]:
         if size not in self.books:

@@ -139,22 +139,13 @@ def chop(g: np.ndarray, starts: np.ndarray, max_len: int, final: bool) -> list[t
         raise ValueError(f"segments of at most {max_len} frames cannot be {MIN_SEGMENT} long")
     room = g.shape[1] * (len(g) + 1)
     ends, joints = np.empty(room, dtype=np.int64), np.empty(room, dtype=np.int64)
-    before = starts.copy()
+    last = starts.copy()
     n = _chop(np.ascontiguousarray(g, dtype=np.float64), starts, len(g), int(max_len), bool(final), ends, joints)
-    out, last = [], before.copy()
+    out = []
     for r, e in zip(joints[:n], ends[:n]):
         out.append((int(r), int(last[r]), int(e)))
         last[r] = e
     return out
-
-
-def normal_positions(length: int) -> np.ndarray:
-    """Where the :data:`NORMAL_FRAMES` samples of a ``length``-frame segment fall, in frames."""
-    return np.linspace(0.0, max(length - 1, 0), NORMAL_FRAMES)
-
-
-def _slerp_at(q: np.ndarray, index0: np.ndarray, frac: np.ndarray, last: np.ndarray) -> np.ndarray:
-    return rotations.quat_slerp(q[index0], q[np.minimum(index0 + 1, last)], frac)
 
 
 def normalise(q: np.ndarray, segments: np.ndarray) -> np.ndarray:

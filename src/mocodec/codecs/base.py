@@ -80,14 +80,22 @@ class StreamEncoder:
         return []
 
 
-def continuous_frames(codec_id: str, skeleton: Skeleton, fps: float, frames: np.ndarray,
-                      previous: np.ndarray | None) -> np.ndarray:
-    """Pushed ``frames`` checked and made continuous (:meth:`Motion.continuous`) carrying on
-    from ``previous``, the last continuous frame of the earlier pushes (None at the start):
-    what stream encoders of predictive and transform coders work on."""
+def checked_frames(codec_id: str, skeleton: Skeleton, frames: np.ndarray) -> np.ndarray:
+    """Pushed ``frames`` as a float64 ``(n, channels)`` array; CodecError unless they fit the
+    skeleton and are finite."""
     frames = np.atleast_2d(np.asarray(frames, dtype=np.float64))
     if frames.shape[1] != skeleton.num_channels or not np.isfinite(frames).all():
         raise CodecError(f"{codec_id} stream: frames must be finite (n, {skeleton.num_channels}) arrays")
+    return frames
+
+
+def continuous_frames(codec_id: str, skeleton: Skeleton, fps: float, frames: np.ndarray,
+                      previous: np.ndarray | None) -> np.ndarray:
+    """Pushed ``frames`` checked (:func:`checked_frames`) and made continuous
+    (:meth:`Motion.continuous`) carrying on from ``previous``, the last continuous frame of the
+    earlier pushes (None at the start): what stream encoders of predictive and transform
+    coders work on."""
+    frames = checked_frames(codec_id, skeleton, frames)
     if not len(frames):
         return frames
     head = frames if previous is None else np.vstack((previous, frames))

@@ -36,7 +36,8 @@ import struct
 import numpy as np
 
 from mocodec import rotations
-from mocodec.codecs.base import Codec, Knob, QualityKnob, StreamDecoder, StreamEncoder, continuous_frames
+from mocodec.codecs.base import (Codec, Knob, QualityKnob, StreamDecoder, StreamEncoder, checked_frames,
+                                 continuous_frames)
 from mocodec.codecs.registry import register
 from mocodec.coding import primresidual, quatseg
 from mocodec.coding.parts import join_parts, split_parts
@@ -160,9 +161,7 @@ class _Encoder(StreamEncoder, _Shared):
         self.starts = np.zeros(self.lay.count, dtype=np.int64)   # open segment start, absolute
 
     def append(self, frames: np.ndarray) -> None:
-        frames = np.atleast_2d(np.asarray(frames, dtype=np.float64))
-        if frames.shape[1] != self.skeleton.num_channels or not np.isfinite(frames).all():
-            raise CodecError(f"primitives stream: frames must be finite (n, {self.skeleton.num_channels}) arrays")
+        frames = checked_frames(PrimitivesCodec.id, self.skeleton, frames)
         q = quatseg.joint_quaternions(self.lay, frames)
         if len(self.q):     # carry on in the hemisphere of the last frame
             q *= np.where(np.sum(q[:1] * self.q[-1:], axis=-1, keepdims=True) < 0, -1.0, 1.0)

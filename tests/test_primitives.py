@@ -164,22 +164,54 @@ def test_history_candidates_help_a_repetitive_motion(walk_amc, martial_db):
     assert len(ours) < len(thesis) and len(alone) < len(thesis) * 1.2
 
 
-def test_streaming_decodes_like_the_whole_clip_within_the_delay(walk_bvh):
-    codec = get_codec("primitives", max_segment=16)
+@pytest.mark.parametrize("smooth", [0, 3])
+def test_streaming_decodes_like_the_whole_clip_within_the_delay(walk_bvh, smooth):
+    codec = get_codec("primitives", max_segment=16, smooth=smooth)
     whole = codec.decode(codec.encode(walk_bvh), walk_bvh.skeleton).channels
     enc, dec = codec.encoder(walk_bvh.skeleton, walk_bvh.fps), codec.decoder(walk_bvh.skeleton, walk_bvh.fps)
     out, pushed = [], 0
     for k in range(0, walk_bvh.num_frames, 7):
         out += [dec.push(p) for p in enc.push(walk_bvh.channels[k:k + 7])]
         pushed = min(k + 7, walk_bvh.num_frames)
-        assert pushed - sum(len(o) for o in out) <= codec.delay_frames == 16
-    out += [dec.push(p) for p in enc.flush()]
+        assert pushed - sum(len(o) for o in out) <= codec.delay_frames == 16 + smooth
+    last = enc.flush()
+    out += [dec.push(p) for p in last]
     assert np.abs(np.concatenate(out) - whole).max() < 1e-9
+    with pytest.raises(CorruptStreamError, match="after the last one"):
+        dec.push(last[-1])
     fresh = codec.decoder(walk_bvh.skeleton, walk_bvh.fps)
     second = get_codec("primitives", max_segment=16).encoder(walk_bvh.skeleton, walk_bvh.fps)
     packets = [p for k in range(0, 100, 20) for p in second.push(walk_bvh.channels[k:k + 20])]
     with pytest.raises(CorruptStreamError, match="start is missing"):
         fresh.push(packets[1])
+
+
+def test_smoothing_joins_the_closest_frames_across_a_seam():
+    angle = np.radians(np.concatenate((np.arange(20), np.arange(15, 35)))).astype(float)   # steps back at 20
+    q = rotations.euler_to_quat(np.degrees(angle)[:, None], "Z")
+    before = q.copy()
+    quatseg.smooth_seams(q, np.array([20]), np.array([0]), np.array([40]), 4, fps=120.0)
+    # the first closest pair is frame 16 and frame 21 (both 16 deg): frames 17..20 hold 16 deg
+    assert np.allclose(rotations.quat_distance(q[17:21], before[16:17]), 0.0, atol=1e-7)
+    assert np.array_equal(q[:17], before[:17]) and np.array_equal(q[21:], before[21:])
+    smooth = rotations.euler_to_quat(np.arange(40.0)[:, None], "Z")
+    kept = smooth.copy()
+    quatseg.smooth_seams(smooth, np.array([20]), np.array([0]), np.array([40]), 4, fps=120.0)
+    assert np.allclose(smooth, kept)          # adjacent frames are the closest pair: nothing to do
+    step = rotations.euler_to_quat(np.where(np.arange(40) < 20, 0.0, 90.0)[:, None], "Z")
+    held = step.copy()
+    quatseg.smooth_seams(step, np.array([20]), np.array([0]), np.array([40]), 4, fps=120.0)
+    assert np.array_equal(step, held)         # a jump is not smoothed
+
+
+def test_smoothing_lowers_jerk_without_losing_accuracy(martial_amc):
+    plain, smooth = (get_codec("primitives", smooth=m) for m in (0, 2))
+    payload = plain.encode(martial_amc)
+    assert smooth.encode(martial_amc) == payload                  # a decoder-side filter
+    a = compare(martial_amc, plain.decode(payload, martial_amc.skeleton)).summary()
+    b = compare(martial_amc, smooth.decode(payload, martial_amc.skeleton)).summary()
+    assert b["jerk_ratio"] < 0.95 * a["jerk_ratio"]
+    assert b["mean_joint_error_cm"] < 1.05 * a["mean_joint_error_cm"]
 
 
 def test_database_mismatches_are_clear_errors(walk_amc, walk_bvh, martial_db, martial_amc, tmp_path):

@@ -48,7 +48,7 @@ from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.skeleton import Skeleton
 
 TRANSLATION_WINDOW = 32
-_PARTS = 13
+_PARTS = 14
 
 
 @register
@@ -65,13 +65,15 @@ class PrimitivesCodec(Codec):
         Knob("db", str, "", "a primitive database file (mocodec primitives train); empty: none"),
         Knob("history", int, 16, "earlier decoded segments of the joint offered as candidates (0: the thesis)",
              low=0, high=256),
+        Knob("smooth", int, 0, "M: frames each side of a seam searched by the smoothing of 5.3.4 (0: none)",
+             low=0, high=quatseg.MIN_SEGMENT // 2),
     )
     quality = QualityKnob("t_lower", higher_is_better=False, log_scale=True)
     streaming = True
 
     @property
     def delay_frames(self) -> int:
-        return self.config["max_segment"]
+        return self.config["max_segment"] + self.config["smooth"]
 
     def encoder(self, skeleton: Skeleton, fps: float) -> StreamEncoder:
         return _Encoder(self, skeleton, fps)
@@ -187,7 +189,7 @@ class _Encoder(StreamEncoder, _Shared):
         self.q, self.base = self.q[keep:], self.base + keep
         if not final and not len(segs) and not parts[-1]:
             return b""
-        return join_parts([*parts[:-1], encode_ints(parts[-1])])
+        return join_parts([*parts[:-1], encode_ints(parts[-1]), b"\x01" if final else b""])
 
     def _segments(self, segs: np.ndarray) -> list[bytes]:
         joints = segs[:, 0]
@@ -232,13 +234,19 @@ class _Decoder(StreamDecoder, _Shared):
         _Shared.__init__(self, codec, skeleton, fps)
         self.pending = [np.zeros((0, 4)) for _ in range(self.lay.count)]
         self.pending_t = np.zeros((0, len(self.lay.translation)))
+        self.last_start = np.zeros(self.lay.count, dtype=np.int64)   # of each joint's last segment, in pending
+        self.started = np.zeros(self.lay.count, dtype=bool)          # the joint has had a segment
+        self.final = False
         self.previous = None
 
     def push(self, packet: bytes) -> np.ndarray:
         where = "primitives packet"
         p = split_parts(packet, _PARTS, where)
         counts, lengths, index, exps, runs, values, tail = (decode_ints(x) for x in p[:7])
-        t_exps, t_runs, t_values, t_tail, t_lengths = (decode_ints(x) for x in p[8:])
+        t_exps, t_runs, t_values, t_tail, t_lengths = (decode_ints(x) for x in p[8:13])
+        if self.final or p[13] not in (b"", b"\x01"):
+            raise CorruptStreamError(f"{where}: {'a packet after the last one' if self.final else 'bad end mark'}")
+        self.final = p[13] == b"\x01"
         self._start(p[7], where, bool(counts.sum() or t_lengths.size))
         if counts.size != self.lay.count or counts.min(initial=0) < 0 or lengths.size != counts.sum():
             raise CorruptStreamError(f"{where}: segment counts do not match the skeleton")
@@ -284,8 +292,23 @@ class _Decoder(StreamDecoder, _Shared):
             cands.update(r, decoded[rows])
         frames = quatseg.denormalise(decoded, lengths)           # joint-major, like the segments
         bounds = np.concatenate(([0], np.cumsum(np.bincount(joints, lengths, self.lay.count)))).astype(np.int64)
+        first = np.concatenate(([0], np.cumsum(counts)))
         for r in np.flatnonzero(counts):
-            self.pending[r] = np.concatenate((self.pending[r], frames[bounds[r]:bounds[r + 1]]))
+            self._append(r, frames[bounds[r]:bounds[r + 1]], np.cumsum(lengths[first[r]:first[r + 1]]))
+
+    def _append(self, r: int, frames: np.ndarray, ends: np.ndarray) -> None:
+        """Joint ``r``'s next segments (ending at ``ends`` in ``frames``) after its pending
+        frames, with their seams smoothed (5.3.4) when ``smooth`` is on."""
+        before = len(self.pending[r])
+        q = np.concatenate((self.pending[r], frames))
+        starts = before + np.concatenate(([0], ends[:-1]))
+        m = self.cfg["smooth"]
+        if m:
+            seams = slice(0, None) if self.started[r] else slice(1, None)
+            lefts = np.concatenate(([max(self.last_start[r], 0)], starts[:-1]))
+            quatseg.smooth_seams(q, starts[seams], lefts[seams], before + ends[seams], m, self.fps)
+        self.pending[r] = q
+        self.last_start[r], self.started[r] = starts[-1], True
 
     def _windows(self, lengths, exps, runs, where) -> None:
         channels = len(self.lay.translation)
@@ -306,10 +329,11 @@ class _Decoder(StreamDecoder, _Shared):
         have = [len(p) for p in self.pending]
         if len(self.lay.translation):
             have.append(len(self.pending_t))
-        n = min(have) if have else 0
+        n = max(min(have) - (0 if self.final else self.cfg["smooth"]), 0) if have else 0
         q = np.stack([p[:n] for p in self.pending], axis=1) if self.pending else np.zeros((n, 0, 4))
         channels = quatseg.quaternions_to_channels(self.lay, q, self.pending_t[:n], self.skeleton.num_channels)
         self.pending = [p[n:] for p in self.pending]
+        self.last_start -= n
         self.pending_t = self.pending_t[n:]
         out = continuous_frames(PrimitivesCodec.id, self.skeleton, self.fps, channels, self.previous)
         if len(out):

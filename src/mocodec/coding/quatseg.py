@@ -221,3 +221,40 @@ def distance_of_dot(m: np.ndarray) -> np.ndarray:
 def segment_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """(5.4): the largest distance (5.3) between corresponding frames of two segments."""
     return distance_of_dot(min_abs_dot(a, b))
+
+
+@numba.njit(cache=True)
+def _smooth_seams(q, lefts, cuts, rights, m, jump):
+    for s in range(len(cuts)):
+        cut = cuts[s]
+        across = abs(q[cut - 1, 0] * q[cut, 0] + q[cut - 1, 1] * q[cut, 1] + q[cut - 1, 2] * q[cut, 2]
+                     + q[cut - 1, 3] * q[cut, 3])
+        if 2.0 * np.arccos(min(across, 1.0)) > jump:
+            continue
+        best, x, y = -1.0, cut - 1, cut
+        for i in range(max(lefts[s], cut - m), cut):
+            for j in range(cut, min(rights[s], cut + m)):
+                d = abs(q[i, 0] * q[j, 0] + q[i, 1] * q[j, 1] + q[i, 2] * q[j, 2] + q[i, 3] * q[j, 3])
+                if d > best:
+                    best, x, y = d, i, j
+        a, b = q[x].copy(), q[y].copy()
+        for k in range(x + 1, y):
+            slerp_into(q[k], a, b, (k - x) / (y - x))
+
+
+def smooth_seams(q: np.ndarray, cuts: np.ndarray, lefts: np.ndarray, rights: np.ndarray, m: int,
+                 fps: float) -> None:
+    """The smoothing of consecutive segments of 5.3.4, in place on one joint's frames ``q (n, 4)``.
+
+    At each seam ``cuts[s]`` (the first frame of a segment; the one before it starts at
+    ``lefts[s]``, the one after ends before ``rights[s]``) the closest pair of frames (x, y),
+    x among the last ``m`` frames before the seam and y among the first ``m`` after it
+    (distance (5.3)), is joined by slerp, linearly in time: the frames between them are
+    replaced. The thesis writes the weights as k / (x + y), indices counted from the seam; we
+    read them as the time fraction between x and y, which keeps both ends in place.
+    A seam where the adjacent frames are the closest pair is left as it is, and so is one the
+    joint crosses faster than :data:`JUMP_SPEED` (a step such as a T-pose frame 0 is not
+    motion to smooth)."""
+    if len(cuts) and m > 0:
+        _smooth_seams(q, lefts.astype(np.int64), cuts.astype(np.int64), rights.astype(np.int64), m,
+                      JUMP_SPEED / fps)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from mocodec import moc, ratecontrol
 from mocodec.codecs import DEFAULT_CODEC, codec_class, codec_ids, get_codec
-from mocodec.coding import primdb, vqbook
+from mocodec.coding import primdb, rhythmdb, vqbook
 from mocodec.errors import CodecError
 from mocodec.formats import load, save
 from mocodec.formats._io import atomic_write_bytes
@@ -210,6 +210,30 @@ def cmd_primitives(args) -> int:
     return 0
 
 
+def cmd_rhythm(args) -> int:
+    if args.action == "info":
+        for path in args.inputs:
+            db = rhythmdb.RhythmDB.load(path)
+            print(f"{path}: {db.count} whole-body primitives of {len(db.names)} joints, "
+                  f"{Path(path).stat().st_size:,} bytes, {db.fps:g} Hz, mean length {db.lengths.mean():.1f} frames, "
+                  f"S_M {db.max_segment}, seed {db.seed}, mean distance to a primitive {db.error:.3f}, "
+                  f"fingerprint {db.fingerprint:08x}, trained on {', '.join(db.trained_on) or '?'}")
+        return 0
+    if not args.output:
+        raise CodecError("rhythm train needs -o FILE")
+    clips = []
+    for k, path in enumerate(args.inputs, 1):
+        _progress(k, len(args.inputs), Path(path).name)
+        clips.append(load(path, asf=args.asf, fps=args.fps))
+    t0 = time.perf_counter()
+    db = rhythmdb.train(clips, count=args.count, max_segment=args.max_segment, seed=args.seed,
+                        names=[Path(p).name for p in args.inputs])
+    db.save(args.output)
+    print(f"wrote {args.output}: {db.count} whole-body primitives, {Path(args.output).stat().st_size:,} bytes, "
+          f"{time.perf_counter() - t0:.1f} s")
+    return 0
+
+
 def cmd_eval(args) -> int:
     inputs = args.inputs
     for k, path in enumerate(inputs, 1):
@@ -257,7 +281,8 @@ def add_commands(sub, common) -> None:
     p.add_argument("--skeleton", help="the skeleton (.asf, .bvh or .amc) of a file encoded with --skeleton-ref")
     p.add_argument("--out-asf", help="where to write the ASF when the output is .amc")
     p.add_argument("--codebook", help="the VQ codebook file (svq, tvq) here, if not where the encoder had it")
-    p.add_argument("--db", help="the primitive database (primitives) here, if not where the encoder had it")
+    p.add_argument("--db", help="the primitive or rhythm database (primitives, rhythmic) here, if not where the "
+                                "encoder had it")
     p.set_defaults(func=cmd_decode)
 
     p = sub.add_parser("codebook", help="train VQ codebooks for svq and tvq (000 7.9)",
@@ -292,6 +317,19 @@ def add_commands(sub, common) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the k-means++ draws (default 0)")
     common(p)
     p.set_defaults(func=cmd_primitives)
+
+    p = sub.add_parser("rhythm", help="train whole-body primitive databases for the rhythmic codec (001 ch. 4)",
+                       description="Cut the clips at whole-body key poses, choose --count of the segments as "
+                                   "k-medoids and write the database encoder and decoder share (--db FILE). "
+                                   "Clips must share a skeleton and a frame rate.")
+    p.add_argument("action", choices=("train", "info"), help="train: make a database; info: describe one")
+    p.add_argument("inputs", nargs="+", metavar="IN", help="train: .bvh or .amc clips; info: the database file")
+    p.add_argument("-o", "--output", help="database file to write (train), e.g. dance.mocrd")
+    p.add_argument("--count", type=int, default=rhythmdb.COUNT, help=f"primitives (default {rhythmdb.COUNT})")
+    p.add_argument("--max-segment", type=int, default=32, help="longest segment in frames (default 32)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the k-means++ draws (default 0)")
+    common(p)
+    p.set_defaults(func=cmd_rhythm)
 
     p = sub.add_parser("eval", help="encode and decode in memory and report ratio, rate, error and speed",
                        description="Ratio vs 32-bit floats, bits per second, PSNR, VPSNR, mean/max joint "

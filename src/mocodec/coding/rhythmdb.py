@@ -5,7 +5,8 @@ A motion (4.2.1) is the root position plus one quaternion per joint
 (:mod:`mocodec.coding.quatseg`). Ch. 4 cuts the whole body at once, at key poses (it cites
 [SI08]: dancers stop and recompose between beats); we sum ``a . w`` of (5.1)/(5.2) over the
 joints, the derivative of the body's total squared joint speed, and cut at its zero crossings
-with the segment bounds of ch. 5 (at least 15 frames, at most S_M). A segment is kept as its
+with the segment bounds of ch. 5 (at least 15 frames, at most S_M); a frame where most joints
+jump ends a segment, a jump of a few joints does not. A segment is kept as its
 joint rotations time-normalised to 16 frames and its root trajectory at the same 16 instants:
 the horizontal axes relative to its first frame (the root is re-placed by velocity on decode,
 4.2.2), the vertical (``Yposition``) as it is.
@@ -52,7 +53,10 @@ def vertical(skeleton: Skeleton) -> np.ndarray:
 
 def body_cuts(q: np.ndarray, fps: float, max_segment: int) -> np.ndarray:
     """``(n, 2)`` [start, end) frames of whole-body segments of joint quaternions ``q``."""
-    g = quatseg.speed_change(q, fps).sum(axis=1)
+    g = quatseg.speed_change(q, fps)
+    jump = np.isinf(g)
+    g = np.where(jump, 0.0, g).sum(axis=1)
+    g[jump.mean(axis=1) > 0.5] = np.inf          # the whole body jumps (a T-pose frame 0), not one joint
     segs = quatseg.chop(g[:, None], np.zeros(1, dtype=np.int64), max_segment, final=True)
     return np.array(segs, dtype=np.int64).reshape(-1, 3)[:, 1:]
 

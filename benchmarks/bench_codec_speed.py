@@ -2,7 +2,9 @@
 (CMU 135_08 tiled), and the first call's time in a fresh process, imports included: with the
 numba cache in place, and compiling every kernel from scratch. The VQ coders use codebooks
 trained beforehand on another clip (07_03), so LBG training is not timed; their first call
-trains on the clip. primitives uses a database trained on 07_03 as well. Run: `.venv/bin/python benchmarks/bench_codec_speed.py [--codecs ID ...]`."""
+trains on the clip. primitives uses a database trained on 07_03 as well; rhythmic makes its
+primitives from the clip, as by default. Run: `.venv/bin/python benchmarks/bench_codec_speed.py
+[--codecs ID ...]`."""
 
 from __future__ import annotations
 

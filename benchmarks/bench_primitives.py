@@ -8,7 +8,8 @@ t_L in {0.0025, 0.005, 0.01, 0.02} by the thesis's coder (``history 0``: databas
 only) and by ours (``history 16``: the joint's earlier decoded segments and held pose offered
 too), and measured: ratio vs 32-bit floats (payload only, as the thesis counts; the database
 is on both ends), mean and max joint position error (cm). Then the S_M effect of table 5.4 on
-61_06, table 5.1's clips we have (61_04, 135_04), the database sizes and the speed of
+61_06, table 5.1's clips we have (61_04, 135_04), the smoothing of 5.3.4 (knob ``smooth``) on
+five clips, the database sizes and the speed of
 table 5.3 (one core). Rows are means of ratios (the thesis averages its ratios) and medians
 of errors over clips; every measurement goes to bench-out/primitives.csv.
 
@@ -39,6 +40,7 @@ THRESHOLDS = (0.0025, 0.005, 0.01, 0.02)
 MODES = {"thesis": {"history": 0}, "ours": {"history": 16}}
 THESIS_5_1 = {"61_04": 51, "135_04": 40}
 THESIS_5_4 = {16: 46, 32: 49, 64: 50}
+SMOOTH = (0, 2, 4)
 
 
 def clip_path(kind: str, name: str):
@@ -118,6 +120,16 @@ def main() -> None:
         cells = [f"{mode} {measure(motion, {'db': dbs['bvh'], 'max_segment': s_m, **extra})['ratio']:5.1f}:1"
                  for mode, extra in MODES.items()]
         print(f"  S_M = {s_m:<3} {'  '.join(cells)}   (thesis {thesis}:1)")
+
+    print("\nsmoothing of consecutive segments (5.3.4), ours, t_L = 0.01 (mean / max joint error, jerk ratio):")
+    for kind, name in (("bvh", "61_06"), ("bvh", "02_01"), ("bvh", "135_04"), ("amc", "131_04"), ("amc", "05_02")):
+        motion = load(clip_path(kind, name))
+        cells = []
+        for m in SMOOTH:
+            codec = get_codec("primitives", db=dbs[kind], smooth=m)
+            s = compare(motion, codec.decode(codec.encode(motion), motion.skeleton)).summary()
+            cells.append(f"M={m}: {s['mean_joint_error_cm']:.3f} / {s['max_joint_error_cm']:5.2f} cm x{s['jerk_ratio']:.2f}")
+        print(f"  {name}.{kind:<4}" + "   ".join(cells))
 
     print("\nspeed, one core, 10,000 frames (table 5.3: 1,660-2,370 us per frame to encode, 110-140 to decode):")
     for kind, name in (("amc", "135_04"), ("bvh", "61_06")):

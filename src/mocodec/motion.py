@@ -144,14 +144,17 @@ class Motion:
         is what transform and predictive coders need."""
         sk = self.skeleton
         out = self.channels.copy()
-        rot = sk.rotation_mask
-        out[:, rot] = np.unwrap(out[:, rot], period=360.0, axis=0)
         if self.num_frames < 2:
             return replace(self, channels=out)
-        for j, joint in enumerate(sk.joints):
-            if len(joint.rotation_order) != 3 or len(set(joint.rotation_order)) < 2:
-                continue
-            idx = sk.channel_offsets[j] + np.array(joint.rotation_channel_indices())
+        followed = {j: sk.channel_offsets[j] + np.array(joint.rotation_channel_indices())
+                    for j, joint in enumerate(sk.joints)
+                    if len(joint.rotation_order) == 3 and len(set(joint.rotation_order)) >= 2}
+        unwrapped = sk.rotation_mask.copy()
+        for idx in followed.values():
+            unwrapped[idx] = False                # _follow sets these below
+        out[:, unwrapped] = np.unwrap(out[:, unwrapped], period=360.0, axis=0)
+        for j, idx in followed.items():
+            joint = sk.joints[j]
             angles = self.channels[:, idx]
             alt = angles + np.array([180.0, 0.0, 180.0])
             alt[:, 1] = -angles[:, 1] if joint.rotation_order[0] == joint.rotation_order[2] else 180.0 - angles[:, 1]
@@ -215,13 +218,14 @@ def _follow(angles, alt):
     """Frame by frame, the candidate triple (shifted by turns of 360) nearest the previous."""
     out = np.empty_like(angles)
     out[0] = angles[0]
+    shifted = np.empty(3)
     for f in range(1, angles.shape[0]):
         best = np.inf
-        for cand in (angles[f], alt[f]):
+        for c in range(2):
+            cand = angles if c == 0 else alt
             cost = 0.0
-            shifted = np.empty(3)
             for k in range(3):
-                d = cand[k] - out[f - 1, k]
+                d = cand[f, k] - out[f - 1, k]
                 d -= 360.0 * np.floor((d + 180.0) / 360.0)
                 shifted[k] = out[f - 1, k] + d
                 cost += abs(d)

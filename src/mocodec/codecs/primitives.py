@@ -33,9 +33,9 @@ from __future__ import annotations
 
 import struct
 
+import numba
 import numpy as np
 
-from mocodec import rotations
 from mocodec.codecs.base import (Codec, Knob, QualityKnob, StreamDecoder, StreamEncoder, checked_frames,
                                  continuous_frames)
 from mocodec.codecs.registry import register
@@ -124,6 +124,34 @@ class _Candidates:
             self.cand[joints, slot] = decoded
             self.valid[joints, slot] = True
             self.filled[joints] += 1
+
+
+@numba.njit(cache=True)
+def _rebuild(joints, index, decoded, cand, valid, filled, history):
+    """The decoder's side of the candidates, in place: each segment's residual rotations
+    ``decoded`` become the segment (5.8), ``cand[joint, index] * residual``, which then updates
+    the candidates as :meth:`_Candidates.update` does. Joints do not share candidates, so the
+    segments go in their joint-major order. Returns the first segment that refers to a
+    candidate not yet sent, or -1."""
+    for s in range(len(joints)):
+        r, k = joints[s], index[s]
+        if not valid[r, k]:
+            return s
+        for f in range(decoded.shape[1]):
+            pw, px, py, pz = cand[r, k, f, 0], cand[r, k, f, 1], cand[r, k, f, 2], cand[r, k, f, 3]
+            qw, qx, qy, qz = decoded[s, f, 0], decoded[s, f, 1], decoded[s, f, 2], decoded[s, f, 3]
+            decoded[s, f, 0] = pw * qw - px * qx - py * qy - pz * qz
+            decoded[s, f, 1] = pw * qx + px * qw + py * qz - pz * qy
+            decoded[s, f, 2] = pw * qy - px * qz + py * qw + pz * qx
+            decoded[s, f, 3] = pw * qz + px * qy - py * qx + pz * qw
+        for f in range(decoded.shape[1]):
+            cand[r, 0, f] = decoded[s, -1]
+        if history:
+            slot = 1 + filled[r] % history
+            cand[r, slot] = decoded[s]
+            valid[r, slot] = True
+            filled[r] += 1
+    return -1
 
 
 def _rounds(joints: np.ndarray) -> list[np.ndarray]:
@@ -284,12 +312,9 @@ class _Decoder(StreamDecoder, _Shared):
         if len(index) and (index.min() < 0 or index.max() >= cands.cand.shape[1]):
             raise CorruptStreamError(f"{where}: a candidate index is out of range")
         decoded = primresidual.differences(exps, coeffs)
-        for rows in _rounds(joints):
-            r = joints[rows]
-            if not cands.valid[r, index[rows]].all():
-                raise CorruptStreamError(f"{where}: a segment refers to a candidate not yet sent")
-            decoded[rows] = rotations.quat_multiply(cands.cand[r, index[rows]], decoded[rows])       # (5.8)
-            cands.update(r, decoded[rows])
+        bad = _rebuild(joints, index, decoded, cands.cand, cands.valid, cands.filled, cands.history)
+        if bad >= 0:
+            raise CorruptStreamError(f"{where}: segment {bad} refers to a candidate not yet sent")
         frames = quatseg.denormalise(decoded, lengths)           # joint-major, like the segments
         bounds = np.concatenate(([0], np.cumsum(np.bincount(joints, lengths, self.lay.count)))).astype(np.int64)
         first = np.concatenate(([0], np.cumsum(counts)))

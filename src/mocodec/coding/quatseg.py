@@ -82,8 +82,10 @@ def quaternions_to_channels(lay: Layout, q: np.ndarray, translation: np.ndarray,
     angles are each rotation's principal Euler angles (the caller makes them continuous)."""
     out = np.zeros((len(q), num_channels))
     out[:, lay.translation] = translation
-    for r, (order, cols) in enumerate(zip(lay.orders, lay.columns)):
-        out[:, cols] = rotations.quat_to_partial_euler(q[:, r], order)
+    for order in dict.fromkeys(lay.orders):          # joints of one order in one call
+        rs = [r for r, o in enumerate(lay.orders) if o == order]
+        angles = rotations.quat_to_partial_euler(q[:, rs], order)
+        out[:, np.concatenate([lay.columns[r] for r in rs])] = angles.reshape(len(q), len(rs) * angles.shape[-1])
     return out
 
 

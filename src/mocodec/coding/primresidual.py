@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from mocodec import rotations
-from mocodec.coding import quatseg, wavelets
+from mocodec.coding import coefcoder, quatseg, wavelets
 from mocodec.coding.quantizers import step_exponents, steps
 
 LEVELS = 4
@@ -32,6 +32,22 @@ MODE = "periodization"
 NO_RESIDUAL = 1                 # exponent sent for a segment coded by its primitive alone
 COEFFS = 3 * quatseg.NORMAL_FRAMES
 MAX_REFINEMENTS = 6
+
+
+def pack(coeffs: np.ndarray) -> bytes:
+    """Quantised segment coefficients ``(n, 48)`` as bytes: the context-adaptive coefficient
+    coder (:mod:`mocodec.coding.coefcoder`), one channel per rotation-vector component, a block
+    of 16 coefficients (4 levels, coarsest first) per segment."""
+    n = len(coeffs)
+    blocks = np.asarray(coeffs, dtype=np.int64).reshape(n, 3, quatseg.NORMAL_FRAMES).transpose(1, 0, 2).reshape(3, -1)
+    return coefcoder.encode(np.zeros(3, np.int64), np.zeros((3, 0), np.int64), blocks,
+                            np.full(n, quatseg.NORMAL_FRAMES), np.full(n, LEVELS))
+
+
+def unpack(data: bytes, n: int) -> np.ndarray:
+    """Inverse of :func:`pack` for ``n`` segments."""
+    _, _, blocks, _ = coefcoder.decode(data, 3, 0, np.full(n, quatseg.NORMAL_FRAMES), np.full(n, LEVELS))
+    return blocks.reshape(3, n, quatseg.NORMAL_FRAMES).transpose(1, 0, 2).reshape(n, COEFFS)
 
 
 def _segment_matrices() -> tuple[np.ndarray, np.ndarray]:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mocodec import rotations
+from mocodec import ratecontrol, rotations
 from mocodec.cli import main
 from mocodec.codecs import get_codec
 from mocodec.coding import blend, quatseg, rhythmdb
@@ -103,6 +103,13 @@ def test_codec_trades_primitives_for_size_and_error(walk_amc):
     assert results[3][0] < results[8][0] < results[1000][0]
     assert results[1000][1] < 1.0 < results[3][1]          # every segment its own primitive: resampling only
     assert results[8][1] < results[3][1]
+
+
+def test_rate_control_turns_the_primitive_count(walk_amc):
+    m = ratecontrol.tune(get_codec("rhythmic"), walk_amc, "mean_error_cm", 2.0)
+    assert m.mean_error_cm <= 2.0
+    fewer = ratecontrol.measure(m.codec.with_knob("primitives", m.codec.config["primitives"] // 2), walk_amc)
+    assert fewer.mean_error_cm > 2.0 and len(fewer.data) < len(m.data)
 
 
 def test_blending_smooths_the_seams(walk_amc):

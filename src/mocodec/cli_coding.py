@@ -161,6 +161,15 @@ def _db(x: float) -> str:
     return f"{x:.2f} dB" if x != float("inf") else "lossless"
 
 
+def _training_clips(args) -> list[Motion]:
+    """The clips a train command names, loaded with progress."""
+    clips = []
+    for k, path in enumerate(args.inputs, 1):
+        _progress(k, len(args.inputs), Path(path).name)
+        clips.append(load(path, asf=args.asf, fps=args.fps))
+    return clips
+
+
 def cmd_codebook(args) -> int:
     if args.action == "info":
         for path in args.inputs:
@@ -173,10 +182,7 @@ def cmd_codebook(args) -> int:
         raise CodecError("codebook train needs -o FILE")
     if args.max_size < 16 or args.max_size & (args.max_size - 1):
         raise CodecError(f"--max-size must be a power of two >= 16, got {args.max_size}")
-    clips = []
-    for k, path in enumerate(args.inputs, 1):
-        _progress(k, len(args.inputs), Path(path).name)
-        clips.append(load(path, asf=args.asf, fps=args.fps).resample(args.rate))
+    clips = [clip.resample(args.rate) for clip in _training_clips(args)]
     sizes = [1 << k for k in range(4, args.max_size.bit_length())]
     book = vqbook.train(args.kind, clips, sizes, predictive=not args.plain, length=args.length,
                         names=[Path(p).name for p in args.inputs])
@@ -196,10 +202,7 @@ def cmd_primitives(args) -> int:
         return 0
     if not args.output:
         raise CodecError("primitives train needs -o FILE")
-    clips = []
-    for k, path in enumerate(args.inputs, 1):
-        _progress(k, len(args.inputs), Path(path).name)
-        clips.append(load(path, asf=args.asf, fps=args.fps))
+    clips = _training_clips(args)
     t0 = time.perf_counter()
     db = primdb.train(clips, max_segment=args.max_segment, seed=args.seed, threshold=args.threshold,
                       max_clusters=args.max_clusters, names=[Path(p).name for p in args.inputs])
@@ -221,10 +224,7 @@ def cmd_rhythm(args) -> int:
         return 0
     if not args.output:
         raise CodecError("rhythm train needs -o FILE")
-    clips = []
-    for k, path in enumerate(args.inputs, 1):
-        _progress(k, len(args.inputs), Path(path).name)
-        clips.append(load(path, asf=args.asf, fps=args.fps))
+    clips = _training_clips(args)
     t0 = time.perf_counter()
     db = rhythmdb.train(clips, count=args.count, max_segment=args.max_segment, seed=args.seed,
                         names=[Path(p).name for p in args.inputs])

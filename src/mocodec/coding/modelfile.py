@@ -10,8 +10,10 @@ import json
 import struct
 import zlib
 from pathlib import Path
+from typing import ClassVar
 
 from mocodec.errors import CodecError
+from mocodec.formats._io import atomic_write_bytes
 
 _HEAD = struct.Struct("<BI")        # version, JSON length
 
@@ -49,3 +51,21 @@ def read(path: str | Path, what: str) -> bytes:
         return Path(path).read_bytes()
     except OSError as e:
         raise CodecError(f"{what} {path}: {e.strerror}") from None
+
+
+class Model:
+    """What every model class shares: its fingerprint, saving and loading, from the class's
+    ``to_bytes()`` and ``from_bytes(data, where)``; ``WHAT`` names the kind of model in errors."""
+
+    WHAT: ClassVar[str] = "model"
+
+    @property
+    def fingerprint(self) -> int:
+        return fingerprint(self.to_bytes())
+
+    def save(self, path: str | Path) -> None:
+        atomic_write_bytes(path, self.to_bytes())
+
+    @classmethod
+    def load(cls, path: str | Path):
+        return cls.from_bytes(read(path, cls.WHAT), f"{cls.WHAT} {path}")

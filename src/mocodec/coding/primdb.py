@@ -20,14 +20,12 @@ fingerprint that a payload coded with it carries. Training is deterministic for 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numba
 import numpy as np
 
 from mocodec.coding import modelfile, quatseg
 from mocodec.errors import CodecError
-from mocodec.formats._io import atomic_write_bytes
 from mocodec.motion import Motion
 
 MAGIC = b"MOCPD"
@@ -118,7 +116,10 @@ def cluster(segs: np.ndarray, rng: np.random.Generator, threshold: float = ERROR
 
 
 @dataclass
-class PrimitiveDB:
+class PrimitiveDB(modelfile.Model):
+
+    WHAT = "primitive database"
+
     primitives: dict[str, np.ndarray]          # joint name -> (K, 16, 4)
     errors: dict[str, float]                   # clustering error (5.6) per joint
     segments: dict[str, int]                   # training segments per joint
@@ -140,15 +141,8 @@ class PrimitiveDB:
             np.asarray(self.primitives[n], dtype="<f4").tobytes() for n in names))
 
     @property
-    def fingerprint(self) -> int:
-        return modelfile.fingerprint(self.to_bytes())
-
-    @property
     def count(self) -> int:
         return sum(len(p) for p in self.primitives.values())
-
-    def save(self, path: str | Path) -> None:
-        atomic_write_bytes(path, self.to_bytes())
 
     @classmethod
     def from_bytes(cls, data: bytes, where: str) -> "PrimitiveDB":
@@ -171,9 +165,6 @@ class PrimitiveDB:
         except (ValueError, KeyError, TypeError) as e:
             raise CodecError(f"{where}: primitive database description does not parse ({e})") from None
 
-    @classmethod
-    def load(cls, path: str | Path) -> "PrimitiveDB":
-        return cls.from_bytes(modelfile.read(path, "primitive database"), f"primitive database {path}")
 
     def for_layout(self, lay: quatseg.Layout, where: str) -> list[np.ndarray]:
         """Each joint's primitives ``(K, 16, 4)`` (none for joints the database lacks); an error

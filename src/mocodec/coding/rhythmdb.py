@@ -24,7 +24,6 @@ and a compact form a payload can carry when the database is made from the clip i
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -32,7 +31,6 @@ from mocodec.coding import modelfile, quatseg
 from mocodec.coding.parts import join_parts, split_parts
 from mocodec.coding.rangecoder import decode_ints, encode_ints
 from mocodec.errors import CodecError, CorruptStreamError
-from mocodec.formats._io import atomic_write_bytes
 from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
@@ -114,8 +112,10 @@ def medoids(dist: np.ndarray, count: int, rng: np.random.Generator) -> np.ndarra
 
 
 @dataclass
-class RhythmDB:
+class RhythmDB(modelfile.Model):
     """Whole-body primitives of one skeleton's joints (by name)."""
+
+    WHAT = "rhythm database"
 
     names: tuple[str, ...]
     rotations: np.ndarray          # (K, 16, R, 4)
@@ -138,13 +138,6 @@ class RhythmDB:
         return modelfile.pack(MAGIC, VERSION, meta, np.asarray(self.rotations, "<f4").tobytes()
                               + np.asarray(self.root, "<f4").tobytes())
 
-    @property
-    def fingerprint(self) -> int:
-        return modelfile.fingerprint(self.to_bytes())
-
-    def save(self, path: str | Path) -> None:
-        atomic_write_bytes(path, self.to_bytes())
-
     @classmethod
     def from_bytes(cls, data: bytes, where: str) -> "RhythmDB":
         meta, offset = modelfile.unpack(data, MAGIC, VERSION, "rhythm database", where)
@@ -160,9 +153,6 @@ class RhythmDB:
         except (ValueError, KeyError, TypeError) as e:
             raise CodecError(f"{where}: rhythm database description does not parse ({e})") from None
 
-    @classmethod
-    def load(cls, path: str | Path) -> "RhythmDB":
-        return cls.from_bytes(modelfile.read(path, "rhythm database"), f"rhythm database {path}")
 
     def check(self, lay: quatseg.Layout, translations: int, fps: float, where: str) -> None:
         if tuple(lay.names) != self.names or translations != self.root.shape[2]:

@@ -20,14 +20,12 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from mocodec.coding import modelfile, vq
 from mocodec.coding.parts import join_parts, split_parts
 from mocodec.errors import CodecError, CorruptStreamError
-from mocodec.formats._io import atomic_write_bytes
 from mocodec.metrics.groups import group_channels
 from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
@@ -74,7 +72,9 @@ def spatial_vectors(x: np.ndarray, cols: np.ndarray, predictive: bool) -> np.nda
 
 
 @dataclass
-class Codebook:
+class Codebook(modelfile.Model):
+    WHAT = "codebook"
+
     kind: str                                   # temporal | spatial
     predictive: bool
     length: int                                 # temporal vector length (1 for spatial)
@@ -90,13 +90,6 @@ class Codebook:
                 "entries": {str(s): [len(b) for b in self.books[s]] for s in sizes}, "trained_on": self.trained_on}
         return modelfile.pack(MAGIC, VERSION, meta, b"".join(
             np.asarray(b, dtype="<f4").tobytes() for s in sizes for b in self.books[s]))
-
-    @property
-    def fingerprint(self) -> int:
-        return modelfile.fingerprint(self.to_bytes())
-
-    def save(self, path: str | Path) -> None:
-        atomic_write_bytes(path, self.to_bytes())
 
     @classmethod
     def from_bytes(cls, data: bytes, where: str) -> "Codebook":
@@ -118,9 +111,6 @@ class Codebook:
         except (ValueError, KeyError, TypeError) as e:
             raise CodecError(f"{where}: codebook description does not parse ({e})") from None
 
-    @classmethod
-    def load(cls, path: str | Path) -> "Codebook":
-        return cls.from_bytes(modelfile.read(path, "codebook"), f"codebook {path}")
 
     def book(self, size: int) -> list[np.ndarray]:
         if size not in self.books:

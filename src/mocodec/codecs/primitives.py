@@ -10,7 +10,7 @@ rest: 5.3.5), the difference (5.7) is coded with 4-level CDF 9/7 wavelets, quant
 (:mod:`mocodec.coding.primresidual`). The translation channels go in windows of 32 frames (at
 most S_M), CDF 9/7, the smallest half of the coefficients zeroed, ``bits``-bit quantisation.
 The segment coefficients go through the context-adaptive coefficient coder
-(:func:`mocodec.coding.primresidual.pack`: about 15% smaller than zero runs); every other
+(:func:`mocodec.coding.primresidual.pack`: about 12% smaller than zero runs); every other
 integer stream is range coded (:func:`mocodec.coding.rangecoder.encode_ints`; zero runs for
 the translation coefficients).
 
@@ -120,19 +120,15 @@ class _Candidates:
         return np.argmax(np.where(self.valid[joints], dots, -1.0), axis=1)
 
     def update(self, joints: np.ndarray, decoded: np.ndarray) -> None:
-        self.cand[joints, 0] = decoded[:, -1:]
-        if self.history:
-            slot = 1 + self.filled[joints] % self.history
-            self.cand[joints, slot] = decoded
-            self.valid[joints, slot] = True
-            self.filled[joints] += 1
+        _remember_all(np.asarray(joints, dtype=np.int64), np.ascontiguousarray(decoded), self.cand, self.valid,
+                      self.filled, self.history)
 
 
 @numba.njit(cache=True)
 def _rebuild(joints, index, decoded, cand, valid, filled, history):
     """The decoder's side of the candidates, in place: each segment's residual rotations
     ``decoded`` become the segment (5.8), ``cand[joint, index] * residual``, which then updates
-    the candidates as :meth:`_Candidates.update` does. Joints do not share candidates, so the
+    the candidates (:func:`_remember`, as :meth:`_Candidates.update` does). Joints do not share candidates, so the
     segments go in their joint-major order. Returns the first segment that refers to a
     candidate not yet sent, or -1."""
     for s in range(len(joints)):
@@ -146,14 +142,27 @@ def _rebuild(joints, index, decoded, cand, valid, filled, history):
             decoded[s, f, 1] = pw * qx + px * qw + py * qz - pz * qy
             decoded[s, f, 2] = pw * qy - px * qz + py * qw + pz * qx
             decoded[s, f, 3] = pw * qz + px * qy - py * qx + pz * qw
-        for f in range(decoded.shape[1]):
-            cand[r, 0, f] = decoded[s, -1]
-        if history:
-            slot = 1 + filled[r] % history
-            cand[r, slot] = decoded[s]
-            valid[r, slot] = True
-            filled[r] += 1
+        _remember(r, decoded[s], cand, valid, filled, history)
     return -1
+
+
+@numba.njit(cache=True)
+def _remember_all(joints, decoded, cand, valid, filled, history):
+    for s in range(len(joints)):
+        _remember(joints[s], decoded[s], cand, valid, filled, history)
+
+
+@numba.njit(inline="always")
+def _remember(r, segment, cand, valid, filled, history):
+    """Joint ``r``'s decoded ``segment`` into its candidates: its last frame held (slot 0) and,
+    with a ``history``, the segment itself in the ring's next slot."""
+    for f in range(segment.shape[0]):
+        cand[r, 0, f] = segment[-1]
+    if history:
+        slot = 1 + filled[r] % history
+        cand[r, slot] = segment
+        valid[r, slot] = True
+        filled[r] += 1
 
 
 def _rounds(joints: np.ndarray) -> list[np.ndarray]:

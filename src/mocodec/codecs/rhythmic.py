@@ -58,23 +58,23 @@ class RhythmicCodec(Codec):
 
     def _encode(self, motion) -> bytes:
         lay, sk = quatseg.layout(motion.skeleton), motion.skeleton
-        q = quatseg.joint_quaternions(lay, motion.channels)
-        cuts = rhythmdb.body_cuts(q, motion.fps, self.config["max_segment"])
+        cuts, rot, root = rhythmdb.segments(motion, self.config["max_segment"])
         if self.config["db"]:
             db = self._external(lay, sk, motion.fps)
             carried = EXTERNAL + struct.pack("<I", db.fingerprint)
         else:
-            db = rhythmdb.train([motion], self.config["primitives"], self.config["max_segment"]).as_compact(
-                lay, motion.fps)
+            db = rhythmdb.from_segments(lay.names, rot, root, cuts[:, 1] - cuts[:, 0], motion.fps,
+                                        self.config["primitives"], self.config["max_segment"], 0, []
+                                        ).as_compact(lay, motion.fps)
             carried = CARRIED + db.compact()
-        index = np.argmin(rhythmdb.body_distance(rhythmdb.normal_rotations(q, cuts), db.rotations), axis=1)
+        index = np.argmin(rhythmdb.body_distance(rot, db.rotations), axis=1)
         if self.config["root"] == "keys":
-            at = np.append(cuts[:, 0], len(q) - 1)
+            at = np.append(cuts[:, 0], motion.num_frames - 1)
             keys = np.round(motion.channels[at][:, lay.translation] / _key_step(sk)).astype(np.int64)
-            root = encode_ints(np.diff(keys, axis=0, prepend=0))
+            placed = encode_ints(np.diff(keys, axis=0, prepend=0))
         else:
-            root = motion.channels[0, lay.translation].astype("<f4").tobytes()
-        return join_parts([encode_ints(cuts[:, 1] - cuts[:, 0]), encode_ints(index), root, carried])
+            placed = motion.channels[0, lay.translation].astype("<f4").tobytes()
+        return join_parts([encode_ints(cuts[:, 1] - cuts[:, 0]), encode_ints(index), placed, carried])
 
     def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:
         where = "rhythmic payload"

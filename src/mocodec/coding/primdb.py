@@ -117,7 +117,6 @@ def cluster(segs: np.ndarray, rng: np.random.Generator, threshold: float = ERROR
 
 @dataclass
 class PrimitiveDB(modelfile.Model):
-
     WHAT = "primitive database"
 
     primitives: dict[str, np.ndarray]          # joint name -> (K, 16, 4)
@@ -164,7 +163,6 @@ class PrimitiveDB(modelfile.Model):
                        int(meta["max_clusters"]), float(meta["fps"]), list(meta.get("trained_on", [])))
         except (ValueError, KeyError, TypeError) as e:
             raise CodecError(f"{where}: primitive database description does not parse ({e})") from None
-
 
     def for_layout(self, lay: quatseg.Layout, where: str) -> list[np.ndarray]:
         """Each joint's primitives ``(K, 16, 4)`` (none for joints the database lacks); an error

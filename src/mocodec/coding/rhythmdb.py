@@ -185,29 +185,42 @@ class RhythmDB(modelfile.Model):
         return RhythmDB.from_compact(self.compact(), lay, self.root.shape[2], fps, self.max_segment, "")
 
 
+def segments(clip: Motion, max_segment: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(cuts ``(n, 2)``, normalised rotations ``(n, 16, R, 4)``, root trajectories
+    ``(n, 16, T)``) of a clip's whole-body segments."""
+    lay = quatseg.layout(clip.skeleton)
+    q = quatseg.joint_quaternions(lay, clip.channels)
+    cuts = body_cuts(q, clip.fps, max_segment)
+    return cuts, normal_rotations(q, cuts), normal_root(clip.channels[:, lay.translation], cuts, vertical(clip.skeleton))
+
+
+def from_segments(names: tuple[str, ...], rot: np.ndarray, root: np.ndarray, lengths: np.ndarray, fps: float,
+                  count: int, max_segment: int, seed: int, trained_on: list[str]) -> RhythmDB:
+    """``count`` k-medoids of whole-body segments (:func:`segments`) as a database."""
+    if count < 1:
+        raise CodecError(f"a rhythm database needs at least one primitive, not {count}")
+    dist = body_distance(rot, rot)
+    chosen = medoids(dist, count, np.random.default_rng(seed))
+    labels = np.argmin(dist[:, chosen], axis=1)
+    mean_length = np.array([np.round(lengths[labels == k].mean()) for k in range(len(chosen))], dtype=np.int64)
+    return RhythmDB(names, rot[chosen].astype("<f4").astype(np.float64), root[chosen].astype("<f4").astype(np.float64),
+                    mean_length, float(fps), max_segment, seed, float(dist[np.arange(len(dist)), chosen[labels]].mean()),
+                    trained_on)
+
+
 def train(clips: list[Motion], count: int = COUNT, max_segment: int = 32, seed: int = 0,
           names: list[str] | None = None) -> RhythmDB:
     """``count`` whole-body primitives of ``clips`` (one skeleton and frame rate)."""
     if not clips:
         raise CodecError("no clips to train a rhythm database on")
-    if count < 1:
-        raise CodecError(f"a rhythm database needs at least one primitive, not {count}")
-    sk, fps = clips[0].skeleton, clips[0].fps
-    lay, up = quatseg.layout(sk), vertical(sk)
+    lay, fps = quatseg.layout(clips[0].skeleton), clips[0].fps
     rot, root, lengths = [], [], []
     for clip in clips:
         if tuple(quatseg.layout(clip.skeleton).names) != lay.names or abs(clip.fps - fps) > 1e-6 * fps:
             raise CodecError("rhythm database clips must share one skeleton and frame rate")
-        q = quatseg.joint_quaternions(lay, clip.channels)
-        cuts = body_cuts(q, fps, max_segment)
-        rot.append(normal_rotations(q, cuts))
-        root.append(normal_root(clip.channels[:, lay.translation], cuts, up))
+        cuts, r, t = segments(clip, max_segment)
+        rot.append(r)
+        root.append(t)
         lengths.append(cuts[:, 1] - cuts[:, 0])
-    rot, root, lengths = np.concatenate(rot), np.concatenate(root), np.concatenate(lengths)
-    dist = body_distance(rot, rot)
-    chosen = medoids(dist, count, np.random.default_rng(seed))
-    labels = np.argmin(dist[:, chosen], axis=1)
-    mean_length = np.array([np.round(lengths[labels == k].mean()) for k in range(len(chosen))], dtype=np.int64)
-    return RhythmDB(lay.names, rot[chosen].astype("<f4").astype(np.float64), root[chosen].astype("<f4").astype(np.float64),
-                    mean_length, float(fps), max_segment, seed, float(dist[np.arange(len(dist)), chosen[labels]].mean()),
-                    list(names or []))
+    return from_segments(lay.names, np.concatenate(rot), np.concatenate(root), np.concatenate(lengths), fps,
+                         count, max_segment, seed, list(names or []))

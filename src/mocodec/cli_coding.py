@@ -1,5 +1,5 @@
-"""The coding commands of the CLI: ``encode``, ``decode``, ``eval``, ``codecs``, ``codebook`` and
-``primitives``.
+"""The coding commands of the CLI: ``encode``, ``decode``, ``eval``, ``codecs``, and the model
+trainers ``codebook``, ``primitives``, ``rhythm`` and ``tables``.
 
 Codec knobs are given as options named after them (``--levels 64`` for the knob ``levels``);
 ``--ratio``, ``--bitrate``, ``--psnr``, ``--mean-error-cm`` and ``--max-error-cm`` ask rate
@@ -14,7 +14,7 @@ from pathlib import Path
 
 from mocodec import moc, ratecontrol
 from mocodec.codecs import DEFAULT_CODEC, codec_class, codec_ids, get_codec
-from mocodec.coding import primdb, rhythmdb, vqbook
+from mocodec.coding import motiontables, primdb, rhythmdb, segmentation, vqbook
 from mocodec.errors import CodecError
 from mocodec.formats import load, save
 from mocodec.formats._io import atomic_write_bytes
@@ -114,7 +114,8 @@ def cmd_decode(args) -> int:
     frames = parse_frames(args.frames)
     if frames and frames[1] == -1:
         frames = (frames[0], moc.info(args.input, skeleton).frames)
-    knobs = {name: path for name, path in (("codebook", args.codebook), ("db", args.db)) if path}
+    knobs = {name: path for name, path in (("codebook", args.codebook), ("db", args.db), ("tables", args.tables))
+             if path}
     motion = moc.decode(args.input, frames=frames, skeleton=skeleton, knobs=knobs or None)
     written = save(motion, args.output, asf=args.out_asf)
     print(f"wrote {', '.join(str(p) for p in written)} ({motion.num_frames} frames)")
@@ -234,6 +235,28 @@ def cmd_rhythm(args) -> int:
     return 0
 
 
+def cmd_tables(args) -> int:
+    if args.action == "info":
+        for path in args.inputs:
+            t = motiontables.Tables.load(path)
+            print(f"{path}: {len(t.groups)} groups, {t.describe()}, gestures of {t.norm} frames, spacing "
+                  f"{t.spacing_cm:g} cm, discard {t.discard_deg:g} deg, b {t.interior:g}, "
+                  f"{Path(path).stat().st_size:,} bytes, fingerprint {t.fingerprint:08x}, "
+                  f"trained on {', '.join(t.trained_on) or '?'}")
+        return 0
+    if not args.output:
+        raise CodecError("tables train needs -o FILE")
+    clips = _training_clips(args)
+    t0 = time.perf_counter()
+    params = segmentation.GestureParams(args.beta, args.window, args.min_length, args.max_length)
+    tables = motiontables.train(clips, args.spacing, args.discard, args.norm, args.interior, params,
+                                names=[Path(p).name for p in args.inputs])
+    tables.save(args.output)
+    print(f"wrote {args.output}: {tables.describe()}, {Path(args.output).stat().st_size:,} bytes, "
+          f"{time.perf_counter() - t0:.1f} s")
+    return 0
+
+
 def cmd_eval(args) -> int:
     inputs = args.inputs
     for k, path in enumerate(inputs, 1):
@@ -283,6 +306,7 @@ def add_commands(sub, common) -> None:
     p.add_argument("--codebook", help="the VQ codebook file (svq, tvq) here, if not where the encoder had it")
     p.add_argument("--db", help="the primitive or rhythm database (primitives, rhythmic) here, if not where the "
                                 "encoder had it")
+    p.add_argument("--tables", help="the motion tables (posture, gesture) here, if not where the encoder had them")
     p.set_defaults(func=cmd_decode)
 
     p = sub.add_parser("codebook", help="train VQ codebooks for svq and tvq (000 7.9)",
@@ -330,6 +354,32 @@ def add_commands(sub, common) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the k-means++ draws (default 0)")
     common(p)
     p.set_defaults(func=cmd_rhythm)
+
+    g = segmentation.GestureParams()
+    p = sub.add_parser("tables", help="train posture and gesture tables for the posture and gesture codecs (000 8.4)",
+                       description="Build each body-part group's posture table (postures at least --spacing cm "
+                                   "apart, greedy search) and gesture table (gesture segments stretched to --norm "
+                                   "frames, those within --discard degrees of one kept dropped) from the clips, "
+                                   "and write the file encoder and decoder share (--tables FILE). Clips must "
+                                   "share a channel layout.")
+    p.add_argument("action", choices=("train", "info"), help="train: make tables; info: describe a tables file")
+    p.add_argument("inputs", nargs="+", metavar="IN", help="train: .bvh or .amc clips; info: the tables file")
+    p.add_argument("-o", "--output", help="tables file to write (train), e.g. dance.moctb")
+    p.add_argument("--spacing", type=float, default=motiontables.SPACING_CM,
+                   help=f"posture spacing d, cm (default {motiontables.SPACING_CM:g})")
+    p.add_argument("--discard", type=float, default=motiontables.DISCARD_DEG,
+                   help=f"gesture discard distance D, degrees (default {motiontables.DISCARD_DEG:g})")
+    p.add_argument("--norm", type=int, default=motiontables.NORM,
+                   help=f"frames of a normalised gesture (default {motiontables.NORM})")
+    p.add_argument("--interior", type=float, default=motiontables.INTERIOR_WEIGHT,
+                   help=f"weight b of a gesture's middle in (8-13) (default {motiontables.INTERIOR_WEIGHT:g})")
+    p.add_argument("--beta", type=float, default=g.beta, help=f"gesture threshold scale (default {g.beta:g})")
+    p.add_argument("--window", type=float, default=g.window, help="threshold low-pass, seconds (default 0.667)")
+    p.add_argument("--min-length", type=float, default=g.min_length, help="shortest gesture, s (default 0.167)")
+    p.add_argument("--max-length", type=float, default=g.max_length, help=f"longest gesture, s (default "
+                                                                           f"{g.max_length:g})")
+    common(p)
+    p.set_defaults(func=cmd_tables)
 
     p = sub.add_parser("eval", help="encode and decode in memory and report ratio, rate, error and speed",
                        description="Ratio vs 32-bit floats, bits per second, PSNR, VPSNR, mean/max joint "

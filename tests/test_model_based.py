@@ -218,3 +218,6 @@ def test_cli_trains_tables_and_codes_with_them(tmp_path, capsys):
     tables.rename(moved)
     assert main(["decode", str(moc), "-o", str(tmp_path / "w.amc"), "--tables", str(moved)]) == 0
     assert main(["tables", "train", str(DATA / "135_08.amc")]) != 0
+    capsys.readouterr()
+    assert main(["eval", str(DATA / "07_03.amc"), "--codec", "hybrid"]) == 0
+    assert "coding delay mean / max" in capsys.readouterr().out

@@ -155,6 +155,9 @@ def evaluate(motion: Motion, args) -> str:
         ("shell error max", f"{s['max_shell_error_cm']:.4g} cm"),
         ("encode / decode", f"{(t1 - t0) * us:.1f} / {(t2 - t1) * us:.1f} us per frame"),
     ]
+    if codec.variable_delay:
+        wait = codec.delays(motion) / motion.fps
+        rows.append(("coding delay mean / max", f"{wait.mean():.2f} / {wait.max():.2f} s"))
     return "\n".join(f"{k:<24}{v}" for k, v in rows)
 
 
@@ -276,8 +279,8 @@ def cmd_codecs(args) -> int:
         knobs = " ".join(k.describe() for k in cls.knobs) or "-"
         quality = f"; quality knob {cls.quality.name}" if cls.quality else ""
         print(f"{cid:<12}{cls.description}")
-        delay = cls().delay_frames
-        print(f"{'':<12}knobs: {knobs}{quality}; delay {delay} frames{'; ' + flags if flags else ''}")
+        delay = "variable (per frame: codec.delays(motion))" if cls.variable_delay else f"{cls().delay_frames} frames"
+        print(f"{'':<12}knobs: {knobs}{quality}; delay {delay}{'; ' + flags if flags else ''}")
     return 0
 
 

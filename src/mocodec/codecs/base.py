@@ -120,6 +120,7 @@ class Codec:
     lossless: ClassVar[bool] = False
     streaming: ClassVar[bool] = False
     delay_frames: ClassVar[int] = 0
+    variable_delay: ClassVar[bool] = False     # the delay depends on the motion (000 ch. 8)
 
     def __init__(self, **knobs):
         specs = {k.name: k for k in self.knobs}

@@ -37,6 +37,8 @@ BLEND_KNOB = Knob("blend", float, round(10 / 30, 4), "seconds over which a segme
 class SegmentedCodec(Codec):
     """Base of the ch. 8 codecs: work in degrees and centimetres, on continuous angles."""
 
+    variable_delay = True
+
     def gesture_params(self) -> segmentation.GestureParams:
         c = self.config
         return segmentation.GestureParams(c["beta"], c["window"], c["min_length"], c["max_length"])

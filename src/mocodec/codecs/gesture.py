@@ -23,26 +23,21 @@ import numpy as np
 
 from mocodec.codecs.base import Knob, QualityKnob, continuous_frames
 from mocodec.codecs.registry import register
-from mocodec.codecs.segmented import BLEND_KNOB, GESTURE_KNOBS, MAX_LAG_KNOB, ROOT_KNOBS, SegmentedCodec
-from mocodec.coding import animate, modelcoding, motiontables, segmentation
-from mocodec.coding.modelgroups import model_groups, posture_vectors
-from mocodec.coding.parts import join_parts, split_parts
-from mocodec.coding.rangecoder import decode_ints, encode_ints
+from mocodec.codecs.segmented import BLEND_KNOB, GESTURE_KNOBS, MAX_LAG_KNOB, ROOT_KNOBS, TABLE_KNOBS, TabledCodec
+from mocodec.coding import animate, motiontables, segmentation
 from mocodec.coding.vqbook import channel_units
 from mocodec.errors import CorruptStreamError
 from mocodec.skeleton import Skeleton
 
 
 @register
-class GestureCodec(SegmentedCodec):
+class GestureCodec(TabledCodec):
     id = "gesture"
     description = "000 8.4.4: gesture segmentation, gesture-table codes with posture fallback, blending"
     knobs = (
         Knob("e", float, 5.0, "largest similarity error (8-12) of a gesture, degrees; beyond it: posture",
              low=0.0, high=1e4),
-        Knob("tables", str, "", "a motion tables file (mocodec tables train); empty: trained on the clip, carried"),
-        Knob("spacing", float, motiontables.SPACING_CM, "posture table spacing in cm (tables trained on the clip)",
-             low=0.01, high=1000),
+    ) + TABLE_KNOBS + (
         Knob("discard", float, motiontables.DISCARD_DEG, "gesture table discard distance D in degrees (tables "
              "trained on the clip)", low=0.0, high=1e4),
     ) + GESTURE_KNOBS + (BLEND_KNOB, MAX_LAG_KNOB) + ROOT_KNOBS
@@ -54,19 +49,13 @@ class GestureCodec(SegmentedCodec):
         return runs + [(root, 1)]
 
     def _encode(self, motion) -> bytes:
-        sk, groups = motion.skeleton, model_groups(motion.skeleton)
-        cont = motion.continuous()
-        x = cont.channels * channel_units(sk)
         params = self.gesture_params()
-        tables, named = modelcoding.tables_for(cont, groups, self.config["tables"], self.config["spacing"],
-                                               self.config["discard"], params)
-        vectors = posture_vectors(sk, cont.channels, groups)
+        x, groups, tables, named, vectors = self._prepare(motion, params, self.config["discard"])
         frames, codes = [], []
         for k, g in enumerate(groups.parts):
             xg = x[:, g.channels]
             at = segmentation.gesture_samples(xg, motion.fps, params).frames
-            entries = tables.posture_vectors(sk, groups, k)
-            postures, _ = motiontables.nearest(vectors[k][at], entries)
+            postures, _ = motiontables.nearest(vectors[k][at], tables.posture_vectors(motion.skeleton, groups, k))
             moves = tables.gestures[k]
             segs = motiontables.gesture_segments(xg, at, tables.norm).reshape(len(at) - 1, -1)
             if len(moves) and len(segs):
@@ -76,31 +65,15 @@ class GestureCodec(SegmentedCodec):
             codes.append(np.concatenate([[-1 - postures[0]], np.where(error <= self.config["e"], best,
                                                                       -1 - postures[1:])]))
             frames.append(at)
-        root, samples = modelcoding.encode_root(x[:, groups.root], self.config["root_d"], self.config["root_step"],
-                                                self.max_lag(motion.fps))
-        return join_parts([named, modelcoding.encode_lags([samples.frames] + frames),
-                           encode_ints(np.concatenate(codes) if codes else np.zeros(0, np.int64)), root])
+        return self._payload(named, x, groups, motion.fps, frames, codes)
 
     def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:
         where = "gesture payload"
-        groups = model_groups(skeleton)
-        named, lags, code_bytes, root = split_parts(body, 4, where)
-        tables = modelcoding.read_tables(named, self.config["tables"], skeleton, groups, where)
-        samples = modelcoding.decode_lags(lags, frames, len(groups.parts) + 1, where)
-        codes = decode_ints(code_bytes)
-        if codes.size != sum(s.size for s in samples[1:]):
-            raise CorruptStreamError(f"{where}: {codes.size} codes for {sum(s.size for s in samples[1:])} samples")
-        out = np.zeros((frames, skeleton.num_channels))
-        out[:, groups.root] = modelcoding.decode_root(root, samples[0], frames, groups.root.size,
-                                                      self.config["root_step"], where)
+        groups, tables, samples, codes, out = self._read(body, skeleton, frames, where)
         blend = round(self.config["blend"] * fps)
-        start = 0
         for k, g in enumerate(groups.parts):
-            at = samples[k + 1]
-            mine = codes[start:start + at.size]
-            start += at.size
-            out[:, g.channels] = self._animate(at, mine, tables.postures[k], tables.gestures[k], blend, frames,
-                                               f"{where}, group {g.name}")
+            out[:, g.channels] = self._animate(samples[k], codes[k], tables.postures[k], tables.gestures[k], blend,
+                                               frames, f"{where}, group {g.name}")
         return continuous_frames(self.id, skeleton, fps, out / channel_units(skeleton), None)
 
     @staticmethod

@@ -88,10 +88,9 @@ class GestureCodec(TabledCodec):
         for a, b, code in zip(at[:-1], at[1:], codes[1:]):
             if code >= 0:
                 seq = animate.stretch(gestures[code], b - a + 1)[1:]
-                seq = seq + 360.0 * np.round((out[a] - seq[0]) / 360.0)
+                seq = animate.turned_to(seq, out[a])
                 out[a + 1:b + 1] = animate.blend_start(seq, out[a], min(blend, (b - a) // 2))
             else:
-                end = postures[-1 - code]
-                end = end + 360.0 * np.round((out[a] - end) / 360.0)
+                end = animate.turned_to(postures[-1 - code], out[a])
                 out[a + 1:b + 1] = animate.raised_cosine(np.array([0, b - a]), np.stack([out[a], end]), b - a + 1)[1:]
         return out

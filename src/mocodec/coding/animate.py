@@ -22,12 +22,16 @@ from __future__ import annotations
 import numpy as np
 
 
-def unwrap_degrees(values: np.ndarray, mask: np.ndarray | None = None) -> np.ndarray:
-    """``values (S, K)`` with each column (where ``mask``) shifted by turns to follow its previous row."""
-    out = np.array(values, dtype=np.float64, copy=True)
-    cols = slice(None) if mask is None else mask
-    out[:, cols] = np.unwrap(out[:, cols], period=360.0, axis=0)
-    return out
+def unwrap_degrees(values: np.ndarray) -> np.ndarray:
+    """``values (S, K)`` with each column shifted by turns to follow its previous row."""
+    return np.unwrap(np.asarray(values, dtype=np.float64), period=360.0, axis=0)
+
+
+def turned_to(values: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """``values`` (one row, or a sequence of rows) shifted by whole turns per angle so that
+    their first row lies within half a turn of ``reference``."""
+    start = values[0] if values.ndim == 2 else values
+    return values + 360.0 * np.round((reference - start) / 360.0)
 
 
 def _segment_of(times: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:

@@ -1,5 +1,6 @@
 """The ``mocodec`` command line: ``info``, ``convert``, ``compare``, ``analyze``, ``demo``, and the
-coding commands of :mod:`mocodec.cli_coding` (``encode``, ``decode``, ``eval``, ``codecs``).
+coding commands of :mod:`mocodec.cli_coding` (``encode``, ``decode``, ``eval``, ``codecs``), and
+``bench`` and ``compress-dir`` of :mod:`mocodec.cli_bench`.
 
 User errors (bad files, impossible conversions) print one line and exit with status 2.
 """
@@ -14,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from mocodec import __version__
+from mocodec import cli_bench
 from mocodec.cli_coding import add_codec_options, add_commands, knobs_from
 from mocodec.errors import MocodecError
 from mocodec.formats import load, save
@@ -181,6 +183,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_analyze)
 
     add_commands(sub, common)
+    cli_bench.add_commands(sub)
 
     p = sub.add_parser("demo", help="run the main job on the bundled sample clip",
                        description="Encode and decode the bundled CMU walk with the default codec and "

@@ -1,0 +1,173 @@
+"""``mocodec bench``: every clip coded by every codec at every point, measured, stored as it
+finishes (so a run resumes where it stopped) and gathered into one tidy table.
+
+A task is one clip and one codec with all its points; it runs in a worker process and returns
+one row per point. A row holds the size, ratio vs 32-bit floats (whole file, skeleton
+included), bit rate, bits per DOF-sample, the quality measures of
+:func:`mocodec.metrics.compare` and the encode and decode time per frame. A point a codec
+cannot reach (rate control says so) gives a row with status ``unreachable``; a clip that
+fails to load or a codec that crashes gives status ``failed`` and the run goes on.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import time
+import traceback
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from mocodec import moc
+from mocodec.bench.points import Point
+from mocodec.codecs import codec_class, get_codec
+from mocodec.errors import MocodecError
+from mocodec.formats import READABLE, load
+from mocodec.metrics import compare
+from mocodec.motion import Motion
+from mocodec.ratecontrol import tune
+
+TARGET_OF = {"error": "max_error_cm", "ratio": "ratio", "bitrate": "bitrate"}
+MEASURES = ("psnr_db", "vpsnr_db", "mean_joint_error_cm", "max_joint_error_cm", "mean_shell_error_cm",
+            "max_shell_error_cm", "foot_slide_original_cm_s", "foot_slide_decoded_cm_s", "jerk_ratio")
+COLUMNS = ("clip", "format", "frames", "fps", "channels", "codec", "baseline", "point", "target", "knob",
+           "knob_value", "status", "bytes", "ratio", "bitrate", "bits_per_dof_sample", *MEASURES,
+           "encode_us_per_frame", "decode_us_per_frame", "message")
+WARM_FRAMES = 64
+_warmed: set[str] = set()
+
+
+@dataclass(frozen=True)
+class Task:
+    """One clip (``path``, shown as ``name``) and one codec at all its points."""
+
+    path: str
+    name: str
+    codec: str
+    points: tuple[Point, ...]
+
+    @property
+    def key(self) -> str:
+        spec = json.dumps([self.name, self.codec, [p.label for p in self.points]])
+        return hashlib.sha1(spec.encode()).hexdigest()[:16]
+
+
+def find_clips(paths) -> list[tuple[str, str]]:
+    """(path, name) of every readable clip in ``paths`` (files, or folders searched
+    recursively), biggest first so parallel runs finish together; names are relative to the
+    folder given."""
+    found: dict[str, str] = {}
+    for given in map(Path, paths):
+        if given.is_dir():
+            for p in sorted(given.rglob("*")):
+                if p.suffix.lower() in READABLE and p.is_file():
+                    found.setdefault(str(p), str(p.relative_to(given)))
+        elif given.is_file():
+            found.setdefault(str(given), given.name)
+        else:
+            raise MocodecError(f"{given}: no such file or folder")
+    return sorted(found.items(), key=lambda pn: (-Path(pn[0]).stat().st_size, pn[1]))
+
+
+def _warm(codec_id: str, motion: Motion) -> None:
+    """Code a few frames once per process, so compile time is not counted as coding time."""
+    if codec_id not in _warmed:
+        _warmed.add(codec_id)
+        try:
+            moc.unpack(moc.pack(motion[:WARM_FRAMES], get_codec(codec_id)))
+        except MocodecError:
+            pass
+
+
+def _base_row(task: Task, motion: Motion | None, point: Point) -> dict:
+    cls = codec_class(task.codec)
+    knob = cls.quality.name if cls.quality else ""
+    return {"clip": task.name, "format": Path(task.path).suffix.lstrip(".").lower(),
+            "frames": motion.num_frames if motion else None, "fps": motion.fps if motion else None,
+            "channels": motion.skeleton.num_channels if motion else None, "codec": task.codec,
+            "baseline": cls.__module__.endswith(".floats") or cls.id == "raw",
+            "point": point.kind, "target": None if point.kind == "knob" else point.value, "knob": knob,
+            "knob_value": point.value if point.kind == "knob" and knob else None}
+
+
+def _measured(task: Task, motion: Motion, point: Point) -> dict:
+    row = _base_row(task, motion, point)
+    codec = get_codec(task.codec)
+    if point.kind == "knob" and row["knob"]:
+        codec = codec.with_knob(row["knob"], point.value)
+    elif point.kind != "knob":
+        codec = tune(codec, motion, TARGET_OF[point.kind], point.value).codec
+        row["knob_value"] = codec.config[row["knob"]] if row["knob"] else None
+    t0 = time.perf_counter()
+    data = moc.pack(motion, codec)
+    t1 = time.perf_counter()
+    decoded = moc.unpack(data)
+    t2 = time.perf_counter()
+    summary = compare(motion, decoded).summary()
+    samples = motion.num_frames * motion.skeleton.num_channels
+    row.update(status="ok", bytes=len(data), ratio=motion.raw_bits / 8 / len(data),
+               bitrate=len(data) * 8 / motion.duration, bits_per_dof_sample=len(data) * 8 / samples,
+               encode_us_per_frame=(t1 - t0) * 1e6 / motion.num_frames,
+               decode_us_per_frame=(t2 - t1) * 1e6 / motion.num_frames,
+               **{k: summary[k] for k in MEASURES})
+    return row
+
+
+def failed_row(task: Task, motion: Motion | None, point: Point, status: str, error: BaseException) -> dict:
+    return {**_base_row(task, motion, point), "status": status, "message": _one_line(error)}
+
+
+def _one_line(error: BaseException) -> str:
+    if isinstance(error, MocodecError):
+        return str(error)
+    where = traceback.extract_tb(error.__traceback__)[-1:] if error.__traceback__ else []
+    at = f" at {Path(where[0].filename).name}:{where[0].lineno}" if where else ""
+    return f"{type(error).__name__}: {error}{at}"
+
+
+def run_task(task: Task) -> list[dict]:
+    """Every row of a task (in a worker). Never raises."""
+    try:
+        motion = load(task.path)
+    except Exception as e:   # noqa: BLE001 - the clip is reported and the run goes on
+        return [failed_row(task, None, Point("knob", math.nan), "failed", e)]
+    _warm(task.codec, motion)
+    rows = []
+    for point in task.points:
+        try:
+            rows.append(_measured(task, motion, point))
+        except MocodecError as e:
+            status = "unreachable" if point.kind != "knob" else "failed"
+            rows.append(failed_row(task, motion, point, status, e))
+        except Exception as e:   # noqa: BLE001
+            rows.append(failed_row(task, motion, point, "failed", e))
+    return rows
+
+
+def task_failed(rows: list[dict]) -> bool:
+    """A task that must run again on resume: nothing measured, or a crash."""
+    return any(r["status"] == "failed" for r in rows)
+
+
+class Store:
+    """``rows.jsonl`` in the output folder: one line per finished task, appended and flushed as
+    tasks finish, so an interrupted run loses at most the tasks in flight."""
+
+    def __init__(self, folder: Path):
+        self.path = folder / "rows.jsonl"
+        self.done: dict[str, list[dict]] = {}
+        if self.path.exists():
+            for line in self.path.read_text().splitlines():
+                try:
+                    entry = json.loads(line)
+                except json.JSONDecodeError:
+                    continue        # a line cut short by an interrupted run
+                if not task_failed(entry["rows"]):
+                    self.done[entry["task"]] = entry["rows"]
+
+    def add(self, task: Task, rows: list[dict]) -> None:
+        with self.path.open("a") as f:
+            f.write(json.dumps({"task": task.key, "spec": asdict(task), "rows": rows}, allow_nan=True) + "\n")
+        if not task_failed(rows):
+            self.done[task.key] = rows

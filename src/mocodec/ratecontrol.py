@@ -75,9 +75,12 @@ def _achieved(m: Measurement, target: str) -> float:
 
 
 def tune(codec: Codec, motion: Motion, target: str, value: float, tolerance: float = 0.02,
-         whole_file: bool = True) -> Measurement:
+         whole_file: bool = True, knob_range: tuple[float, float] | None = None,
+         resolution: float = KNOB_RESOLUTION) -> Measurement:
     """The measured setting of ``codec``'s quality knob for the target (see the module doc).
-    Ratio and bit-rate targets count the whole file unless ``whole_file`` is False."""
+    Ratio and bit-rate targets count the whole file unless ``whole_file`` is False. The knob is
+    searched over its whole range, or over ``knob_range``, down to steps of ``resolution``
+    (relative)."""
     if target not in TARGETS:
         raise CodecError(f"unknown target {target!r} (one of {', '.join(TARGETS)})")
     if not (math.isfinite(value) and value > 0):
@@ -95,7 +98,7 @@ def tune(codec: Codec, motion: Motion, target: str, value: float, tolerance: flo
         raise CodecError(f"codec {codec.id} has no quality knob and gives {target} {_achieved(m, target):.4g}, "
                          f"not {value:g}")
     knob = next(k for k in codec.knobs if k.name == q.name)
-    lo, hi = float(knob.low), float(knob.high)
+    lo, hi = map(float, knob_range or (knob.low, knob.high))
     integer = knob.kind is int
 
     def at(x: float) -> Measurement:
@@ -128,7 +131,7 @@ def tune(codec: Codec, motion: Motion, target: str, value: float, tolerance: flo
         if size_target and abs(_achieved(good, target) - value) <= tolerance * value:
             break
         x = mid(good_x, bad_x)
-        if x in (good_x, bad_x) or abs(x - good_x) <= KNOB_RESOLUTION * max(abs(good_x), 1e-12):
+        if x in (good_x, bad_x) or abs(x - good_x) <= resolution * max(abs(good_x), 1e-12):
             break
         m = at(x)
         if _meets(m, target, value):

@@ -20,7 +20,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 from mocodec import moc
-from mocodec.bench.points import Point
+from mocodec.bench.points import Point, sweep_range
 from mocodec.codecs import codec_class, get_codec
 from mocodec.errors import MocodecError
 from mocodec.formats import READABLE, load
@@ -35,6 +35,7 @@ COLUMNS = ("clip", "format", "frames", "fps", "channels", "codec", "baseline", "
            "knob_value", "status", "bytes", "ratio", "bitrate", "bits_per_dof_sample", *MEASURES,
            "encode_us_per_frame", "decode_us_per_frame", "message")
 WARM_FRAMES = 64
+SEARCH_RESOLUTION = 0.01      # rate control stops at knob steps of 1%: finer changes sizes by less
 _warmed: set[str] = set()
 
 
@@ -97,7 +98,8 @@ def _measured(task: Task, motion: Motion, point: Point) -> dict:
     if point.kind == "knob" and row["knob"]:
         codec = codec.with_knob(row["knob"], point.value)
     elif point.kind != "knob":
-        codec = tune(codec, motion, TARGET_OF[point.kind], point.value).codec
+        codec = tune(codec, motion, TARGET_OF[point.kind], point.value, knob_range=sweep_range(type(codec)),
+                     resolution=SEARCH_RESOLUTION).codec
         row["knob_value"] = codec.config[row["knob"]] if row["knob"] else None
     t0 = time.perf_counter()
     data = moc.pack(motion, codec)

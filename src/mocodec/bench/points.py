@@ -1,8 +1,10 @@
 """The operating points a benchmark measures each codec at: a sweep of its quality knob, or
 rate-controlled targets (compression ratio, bit rate, max joint error).
 
-Sweeps cover the range where each codec is worth looking at on 30-120 fps human motion; a
-codec missing from :data:`SWEEPS` (a plug-in) is swept over its knob's own range.
+Sweeps cover the range where each codec is worth looking at on 30-120 fps human motion (and
+where its coding time stays reasonable: VQ codebooks of 256 entries at most); rate-control
+targets are searched in the same range, so "unreachable" means "not within it". A codec
+missing from :data:`SWEEPS` (a plug-in) is swept over its knob's own range.
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ SWEEPS: dict[str, tuple[float, float]] = {
     "adpcm": (4, 256), "dct": (0.125, 8.0), "deadreckoning": (0.0125, 1.6), "dpcm": (4, 256),
     "gesture": (1.0, 20.0), "hybrid": (0, 7), "kinwave": (0.05, 5.0), "posture": (10.0, 80.0),
     "primitives": (0.0025, 0.04), "pwavelet": (0.01, 0.5), "quant": (8, 1024), "rhythmic": (5, 80),
-    "spiht": (2000.0, 64000.0), "subband": (0.01, 0.32), "svq": (16, 512), "tvq": (16, 512),
+    "spiht": (2000.0, 512000.0), "subband": (0.01, 0.32), "svq": (16, 256), "tvq": (16, 256),
     "sz3": (0.001, 1.0), "zfp": (0.001, 1.0), "fpzip": (12, 28),
 }
 
@@ -45,6 +47,15 @@ class Point:
         return f"{self.kind}={self.value:g}"
 
 
+def sweep_range(cls: type[Codec]) -> tuple[float, float] | None:
+    """(low, high) of the codec's quality knob in benchmarks: sweeps cover it and rate-control
+    targets are searched in it (None for a codec without a quality knob)."""
+    if cls.quality is None:
+        return None
+    knob = next(k for k in cls.knobs if k.name == cls.quality.name)
+    return SWEEPS.get(cls.id, (knob.low, knob.high))
+
+
 def knob_sweep(cls: type[Codec], points: int = SWEEP_POINTS) -> list[float]:
     """``points`` settings of the codec's quality knob, from its worst to its best quality
     (log-spaced for log-scaled knobs; integers rounded and repeated ones dropped)."""
@@ -52,7 +63,7 @@ def knob_sweep(cls: type[Codec], points: int = SWEEP_POINTS) -> list[float]:
     if q is None:
         return []
     knob = next(k for k in cls.knobs if k.name == q.name)
-    low, high = SWEEPS.get(cls.id, (knob.low, knob.high))
+    low, high = sweep_range(cls)
     log = q.log_scale or (low > 0 and high / low >= 16)
     values = np.geomspace(low, high, points) if log else np.linspace(low, high, points)
     if knob.kind is int:

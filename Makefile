@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test bench clean
+.PHONY: demo test bench bench-suite clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -21,16 +21,18 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(BIN)/python -m pytest
 
+# every benchmark script of benchmarks/ (speed and rate-distortion of each issue), one after another
 bench: $(STAMP)
-	$(BIN)/python benchmarks/bench_foundation.py
-	$(BIN)/python benchmarks/bench_measures.py
-	$(BIN)/python benchmarks/bench_coding.py
-	$(BIN)/python benchmarks/bench_lossless.py
-	$(BIN)/python benchmarks/bench_codec_speed.py
-	$(BIN)/python benchmarks/bench_seams.py
-	$(BIN)/python benchmarks/bench_ratecontrol.py
+	for script in foundation measures coding lossless codec_speed seams ratecontrol kinwave kinwave_ablation \
+	              primitives rhythmic model_based; do \
+		$(BIN)/python benchmarks/bench_$$script.py || exit 1; done
 	$(BIN)/python benchmarks/bench_perceptual.py --set amc
 	$(BIN)/python benchmarks/bench_waveform.py --set amc
+	$(BIN)/python benchmarks/fig_6_2_vmse.py
+
+# the whole comparison on the shared clips: report in bench-out/report.html (docs/benchmarks.md)
+bench-suite: $(STAMP)
+	$(BIN)/mocodec bench ../shared/data --out bench-out
 
 clean:
 	rm -rf $(VENV) build src/*.egg-info .pytest_cache

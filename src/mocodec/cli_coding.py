@@ -275,7 +275,8 @@ def cmd_eval(args) -> int:
 def cmd_codecs(args) -> int:
     for cid in codec_ids():
         cls = codec_class(cid)
-        flags = ", ".join(f for f, on in (("lossless", cls.lossless), ("streaming", cls.streaming)) if on)
+        flags = ", ".join(f for f, on in (("lossless", cls.lossless), ("streaming", cls.streaming),
+                                               ("baseline for comparison", cls.baseline)) if on)
         knobs = " ".join(k.describe() for k in cls.knobs) or "-"
         quality = f"; quality knob {cls.quality.name}" if cls.quality else ""
         print(f"{cid:<12}{cls.description}")

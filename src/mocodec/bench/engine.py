@@ -87,7 +87,7 @@ def _base_row(task: Task, motion: Motion | None, point: Point) -> dict:
     return {"clip": task.name, "format": Path(task.path).suffix.lstrip(".").lower(),
             "frames": motion.num_frames if motion else None, "fps": motion.fps if motion else None,
             "channels": motion.skeleton.num_channels if motion else None, "codec": task.codec,
-            "baseline": cls.__module__.endswith(".floats") or cls.id == "raw",
+            "baseline": cls.baseline,
             "point": point.kind, "target": None if point.kind == "knob" else point.value, "knob": knob,
             "knob_value": point.value if point.kind == "knob" and knob else None}
 

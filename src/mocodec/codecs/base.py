@@ -121,6 +121,7 @@ class Codec:
     streaming: ClassVar[bool] = False
     delay_frames: ClassVar[int] = 0
     variable_delay: ClassVar[bool] = False     # the delay depends on the motion (000 ch. 8)
+    baseline: ClassVar[bool] = False           # a generic float compressor, for comparison
 
     def __init__(self, **knobs):
         specs = {k.name: k for k in self.knobs}

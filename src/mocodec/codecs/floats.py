@@ -57,6 +57,7 @@ def _frames_from(values: np.ndarray, skeleton: Skeleton, frames: int, what: str)
 class _PerChannel(Codec):
     """An error-bounded compressor run on each channel's samples on its own."""
 
+    baseline = True
     quality = QualityKnob("bound", higher_is_better=False, log_scale=True)
     package: ClassVar[str] = ""
 
@@ -84,6 +85,7 @@ class ZstdCodec(Codec):
     id = "zstd"
     description = "baseline: zstandard on the 32-bit float channels (lossless at float precision)"
     knobs = (Knob("level", int, 19, "zstandard compression level", 1, 22),)
+    baseline = True
 
     def _encode(self, motion: Motion) -> bytes:
         return zstandard.ZstdCompressor(level=self.config["level"]).compress(_time_contiguous(motion).tobytes())
@@ -131,6 +133,7 @@ class FpzipCodec(Codec):
     knobs = (Knob("precision", int, 20, "bits kept of each 32-bit float (32 = lossless)", 2, 32),)
     quality = QualityKnob("precision", higher_is_better=True)
     package = "fpzip"
+    baseline = True
 
     def _encode(self, motion: Motion) -> bytes:
         fpzip = _module(self.package)

@@ -12,7 +12,7 @@ from mocodec.coding import blend, quatseg, rhythmdb
 from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.metrics import compare
 
-from conftest import DATA
+from conftest import DATA, SHARED
 
 
 @pytest.fixture(scope="module")
@@ -151,3 +151,18 @@ def test_rhythm_on_the_command_line(tmp_path, capsys):
     assert "joint error mean / max" in capsys.readouterr().out
     assert main(["rhythm", "train", str(DATA / "135_08.amc")]) == 2
     assert main(["rhythm", "train", str(DATA / "135_08.amc"), "-o", str(db), "--count", "0"]) == 2
+
+
+@pytest.mark.shared_data
+@pytest.mark.skipif(SHARED is None or not (SHARED / "cmu/bvh/06_02.bvh").exists(), reason="needs shared clip 06_02")
+def test_segments_at_zero_distance_from_each_other_still_give_one_primitive_each():
+    """06_02 has whole-body segments identical to each other: two clusters settled on one
+    medoid and a primitive had no segment left to average its length over (NaN)."""
+    from mocodec import load
+    motion = load(SHARED / "cmu/bvh/06_02.bvh")
+    codec = get_codec("rhythmic", primitives=80)
+    decoded = codec.decode(codec.encode(motion), motion.skeleton)
+    assert compare(motion, decoded).joints.max < 5.0
+    dist = np.zeros((4, 4))
+    chosen = rhythmdb.medoids(dist, 4, np.random.default_rng(0))
+    assert len(set(chosen.tolist())) == len(chosen)

@@ -108,7 +108,8 @@ def medoids(dist: np.ndarray, count: int, rng: np.random.Generator) -> np.ndarra
         if np.array_equal(moved, chosen):
             break
         chosen = moved
-    return chosen
+    _, first = np.unique(chosen, return_index=True)     # two clusters can settle on one medoid
+    return chosen[np.sort(first)]
 
 
 @dataclass
@@ -202,6 +203,7 @@ def from_segments(names: tuple[str, ...], rot: np.ndarray, root: np.ndarray, len
     dist = body_distance(rot, rot)
     chosen = medoids(dist, count, np.random.default_rng(seed))
     labels = np.argmin(dist[:, chosen], axis=1)
+    labels[chosen] = np.arange(len(chosen))     # a medoid at zero distance from another keeps its own
     mean_length = np.array([np.round(lengths[labels == k].mean()) for k in range(len(chosen))], dtype=np.int64)
     return RhythmDB(names, rot[chosen].astype("<f4").astype(np.float64), root[chosen].astype("<f4").astype(np.float64),
                     mean_length, float(fps), max_segment, seed, float(dist[np.arange(len(dist)), chosen[labels]].mean()),

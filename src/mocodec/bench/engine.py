@@ -98,7 +98,10 @@ def _measured(task: Task, motion: Motion, point: Point) -> dict:
     if point.kind == "knob" and row["knob"]:
         codec = codec.with_knob(row["knob"], point.value)
     elif point.kind != "knob":
-        codec = tune(codec, motion, TARGET_OF[point.kind], point.value, knob_range=sweep_range(type(codec)),
+        # error targets are searched in the sweep's range (the knob's far ends can be slow: VQ
+        # codebooks of 4096 entries); size targets over the whole knob
+        span = sweep_range(type(codec)) if point.kind == "error" else None
+        codec = tune(codec, motion, TARGET_OF[point.kind], point.value, knob_range=span,
                      resolution=SEARCH_RESOLUTION).codec
         row["knob_value"] = codec.config[row["knob"]] if row["knob"] else None
     t0 = time.perf_counter()

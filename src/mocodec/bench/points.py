@@ -2,8 +2,9 @@
 rate-controlled targets (compression ratio, bit rate, max joint error).
 
 Sweeps cover the range where each codec is worth looking at on 30-120 fps human motion (and
-where its coding time stays reasonable: VQ codebooks of 256 entries at most); rate-control
-targets are searched in the same range, so "unreachable" means "not within it". A codec
+where its coding time stays reasonable: VQ codebooks of 256 entries at most); error targets
+are searched in the same range, so "unreachable" means "not within it"; ratio and bit-rate
+targets over the knob's whole range. A codec
 missing from :data:`SWEEPS` (a plug-in) is swept over its knob's own range.
 """
 

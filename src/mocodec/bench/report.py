@@ -27,19 +27,24 @@ def _ok(rows):
 
 
 def curves(rows) -> dict[str, list[dict]]:
-    """codec -> the median over clips of every measure at each knob setting, by bit rate."""
+    """codec -> the median over clips of every measure at each knob setting, by bit rate (at
+    each rate-control target instead for a run without knob sweeps)."""
     groups = defaultdict(list)
     for r in _ok(rows):
-        if r["point"] == "knob":
-            groups[(r["codec"], r["knob_value"])].append(r)
+        setting = r["knob_value"] if r["point"] == "knob" else r["target"]
+        groups[(r["codec"], r["point"], setting)].append(r)
+    swept = {codec for codec, point, _ in groups if point == "knob"}
     out = defaultdict(list)
-    for (codec, knob), rs in groups.items():
-        point = {"knob_value": knob, "clips": len(rs)}
+    for (codec, point, setting), rs in groups.items():
+        if (point == "knob") != (codec in swept):
+            continue
+        entry = {"knob_value": rs[0]["knob_value"] if point == "knob" else None, "point": point,
+                 "setting": setting, "clips": len(rs)}
         for k in ("ratio", "bitrate", "bits_per_dof_sample", "psnr_db", "vpsnr_db", "mean_joint_error_cm",
                   "max_joint_error_cm", "max_shell_error_cm", "encode_us_per_frame", "decode_us_per_frame"):
             values = [r[k] for r in rs if r.get(k) is not None]
-            point[k] = median(values) if values else None
-        out[codec].append(point)
+            entry[k] = median(values) if values else None
+        out[codec].append(entry)
     return {c: sorted(ps, key=lambda p: p["bitrate"]) for c, ps in sorted(out.items())}
 
 
@@ -87,9 +92,13 @@ def _pyplot():
     return plt
 
 
-def _style(codec: str, baselines: set[str]):
-    return {"linestyle": "--" if codec in baselines else "-", "marker": "s" if codec in baselines else "o",
-            "markersize": 3, "linewidth": 1.2}
+MARKERS = "o^vD<>PX*h"
+
+
+def _style(plt, index: int, codec: str, baselines: set[str]):
+    """A colour and marker of its own for each of up to 200 codecs; baselines dashed."""
+    return {"color": plt.get_cmap("tab20")(index % 20), "marker": MARKERS[index // 2 % len(MARKERS)],
+            "linestyle": "--" if codec in baselines else "-", "markersize": 4, "linewidth": 1.2}
 
 
 def plot_rd(curve_map, baselines, path: Path, title: str) -> None:
@@ -97,10 +106,11 @@ def plot_rd(curve_map, baselines, path: Path, title: str) -> None:
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.8))
     for ax, key, label in ((axes[0], "mean_joint_error_cm", "mean joint error (cm)"),
                            (axes[1], "max_joint_error_cm", "max joint error (cm)")):
-        for codec, pts in curve_map.items():
+        for i, (codec, pts) in enumerate(curve_map.items()):
             pts = [p for p in pts if p[key] and p[key] > 0 and p["bitrate"] > 0]
             if pts:
-                ax.plot([p["bitrate"] for p in pts], [p[key] for p in pts], label=codec, **_style(codec, baselines))
+                ax.plot([p["bitrate"] for p in pts], [p[key] for p in pts], label=codec,
+                        **_style(plt, i, codec, baselines))
         ax.set(xscale="log", yscale="log", xlabel="bit rate (bit/s)", ylabel=label)
         ax.grid(True, which="both", alpha=0.3)
     axes[1].legend(fontsize=7, ncol=2, loc="best")
@@ -188,11 +198,11 @@ def _tables(rows, meta) -> list[tuple[str, list[str], list[list[str]], str]]:
         out.append(("Median ratio at each max joint error (clips that reached it)",
                     ["codec"] + [f"{_f(e['level_cm'])} cm" for e in summary], body, ""))
     curve_map = curves(rows)
-    body = [[c, _f(p["knob_value"]), _f(p["ratio"]), _f(p["bitrate"], 4), _f(p["bits_per_dof_sample"]),
+    body = [[c, f"{p['point']} {_f(p['setting'])}", _f(p["ratio"]), _f(p["bitrate"], 4), _f(p["bits_per_dof_sample"]),
              _f(p["psnr_db"]), _f(p["vpsnr_db"]), _f(p["mean_joint_error_cm"]), _f(p["max_joint_error_cm"]),
              _f(p["max_shell_error_cm"])] for c, ps in curve_map.items() for p in ps]
-    out.append(("Knob sweeps: medians over clips",
-                ["codec", "knob", "ratio", "bit/s", "bits/DOF-sample", "PSNR dB", "VPSNR dB", "mean cm", "max cm",
+    out.append(("Rate-distortion: medians over clips at each knob setting (or target)",
+                ["codec", "point", "ratio", "bit/s", "bits/DOF-sample", "PSNR dB", "VPSNR dB", "mean cm", "max cm",
                  "max shell cm"], body, ""))
     body = [[c, _f(e), _f(d)] for c, (e, d) in speeds(rows).items()]
     out.append(("Speed (median microseconds per frame, whole file encode and decode, one core per task)",
@@ -258,7 +268,7 @@ def write_report(rows, meta, out_dir) -> list[Path]:
     plots.mkdir(exist_ok=True)
     baselines = {r["codec"] for r in rows if r.get("baseline")}
     curve_map = curves(rows)
-    figures = [("Rate-distortion over every clip (median at each knob setting)", "plots/overall.png")]
+    figures = [("Rate-distortion over every clip (median at each knob setting or target)", "plots/overall.png")]
     plot_rd(curve_map, baselines, plots / "overall.png", f"{meta['clips']} clips, medians per knob setting")
     plot_speed(speeds(rows), plots / "speed.png")
     figures.append(("Speed, with the thesis's figures (another machine: a 2.66 GHz Core 2 Duo)", "plots/speed.png"))

@@ -52,7 +52,7 @@ def main() -> None:
     SETTINGS["primitives"] = {"db": os.path.join(books, "primitives.mocdb")}
     motion = tile(clip, FRAMES)
     print(f"{FRAMES} frames x {motion.num_channels} channels; frames per second, best of 3")
-    print(f"{'codec':<10}{'encode':>12}{'decode':>12}{'ratio':>8}{'first call: cached':>20}{'compiling':>11}")
+    print(f"{'codec':<14}{'encode':>12}{'decode':>12}{'ratio':>8}{'first call: cached':>20}{'compiling':>11}")
     for cid in codec_ids():
         if cid.startswith("test") or (args.codecs and cid not in args.codecs):
             continue
@@ -65,7 +65,7 @@ def main() -> None:
         with tempfile.TemporaryDirectory() as empty:
             cold = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
                                   env={**os.environ, "NUMBA_CACHE_DIR": empty}).stdout.strip()
-        print(f"{cid:<10}{FRAMES / enc:>12,.0f}{FRAMES / dec:>12,.0f}{motion.raw_bits / 8 / len(payload):>8.1f}"
+        print(f"{cid:<14}{FRAMES / enc:>12,.0f}{FRAMES / dec:>12,.0f}{motion.raw_bits / 8 / len(payload):>8.1f}"
               f"{float(cached):>18.2f} s{float(cold):>9.2f} s")
 
 

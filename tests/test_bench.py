@@ -207,7 +207,7 @@ def test_the_report_shows_every_codec_and_its_plots(tmp_path):
         assert f"src='{src}'" in page and (tmp_path / src).stat().st_size > 10_000
     assert "http" not in page.replace("http-equiv", "")                 # nothing to fetch: opens offline
     md = (tmp_path / "report.md").read_text()
-    assert "| 1 | kinwave |" in md
+    assert "| all | 1 | kinwave |" in md
 
 
 # ----- compress-dir and the commands ----------------------------------------------------------

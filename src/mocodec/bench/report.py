@@ -184,10 +184,14 @@ def _tables(rows, meta) -> list[tuple[str, list[str], list[list[str]], str]]:
     out = []
     summary = error_summary(rows)
     if summary:
-        body = [[_f(e["level_cm"]), e.get("best", "none reached it on every clip"), _f(e.get("best_ratio")),
-                 _f(e.get(f"vs_{ERROR_BASELINE}")), _f(e.get(f"vs_{LOSSLESS_BASELINE}"))] for e in summary]
+        formats = sorted({r["format"] for r in rows})
+        split = [(f, e) for f in formats for e in error_summary([r for r in rows if r["format"] == f])] \
+            if len(formats) > 1 else []
+        body = [[label, _f(e["level_cm"]), e.get("best", "none reached it on every clip"), _f(e.get("best_ratio")),
+                 _f(e.get(f"vs_{ERROR_BASELINE}")), _f(e.get(f"vs_{LOSSLESS_BASELINE}"))]
+                for label, e in [("all", e) for e in summary] + split]
         out.append(("Smallest codec at each max joint error",
-                    ["max joint error (cm)", "smallest codec", "its median ratio", "x smaller than SZ3",
+                    ["clips", "max joint error (cm)", "smallest codec", "its median ratio", "x smaller than SZ3",
                      "x smaller than zstd"], body,
                     "Error-target points (rate control to the bound, verified on the decoded file); the best codec "
                     "is taken among those that reached the bound on every clip; factors are medians over clips of "

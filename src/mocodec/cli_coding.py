@@ -137,12 +137,9 @@ def cmd_truncate(args) -> int:
 def evaluate(motion: Motion, args) -> str:
     """Encode and decode in memory; the table of ``eval``."""
     codec, _ = configured(args, motion)
-    t0 = time.perf_counter()
-    data = moc.pack(motion, codec)
-    t1 = time.perf_counter()
-    decoded = moc.unpack(data)
-    t2 = time.perf_counter()
-    s = compare(motion, decoded).summary()
+    trip = moc.round_trip(motion, codec)
+    data = trip.data
+    s = compare(motion, trip.decoded).summary()
     us = 1e6 / max(motion.num_frames, 1)
     rows = [
         ("codec", repr(codec)),
@@ -153,7 +150,7 @@ def evaluate(motion: Motion, args) -> str:
         ("PSNR / VPSNR", f"{_db(s['psnr_db'])} / {_db(s['vpsnr_db'])} (mean over DOFs)"),
         ("joint error mean / max", f"{s['mean_joint_error_cm']:.4g} / {s['max_joint_error_cm']:.4g} cm"),
         ("shell error max", f"{s['max_shell_error_cm']:.4g} cm"),
-        ("encode / decode", f"{(t1 - t0) * us:.1f} / {(t2 - t1) * us:.1f} us per frame"),
+        ("encode / decode", f"{trip.encode_s * us:.1f} / {trip.decode_s * us:.1f} us per frame"),
     ]
     if codec.variable_delay:
         wait = codec.delays(motion) / motion.fps

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import io
 import os
+import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -51,6 +53,23 @@ def unpack(data: bytes, frames: tuple[int, int] | None = None, name: str = "<byt
     """Decode .moc bytes (all frames, or ``frames=(first, stop)``); ``skeleton`` for a file
     that holds only its skeleton's id."""
     return _decode(container.open_container(io.BytesIO(data), len(data), name, skeleton), frames)
+
+
+@dataclass(frozen=True)
+class RoundTrip:
+    data: bytes             # the .moc bytes
+    decoded: Motion
+    encode_s: float         # wall time of pack, seconds
+    decode_s: float         # wall time of unpack
+
+
+def round_trip(motion: Motion, codec: Codec) -> RoundTrip:
+    """Pack and unpack in memory, timing each: what ``eval`` and ``bench`` measure."""
+    t0 = time.perf_counter()
+    data = pack(motion, codec)
+    t1 = time.perf_counter()
+    decoded = unpack(data)
+    return RoundTrip(data, decoded, t1 - t0, time.perf_counter() - t1)
 
 
 def decode(path: str | os.PathLike, frames: tuple[int, int] | None = None, skeleton: Skeleton | None = None,

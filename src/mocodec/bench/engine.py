@@ -14,7 +14,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import time
 import traceback
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -104,17 +103,14 @@ def _measured(task: Task, motion: Motion, point: Point) -> dict:
         codec = tune(codec, motion, TARGET_OF[point.kind], point.value, knob_range=span,
                      resolution=SEARCH_RESOLUTION).codec
         row["knob_value"] = codec.config[row["knob"]] if row["knob"] else None
-    t0 = time.perf_counter()
-    data = moc.pack(motion, codec)
-    t1 = time.perf_counter()
-    decoded = moc.unpack(data)
-    t2 = time.perf_counter()
-    summary = compare(motion, decoded).summary()
+    trip = moc.round_trip(motion, codec)
+    size = len(trip.data)
+    summary = compare(motion, trip.decoded).summary()
     samples = motion.num_frames * motion.skeleton.num_channels
-    row.update(status="ok", bytes=len(data), ratio=motion.raw_bits / 8 / len(data),
-               bitrate=len(data) * 8 / motion.duration, bits_per_dof_sample=len(data) * 8 / samples,
-               encode_us_per_frame=(t1 - t0) * 1e6 / motion.num_frames,
-               decode_us_per_frame=(t2 - t1) * 1e6 / motion.num_frames,
+    row.update(status="ok", bytes=size, ratio=motion.raw_bits / 8 / size,
+               bitrate=size * 8 / motion.duration, bits_per_dof_sample=size * 8 / samples,
+               encode_us_per_frame=trip.encode_s * 1e6 / motion.num_frames,
+               decode_us_per_frame=trip.decode_s * 1e6 / motion.num_frames,
                **{k: summary[k] for k in MEASURES})
     return row
 

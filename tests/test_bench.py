@@ -118,7 +118,9 @@ def test_a_run_resumes_and_only_runs_what_is_new(tmp_path):
     assert again.rows[-1]["codec"] == "dpcm" and again.rows[0]["bytes"] == first.rows[0]["bytes"]
     with (tmp_path / "rows.jsonl").open("a") as f:
         f.write('{"task": "cut short')                # an interrupted write
-    assert suite.run([SMALL], tmp_path, ["zstd"], report=False, jobs=1).meta["tasks_run"] == 0
+    last = suite.run([SMALL], tmp_path, ["zstd"], report=False, jobs=1).meta
+    assert last["tasks_run"] == 0
+    assert last["wall_s_total"] == pytest.approx(first.meta["wall_s"] + again.meta["wall_s"] + last["wall_s"], abs=0.2)
 
 
 def test_a_bad_clip_is_reported_and_the_run_goes_on(tmp_path):

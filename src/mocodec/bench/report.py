@@ -288,8 +288,10 @@ def write_report(rows, meta, out_dir) -> list[Path]:
             clip_figures.append((clip, f"plots/{name}"))
     tables = _tables(rows, meta)
     versions = ", ".join(f"{k} {v}" for k, v in meta["versions"].items() if v)
+    total = meta.get("wall_s_total", meta["wall_s"])
     facts = [f"command: {meta['command']}", f"wall time {meta['wall_s']:.0f} s for {meta['tasks_run']} tasks "
-             f"({meta['tasks_resumed']} resumed from an earlier run), {meta['jobs']} jobs, {meta['scheduler']}",
+             f"({meta['tasks_resumed']} resumed from earlier runs, {total:.0f} s in all), {meta['jobs']} jobs, "
+             f"{meta['scheduler']}",
              f"{meta['clips']} clips, codecs: {', '.join(meta['codecs'])}",
              f"machine: {meta['machine']['platform']}, {meta['machine']['cores']} cores, Python {meta['machine']['python']}",
              f"versions: {versions}"]

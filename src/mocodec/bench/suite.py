@@ -79,10 +79,11 @@ def run(paths, out_dir, codecs=None, kinds=DEFAULT_KINDS, errors=DEFAULT_ERRORS_
         store.add(task, result)
         fresh[task.key] = result
     wall = time.perf_counter() - t0
+    earlier = _earlier_wall(out) if len(todo) < len(tasks) else 0.0
     rows = [r for t in tasks for r in (store.done.get(t.key) or fresh.get(t.key, []))]
     meta = {
         "command": command or " ".join(sys.argv), "started": time.strftime("%Y-%m-%dT%H:%M:%S", time.localtime(started)),
-        "wall_s": round(wall, 1), "jobs": jobs or default_jobs(), "scheduler": scheduler or ("dask local" if dask else "local"),
+        "wall_s": round(wall, 1), "wall_s_total": round(earlier + wall, 1), "jobs": jobs or default_jobs(), "scheduler": scheduler or ("dask local" if dask else "local"),
         "clips": len(clips), "codecs": codecs, "tasks": len(tasks), "tasks_run": len(todo),
         "tasks_resumed": len(tasks) - len(todo), "points": {c: [p.label for p in ps] for c, ps in plan.items()},
         "machine": {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
@@ -96,6 +97,15 @@ def run(paths, out_dir, codecs=None, kinds=DEFAULT_KINDS, errors=DEFAULT_ERRORS_
         from mocodec.bench.report import write_report
         write_report(rows, meta, out)
     return result
+
+
+def _earlier_wall(out: Path) -> float:
+    """The wall time the runs before this one spent on the folder (0 if unknown)."""
+    try:
+        meta = json.loads((out / "meta.json").read_text())
+        return float(meta.get("wall_s_total", meta.get("wall_s", 0.0)))
+    except (OSError, ValueError, TypeError):
+        return 0.0
 
 
 def to_csv(rows: list[dict]) -> str:

@@ -45,4 +45,5 @@ TABLE_6_2 = {"Arikan 2006": (30, 30), "Beaudoin et al. 2007": (25, 48), "Gu et a
              "gzip": (3.3, 3.3)}
 TABLE_6_2_SPIHT_RATIO = 80
 # microseconds per frame (encode, decode): 001 table 3.4 (pwavelet), 5.3 (primitives, range), 6.4 (spiht)
-SPEED_US = {"pwavelet": ((24.2, 25.5), None), "primitives": ((1660, 2370), (110, 140)), "spiht": ((520, 520), (100, 100))}
+SPEED_US = {"pwavelet": ((24.2, 25.5), None), "primitives": ((1660, 2370), (110, 140)),
+            "spiht": ((520, 520), (100, 100))}

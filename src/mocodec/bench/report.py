@@ -239,9 +239,10 @@ def _published_tables(rows) -> list:
              _f(median(pw[ratio])) if pw.get(ratio) else "run with --points ratio"] for ratio in (20, 25, 30, 35, 40)]
     out.append(("001 table 3.1: pwavelet", ["ratio", "thesis scores 02_02 / 49_14 (1-5)", "our median mean joint cm"],
                 body, "The thesis measured quality by a user study; we report joint position error."))
-    sp = [r for r in ok if r["codec"] == "spiht" and r["point"] == "ratio" and r["target"] == published.TABLE_6_2_SPIHT_RATIO]
-    ours = (f"spiht {published.TABLE_6_2_SPIHT_RATIO}:1: median mean joint error "
-            f"{_f(median(r['mean_joint_error_cm'] for r in sp))} cm" if sp else "spiht at 80:1: run with --points ratio")
+    at = published.TABLE_6_2_SPIHT_RATIO
+    sp = [r for r in ok if r["codec"] == "spiht" and r["point"] == "ratio" and r["target"] == at]
+    ours = (f"spiht {at}:1: median mean joint error {_f(median(r['mean_joint_error_cm'] for r in sp))} cm" if sp
+            else f"spiht at {at}:1: run with --points ratio")
     body = [[name, f"{a}:1", f"{b}:1"] for name, (a, b) in published.TABLE_6_2.items()]
     out.append(("001 table 6.2: ratios reported in the literature", ["method", "average", "best"], body, ours))
     return out
@@ -293,10 +294,12 @@ def write_report(rows, meta, out_dir) -> list[Path]:
              f"({meta['tasks_resumed']} resumed from earlier runs, {total:.0f} s in all), {meta['jobs']} jobs, "
              f"{meta['scheduler']}",
              f"{meta['clips']} clips, codecs: {', '.join(meta['codecs'])}",
-             f"machine: {meta['machine']['platform']}, {meta['machine']['cores']} cores, Python {meta['machine']['python']}",
+             f"machine: {meta['machine']['platform']}, {meta['machine']['cores']} cores, "
+             f"Python {meta['machine']['python']}",
              f"versions: {versions}"]
     page = [f"<!doctype html><html><head><meta charset='utf-8'><title>mocodec benchmark</title><style>{CSS}</style>"
-            "</head><body><h1>mocodec benchmark</h1><ul>" + "".join(f"<li>{html.escape(f)}</li>" for f in facts) + "</ul>"]
+            "</head><body><h1>mocodec benchmark</h1><ul>"
+            + "".join(f"<li>{html.escape(f)}</li>" for f in facts) + "</ul>"]
     page += [_html_table(*t) for t in tables[:1]]
     page += [f"<h2>{html.escape(t)}</h2><img src='{src}' alt='{html.escape(t)}'>" for t, src in figures]
     page += [_html_table(*t) for t in tables[1:]]

@@ -82,8 +82,10 @@ def run(paths, out_dir, codecs=None, kinds=DEFAULT_KINDS, errors=DEFAULT_ERRORS_
     earlier = _earlier_wall(out) if len(todo) < len(tasks) else 0.0
     rows = [r for t in tasks for r in (store.done.get(t.key) or fresh.get(t.key, []))]
     meta = {
-        "command": command or " ".join(sys.argv), "started": time.strftime("%Y-%m-%dT%H:%M:%S", time.localtime(started)),
-        "wall_s": round(wall, 1), "wall_s_total": round(earlier + wall, 1), "jobs": jobs or default_jobs(), "scheduler": scheduler or ("dask local" if dask else "local"),
+        "command": command or " ".join(sys.argv),
+        "started": time.strftime("%Y-%m-%dT%H:%M:%S", time.localtime(started)),
+        "wall_s": round(wall, 1), "wall_s_total": round(earlier + wall, 1), "jobs": jobs or default_jobs(),
+        "scheduler": scheduler or ("dask local" if dask else "local"),
         "clips": len(clips), "codecs": codecs, "tasks": len(tasks), "tasks_run": len(todo),
         "tasks_resumed": len(tasks) - len(todo), "points": {c: [p.label for p in ps] for c, ps in plan.items()},
         "machine": {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),

@@ -159,6 +159,8 @@ def _square(x):
 def test_the_process_pool_returns_every_result_and_each_exception():
     results = dict(runner.execute(_square, [1, 2, 3, 4], jobs=2))
     assert results[1] == 1 and results[4] == 16 and isinstance(results[3], ValueError)
+    with pytest.raises(MocodecError, match="at least 1"):
+        list(runner.execute(_square, [1], jobs=0))
 
 
 def test_a_dask_cluster_runs_the_benchmark(tmp_path):

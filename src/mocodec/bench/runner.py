@@ -33,9 +33,9 @@ def _progress(total: int, show: bool, what: str):
 def execute(fn: Callable, tasks: Sequence, jobs: int | None = None, scheduler: str | None = None,
             dask: bool = False, progress: bool = False, what: str = "task") -> Iterator[tuple[object, object]]:
     """``(task, fn(task) or the exception it raised)`` for every task, as they finish."""
-    jobs = jobs or default_jobs()
-    if jobs < 1:
+    if jobs is not None and jobs < 1:
         raise MocodecError(f"jobs must be at least 1, got {jobs}")
+    jobs = jobs or default_jobs()
     with _progress(len(tasks), progress, what) as bar:
         if scheduler or dask:
             results = _on_dask(fn, tasks, jobs, scheduler)

@@ -25,9 +25,6 @@ from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
-BOUND_KNOB = Knob("bound", float, 0.01, "absolute error bound per sample: degrees, cm for translations",
-                  1e-6, 1000.0)
-
 
 def _module(name: str):
     try:
@@ -58,6 +55,8 @@ class _PerChannel(Codec):
     """An error-bounded compressor run on each channel's samples on its own."""
 
     baseline = True
+    knobs = (Knob("bound", float, 0.01, "absolute error bound per sample: degrees, cm for translations",
+                  1e-6, 1000.0),)
     quality = QualityKnob("bound", higher_is_better=False, log_scale=True)
     package: ClassVar[str] = ""
 
@@ -99,7 +98,6 @@ class ZstdCodec(Codec):
 class Sz3Codec(_PerChannel):
     id = "sz3"
     description = "baseline: SZ3 (pysz) per channel with an absolute error bound"
-    knobs = (BOUND_KNOB,)
     package = "pysz"
 
     def _compress(self, lib, row, bound):
@@ -116,7 +114,6 @@ class Sz3Codec(_PerChannel):
 class ZfpCodec(_PerChannel):
     id = "zfp"
     description = "baseline: ZFP (zfpy) per channel in fixed-accuracy mode"
-    knobs = (BOUND_KNOB,)
     package = "zfpy"
 
     def _compress(self, lib, row, bound):

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from mocodec import moc, ratecontrol
-from mocodec.bench.engine import find_clips
+from mocodec.bench.engine import find_clips, one_line
 from mocodec.bench.runner import execute
 from mocodec.codecs import get_codec
 from mocodec.errors import MocodecError
@@ -67,13 +67,13 @@ def plan(in_dir, out_dir, codec: str, knobs: dict | None = None, goal=None) -> l
 def compress_dir(in_dir, out_dir, codec: str, knobs: dict | None = None, goal=None, jobs: int | None = None,
                  scheduler: str | None = None, dask: bool = False, progress: bool = False) -> Outcome:
     tasks = plan(in_dir, out_dir, codec, knobs, goal)
-    out = Outcome(skipped=[t.target for t in tasks if Path(t.target).exists()])
-    todo = [t for t in tasks if not Path(t.target).exists()]
+    done = {t.target for t in tasks if Path(t.target).exists()}
+    out = Outcome(skipped=[t.target for t in tasks if t.target in done])
+    todo = [t for t in tasks if t.target not in done]
     t0 = time.perf_counter()
     for task, result in execute(compress_file, todo, jobs, scheduler, dask, progress, "clip"):
         if isinstance(result, BaseException):
-            out.failed.append((task.source, str(result) if isinstance(result, MocodecError)
-                               else f"{type(result).__name__}: {result}"))
+            out.failed.append((task.source, one_line(result)))
         else:
             out.written.append(result)
     out.wall_s = time.perf_counter() - t0

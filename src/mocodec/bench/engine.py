@@ -116,10 +116,11 @@ def _measured(task: Task, motion: Motion, point: Point) -> dict:
 
 
 def failed_row(task: Task, motion: Motion | None, point: Point, status: str, error: BaseException) -> dict:
-    return {**_base_row(task, motion, point), "status": status, "message": _one_line(error)}
+    return {**_base_row(task, motion, point), "status": status, "message": one_line(error)}
 
 
-def _one_line(error: BaseException) -> str:
+def one_line(error: BaseException) -> str:
+    """An error as one line: a MocodecError's own text, else its type, text and where it arose."""
     if isinstance(error, MocodecError):
         return str(error)
     where = traceback.extract_tb(error.__traceback__)[-1:] if error.__traceback__ else []

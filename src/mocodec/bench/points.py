@@ -4,8 +4,8 @@ rate-controlled targets (compression ratio, bit rate, max joint error).
 Sweeps cover the range where each codec is worth looking at on 30-120 fps human motion (and
 where its coding time stays reasonable: VQ codebooks of 256 entries at most); error targets
 are searched in the same range, so "unreachable" means "not within it"; ratio and bit-rate
-targets over the knob's whole range. A codec
-missing from :data:`SWEEPS` (a plug-in) is swept over its knob's own range.
+targets over the knob's whole range. A codec missing from :data:`SWEEPS` (a plug-in) is swept
+over its knob's own range.
 """
 
 from __future__ import annotations
@@ -49,8 +49,8 @@ class Point:
 
 
 def sweep_range(cls: type[Codec]) -> tuple[float, float] | None:
-    """(low, high) of the codec's quality knob in benchmarks: sweeps cover it and rate-control
-    targets are searched in it (None for a codec without a quality knob)."""
+    """(low, high) of the codec's quality knob in benchmarks: sweeps cover it and error targets
+    are searched in it (None for a codec without a quality knob)."""
     if cls.quality is None:
         return None
     knob = next(k for k in cls.knobs if k.name == cls.quality.name)

@@ -79,6 +79,11 @@ class StreamEncoder:
     def flush(self) -> list[bytes]:
         return []
 
+    def prime(self, frames: np.ndarray) -> None:
+        """Frames from before the stream starts, which are not coded: a coder that picks its
+        parameters from the first frames it sees may look at them too (a live stream's intra
+        refresh starts a new stream in mid-motion). Call before the first push."""
+
 
 def checked_frames(codec_id: str, skeleton: Skeleton, frames: np.ndarray) -> np.ndarray:
     """Pushed ``frames`` as a float64 ``(n, channels)`` array; CodecError unless they fit the

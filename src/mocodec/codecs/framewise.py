@@ -13,7 +13,9 @@ across pushes), as predictive coders need.
 
 Parameters come from the first push: a live sender should push a representative first block
 (a second or more), or the coder works with the ranges that block showed (the closed loop
-recovers from overload, at the cost of error while it lasts).
+recovers from overload, at the cost of error while it lasts). A stream restarted in mid-motion
+(a live stream's intra refresh) is *primed* with the frames before it, which the parameters see
+too (time-reversed behind the first block, so the first frame stays the centre).
 """
 
 from __future__ import annotations
@@ -125,6 +127,13 @@ class _FrameEncoder(StreamEncoder):
         self.last: np.ndarray | None = None          # the last continuous frame seen
         self.state: Any = None
         self.models: list[intcoder.Model] = []
+        self.primer = np.zeros((0, skeleton.num_channels))
+
+    def prime(self, frames: np.ndarray) -> None:
+        if self.state is not None or len(self.pending):
+            raise CodecError(f"{self.codec.id} stream: prime before the first push")
+        self.primer = continuous_frames(self.codec.id, self.skeleton, self.fps, frames, None)
+        self.last = self.primer[-1] if len(self.primer) else None
 
     def push(self, frames: np.ndarray) -> list[bytes]:
         cont = continuous_frames(self.codec.id, self.skeleton, self.fps, frames, self.last)
@@ -149,7 +158,8 @@ class _FrameEncoder(StreamEncoder):
     def _packet(self, frames: np.ndarray, ahead: np.ndarray, last: bool = False) -> bytes:
         header = []
         if self.state is None:
-            setup, self.state = self.codec._setup(np.vstack((frames, ahead)), self.skeleton, self.fps)
+            seen = np.vstack((frames, ahead, self.primer[::-1]))
+            setup, self.state = self.codec._setup(seen, self.skeleton, self.fps)
             header = [setup]
         arrays, _ = self.codec._code(self.state, frames, ahead)
         while len(self.models) < len(arrays):

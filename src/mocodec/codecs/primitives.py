@@ -226,7 +226,7 @@ class _Encoder(StreamEncoder, _Shared):
         parts = self._segments(segs) + self._windows(final)
         keep = max(int(self.starts.min()) - self.base - 2, 0)
         self.q, self.base = self.q[keep:], self.base + keep
-        if not final and not len(segs) and not parts[-1]:
+        if not final and not len(segs) and not parts[-1] and not parts[5]:   # nothing decided, no start
             return b""
         return join_parts([*parts[:-1], encode_ints(parts[-1]), b"\x01" if final else b""])
 

@@ -325,6 +325,53 @@ class SpihtCodec(Codec):
 
         return cut
 
+    def packet_cuts(self, packet: bytes, skeleton: Skeleton) -> np.ndarray:
+        """The bits each channel stream of a stream packet uses, in stream order: what
+        :meth:`truncate_packet` needs to cut the packet without decoding it (a sender works it
+        out once, a relay then cuts for every viewer)."""
+        _, _, levels, total, bits = self._packet_fields(packet, skeleton)
+        return np.array([used for _, _, used, _, _ in self._segment_streams(levels, total, bits, 0, "the packet")],
+                        dtype=np.int64)
+
+    def truncate_packet(self, packet: bytes, skeleton: Skeleton, cuts: np.ndarray, bits_per_second: float,
+                        fps: float) -> bytes:
+        """A stream packet cut to ``bits_per_second`` (if below its own rate): every channel
+        keeps the prefix of its embedded stream its new share allows, so it decodes to a
+        coarser segment with no re-encoding, the same bytes as coding at that rate (the
+        whole-file :meth:`truncate`, per packet)."""
+        head, parts, levels, total, bits = self._packet_fields(packet, skeleton)
+        total_bits = int(np.floor(bits_per_second * _PACKET.unpack_from(head)[1] / fps))
+        if total_bits >= total:
+            return packet
+        old = perception.allocate(level_weights(levels), total)
+        new = perception.allocate(level_weights(levels), max(int(total_bits), 0))
+        present = np.flatnonzero(old > N0_BITS)
+        if cuts.size != present.size or cuts.sum() != bits.size:
+            raise CorruptStreamError("spiht packet: the cut table does not match the packet's streams")
+        starts = np.concatenate(([0], np.cumsum(cuts)))
+        keep = [bits[starts[k]:starts[k] + min(int(cuts[k]), int(new[c]))] for k, c in enumerate(present)
+                if new[c] > N0_BITS]
+        kept = np.concatenate(keep) if keep else np.zeros(0, dtype=np.uint8)
+        parts[-2] = encode_ints([int(total_bits)])
+        parts[-1] = _U32.pack(kept.size) + np.packbits(kept).tobytes()
+        return head + join_parts(parts)
+
+    def _packet_fields(self, packet: bytes, skeleton: Skeleton):
+        """(packet header bytes, parts, levels, segment budget, bits) of a stream packet."""
+        if len(packet) < _PACKET.size:
+            raise CorruptStreamError(f"spiht packet of {len(packet)} bytes is shorter than its header")
+        parts = split_parts(packet, None, "spiht packet", start=_PACKET.size)
+        if len(parts) not in (4, 5):
+            raise CorruptStreamError(f"spiht packet: {len(parts)} parts, expected 4 or 5")
+        levels = decode_ints(parts[-3])
+        (total,) = decode_ints(parts[-2])
+        (n_bits,) = _U32.unpack_from(parts[-1])
+        bits = np.unpackbits(np.frombuffer(parts[-1], dtype=np.uint8, offset=4))[:n_bits]
+        if levels.size != skeleton.num_channels or bits.size != n_bits \
+                or levels.min(initial=0) < 0 or levels.max(initial=0) >= F_LEVELS:
+            raise CorruptStreamError("spiht packet: levels or bits do not fit the skeleton")
+        return packet[:_PACKET.size], parts, levels, int(total), bits
+
     def _smaller(self, bits_per_second: float) -> "SpihtCodec":
         if bits_per_second > self.config["bits_per_second"]:
             raise CodecError(f"cannot truncate to {bits_per_second:g} bit/s, above the coded "

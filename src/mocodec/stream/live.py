@@ -1,0 +1,265 @@
+"""Live streams: a codec's stream encoder and decoder wrapped in packets, with intra refresh
+and loss concealment.
+
+Every ``keyframe_s`` seconds (rounded up to the codec's block, so a segment coder is not cut
+short) the sender ends the codec stream and starts a new one; the first packet of each is a
+*keyframe*, decodable with nothing before it. A frame-recursive coder's new stream is primed
+with the last second of input so its parameters fit the motion (:meth:`StreamEncoder.prime`).
+A receiver that joins late, or loses a packet, drops what it cannot decode until the next
+keyframe and conceals the frames in between, so it is back in step within one refresh period.
+
+Each packet says which frames it completes at the receiver (``first_frame``, ``frames``): the
+sender runs a decoder of its own beside the encoder, so the numbers are exact for every codec,
+whatever it holds back, and a receiver knows how many frames to conceal for a lost packet.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from mocodec.codecs import get_codec
+from mocodec.codecs.base import Codec, checked_frames
+from mocodec.coding.rangecoder import encode_ints
+from mocodec.errors import CodecError, MocodecError
+from mocodec.motion import Motion
+from mocodec.skeleton import POSITION_CHANNELS, Skeleton
+from mocodec.stream.packets import (CUTS, DATA, END, HEADER, KEYFRAME, Packet, StreamInfo, header_packet,
+                                    with_cuts)
+
+#: Seconds of earlier input a restarted stream is primed with.
+PRIMER_S = 1.0
+#: How far extrapolation runs on before it holds (seconds).
+EXTRAPOLATE_S = 0.25
+
+
+def now_us() -> int:
+    return time.time_ns() // 1000
+
+
+def root_position(skeleton: Skeleton, frame: np.ndarray) -> tuple[float, float, float]:
+    """The root's position in metres from one frame of channels (0 where it has no channel),
+    as the float32 a packet carries."""
+    out = [0.0, 0.0, 0.0]
+    root = skeleton.joints[0]
+    first = int(skeleton.channel_offsets[0])
+    for k, name in enumerate(root.channels):
+        if name in POSITION_CHANNELS:
+            out[POSITION_CHANNELS.index(name)] = float(frame[first + k]) / skeleton.units_per_metre
+    x, y, z = (float(np.float32(v)) for v in out)
+    return x, y, z
+
+
+def refresh_frames(codec: Codec, fps: float, keyframe_s: float) -> int:
+    """Frames between keyframes: ``keyframe_s`` rounded up to the codec's segment or block."""
+    block = int(codec.config.get("window", codec.config.get("block", 1)))
+    n = max(int(round(keyframe_s * fps)), 1)
+    return -(-n // block) * block
+
+
+class LiveEncoder:
+    """Frames in, packets out, for one stream (one avatar). ``primer``: frames like the ones
+    to come (a calibration take, or a clip's first second), which the first stream's
+    parameters may look at; without it a frame-recursive coder fits its first stream to the
+    first push alone, and is coarse until the first refresh."""
+
+    def __init__(self, codec: Codec, skeleton: Skeleton, fps: float, stream: int, keyframe_s: float = 1.0,
+                 name: str = "", primer: np.ndarray | None = None):
+        if not codec.streaming:
+            raise CodecError(f"codec {codec.id} does not stream (streaming codecs: dpcm, adpcm, deadreckoning, "
+                             "dct, spiht, primitives, ...)")
+        if not keyframe_s > 0:
+            raise CodecError(f"keyframe interval must be positive, got {keyframe_s}")
+        self.codec, self.skeleton, self.fps, self.stream = codec, skeleton, fps, stream
+        self.info = StreamInfo(skeleton, fps, codec.get_config(), name)
+        self.refresh = refresh_frames(codec, fps, keyframe_s)
+        self.primer_frames = max(int(round(PRIMER_S * fps)), 1)
+        self.recent = np.zeros((0, skeleton.num_channels)) if primer is None else \
+            checked_frames(codec.id, skeleton, primer)[-self.primer_frames:]
+        self.sequence = 0
+        self.out_frames = 0            # frames the receiver has been told about
+        self.in_group = 0              # input frames in the current codec stream
+        self.encoder = self.decoder = None
+        self.keyframe_due = True
+        self.position = (0.0, 0.0, 0.0)
+
+    def header(self, timestamp_us: int | None = None) -> Packet:
+        return header_packet(self.stream, self.info, now_us() if timestamp_us is None else timestamp_us)
+
+    def push(self, frames: np.ndarray, timestamp_us: int | None = None) -> list[Packet]:
+        frames = checked_frames(self.codec.id, self.skeleton, frames)
+        ts = now_us() if timestamp_us is None else timestamp_us
+        out: list[Packet] = []
+        while len(frames):
+            if self.encoder is None:
+                self._start()
+            take = min(len(frames), self.refresh - self.in_group)
+            chunk, frames = frames[:take], frames[take:]
+            self.position = root_position(self.skeleton, chunk[-1])
+            out += self._wrap(self.encoder.push(chunk), ts)
+            self.in_group += take
+            self.recent = np.vstack((self.recent, chunk))[-self.primer_frames:]
+            if self.in_group == self.refresh:
+                out += self._wrap(self.encoder.flush(), ts)
+                self.encoder = None
+        return out
+
+    def close(self, timestamp_us: int | None = None) -> list[Packet]:
+        """The stream's last packets (the last one flagged END)."""
+        ts = now_us() if timestamp_us is None else timestamp_us
+        out = self._wrap(self.encoder.flush(), ts) if self.encoder is not None else []
+        self.encoder = None
+        if out:
+            last = out[-1]
+            out[-1] = Packet(last.stream, last.sequence, last.timestamp_us, last.codec, last.first_frame,
+                             last.frames, last.payload, DATA, last.flags | END, last.position)
+        else:
+            out = [self._packet(b"", 0, ts, END)]
+        return out
+
+    def _start(self) -> None:
+        self.encoder = self.codec.encoder(self.skeleton, self.fps)
+        self.decoder = self.codec.decoder(self.skeleton, self.fps)
+        if len(self.recent):
+            self.encoder.prime(self.recent)
+        self.in_group = 0
+        self.keyframe_due = True
+
+    def _wrap(self, payloads: list[bytes], ts: int) -> list[Packet]:
+        out = []
+        cut_table = getattr(self.codec, "packet_cuts", None)     # an embedded codec's packets can be cut
+        for payload in payloads:
+            n = len(self.decoder.push(payload))
+            flags = KEYFRAME if self.keyframe_due else 0
+            if cut_table is not None:
+                payload, flags = with_cuts(payload, encode_ints(cut_table(payload, self.skeleton))), flags | CUTS
+            out.append(self._packet(payload, n, ts, flags))
+            self.keyframe_due = False
+        return out
+
+    def _packet(self, payload: bytes, frames: int, ts: int, flags: int) -> Packet:
+        p = Packet(self.stream, self.sequence, ts, self.codec.id, self.out_frames, frames, payload, DATA, flags,
+                   self.position)
+        self.sequence = (self.sequence + 1) & 0xFFFFFFFF
+        self.out_frames += frames
+        return p
+
+
+@dataclass
+class ReceiverStats:
+    packets: int = 0
+    lost: int = 0              # packets missing from the sequence
+    dropped: int = 0           # received but not decodable (waiting for a keyframe, damaged)
+    concealed_frames: int = 0
+    resyncs: int = 0
+
+
+class LiveDecoder:
+    """Packets in, frames out, for one stream. Never raises on a bad or missing packet: it
+    conceals (``hold`` the last frame, or ``extrapolate`` its velocity for a quarter second,
+    then hold) until the next keyframe."""
+
+    def __init__(self, info: StreamInfo, conceal: str = "hold"):
+        if conceal not in ("hold", "extrapolate"):
+            raise CodecError(f"concealment must be hold or extrapolate, got {conceal!r}")
+        self.info = info
+        self.codec = get_codec(info.codec["codec"], **info.codec.get("knobs", {}))
+        self.conceal = conceal
+        self.decoder = None
+        self.expected: int | None = None      # next sequence number
+        self.next_frame: int | None = None    # next frame number to output
+        self.tail = np.zeros((0, info.skeleton.num_channels))   # the last two frames out
+        self.stats = ReceiverStats()
+        self.ended = False
+
+    @property
+    def in_sync(self) -> bool:
+        return self.decoder is not None
+
+    def push(self, packet: Packet) -> np.ndarray:
+        """The frames up to the end of this packet's range: decoded, or concealed."""
+        empty = np.zeros((0, self.info.skeleton.num_channels))
+        if packet.kind != DATA or packet.codec != self.codec.id:
+            self.stats.dropped += 1
+            return empty
+        if self.expected is not None:
+            ahead = (packet.sequence - self.expected) & 0xFFFFFFFF
+            if ahead >= 1 << 31:             # old or repeated
+                return empty
+            if ahead:
+                self.stats.lost += ahead
+                self.decoder = None
+        self.expected = (packet.sequence + 1) & 0xFFFFFFFF
+        self.stats.packets += 1
+        if packet.keyframe:                   # a new codec stream starts here
+            self.stats.resyncs += self.decoder is None and self.next_frame is not None
+            self.decoder = self.codec.decoder(self.info.skeleton, self.info.fps)
+        elif self.decoder is None:
+            self.stats.dropped += 1
+            return self._concealed(packet.first_frame + packet.frames)
+        head = self._concealed(packet.first_frame)
+        try:
+            payload = packet.codec_payload
+            frames = np.asarray(self.decoder.push(payload), dtype=np.float64) if payload else empty
+            if len(frames) != packet.frames:
+                raise CodecError(f"packet {packet.sequence} decodes to {len(frames)} frames, its header says "
+                                 f"{packet.frames}")
+        except MocodecError:
+            self.decoder = None
+            self.stats.dropped += 1
+            return np.vstack((head, self._concealed(packet.first_frame + packet.frames)))
+        if packet.end:
+            self.ended, self.decoder = True, None
+        return np.vstack((head, self._emit(frames)))
+
+    def _emit(self, frames: np.ndarray) -> np.ndarray:
+        if self.next_frame is None:
+            self.next_frame = 0
+        self.next_frame += len(frames)
+        if len(frames):
+            self.tail = np.vstack((self.tail, frames))[-2:]
+        return frames
+
+    def _concealed(self, upto: int) -> np.ndarray:
+        """Concealed frames from the next one to frame ``upto`` (nothing before the first
+        decoded frame: there is nothing to hold)."""
+        n_ch = self.info.skeleton.num_channels
+        if self.next_frame is None or not len(self.tail) or upto <= self.next_frame:
+            if self.next_frame is None and upto > 0 and self.decoder is not None:
+                self.next_frame = upto        # joined mid-stream: start at the keyframe
+            return np.zeros((0, n_ch))
+        n = upto - self.next_frame
+        last = self.tail[-1]
+        out = np.repeat(last[None], n, axis=0)
+        if self.conceal == "extrapolate" and len(self.tail) == 2:
+            steps = np.minimum(np.arange(1, n + 1), int(EXTRAPOLATE_S * self.info.fps))
+            out = last + steps[:, None] * (self.tail[1] - self.tail[0])
+        self.stats.concealed_frames += n
+        return self._emit(out)
+
+
+def stream_clip(motion: Motion, codec: Codec, stream: int = 0, keyframe_s: float = 1.0,
+                frames_per_packet: int | None = None) -> list[Packet]:
+    """A clip as the live packets a sender would send (header first), pushing
+    ``frames_per_packet`` frames at a time (default: a 30 Hz tick), primed with its first
+    second."""
+    enc = LiveEncoder(codec, motion.skeleton, motion.fps, stream, keyframe_s,
+                      primer=motion.channels[:int(round(PRIMER_S * motion.fps))])
+    step = frames_per_packet or max(int(round(motion.fps / 30)), 1)
+    packets = [enc.header(0)]
+    for a in range(0, motion.num_frames, step):
+        packets += enc.push(motion.channels[a:a + step], timestamp_us=int(a * 1e6 / motion.fps))
+    return packets + enc.close(timestamp_us=int(motion.num_frames * 1e6 / motion.fps))
+
+
+def receive_clip(packets: list[Packet], conceal: str = "hold") -> Motion:
+    """The motion a receiver gets from ``packets`` (a stream header first)."""
+    if not packets or packets[0].kind != HEADER:
+        raise CodecError("a stream starts with its header packet")
+    info = StreamInfo.from_payload(packets[0].payload)
+    dec = LiveDecoder(info, conceal)
+    out = [dec.push(p) for p in packets[1:]]
+    channels = np.vstack(out) if out else np.zeros((0, info.skeleton.num_channels))
+    return Motion(info.skeleton, info.fps, channels)

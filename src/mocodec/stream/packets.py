@@ -1,0 +1,212 @@
+"""The wire format of live motion: packets and batches.
+
+A packet is one codec packet with what a network needs around it::
+
+    magic "MP", version u8, kind u8 (0 stream header, 1 data), flags u8 (1 keyframe, 2 end,
+    4 cut table: the payload starts with a u16 length and the table),
+    codec u8, stream id u32, sequence u32, timestamp u64 (µs since the epoch),
+    first frame u32, frames u16, position 3 x f32 (the avatar's root, for crowd allocation),
+    payload length u32, payload, CRC32 over everything before it
+
+All integers little-endian; 48 bytes around the payload. A *stream header* packet (kind 0)
+carries the skeleton, frame rate and codec configuration as compressed JSON, so a receiver
+needs nothing else. A *batch* (one WebSocket message) is "MB", a count u32, the packet lengths
+u32 each, then the packets: the relay sends each viewer one per tick.
+
+An embedded (truncatable) codec's packets travel from the sender to the relay with a *cut
+table*: where each channel's stream ends, so the relay cuts every viewer's share by slicing,
+without decoding. The relay strips the table before it forwards a packet.
+
+Parsing never trusts a length: a short, oversized or damaged packet raises
+:class:`~mocodec.errors.CorruptStreamError` naming the byte offset and what was expected.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+import zlib
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from mocodec.errors import CorruptStreamError
+from mocodec.formats.container import skeleton_from_dict, skeleton_to_dict
+from mocodec.skeleton import Skeleton
+
+MAGIC = b"MP"
+BATCH_MAGIC = b"MB"
+VERSION = 1
+HEADER, DATA = 0, 1
+KEYFRAME, END, CUTS = 1, 2, 4
+
+#: The codecs a packet can name, by number (the numbering is part of the format: append only).
+CODEC_NUMBERS = ("raw", "quant", "dpcm", "adpcm", "deadreckoning", "dct", "subband", "spiht", "primitives",
+                 "kinwave")
+
+_FIELDS = struct.Struct("<2sBBBBIIQIH3fI")
+_CRC = struct.Struct("<I")
+_U16 = struct.Struct("<H")
+_BATCH = struct.Struct("<2sI")
+OVERHEAD = _FIELDS.size + _CRC.size
+#: Where the timestamp, stream id and sequence number sit in a packet (read in bulk by the load test).
+STREAM_OFFSET, SEQUENCE_OFFSET, TIMESTAMP_OFFSET = 6, 10, 14
+
+
+@dataclass(frozen=True)
+class Packet:
+    stream: int
+    sequence: int
+    timestamp_us: int
+    codec: str
+    first_frame: int
+    frames: int
+    payload: bytes
+    kind: int = DATA
+    flags: int = 0
+    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    @property
+    def keyframe(self) -> bool:
+        return bool(self.flags & KEYFRAME)
+
+    @property
+    def end(self) -> bool:
+        return bool(self.flags & END)
+
+    @property
+    def codec_payload(self) -> bytes:
+        """The codec's packet, without the cut table."""
+        return self.payload[_U16.size + self._cuts_size():] if self.flags & CUTS else self.payload
+
+    @property
+    def cuts(self) -> bytes:
+        return self.payload[_U16.size:_U16.size + self._cuts_size()] if self.flags & CUTS else b""
+
+    def _cuts_size(self) -> int:
+        if len(self.payload) < _U16.size or _U16.unpack_from(self.payload)[0] > len(self.payload) - _U16.size:
+            raise CorruptStreamError(f"packet {self.sequence} of stream {self.stream}: its cut table overruns it")
+        return _U16.unpack_from(self.payload)[0]
+
+    def with_payload(self, payload: bytes, flags: int | None = None) -> "Packet":
+        return replace(self, payload=payload, flags=self.flags if flags is None else flags)
+
+    def without_cuts(self) -> "Packet":
+        return self.with_payload(self.codec_payload, self.flags & ~CUTS) if self.flags & CUTS else self
+
+    def to_bytes(self) -> bytes:
+        head = _FIELDS.pack(MAGIC, VERSION, self.kind, self.flags, codec_number(self.codec), self.stream,
+                            self.sequence, self.timestamp_us, self.first_frame, self.frames, *self.position,
+                            len(self.payload))
+        return head + self.payload + _CRC.pack(zlib.crc32(self.payload, zlib.crc32(head)))
+
+
+def with_cuts(payload: bytes, cuts: bytes) -> bytes:
+    """A payload carrying a cut table (flag CUTS)."""
+    return _U16.pack(len(cuts)) + cuts + payload
+
+
+def codec_number(codec_id: str) -> int:
+    try:
+        return CODEC_NUMBERS.index(codec_id)
+    except ValueError:
+        raise CorruptStreamError(f"codec {codec_id!r} has no packet number (streaming codecs: "
+                                 f"{', '.join(CODEC_NUMBERS)})") from None
+
+
+def parse(data: bytes | memoryview, where: str = "packet") -> Packet:
+    """The packet in ``data`` (exactly one), its CRC checked."""
+    data = bytes(data)
+    if len(data) < OVERHEAD:
+        raise CorruptStreamError(f"{where}: {len(data)} bytes, shorter than the {OVERHEAD}-byte packet frame")
+    (magic, version, kind, flags, number, stream, seq, ts, first, frames, x, y, z,
+     length) = _FIELDS.unpack_from(data)
+    if magic != MAGIC:
+        raise CorruptStreamError(f"{where}: byte 0: expected the packet magic {MAGIC!r}, got {magic!r}")
+    if version != VERSION:
+        raise CorruptStreamError(f"{where}: byte 2: packet version {version}, this mocodec reads {VERSION}")
+    if kind not in (HEADER, DATA) or number >= len(CODEC_NUMBERS):
+        raise CorruptStreamError(f"{where}: bytes 3-5: unknown packet kind {kind} or codec number {number}")
+    if len(data) != OVERHEAD + length:
+        raise CorruptStreamError(f"{where}: byte {_FIELDS.size - 4}: payload of {length} bytes announced, "
+                                 f"{len(data) - OVERHEAD} present")
+    end = _FIELDS.size + length
+    (crc,) = _CRC.unpack_from(data, end)
+    if crc != zlib.crc32(data[:end]):
+        raise CorruptStreamError(f"{where}: byte {end}: CRC mismatch (damaged packet)")
+    return Packet(stream, seq, ts, CODEC_NUMBERS[number], first, frames, data[_FIELDS.size:end], kind, flags,
+                  (x, y, z))
+
+
+# ----- stream headers ---------------------------------------------------------------------------
+@dataclass(frozen=True)
+class StreamInfo:
+    """What a receiver needs before the first data packet of a stream."""
+
+    skeleton: Skeleton
+    fps: float
+    codec: dict                      # Codec.get_config()
+    name: str = ""
+    extra: dict = field(default_factory=dict)
+
+    def to_payload(self) -> bytes:
+        doc = {"skeleton": skeleton_to_dict(self.skeleton), "fps": float(self.fps), "codec": self.codec,
+               "name": self.name, "extra": self.extra}
+        return zlib.compress(json.dumps(doc, sort_keys=True, separators=(",", ":")).encode(), 9)
+
+    @classmethod
+    def from_payload(cls, payload: bytes, where: str = "stream header") -> "StreamInfo":
+        try:
+            doc = json.loads(zlib.decompress(payload))
+            return cls(skeleton_from_dict(doc["skeleton"]), float(doc["fps"]), dict(doc["codec"]),
+                       str(doc.get("name", "")), dict(doc.get("extra", {})))
+        except Exception as e:   # noqa: BLE001 - anything malformed in a header
+            raise CorruptStreamError(f"{where}: does not parse ({type(e).__name__}: {e})") from None
+
+
+def header_packet(stream: int, info: StreamInfo, timestamp_us: int = 0) -> Packet:
+    return Packet(stream, 0, timestamp_us, info.codec["codec"], 0, 0, info.to_payload(), kind=HEADER)
+
+
+# ----- batches ----------------------------------------------------------------------------------
+def pack_batch(packets: list[bytes]) -> bytes:
+    """One message holding ``packets`` (already serialised)."""
+    lengths = np.fromiter((len(p) for p in packets), dtype="<u4", count=len(packets))
+    return _BATCH.pack(BATCH_MAGIC, len(packets)) + lengths.tobytes() + b"".join(packets)
+
+
+def split_batch(data: bytes | memoryview, where: str = "batch") -> list[memoryview]:
+    """The packets of a batch, unparsed (views into ``data``)."""
+    view = memoryview(data)
+    offsets = batch_offsets(view, where)
+    return [view[a:b] for a, b in zip(offsets[:-1], offsets[1:])]
+
+
+def batch_offsets(data: bytes | memoryview, where: str = "batch") -> np.ndarray:
+    """Where each packet of a batch starts, and where the last ends: ``(count + 1,)``."""
+    if len(data) < _BATCH.size:
+        raise CorruptStreamError(f"{where}: {len(data)} bytes, shorter than a batch header")
+    magic, count = _BATCH.unpack_from(data)
+    if magic != BATCH_MAGIC:
+        raise CorruptStreamError(f"{where}: byte 0: expected the batch magic {BATCH_MAGIC!r}, got {bytes(magic)!r}")
+    start = _BATCH.size + 4 * count
+    if start > len(data):
+        raise CorruptStreamError(f"{where}: byte 2: {count} packets announced, the message is {len(data)} bytes")
+    lengths = np.frombuffer(data, dtype="<u4", count=count, offset=_BATCH.size).astype(np.int64)
+    offsets = start + np.concatenate(([0], np.cumsum(lengths)))
+    if offsets[-1] != len(data):
+        raise CorruptStreamError(f"{where}: packet lengths add up to {offsets[-1]} bytes, the message is {len(data)}")
+    return offsets
+
+
+def read_u32(data: bytes | memoryview, offsets: np.ndarray, at: int) -> np.ndarray:
+    """The u32 at byte ``at`` of every packet starting at ``offsets`` (vectorised)."""
+    raw = np.frombuffer(data, dtype=np.uint8)
+    idx = offsets[:, None] + at + np.arange(4)
+    return raw[idx].copy().view("<u4").ravel()
+
+
+def read_u64(data: bytes | memoryview, offsets: np.ndarray, at: int) -> np.ndarray:
+    raw = np.frombuffer(data, dtype=np.uint8)
+    idx = offsets[:, None] + at + np.arange(8)
+    return raw[idx].copy().view("<u8").ravel()

@@ -1,0 +1,179 @@
+"""Python clients of the relay: publish a clip as a live stream, watch a room and record it.
+
+    async with connect(url, room, token, "publish") as ws: ...
+    await publish_clip(url, room, token, motion, get_codec("spiht", bits_per_second=8000))
+    motions = await record(url, room, token, frames=600, budget=3000)
+
+A refused connection (bad or expired token, wrong room) raises :class:`RelayRefused` with the
+relay's reason; a relay that cannot be reached raises it too, with the address.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import time
+from dataclasses import dataclass
+
+import aiohttp
+import numpy as np
+
+from mocodec.codecs.base import Codec
+from mocodec.errors import MocodecError
+from mocodec.motion import Motion
+from mocodec.stream.live import PRIMER_S, LiveDecoder, LiveEncoder
+from mocodec.stream.packets import HEADER, Packet, StreamInfo, pack_batch, parse, split_batch
+
+#: A sender's and a viewer's tick (Hz): frames are pushed, and batches sent, this often.
+TICK_HZ = 30.0
+
+
+class RelayRefused(MocodecError):
+    """The relay refused the connection, closed it, or could not be reached."""
+
+
+def ws_url(url: str, room: str, role: str) -> str:
+    from urllib.parse import urlencode
+
+    if not url.startswith(("ws://", "wss://")):
+        raise RelayRefused(f"the relay address must start with ws:// or wss://, got {url!r}")
+    return f"{url.rstrip('/')}/ws?{urlencode({'room': room, 'role': role})}"
+
+
+@contextlib.asynccontextmanager
+async def connect(url: str, room: str, token: str, role: str, max_msg_size: int = 64 << 20):
+    """An open WebSocket to the relay, past its welcome."""
+    async with aiohttp.ClientSession() as session:
+        try:
+            ws = await session.ws_connect(ws_url(url, room, role), headers={"Authorization": f"Bearer {token}"},
+                                          max_msg_size=max_msg_size, heartbeat=20.0)
+        except (aiohttp.ClientError, OSError) as e:
+            raise RelayRefused(f"cannot reach the relay at {url}: {e}") from None
+        async with ws:
+            msg = await ws.receive()
+            if msg.type != aiohttp.WSMsgType.TEXT or "welcome" not in msg.data:
+                raise RelayRefused(f"the relay at {url} refused room {room!r}: {closed_reason(ws, msg)}")
+            yield ws
+
+
+def closed_reason(ws, msg) -> str:
+    reason = msg.extra if msg.type == aiohttp.WSMsgType.CLOSE and msg.extra else ""
+    return f"{reason or 'connection closed'} (code {ws.close_code})"
+
+
+@dataclass
+class PublishStats:
+    frames: int = 0
+    packets: int = 0
+    bytes: int = 0
+    seconds: float = 0.0
+
+
+async def publish_clip(url: str, room: str, token: str, motion: Motion, codec: Codec, speed: float = 1.0,
+                       stream: int = 0, keyframe_s: float = 1.0) -> PublishStats:
+    """Play ``motion`` into ``room`` as a live stream at its frame rate (``speed`` times faster),
+    one batch per tick; the last packet ends the stream."""
+    if not speed > 0:
+        raise MocodecError(f"speed must be positive, got {speed}")
+    enc = LiveEncoder(codec, motion.skeleton, motion.fps, stream, keyframe_s,
+                      primer=motion.channels[:int(round(PRIMER_S * motion.fps))])
+    stats = PublishStats()
+    async with connect(url, room, token, "publish") as ws:
+        start = time.monotonic()
+
+        async def send(packets: list[Packet]) -> None:
+            if ws.closed:
+                raise RelayRefused(f"the relay closed the stream: {ws.close_code}")
+            data = [p.to_bytes() for p in packets]
+            await ws.send_bytes(pack_batch(data))
+            stats.packets += len(data)
+            stats.bytes += sum(map(len, data))
+
+        await send([enc.header()])
+        sent = 0
+        while sent < motion.num_frames:
+            due = min(int((time.monotonic() - start) * speed * motion.fps) + 1, motion.num_frames)
+            if due > sent:
+                packets = enc.push(motion.channels[sent:due])
+                sent = due
+                if packets:
+                    await send(packets)
+            await asyncio.sleep(1.0 / TICK_HZ)
+        await send(enc.close())
+        stats.frames, stats.seconds = sent, time.monotonic() - start
+        await _drain(ws)
+    return stats
+
+
+async def _drain(ws) -> None:
+    """Wait briefly for the relay to close on us (a refused stream says why), then go."""
+    try:
+        msg = await ws.receive(timeout=2.0 / TICK_HZ)
+    except asyncio.TimeoutError:
+        return
+    if msg.type == aiohttp.WSMsgType.CLOSE and ws.close_code and ws.close_code >= 4000:
+        raise RelayRefused(f"the relay closed the stream: {closed_reason(ws, msg)}")
+
+
+class Watcher:
+    """What a viewer holds: a decoder per stream, the frames received so far."""
+
+    def __init__(self, conceal: str = "hold"):
+        self.conceal = conceal
+        self.decoders: dict[int, LiveDecoder] = {}
+        self.frames: dict[int, list[np.ndarray]] = {}
+        self.counts: dict[int, int] = {}
+
+    def take(self, data: bytes) -> None:
+        for raw in split_batch(data):
+            p = parse(raw)
+            if p.kind == HEADER:
+                if p.stream not in self.decoders:
+                    self.decoders[p.stream] = LiveDecoder(StreamInfo.from_payload(p.payload), self.conceal)
+                    self.frames[p.stream], self.counts[p.stream] = [], 0
+                continue
+            dec = self.decoders.get(p.stream)
+            if dec is not None:
+                out = dec.push(p)
+                self.frames[p.stream].append(out)
+                self.counts[p.stream] += len(out)
+
+    def motion(self, stream: int) -> Motion:
+        info = self.decoders[stream].info
+        chunks = self.frames[stream]
+        channels = np.vstack(chunks) if chunks else np.zeros((0, info.skeleton.num_channels))
+        return Motion(info.skeleton, info.fps, channels)
+
+
+async def record(url: str, room: str, token: str, frames: int | None = None, stream: int | None = None,
+                 budget: float = 0.0, camera=(0.0, 0.0, 0.0), timeout_s: float | None = None,
+                 conceal: str = "hold") -> dict[int, Motion]:
+    """Watch ``room`` and return what each stream delivered: until ``stream`` (or, without it,
+    the first stream seen) has ``frames`` frames or ends, or ``timeout_s`` passes."""
+    watcher = Watcher(conceal)
+    deadline = None if timeout_s is None else time.monotonic() + timeout_s
+    async with connect(url, room, token, "subscribe") as ws:
+        if budget or any(camera):
+            await ws.send_str(json.dumps({"budget": budget, "camera": list(camera)}))
+        while True:
+            left = None if deadline is None else deadline - time.monotonic()
+            if left is not None and left <= 0:
+                break
+            try:
+                msg = await ws.receive(timeout=left)
+            except asyncio.TimeoutError:
+                break
+            if msg.type in (aiohttp.WSMsgType.CLOSE, aiohttp.WSMsgType.CLOSED, aiohttp.WSMsgType.ERROR):
+                if ws.close_code and ws.close_code >= 4000:
+                    raise RelayRefused(f"the relay closed the connection: {closed_reason(ws, msg)}")
+                break
+            if msg.type != aiohttp.WSMsgType.BINARY:
+                continue
+            watcher.take(msg.data)
+            target = stream if stream is not None else next(iter(watcher.decoders), None)
+            if target is None or target not in watcher.decoders:
+                continue
+            if (frames is not None and watcher.counts[target] >= frames) or watcher.decoders[target].ended:
+                break
+    return {k: watcher.motion(k)[:frames] for k in watcher.decoders}

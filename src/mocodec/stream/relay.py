@@ -1,0 +1,378 @@
+"""The relay: senders publish avatar streams into rooms, viewers watch rooms (``mocodec serve``).
+
+One aiohttp server, one port: ``/ws`` is the WebSocket (``?room=R&role=publish|subscribe``,
+the token in ``Authorization: Bearer T`` or ``&token=T``), ``/status`` a JSON summary, and
+anything else the static files of the viewer. The relay greets an accepted connection with
+``{"welcome": room, "role": role}`` and closes a refused one with code 4003 and the reason. A
+sender's message is a batch of packets (:mod:`mocodec.stream.packets`); a viewer's messages
+are JSON settings, ``{"budget": bit/s, "camera": [x, y, z] (metres)}``.
+
+Every tick (30 Hz) each viewer gets one batch with everything new in its room. A viewer that
+declared a budget gets the embedded (``spiht``) streams cut to their shares by the crowd rule
+of 001: scores S = d_min / d (6.4), shares B S / sum S (6.5), d the distance from its camera
+to each avatar's root; other streams pass whole. A viewer that joins late gets every stream
+header and the packets since each stream's last keyframe.
+
+Limits: message size (the WebSocket refuses larger ones), per-connection rates of messages
+and bytes (token buckets; over the limit closes that connection), at most one batch queued
+per viewer (a slow viewer misses ticks and resynchronises at the next keyframe; missing
+ticks for ``slow_viewer_s`` drops it), so memory does not grow with slow links. A malformed
+message closes its connection only, with a close code and the reason.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from aiohttp import WSMsgType, web
+
+from mocodec.codecs import get_codec
+from mocodec.coding.rangecoder import decode_ints
+from mocodec.errors import MocodecError
+from mocodec.scene import bandwidth_scores, split_budget
+from mocodec.stream import tokens
+from mocodec.stream.packets import (BATCH_MAGIC, CUTS, HEADER, Packet, StreamInfo, pack_batch, parse,
+                                    split_batch)
+
+log = logging.getLogger("mocodec.relay")
+
+#: Close codes (4000-4999 are the application's).
+BAD_TOKEN, BAD_MESSAGE, RATE_LIMIT, SLOW, TAKEN = 4003, 4400, 4429, 4408, 4409
+STATIC = Path(__file__).with_name("static")
+
+
+@dataclass
+class Limits:
+    max_message_bytes: int = 1 << 20
+    publish_messages_per_s: float = 400.0
+    publish_bytes_per_s: float = 8e6
+    control_messages_per_s: float = 20.0
+    burst_s: float = 2.0                 # a bucket holds this many seconds of its rate
+    slow_viewer_s: float = 5.0
+    max_gop_packets: int = 512
+    min_distance_m: float = 0.1
+
+
+class Bucket:
+    """A token bucket: ``rate`` per second, up to ``rate * burst_s`` saved."""
+
+    def __init__(self, rate: float, burst_s: float):
+        self.rate, self.capacity = rate, rate * burst_s
+        self.level, self.at = self.capacity, time.monotonic()
+
+    def take(self, amount: float = 1.0) -> bool:
+        now = time.monotonic()
+        self.level = min(self.capacity, self.level + (now - self.at) * self.rate)
+        self.at = now
+        if self.level < amount:
+            return False
+        self.level -= amount
+        return True
+
+
+class Closing(Exception):
+    """Close this connection with ``code`` and ``reason``."""
+
+    def __init__(self, code: int, reason: str):
+        super().__init__(reason)
+        self.code, self.reason = code, reason
+
+
+@dataclass
+class Forward:
+    """A packet on its way to viewers: the bytes as forwarded, and what cutting needs."""
+
+    packet: Packet
+    data: bytes                          # without the cut table
+    cuts: np.ndarray | None = None
+
+
+@dataclass
+class StreamState:
+    owner: object                        # the sending connection, or the bus
+    header: Forward
+    info: StreamInfo
+    codec: object
+    gop: list[Forward] = field(default_factory=list)
+    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass
+class Viewer:
+    ws: web.WebSocketResponse
+    budget: float = 0.0                  # bit/s for the embedded streams; 0: everything whole
+    camera: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    pending: list[Forward] = field(default_factory=list)
+    queue: asyncio.Queue = field(default_factory=lambda: asyncio.Queue(maxsize=1))
+    missed_since: float | None = None
+    missed: int = 0
+    sent: int = 0
+
+
+@dataclass
+class Room:
+    streams: dict[int, StreamState] = field(default_factory=dict)
+    viewers: list[Viewer] = field(default_factory=list)
+    fresh: list[Forward] = field(default_factory=list)
+
+
+class Relay:
+    def __init__(self, secret: str, limits: Limits | None = None, tick_hz: float = 30.0, bus=None):
+        if not secret:
+            raise MocodecError("the relay needs a secret (--secret) to check room tokens")
+        self.secret, self.limits, self.tick_s = secret, limits or Limits(), 1.0 / tick_hz
+        self.rooms: dict[str, Room] = {}
+        self.bus = bus
+        self.started = time.monotonic()
+        self.counters = {"packets_in": 0, "batches_out": 0, "missed_ticks": 0, "closed_bad": 0,
+                         "closed_rate": 0, "dropped_slow": 0}
+
+    # ----- the application -------------------------------------------------------------------
+    def app(self) -> web.Application:
+        app = web.Application()
+        app.router.add_get("/ws", self.handle_ws)
+        app.router.add_get("/status", self.handle_status)
+        if STATIC.is_dir():
+            app.router.add_get("/", lambda _: web.FileResponse(STATIC / "index.html"))
+            app.router.add_static("/static", STATIC)
+        app.on_startup.append(self._start)
+        app.on_cleanup.append(self._stop)
+        return app
+
+    async def _start(self, app: web.Application) -> None:
+        self._ticker = asyncio.create_task(self._tick_loop())
+        if self.bus is not None:
+            await self.bus.start(self._from_bus)
+
+    async def _stop(self, app: web.Application) -> None:
+        self._ticker.cancel()
+        if self.bus is not None:
+            await self.bus.stop()
+
+    async def handle_status(self, request: web.Request) -> web.Response:
+        rooms = {name: {"streams": len(r.streams), "viewers": len(r.viewers)} for name, r in self.rooms.items()}
+        return web.json_response({"rooms": rooms, "uptime_s": round(time.monotonic() - self.started, 1),
+                                  **self.counters})
+
+    async def handle_ws(self, request: web.Request) -> web.WebSocketResponse:
+        room_name = request.query.get("room", "")
+        role = request.query.get("role", "subscribe")
+        auth = request.headers.get("Authorization", "")
+        token = auth[7:] if auth.startswith("Bearer ") else request.query.get("token", "")
+        ws = web.WebSocketResponse(max_msg_size=self.limits.max_message_bytes, heartbeat=20.0)
+        await ws.prepare(request)
+        try:
+            if role not in ("publish", "subscribe"):
+                raise Closing(BAD_MESSAGE, f"role must be publish or subscribe, got {role!r}")
+            try:
+                tokens.verify(self.secret, token, room_name, role)
+            except tokens.TokenError as e:
+                raise Closing(BAD_TOKEN, str(e)) from None
+            room = self.rooms.setdefault(room_name, Room())
+            await ws.send_json({"welcome": room_name, "role": role})
+            if role == "publish":
+                await self._publisher(ws, room_name, room)
+            else:
+                await self._viewer(ws, room)
+        except Closing as c:
+            self.counters["closed_rate" if c.code == RATE_LIMIT else "closed_bad"] += 1
+            log.info("closing a connection: %s", c.reason)
+            await ws.close(code=c.code, message=c.reason[:120].encode())
+        return ws
+
+    # ----- senders -----------------------------------------------------------------------------
+    async def _publisher(self, ws: web.WebSocketResponse, room_name: str, room: Room) -> None:
+        messages = Bucket(self.limits.publish_messages_per_s, self.limits.burst_s)
+        volume = Bucket(self.limits.publish_bytes_per_s, self.limits.burst_s)
+        try:
+            async for msg in ws:
+                if msg.type == WSMsgType.ERROR or msg.type != WSMsgType.BINARY:
+                    if msg.type == WSMsgType.ERROR:
+                        break
+                    raise Closing(BAD_MESSAGE, "a sender sends binary packet batches only")
+                if not messages.take() or not volume.take(len(msg.data)):
+                    raise Closing(RATE_LIMIT, f"rate limit: over {self.limits.publish_messages_per_s:g} messages "
+                                              f"or {self.limits.publish_bytes_per_s:g} bytes per second")
+                self._ingest(room, msg.data, owner=ws)
+                if self.bus is not None:
+                    await self.bus.publish(room_name, msg.data)
+        finally:
+            for key in [k for k, s in room.streams.items() if s.owner is ws]:
+                del room.streams[key]
+
+    def _ingest(self, room: Room, data: bytes, owner: object) -> None:
+        """The packets of one sender message into the room; Closing if it is malformed."""
+        try:
+            raw = split_batch(data) if data[:2] == BATCH_MAGIC else [memoryview(data)]
+            packets = [parse(p, f"packet {k}") for k, p in enumerate(raw)]
+        except MocodecError as e:
+            raise Closing(BAD_MESSAGE, f"bad message: {e}") from None
+        for p in packets:
+            self.counters["packets_in"] += 1
+            state = room.streams.get(p.stream)
+            if state is not None and state.owner is not owner:
+                raise Closing(TAKEN, f"stream {p.stream} is published by another sender")
+            if p.kind == HEADER:
+                try:
+                    info = StreamInfo.from_payload(p.payload)
+                    codec = get_codec(info.codec["codec"], **info.codec.get("knobs", {}))
+                except MocodecError as e:
+                    raise Closing(BAD_MESSAGE, f"stream {p.stream}: {e}") from None
+                room.streams[p.stream] = StreamState(owner, Forward(p, p.to_bytes()), info, codec)
+                room.fresh.append(room.streams[p.stream].header)
+                continue
+            if state is None:
+                raise Closing(BAD_MESSAGE, f"stream {p.stream}: data before its header")
+            forward = self._forward(p, state)
+            state.position = p.position
+            if p.keyframe:
+                state.gop = []
+            state.gop = (state.gop + [forward])[-self.limits.max_gop_packets:]
+            room.fresh.append(forward)
+
+    def _forward(self, p: Packet, state: StreamState) -> Forward:
+        if not p.flags & CUTS:
+            return Forward(p, p.to_bytes())
+        try:
+            cuts = decode_ints(p.cuts)
+        except Exception:   # noqa: BLE001 - a cut table that does not parse
+            raise Closing(BAD_MESSAGE, f"stream {p.stream}: packet {p.sequence}: bad cut table") from None
+        plain = p.without_cuts()
+        return Forward(plain, plain.to_bytes(), cuts)
+
+    async def _from_bus(self, room_name: str, data: bytes) -> None:
+        try:
+            self._ingest(self.rooms.setdefault(room_name, Room()), data, owner=self.bus)
+        except Closing as c:
+            log.warning("a bus message for room %s was refused: %s", room_name, c.reason)
+
+    # ----- viewers -----------------------------------------------------------------------------
+    async def _viewer(self, ws: web.WebSocketResponse, room: Room) -> None:
+        viewer = Viewer(ws)
+        for state in room.streams.values():            # a late joiner starts at the last keyframes
+            viewer.pending += [state.header, *state.gop]
+        room.viewers.append(viewer)
+        sender = asyncio.create_task(self._send_loop(viewer))
+        control = Bucket(self.limits.control_messages_per_s, self.limits.burst_s)
+        try:
+            async for msg in ws:
+                if msg.type == WSMsgType.ERROR:
+                    break
+                if msg.type != WSMsgType.TEXT:
+                    raise Closing(BAD_MESSAGE, "a viewer sends JSON settings only")
+                if not control.take():
+                    raise Closing(RATE_LIMIT, f"rate limit: over {self.limits.control_messages_per_s:g} settings "
+                                              "per second")
+                self._settings(viewer, msg.data)
+        finally:
+            room.viewers.remove(viewer)
+            sender.cancel()
+
+    @staticmethod
+    def _settings(viewer: Viewer, text: str) -> None:
+        try:
+            doc = json.loads(text)
+            budget = float(doc.get("budget", viewer.budget))
+            camera = tuple(float(x) for x in doc.get("camera", viewer.camera))
+        except (ValueError, TypeError, AttributeError):
+            raise Closing(BAD_MESSAGE, 'settings must be JSON like {"budget": 8000, "camera": [0, 1.6, 5]}') \
+                from None
+        if not (math.isfinite(budget) and budget >= 0) or len(camera) != 3 or not all(map(math.isfinite, camera)):
+            raise Closing(BAD_MESSAGE, "budget must be >= 0 bit/s and camera three finite numbers")
+        viewer.budget, viewer.camera = budget, camera
+
+    async def _send_loop(self, viewer: Viewer) -> None:
+        while True:
+            batch = await viewer.queue.get()
+            try:
+                await viewer.ws.send_bytes(batch)
+            except (ConnectionError, RuntimeError):
+                return
+
+    # ----- ticks -------------------------------------------------------------------------------
+    async def _tick_loop(self) -> None:
+        next_tick = time.monotonic()
+        while True:
+            next_tick += self.tick_s
+            await asyncio.sleep(max(next_tick - time.monotonic(), 0.0))
+            for name, room in list(self.rooms.items()):
+                try:
+                    self._dispatch(room)
+                except Exception:   # noqa: BLE001 - one room's fault must not stop the others
+                    log.exception("dispatching room %s failed", name)
+            for name in [n for n, r in self.rooms.items() if not r.streams and not r.viewers]:
+                del self.rooms[name]
+
+    def _dispatch(self, room: Room) -> None:
+        fresh, room.fresh = room.fresh, []
+        shared: bytes | None = None                 # the batch of every viewer with nothing of its own
+        cut_cache: dict[tuple[int, int], bytes] = {}
+        for viewer in list(room.viewers):
+            items, viewer.pending = viewer.pending + fresh, []
+            if not items:
+                continue
+            if viewer.budget > 0 and any(f.cuts is not None for f in items):
+                batch = pack_batch(self._cut(room, viewer, items, cut_cache))
+            elif len(items) == len(fresh):
+                shared = shared or pack_batch([f.data for f in fresh])
+                batch = shared
+            else:
+                batch = pack_batch([f.data for f in items])
+            self._offer(viewer, batch, items)
+
+    def _offer(self, viewer: Viewer, batch: bytes, items: list[Forward]) -> None:
+        """Queue a viewer's batch, or miss the tick if the last is still on its way: it keeps
+        the stream headers for the next tick and drops the rest (its receivers resynchronise at
+        the next keyframe)."""
+        try:
+            viewer.queue.put_nowait(batch)
+            viewer.missed_since = None
+            viewer.sent += 1
+            self.counters["batches_out"] += 1
+        except asyncio.QueueFull:
+            viewer.missed += 1
+            self.counters["missed_ticks"] += 1
+            viewer.pending = [f for f in items if f.packet.kind == HEADER]
+            now = time.monotonic()
+            viewer.missed_since = viewer.missed_since or now
+            if now - viewer.missed_since > self.limits.slow_viewer_s:
+                self.counters["dropped_slow"] += 1
+                asyncio.ensure_future(viewer.ws.close(code=SLOW, message=b"too slow: missed ticks for too long"))
+
+    def _cut(self, room: Room, viewer: Viewer, items: list[Forward], cache: dict) -> list[bytes]:
+        """The viewer's packets, the embedded streams cut to their crowd shares (6.4, 6.5)."""
+        embedded = [k for k, s in room.streams.items() if hasattr(s.codec, "truncate_packet")]
+        camera = np.asarray(viewer.camera)
+        d = np.array([max(float(np.linalg.norm(np.asarray(room.streams[k].position) - camera)),
+                          self.limits.min_distance_m) for k in embedded])
+        shares = dict(zip(embedded, split_budget(int(viewer.budget), bandwidth_scores(d)))) if embedded else {}
+        out = []
+        for f in items:
+            state = room.streams.get(f.packet.stream)
+            if f.cuts is None or state is None or f.packet.stream not in shares:
+                out.append(f.data)
+                continue
+            key = (id(f), int(shares[f.packet.stream]))
+            if key not in cache:
+                try:
+                    payload = state.codec.truncate_packet(f.packet.payload, state.info.skeleton, f.cuts, key[1],
+                                                          state.info.fps)
+                except MocodecError as e:       # a cut table that does not fit: pass the packet whole
+                    log.warning("stream %d: packet %d not cut: %s", f.packet.stream, f.packet.sequence, e)
+                    payload = f.packet.payload
+                cache[key] = f.data if payload is f.packet.payload else f.packet.with_payload(payload).to_bytes()
+            out.append(cache[key])
+        return out
+
+
+def run(host: str, port: int, secret: str, limits: Limits | None = None, bus=None, tick_hz: float = 30.0) -> None:
+    """Serve until interrupted (``mocodec serve``)."""
+    web.run_app(Relay(secret, limits, tick_hz, bus).app(), host=host, port=port, print=None,
+                handle_signals=True)

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from mocodec import __version__
-from mocodec import cli_bench
+from mocodec import cli_bench, cli_stream
 from mocodec.cli_coding import add_codec_options, add_commands, knobs_from
 from mocodec.errors import MocodecError
 from mocodec.formats import load, save
@@ -184,6 +184,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_commands(sub, common)
     cli_bench.add_commands(sub)
+    cli_stream.add_commands(sub)
 
     p = sub.add_parser("demo", help="run the main job on the bundled sample clip",
                        description="Encode and decode the bundled CMU walk with the default codec and "

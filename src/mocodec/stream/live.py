@@ -31,8 +31,10 @@ from mocodec.stream.packets import (CUTS, DATA, END, HEADER, KEYFRAME, Packet, S
 
 #: Seconds of earlier input a restarted stream is primed with.
 PRIMER_S = 1.0
-#: How far extrapolation runs on before it holds (seconds).
+#: How far extrapolation runs on before it holds (seconds), and the frames its velocity is
+#: measured over.
 EXTRAPOLATE_S = 0.25
+VELOCITY_FRAMES = 5
 
 
 def now_us() -> int:
@@ -158,8 +160,8 @@ class ReceiverStats:
 
 class LiveDecoder:
     """Packets in, frames out, for one stream. Never raises on a bad or missing packet: it
-    conceals (``hold`` the last frame, or ``extrapolate`` its velocity for a quarter second,
-    then hold) until the next keyframe."""
+    conceals (``hold`` the last frame, or ``extrapolate`` the velocity of the last few frames
+    for a quarter second, then hold) until the next keyframe."""
 
     def __init__(self, info: StreamInfo, conceal: str = "hold"):
         if conceal not in ("hold", "extrapolate"):
@@ -170,7 +172,7 @@ class LiveDecoder:
         self.decoder = None
         self.expected: int | None = None      # next sequence number
         self.next_frame: int | None = None    # next frame number to output
-        self.tail = np.zeros((0, info.skeleton.num_channels))   # the last two frames out
+        self.tail = np.zeros((0, info.skeleton.num_channels))   # the last frames out
         self.stats = ReceiverStats()
         self.ended = False
 
@@ -219,7 +221,7 @@ class LiveDecoder:
             self.next_frame = 0
         self.next_frame += len(frames)
         if len(frames):
-            self.tail = np.vstack((self.tail, frames))[-2:]
+            self.tail = np.vstack((self.tail, frames))[-VELOCITY_FRAMES:]
         return frames
 
     def _concealed(self, upto: int) -> np.ndarray:
@@ -233,9 +235,10 @@ class LiveDecoder:
         n = upto - self.next_frame
         last = self.tail[-1]
         out = np.repeat(last[None], n, axis=0)
-        if self.conceal == "extrapolate" and len(self.tail) == 2:
+        if self.conceal == "extrapolate" and len(self.tail) == VELOCITY_FRAMES:
             steps = np.minimum(np.arange(1, n + 1), int(EXTRAPOLATE_S * self.info.fps))
-            out = last + steps[:, None] * (self.tail[1] - self.tail[0])
+            velocity = (self.tail[-1] - self.tail[0]) / (VELOCITY_FRAMES - 1)   # smooths coding noise
+            out = last + steps[:, None] * velocity
         self.stats.concealed_frames += n
         return self._emit(out)
 

@@ -1,0 +1,157 @@
+"""Live streams: the packet format, intra refresh, loss concealment, tokens."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mocodec.codecs import get_codec
+from mocodec.errors import CorruptStreamError
+from mocodec.stream import tokens
+from mocodec.stream.live import LiveDecoder, receive_clip, refresh_frames, stream_clip
+from mocodec.stream.packets import (DATA, HEADER, Packet, StreamInfo, batch_offsets, pack_batch, parse, read_u32,
+                                    read_u64, split_batch, SEQUENCE_OFFSET, TIMESTAMP_OFFSET)
+
+REALTIME = ("dpcm", "adpcm", "deadreckoning", "dct", "spiht", "primitives")
+
+
+def wrapped_error(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.abs((a - b + 180.0) % 360.0 - 180.0).max())
+
+
+# ----- packets -----------------------------------------------------------------------------------
+def test_packet_round_trip_and_damage():
+    p = Packet(7, 42, 1_700_000_000_123_456, "spiht", 128, 64, b"payload bytes", DATA, 1, (1.5, 0.0, -2.25))
+    data = p.to_bytes()
+    assert parse(data) == p and len(data) == len(p.payload) + 48
+    for k in (0, 3, 12, len(data) - 10, len(data) - 1):           # magic, kind, sequence, payload, CRC
+        bad = bytearray(data)
+        bad[k] ^= 0x40
+        with pytest.raises(CorruptStreamError):
+            parse(bytes(bad))
+    with pytest.raises(CorruptStreamError, match="shorter"):
+        parse(data[:20])
+    with pytest.raises(CorruptStreamError, match="announced"):
+        parse(data[:-1])
+
+
+def test_batch_split_and_bulk_fields():
+    packets = [Packet(s, 10 + s, 1000 * s, "dpcm", 0, 4, bytes(s)) for s in range(5)]
+    batch = pack_batch([p.to_bytes() for p in packets])
+    assert [parse(r) for r in split_batch(batch)] == packets
+    offsets = batch_offsets(batch)[:-1]
+    assert read_u32(batch, offsets, SEQUENCE_OFFSET).tolist() == [10, 11, 12, 13, 14]
+    assert read_u64(batch, offsets, TIMESTAMP_OFFSET).tolist() == [0, 1000, 2000, 3000, 4000]
+    with pytest.raises(CorruptStreamError, match="add up"):
+        split_batch(batch[:-3])
+    with pytest.raises(CorruptStreamError, match="magic"):
+        split_batch(b"XX" + batch[2:])
+
+
+def test_stream_header_carries_skeleton_and_codec(walk_bvh):
+    info = StreamInfo(walk_bvh.skeleton, walk_bvh.fps, get_codec("dpcm").get_config(), "walker")
+    back = StreamInfo.from_payload(info.to_payload())
+    assert back.skeleton.isclose(walk_bvh.skeleton) and back.fps == 120.0 and back.codec == info.codec
+    with pytest.raises(CorruptStreamError, match="stream header"):
+        StreamInfo.from_payload(b"not zlib")
+
+
+# ----- live streams ------------------------------------------------------------------------------
+@pytest.mark.parametrize("codec_id", REALTIME)
+def test_every_realtime_codec_streams_through_packets(walk_bvh, codec_id):
+    packets = stream_clip(walk_bvh, get_codec(codec_id))
+    assert packets[0].kind == HEADER and packets[-1].end
+    assert sum(p.keyframe for p in packets) >= walk_bvh.num_frames // refresh_frames(get_codec(codec_id), 120, 1.0)
+    frames = [(p.first_frame, p.frames) for p in packets[1:]]
+    assert all(a + n == b for (a, n), (b, _) in zip(frames, frames[1:]))      # ranges tile the clip
+    got = receive_clip(packets)
+    assert got.num_frames == walk_bvh.num_frames
+    batch = get_codec(codec_id).decode(get_codec(codec_id).encode(walk_bvh), walk_bvh.skeleton)
+    # intra refresh costs some quality against one uninterrupted stream, within a small factor
+    assert wrapped_error(got.channels, walk_bvh.channels) < 3 * wrapped_error(batch.channels, walk_bvh.channels) + 1
+
+
+def test_a_lost_packet_is_concealed_and_the_receiver_resyncs_at_the_next_keyframe(walk_bvh):
+    packets = stream_clip(walk_bvh, get_codec("dpcm"), keyframe_s=0.5)
+    clean = receive_clip(packets).channels
+    keys = [k for k, p in enumerate(packets) if p.keyframe]
+    lost = keys[1] + 2                                   # inside the second refresh period
+    got = receive_clip(packets[:lost] + packets[lost + 1:]).channels
+    assert got.shape == clean.shape
+    first_lost = packets[lost].first_frame
+    resync = packets[keys[2]].first_frame
+    np.testing.assert_array_equal(got[:first_lost], clean[:first_lost])
+    held = got[first_lost:resync]
+    assert np.all(held == got[first_lost - 1])            # held, not garbage
+    np.testing.assert_array_equal(got[resync:], clean[resync:])   # exact again after the keyframe
+    assert resync - first_lost <= refresh_frames(get_codec("dpcm"), 120, 0.5)
+
+
+def test_late_joiner_starts_at_a_keyframe(walk_bvh):
+    packets = stream_clip(walk_bvh, get_codec("spiht"), keyframe_s=2.0)      # two segments per refresh
+    clean = receive_clip(packets).channels
+    k = next(k for k, p in enumerate(packets) if p.keyframe and p.first_frame > 0)
+    dec = LiveDecoder(StreamInfo.from_payload(packets[0].payload))
+    out = np.vstack([dec.push(p) for p in packets[k - 1:]])   # one packet before the keyframe: dropped
+    start = packets[k].first_frame
+    assert dec.stats.dropped == 1
+    assert len(out) == walk_bvh.num_frames - start
+    # the joiner's first segment is not smoothed against the one it never saw; the rest is exact
+    tail = packets[k].frames
+    np.testing.assert_array_equal(out[tail:], clean[start + tail:])
+
+
+def test_damaged_payload_never_crashes_the_receiver(walk_bvh):
+    packets = stream_clip(walk_bvh, get_codec("adpcm"))
+    victim = packets[5]
+    garbage = Packet(victim.stream, victim.sequence, victim.timestamp_us, victim.codec, victim.first_frame,
+                     victim.frames, bytes(len(victim.payload)), DATA, victim.flags, victim.position)
+    got = receive_clip(packets[:5] + [garbage] + packets[6:])
+    assert got.num_frames == walk_bvh.num_frames and np.isfinite(got.channels).all()
+
+
+def test_extrapolation_continues_the_motion(walk_bvh):
+    packets = stream_clip(walk_bvh, get_codec("dpcm"), keyframe_s=2.0)
+    clean = receive_clip(packets).channels
+    errors = {"hold": [], "extrapolate": []}
+    for lost in range(5, len(packets) - 3, 3):
+        if not packets[lost].keyframe:
+            span = slice(packets[lost].first_frame, packets[lost].first_frame + 8)
+            for mode, found in errors.items():
+                got = receive_clip(packets[:lost] + packets[lost + 1:], mode).channels
+                found.append(np.abs(got[span] - clean[span]).mean())
+    assert np.mean(errors["extrapolate"]) < 0.9 * np.mean(errors["hold"])
+
+
+def test_spiht_packets_cut_to_a_rate_are_the_packets_coded_at_that_rate(walk_bvh):
+    hi, lo = get_codec("spiht", bits_per_second=8000), get_codec("spiht", bits_per_second=2500)
+
+    def packets(codec):
+        enc = codec.encoder(walk_bvh.skeleton, walk_bvh.fps)
+        return enc.push(walk_bvh.channels) + enc.flush()
+
+    for a, b in zip(packets(hi), packets(lo), strict=True):
+        cut = hi.truncate_packet(a, walk_bvh.skeleton, hi.packet_cuts(a, walk_bvh.skeleton), 2500, walk_bvh.fps)
+        assert cut == b and len(cut) < len(a)
+    with pytest.raises(CorruptStreamError, match="cut table"):
+        p = packets(hi)[0]
+        hi.truncate_packet(p, walk_bvh.skeleton, np.array([1, 2, 3]), 2500, walk_bvh.fps)
+
+
+# ----- tokens ------------------------------------------------------------------------------------
+def test_tokens():
+    t = tokens.issue("secret", "lobby", "subscribe", ttl_s=60, now=1000.0)
+    assert tokens.verify("secret", t, "lobby", "subscribe", now=1030.0)["room"] == "lobby"
+    cases = [("other", t, "lobby", "subscribe", 1030.0, "signature"),
+             ("secret", t, "lobby", "subscribe", 1061.0, "expired"),
+             ("secret", t, "hall", "subscribe", 1030.0, "room"),
+             ("secret", t, "lobby", "publish", 1030.0, "allows"),
+             ("secret", "garbage", "lobby", "subscribe", 1030.0, "malformed"),
+             ("secret", t[:-2] + "AA", "lobby", "subscribe", 1030.0, "signature")]
+    for secret, token, room, role, now, why in cases:
+        with pytest.raises(tokens.TokenError, match=why):
+            tokens.verify(secret, token, room, role, now=now)
+    both = tokens.issue("secret", "lobby", "both", now=1000.0)
+    assert tokens.verify("secret", both, "lobby", "publish", now=1001.0)
+    with pytest.raises(tokens.TokenError):
+        tokens.issue("", "lobby")

@@ -22,12 +22,8 @@ import numpy as np
 from mocodec.codecs.base import Codec
 from mocodec.errors import MocodecError
 from mocodec.motion import Motion
-from mocodec.stream.live import PRIMER_S, LiveDecoder, LiveEncoder
+from mocodec.stream.live import PRIMER_S, TICK_HZ, LiveDecoder, LiveEncoder, tick_frames
 from mocodec.stream.packets import HEADER, Packet, StreamInfo, pack_batch, parse, split_batch
-
-#: A sender's and a viewer's tick (Hz): frames are pushed, and batches sent, this often.
-TICK_HZ = 30.0
-
 
 class RelayRefused(MocodecError):
     """The relay refused the connection, closed it, or could not be reached."""
@@ -58,7 +54,7 @@ async def connect(url: str, room: str, token: str, role: str, max_msg_size: int 
 
 
 def closed_reason(ws, msg) -> str:
-    reason = msg.extra if msg.type == aiohttp.WSMsgType.CLOSE and msg.extra else ""
+    reason = msg.extra if msg is not None and msg.type == aiohttp.WSMsgType.CLOSE and msg.extra else ""
     return f"{reason or 'connection closed'} (code {ws.close_code})"
 
 
@@ -72,36 +68,36 @@ class PublishStats:
 
 async def publish_clip(url: str, room: str, token: str, motion: Motion, codec: Codec, speed: float = 1.0,
                        stream: int = 0, keyframe_s: float = 1.0) -> PublishStats:
-    """Play ``motion`` into ``room`` as a live stream at its frame rate (``speed`` times faster),
-    one batch per tick; the last packet ends the stream."""
+    """Play ``motion`` into ``room`` as a live stream at its frame rate (``speed`` times faster):
+    the frames of one tick (1/30 s of the clip) are pushed when their time comes, and their
+    packets sent as one batch; the last packet ends the stream. The packets are those of
+    :func:`~mocodec.stream.live.stream_clip`, whatever the timing."""
     if not speed > 0:
         raise MocodecError(f"speed must be positive, got {speed}")
     enc = LiveEncoder(codec, motion.skeleton, motion.fps, stream, keyframe_s,
                       primer=motion.channels[:int(round(PRIMER_S * motion.fps))])
+    step = tick_frames(motion.fps)
     stats = PublishStats()
     async with connect(url, room, token, "publish") as ws:
         start = time.monotonic()
 
         async def send(packets: list[Packet]) -> None:
             if ws.closed:
-                raise RelayRefused(f"the relay closed the stream: {ws.close_code}")
+                raise RelayRefused(f"the relay closed the stream: {closed_reason(ws, None)}")
             data = [p.to_bytes() for p in packets]
             await ws.send_bytes(pack_batch(data))
             stats.packets += len(data)
             stats.bytes += sum(map(len, data))
 
         await send([enc.header()])
-        sent = 0
-        while sent < motion.num_frames:
-            due = min(int((time.monotonic() - start) * speed * motion.fps) + 1, motion.num_frames)
-            if due > sent:
-                packets = enc.push(motion.channels[sent:due])
-                sent = due
-                if packets:
-                    await send(packets)
-            await asyncio.sleep(1.0 / TICK_HZ)
+        for a in range(0, motion.num_frames, step):
+            b = min(a + step, motion.num_frames)
+            await asyncio.sleep(max(start + b / (motion.fps * speed) - time.monotonic(), 0.0))
+            packets = enc.push(motion.channels[a:b])
+            if packets:
+                await send(packets)
         await send(enc.close())
-        stats.frames, stats.seconds = sent, time.monotonic() - start
+        stats.frames, stats.seconds = motion.num_frames, time.monotonic() - start
         await _drain(ws)
     return stats
 

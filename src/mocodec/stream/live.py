@@ -29,6 +29,8 @@ from mocodec.skeleton import POSITION_CHANNELS, Skeleton
 from mocodec.stream.packets import (CUTS, DATA, END, HEADER, KEYFRAME, Packet, StreamInfo, header_packet,
                                     with_cuts)
 
+#: A sender's tick (Hz): frames are pushed, and packets sent, this often.
+TICK_HZ = 30.0
 #: Seconds of earlier input a restarted stream is primed with.
 PRIMER_S = 1.0
 #: How far extrapolation runs on before it holds (seconds), and the frames its velocity is
@@ -52,6 +54,11 @@ def root_position(skeleton: Skeleton, frame: np.ndarray) -> tuple[float, float, 
             out[POSITION_CHANNELS.index(name)] = float(frame[first + k]) / skeleton.units_per_metre
     x, y, z = (float(np.float32(v)) for v in out)
     return x, y, z
+
+
+def tick_frames(fps: float) -> int:
+    """Frames a sender pushes per tick."""
+    return max(int(round(fps / TICK_HZ)), 1)
 
 
 def refresh_frames(codec: Codec, fps: float, keyframe_s: float) -> int:
@@ -250,7 +257,7 @@ def stream_clip(motion: Motion, codec: Codec, stream: int = 0, keyframe_s: float
     second."""
     enc = LiveEncoder(codec, motion.skeleton, motion.fps, stream, keyframe_s,
                       primer=motion.channels[:int(round(PRIMER_S * motion.fps))])
-    step = frames_per_packet or max(int(round(motion.fps / 30)), 1)
+    step = frames_per_packet or tick_frames(motion.fps)
     packets = [enc.header(0)]
     for a in range(0, motion.num_frames, step):
         packets += enc.push(motion.channels[a:a + step], timestamp_us=int(a * 1e6 / motion.fps))

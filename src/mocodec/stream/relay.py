@@ -140,7 +140,7 @@ class Relay:
         app.router.add_get("/ws", self.handle_ws)
         app.router.add_get("/status", self.handle_status)
         if STATIC.is_dir():
-            app.router.add_get("/", lambda _: web.FileResponse(STATIC / "index.html"))
+            app.router.add_get("/", self.handle_index)
             app.router.add_static("/static", STATIC)
         app.on_startup.append(self._start)
         app.on_cleanup.append(self._stop)
@@ -155,6 +155,9 @@ class Relay:
         self._ticker.cancel()
         if self.bus is not None:
             await self.bus.stop()
+
+    async def handle_index(self, request: web.Request) -> web.FileResponse:
+        return web.FileResponse(STATIC / "index.html")
 
     async def handle_status(self, request: web.Request) -> web.Response:
         rooms = {name: {"streams": len(r.streams), "viewers": len(r.viewers)} for name, r in self.rooms.items()}

@@ -1,0 +1,235 @@
+"""The relay server, its clients and its limits, over real WebSockets on loopback."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import shutil
+import socket
+import subprocess
+import time
+
+import aiohttp
+import numpy as np
+import pytest
+from aiohttp import web
+
+from mocodec.cli import main
+from mocodec.codecs import get_codec
+from mocodec.stream import tokens
+from mocodec.stream.bus import NatsBus
+from mocodec.stream.client import RelayRefused, connect, publish_clip, record
+from mocodec.stream.live import receive_clip, stream_clip
+from mocodec.stream.packets import pack_batch
+from mocodec.stream.relay import BAD_MESSAGE, RATE_LIMIT, SLOW, Limits, Relay, Viewer
+
+SECRET = "test-secret"
+
+
+@contextlib.asynccontextmanager
+async def serving(relay: Relay | None = None):
+    """A relay on a free loopback port: yields its ws:// address."""
+    relay = relay or Relay(SECRET)
+    runner = web.AppRunner(relay.app())
+    await runner.setup()
+    site = web.TCPSite(runner, "127.0.0.1", 0)
+    await site.start()
+    port = site._server.sockets[0].getsockname()[1]
+    try:
+        yield f"ws://127.0.0.1:{port}"
+    finally:
+        await runner.cleanup()
+
+
+def token(room: str = "lobby", role: str = "both", ttl: float = 600.0) -> str:
+    return tokens.issue(SECRET, room, role, ttl)
+
+
+async def publish_and_record(url, motion, codec, speed=8.0, **watch):
+    viewer = asyncio.create_task(record(url, "lobby", token(), timeout_s=30, **watch))
+    await asyncio.sleep(0.2)
+    await publish_clip(url, "lobby", token(), motion, codec, speed=speed)
+    return await viewer
+
+
+def test_a_recorded_stream_decodes_as_offline_at_the_viewers_budget(walk_bvh):
+    """spiht sent at 8 kbit/s, cut by the relay to the viewer's 3 kbit/s: the same motion as
+    the clip streamed at 3 kbit/s and decoded offline."""
+    async def go():
+        async with serving() as url:
+            return await publish_and_record(url, walk_bvh, get_codec("spiht", bits_per_second=8000), budget=3000)
+
+    got = asyncio.run(go())[0]
+    offline = receive_clip(stream_clip(walk_bvh, get_codec("spiht", bits_per_second=3000)))
+    np.testing.assert_array_equal(got.channels, offline.channels)
+    whole = receive_clip(stream_clip(walk_bvh, get_codec("spiht", bits_per_second=8000)))
+    assert not np.array_equal(got.channels, whole.channels)
+
+
+def test_whole_streams_pass_unchanged(walk_bvh):
+    async def go():
+        async with serving() as url:
+            return await publish_and_record(url, walk_bvh, get_codec("dpcm"))
+
+    got = asyncio.run(go())[0]
+    np.testing.assert_array_equal(got.channels, receive_clip(stream_clip(walk_bvh, get_codec("dpcm"))).channels)
+
+
+def test_late_joiner_gets_the_header_and_the_last_keyframe(walk_bvh):
+    async def go():
+        async with serving() as url:
+            sender = asyncio.create_task(publish_clip(url, "lobby", token(), walk_bvh, get_codec("dpcm"), speed=1.0))
+            await asyncio.sleep(1.6)
+            got = await record(url, "lobby", token(), timeout_s=10)
+            await sender
+            return got[0]
+
+    got = asyncio.run(go())
+    packets = stream_clip(walk_bvh, get_codec("dpcm"))
+    clean = receive_clip(packets).channels
+    starts = [p.first_frame for p in packets[1:] if p.keyframe]
+    start = walk_bvh.num_frames - got.num_frames
+    assert start in starts[1:]                      # joined at a keyframe after the first
+    np.testing.assert_array_equal(got.channels, clean[start:])
+
+
+def test_the_nearer_avatar_gets_the_larger_share(walk_bvh):
+    far = walk_bvh.with_channels(walk_bvh.channels.copy())
+    x = walk_bvh.skeleton.channel_index("hip.Xposition")
+    far.channels[:, x] += 20 * walk_bvh.skeleton.units_per_metre          # 20 m further along x
+    codec = get_codec("spiht", bits_per_second=8000)
+
+    async def go():
+        async with serving() as url:
+            camera = tuple(walk_bvh.positions_m()[0, 0])
+            viewer = asyncio.create_task(record(url, "lobby", token(), budget=4000, camera=camera, timeout_s=30,
+                                                stream=1))
+            await asyncio.sleep(0.2)
+            await asyncio.gather(publish_clip(url, "lobby", token(), walk_bvh, codec, speed=8, stream=0),
+                                 publish_clip(url, "lobby", token(), far, codec, speed=8, stream=1))
+            return await viewer
+
+    got = asyncio.run(go())
+    near_err = np.abs(got[0].channels - walk_bvh.continuous().channels).mean()
+    far_err = np.abs(got[1].channels - far.continuous().channels).mean()
+    assert near_err < far_err
+
+
+@pytest.mark.parametrize("bad, why", [(tokens.issue("other-secret", "lobby"), "signature"),
+                                      (tokens.issue(SECRET, "lobby", ttl_s=1, now=time.time() - 10), "expired"),
+                                      (tokens.issue(SECRET, "hall"), "room"),
+                                      (tokens.issue(SECRET, "lobby", "subscribe"), "allows")])
+def test_bad_tokens_are_refused_with_the_reason(walk_bvh, bad, why):
+    async def go():
+        async with serving() as url:
+            with pytest.raises(RelayRefused, match=why):
+                await publish_clip(url, "lobby", bad, walk_bvh, get_codec("dpcm"))
+    asyncio.run(go())
+
+
+def test_a_malformed_message_closes_that_connection_only(walk_bvh):
+    async def go():
+        async with serving() as url:
+            viewer = asyncio.create_task(record(url, "lobby", token(), timeout_s=30))
+            async with connect(url, "lobby", token(), "publish") as rogue:
+                await rogue.send_bytes(b"MP this is no packet")
+                msg = await rogue.receive()
+                assert msg.type == aiohttp.WSMsgType.CLOSE and rogue.close_code == BAD_MESSAGE
+                assert "bad message" in msg.extra
+            await publish_clip(url, "lobby", token(), walk_bvh, get_codec("dpcm"), speed=8)
+            return await viewer
+
+    assert asyncio.run(go())[0].num_frames == walk_bvh.num_frames
+
+
+def test_message_size_and_rate_limits_close_the_connection(walk_bvh):
+    limits = Limits(max_message_bytes=4096, publish_messages_per_s=5, burst_s=1.0)
+    header = stream_clip(walk_bvh[0:10], get_codec("dpcm"))[0].to_bytes()
+
+    async def go():
+        async with serving(Relay(SECRET, limits)) as url:
+            async with connect(url, "lobby", token(), "publish") as ws:
+                await ws.send_bytes(bytes(10_000))
+                await ws.receive()
+                assert ws.close_code == aiohttp.WSCloseCode.MESSAGE_TOO_BIG
+            async with connect(url, "lobby", token(), "publish") as ws:
+                for _ in range(20):
+                    if ws.closed:
+                        break
+                    await ws.send_bytes(pack_batch([header]))
+                msg = await ws.receive()
+                assert ws.close_code == RATE_LIMIT and "rate limit" in msg.extra
+            async with connect(url, "lobby", token(), "subscribe") as ws:
+                await ws.send_str("{not json")
+                await ws.receive()
+                assert ws.close_code == BAD_MESSAGE
+    asyncio.run(go())
+
+
+def test_a_slow_viewer_misses_ticks_keeps_headers_and_is_dropped():
+    class StubSocket:
+        closed_with = None
+
+        async def close(self, code, message):
+            self.closed_with = code
+
+    async def go():
+        relay = Relay(SECRET, Limits(slow_viewer_s=0.05))
+        viewer = Viewer(StubSocket())
+        viewer.queue.put_nowait(b"a batch still on its way")
+        header = type("F", (), {"packet": type("P", (), {"kind": 0})()})()
+        data = type("F", (), {"packet": type("P", (), {"kind": 1})()})()
+        relay._offer(viewer, b"next", [header, data])
+        assert viewer.missed == 1 and viewer.pending == [header]        # memory stays one batch
+        await asyncio.sleep(0.1)
+        relay._offer(viewer, b"next", [data])
+        await asyncio.sleep(0)
+        assert viewer.ws.closed_with == SLOW and relay.counters["dropped_slow"] == 1
+    asyncio.run(go())
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture
+def nats_server():
+    binary = shutil.which("nats-server", path="/usr/sbin:/usr/bin:/usr/local/bin")
+    if binary is None:
+        pytest.skip("nats-server is not installed (.ci/run installs Debian's nats-server)")
+    port = free_port()
+    proc = subprocess.Popen([binary, "-a", "127.0.0.1", "-p", str(port)], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    for _ in range(100):
+        with contextlib.suppress(OSError), socket.create_connection(("127.0.0.1", port), timeout=0.1):
+            break
+        time.sleep(0.05)
+    yield f"nats://127.0.0.1:{port}"
+    proc.terminate()
+    proc.wait(5)
+
+
+def test_two_relays_share_a_room_over_nats(walk_bvh, nats_server):
+    """A sender on relay A reaches a viewer on relay B."""
+    async def go():
+        async with serving(Relay(SECRET, bus=NatsBus(nats_server))) as a, \
+                serving(Relay(SECRET, bus=NatsBus(nats_server))) as b:
+            viewer = asyncio.create_task(record(b, "lobby", token(), timeout_s=30))
+            await asyncio.sleep(0.3)
+            await publish_clip(a, "lobby", token(), walk_bvh, get_codec("dpcm"), speed=8)
+            return await viewer
+
+    got = asyncio.run(go())[0]
+    np.testing.assert_array_equal(got.channels, receive_clip(stream_clip(walk_bvh, get_codec("dpcm"))).channels)
+
+
+def test_cli_token_and_refusal(capsys):
+    assert main(["token", "--secret", SECRET, "--room", "lobby", "--role", "subscribe"]) == 0
+    issued = capsys.readouterr().out.strip()
+    assert tokens.verify(SECRET, issued, "lobby", "subscribe")
+    port = free_port()
+    code = main(["subscribe", "--url", f"ws://127.0.0.1:{port}", "--room", "lobby", "--token", issued,
+                 "-o", "out.bvh", "--timeout", "1"])
+    assert code == 2 and "cannot reach the relay" in capsys.readouterr().err

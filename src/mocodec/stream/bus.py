@@ -33,6 +33,7 @@ class NatsBus:
             raise MocodecError(f"--bus must be a nats:// address, got {url!r}")
         self.url = url
         self.nc = None
+        self.stopping = False
 
     async def start(self, deliver: Callable[[str, bytes], Awaitable[None]]) -> None:
         import nats
@@ -46,9 +47,17 @@ class NatsBus:
                 return
             await deliver(room, msg.data)
 
+        async def on_error(e: Exception) -> None:
+            log.warning("NATS %s: %s", self.url, e or type(e).__name__)
+
+        async def on_disconnect() -> None:
+            if not self.stopping:
+                log.warning("NATS %s: disconnected, reconnecting", self.url)
+
         try:
             self.nc = await nats.connect(servers=[self.url], no_echo=True, connect_timeout=5,
-                                         max_reconnect_attempts=-1, allow_reconnect=True)
+                                         max_reconnect_attempts=-1, allow_reconnect=True, error_cb=on_error,
+                                         disconnected_cb=on_disconnect)
         except (NoServersError, OSError) as e:
             raise MocodecError(f"cannot reach the NATS server at {self.url}: {e}") from None
         await self.nc.subscribe(PREFIX + "*", cb=on_message)
@@ -57,5 +66,10 @@ class NatsBus:
         await self.nc.publish(subject(room), data)
 
     async def stop(self) -> None:
-        if self.nc is not None:
+        if self.nc is None:
+            return
+        self.stopping = True
+        try:
             await self.nc.drain()
+        except Exception:   # noqa: BLE001 - the server is gone or reconnecting: just close
+            await self.nc.close()

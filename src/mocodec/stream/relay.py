@@ -23,6 +23,7 @@ message closes its connection only, with a close code and the reason.
 from __future__ import annotations
 
 import asyncio
+import functools
 import json
 import logging
 import math
@@ -121,6 +122,14 @@ class Room:
     streams: dict[int, StreamState] = field(default_factory=dict)
     viewers: list[Viewer] = field(default_factory=list)
     fresh: list[Forward] = field(default_factory=list)
+
+
+@functools.lru_cache(maxsize=256)
+def stream_setup(header_payload: bytes) -> tuple[StreamInfo, object]:
+    """A stream header's contents and codec, parsed once for every avatar that sends the same
+    header (a crowd of one kind joins at the cost of one)."""
+    info = StreamInfo.from_payload(header_payload)
+    return info, get_codec(info.codec["codec"], **info.codec.get("knobs", {}))
 
 
 class Relay:
@@ -224,8 +233,7 @@ class Relay:
                 raise Closing(TAKEN, f"stream {p.stream} is published by another sender")
             if p.kind == HEADER:
                 try:
-                    info = StreamInfo.from_payload(p.payload)
-                    codec = get_codec(info.codec["codec"], **info.codec.get("knobs", {}))
+                    info, codec = stream_setup(p.payload)
                 except MocodecError as e:
                     raise Closing(BAD_MESSAGE, f"stream {p.stream}: {e}") from None
                 room.streams[p.stream] = StreamState(owner, Forward(p, p.to_bytes()), info, codec)

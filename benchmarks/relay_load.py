@@ -1,0 +1,327 @@
+"""Load test of the relay on loopback: N avatars streaming at 30 Hz to M viewers.
+
+The relay runs as `mocodec serve` in its own process (or two relays joined by a NATS server
+with --nats); publishers and viewers run in other processes. Each avatar replays the live
+packets of a real clip (07_03, dpcm, keyframes every --keyframe-s seconds), restamped with its
+stream id, sequence number and the send time; viewers read every batch's timestamps and
+sequence numbers in bulk and report delivered and lost packets and the end-to-end latency
+(send -> receipt, which includes waiting for the relay's next 30 Hz tick). With --loss P each
+viewer drops packets at random (an emulated lossy link) and a sample of viewers follows every
+stream as a receiver would: after a loss it waits for the next keyframe; the time from the
+first lost frame to the keyframe is the resync time. Server CPU (share of one core) and
+memory (RSS) are read with psutil.
+
+    .venv/bin/python benchmarks/relay_load.py                     # 500 avatars, 50 viewers, 20 s
+    .venv/bin/python benchmarks/relay_load.py --loss 0.1
+    .venv/bin/python benchmarks/relay_load.py --nats              # two relays over NATS
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import multiprocessing as mp
+import queue
+import shutil
+import socket
+import struct
+import subprocess
+import sys
+import time
+import zlib
+
+import numpy as np
+
+from common import DATA
+
+SECRET = "load-test"
+BINS_MS = 0.1                 # latency histogram resolution
+MAX_MS = 5000.0
+_STAMP = struct.Struct("<IIQI")   # stream, sequence, timestamp, first frame: bytes 6..26 of a packet
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_port(port: int, seconds: float = 20.0) -> None:
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        with contextlib.suppress(OSError), socket.create_connection(("127.0.0.1", port), timeout=0.2):
+            return
+        time.sleep(0.05)
+    raise SystemExit(f"nothing listens on port {port} after {seconds} s")
+
+
+def templates(keyframe_s: float):
+    """The clip's live packets (bytes) and their keyframe flags, frame ranges and length."""
+    from mocodec import load
+    from mocodec.codecs import get_codec
+    from mocodec.stream.live import stream_clip
+
+    motion = load(DATA / "07_03.bvh")
+    packets = stream_clip(motion, get_codec("dpcm"), keyframe_s=keyframe_s)
+    data = [p for p in packets[1:] if p.frames]
+    return packets[0].to_bytes(), [p.to_bytes() for p in data], motion.num_frames
+
+
+def restamp(template: bytes, stream: int, seq: int, ts_us: int, first: int) -> bytes:
+    buf = bytearray(template)
+    _STAMP.pack_into(buf, 6, stream, seq, ts_us, first)
+    struct.pack_into("<I", buf, len(buf) - 4, zlib.crc32(memoryview(buf)[:-4]))
+    return bytes(buf)
+
+
+# ----- publishers ------------------------------------------------------------------------------------
+def publisher(url: str, token: str, streams: list[int], seconds: float, keyframe_s: float, out) -> None:
+    import aiohttp
+
+    from mocodec.stream.packets import pack_batch
+
+    header, data, clip_frames = templates(keyframe_s)
+    first_frames = [struct.unpack_from("<I", d, 22)[0] for d in data]
+    rng = np.random.default_rng(streams[0])
+    phase = {s: int(rng.integers(len(data))) for s in streams}
+
+    async def run() -> None:
+        async with aiohttp.ClientSession() as session:
+            ws = await session.ws_connect(f"{url}/ws?room=load&role=publish", headers={"Authorization": f"Bearer {token}"},
+                                          max_msg_size=64 << 20)
+            await ws.receive()                                       # welcome
+            await ws.send_bytes(pack_batch([restamp(header, s, 0, 0, 0) for s in streams]))
+            start = time.monotonic()
+            tick, sent = 0, 0
+            while time.monotonic() - start < seconds:
+                now_us = time.time_ns() // 1000
+                batch = []
+                for s in streams:
+                    k = phase[s] + tick
+                    loop, idx = divmod(k, len(data))
+                    batch.append(restamp(data[idx], s, k, now_us, loop * clip_frames + first_frames[idx]))
+                await ws.send_bytes(pack_batch(batch))
+                sent += len(batch)
+                tick += 1
+                await asyncio.sleep(max(start + tick / 30.0 - time.monotonic(), 0.0))
+            await ws.close()
+            out.put(("sent", sent))
+
+    asyncio.run(run())
+
+
+# ----- viewers ---------------------------------------------------------------------------------------
+class Follower:
+    """What a receiver does with flags only: after a loss it is out of step until a keyframe."""
+
+    def __init__(self, fps: float):
+        self.fps = fps
+        self.expected: dict[int, int] = {}
+        self.last_end: dict[int, int] = {}       # stream -> the frame after the last one received
+        self.lost_at: dict[int, int] = {}        # stream -> first frame lost
+        self.resync_s: list[float] = []
+
+    def see(self, stream: int, seq: int, keyframe: bool, first: int, frames: int) -> None:
+        exp = self.expected.get(stream)
+        if exp is not None and seq > exp and stream not in self.lost_at:
+            self.lost_at[stream] = self.last_end.get(stream, first)
+        self.expected[stream] = seq + 1
+        if stream in self.lost_at and keyframe:
+            self.resync_s.append((first - self.lost_at.pop(stream)) / self.fps)
+        self.last_end[stream] = first + frames
+
+
+def viewers(url: str, token: str, count: int, seconds: float, loss: float, follow: int, seed: int, out,
+            warmup_s: float) -> None:
+    import aiohttp
+
+    from mocodec.stream.packets import (SEQUENCE_OFFSET, STREAM_OFFSET, TIMESTAMP_OFFSET, batch_offsets,
+                                        read_u32, read_u64)
+
+    hist = np.zeros(int(MAX_MS / BINS_MS) + 1, dtype=np.int64)
+    tally = {"received": 0, "dropped": 0, "batches": 0, "lost": 0}
+    followers = [Follower(120.0) for _ in range(follow)]
+    rng = np.random.default_rng(seed)
+
+    async def one(k: int, session) -> None:
+        ws = await session.ws_connect(f"{url}/ws?room=load&role=subscribe", headers={"Authorization": f"Bearer {token}"},
+                                      max_msg_size=256 << 20)
+        await ws.receive()
+        counts = np.zeros(1 << 12, dtype=np.int64)
+        lo = np.full(1 << 12, np.iinfo(np.int64).max)
+        hi = np.full(1 << 12, -1, dtype=np.int64)
+        measure_from = time.monotonic() + warmup_s
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            try:
+                msg = await ws.receive(timeout=max(end - time.monotonic(), 0.01))
+            except asyncio.TimeoutError:
+                break
+            if msg.type != aiohttp.WSMsgType.BINARY:
+                break
+            now_us = time.time_ns() // 1000
+            if time.monotonic() < measure_from:
+                continue
+            data = msg.data
+            offsets = batch_offsets(data)[:-1]
+            ts = read_u64(data, offsets, TIMESTAMP_OFFSET)
+            live = ts > 0                                           # stream headers carry no time
+            offsets, ts = offsets[live], ts[live]
+            streams = read_u32(data, offsets, STREAM_OFFSET).astype(np.int64)
+            seqs = read_u32(data, offsets, SEQUENCE_OFFSET).astype(np.int64)
+            n = np.bincount(streams)                                # what the relay delivered
+            counts[:len(n)] += n
+            if n.max(initial=0) > 1:                                # a late joiner's keyframe run
+                np.minimum.at(lo, streams, seqs)
+                np.maximum.at(hi, streams, seqs)
+            else:
+                lo[streams] = np.minimum(lo[streams], seqs)
+                hi[streams] = np.maximum(hi[streams], seqs)
+            lat = np.bincount(np.clip((now_us - ts.astype(np.int64)) // int(BINS_MS * 1000), 0, len(hist) - 1))
+            hist[:len(lat)] += lat
+            tally["received"] += len(offsets)
+            if loss:                                                # the emulated lossy link
+                keep = rng.random(len(offsets)) >= loss
+                tally["dropped"] += int((~keep).sum())
+                offsets, streams, seqs = offsets[keep], streams[keep], seqs[keep]
+            tally["batches"] += 1
+            if k < follow:
+                raw = np.frombuffer(data, dtype=np.uint8)
+                flags = raw[offsets + 4]
+                firsts = read_u32(data, offsets, 22)
+                frames = raw[offsets + 26].astype(np.int64) | (raw[offsets + 27].astype(np.int64) << 8)
+                f = followers[k]
+                for s, q, fl, a, n in zip(streams.tolist(), seqs.tolist(), flags.tolist(), firsts.tolist(),
+                                          frames.tolist()):
+                    f.see(s, q, bool(fl & 1), a, n)
+        await ws.close()
+        got = counts > 0
+        tally["lost"] += int((hi[got] - lo[got] + 1).sum() - counts[got].sum())
+
+    async def run() -> None:
+        async with aiohttp.ClientSession() as session:
+            await asyncio.gather(*(one(k, session) for k in range(count)))
+
+    asyncio.run(run())
+    resync = [s for f in followers for s in f.resync_s]
+    out.put(("viewers", tally, hist, resync))
+
+
+# ----- the run ---------------------------------------------------------------------------------------
+def percentile(hist: np.ndarray, q: float) -> float:
+    c = np.cumsum(hist)
+    return float(np.searchsorted(c, q * c[-1]) * BINS_MS) if c[-1] else float("nan")
+
+
+def drive(args, token: str, relays: list) -> tuple[list, list, list]:
+    """Start the publishers and viewers, watch the relays, collect what the workers report."""
+    import psutil
+    out = mp.Queue()
+    total = args.seconds + 3.0
+    ids = list(range(args.avatars))
+    workers = [mp.Process(target=publisher, args=(relays[0][0], token, ids[k::args.publishers], total + 1.0,
+                                                  args.keyframe_s, out)) for k in range(args.publishers)]
+    per = -(-args.viewers // args.viewer_procs)
+    for k in range(args.viewer_procs):
+        n = min(per, args.viewers - k * per)
+        url = relays[k % len(relays)][0] if args.nats else relays[0][0]
+        workers.append(mp.Process(target=viewers, args=(url, token, n, total + 1.0, args.loss, 2 if args.loss else 0,
+                                                         k, out, 4.0)))
+    for w in workers[args.publishers:]:
+        w.start()
+    time.sleep(1.0)
+    for w in workers[:args.publishers]:
+        w.start()
+    time.sleep(3.0)
+    clients = [psutil.Process(w.pid) for w in workers]
+    for pr in [pr for _, pr in relays] + clients:
+        pr.cpu_percent(None)
+    t0 = time.monotonic()
+    peak_rss = [0] * len(relays)
+    while time.monotonic() - t0 < args.seconds:
+        time.sleep(1.0)
+        for k, (_, pr) in enumerate(relays):
+            peak_rss[k] = max(peak_rss[k], pr.memory_info().rss)
+    cpu = [pr.cpu_percent(None) for _, pr in relays]
+    busy = [c.cpu_percent(None) for c in clients]
+    print(f"  client CPU (% of one core): publishers {sum(busy[:args.publishers]):.0f}, viewer processes "
+          f"{', '.join(f'{b:.0f}' for b in busy[args.publishers:])}")
+    try:
+        results = [out.get(timeout=60) for _ in workers]
+    except queue.Empty:
+        raise SystemExit("a publisher or viewer failed (see above)") from None
+    for w in workers:
+        w.join(30)
+    return results, cpu, peak_rss
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--avatars", type=int, default=500)
+    ap.add_argument("--viewers", type=int, default=50)
+    ap.add_argument("--seconds", type=float, default=20.0, help="measured time (after a 3 s start)")
+    ap.add_argument("--loss", type=float, default=0.0, help="packet loss each viewer emulates (0..1)")
+    ap.add_argument("--keyframe-s", type=float, default=0.5)
+    ap.add_argument("--publishers", type=int, default=10, help="sending connections (avatars spread over them)")
+    ap.add_argument("--viewer-procs", type=int, default=1)
+    ap.add_argument("--nats", action="store_true", help="two relays sharing the room through a NATS server: "
+                                                        "senders on the first, viewers split over both")
+    args = ap.parse_args()
+    if args.nats:
+        args.viewer_procs = max(args.viewer_procs, 2)      # viewers on both relays
+
+    import psutil
+
+    from mocodec.stream import tokens
+
+    token = tokens.issue(SECRET, "load", ttl_s=3600)
+    procs, relays = [], []
+    nats_url = None
+    if args.nats:
+        binary = shutil.which("nats-server", path="/usr/sbin:/usr/bin:/usr/local/bin")
+        if binary is None:
+            raise SystemExit("--nats needs nats-server (apt-get install nats-server)")
+        nport = free_port()
+        procs.append(subprocess.Popen([binary, "-a", "127.0.0.1", "-p", str(nport)], stdout=subprocess.DEVNULL,
+                                      stderr=subprocess.DEVNULL))
+        wait_port(nport)
+        nats_url = f"nats://127.0.0.1:{nport}"
+    for _ in range(2 if args.nats else 1):
+        port = free_port()
+        cmd = [sys.executable, "-m", "mocodec.cli", "serve", "--port", str(port), "--secret", SECRET,
+               "--max-messages-per-s", "1000", "--max-bytes-per-s", "1e8"]
+        if nats_url:
+            cmd += ["--bus", nats_url]
+        p = subprocess.Popen(cmd, stdout=subprocess.DEVNULL)
+        procs.append(p)
+        wait_port(port)
+        relays.append((f"ws://127.0.0.1:{port}", psutil.Process(p.pid)))
+    try:
+        results, cpu, peak_rss = drive(args, token, relays)
+    finally:
+        for p in reversed(procs):                             # relays first, then NATS
+            p.terminate()
+            p.wait(10)
+    sent = sum(r[1] for r in results if r[0] == "sent")
+    hist = sum(r[2] for r in results if r[0] == "viewers")
+    tally = {k: sum(r[1][k] for r in results if r[0] == "viewers") for k in ("received", "dropped", "batches", "lost")}
+    resync = np.array([s for r in results if r[0] == "viewers" for s in r[3]])
+    setup = f"{args.avatars} avatars at 30 Hz -> {args.viewers} viewers" + (", two relays over NATS" if args.nats else "")
+    print(f"relay load: {setup}, {args.seconds:g} s measured, loss {args.loss:.0%}, keyframes every "
+          f"{args.keyframe_s:g} s")
+    print(f"  packets sent {sent:,}; delivered to viewers {tally['received']:,} in {tally['batches']:,} batches; "
+          f"lost on the way {tally['lost']:,}" + (f"; dropped by the emulated link {tally['dropped']:,}" if args.loss else ""))
+    print(f"  latency p50 {percentile(hist, 0.5):.1f} ms, p99 {percentile(hist, 0.99):.1f} ms, "
+          f"max {percentile(hist, 1.0):.1f} ms")
+    for k, ((url, _), c, rss) in enumerate(zip(relays, cpu, peak_rss)):
+        print(f"  relay {k + 1}: CPU {c:.0f}% of one core, peak RSS {rss / 2**20:.0f} MiB")
+    if args.loss:
+        if len(resync):
+            print(f"  resync after a loss ({len(resync):,} events): p50 {np.median(resync):.2f} s, "
+                  f"p99 {np.quantile(resync, 0.99):.2f} s, max {resync.max():.2f} s; "
+                  f"within 1 s: {np.mean(resync <= 1.0):.1%}")
+
+
+if __name__ == "__main__":
+    main()

@@ -14,7 +14,7 @@ to each avatar's root; other streams pass whole. A viewer that joins late gets e
 header and the packets since each stream's last keyframe.
 
 Limits: message size (the WebSocket refuses larger ones), per-connection rates of messages
-and bytes (token buckets; over the limit closes that connection), at most one batch queued
+and bytes (token buckets; over the limit closes that connection), streams per room, at most one batch queued
 per viewer (a slow viewer misses ticks and resynchronises at the next keyframe; missing
 ticks for ``slow_viewer_s`` drops it), so memory does not grow with slow links. A malformed
 message closes its connection only, with a close code and the reason.
@@ -58,6 +58,7 @@ class Limits:
     burst_s: float = 2.0                 # a bucket holds this many seconds of its rate
     slow_viewer_s: float = 5.0
     max_gop_packets: int = 512
+    max_streams_per_room: int = 5000
     min_distance_m: float = 0.1
 
 
@@ -236,6 +237,8 @@ class Relay:
                     info, codec = stream_setup(p.payload)
                 except MocodecError as e:
                     raise Closing(BAD_MESSAGE, f"stream {p.stream}: {e}") from None
+                if state is None and len(room.streams) >= self.limits.max_streams_per_room:
+                    raise Closing(RATE_LIMIT, f"room is full ({self.limits.max_streams_per_room} streams)")
                 room.streams[p.stream] = StreamState(owner, Forward(p, p.to_bytes()), info, codec)
                 room.fresh.append(room.streams[p.stream].header)
                 continue

@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import json
 import multiprocessing as mp
 import queue
 import shutil
@@ -56,52 +57,70 @@ def wait_port(port: int, seconds: float = 20.0) -> None:
     raise SystemExit(f"nothing listens on port {port} after {seconds} s")
 
 
-def templates(keyframe_s: float):
-    """The clip's live packets (bytes) and their keyframe flags, frame ranges and length."""
+def templates(codec_id: str, bits_per_second: float, keyframe_s: float):
+    """The clip's live stream as a sender makes it: (header, [(tick, packet bytes)], ticks, frames),
+    the last packet's END flag cleared so the clip can loop (every loop starts at a keyframe)."""
     from mocodec import load
     from mocodec.codecs import get_codec
-    from mocodec.stream.live import stream_clip
+    from mocodec.stream.live import END, LiveEncoder, tick_frames
 
     motion = load(DATA / "07_03.bvh")
-    packets = stream_clip(motion, get_codec("dpcm"), keyframe_s=keyframe_s)
-    data = [p for p in packets[1:] if p.frames]
-    return packets[0].to_bytes(), [p.to_bytes() for p in data], motion.num_frames
+    codec = get_codec(codec_id, **({"bits_per_second": bits_per_second} if codec_id == "spiht" else {}))
+    enc = LiveEncoder(codec, motion.skeleton, motion.fps, 0, keyframe_s, primer=motion.channels[:120])
+    step = tick_frames(motion.fps)
+    ticks = -(-motion.num_frames // step)
+    timed = [(k, p) for k in range(ticks) for p in enc.push(motion.channels[k * step:(k + 1) * step], 0)]
+    timed += [(ticks - 1, p) for p in enc.close(0) if p.frames]
+    data = [(k, p.with_payload(p.payload, p.flags & ~END).to_bytes()) for k, p in timed]
+    return enc.header(0).to_bytes(), data, ticks, motion.num_frames
 
 
-def restamp(template: bytes, stream: int, seq: int, ts_us: int, first: int) -> bytes:
+def restamp(template: bytes, stream: int, seq: int, ts_us: int, first: int, x: float, z: float) -> bytes:
     buf = bytearray(template)
     _STAMP.pack_into(buf, 6, stream, seq, ts_us, first)
+    y = struct.unpack_from("<f", buf, 32)[0]
+    struct.pack_into("<3f", buf, 28, x, y, z)
     struct.pack_into("<I", buf, len(buf) - 4, zlib.crc32(memoryview(buf)[:-4]))
     return bytes(buf)
 
 
+def place(stream: int) -> tuple[float, float]:
+    """Where an avatar stands: a grid 2 m apart, 25 to a row."""
+    return 2.0 * (stream % 25), 2.0 * (stream // 25)
+
+
 # ----- publishers ------------------------------------------------------------------------------------
-def publisher(url: str, token: str, streams: list[int], seconds: float, keyframe_s: float, out) -> None:
+def publisher(url: str, token: str, streams: list[int], seconds: float, codec: tuple, keyframe_s: float,
+              out) -> None:
     import aiohttp
 
     from mocodec.stream.packets import pack_batch
 
-    header, data, clip_frames = templates(keyframe_s)
-    first_frames = [struct.unpack_from("<I", d, 22)[0] for d in data]
+    header, data, ticks, clip_frames = templates(*codec, keyframe_s)
+    by_tick: dict[int, list[tuple[int, bytes, int]]] = {}
+    for idx, (k, d) in enumerate(data):
+        by_tick.setdefault(k, []).append((idx, d, struct.unpack_from("<I", d, 22)[0]))
     rng = np.random.default_rng(streams[0])
-    phase = {s: int(rng.integers(len(data))) for s in streams}
+    phase = {s: int(rng.integers(ticks)) for s in streams}
 
     async def run() -> None:
         async with aiohttp.ClientSession() as session:
             ws = await session.ws_connect(f"{url}/ws?room=load&role=publish", headers={"Authorization": f"Bearer {token}"},
                                           max_msg_size=64 << 20)
             await ws.receive()                                       # welcome
-            await ws.send_bytes(pack_batch([restamp(header, s, 0, 0, 0) for s in streams]))
+            await ws.send_bytes(pack_batch([restamp(header, s, 0, 0, 0, *place(s)) for s in streams]))
             start = time.monotonic()
             tick, sent = 0, 0
             while time.monotonic() - start < seconds:
                 now_us = time.time_ns() // 1000
                 batch = []
                 for s in streams:
-                    k = phase[s] + tick
-                    loop, idx = divmod(k, len(data))
-                    batch.append(restamp(data[idx], s, k, now_us, loop * clip_frames + first_frames[idx]))
-                await ws.send_bytes(pack_batch(batch))
+                    loop, k = divmod(phase[s] + tick, ticks)
+                    for idx, d, first in by_tick.get(k, ()):
+                        batch.append(restamp(d, s, loop * len(data) + idx, now_us, loop * clip_frames + first,
+                                             *place(s)))
+                if batch:
+                    await ws.send_bytes(pack_batch(batch))
                 sent += len(batch)
                 tick += 1
                 await asyncio.sleep(max(start + tick / 30.0 - time.monotonic(), 0.0))
@@ -133,7 +152,7 @@ class Follower:
 
 
 def viewers(url: str, token: str, count: int, seconds: float, loss: float, follow: int, seed: int, out,
-            warmup_s: float) -> None:
+            warmup_s: float, budget: float) -> None:
     import aiohttp
 
     from mocodec.stream.packets import (SEQUENCE_OFFSET, STREAM_OFFSET, TIMESTAMP_OFFSET, batch_offsets,
@@ -148,6 +167,9 @@ def viewers(url: str, token: str, count: int, seconds: float, loss: float, follo
         ws = await session.ws_connect(f"{url}/ws?room=load&role=subscribe", headers={"Authorization": f"Bearer {token}"},
                                       max_msg_size=256 << 20)
         await ws.receive()
+        if budget:                                   # somewhere in the crowd, looking at it
+            x, z = rng.uniform(0, 50), rng.uniform(0, 40)
+            await ws.send_str(json.dumps({"budget": budget, "camera": [x, 1.6, z]}))
         counts = np.zeros(1 << 12, dtype=np.int64)
         lo = np.full(1 << 12, np.iinfo(np.int64).max)
         hi = np.full(1 << 12, -1, dtype=np.int64)
@@ -220,14 +242,15 @@ def drive(args, token: str, relays: list) -> tuple[list, list, list]:
     out = mp.Queue()
     total = args.seconds + 3.0
     ids = list(range(args.avatars))
-    workers = [mp.Process(target=publisher, args=(relays[0][0], token, ids[k::args.publishers], total + 1.0,
+    codec = (args.codec, args.bits_per_second)
+    workers = [mp.Process(target=publisher, args=(relays[0][0], token, ids[k::args.publishers], total + 1.0, codec,
                                                   args.keyframe_s, out)) for k in range(args.publishers)]
     per = -(-args.viewers // args.viewer_procs)
     for k in range(args.viewer_procs):
         n = min(per, args.viewers - k * per)
         url = relays[k % len(relays)][0] if args.nats else relays[0][0]
         workers.append(mp.Process(target=viewers, args=(url, token, n, total + 1.0, args.loss, 2 if args.loss else 0,
-                                                         k, out, 4.0)))
+                                                         k, out, 4.0, args.budget)))
     for w in workers[args.publishers:]:
         w.start()
     time.sleep(1.0)
@@ -263,6 +286,11 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=20.0, help="measured time (after a 3 s start)")
     ap.add_argument("--loss", type=float, default=0.0, help="packet loss each viewer emulates (0..1)")
     ap.add_argument("--keyframe-s", type=float, default=0.5)
+    ap.add_argument("--codec", choices=("dpcm", "spiht"), default="dpcm", help="the avatars' codec (default dpcm)")
+    ap.add_argument("--bits-per-second", type=float, default=16000, help="spiht's rate as sent (default 16000)")
+    ap.add_argument("--budget", type=float, default=0.0,
+                    help="each viewer's bandwidth (bit/s) from a random camera in the crowd: spiht streams are cut "
+                         "to their crowd shares (default 0: all whole)")
     ap.add_argument("--publishers", type=int, default=10, help="sending connections (avatars spread over them)")
     ap.add_argument("--viewer-procs", type=int, default=1)
     ap.add_argument("--nats", action="store_true", help="two relays sharing the room through a NATS server: "
@@ -307,7 +335,8 @@ def main() -> None:
     hist = sum(r[2] for r in results if r[0] == "viewers")
     tally = {k: sum(r[1][k] for r in results if r[0] == "viewers") for k in ("received", "dropped", "batches", "lost")}
     resync = np.array([s for r in results if r[0] == "viewers" for s in r[3]])
-    setup = f"{args.avatars} avatars at 30 Hz -> {args.viewers} viewers" + (", two relays over NATS" if args.nats else "")
+    setup = (f"{args.avatars} {args.codec} avatars at 30 Hz -> {args.viewers} viewers"
+             + (f" of {args.budget:g} bit/s each" if args.budget else "") + (", two relays over NATS" if args.nats else ""))
     print(f"relay load: {setup}, {args.seconds:g} s measured, loss {args.loss:.0%}, keyframes every "
           f"{args.keyframe_s:g} s")
     print(f"  packets sent {sent:,}; delivered to viewers {tally['received']:,} in {tally['batches']:,} batches; "

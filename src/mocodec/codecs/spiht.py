@@ -339,22 +339,32 @@ class SpihtCodec(Codec):
         keeps the prefix of its embedded stream its new share allows, so it decodes to a
         coarser segment with no re-encoding, the same bytes as coding at that rate (the
         whole-file :meth:`truncate`, per packet)."""
+        return self.packet_cutter(packet, skeleton, cuts, fps)(bits_per_second)
+
+    def packet_cutter(self, packet: bytes, skeleton: Skeleton, cuts: np.ndarray, fps: float):
+        """A function bits_per_second -> the packet cut to that rate (:meth:`truncate_packet`):
+        the packet is parsed once, so cutting it for many viewers costs a few array operations
+        each."""
         head, parts, levels, total, bits = self._packet_fields(packet, skeleton)
-        total_bits = int(np.floor(bits_per_second * _PACKET.unpack_from(head)[1] / fps))
-        if total_bits >= total:
-            return packet
-        old = perception.allocate(level_weights(levels), total)
-        new = perception.allocate(level_weights(levels), max(int(total_bits), 0))
-        present = np.flatnonzero(old > N0_BITS)
-        if cuts.size != present.size or cuts.sum() != bits.size:
+        frames = _PACKET.unpack_from(head)[1]
+        weights = level_weights(levels)
+        present = np.flatnonzero(perception.allocate(weights, total) > N0_BITS)
+        if cuts.size != present.size or cuts.min(initial=0) < 0 or cuts.sum() != bits.size:
             raise CorruptStreamError("spiht packet: the cut table does not match the packet's streams")
-        starts = np.concatenate(([0], np.cumsum(cuts)))
-        keep = [bits[starts[k]:starts[k] + min(int(cuts[k]), int(new[c]))] for k, c in enumerate(present)
-                if new[c] > N0_BITS]
-        kept = np.concatenate(keep) if keep else np.zeros(0, dtype=np.uint8)
-        parts[-2] = encode_ints([int(total_bits)])
-        parts[-1] = _U32.pack(kept.size) + np.packbits(kept).tobytes()
-        return head + join_parts(parts)
+        starts = np.cumsum(cuts) - cuts
+
+        def cut(bits_per_second: float) -> bytes:
+            total_bits = max(int(np.floor(bits_per_second * frames / fps)), 0)
+            if total_bits >= total:
+                return packet
+            new = perception.allocate(weights, total_bits)[present]
+            keep = np.where(new > N0_BITS, np.minimum(cuts, new), 0)
+            # the kept prefixes, gathered in one indexing: work in proportion to what is kept
+            kept = bits[np.arange(keep.sum()) + np.repeat(starts - (np.cumsum(keep) - keep), keep)]
+            return head + join_parts([*parts[:-2], _U32.pack(total_bits),
+                                      _U32.pack(kept.size) + np.packbits(kept).tobytes()])
+
+        return cut
 
     def _packet_fields(self, packet: bytes, skeleton: Skeleton):
         """(packet header bytes, parts, levels, segment budget, bits) of a stream packet."""
@@ -364,7 +374,7 @@ class SpihtCodec(Codec):
         if len(parts) not in (4, 5):
             raise CorruptStreamError(f"spiht packet: {len(parts)} parts, expected 4 or 5")
         levels = decode_ints(parts[-3])
-        (total,) = decode_ints(parts[-2])
+        total = _packet_total(parts[-2])
         (n_bits,) = _U32.unpack_from(parts[-1])
         bits = np.unpackbits(np.frombuffer(parts[-1], dtype=np.uint8, offset=4))[:n_bits]
         if levels.size != skeleton.num_channels or bits.size != n_bits \
@@ -380,6 +390,13 @@ class SpihtCodec(Codec):
 
 
 _PACKET = struct.Struct("<BI")      # flags (1: carries the start anchors, 2: last segment), frames
+
+
+def _packet_total(part: bytes) -> int:
+    """A stream packet's segment budget B_T (a plain u32, so a relay rewrites it cheaply)."""
+    if len(part) != _U32.size:
+        raise CorruptStreamError(f"spiht packet: a {len(part)}-byte segment budget, expected {_U32.size}")
+    return _U32.unpack(part)[0]
 
 
 def _line(start: np.ndarray, end: np.ndarray, frames: int, span: int) -> np.ndarray:
@@ -429,7 +446,7 @@ class _StreamEncoder(StreamEncoder):
         levels, streams = self.codec._code_segment(self.skeleton, values[:n], residual, total)
         bits = np.concatenate(streams) if streams else np.zeros(0, dtype=np.uint8)
         parts = ([encode_ints(self.start)] if first else []) + [
-            encode_ints(end - self.start), encode_ints(levels), encode_ints([total]),
+            encode_ints(end - self.start), encode_ints(levels), _U32.pack(total),
             _U32.pack(bits.size) + np.packbits(bits).tobytes()]
         self.start = end
         return _PACKET.pack(int(first) | 2 * int(last), n) + join_parts(parts)
@@ -479,7 +496,7 @@ class _StreamDecoder(StreamDecoder):
             raise CorruptStreamError("spiht packet: no start anchors (a packet is missing) or wrong layout")
         end = start + decode_ints(parts[0])
         levels = decode_ints(parts[1])
-        (total,) = decode_ints(parts[2])
+        total = _packet_total(parts[2])
         (n_bits,) = _U32.unpack_from(parts[3])
         bits = np.unpackbits(np.frombuffer(parts[3], dtype=np.uint8, offset=4))[:n_bits]
         if end.size != n_ch or levels.size != n_ch or bits.size != n_bits or n_bits > total \

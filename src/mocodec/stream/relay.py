@@ -10,7 +10,8 @@ are JSON settings, ``{"budget": bit/s, "camera": [x, y, z] (metres)}``.
 Every tick (30 Hz) each viewer gets one batch with everything new in its room. A viewer that
 declared a budget gets the embedded (``spiht``) streams cut to their shares by the crowd rule
 of 001: scores S = d_min / d (6.4), shares B S / sum S (6.5), d the distance from its camera
-to each avatar's root; other streams pass whole. A viewer that joins late gets every stream
+to each avatar's root, each share rounded down to a ladder of 4 rates per octave so that
+viewers with nearly equal shares share one cut; other streams pass whole. A viewer that joins late gets every stream
 header and the packets since each stream's last keyframe.
 
 Limits: message size (the WebSocket refuses larger ones), per-connection rates of messages
@@ -47,6 +48,8 @@ log = logging.getLogger("mocodec.relay")
 #: Close codes (4000-4999 are the application's).
 BAD_TOKEN, BAD_MESSAGE, RATE_LIMIT, SLOW, TAKEN = 4003, 4400, 4429, 4408, 4409
 STATIC = Path(__file__).with_name("static")
+#: Shares are rounded down to this many rates per octave (19% apart), so cuts are shared.
+LADDER_STEPS = 4
 
 
 @dataclass
@@ -94,6 +97,7 @@ class Forward:
     packet: Packet
     data: bytes                          # without the cut table
     cuts: np.ndarray | None = None
+    cutter: object = None                # the codec's packet cutter, made at the first cut
 
 
 @dataclass
@@ -327,13 +331,15 @@ class Relay:
     def _dispatch(self, room: Room) -> None:
         fresh, room.fresh = room.fresh, []
         shared: bytes | None = None                 # the batch of every viewer with nothing of its own
-        cut_cache: dict[tuple[int, int], bytes] = {}
+        cut_cache: dict[tuple[int, float], bytes] = {}
+        crowd = None                                # the embedded streams and where they are, this tick
         for viewer in list(room.viewers):
             items, viewer.pending = viewer.pending + fresh, []
             if not items:
                 continue
             if viewer.budget > 0 and any(f.cuts is not None for f in items):
-                batch = pack_batch(self._cut(room, viewer, items, cut_cache))
+                crowd = crowd or self._crowd(room)
+                batch = pack_batch(self._cut(room, crowd, viewer, items, cut_cache))
             elif len(items) == len(fresh):
                 shared = shared or pack_batch([f.data for f in fresh])
                 batch = shared
@@ -360,30 +366,51 @@ class Relay:
                 self.counters["dropped_slow"] += 1
                 asyncio.ensure_future(viewer.ws.close(code=SLOW, message=b"too slow: missed ticks for too long"))
 
-    def _cut(self, room: Room, viewer: Viewer, items: list[Forward], cache: dict) -> list[bytes]:
+    @staticmethod
+    def _crowd(room: Room) -> tuple[dict[int, int], np.ndarray]:
+        """The room's embedded (cuttable) streams, each with its row in ``(streams, 3)``
+        positions."""
+        embedded = [k for k, s in room.streams.items() if hasattr(s.codec, "packet_cutter")]
+        where = np.array([room.streams[k].position for k in embedded], dtype=np.float64).reshape(-1, 3)
+        return {k: i for i, k in enumerate(embedded)}, where
+
+    def _cut(self, room: Room, crowd, viewer: Viewer, items: list[Forward], cache: dict) -> list[bytes]:
         """The viewer's packets, the embedded streams cut to their crowd shares (6.4, 6.5)."""
-        embedded = [k for k, s in room.streams.items() if hasattr(s.codec, "truncate_packet")]
-        camera = np.asarray(viewer.camera)
-        d = np.array([max(float(np.linalg.norm(np.asarray(room.streams[k].position) - camera)),
-                          self.limits.min_distance_m) for k in embedded])
-        shares = dict(zip(embedded, split_budget(int(viewer.budget), bandwidth_scores(d)))) if embedded else {}
+        row, where = crowd
+        d = np.maximum(np.linalg.norm(where - np.asarray(viewer.camera), axis=1), self.limits.min_distance_m)
+        shares = split_budget(int(viewer.budget), bandwidth_scores(d)) if len(row) else None
         out = []
         for f in items:
             state = room.streams.get(f.packet.stream)
-            if f.cuts is None or state is None or f.packet.stream not in shares:
+            if f.cuts is None or state is None or f.packet.stream not in row:
                 out.append(f.data)
                 continue
-            key = (id(f), int(shares[f.packet.stream]))
+            rate = on_ladder(float(shares[row[f.packet.stream]]))
+            key = (id(f), rate)
             if key not in cache:
-                try:
-                    payload = state.codec.truncate_packet(f.packet.payload, state.info.skeleton, f.cuts, key[1],
-                                                          state.info.fps)
-                except MocodecError as e:       # a cut table that does not fit: pass the packet whole
-                    log.warning("stream %d: packet %d not cut: %s", f.packet.stream, f.packet.sequence, e)
-                    payload = f.packet.payload
-                cache[key] = f.data if payload is f.packet.payload else f.packet.with_payload(payload).to_bytes()
+                cache[key] = self._cut_one(f, state, rate)
             out.append(cache[key])
         return out
+
+    @staticmethod
+    def _cut_one(f: Forward, state: StreamState, rate: float) -> bytes:
+        try:
+            if f.cutter is None:
+                f.cutter = state.codec.packet_cutter(f.packet.payload, state.info.skeleton, f.cuts, state.info.fps)
+            payload = f.cutter(rate)
+        except MocodecError as e:            # a cut table that does not fit: pass the packet whole
+            log.warning("stream %d: packet %d not cut: %s", f.packet.stream, f.packet.sequence, e)
+            f.cuts = None
+            return f.data
+        return f.data if payload is f.packet.payload else f.packet.with_payload(payload).to_bytes()
+
+
+def on_ladder(bits_per_second: float) -> float:
+    """A share rounded down to a ladder of LADDER_STEPS rates per octave, so viewers with
+    nearly equal shares share one cut packet."""
+    if bits_per_second < 1:
+        return 0.0
+    return 2.0 ** (math.floor(math.log2(bits_per_second) * LADDER_STEPS) / LADDER_STEPS)
 
 
 def run(host: str, port: int, secret: str, limits: Limits | None = None, bus=None, tick_hz: float = 30.0) -> None:

@@ -29,6 +29,8 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_perceptual.py --set amc
 	$(BIN)/python benchmarks/bench_waveform.py --set amc
 	$(BIN)/python benchmarks/fig_6_2_vmse.py
+	$(BIN)/python benchmarks/bench_streaming.py
+	$(BIN)/python benchmarks/relay_load.py
 
 # the whole comparison on the shared clips: report in bench-out/report.html (docs/benchmarks.md)
 bench-suite: $(STAMP)

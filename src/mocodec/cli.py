@@ -1,6 +1,7 @@
 """The ``mocodec`` command line: ``info``, ``convert``, ``compare``, ``analyze``, ``demo``, and the
 coding commands of :mod:`mocodec.cli_coding` (``encode``, ``decode``, ``eval``, ``codecs``), and
-``bench`` and ``compress-dir`` of :mod:`mocodec.cli_bench`.
+``bench`` and ``compress-dir`` of :mod:`mocodec.cli_bench`, ``serve``, ``token``, ``publish`` and
+``subscribe`` of :mod:`mocodec.cli_stream`.
 
 User errors (bad files, impossible conversions) print one line and exit with status 2.
 """

@@ -210,9 +210,9 @@ class Relay:
         volume = Bucket(self.limits.publish_bytes_per_s, self.limits.burst_s)
         try:
             async for msg in ws:
-                if msg.type == WSMsgType.ERROR or msg.type != WSMsgType.BINARY:
-                    if msg.type == WSMsgType.ERROR:
-                        break
+                if msg.type == WSMsgType.ERROR:
+                    break
+                if msg.type != WSMsgType.BINARY:
                     raise Closing(BAD_MESSAGE, "a sender sends binary packet batches only")
                 if not messages.take() or not volume.take(len(msg.data)):
                     raise Closing(RATE_LIMIT, f"rate limit: over {self.limits.publish_messages_per_s:g} messages "
@@ -228,10 +228,10 @@ class Relay:
         """The packets of one sender message into the room; Closing if it is malformed."""
         try:
             raw = split_batch(data) if data[:2] == BATCH_MAGIC else [memoryview(data)]
-            packets = [parse(p, f"packet {k}") for k, p in enumerate(raw)]
+            packets = [parse(r, f"packet {k}") for k, r in enumerate(raw)]
         except MocodecError as e:
             raise Closing(BAD_MESSAGE, f"bad message: {e}") from None
-        for p in packets:
+        for p, r in zip(packets, raw):
             self.counters["packets_in"] += 1
             state = room.streams.get(p.stream)
             if state is not None and state.owner is not owner:
@@ -243,21 +243,24 @@ class Relay:
                     raise Closing(BAD_MESSAGE, f"stream {p.stream}: {e}") from None
                 if state is None and len(room.streams) >= self.limits.max_streams_per_room:
                     raise Closing(RATE_LIMIT, f"room is full ({self.limits.max_streams_per_room} streams)")
-                room.streams[p.stream] = StreamState(owner, Forward(p, p.to_bytes()), info, codec)
+                room.streams[p.stream] = StreamState(owner, Forward(p, bytes(r)), info, codec)
                 room.fresh.append(room.streams[p.stream].header)
                 continue
             if state is None:
                 raise Closing(BAD_MESSAGE, f"stream {p.stream}: data before its header")
-            forward = self._forward(p, state)
+            forward = self._forward(p, r)
             state.position = p.position
             if p.keyframe:
-                state.gop = []
-            state.gop = (state.gop + [forward])[-self.limits.max_gop_packets:]
+                state.gop.clear()
+            state.gop.append(forward)
+            if len(state.gop) > self.limits.max_gop_packets:
+                del state.gop[0]
             room.fresh.append(forward)
 
-    def _forward(self, p: Packet, state: StreamState) -> Forward:
+    @staticmethod
+    def _forward(p: Packet, raw: memoryview) -> Forward:
         if not p.flags & CUTS:
-            return Forward(p, p.to_bytes())
+            return Forward(p, bytes(raw))
         try:
             cuts = decode_ints(p.cuts)
         except Exception:   # noqa: BLE001 - a cut table that does not parse

@@ -155,3 +155,19 @@ def test_tokens():
     assert tokens.verify("secret", both, "lobby", "publish", now=1001.0)
     with pytest.raises(tokens.TokenError):
         tokens.issue("", "lobby")
+
+
+@pytest.mark.parametrize("codec_id", REALTIME)
+def test_random_payloads_are_concealed_for_every_codec(walk_bvh, codec_id):
+    packets = stream_clip(walk_bvh[:200], get_codec(codec_id))
+    rng = np.random.default_rng(7)
+    def noise(p):
+        return p.with_payload(rng.integers(0, 256, len(p.payload), dtype=np.uint8).tobytes())
+
+    shown = next(k for k, p in enumerate(packets) if p.frames)          # from here there is a frame to hold
+    later = [p if k <= shown or p.keyframe or k % 3 else noise(p) for k, p in enumerate(packets)]
+    got = receive_clip(later)
+    assert got.num_frames == 200 and np.isfinite(got.channels).all()      # concealed, in time
+    every_third = [packets[0]] + [noise(p) if k % 3 == 1 else p for k, p in enumerate(packets[1:])]
+    got = receive_clip(every_third)                                        # no frames before the first good key
+    assert got.num_frames <= 200 and np.isfinite(got.channels).all()

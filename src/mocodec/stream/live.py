@@ -23,7 +23,7 @@ import numpy as np
 from mocodec.codecs import get_codec
 from mocodec.codecs.base import Codec, checked_frames
 from mocodec.coding.rangecoder import encode_ints
-from mocodec.errors import CodecError, MocodecError
+from mocodec.errors import CodecError
 from mocodec.motion import Motion
 from mocodec.skeleton import POSITION_CHANNELS, Skeleton
 from mocodec.stream.packets import (CUTS, DATA, END, HEADER, KEYFRAME, Packet, StreamInfo, header_packet,
@@ -121,9 +121,7 @@ class LiveEncoder:
         out = self._wrap(self.encoder.flush(), ts) if self.encoder is not None else []
         self.encoder = None
         if out:
-            last = out[-1]
-            out[-1] = Packet(last.stream, last.sequence, last.timestamp_us, last.codec, last.first_frame,
-                             last.frames, last.payload, DATA, last.flags | END, last.position)
+            out[-1] = out[-1].with_payload(out[-1].payload, out[-1].flags | END)
         else:
             out = [self._packet(b"", 0, ts, END)]
         return out
@@ -202,6 +200,7 @@ class LiveDecoder:
                 self.decoder = None
         self.expected = (packet.sequence + 1) & 0xFFFFFFFF
         self.stats.packets += 1
+        self.ended = self.ended or packet.end
         if packet.keyframe:                   # a new codec stream starts here
             self.stats.resyncs += self.decoder is None and self.next_frame is not None
             self.decoder = self.codec.decoder(self.info.skeleton, self.info.fps)
@@ -215,12 +214,12 @@ class LiveDecoder:
             if len(frames) != packet.frames:
                 raise CodecError(f"packet {packet.sequence} decodes to {len(frames)} frames, its header says "
                                  f"{packet.frames}")
-        except MocodecError:
+        except Exception:   # noqa: BLE001 - whatever a damaged payload does to a codec, conceal
             self.decoder = None
             self.stats.dropped += 1
             return np.vstack((head, self._concealed(packet.first_frame + packet.frames)))
         if packet.end:
-            self.ended, self.decoder = True, None
+            self.decoder = None
         return np.vstack((head, self._emit(frames)))
 
     def _emit(self, frames: np.ndarray) -> np.ndarray:

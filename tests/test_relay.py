@@ -7,6 +7,7 @@ import contextlib
 import shutil
 import socket
 import subprocess
+import sys
 import time
 
 import aiohttp
@@ -21,7 +22,7 @@ from mocodec.stream.bus import NatsBus
 from mocodec.stream.client import RelayRefused, connect, publish_clip, record
 from mocodec.stream.live import receive_clip, stream_clip
 from mocodec.stream.packets import pack_batch
-from mocodec.stream.relay import BAD_MESSAGE, RATE_LIMIT, SLOW, Limits, Relay, Viewer, on_ladder
+from mocodec.stream.relay import BAD_MESSAGE, RATE_LIMIT, Limits, Relay, Viewer, on_ladder
 
 SECRET = "test-secret"
 
@@ -169,15 +170,15 @@ def test_message_size_and_rate_limits_close_the_connection(walk_bvh):
 
 
 def test_a_slow_viewer_misses_ticks_keeps_headers_and_is_dropped():
-    class StubSocket:
-        closed_with = None
+    class StubTransport:
+        aborted = False
 
-        async def close(self, code, message):
-            self.closed_with = code
+        def abort(self):
+            self.aborted = True
 
     async def go():
         relay = Relay(SECRET, Limits(slow_viewer_s=0.05))
-        viewer = Viewer(StubSocket())
+        viewer = Viewer(None, StubTransport())
         viewer.queue.put_nowait(b"a batch still on its way")
         header = type("F", (), {"packet": type("P", (), {"kind": 0})()})()
         data = type("F", (), {"packet": type("P", (), {"kind": 1})()})()
@@ -185,8 +186,8 @@ def test_a_slow_viewer_misses_ticks_keeps_headers_and_is_dropped():
         assert viewer.missed == 1 and viewer.pending == [header]        # memory stays one batch
         await asyncio.sleep(0.1)
         relay._offer(viewer, b"next", [data])
-        await asyncio.sleep(0)
-        assert viewer.ws.closed_with == SLOW and relay.counters["dropped_slow"] == 1
+        relay._offer(viewer, b"next", [data])
+        assert viewer.transport.aborted and viewer.dropped and relay.counters["dropped_slow"] == 1
     asyncio.run(go())
 
 
@@ -235,3 +236,78 @@ def test_cli_token_and_refusal(capsys):
     code = main(["subscribe", "--url", f"ws://127.0.0.1:{port}", "--room", "lobby", "--token", issued,
                  "-o", "out.bvh", "--timeout", "1"])
     assert code == 2 and "cannot reach the relay" in capsys.readouterr().err
+
+
+def raw_viewer(url: str, tok: str) -> socket.socket:
+    """A viewer that completes the WebSocket handshake and then never reads: a stalled link."""
+    import base64
+    import os
+
+    host, port = url.removeprefix("ws://").split(":")
+    s = socket.socket()
+    s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    s.connect((host, int(port)))
+    key = base64.b64encode(os.urandom(16)).decode()
+    s.sendall((f"GET /ws?room=lobby&role=subscribe&token={tok} HTTP/1.1\r\nHost: {host}\r\nUpgrade: websocket\r\n"
+               f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n\r\n").encode())
+    reply = b""
+    while b"\r\n\r\n" not in reply:
+        reply += s.recv(1)
+    assert b" 101 " in reply
+    return s
+
+
+def test_a_stalled_viewer_is_dropped_and_the_others_go_on(walk_bvh):
+    relay = Relay(SECRET, Limits(slow_viewer_s=0.5))
+
+    async def go():
+        async with serving(relay) as url:
+            stalled = await asyncio.to_thread(raw_viewer, url, token())
+            watcher = asyncio.create_task(record(url, "lobby", token(), stream=300, timeout_s=60))
+            await asyncio.sleep(0.2)
+            for r in range(4):              # 16 raw streams a round: about 14 MB in 2 s
+                await asyncio.gather(*(publish_clip(url, "lobby", token(), walk_bvh, get_codec("raw"), speed=8.0,
+                                                   stream=100 * r + s) for s in range(16)))
+            got = await watcher
+            stalled.close()
+            return got
+
+    got = asyncio.run(go())
+    assert relay.counters["missed_ticks"] > 0 and relay.counters["dropped_slow"] == 1
+    assert got[300].num_frames == walk_bvh.num_frames    # the viewer that reads gets the last round whole
+
+
+def test_the_commands_end_to_end(tmp_path):
+    """serve, token, publish and subscribe as a user types them: an AMC clip recorded as BVH."""
+    from tests.conftest import DATA
+
+    port = free_port()
+    mocodec = [sys.executable, "-m", "mocodec.cli"]
+    server = subprocess.Popen(mocodec + ["serve", "--port", str(port), "--secret", SECRET], stdout=subprocess.PIPE,
+                              text=True)
+    try:
+        assert "relay on" in server.stdout.readline()
+        tok = subprocess.run(mocodec + ["token", "--secret", SECRET, "--room", "r"], capture_output=True, text=True,
+                             check=True).stdout.strip()
+        url = f"ws://127.0.0.1:{port}"
+        sub = subprocess.Popen(mocodec + ["subscribe", "--url", url, "--room", "r", "--token", tok,
+                                          "-o", str(tmp_path / "got.bvh"), "--frames", "200", "--timeout", "60"],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        time.sleep(2.0)
+        pub = subprocess.run(mocodec + ["publish", str(DATA / "07_03.amc"), "--url", url, "--room", "r",
+                                        "--token", tok, "--speed", "8", "--codec", "dpcm"],
+                             capture_output=True, text=True)
+        assert pub.returncode == 0, pub.stderr
+        out, err = sub.communicate(timeout=60)
+        assert sub.returncode == 0, err
+        assert "200 frames" in out
+        from mocodec import load
+
+        got = load(tmp_path / "got.bvh")
+        assert got.num_frames == 200
+        bad = subprocess.run(mocodec + ["publish", str(DATA / "07_03.amc"), "--url", url, "--room", "r",
+                                        "--token", tok + "x"], capture_output=True, text=True)
+        assert bad.returncode == 2 and "signature" in bad.stderr and "Traceback" not in bad.stderr
+    finally:
+        server.terminate()
+        server.wait(10)

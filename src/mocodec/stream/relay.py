@@ -17,7 +17,8 @@ header and the packets since each stream's last keyframe.
 Limits: message size (the WebSocket refuses larger ones), per-connection rates of messages
 and bytes (token buckets; over the limit closes that connection), streams per room, at most one batch queued
 per viewer (a slow viewer misses ticks and resynchronises at the next keyframe; missing
-ticks for ``slow_viewer_s`` drops it), so memory does not grow with slow links. A malformed
+ticks for ``slow_viewer_s`` drops it: its connection is cut, as a close frame would wait behind
+the data its link cannot take), so memory does not grow with slow links. A malformed
 message closes its connection only, with a close code and the reason.
 """
 
@@ -46,7 +47,7 @@ from mocodec.stream.packets import (BATCH_MAGIC, CUTS, HEADER, Packet, StreamInf
 log = logging.getLogger("mocodec.relay")
 
 #: Close codes (4000-4999 are the application's).
-BAD_TOKEN, BAD_MESSAGE, RATE_LIMIT, SLOW, TAKEN = 4003, 4400, 4429, 4408, 4409
+BAD_TOKEN, BAD_MESSAGE, RATE_LIMIT, TAKEN = 4003, 4400, 4429, 4409
 STATIC = Path(__file__).with_name("static")
 #: Shares are rounded down to this many rates per octave (19% apart), so cuts are shared.
 LADDER_STEPS = 4
@@ -113,6 +114,7 @@ class StreamState:
 @dataclass
 class Viewer:
     ws: web.WebSocketResponse
+    transport: object                    # the connection, aborted if the viewer stalls
     budget: float = 0.0                  # bit/s for the embedded streams; 0: everything whole
     camera: tuple[float, float, float] = (0.0, 0.0, 0.0)
     pending: list[Forward] = field(default_factory=list)
@@ -120,6 +122,7 @@ class Viewer:
     missed_since: float | None = None
     missed: int = 0
     sent: int = 0
+    dropped: bool = False
 
 
 @dataclass
@@ -197,7 +200,7 @@ class Relay:
             if role == "publish":
                 await self._publisher(ws, room_name, room)
             else:
-                await self._viewer(ws, room)
+                await self._viewer(ws, room, request.transport)
         except Closing as c:
             self.counters["closed_rate" if c.code == RATE_LIMIT else "closed_bad"] += 1
             log.info("closing a connection: %s", c.reason)
@@ -275,8 +278,8 @@ class Relay:
             log.warning("a bus message for room %s was refused: %s", room_name, c.reason)
 
     # ----- viewers -----------------------------------------------------------------------------
-    async def _viewer(self, ws: web.WebSocketResponse, room: Room) -> None:
-        viewer = Viewer(ws)
+    async def _viewer(self, ws: web.WebSocketResponse, room: Room, transport) -> None:
+        viewer = Viewer(ws, transport)
         for state in room.streams.values():            # a late joiner starts at the last keyframes
             viewer.pending += [state.header, *state.gop]
         room.viewers.append(viewer)
@@ -336,7 +339,7 @@ class Relay:
         shared: bytes | None = None                 # the batch of every viewer with nothing of its own
         cut_cache: dict[tuple[int, float], bytes] = {}
         crowd = None                                # the embedded streams and where they are, this tick
-        for viewer in list(room.viewers):
+        for viewer in [v for v in room.viewers if not v.dropped]:
             items, viewer.pending = viewer.pending + fresh, []
             if not items:
                 continue
@@ -365,9 +368,12 @@ class Relay:
             viewer.pending = [f for f in items if f.packet.kind == HEADER]
             now = time.monotonic()
             viewer.missed_since = viewer.missed_since or now
-            if now - viewer.missed_since > self.limits.slow_viewer_s:
+            if now - viewer.missed_since > self.limits.slow_viewer_s and not viewer.dropped:
+                # its link is full, so a close frame would wait behind the data: cut the connection
                 self.counters["dropped_slow"] += 1
-                asyncio.ensure_future(viewer.ws.close(code=SLOW, message=b"too slow: missed ticks for too long"))
+                viewer.dropped = True
+                log.info("dropping a viewer that missed ticks for %.1f s", now - viewer.missed_since)
+                viewer.transport.abort()
 
     @staticmethod
     def _crowd(room: Room) -> tuple[dict[int, int], np.ndarray]:

@@ -105,7 +105,8 @@ def publisher(url: str, token: str, streams: list[int], seconds: float, codec: t
 
     async def run() -> None:
         async with aiohttp.ClientSession() as session:
-            ws = await session.ws_connect(f"{url}/ws?room=load&role=publish", headers={"Authorization": f"Bearer {token}"},
+            ws = await session.ws_connect(f"{url}/ws?room=load&role=publish",
+                                          headers={"Authorization": f"Bearer {token}"},
                                           max_msg_size=64 << 20)
             await ws.receive()                                       # welcome
             await ws.send_bytes(pack_batch([restamp(header, s, 0, 0, 0, *place(s)) for s in streams]))
@@ -164,7 +165,8 @@ def viewers(url: str, token: str, count: int, seconds: float, loss: float, follo
     rng = np.random.default_rng(seed)
 
     async def one(k: int, session) -> None:
-        ws = await session.ws_connect(f"{url}/ws?room=load&role=subscribe", headers={"Authorization": f"Bearer {token}"},
+        ws = await session.ws_connect(f"{url}/ws?room=load&role=subscribe",
+                                      headers={"Authorization": f"Bearer {token}"},
                                       max_msg_size=256 << 20)
         await ws.receive()
         if budget:                                   # somewhere in the crowd, looking at it
@@ -336,11 +338,13 @@ def main() -> None:
     tally = {k: sum(r[1][k] for r in results if r[0] == "viewers") for k in ("received", "dropped", "batches", "lost")}
     resync = np.array([s for r in results if r[0] == "viewers" for s in r[3]])
     setup = (f"{args.avatars} {args.codec} avatars at 30 Hz -> {args.viewers} viewers"
-             + (f" of {args.budget:g} bit/s each" if args.budget else "") + (", two relays over NATS" if args.nats else ""))
+             + (f" of {args.budget:g} bit/s each" if args.budget else "")
+             + (", two relays over NATS" if args.nats else ""))
     print(f"relay load: {setup}, {args.seconds:g} s measured, loss {args.loss:.0%}, keyframes every "
           f"{args.keyframe_s:g} s")
     print(f"  packets sent {sent:,}; delivered to viewers {tally['received']:,} in {tally['batches']:,} batches; "
-          f"lost on the way {tally['lost']:,}" + (f"; dropped by the emulated link {tally['dropped']:,}" if args.loss else ""))
+          f"lost on the way {tally['lost']:,}"
+          + (f"; dropped by the emulated link {tally['dropped']:,}" if args.loss else ""))
     print(f"  latency p50 {percentile(hist, 0.5):.1f} ms, p99 {percentile(hist, 0.99):.1f} ms, "
           f"max {percentile(hist, 1.0):.1f} ms")
     for k, ((url, _), c, rss) in enumerate(zip(relays, cpu, peak_rss)):

@@ -311,3 +311,22 @@ def test_the_commands_end_to_end(tmp_path):
     finally:
         server.terminate()
         server.wait(10)
+
+
+def test_a_sender_that_vanishes_ends_its_stream_for_viewers(walk_bvh):
+    packets = stream_clip(walk_bvh, get_codec("dpcm"))
+
+    async def go():
+        async with serving() as url:
+            viewer = asyncio.create_task(record(url, "lobby", token(), timeout_s=30))
+            await asyncio.sleep(0.2)
+            async with connect(url, "lobby", token(), "publish") as ws:      # half the clip, then gone
+                for p in packets[:len(packets) // 2]:
+                    await ws.send_bytes(pack_batch([p.to_bytes()]))
+            started = time.monotonic()
+            got = await viewer
+            return got, time.monotonic() - started
+
+    (got, waited) = asyncio.run(go())
+    half = packets[len(packets) // 2 - 1]
+    assert got[0].num_frames == half.first_frame + half.frames and waited < 5      # ended, not timed out

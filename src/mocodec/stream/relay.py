@@ -11,15 +11,17 @@ Every tick (30 Hz) each viewer gets one batch with everything new in its room. A
 declared a budget gets the embedded (``spiht``) streams cut to their shares by the crowd rule
 of 001: scores S = d_min / d (6.4), shares B S / sum S (6.5), d the distance from its camera
 to each avatar's root, each share rounded down to a ladder of 4 rates per octave so that
-viewers with nearly equal shares share one cut; other streams pass whole. A viewer that joins late gets every stream
-header and the packets since each stream's last keyframe.
+viewers with nearly equal shares share one cut; other streams pass whole. A viewer that joins
+late gets every stream header and the packets since each stream's last keyframe. A stream
+ends with its END packet; if its sender goes without one, the relay sends the END for it (and
+over the bus), so no viewer waits for a stream that will not come back.
 
-Limits: message size (the WebSocket refuses larger ones), per-connection rates of messages
-and bytes (token buckets; over the limit closes that connection), streams per room, at most one batch queued
-per viewer (a slow viewer misses ticks and resynchronises at the next keyframe; missing
-ticks for ``slow_viewer_s`` drops it: its connection is cut, as a close frame would wait behind
-the data its link cannot take), so memory does not grow with slow links. A malformed
-message closes its connection only, with a close code and the reason.
+Limits: message size (the WebSocket refuses larger ones), per-connection rates of messages and
+bytes (token buckets; over the limit closes that connection), streams per room, and at most
+one batch queued per viewer: a slow viewer misses ticks and resynchronises at the next
+keyframe, and missing ticks for ``slow_viewer_s`` drops it (its connection is cut, as a close
+frame would wait behind the data its link cannot take), so memory does not grow with slow
+links. A malformed message closes its connection only, with a close code and the reason.
 """
 
 from __future__ import annotations
@@ -41,7 +43,7 @@ from mocodec.coding.rangecoder import decode_ints
 from mocodec.errors import MocodecError
 from mocodec.scene import bandwidth_scores, split_budget
 from mocodec.stream import tokens
-from mocodec.stream.packets import (BATCH_MAGIC, CUTS, HEADER, Packet, StreamInfo, pack_batch, parse,
+from mocodec.stream.packets import (BATCH_MAGIC, CUTS, END, HEADER, Packet, StreamInfo, pack_batch, parse,
                                     split_batch)
 
 log = logging.getLogger("mocodec.relay")
@@ -109,6 +111,14 @@ class StreamState:
     codec: object
     gop: list[Forward] = field(default_factory=list)
     position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    next_sequence: int = 0
+    next_frame: int = 0
+    ended: bool = False
+
+    def end_packet(self, stream: int) -> Packet:
+        """The packet that ends this stream for its receivers when its sender vanishes."""
+        return Packet(stream, self.next_sequence, time.time_ns() // 1000, self.header.packet.codec,
+                      self.next_frame, 0, b"", flags=END, position=self.position)
 
 
 @dataclass
@@ -223,9 +233,12 @@ class Relay:
                 self._ingest(room, msg.data, owner=ws)
                 if self.bus is not None:
                     await self.bus.publish(room_name, msg.data)
-        finally:
-            for key in [k for k, s in room.streams.items() if s.owner is ws]:
-                del room.streams[key]
+        finally:                            # streams left without their end: end them for everyone
+            ends = [s.end_packet(k).to_bytes() for k, s in room.streams.items() if s.owner is ws and not s.ended]
+            if ends:
+                self._ingest(room, pack_batch(ends), owner=ws)
+                if self.bus is not None:
+                    await self.bus.publish(room_name, pack_batch(ends))
 
     def _ingest(self, room: Room, data: bytes, owner: object) -> None:
         """The packets of one sender message into the room; Closing if it is malformed."""
@@ -253,12 +266,14 @@ class Relay:
                 raise Closing(BAD_MESSAGE, f"stream {p.stream}: data before its header")
             forward = self._forward(p, r)
             state.position = p.position
+            state.next_sequence, state.next_frame = (p.sequence + 1) & 0xFFFFFFFF, p.first_frame + p.frames
             if p.keyframe:
                 state.gop.clear()
             state.gop.append(forward)
             if len(state.gop) > self.limits.max_gop_packets:
                 del state.gop[0]
             room.fresh.append(forward)
+            state.ended = state.ended or p.end      # removed after this tick's dispatch
 
     @staticmethod
     def _forward(p: Packet, raw: memoryview) -> Forward:
@@ -281,7 +296,8 @@ class Relay:
     async def _viewer(self, ws: web.WebSocketResponse, room: Room, transport) -> None:
         viewer = Viewer(ws, transport)
         for state in room.streams.values():            # a late joiner starts at the last keyframes
-            viewer.pending += [state.header, *state.gop]
+            if not state.ended:
+                viewer.pending += [state.header, *state.gop]
         room.viewers.append(viewer)
         sender = asyncio.create_task(self._send_loop(viewer))
         control = Bucket(self.limits.control_messages_per_s, self.limits.burst_s)
@@ -352,6 +368,8 @@ class Relay:
             else:
                 batch = pack_batch([f.data for f in items])
             self._offer(viewer, batch, items)
+        for key in [k for k, state in room.streams.items() if state.ended]:
+            del room.streams[key]                   # over: late joiners will not see it
 
     def _offer(self, viewer: Viewer, batch: bytes, items: list[Forward]) -> None:
         """Queue a viewer's batch, or miss the tick if the last is still on its way: it keeps

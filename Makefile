@@ -4,16 +4,32 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+THREE_VERSION := 0.187.0
+VENDOR := src/mocodec/viewer/static/vendor
+THREE := $(VENDOR)/three.module.js
 
-.PHONY: demo test bench bench-suite clean
+.PHONY: demo test bench bench-suite vendor clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
-$(STAMP): $(BIN)/python pyproject.toml
+$(STAMP): $(BIN)/python pyproject.toml $(THREE)
 	$(BIN)/python -m pip install --quiet -e ".[test,plot,bench]"
 	touch $(STAMP)
+
+# the viewer's three.js, fetched from npm once (pinned; npm checks its integrity) and served
+# from the package, so the viewer works offline
+vendor: $(THREE)
+
+$(THREE):
+	rm -rf $(VENDOR).tmp && mkdir -p $(VENDOR).tmp
+	cd $(VENDOR).tmp && npm pack --silent three@$(THREE_VERSION) > /dev/null && tar xzf three-$(THREE_VERSION).tgz
+	mkdir -p $(VENDOR)/addons/controls
+	cp $(VENDOR).tmp/package/build/three.core.js $(VENDOR).tmp/package/LICENSE $(VENDOR)/
+	cp $(VENDOR).tmp/package/examples/jsm/controls/OrbitControls.js $(VENDOR)/addons/controls/
+	cp $(VENDOR).tmp/package/build/three.module.js $(VENDOR)/
+	rm -rf $(VENDOR).tmp
 
 demo: $(STAMP)
 	$(BIN)/mocodec demo

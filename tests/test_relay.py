@@ -279,7 +279,7 @@ def test_a_stalled_viewer_is_dropped_and_the_others_go_on(walk_bvh):
 
 def test_the_commands_end_to_end(tmp_path):
     """serve, token, publish and subscribe as a user types them: an AMC clip recorded as BVH."""
-    from tests.conftest import DATA
+    from conftest import DATA
 
     port = free_port()
     mocodec = [sys.executable, "-m", "mocodec.cli"]

@@ -1,0 +1,95 @@
+"""The viewer's web server (``mocodec view``): the page, its three.js, and a small JSON API.
+
+    GET  /                 the page
+    GET  /static/...       its script, style and the vendored three.js (no CDN: works offline)
+    GET  /api/state        the clip, its decoded version and the numbers (session.ViewSession.state)
+    GET  /api/codecs       every codec and its knobs
+    POST /api/encode       {"codec": id, "knobs": {...}, "target": ["ratio", 40] | null}: re-encode,
+                           then the new state; a bad codec, knob or target answers 400 with the reason
+
+Encoding runs in a worker thread, so the page stays served while a slow codec works.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+from pathlib import Path
+
+from aiohttp import web
+
+from mocodec.errors import MocodecError
+from mocodec.viewer.session import ViewSession, codec_menu
+
+STATIC = Path(__file__).with_name("static")
+VENDOR = STATIC / "vendor"
+
+
+def vendored() -> bool:
+    return (VENDOR / "three.module.js").is_file() and (VENDOR / "addons" / "controls" / "OrbitControls.js").is_file()
+
+
+def make_app(session: ViewSession) -> web.Application:
+    if not vendored():
+        raise MocodecError(f"three.js is not vendored into {VENDOR}: run `make vendor` (fetches it from npm once)")
+    lock = asyncio.Lock()
+
+    async def index(request: web.Request) -> web.FileResponse:
+        return web.FileResponse(STATIC / "index.html")
+
+    async def state(request: web.Request) -> web.Response:
+        return web.json_response(session.state())
+
+    async def codecs(request: web.Request) -> web.Response:
+        return web.json_response(codec_menu())
+
+    async def encode(request: web.Request) -> web.Response:
+        try:
+            body = await request.json()
+            codec_id = str(body["codec"])
+            knobs = {str(k): v for k, v in (body.get("knobs") or {}).items()}
+            target = body.get("target")
+            target = (str(target[0]), float(target[1])) if target else None
+        except (ValueError, KeyError, TypeError, IndexError, json.JSONDecodeError):
+            return web.json_response({"error": 'expected {"codec": id, "knobs": {...}, "target": [kind, value]}'},
+                                     status=400)
+        async with lock:                 # one encode at a time; the session holds one result
+            try:
+                await asyncio.to_thread(session.code, codec_id, knobs, target)
+            except MocodecError as e:
+                return web.json_response({"error": str(e)}, status=400)
+        return web.json_response(session.state())
+
+    app = web.Application()
+    app.router.add_get("/", index)
+    app.router.add_get("/api/state", state)
+    app.router.add_get("/api/codecs", codecs)
+    app.router.add_post("/api/encode", encode)
+    app.router.add_static("/static", STATIC)
+    return app
+
+
+def serve(session: ViewSession, host: str, port: int, open_browser: bool) -> None:
+    """Serve until interrupted; open the default browser on the page unless told not to."""
+    app = make_app(session)
+
+    async def run() -> None:
+        runner = web.AppRunner(app)
+        await runner.setup()
+        site = web.TCPSite(runner, host, port)
+        await site.start()
+        url = f"http://{host}:{site._server.sockets[0].getsockname()[1]}/"
+        print(f"viewer on {url} (Ctrl-C to stop)", flush=True)
+        if open_browser:
+            import webbrowser
+
+            webbrowser.open(url)
+        try:
+            await asyncio.Event().wait()
+        finally:
+            await runner.cleanup()
+
+    try:
+        asyncio.run(run())
+    except KeyboardInterrupt:
+        pass

@@ -1,0 +1,163 @@
+"""The viewer: its JSON API, and the page in a real browser (Debian's chromium, Playwright)."""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import contextlib
+import shutil
+import socket
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from aiohttp import web
+
+from mocodec import load
+from mocodec.viewer.server import make_app
+from mocodec.viewer.session import ViewSession
+
+from conftest import DATA
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
+         "--disable-sync", "--no-first-run", "--enable-unsafe-swiftshader"]
+
+
+def positions(b64: str, frames: int, joints: int) -> np.ndarray:
+    return np.frombuffer(base64.b64decode(b64), dtype="<f4").reshape(frames, joints, 3)
+
+
+@pytest.fixture(scope="module")
+def session():
+    s = ViewSession(load(DATA / "07_03.bvh")[:240], "07_03.bvh")
+    s.code("dpcm", {"levels": 32})
+    return s
+
+
+def test_state_has_both_motions_errors_and_numbers(session):
+    st = session.state()
+    n, j = st["frames"], len(st["joints"])
+    orig, dec = positions(st["original"], n, j), positions(st["decoded"], n, j)
+    np.testing.assert_allclose(orig, session.motion.positions_m(), atol=1e-5)
+    err = np.frombuffer(base64.b64decode(st["error_cm"]), dtype="<f4").reshape(n, j)
+    np.testing.assert_allclose(err, np.linalg.norm(dec - orig, axis=2) * 100, rtol=1e-4, atol=1e-3)
+    assert abs(err.max() - st["numbers"]["max_joint_error_cm"]) < 0.01
+    assert st["numbers"]["ratio"] > 1 and st["config"]["codec"] == "dpcm"
+
+
+def test_encode_api_re_encodes_and_reports_bad_requests(session):
+    async def go():
+        runner = web.AppRunner(make_app(session))
+        await runner.setup()
+        site = web.TCPSite(runner, "127.0.0.1", 0)
+        await site.start()
+        port = site._server.sockets[0].getsockname()[1]
+        import aiohttp
+
+        try:
+            async with aiohttp.ClientSession() as http:
+                url = f"http://127.0.0.1:{port}"
+                ok = await (await http.post(f"{url}/api/encode", json={"codec": "spiht", "target": ["ratio", 40]})).json()
+                bad = await http.post(f"{url}/api/encode", json={"codec": "dpcm", "knobs": {"levels": "many"}})
+                junk = await http.post(f"{url}/api/encode", data=b"not json")
+                menu = await (await http.get(f"{url}/api/codecs")).json()
+                return ok, bad.status, (await bad.json())["error"], junk.status, menu
+        finally:
+            await runner.cleanup()
+
+    ok, bad_status, bad_error, junk_status, menu = asyncio.run(go())
+    assert ok["config"]["codec"] == "spiht" and abs(ok["numbers"]["ratio"] - 40) < 0.02 * 40
+    assert bad_status == 400 and "levels" in bad_error and junk_status == 400
+    assert {"kinwave", "spiht", "dpcm"} <= {c["id"] for c in menu}
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@contextlib.contextmanager
+def viewer_process(*args):
+    port = free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "mocodec.cli", "view", *args, "--port", str(port), "--no-browser"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        line = proc.stdout.readline()
+        assert "viewer on" in line, proc.stderr.read()
+        yield f"http://127.0.0.1:{port}/"
+    finally:
+        proc.terminate()
+        proc.wait(10)
+
+
+@pytest.fixture(scope="module")
+def browser():
+    if CHROMIUM is None:
+        pytest.skip("chromium is not installed (.ci/run installs Debian's chromium)")
+    sync_api = pytest.importorskip("playwright.sync_api")
+    with sync_api.sync_playwright() as pw:
+        b = pw.chromium.launch(executable_path=CHROMIUM, headless=True, args=FLAGS)
+        yield b
+        b.close()
+
+
+def figure_pixels(png: bytes) -> tuple[int, int]:
+    """Dark (figure) pixels in the left and right halves of a screenshot of the 3-D view."""
+    from io import BytesIO
+
+    from matplotlib import image
+
+    img = image.imread(BytesIO(png), format="png")[:, :, :3]
+    dark = img.sum(axis=2) < 1.6            # bones and joints on the light background and grid
+    half = img.shape[1] // 2
+    return int(dark[:, :half].sum()), int(dark[:, half:].sum())
+
+
+def test_the_page_plays_both_figures_and_shows_the_servers_numbers(browser, tmp_path):
+    with viewer_process(str(DATA / "07_03.bvh"), "--codec", "dpcm", "--levels", "32") as url:
+        page = browser.new_page(viewport={"width": 1280, "height": 900})
+        errors = []
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.goto(url)
+        page.wait_for_function("window.viewerState && window.viewerState.ready", timeout=30_000)
+        state = page.evaluate("fetch('/api/state').then(r => r.json())")
+        numbers = state["numbers"]
+        assert page.inner_text("#n-ratio") == f"{numbers['ratio']:.2f} : 1"
+        assert page.inner_text("#n-max") == f"{numbers['max_joint_error_cm']:.3f} cm"
+        assert page.inner_text("#n-vpsnr") == f"{numbers['vpsnr_db']:.2f} dB"
+        page.click("#play")
+        page.wait_for_timeout(600)
+        assert page.evaluate("window.viewerState.playing") and page.evaluate("window.viewerState.frame") > 0
+        shot = page.locator("#view canvas").screenshot()
+        (tmp_path / "viewer.png").write_bytes(shot)
+        left, right = figure_pixels(shot)
+        assert left > 200 and right > 200, (left, right)     # the original and the decoded figure
+        page.click("#play")
+        frame = page.evaluate("window.viewerState.frame")
+        page.wait_for_timeout(300)
+        assert page.evaluate("window.viewerState.frame") == frame          # paused
+        page.fill("#scrub", "100")
+        page.dispatch_event("#scrub", "input")
+        assert page.evaluate("window.viewerState.frame") == 100
+        # another codec and target from the page: the server re-encodes, the numbers follow
+        page.select_option("#codec", "spiht")
+        page.select_option("#target-kind", "ratio")
+        page.fill("#target-value", "40")
+        page.click("#apply")
+        page.wait_for_function("window.viewerState.ready && window.viewerState.numbers.codec.startsWith('spiht')",
+                               timeout=60_000)
+        ratio = float(page.inner_text("#n-ratio").split()[0])
+        assert abs(ratio - 40) < 0.8
+        assert not errors, errors
+        page.close()
+
+
+def test_view_refuses_a_bad_file_with_one_line(tmp_path):
+    bad = tmp_path / "bad.bvh"
+    bad.write_text("HIERARCHY\nROOT hip\n{\n")
+    out = subprocess.run([sys.executable, "-m", "mocodec.cli", "view", str(bad), "--no-browser"], capture_output=True,
+                         text=True, timeout=60)
+    assert out.returncode == 2 and "bad.bvh" in out.stderr and "Traceback" not in out.stderr

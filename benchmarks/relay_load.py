@@ -62,11 +62,11 @@ def templates(codec_id: str, bits_per_second: float, keyframe_s: float):
     the last packet's END flag cleared so the clip can loop (every loop starts at a keyframe)."""
     from mocodec import load
     from mocodec.codecs import get_codec
-    from mocodec.stream.live import END, LiveEncoder, tick_frames
+    from mocodec.stream.live import END, clip_encoder, tick_frames
 
     motion = load(DATA / "07_03.bvh")
     codec = get_codec(codec_id, **({"bits_per_second": bits_per_second} if codec_id == "spiht" else {}))
-    enc = LiveEncoder(codec, motion.skeleton, motion.fps, 0, keyframe_s, primer=motion.channels[:120])
+    enc = clip_encoder(motion, codec, 0, keyframe_s)
     step = tick_frames(motion.fps)
     ticks = -(-motion.num_frames // step)
     timed = [(k, p) for k in range(ticks) for p in enc.push(motion.channels[k * step:(k + 1) * step], 0)]

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from aiohttp import web
 
+from conftest import DATA, free_port
 from mocodec.cli import main
 from mocodec.codecs import get_codec
 from mocodec.stream import tokens
@@ -191,12 +192,6 @@ def test_a_slow_viewer_misses_ticks_keeps_headers_and_is_dropped():
     asyncio.run(go())
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 @pytest.fixture
 def nats_server():
     binary = shutil.which("nats-server", path="/usr/sbin:/usr/bin:/usr/local/bin")
@@ -279,8 +274,6 @@ def test_a_stalled_viewer_is_dropped_and_the_others_go_on(walk_bvh):
 
 def test_the_commands_end_to_end(tmp_path):
     """serve, token, publish and subscribe as a user types them: an AMC clip recorded as BVH."""
-    from conftest import DATA
-
     port = free_port()
     mocodec = [sys.executable, "-m", "mocodec.cli"]
     server = subprocess.Popen(mocodec + ["serve", "--port", str(port), "--secret", SECRET], stdout=subprocess.PIPE,

@@ -6,7 +6,6 @@ import asyncio
 import base64
 import contextlib
 import shutil
-import socket
 import subprocess
 import sys
 
@@ -18,7 +17,7 @@ from mocodec import load
 from mocodec.viewer.server import make_app
 from mocodec.viewer.session import ViewSession
 
-from conftest import DATA
+from conftest import DATA, free_port
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
@@ -71,12 +70,6 @@ def test_encode_api_re_encodes_and_reports_bad_requests(session):
     assert ok["config"]["codec"] == "spiht" and abs(ok["numbers"]["ratio"] - 40) < 0.02 * 40
     assert bad_status == 400 and "levels" in bad_error and junk_status == 400
     assert {"kinwave", "spiht", "dpcm"} <= {c["id"] for c in menu}
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @contextlib.contextmanager

@@ -22,7 +22,7 @@ import numpy as np
 from mocodec.codecs.base import Codec
 from mocodec.errors import MocodecError
 from mocodec.motion import Motion
-from mocodec.stream.live import PRIMER_S, TICK_HZ, LiveDecoder, LiveEncoder, tick_frames
+from mocodec.stream.live import TICK_HZ, LiveDecoder, clip_encoder, tick_frames
 from mocodec.stream.packets import HEADER, Packet, StreamInfo, pack_batch, parse, split_batch
 
 class RelayRefused(MocodecError):
@@ -74,8 +74,7 @@ async def publish_clip(url: str, room: str, token: str, motion: Motion, codec: C
     :func:`~mocodec.stream.live.stream_clip`, whatever the timing."""
     if not speed > 0:
         raise MocodecError(f"speed must be positive, got {speed}")
-    enc = LiveEncoder(codec, motion.skeleton, motion.fps, stream, keyframe_s,
-                      primer=motion.channels[:int(round(PRIMER_S * motion.fps))])
+    enc = clip_encoder(motion, codec, stream, keyframe_s)
     step = tick_frames(motion.fps)
     stats = PublishStats()
     async with connect(url, room, token, "publish") as ws:

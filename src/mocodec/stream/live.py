@@ -249,13 +249,18 @@ class LiveDecoder:
         return self._emit(out)
 
 
+def clip_encoder(motion: Motion, codec: Codec, stream: int = 0, keyframe_s: float = 1.0) -> LiveEncoder:
+    """The live encoder of a clip played as a stream, primed with the clip's first second."""
+    return LiveEncoder(codec, motion.skeleton, motion.fps, stream, keyframe_s,
+                       primer=motion.channels[:int(round(PRIMER_S * motion.fps))])
+
+
 def stream_clip(motion: Motion, codec: Codec, stream: int = 0, keyframe_s: float = 1.0,
                 frames_per_packet: int | None = None) -> list[Packet]:
     """A clip as the live packets a sender would send (header first), pushing
     ``frames_per_packet`` frames at a time (default: a 30 Hz tick), primed with its first
     second."""
-    enc = LiveEncoder(codec, motion.skeleton, motion.fps, stream, keyframe_s,
-                      primer=motion.channels[:int(round(PRIMER_S * motion.fps))])
+    enc = clip_encoder(motion, codec, stream, keyframe_s)
     step = frames_per_packet or tick_frames(motion.fps)
     packets = [enc.header(0)]
     for a in range(0, motion.num_frames, step):

@@ -142,6 +142,17 @@ class Room:
     fresh: list[Forward] = field(default_factory=list)
 
 
+async def messages_of(ws: web.WebSocketResponse, kind: WSMsgType, refusal: str):
+    """The data of a connection's messages until it closes; Closing(``refusal``) at the first
+    message of another kind."""
+    async for msg in ws:
+        if msg.type == WSMsgType.ERROR:
+            return
+        if msg.type != kind:
+            raise Closing(BAD_MESSAGE, refusal)
+        yield msg.data
+
+
 @functools.lru_cache(maxsize=256)
 def stream_setup(header_payload: bytes) -> tuple[StreamInfo, object]:
     """A stream header's contents and codec, parsed once for every avatar that sends the same
@@ -222,17 +233,13 @@ class Relay:
         messages = Bucket(self.limits.publish_messages_per_s, self.limits.burst_s)
         volume = Bucket(self.limits.publish_bytes_per_s, self.limits.burst_s)
         try:
-            async for msg in ws:
-                if msg.type == WSMsgType.ERROR:
-                    break
-                if msg.type != WSMsgType.BINARY:
-                    raise Closing(BAD_MESSAGE, "a sender sends binary packet batches only")
-                if not messages.take() or not volume.take(len(msg.data)):
+            async for data in messages_of(ws, WSMsgType.BINARY, "a sender sends binary packet batches only"):
+                if not messages.take() or not volume.take(len(data)):
                     raise Closing(RATE_LIMIT, f"rate limit: over {self.limits.publish_messages_per_s:g} messages "
                                               f"or {self.limits.publish_bytes_per_s:g} bytes per second")
-                self._ingest(room, msg.data, owner=ws)
+                self._ingest(room, data, owner=ws)
                 if self.bus is not None:
-                    await self.bus.publish(room_name, msg.data)
+                    await self.bus.publish(room_name, data)
         finally:                            # streams left without their end: end them for everyone
             ends = [s.end_packet(k).to_bytes() for k, s in room.streams.items() if s.owner is ws and not s.ended]
             if ends:
@@ -302,15 +309,11 @@ class Relay:
         sender = asyncio.create_task(self._send_loop(viewer))
         control = Bucket(self.limits.control_messages_per_s, self.limits.burst_s)
         try:
-            async for msg in ws:
-                if msg.type == WSMsgType.ERROR:
-                    break
-                if msg.type != WSMsgType.TEXT:
-                    raise Closing(BAD_MESSAGE, "a viewer sends JSON settings only")
+            async for text in messages_of(ws, WSMsgType.TEXT, "a viewer sends JSON settings only"):
                 if not control.take():
                     raise Closing(RATE_LIMIT, f"rate limit: over {self.limits.control_messages_per_s:g} settings "
                                               "per second")
-                self._settings(viewer, msg.data)
+                self._settings(viewer, text)
         finally:
             room.viewers.remove(viewer)
             sender.cancel()

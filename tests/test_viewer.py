@@ -154,3 +154,47 @@ def test_view_refuses_a_bad_file_with_one_line(tmp_path):
     out = subprocess.run([sys.executable, "-m", "mocodec.cli", "view", str(bad), "--no-browser"], capture_output=True,
                          text=True, timeout=60)
     assert out.returncode == 2 and "bad.bvh" in out.stderr and "Traceback" not in out.stderr
+
+
+def test_the_page_watches_a_relay_room_live(browser):
+    """Two avatars published into a relay room appear in the page with their bit rates."""
+    from mocodec.codecs import get_codec
+    from mocodec.stream import tokens
+    from mocodec.stream.client import publish_clip
+
+    relay_port = free_port()
+    relay = subprocess.Popen([sys.executable, "-m", "mocodec.cli", "serve", "--port", str(relay_port),
+                              "--secret", "s"], stdout=subprocess.PIPE, text=True)
+    try:
+        assert "relay on" in relay.stdout.readline()
+        relay_url = f"ws://127.0.0.1:{relay_port}"
+        tok = tokens.issue("s", "lobby")
+        with viewer_process("--relay", relay_url) as url:
+            page = browser.new_page(viewport={"width": 1280, "height": 900})
+            page.goto(f"{url}?room=lobby&token={tok}&budget=20000")
+            page.wait_for_function("window.viewerState && window.viewerState.ready", timeout=30_000)
+            walk = load(DATA / "07_03.bvh")
+
+            async def publish():
+                await asyncio.gather(*(publish_clip(relay_url, "lobby", tok, walk, get_codec(c), speed=1.0, stream=s,
+                                                    name=f"walker {s}") for s, c in ((0, "spiht"), (1, "dpcm"))))
+
+            import threading
+
+            sender = threading.Thread(target=asyncio.run, args=(publish(),))
+            sender.start()
+            page.wait_for_function("window.viewerState.live.streams === 2", timeout=30_000)
+            page.wait_for_timeout(2500)              # a spiht packet comes once a segment (1.07 s)
+            bits = page.evaluate("window.viewerState.live.bits")
+            assert all(b > 0 for b in bits.values()), bits
+            assert "walker 0" in page.inner_text("#avatars") and "spiht" in page.inner_text("#avatars")
+            shot = page.locator("#view canvas").screenshot()
+            assert sum(figure_pixels(shot)) > 300
+            sender.join()
+            page.close()
+        bad = subprocess.run([sys.executable, "-m", "mocodec.cli", "view", "--no-browser"], capture_output=True,
+                             text=True, timeout=60)
+        assert bad.returncode == 2 and "needs a FILE" in bad.stderr
+    finally:
+        relay.terminate()
+        relay.wait(10)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+from pathlib import Path
 
 from mocodec.cli_coding import TARGET_OPTIONS, configured
 from mocodec.errors import MocodecError
@@ -40,7 +41,7 @@ def cmd_publish(args) -> int:
     motion = load(args.file, asf=args.asf, fps=args.fps)
     codec, _ = configured(args, motion)
     stats = asyncio.run(client.publish_clip(args.url, args.room, args.token, motion, codec, args.speed,
-                                            args.stream, args.keyframe_s))
+                                            args.stream, args.keyframe_s, Path(args.file).name))
     rate = stats.bytes * 8 / max(motion.duration, 1e-9)
     print(f"published {stats.frames} frames in {stats.seconds:.1f} s to room {args.room!r}: {stats.packets} packets, "
           f"{stats.bytes:,} bytes ({rate / 1000:.2f} kbit/s), {codec!r}")

@@ -67,14 +67,14 @@ class PublishStats:
 
 
 async def publish_clip(url: str, room: str, token: str, motion: Motion, codec: Codec, speed: float = 1.0,
-                       stream: int = 0, keyframe_s: float = 1.0) -> PublishStats:
+                       stream: int = 0, keyframe_s: float = 1.0, name: str = "") -> PublishStats:
     """Play ``motion`` into ``room`` as a live stream at its frame rate (``speed`` times faster):
     the frames of one tick (1/30 s of the clip) are pushed when their time comes, and their
-    packets sent as one batch; the last packet ends the stream. The packets are those of
+    packets sent as one batch; the last packet ends the stream. ``name`` labels the avatar. The packets are those of
     :func:`~mocodec.stream.live.stream_clip`, whatever the timing."""
     if not speed > 0:
         raise MocodecError(f"speed must be positive, got {speed}")
-    enc = clip_encoder(motion, codec, stream, keyframe_s)
+    enc = clip_encoder(motion, codec, stream, keyframe_s, name)
     step = tick_frames(motion.fps)
     stats = PublishStats()
     async with connect(url, room, token, "publish") as ws:
@@ -112,13 +112,16 @@ async def _drain(ws) -> None:
 
 
 class Watcher:
-    """What a viewer holds: a decoder per stream, the frames received so far."""
+    """What a viewer holds: a decoder per stream, the frames received so far (or, with
+    ``keep=False``, only each stream's newest frame, for watching without end), and the bytes
+    each stream has brought."""
 
-    def __init__(self, conceal: str = "hold"):
-        self.conceal = conceal
+    def __init__(self, conceal: str = "hold", keep: bool = True):
+        self.conceal, self.keep = conceal, keep
         self.decoders: dict[int, LiveDecoder] = {}
         self.frames: dict[int, list[np.ndarray]] = {}
         self.counts: dict[int, int] = {}
+        self.bytes: dict[int, int] = {}
 
     def take(self, data: bytes) -> None:
         for raw in split_batch(data):
@@ -126,13 +129,17 @@ class Watcher:
             if p.kind == HEADER:
                 if p.stream not in self.decoders:
                     self.decoders[p.stream] = LiveDecoder(StreamInfo.from_payload(p.payload), self.conceal)
-                    self.frames[p.stream], self.counts[p.stream] = [], 0
+                    self.frames[p.stream], self.counts[p.stream], self.bytes[p.stream] = [], 0, 0
                 continue
             dec = self.decoders.get(p.stream)
             if dec is not None:
                 out = dec.push(p)
-                self.frames[p.stream].append(out)
+                self.bytes[p.stream] += len(raw)
                 self.counts[p.stream] += len(out)
+                if self.keep:
+                    self.frames[p.stream].append(out)
+                elif len(out):
+                    self.frames[p.stream] = [out[-1:]]
 
     def motion(self, stream: int) -> Motion:
         info = self.decoders[stream].info

@@ -249,9 +249,10 @@ class LiveDecoder:
         return self._emit(out)
 
 
-def clip_encoder(motion: Motion, codec: Codec, stream: int = 0, keyframe_s: float = 1.0) -> LiveEncoder:
+def clip_encoder(motion: Motion, codec: Codec, stream: int = 0, keyframe_s: float = 1.0,
+                 name: str = "") -> LiveEncoder:
     """The live encoder of a clip played as a stream, primed with the clip's first second."""
-    return LiveEncoder(codec, motion.skeleton, motion.fps, stream, keyframe_s,
+    return LiveEncoder(codec, motion.skeleton, motion.fps, stream, keyframe_s, name,
                        primer=motion.channels[:int(round(PRIMER_S * motion.fps))])
 
 

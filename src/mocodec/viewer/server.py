@@ -6,6 +6,7 @@
     GET  /api/codecs       every codec and its knobs
     POST /api/encode       {"codec": id, "knobs": {...}, "target": ["ratio", 40] | null}: re-encode,
                            then the new state; a bad codec, knob or target answers 400 with the reason
+    GET  /api/live         WebSocket: a relay room's avatars, decoded here (viewer.live)
 
 Encoding runs in a worker thread, so the page stays served while a slow codec works.
 """
@@ -19,6 +20,7 @@ from pathlib import Path
 from aiohttp import web
 
 from mocodec.errors import MocodecError
+from mocodec.viewer.live import live_handler
 from mocodec.viewer.session import ViewSession, codec_menu
 
 STATIC = Path(__file__).with_name("static")
@@ -29,21 +31,27 @@ def vendored() -> bool:
     return (VENDOR / "three.module.js").is_file() and (VENDOR / "addons" / "controls" / "OrbitControls.js").is_file()
 
 
-def make_app(session: ViewSession) -> web.Application:
+def make_app(session: ViewSession | None, relay_url: str | None = None) -> web.Application:
+    """The viewer's application: of a clip (``session``), of a relay's rooms, or both."""
     if not vendored():
         raise MocodecError(f"three.js is not vendored into {VENDOR}: run `make vendor` (fetches it from npm once)")
     lock = asyncio.Lock()
+
+    def no_clip() -> web.Response:
+        return web.json_response({"error": "no clip: start the viewer with a FILE"}, status=404)
 
     async def index(request: web.Request) -> web.FileResponse:
         return web.FileResponse(STATIC / "index.html")
 
     async def state(request: web.Request) -> web.Response:
-        return web.json_response(session.state())
+        return web.json_response(session.state()) if session else no_clip()
 
     async def codecs(request: web.Request) -> web.Response:
         return web.json_response(codec_menu())
 
     async def encode(request: web.Request) -> web.Response:
+        if session is None:
+            return no_clip()
         try:
             body = await request.json()
             codec_id = str(body["codec"])
@@ -65,20 +73,23 @@ def make_app(session: ViewSession) -> web.Application:
     app.router.add_get("/api/state", state)
     app.router.add_get("/api/codecs", codecs)
     app.router.add_post("/api/encode", encode)
+    app.router.add_get("/api/live", live_handler(relay_url))
     app.router.add_static("/static", STATIC)
     return app
 
 
-def serve(session: ViewSession, host: str, port: int, open_browser: bool) -> None:
-    """Serve until interrupted; open the default browser on the page unless told not to."""
-    app = make_app(session)
+def serve(session: ViewSession | None, host: str, port: int, open_browser: bool, relay_url: str | None = None,
+          page: str = "") -> None:
+    """Serve until interrupted; open the default browser on the page (``page``: its query, such
+    as ``?room=R&token=T``) unless told not to."""
+    app = make_app(session, relay_url)
 
     async def run() -> None:
         runner = web.AppRunner(app)
         await runner.setup()
         site = web.TCPSite(runner, host, port)
         await site.start()
-        url = f"http://{host}:{site._server.sockets[0].getsockname()[1]}/"
+        url = f"http://{host}:{site._server.sockets[0].getsockname()[1]}/{page}"
         print(f"viewer on {url} (Ctrl-C to stop)", flush=True)
         if open_browser:
             import webbrowser

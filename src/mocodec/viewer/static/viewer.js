@@ -1,5 +1,6 @@
 // The mocodec viewer: the original and the decoded motion in sync, the decoded joints coloured
-// by their error, the error over time, the numbers, and re-encoding with another codec or knob.
+// by their error, the error over time, the numbers, and re-encoding with another codec or knob;
+// or, with ?room=R&token=T, every avatar of a relay room live with the bit rate it gets.
 // Joint positions come from the server in metres (forward kinematics is done there).
 import * as THREE from "three";
 import { OrbitControls } from "three/addons/controls/OrbitControls.js";
@@ -276,6 +277,54 @@ $("coding").addEventListener("submit", async (event) => {
   state.ready = true;
 });
 
+// ----- live: a relay room ------------------------------------------------------------------------
+const avatars = new Map();              // stream id -> Figure
+function startLive(params) {
+  resize();
+  for (const id of ["chart", "transport"]) $(id).hidden = true;
+  $("clip-panel").hidden = true;
+  $("live-panel").hidden = false;
+  $("room-name").textContent = params.get("room");
+  state.live = { streams: 0, frames: {}, bits: {} };
+  const query = new URLSearchParams({ room: params.get("room"), token: params.get("token") || "",
+                                      budget: params.get("budget") || "0", camera: params.get("camera") || "0,1.6,6" });
+  const socket = new WebSocket(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/api/live?${query}`);
+  socket.onmessage = (event) => {
+    const data = JSON.parse(event.data);
+    if (data.error) { $("status").textContent = `error: ${data.error}`; state.error = data.error; return; }
+    live(data.streams);
+  };
+  socket.onclose = () => { if (!state.error) $("status").textContent = "disconnected"; };
+  $("status").textContent = "watching";
+  state.ready = true;
+  const loop = () => { renderer.render(scene, camera); requestAnimationFrame(loop); };
+  requestAnimationFrame(loop);
+}
+
+function live(streams) {
+  for (const [id, figure] of avatars) {
+    if (!(id in streams)) { scene.remove(figure.group); avatars.delete(id); }
+  }
+  const rows = [];
+  let cx = 0, cz = 0;
+  for (const [id, s] of Object.entries(streams)) {
+    if (!avatars.has(id)) avatars.set(id, new Figure(s.parents, 0x3b4a6b, 0x2a6fdb));
+    avatars.get(id).pose(Float32Array.from(s.positions), 0);
+    cx += s.positions[0]; cz += s.positions[2];
+    state.live.frames[id] = s.frames; state.live.bits[id] = s.bits_per_second;
+    rows.push(`<tr><td>${s.name}</td><td>${s.codec}</td><td>${(s.bits_per_second / 1000).toFixed(2)}</td>` +
+              `<td>${s.frames}${s.in_sync ? "" : " (resync)"}</td></tr>`);
+  }
+  $("avatars").tBodies[0].innerHTML = rows.join("");
+  const n = Object.keys(streams).length;
+  if (n && !state.live.streams) {          // look at the crowd when it first appears
+    controls.target.set(cx / n, 0.9, cz / n);
+    camera.position.set(cx / n + 1.5, 2.5, cz / n + 7);
+    controls.update();
+  }
+  state.live.streams = n;
+}
+
 // ----- start -------------------------------------------------------------------------------------
 async function start() {
   resize();
@@ -286,4 +335,6 @@ async function start() {
   state.ready = true;
   requestAnimationFrame(tick);
 }
-start().catch((e) => { $("status").textContent = `error: ${e}`; state.error = String(e); });
+const params = new URLSearchParams(location.search);
+if (params.get("room")) startLive(params);
+else start().catch((e) => { $("status").textContent = `error: ${e}`; state.error = String(e); });

@@ -4,17 +4,11 @@
 // Joint positions come from the server in metres (forward kinematics is done there).
 import * as THREE from "three";
 import { OrbitControls } from "three/addons/controls/OrbitControls.js";
+import { Figure, f32 } from "/static/figure.js";
 
 const $ = (id) => document.getElementById(id);
 const state = { ready: false, playing: false, frame: 0, frames: 0, fps: 30, time: 0, numbers: null, codecs: [] };
 window.viewerState = state;            // read by the browser tests
-
-function f32(b64) {
-  const bin = atob(b64);
-  const bytes = new Uint8Array(bin.length);
-  for (let i = 0; i < bin.length; i++) bytes[i] = bin.charCodeAt(i);
-  return new Float32Array(bytes.buffer);
-}
 
 // ----- the 3-D view ----------------------------------------------------------------------------
 const view = $("view");
@@ -34,43 +28,6 @@ function resize() {
   camera.updateProjectionMatrix();
 }
 window.addEventListener("resize", resize);
-
-class Figure {
-  // bones as line segments, joints as small spheres with a colour each
-  constructor(parents, boneColor, jointColor) {
-    this.parents = parents;
-    this.bones = parents.map((p, j) => [p, j]).filter(([p]) => p >= 0);
-    const lines = new THREE.BufferGeometry();
-    lines.setAttribute("position", new THREE.BufferAttribute(new Float32Array(this.bones.length * 6), 3));
-    this.lines = new THREE.LineSegments(lines, new THREE.LineBasicMaterial({ color: boneColor }));
-    const ball = new THREE.SphereGeometry(0.03, 10, 8);
-    this.joints = new THREE.InstancedMesh(ball, new THREE.MeshBasicMaterial({ color: 0xffffff }), parents.length);
-    for (let j = 0; j < parents.length; j++) this.joints.setColorAt(j, new THREE.Color(jointColor));
-    this.group = new THREE.Group();
-    this.group.add(this.lines, this.joints);
-    scene.add(this.group);
-    this.matrix = new THREE.Matrix4();
-  }
-  pose(positions, frame) {
-    const n = this.parents.length, base = frame * n * 3;
-    const at = (j, k) => positions[base + j * 3 + k];
-    const line = this.lines.geometry.attributes.position.array;
-    this.bones.forEach(([p, j], b) => {
-      for (let k = 0; k < 3; k++) { line[b * 6 + k] = at(p, k); line[b * 6 + 3 + k] = at(j, k); }
-    });
-    this.lines.geometry.attributes.position.needsUpdate = true;
-    this.lines.geometry.computeBoundingSphere();
-    for (let j = 0; j < n; j++) {
-      this.matrix.makeTranslation(at(j, 0), at(j, 1), at(j, 2));
-      this.joints.setMatrixAt(j, this.matrix);
-    }
-    this.joints.instanceMatrix.needsUpdate = true;
-  }
-  colour(colours) {
-    colours.forEach((c, j) => this.joints.setColorAt(j, c));
-    this.joints.instanceColor.needsUpdate = true;
-  }
-}
 
 // ----- the clip ----------------------------------------------------------------------------------
 let clip = null, original = null, decoded = null, lastRoot = null;
@@ -92,8 +49,8 @@ function show(data) {
   $("clip-name").textContent = data.name;
   $("scrub").max = String(Math.max(clip.frames - 1, 0));
   if (!original) {
-    original = new Figure(clip.parents, 0x3b4a6b, 0x3b4a6b);
-    decoded = new Figure(clip.parents, 0x555555, 0x2a6fdb);
+    original = new Figure(scene, clip.parents, 0x3b4a6b, 0x3b4a6b);
+    decoded = new Figure(scene, clip.parents, 0x555555, 0x2a6fdb);
   }
   decoded.group.visible = Boolean(clip.decoded);
   numbers(data.numbers);
@@ -308,7 +265,7 @@ function live(streams) {
   const rows = [];
   let cx = 0, cz = 0;
   for (const [id, s] of Object.entries(streams)) {
-    if (!avatars.has(id)) avatars.set(id, new Figure(s.parents, 0x3b4a6b, 0x2a6fdb));
+    if (!avatars.has(id)) avatars.set(id, new Figure(scene, s.parents, 0x3b4a6b, 0x2a6fdb));
     avatars.get(id).pose(Float32Array.from(s.positions), 0);
     cx += s.positions[0]; cz += s.positions[2];
     state.live.frames[id] = s.frames; state.live.bits[id] = s.bits_per_second;

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from aiohttp import web
 
-from mocodec import load
+from mocodec import Motion, load
 from mocodec.viewer.server import make_app
 from mocodec.viewer.session import ViewSession
 
@@ -173,7 +173,8 @@ def test_the_page_watches_a_relay_room_live(browser):
             page = browser.new_page(viewport={"width": 1280, "height": 900})
             page.goto(f"{url}?room=lobby&token={tok}&budget=20000")
             page.wait_for_function("window.viewerState && window.viewerState.ready", timeout=30_000)
-            walk = load(DATA / "07_03.bvh")
+            clip = load(DATA / "07_03.bvh")
+            walk = Motion(clip.skeleton, clip.fps, np.vstack([clip.channels] * 3))     # 10 s: still live when checked
 
             async def publish():
                 await asyncio.gather(*(publish_clip(relay_url, "lobby", tok, walk, get_codec(c), speed=1.0, stream=s,

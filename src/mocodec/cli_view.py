@@ -1,13 +1,18 @@
-"""The viewer command of the CLI: ``view`` (the original and the decoded motion in the browser)."""
+"""The viewer commands of the CLI: ``view`` (the original and the decoded motion in the
+browser, or a relay room live) and ``study run`` / ``study report`` (the perceptual studies of
+001, DSCQS and the 2AFC staircase)."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from urllib.parse import urlencode
 
 from mocodec.cli_coding import TARGET_OPTIONS, add_codec_options
 from mocodec.errors import MocodecError
-from mocodec.viewer.server import serve
+from mocodec.viewer import study
+from mocodec.viewer.server import make_app, serve
+from mocodec.viewer.study_server import make_study_app
 from mocodec.viewer.session import ViewSession, load_reference
 
 
@@ -21,7 +26,31 @@ def cmd_view(args) -> int:
                        if getattr(args, dest) is not None), None)
         session.code(args.codec, args.knobs, target)
     page = f"?{urlencode({'room': args.room, 'token': args.token or ''})}" if args.room else ""
-    serve(session, args.host, args.port, not args.no_browser, args.relay, page)
+    serve(make_app(session, args.relay), args.host, args.port, not args.no_browser, page)
+    return 0
+
+
+def cmd_study_run(args) -> int:
+    cfg = study.load_config(args.config)
+    session = study.start(cfg, args.participant)
+    serve(make_study_app(session, args.out), args.host, args.port, not args.no_browser)
+    return 0
+
+
+def cmd_study_report(args) -> int:
+    result = study.report(args.results)
+    if args.json:
+        print(json.dumps(result, indent=1))
+        return 0
+    for label, d in result["dmos"].items():
+        lo, hi = d["ci95"]
+        print(f"DMOS {label}: {d['mean']:.2f} (95% CI {lo:.2f}..{hi:.2f}, {d['n']} participants)")
+    t = result["threshold_t_lower"]
+    if t:
+        lo, hi = t["ci95"]
+        print(f"t_L threshold: {t['mean']:.4f} rad (95% CI {lo:.4f}..{hi:.4f}, {t['n']} participants)")
+    if not result["dmos"] and not t:
+        print("no finished DSCQS case or staircase in these files")
     return 0
 
 
@@ -43,3 +72,20 @@ def add_commands(sub) -> None:
     p.add_argument("--room", help="open the page on this room of --relay")
     p.add_argument("--token", help="the room token for --room")
     p.set_defaults(func=cmd_view, takes_knobs=True)
+
+    p = sub.add_parser("study", help="perceptual studies in the browser: DSCQS and the 2AFC staircase (001)")
+    steps = p.add_subparsers(dest="step", required=True)
+    q = steps.add_parser("run", help="run one participant's session of a study configured by a JSON file",
+                         description="Serves the study page; the results are saved as JSON in --out when the "
+                                     "session ends. See docs/viewer.md for the configuration.")
+    q.add_argument("config", metavar="STUDY.json")
+    q.add_argument("--out", required=True, metavar="DIR", help="folder for the results files")
+    q.add_argument("--participant", default="anonymous", help="a name or code for the results file")
+    q.add_argument("--port", type=int, default=8771)
+    q.add_argument("--host", default="127.0.0.1")
+    q.add_argument("--no-browser", action="store_true")
+    q.set_defaults(func=cmd_study_run)
+    q = steps.add_parser("report", help="DMOS per case and t_L thresholds, with 95%% confidence intervals")
+    q.add_argument("results", nargs="+", metavar="RESULT.json")
+    q.add_argument("--json", action="store_true", help="the figures as JSON")
+    q.set_defaults(func=cmd_study_report)

@@ -78,11 +78,9 @@ def make_app(session: ViewSession | None, relay_url: str | None = None) -> web.A
     return app
 
 
-def serve(session: ViewSession | None, host: str, port: int, open_browser: bool, relay_url: str | None = None,
-          page: str = "") -> None:
-    """Serve until interrupted; open the default browser on the page (``page``: its query, such
-    as ``?room=R&token=T``) unless told not to."""
-    app = make_app(session, relay_url)
+def serve(app: web.Application, host: str, port: int, open_browser: bool, page: str = "") -> None:
+    """Serve ``app`` until interrupted; open the default browser on the page (``page``: its
+    query, such as ``?room=R&token=T``) unless told not to."""
 
     async def run() -> None:
         runner = web.AppRunner(app)

@@ -24,10 +24,6 @@ from mocodec.formats import load
 from mocodec.metrics import compare
 from mocodec.motion import Motion
 
-#: Rate-control targets the page offers (the CLI's names).
-TARGETS = ("ratio", "bitrate", "psnr", "mean_error_cm", "max_error_cm")
-
-
 def _f32(values: np.ndarray) -> str:
     """An array as base64 little-endian float32 (compact for the page, decoded with atob)."""
     return base64.b64encode(np.ascontiguousarray(values, dtype="<f4").tobytes()).decode()
@@ -59,8 +55,8 @@ class ViewSession:
         codec = get_codec(codec_id, **(knobs or {}))
         if target is not None:
             kind, value = target
-            if kind not in TARGETS:
-                raise CodecError(f"unknown target {kind!r} (targets: {', '.join(TARGETS)})")
+            if kind not in ratecontrol.TARGETS:
+                raise CodecError(f"unknown target {kind!r} (targets: {', '.join(ratecontrol.TARGETS)})")
             codec = ratecontrol.tune(codec, self.motion, kind, float(value)).codec
         trip = moc.round_trip(self.motion, codec)
         s = compare(self.motion, trip.decoded).summary()

@@ -97,19 +97,6 @@ def test_report_dmos_and_thresholds_with_confidence_intervals(tmp_path):
         study.report([bad])
 
 
-@pytest.fixture(scope="module")
-def browser():
-    from test_viewer import CHROMIUM, FLAGS
-
-    if CHROMIUM is None:
-        pytest.skip("chromium is not installed (.ci/run installs Debian's chromium)")
-    sync_api = pytest.importorskip("playwright.sync_api")
-    with sync_api.sync_playwright() as pw:
-        b = pw.chromium.launch(executable_path=CHROMIUM, headless=True, args=FLAGS)
-        yield b
-        b.close()
-
-
 def run_session(config, out, browser, clicks):
     port = free_port()
     proc = subprocess.Popen([sys.executable, "-m", "mocodec.cli", "study", "run", str(config), "--out", str(out),

@@ -5,7 +5,6 @@ from __future__ import annotations
 import asyncio
 import base64
 import contextlib
-import shutil
 import subprocess
 import sys
 
@@ -18,11 +17,6 @@ from mocodec.viewer.server import make_app
 from mocodec.viewer.session import ViewSession
 
 from conftest import DATA, free_port
-
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
-         "--disable-sync", "--no-first-run", "--enable-unsafe-swiftshader"]
-
 
 def positions(b64: str, frames: int, joints: int) -> np.ndarray:
     return np.frombuffer(base64.b64decode(b64), dtype="<f4").reshape(frames, joints, 3)
@@ -84,17 +78,6 @@ def viewer_process(*args):
     finally:
         proc.terminate()
         proc.wait(10)
-
-
-@pytest.fixture(scope="module")
-def browser():
-    if CHROMIUM is None:
-        pytest.skip("chromium is not installed (.ci/run installs Debian's chromium)")
-    sync_api = pytest.importorskip("playwright.sync_api")
-    with sync_api.sync_playwright() as pw:
-        b = pw.chromium.launch(executable_path=CHROMIUM, headless=True, args=FLAGS)
-        yield b
-        b.close()
 
 
 def figure_pixels(png: bytes) -> tuple[int, int]:

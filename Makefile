@@ -46,6 +46,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_waveform.py --set amc
 	$(BIN)/python benchmarks/fig_6_2_vmse.py
 	$(BIN)/python benchmarks/bench_streaming.py
+	$(BIN)/python benchmarks/bench_capture.py
 	$(BIN)/python benchmarks/relay_load.py
 
 # the whole comparison on the shared clips: report in bench-out/report.html (docs/benchmarks.md)

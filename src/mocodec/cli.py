@@ -1,7 +1,8 @@
 """The ``mocodec`` command line: ``info``, ``convert``, ``compare``, ``analyze``, ``demo``, and the
 coding commands of :mod:`mocodec.cli_coding` (``encode``, ``decode``, ``eval``, ``codecs``), and
 ``bench`` and ``compress-dir`` of :mod:`mocodec.cli_bench`, ``serve``, ``token``, ``publish`` and
-``subscribe`` of :mod:`mocodec.cli_stream`, and ``view`` of :mod:`mocodec.cli_view`.
+``subscribe`` of :mod:`mocodec.cli_stream`, ``view`` and ``study`` of :mod:`mocodec.cli_view`, and
+``capture`` of :mod:`mocodec.cli_capture`.
 
 User errors (bad files, impossible conversions) print one line and exit with status 2.
 """
@@ -16,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from mocodec import __version__
-from mocodec import cli_bench, cli_stream, cli_view
+from mocodec import cli_bench, cli_capture, cli_stream, cli_view
 from mocodec.cli_coding import add_codec_options, add_commands, knobs_from
 from mocodec.errors import MocodecError
 from mocodec.formats import load, save
@@ -187,6 +188,7 @@ def build_parser() -> argparse.ArgumentParser:
     cli_bench.add_commands(sub)
     cli_stream.add_commands(sub)
     cli_view.add_commands(sub)
+    cli_capture.add_commands(sub)
 
     p = sub.add_parser("demo", help="run the main job on the bundled sample clip",
                        description="Encode and decode the bundled CMU walk with the default codec and "

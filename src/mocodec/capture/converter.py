@@ -51,19 +51,19 @@ ACOS_MARGIN = 0.02              # soft-clip margin of acos arguments at +-1
 SPINE_PASSES = 4                # the spine solved again with the neck's lean (the thesis: one pass)
 
 
-def _rx(a):
+def rot_x(a):
     c, s = np.cos(a), np.sin(a)
     o, z = np.ones_like(a), np.zeros_like(a)
     return np.stack([np.stack([o, z, z], -1), np.stack([z, c, -s], -1), np.stack([z, s, c], -1)], -2)
 
 
-def _ry(a):
+def rot_y(a):
     c, s = np.cos(a), np.sin(a)
     o, z = np.ones_like(a), np.zeros_like(a)
     return np.stack([np.stack([c, z, s], -1), np.stack([z, o, z], -1), np.stack([-s, z, c], -1)], -2)
 
 
-def _rz(a):
+def rot_z(a):
     c, s = np.cos(a), np.sin(a)
     o, z = np.ones_like(a), np.zeros_like(a)
     return np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)], -2)
@@ -81,7 +81,7 @@ def _acos(x: np.ndarray) -> np.ndarray:
     return np.arccos(soft_clip(x, -1.0, 1.0, ACOS_MARGIN))
 
 
-def _pose(rot: np.ndarray, pos: np.ndarray) -> np.ndarray:
+def pose(rot: np.ndarray, pos: np.ndarray) -> np.ndarray:
     out = np.zeros(rot.shape[:-2] + (4, 4))
     out[..., :3, :3], out[..., :3, 3], out[..., 3, 3] = rot, pos, 1.0
     return out
@@ -100,7 +100,7 @@ class Calibration:
     def from_reference(cls, readings: dict[str, np.ndarray], skeleton: Skeleton) -> "Calibration":
         pos, quat = forward_kinematics(skeleton, np.zeros((1, skeleton.num_channels)))
         rot = rotations.quat_to_matrix(quat[0])
-        frames = {t: _pose(rot[skeleton.index(seg)], pos[0, skeleton.index(at)]) for t, (seg, at) in MOUNTS.items()}
+        frames = {t: pose(rot[skeleton.index(seg)], pos[0, skeleton.index(at)]) for t, (seg, at) in MOUNTS.items()}
         world = frames["hips"] @ np.linalg.inv(readings["hips"])
         mounts = {t: np.linalg.inv(frames[t]) @ world @ readings[t] for t in TRACKERS}
         ankles = {side: pos[0, skeleton.index(f"{side}_ankle")] for side in ("left", "right")}
@@ -132,7 +132,7 @@ class Converter:
         r_root, r_torso = self._spine(frames, ch)
         for side in ("left", "right"):
             self._arm(side, frames[f"{side}_wrist"], r_torso, frames["hips"][:, :3, 3], r_root, ch)
-            self._leg(side, cal.ankles[side], frames["hips"][:, :3, 3], r_root, ch)
+            self.solve_leg(side, cal.ankles[side], frames["hips"][:, :3, 3], r_root, ch)
             self._hand(side, log.gloves[f"{side}_glove"], ch)
         rot = self.sk.rotation_mask
         ch[:, rot] = soft_clip(ch[:, rot], self.limits[rot, 0], self.limits[rot, 1], ANGLE_MARGIN_DEG)
@@ -152,14 +152,14 @@ class Converter:
         neck_top = head_base                     # first as the thesis: a straight root-to-head chain
         length = self.spine
         for _ in range(SPINE_PASSES):
-            v = _apply(_t(_ry(yaw)), neck_top - p_root)                                  # (4-11)
+            v = _apply(_t(rot_y(yaw)), neck_top - p_root)                                  # (4-11)
             roll = np.arcsin(soft_clip(-v[:, 0] / length, -1.0, 1.0, ACOS_MARGIN))       # (4-12)
             pitch = np.arctan2(v[:, 2], v[:, 1])
-            r_root = _ry(yaw) @ _rx(pitch / 2) @ _rz(roll / 2)                           # (4-15)
-            r_torso = r_root @ _rx(pitch / 2) @ _rz(roll / 2)
+            r_root = rot_y(yaw) @ rot_x(pitch / 2) @ rot_z(roll / 2)                           # (4-15)
+            r_torso = r_root @ rot_x(pitch / 2) @ rot_z(roll / 2)
             residual = _t(r_torso) @ r_head                                              # (4-13)
             hy, hx, hz = np.radians(rotations.matrix_to_euler(residual, "YXZ")).T        # (4-14)
-            r_neck = r_torso @ _rx(hx / 2) @ _rz(hz / 2)
+            r_neck = r_torso @ rot_x(hx / 2) @ rot_z(hz / 2)
             # then again with the neck as it now leans: the chain ends where the neck does
             neck_top = head_base - _apply(r_neck, self.off["head"])
             length = self.spine - float(self.off["head"][1])
@@ -184,22 +184,23 @@ class Converter:
         rho = np.hypot(e_loc[:, 0], e_loc[:, 2])
         a2 = -np.arctan2(rho, -e_loc[:, 1])                                              # (4-22), (4-23)
         a1 = np.arctan2(e_loc[:, 2], -e_loc[:, 0])
-        r = _apply(_t(_rz(a2)) @ _t(_ry(a1)), w_loc)                                     # (4-24)
+        r = _apply(_t(rot_z(a2)) @ _t(rot_y(a1)), w_loc)                                     # (4-24)
         sign = np.where(-lo * np.sin(elbow) >= 0, 1.0, -1.0)
         a3 = np.arctan2(sign * r[:, 0], sign * r[:, 2])                                  # (4-25)
-        r_sh = _ry(a1) @ _rz(a2) @ _ry(a3)
+        r_sh = rot_y(a1) @ rot_z(a2) @ rot_y(a3)
         if self.wrist_correction:                                                        # (4-29)-(4-32)
-            reach = _apply(r_sh, (0.0, -u, 0.0)) + _apply(r_sh @ _rx(elbow), (0.0, -lo, 0.0))
+            reach = _apply(r_sh, (0.0, -u, 0.0)) + _apply(r_sh @ rot_x(elbow), (0.0, -lo, 0.0))
             r_sh = _rotation_between(reach, w_loc) @ r_sh
             a1, a2, a3 = _shoulder_angles(r_sh)
-        m = _t(r_torso @ r_sh @ _rx(elbow)) @ r_fore                                      # (4-26), (4-27)
+        m = _t(r_torso @ r_sh @ rot_x(elbow)) @ r_fore                                      # (4-26), (4-27)
         twist = np.arctan2(m[:, 0, 2], m[:, 0, 0])                                       # (4-28)
         first = self.sk.channel_offsets[self.sk.index(f"{side}_shoulder")]             # Y, Z, Y: by position
         ch[:, first:first + 3] = np.degrees(np.stack([a1, a2, a3], 1))
         self._set(ch, f"{side}_elbow", {"X": elbow, "Y": twist})
 
     # ----- legs (4-33 to 4-37) ---------------------------------------------------------------------
-    def _leg(self, side, ankle, p_root, r_root, ch):
+    def solve_leg(self, side, ankle, p_root, r_root, ch):
+        """The leg of ``side`` reaching the fixed ``ankle`` position with the foot flat (into ``ch``)."""
         u = -float(self.off[f"{side}_knee"][1])
         lo = -float(self.off[f"{side}_ankle"][1])
         hip = p_root + _apply(r_root, self.off[f"{side}_hip"])
@@ -209,7 +210,7 @@ class Converter:
         y0, z0 = -u - lo * np.cos(knee), -lo * np.sin(knee)
         roll = np.arcsin(soft_clip(-h[:, 0] / y0, -1.0, 1.0, ACOS_MARGIN))               # (4-36)
         pitch = _wrap(np.arctan2(h[:, 2], h[:, 1]) - np.arctan2(z0, y0 * np.cos(roll)))  # (4-34), (4-35)
-        r_leg = r_root @ _rx(pitch) @ _rz(roll) @ _rx(knee)
+        r_leg = r_root @ rot_x(pitch) @ rot_z(roll) @ rot_x(knee)
         ax, ay, az = np.radians(rotations.matrix_to_euler(_t(r_leg), "XYZ")).T           # foot flat, (4-37)
         self._set(ch, f"{side}_hip", {"X": pitch, "Z": roll})
         self._set(ch, f"{side}_knee", {"X": knee})

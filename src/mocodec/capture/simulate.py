@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from mocodec import rotations
-from mocodec.capture.converter import MOUNTS, _pose, glove_channels
+from mocodec.capture.converter import MOUNTS, Converter, glove_channels, pose, rot_x, rot_y, rot_z
 from mocodec.capture.sensors import FINGERS, TRACKERS, SensorLog
 from mocodec.errors import MocodecError
 from mocodec.human import human_model
@@ -28,7 +28,7 @@ GLOVE_NOISE = 0.016            # sigma of a normalised glove value (1.1 deg of 7
 SOURCES = (
     {"hips": ("lThigh", "rThigh"), "neck": "neck", "head": "head", "left": ("lForeArm", "lHand"),
      "right": ("rForeArm", "rHand")},
-    {"hips": ("lhipjoint", "rhipjoint"), "neck": "lowerneck", "head": "head", "left": ("lradius", "lwrist"),
+    {"hips": ("lfemur", "rfemur"), "neck": "lowerneck", "head": "head", "left": ("lradius", "lwrist"),
      "right": ("rradius", "rwrist")},
 )
 
@@ -47,7 +47,7 @@ def model_frames(motion: Motion) -> dict[str, np.ndarray]:
     sk = motion.skeleton
     pos, quat = forward_kinematics(sk, motion.channels)
     rot = rotations.quat_to_matrix(quat)
-    return {t: _pose(rot[:, sk.index(seg)], pos[:, sk.index(at)]) for t, (seg, at) in MOUNTS.items()}
+    return {t: pose(rot[:, sk.index(seg)], pos[:, sk.index(at)]) for t, (seg, at) in MOUNTS.items()}
 
 
 def _frame(y: np.ndarray, x_hint: np.ndarray) -> np.ndarray:
@@ -81,13 +81,13 @@ def retargeted_frames(motion: Motion) -> dict[str, np.ndarray]:
 
     across = lhip - rhip                                   # toward the figure's left: +X of the model
     up = np.tile([0.0, 1.0, 0.0], (len(root), 1))
-    frames = {"hips": _pose(_frame(up, across), place(root))}
+    frames = {"hips": pose(_frame(up, across), place(root))}
     head_dir = at[names["head"]] - at[names["neck"]]
     head_top = place(at[names["head"]]) + 0.1 * head_dir / np.linalg.norm(head_dir, axis=1, keepdims=True)
-    frames["head"] = _pose(_frame(head_dir, across), head_top)
+    frames["head"] = pose(_frame(head_dir, across), head_top)
     for side in ("left", "right"):
         elbow, wrist = (at[n] for n in names[side])
-        frames[f"{side}_wrist"] = _pose(_frame(elbow - wrist, across), place(wrist))
+        frames[f"{side}_wrist"] = pose(_frame(elbow - wrist, across), place(wrist))
     return frames
 
 
@@ -103,10 +103,10 @@ def simulate(motion: Motion, noise_deg: float = 0.5, noise_cm: float = 0.3, seed
     model = human_model()
     on_model = sk.isclose(model)
     frames = model_frames(motion) if on_model else retargeted_frames(motion)
-    transmitter = _pose(_random_rotation(rng, 30.0), rng.uniform(-1.0, 1.0, 3))   # sensor world in model world
+    transmitter = pose(_random_rotation(rng, 30.0), rng.uniform(-1.0, 1.0, 3))   # sensor world in model world
     # strapped on askew, but for the hip tracker: its reading also fixes the transmitter's frame
     # in calibration, and the two cannot both be told from it (003 §4.3.3)
-    mounts = {t: np.eye(4) if t == "hips" else _pose(_random_rotation(rng, 5.0), rng.normal(0.0, 0.01, 3))
+    mounts = {t: np.eye(4) if t == "hips" else pose(_random_rotation(rng, 5.0), rng.normal(0.0, 0.01, 3))
               for t in TRACKERS}
     rest = model_frames(Motion(model, motion.fps, np.zeros((1, model.num_channels))))
     to_sensor = np.linalg.inv(transmitter)
@@ -133,3 +133,50 @@ def _glove(motion: Motion, side: str) -> np.ndarray:
         lim = sk.limits[idx]
         out.append(((motion.channels[:, idx] - lim[:, 0]) / (lim[:, 1] - lim[:, 0])).mean(axis=1))
     return np.clip(np.stack(out, axis=1), 0.0, 1.0)
+
+
+def random_poses(frames: int, seed: int = 0) -> Motion:
+    """Poses of the human model within its limits and within what the minimal configuration
+    can tell (for round-trip tests): the spine bent evenly between root and torso and the
+    head's pitch and roll shared with the neck (4-15), wrists and hip twist at zero, the feet
+    where they stand at calibration (the hips turn at most 25 degrees), fingers bent as a glove
+    reports them (each finger's joints at one fraction of their ranges)."""
+    rng = np.random.default_rng(seed)
+    sk = human_model()
+    ch = np.zeros((frames, sk.num_channels))
+    at = {name: k for k, name in enumerate(sk.channel_names)}
+
+    def put(name, values):
+        ch[:, at[name]] = values
+
+    yaw, pitch, roll = rng.uniform(-25, 25, frames), rng.uniform(-30, 30, frames), rng.uniform(-20, 20, frames)
+    for joint in ("root", "torso"):
+        put(f"{joint}.Xrotation", pitch / 2)
+        put(f"{joint}.Zrotation", roll / 2)
+    put("root.Yrotation", yaw)
+    put("root.Yposition", -rng.uniform(0.0, 0.15, frames))               # a slight crouch
+    hx, hz = rng.uniform(-40, 40, frames), rng.uniform(-20, 20, frames)
+    for joint in ("neck", "head"):
+        put(f"{joint}.Xrotation", hx / 2)
+        put(f"{joint}.Zrotation", hz / 2)
+    put("head.Yrotation", rng.uniform(-60, 60, frames))
+    for side in ("left", "right"):
+        first = sk.channel_offsets[sk.index(f"{side}_shoulder")]
+        ch[:, first:first + 3] = np.stack([rng.uniform(-180, 180, frames), rng.uniform(-120, -10, frames),
+                                           rng.uniform(-90, 90, frames)], 1)
+        put(f"{side}_elbow.Xrotation", rng.uniform(-140, -20, frames))
+        put(f"{side}_elbow.Yrotation", rng.uniform(-60, 60, frames))
+        for finger in FINGERS:
+            s = rng.uniform(0, 1, frames)
+            for name in glove_channels(side, finger):
+                low, high = sk.limits[at[name]]
+                put(name, low + s * (high - low))
+    rest = forward_kinematics(sk, np.zeros((1, sk.num_channels)))[0][0]
+    r_root = rot_y(np.radians(yaw)) @ rot_x(np.radians(pitch / 2)) @ rot_z(np.radians(roll / 2))
+    p_root = rest[sk.index("root")] + ch[:, 3:6]
+    legs = Converter(sk)
+    for side in ("left", "right"):
+        legs.solve_leg(side, rest[sk.index(f"{side}_ankle")], p_root, r_root, ch)
+    rot = sk.rotation_mask
+    ch[:, rot] = np.clip(ch[:, rot], sk.limits[rot, 0], sk.limits[rot, 1])
+    return Motion(sk, 120.0, ch)

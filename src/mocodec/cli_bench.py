@@ -8,7 +8,7 @@ import sys
 
 from mocodec.bench import points, suite
 from mocodec.bench.compressdir import compress_dir
-from mocodec.cli_coding import TARGET_OPTIONS, add_codec_options
+from mocodec.cli_coding import add_codec_options, target_of
 from mocodec.codecs import codec_class
 
 
@@ -42,8 +42,7 @@ def cmd_bench(args) -> int:
 
 
 def cmd_compress_dir(args) -> int:
-    goal = next(((dest, getattr(args, dest)) for _, dest, _ in TARGET_OPTIONS if getattr(args, dest) is not None), None)
-    out = compress_dir(args.input, args.output, args.codec, args.knobs, goal, args.jobs, args.scheduler, args.dask,
+    out = compress_dir(args.input, args.output, args.codec, args.knobs, target_of(args), args.jobs, args.scheduler, args.dask,
                        progress=_bar(args))
     raw = sum(r["raw_bytes"] for r in out.written)
     coded = sum(r["bytes"] for r in out.written)

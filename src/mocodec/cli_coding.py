@@ -28,8 +28,8 @@ TARGET_OPTIONS = (("ratio", "ratio", "compression ratio vs 32-bit floats, e.g. 5
                   ("max-error-cm", "max_error_cm", "max joint position error bound in cm (guaranteed)"))
 
 
-def add_codec_options(p) -> None:
-    p.add_argument("--codec", default=DEFAULT_CODEC, help=f"codec id (default {DEFAULT_CODEC}; see `mocodec codecs`)")
+def add_codec_options(p, default: str = DEFAULT_CODEC) -> None:
+    p.add_argument("--codec", default=default, help=f"codec id (default {default}; see `mocodec codecs`)")
     group = p.add_mutually_exclusive_group()
     for flag, dest, text in TARGET_OPTIONS:
         group.add_argument(f"--{flag}", dest=dest, type=float, help=text)
@@ -50,16 +50,21 @@ def knobs_from(extra: list[str]) -> dict[str, str]:
     return knobs
 
 
+def target_of(args) -> tuple[str, float] | None:
+    """The rate-control target given on the command line, as (name, value), or None."""
+    return next(((dest, getattr(args, dest)) for _, dest, _ in TARGET_OPTIONS if getattr(args, dest) is not None),
+                None)
+
+
 def configured(args, motion: Motion):
     """The codec of the command line, tuned by rate control if a target was given:
     (codec, measurement or None)."""
     codec = get_codec(args.codec, **args.knobs)
-    for _, dest, _ in TARGET_OPTIONS:
-        value = getattr(args, dest)
-        if value is not None:
-            m = ratecontrol.tune(codec, motion, dest, value)
-            return m.codec, m
-    return codec, None
+    target = target_of(args)
+    if target is None:
+        return codec, None
+    m = ratecontrol.tune(codec, motion, *target)
+    return m.codec, m
 
 
 def _progress(k: int, n: int, text: str) -> None:

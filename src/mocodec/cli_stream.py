@@ -7,7 +7,7 @@ import asyncio
 import logging
 from pathlib import Path
 
-from mocodec.cli_coding import TARGET_OPTIONS, configured
+from mocodec.cli_coding import add_codec_options, configured
 from mocodec.errors import MocodecError
 from mocodec.formats import load, save
 from mocodec.stream import client, tokens
@@ -110,10 +110,7 @@ def add_commands(sub) -> None:
     p.add_argument("--speed", type=float, default=1.0)
     p.add_argument("--stream", type=int, default=0, help="stream id in the room (default 0)")
     p.add_argument("--keyframe-s", type=float, default=1.0, help="seconds between keyframes (default 1)")
-    p.add_argument("--codec", default=PUBLISH_CODEC, help=f"a streaming codec (default {PUBLISH_CODEC})")
-    group = p.add_mutually_exclusive_group()
-    for flag, dest, text in TARGET_OPTIONS:
-        group.add_argument(f"--{flag}", dest=dest, type=float, help=text)
+    add_codec_options(p, PUBLISH_CODEC)
     p.add_argument("--asf", help="ASF skeleton of an .amc input (default: <subject>.asf beside it)")
     p.add_argument("--fps", type=float, help="frame rate of an .amc input (default 120)")
     p.set_defaults(func=cmd_publish, takes_knobs=True)

@@ -8,7 +8,7 @@ import json
 from pathlib import Path
 from urllib.parse import urlencode
 
-from mocodec.cli_coding import TARGET_OPTIONS, add_codec_options
+from mocodec.cli_coding import add_codec_options, target_of
 from mocodec.errors import MocodecError
 from mocodec.viewer import study
 from mocodec.viewer.server import make_app, serve
@@ -22,9 +22,7 @@ def cmd_view(args) -> int:
     session = None
     if args.file is not None:
         session = ViewSession(load_reference(args.file, args.asf), Path(args.file).name)
-        target = next(((dest, getattr(args, dest)) for _, dest, _ in TARGET_OPTIONS
-                       if getattr(args, dest) is not None), None)
-        session.code(args.codec, args.knobs, target)
+        session.code(args.codec, args.knobs, target_of(args))
     page = f"?{urlencode({'room': args.room, 'token': args.token or ''})}" if args.room else ""
     serve(make_app(session, args.relay), args.host, args.port, not args.no_browser, page)
     return 0
@@ -60,8 +58,8 @@ def add_commands(sub) -> None:
                                    "version in sync, colours each decoded joint by its error, charts the error over "
                                    "time and shows ratio, bit rate, joint errors, PSNR and VPSNR; codec and knobs "
                                    "can be changed in the page. Opens .bvh, .amc and .moc (a .moc file's motion is "
-                                   "the reference). With --relay, the page also watches a relay room live (every avatar and the bit "
-                                   "rate it gets). Codec knobs as --name value.")
+                                   "the reference). With --relay, the page also watches a relay room live (every "
+                                   "avatar and the bit rate it gets). Codec knobs as --name value.")
     p.add_argument("file", metavar="FILE", nargs="?", help=".bvh, .amc or .moc (optional with --relay)")
     add_codec_options(p)
     p.add_argument("--port", type=int, default=8770, help="port (default 8770; 0: any free port)")

@@ -24,7 +24,7 @@ from mocodec.formats import load
 from mocodec.metrics import compare
 from mocodec.motion import Motion
 
-def _f32(values: np.ndarray) -> str:
+def base64_f32(values: np.ndarray) -> str:
     """An array as base64 little-endian float32 (compact for the page, decoded with atob)."""
     return base64.b64encode(np.ascontiguousarray(values, dtype="<f4").tobytes()).decode()
 
@@ -42,6 +42,7 @@ class Coded:
     codec: object
     decoded: Motion
     numbers: dict
+    positions: np.ndarray                  # the decoded motion's joint positions, metres
 
 
 class ViewSession:
@@ -65,17 +66,19 @@ class ViewSession:
                    "bits_per_second": len(trip.data) * 8 / m.duration, "psnr_db": s["psnr_db"],
                    "vpsnr_db": s["vpsnr_db"], "mean_joint_error_cm": s["mean_joint_error_cm"],
                    "max_joint_error_cm": s["max_joint_error_cm"]}
-        self.coded = Coded(codec, trip.decoded, {k: _finite(v) for k, v in numbers.items()})
+        self.coded = Coded(codec, trip.decoded, {k: _finite(v) for k, v in numbers.items()},
+                           trip.decoded.positions_m())
         return self.coded
 
     def state(self) -> dict:
         sk, m = self.motion.skeleton, self.motion
         out = {"name": self.name, "fps": m.fps, "frames": m.num_frames, "joints": list(sk.names),
-               "parents": [int(p) for p in sk.parents], "original": _f32(self.positions), "decoded": None,
+               "parents": [int(p) for p in sk.parents], "original": base64_f32(self.positions), "decoded": None,
                "error_cm": None, "numbers": None, "config": None}
         if self.coded is not None:
-            decoded = self.coded.decoded.positions_m()
-            out.update(decoded=_f32(decoded), error_cm=_f32(np.linalg.norm(decoded - self.positions, axis=2) * 100),
+            decoded = self.coded.positions
+            error_cm = np.linalg.norm(decoded - self.positions, axis=2) * 100
+            out.update(decoded=base64_f32(decoded), error_cm=base64_f32(error_cm),
                        numbers=self.coded.numbers, config=self.coded.codec.get_config())
         return out
 

@@ -17,7 +17,6 @@ the thresholds, each with a 95% confidence interval over participants.
 
 from __future__ import annotations
 
-import base64
 import datetime
 import json
 import math
@@ -32,6 +31,7 @@ from mocodec.errors import FormatError, MocodecError
 from mocodec.formats import load
 from mocodec.formats._io import atomic_write
 from mocodec.motion import Motion
+from mocodec.viewer.session import base64_f32
 
 KINDS = ("dscqs", "2afc")
 SCORES = {1: "Bad", 2: "Poor", 3: "Fair", 4: "Good", 5: "Excellent"}
@@ -88,7 +88,7 @@ def load_config(path: str | Path) -> StudyConfig:
 
 
 def _positions(motion: Motion) -> str:
-    return base64.b64encode(np.ascontiguousarray(motion.positions_m(), dtype="<f4").tobytes()).decode()
+    return base64_f32(motion.positions_m())
 
 
 

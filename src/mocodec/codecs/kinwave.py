@@ -104,6 +104,15 @@ def _group_step(g: _Group, codes: np.ndarray, skeleton: Skeleton) -> float:
     return _step(codes[-1]) * skeleton.units_per_metre / 100.0
 
 
+@lru_cache(maxsize=64)
+def _depths(skeleton: Skeleton) -> tuple[tuple[int, ...], ...]:
+    """Joints by their depth in the tree, the root's first."""
+    depth = [0] * len(skeleton)
+    for j, p in enumerate(skeleton.parents):
+        depth[j] = depth[p] + 1 if p >= 0 else 0        # parents come before their children
+    return tuple(tuple(j for j in range(len(skeleton)) if depth[j] == d) for d in range(max(depth, default=-1) + 1))
+
+
 def _rotation_joints(skeleton: Skeleton) -> list[int]:
     return [g.joint for g in _groups(skeleton) if g.rotation]
 
@@ -281,6 +290,10 @@ class _Encoder:
         return np.array([_code(s) for s in steps], dtype=np.uint8)
 
     def run_pass(self, codes: np.ndarray) -> _Pass:
+        """Quantise and reconstruct every group, the joints of one tree depth at a time: a
+        joint's closed-loop target needs its parent's decoded orientation, and the joints of one
+        depth go through the transforms together (rows are independent, so each row's floats
+        are those of coding it alone)."""
         sk, lay, values = self.skeleton, self.lay, self.values
         C = sk.num_channels
         knots = np.zeros((C, lay.num_knots), dtype=np.int64)
@@ -288,41 +301,46 @@ class _Encoder:
         decoded = np.empty((C, self.frames))
         glob = np.empty((len(sk), self.frames, 4))
         identity = np.tile([1.0, 0.0, 0.0, 0.0], (self.frames, 1))
-        children = sk.children
-        theta = self.cfg["deadzone"]
-        for j, joint_groups in enumerate(_joint_groups(sk)):
-            p = sk.parents[j]
-            parent = glob[p] if p >= 0 else identity
-            glob[j] = parent
-            for g in joint_groups:
-                step = _group_step(g, codes, sk)
-                if g.rotation:
-                    target = values[g.channels].T
-                    active = ~self.const[g.channels]
-                    if self.cfg["closed_loop"] and p >= 0 and active.any():
-                        target = closedloop.target_angles(target, g.axes, active, self.plan.axis_quat[j],
-                                                          self.plan.has_axis[j], parent, self.quats[:, j])
-                    target = target.T
-                else:
+        for depth in _depths(sk):
+            rows, targets, steps = [], [], []
+            for j in depth:
+                p = sk.parents[j]
+                parent = glob[p] if p >= 0 else identity
+                glob[j] = parent
+                for g in _joint_groups(sk)[j]:
                     target = values[g.channels]
-                k_int, c_int = self._quantise(target, self.const[g.channels], step, theta)
-                knots[g.channels], coeffs[g.channels] = k_int, c_int
-                decoded[g.channels] = _reconstruct(k_int, c_int, self.const[g.channels],
-                                                   np.full((g.channels.size, 1), step), lay)
-                if g.rotation and children[j]:
-                    glob[j] = closedloop.compose(decoded[g.channels].T, g.axes, self.plan.axis_quat[j],
-                                                 self.plan.has_axis[j], parent)
+                    active = ~self.const[g.channels]
+                    if g.rotation and self.cfg["closed_loop"] and p >= 0 and active.any():
+                        target = closedloop.target_angles(target.T, g.axes, active, self.plan.axis_quat[j],
+                                                          self.plan.has_axis[j], parent, self.quats[:, j]).T
+                    rows.append(g.channels)
+                    targets.append(target)
+                    steps.append(np.full(g.channels.size, _group_step(g, codes, sk)))
+            if not rows:
+                continue
+            channels = np.concatenate(rows)
+            step = np.concatenate(steps)[:, None]
+            const = self.const[channels]
+            k_int, c_int = self._quantise(np.vstack(targets), const, step)
+            knots[channels], coeffs[channels] = k_int, c_int
+            decoded[channels] = _reconstruct(k_int, c_int, const, step, lay)
+            for j in depth:
+                for g in _joint_groups(sk)[j]:
+                    if g.rotation and sk.children[j]:
+                        glob[j] = closedloop.compose(decoded[g.channels].T, g.axes, self.plan.axis_quat[j],
+                                                     self.plan.has_axis[j], glob[j])
         return _Pass(codes, self.const.astype(np.int64), knots, coeffs, decoded)
 
-    def _quantise(self, target: np.ndarray, const: np.ndarray, step: float, theta: float):
+    def _quantise(self, target: np.ndarray, const: np.ndarray, step: np.ndarray):
+        """Knots and dead-zone quantised coefficients of ``target (k, T)`` with steps ``(k, 1)``."""
         lay = self.lay
         quantum = step * lay.knot_quantum
         k_int = np.round(target[:, lay.knot_frames] / quantum).astype(np.int64)
-        k_int[const] = np.round(target[const, :1] / step).astype(np.int64)
+        k_int[const] = np.round(target[const, :1] / step[const]).astype(np.int64)
         residual = target - trendwave.trend(k_int * quantum, lay)
         residual[const] = 0.0
         c = trendwave.analyse(residual, lay) / step
-        c_int = (np.sign(c) * np.floor(np.abs(c) + theta)).astype(np.int64)
+        c_int = (np.sign(c) * np.floor(np.abs(c) + self.cfg["deadzone"])).astype(np.int64)
         c_int[const] = 0
         return k_int, c_int
 

@@ -37,12 +37,13 @@ def natural_steps(x: np.ndarray, seams) -> np.ndarray:
     probes = np.asarray(seams)[:, None] + np.array(_PROBES)[None, :]
     fits = (probes >= 3) & (probes <= len(x) - 3)
     sizes = np.abs(seam_steps(x, np.where(fits, probes, 3).ravel())).reshape(*probes.shape, -1)
-    sizes[~fits] = np.nan
-    out = np.zeros(sizes[:, 0].shape)
-    some = fits.any(axis=1)
-    if some.any():
-        out[some] = np.nanmedian(sizes[some], axis=1)
-    return out
+    sizes[~fits] = np.inf                                   # sorted after every probe that fits
+    sizes.sort(axis=1)
+    count = fits.sum(axis=1)
+    rows = np.arange(len(count))
+    low = sizes[rows, np.maximum(count - 1, 0) // 2]              # the middle one, or the two middle ones
+    high = sizes[rows, np.minimum(count // 2, sizes.shape[1] - 1)]
+    return np.where((count > 0)[:, None], (low + high) / 2, 0.0)
 
 
 def smooth_seams(x: np.ndarray, seams, half_width: int, limits: np.ndarray | None = None) -> np.ndarray:

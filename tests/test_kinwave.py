@@ -10,7 +10,7 @@ import pytest
 from mocodec import moc, ratecontrol
 from mocodec.codecs import get_codec
 from mocodec.codecs.kinwave import _Encoder
-from mocodec.errors import CodecError
+from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.kinematics import forward_kinematics
 from mocodec.metrics.pose import shell_errors
 
@@ -153,3 +153,25 @@ def test_segment_seams_are_smoothed(martial_amc, walk_bvh):
     for motion, most in ((martial_amc, 25.0), (walk_bvh, 8.0)):
         codec = get_codec("kinwave", max_error_cm=1.0, error_measure="mean")
         assert _seam_jerk_ratio(motion, codec.decode(codec.encode(motion), motion.skeleton)) < most
+
+
+def test_time_adaptive_steps_shrink_max_error_files(walk_amc, walk_bvh):
+    """Each segment gets its own step offset under a max-error bound: quieter stretches take
+    coarser steps, the bound still holds, and the file is smaller than with one scale."""
+    for motion, measure in ((walk_amc, "joint"), (walk_bvh, "shell")):
+        codec = get_codec("kinwave", max_error_cm=0.5, error_measure=measure)
+        payload = codec.encode(motion)
+        single = _Encoder(codec, motion)._to_bound(0.5)
+        assert codec.decode(payload, motion.skeleton).num_frames == motion.num_frames
+        assert len(payload) < len(codec.wrap(single, motion.num_frames, motion.fps)) * 0.95
+        assert _errors(motion, codec.decode(payload, motion.skeleton))[measure] <= 0.5
+
+
+def test_segment_offsets_keep_the_encoder_bit_exact(walk_bvh):
+    enc = _Encoder(get_codec("kinwave", max_error_cm=0.3), walk_bvh)
+    offsets = np.arange(enc.lay.starts.size) * 3 - 4
+    ps = enc.run_pass(enc.codes(0.4), offsets)
+    body = enc.body(ps)
+    assert np.array_equal(enc._decode_body(body), ps.decoded)
+    with pytest.raises(CorruptStreamError, match="segment offsets"):
+        enc._decode_body(body[:6 + len(ps.steps) + 1])

@@ -95,8 +95,8 @@ def test_closed_loop_targets_restore_the_global_orientation(walk_bvh, walk_amc):
             before = np.degrees(rotations.quat_distance(
                 closedloop.compose(motion.channels[:, idx], axes, plan.axis_quat[j], plan.has_axis[j], wrong),
                 quat[:, j]))
-            if k == 3:
-                assert err.max() < 1e-4, sk.names[j]          # arccos resolution
+            if k == 3:     # one Gauss-Newton step: what is left is second order in the 2 degrees
+                assert err.max() < 0.05 and (err < before / 40).all(), sk.names[j]
             else:      # fewer DOFs: the best reachable rotation, never worse than doing nothing
                 assert (err <= before + 1e-9).all(), sk.names[j]
 

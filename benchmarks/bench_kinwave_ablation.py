@@ -23,12 +23,13 @@ VARIANTS = {
     "plain rounding (deadzone=0.5)": {"deadzone": 0.5},
     "stronger dead zone (deadzone=0.3)": {"deadzone": 0.3},
     "T-pose keyframe apart (keyframes=True)": {"keyframes": True},
-    "window 256": {"window": 256},
-    "window 64": {"window": 64},
+    "one scale for all segments (segment_steps=False)": {"segment_steps": False},
+    "window 128": {"window": 128},
+    "window 512": {"window": 512},
     "4 levels": {"levels": 4},
     "6 levels": {"levels": 6},
 }
-BOUNDS = (("mean", 0.5), ("shell", 0.1))
+BOUNDS = (("mean", 0.5), ("joint", 0.5), ("shell", 0.1))
 
 
 def main() -> None:

@@ -41,7 +41,8 @@ def main() -> None:
         settings = [(f"spiht {bps // 1000} kbit/s{' smooth' if smooth else ''}",
                      get_codec("spiht", bits_per_second=bps, smooth_seams=smooth))
                     for bps in (4000, 15000) for smooth in (False, True)]
-        settings += [(f"kinwave mean {bound} cm", get_codec("kinwave", max_error_cm=bound, error_measure="mean"))
+        settings += [(f"kinwave mean {bound} cm", get_codec("kinwave", max_error_cm=bound, error_measure="mean",
+                                                                     window=128))
                      for bound in (0.5, 1.0)]
         for label, codec in settings:
             decoded = codec.decode(codec.encode(motion), motion.skeleton)

@@ -151,7 +151,7 @@ def test_segment_seams_are_smoothed(martial_amc, walk_bvh):
     """Unsmoothed, the steps where segments meet made the jerk there 165x (135_08) and 20x
     (07_03) what it is elsewhere at this bound; smoothed, 12x and 4x."""
     for motion, most in ((martial_amc, 25.0), (walk_bvh, 8.0)):
-        codec = get_codec("kinwave", max_error_cm=1.0, error_measure="mean")
+        codec = get_codec("kinwave", max_error_cm=1.0, error_measure="mean", window=128)
         assert _seam_jerk_ratio(motion, codec.decode(codec.encode(motion), motion.skeleton)) < most
 
 
@@ -159,7 +159,7 @@ def test_time_adaptive_steps_shrink_max_error_files(walk_amc, walk_bvh):
     """Each segment gets its own step offset under a max-error bound: quieter stretches take
     coarser steps, the bound still holds, and the file is smaller than with one scale."""
     for motion, measure in ((walk_amc, "shell"), (walk_bvh, "joint")):      # 17% and 7% smaller
-        codec = get_codec("kinwave", max_error_cm=0.5, error_measure=measure)
+        codec = get_codec("kinwave", max_error_cm=0.5, error_measure=measure, window=128)     # 4 segments
         payload = codec.encode(motion)
         single = _Encoder(codec, motion)._to_bound(0.5)
         assert codec.decode(payload, motion.skeleton).num_frames == motion.num_frames

@@ -178,13 +178,16 @@ class KinwaveCodec(Codec):
         Knob("error_measure", str, "joint", "what the bound limits: shell = points 3 cm off every bone (worst), "
              "joint = max joint position error, mean = mean joint position error", choices=kinalloc.MODES),
         Knob("bits_per_second", float, 0.0, "code to this bit rate instead of an error bound (0: off)", 0.0, 1e9),
-        Knob("window", int, 128, "segment length in frames (a power of two): the streaming delay", 8, 4096),
+        Knob("window", int, 256, "segment length in frames (a power of two): the streaming delay (128 halves it, "
+             "for 2-6% more bytes at a mean-error bound)", 8, 4096),
         Knob("levels", int, 5, "wavelet levels per segment", 1, 10),
         Knob("wavelet", str, "cdf97", "segment transform", choices=WAVELET_IDS),
         Knob("deadzone", float, 0.4, "rounding offset of the dead-zone quantiser (0.5: plain rounding)", 0.0, 0.5),
         Knob("closed_loop", bool, True, "code each joint against its parent's decoded orientation"),
         Knob("allocation", str, "convex", "per-joint steps: convex program, or one step for every angle",
              choices=("convex", "uniform")),
+        Knob("segment_steps", bool, True, "under a max-error bound, give each segment its own step offset (time-"
+             "adaptive steps, from 4 segments on): quiet stretches get coarser steps"),
         Knob("keyframes", bool, False, "code a frame 0 that jumps away from frame 1 on its own (the knot at "
              "frame 0 already keeps such a T-pose out of the transform: off by default, see docs/kinwave.md)"),
     )
@@ -399,7 +402,8 @@ class _Encoder:
             return self.body(self.run_pass(self.codes(1.0)))
         if self.cfg["bits_per_second"] > 0:
             return self._to_rate(self.cfg["bits_per_second"] * self.frames / self.motion.fps / 8.0)
-        if self.cfg["error_measure"] != "mean" and self.lay.starts.size >= ADAPTIVE_SEGMENTS:
+        if (self.cfg["segment_steps"] and self.cfg["error_measure"] != "mean"
+                and self.lay.starts.size >= ADAPTIVE_SEGMENTS):
             return self._to_bound_by_segment(self.cfg["max_error_cm"])
         return self._to_bound(self.cfg["max_error_cm"])
 

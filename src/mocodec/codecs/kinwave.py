@@ -23,10 +23,15 @@ Per payload of T frames:
    space on the *decoded* output (the encoder reconstructs through the decoder's own
    functions), so the bound holds on what the decoder will produce, verified on the final bytes;
    with ``bits_per_second`` the same search aims at the payload's byte budget within 2%.
+5. Under a max-error bound, a payload of 4 segments or more gets time-adaptive steps: each
+   segment a step offset of its own (1/8 octave), searched on its own worst error, so quiet
+   stretches are not coded as finely as the busiest one needs.
 
-Payload body: u8 version, u8 flags (bit 0 keyframe, bits 1-2 wavelet), u8 log2 window, u8
-levels, u16 channels (a payload for another skeleton is refused), one u8 step code per joint with rotation channels and one for translations (step =
-2^(code/8 - 20) degrees or cm), then the arithmetic-coded stream.
+Payload body: u8 version, u8 flags (bit 0 keyframe, bits 1-2 wavelet, bit 3 segment offsets),
+u8 log2 window, u8 levels, u16 channels (a payload for another skeleton is refused), one u8
+step code per joint with rotation channels and one for translations (step = 2^(code/8 - 20)
+degrees or cm), with flag bit 3 one i8 step offset per segment, then the arithmetic-coded
+stream.
 """
 
 from __future__ import annotations

@@ -23,6 +23,7 @@ VARIANTS = {
     "plain rounding (deadzone=0.5)": {"deadzone": 0.5},
     "stronger dead zone (deadzone=0.3)": {"deadzone": 0.3},
     "T-pose keyframe apart (keyframes=True)": {"keyframes": True},
+    "model steps only (joint_feedback=False)": {"joint_feedback": False},
     "one scale for all segments (segment_steps=False)": {"segment_steps": False},
     "window 128": {"window": 128},
     "window 512": {"window": 512},

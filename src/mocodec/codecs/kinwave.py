@@ -48,7 +48,7 @@ from mocodec.codecs.registry import register
 from mocodec.coding import closedloop, coefcoder, kinalloc, seams, trendwave
 from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.kinematics import _plan, forward_kinematics
-from mocodec.metrics.pose import shell_errors
+from mocodec.metrics.pose import bone_joints, shell_errors
 from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
@@ -58,6 +58,7 @@ FLAG_OFFSETS = 8                # flags bit 3: a signed step offset per segment 
 WAVELET_IDS = ("cdf97", "d4", "haar")
 CONSTANT = 1e-6                 # a channel whose range is below this is one knot
 MAX_PASSES = 8                  # secant passes before falling back to halving
+JOINT_FEEDBACK = 1.0            # share of a joint's measured slack (in octaves) its steps take on
 ACCEPT = 0.9                    # a max-error bound is met well enough at 90-100% of it
 MEAN_ACCEPT = 0.97              # a mean-error bound (smooth in the scale: 1.9% fewer bytes than at 0.9 for
                                 # 1.3 more passes)
@@ -114,6 +115,27 @@ def _group_step(g: _Group, codes: np.ndarray, skeleton: Skeleton) -> float:
     if g.rotation:
         return _step(codes[_rotation_joints(skeleton).index(g.joint)])
     return _step(codes[-1]) * skeleton.units_per_metre / 100.0
+
+
+@lru_cache(maxsize=64)
+def _influence(skeleton: Skeleton, measure: str) -> np.ndarray:
+    """``(codes, points)``: which of the points a max bound measures each step code moves (a
+    rotation joint: the joints below it, and with ``shell`` its own bone's shell; the
+    translations: all)."""
+    n = len(skeleton)
+    below = np.zeros((n, n), dtype=bool)
+    for p in range(n):
+        j = skeleton.parents[p]
+        while j >= 0:
+            below[j, p] = True
+            j = skeleton.parents[j]
+    if measure == "shell":
+        points = bone_joints(skeleton)
+        below = below[:, points] | (np.arange(n)[:, None] == points[None, :])
+    rows = [below[j] for j in _rotation_joints(skeleton)]
+    if _has_translation(skeleton):
+        rows.append(np.ones(below.shape[1], dtype=bool))
+    return np.array(rows)
 
 
 @lru_cache(maxsize=64)
@@ -193,6 +215,8 @@ class KinwaveCodec(Codec):
         Knob("closed_loop", bool, True, "code each joint against its parent's decoded orientation"),
         Knob("allocation", str, "convex", "per-joint steps: convex program, or one step for every angle",
              choices=("convex", "uniform")),
+        Knob("joint_feedback", bool, True, "under a max-error bound, correct each joint's step by the slack a first "
+             "pass measured at the points it moves"),
         Knob("segment_steps", bool, True, "under a max-error bound, give each segment its own step offset (time-"
              "adaptive steps, from 4 segments on): quiet stretches get coarser steps"),
         Knob("keyframes", bool, False, "code a frame 0 that jumps away from frame 1 on its own (the knot at "
@@ -296,6 +320,7 @@ class _Encoder:
         self.rot_joints = _rotation_joints(sk)
         self.trans = _has_translation(sk)
         self.shape_rot, self.shape_trans = self._shape()
+        self.joint_offsets = np.zeros(len(self.rot_joints) + self.trans, dtype=np.int64)
 
     def _shape(self) -> tuple[np.ndarray, float]:
         """Steps (degrees per rotation joint, cm for translations) whose modelled bound is 1 cm."""
@@ -322,7 +347,22 @@ class _Encoder:
     # ----- one pass -------------------------------------------------------------------------
     def codes(self, scale: float) -> np.ndarray:
         steps = np.append(self.shape_rot * scale, self.shape_trans * scale if self.trans else [])
-        return np.array([_code(s) for s in steps], dtype=np.uint8)
+        return np.clip(np.array([_code(s) for s in steps]) + self.joint_offsets, 0, 255).astype(np.uint8)
+
+    def _adapt_joints(self, ps: _Pass, bound: float) -> float:
+        """Correct the model's step shape by what a pass measured (max bounds): a joint whose
+        points all stayed well below the worst one is coded finer than it needs (the model's
+        uniform-noise error overstates quiet joints, whose coefficients mostly fall in the dead
+        zone), so its steps grow by half the octaves of its slack. Returns the scale factor that
+        brings the pass's worst error to the middle of the accepted range."""
+        err = self._joint_errors(ps.decoded).max(axis=0)
+        worst = err.max()
+        if worst <= 0:
+            return 1.0
+        moved = _influence(self.skeleton, self.cfg["error_measure"])
+        own = np.array([err[row].max() if row.any() else worst for row in moved])
+        self.joint_offsets = np.floor(8.0 * JOINT_FEEDBACK * np.log2(worst / np.maximum(own, worst * 2.0 ** -8)))
+        return float(np.clip(bound * (1.0 + ACCEPT) / 2.0 / worst, 0.25, 4.0))
 
     def run_pass(self, codes: np.ndarray, offsets: np.ndarray | None = None) -> _Pass:
         """Quantise and reconstruct every group, the joints of one tree depth at a time: a
@@ -456,6 +496,8 @@ class _Encoder:
 
     def _to_bound(self, bound: float) -> bytes:
         guess = bound / (0.3 if self.cfg["error_measure"] == "mean" else 0.8)
+        if self.cfg["error_measure"] != "mean" and self.cfg["joint_feedback"] and not self.joint_offsets.any():
+            guess *= self._adapt_joints(self.run_pass(self.codes(guess)), bound)
         accept = MEAN_ACCEPT if self.cfg["error_measure"] == "mean" else ACCEPT
         best, x = self._search(lambda ps: self.error(ps.decoded), bound, accept, guess, 1.0)
         for _ in range(60):
@@ -481,7 +523,10 @@ class _Encoder:
         def segment_errors(ps):
             return np.maximum.reduceat(self._joint_errors(ps.decoded).max(axis=1), starts)
 
-        base = self.codes(bound / 0.8)
+        guess = bound / 0.8
+        if self.cfg["joint_feedback"]:
+            guess *= self._adapt_joints(self.run_pass(self.codes(guess)), bound)
+        base = self.codes(guess)
         lowest, highest = max(-int(base.min()), -128), min(255 - int(base.max()), 127)
         passes: dict[bytes, tuple[_Pass, np.ndarray]] = {}
 

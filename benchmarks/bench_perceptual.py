@@ -1,6 +1,7 @@
 """Quality at fixed compression ratios: spiht (each allocation mode of the thesis, and ours,
-``impact``), pwavelet, SZ3 on the whole clip at once (``sz3-2d``), and SZ3 (pysz,
-one channel at a time, absolute error bound) in the same run, on the shared CMU clips.
+``impact``, also with closed-loop coding at W = 128 and 256), pwavelet, SZ3 on the whole clip
+at once (``sz3-2d``), and SZ3 (pysz, one channel at a time, absolute error bound) in the same
+run, on the shared CMU clips.
 
 For each clip and ratio (vs 32-bit floats, whole file: container and skeleton included; SZ3
 gets the same compressed skeleton added) the codec's knob is set by rate control and the
@@ -35,6 +36,8 @@ CODECS = {
     "spiht-energy": ("spiht", {"allocation": "energy"}),
     "spiht-uniform": ("spiht", {"allocation": "uniform"}),
     "spiht-impact": ("spiht", {"allocation": "impact"}),
+    "spiht-impact-closed": ("spiht", {"allocation": "impact", "closed_loop": True}),
+    "spiht-impact-closed-256": ("spiht", {"allocation": "impact", "closed_loop": True, "window": 256}),
     "pwavelet": ("pwavelet", {}),
 }
 

@@ -353,8 +353,9 @@ class _Encoder:
         """Correct the model's step shape by what a pass measured (max bounds): a joint whose
         points all stayed well below the worst one is coded finer than it needs (the model's
         uniform-noise error overstates quiet joints, whose coefficients mostly fall in the dead
-        zone), so its steps grow by half the octaves of its slack. Returns the scale factor that
-        brings the pass's worst error to the middle of the accepted range."""
+        zone), so its steps grow by that slack (the clip's worst error over the worst among the
+        points it moves). Returns the scale factor that brings the pass's worst error to the
+        middle of the accepted range."""
         err = self._joint_errors(ps.decoded).max(axis=0)
         worst = err.max()
         if worst <= 0:

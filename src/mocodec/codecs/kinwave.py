@@ -138,15 +138,6 @@ def _influence(skeleton: Skeleton, measure: str) -> np.ndarray:
     return np.array(rows)
 
 
-@lru_cache(maxsize=64)
-def _depths(skeleton: Skeleton) -> tuple[tuple[int, ...], ...]:
-    """Joints by their depth in the tree, the root's first."""
-    depth = [0] * len(skeleton)
-    for j, p in enumerate(skeleton.parents):
-        depth[j] = depth[p] + 1 if p >= 0 else 0        # parents come before their children
-    return tuple(tuple(j for j in range(len(skeleton)) if depth[j] == d) for d in range(max(depth, default=-1) + 1))
-
-
 def _rotation_joints(skeleton: Skeleton) -> list[int]:
     return [g.joint for g in _groups(skeleton) if g.rotation]
 
@@ -378,7 +369,7 @@ class _Encoder:
         decoded = np.empty((C, self.frames))
         glob = np.empty((len(sk), self.frames, 4))
         identity = np.tile([1.0, 0.0, 0.0, 0.0], (self.frames, 1))
-        for depth in _depths(sk):
+        for depth in closedloop.depth_levels(sk):
             rows, targets, steps = [], [], []
             for j in depth:
                 p = sk.parents[j]

@@ -236,8 +236,9 @@ class SpihtCodec(Codec):
         """Beyond the thesis (kinwave.md, "what mattered" 1): joints coded parents first, each
         joint's angles the closed-loop target that restores its original global orientation on
         top of its parent's decoded one (the stream decoded as the decoder will, before seam
-        smoothing), so coding errors stop adding up along the chains. Root translations are
-        coded as they are. Channels without a budget keep their anchor line."""
+        smoothing), so coding errors stop adding up along the chains; the joints of one tree
+        depth are coded together. Root translations are coded as they are. Channels without a
+        budget keep their anchor line."""
         scale = channel_scale(sk)
         plan = _plan(sk)
         frames = len(values)
@@ -245,23 +246,33 @@ class SpihtCodec(Codec):
         goal = forward_kinematics(sk, values)[1]
         glob = np.empty((len(sk), frames, 4))
         identity = np.tile([1.0, 0.0, 0.0, 0.0], (frames, 1))
-        for j in range(len(sk)):                        # parents come before their children
-            p = sk.parents[j]
-            parent = glob[p] if p >= 0 else identity
-            moves = plan.pos_index[j][plan.pos_index[j] >= 0]
-            if moves.size:
-                self._code_channels(moves, residual[:, moves], budgets, scale, streams)
-            k = int((plan.rot_index[j] >= 0).sum())
-            glob[j] = parent
-            if not k:
+        for depth in closedloop.depth_levels(sk):
+            channels, targets = [], []
+            for j in depth:
+                p = sk.parents[j]
+                glob[j] = glob[p] if p >= 0 else identity
+                moves = plan.pos_index[j][plan.pos_index[j] >= 0]
+                k = int((plan.rot_index[j] >= 0).sum())
+                chans, axes = plan.rot_index[j, :k], plan.rot_axis[j, :k]
+                active = budgets[chans] > N0_BITS
+                angles = np.where(active, values[:, chans], line[:, chans])
+                if active.any() and p >= 0:
+                    angles = closedloop.target_angles(angles, axes, active, plan.axis_quat[j], plan.has_axis[j],
+                                                      glob[j], goal[:, j])
+                channels += [moves, chans]
+                targets += [values[:, moves], angles]
+            channels = np.concatenate(channels)
+            if not channels.size:
                 continue
-            chans, axes = plan.rot_index[j, :k], plan.rot_axis[j, :k]
-            active = budgets[chans] > N0_BITS
-            start = np.where(active, values[:, chans], line[:, chans])
-            target = closedloop.target_angles(start, axes, active, plan.axis_quat[j], plan.has_axis[j], parent,
-                                              goal[:, j]) if active.any() and p >= 0 else start
-            decoded = line[:, chans] + self._code_channels(chans, target - line[:, chans], budgets, scale, streams)
-            glob[j] = closedloop.compose(decoded, axes, plan.axis_quat[j], plan.has_axis[j], parent)
+            decoded = line[:, channels] + self._code_channels(channels, np.hstack(targets) - line[:, channels],
+                                                              budgets, scale, streams)
+            column = {c: i for i, c in enumerate(channels)}
+            for j in depth:
+                k = int((plan.rot_index[j] >= 0).sum())
+                if k and sk.children[j]:
+                    chans = plan.rot_index[j, :k]
+                    glob[j] = closedloop.compose(decoded[:, [column[c] for c in chans]], plan.rot_axis[j, :k],
+                                                 plan.axis_quat[j], plan.has_axis[j], glob[j])
 
     def _segment_streams(self, levels: np.ndarray, total: int, bits: np.ndarray, cursor: int, where: str):
         """Decode one segment's channel streams from ``bits[cursor:]``: yields (channel, start

@@ -17,8 +17,12 @@ Quaternions are (w, x, y, z), Hamilton products, the conventions of
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numba
 import numpy as np
+
+from mocodec.skeleton import Skeleton
 
 _DAMPING = 1e-9
 _ITERATIONS = 1
@@ -150,3 +154,13 @@ def compose(angles: np.ndarray, axes: np.ndarray, axis_quat: np.ndarray, has_axi
     _compose(np.ascontiguousarray(angles, dtype=np.float64), np.ascontiguousarray(axes, dtype=np.int64),
              np.ascontiguousarray(axis_quat, dtype=np.float64), bool(has_axis), np.ascontiguousarray(parent), out)
     return out
+
+
+@lru_cache(maxsize=64)
+def depth_levels(skeleton: Skeleton) -> tuple[tuple[int, ...], ...]:
+    """Joints by their depth in the tree, the root's first: the order closed-loop coding needs
+    (a joint after its parent), and the joints of one depth can be coded together."""
+    depth = [0] * len(skeleton)
+    for j, p in enumerate(skeleton.parents):
+        depth[j] = depth[p] + 1 if p >= 0 else 0        # parents come before their children
+    return tuple(tuple(j for j in range(len(skeleton)) if depth[j] == d) for d in range(max(depth, default=-1) + 1))

@@ -1,5 +1,5 @@
 """Quality at fixed compression ratios: spiht (each allocation mode of the thesis, and ours,
-``impact``, also with closed-loop coding at W = 128 and 256), pwavelet, SZ3 on the whole clip
+``impact``, also with closed-loop coding at W = 128, 256 and 512), pwavelet, SZ3 on the whole clip
 at once (``sz3-2d``), and SZ3 (pysz, one channel at a time, absolute error bound) in the same
 run, on the shared CMU clips.
 
@@ -38,6 +38,7 @@ CODECS = {
     "spiht-impact": ("spiht", {"allocation": "impact"}),
     "spiht-impact-closed": ("spiht", {"allocation": "impact", "closed_loop": True}),
     "spiht-impact-closed-256": ("spiht", {"allocation": "impact", "closed_loop": True, "window": 256}),
+    "spiht-impact-closed-512": ("spiht", {"allocation": "impact", "closed_loop": True, "window": 512}),
     "pwavelet": ("pwavelet", {}),
 }
 

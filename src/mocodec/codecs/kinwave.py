@@ -62,7 +62,7 @@ JOINT_FEEDBACK = 1.0            # share of a joint's measured slack (in octaves)
 ACCEPT = 0.9                    # a max-error bound is met well enough at 90-100% of it
 MEAN_ACCEPT = 0.97              # a mean-error bound (smooth in the scale: 1.9% fewer bytes than at 0.9 for
                                 # 1.3 more passes)
-SEGMENT_PASSES = 3              # passes of the per-segment search before the combination is fixed
+SEGMENT_PASSES = 2              # passes of the per-segment search before the combination is fixed
 SEGMENT_ACCEPT = 0.8            # a segment's worst error is near enough to the bound at this share of it
 ADAPTIVE_SEGMENTS = 4           # time-adaptive steps from this many segments on (on fewer they measured
                                 # 1.6% larger than one scale, from 4 on 3% smaller, from 8 on 9%)
@@ -516,8 +516,11 @@ class _Encoder:
             return np.maximum.reduceat(self._joint_errors(ps.decoded).max(axis=1), starts)
 
         guess = bound / 0.8
+        first = None
         if self.cfg["joint_feedback"]:
-            guess *= self._adapt_joints(self.run_pass(self.codes(guess)), bound)
+            ps = self.run_pass(self.codes(guess))
+            first = segment_errors(ps)
+            guess *= self._adapt_joints(ps, bound)
         base = self.codes(guess)
         lowest, highest = max(-int(base.min()), -128), min(255 - int(base.max()), 127)
         passes: dict[bytes, tuple[_Pass, np.ndarray]] = {}
@@ -530,6 +533,9 @@ class _Encoder:
             return passes[key]
 
         offsets = np.zeros(starts.size, dtype=np.int64)
+        if first is not None:           # segments quieter in the first pass start coarser (half their slack)
+            offsets = np.clip(np.round(4.0 * np.log2(first.max() / np.maximum(first, 1e-12))), 0,
+                              highest).astype(np.int64)
         feasible = np.full(starts.size, lowest - 1)         # the largest offset seen within the bound
         failed = np.full(starts.size, highest + 1)          # the smallest offset seen over it
         for _ in range(SEGMENT_PASSES):

@@ -23,9 +23,11 @@ Per payload of T frames:
    space on the *decoded* output (the encoder reconstructs through the decoder's own
    functions), so the bound holds on what the decoder will produce, verified on the final bytes;
    with ``bits_per_second`` the same search aims at the payload's byte budget within 2%.
-5. Under a max-error bound, a payload of 4 segments or more gets time-adaptive steps: each
-   segment a step offset of its own (1/8 octave), searched on its own worst error, so quiet
-   stretches are not coded as finely as the busiest one needs.
+5. Under a max-error bound a first pass corrects the model's step per joint by the slack it
+   measured at the points the joint moves (the model overstates quiet joints' errors), and a
+   payload of 4 segments or more gets time-adaptive steps: each segment a step offset of its
+   own (1/8 octave), searched on its own worst error, so quiet stretches are not coded as
+   finely as the busiest one needs.
 
 Payload body: u8 version, u8 flags (bit 0 keyframe, bits 1-2 wavelet, bit 3 segment offsets),
 u8 log2 window, u8 levels, u16 channels (a payload for another skeleton is refused), one u8
@@ -64,8 +66,8 @@ MEAN_ACCEPT = 0.97              # a mean-error bound (smooth in the scale: 1.9% 
                                 # 1.3 more passes)
 SEGMENT_PASSES = 2              # passes of the per-segment search before the combination is fixed
 SEGMENT_ACCEPT = 0.8            # a segment's worst error is near enough to the bound at this share of it
-ADAPTIVE_SEGMENTS = 4           # time-adaptive steps from this many segments on (on fewer they measured
-                                # 1.6% larger than one scale, from 4 on 3% smaller, from 8 on 9%)
+ADAPTIVE_SEGMENTS = 4           # time-adaptive steps from this many segments on (at W = 128 on fewer they
+                                # measured 1.6% larger than one scale, from 4 on 3% smaller, from 8 on 9%)
 RATE_TOLERANCE = 0.02
 SEAM_HALF_WIDTH = 8             # frames each side of a seam over which its step is spread
 SEAM_LIMIT = 1.0                # the largest step removed, in quantiser steps of the channel

@@ -65,6 +65,7 @@ ACCEPT = 0.9                    # a max-error bound is met well enough at 90-100
 MEAN_ACCEPT = 0.97              # a mean-error bound (smooth in the scale: 1.9% fewer bytes than at 0.9 for
                                 # 1.3 more passes)
 SEGMENT_PASSES = 2              # passes of the per-segment search before the combination is fixed
+MARGIN = 0.95            # a segment whose error was this close to the bound goes a code finer when combined
 SEGMENT_ACCEPT = 0.8            # a segment's worst error is near enough to the bound at this share of it
 ADAPTIVE_SEGMENTS = 4           # time-adaptive steps from this many segments on (at W = 128 on fewer they
                                 # measured 1.6% larger than one scale, from 4 on 3% smaller, from 8 on 9%)
@@ -539,10 +540,12 @@ class _Encoder:
             offsets = np.clip(np.round(4.0 * np.log2(first.max() / np.maximum(first, 1e-12))), 0,
                               highest).astype(np.int64)
         feasible = np.full(starts.size, lowest - 1)         # the largest offset seen within the bound
+        closest = np.zeros(starts.size)                     # the error seen there
         failed = np.full(starts.size, highest + 1)          # the smallest offset seen over it
         for _ in range(SEGMENT_PASSES):
             _, seg = run(offsets)
             ok = seg <= bound
+            closest = np.where(ok & (offsets >= feasible), seg, closest)
             feasible = np.where(ok, np.maximum(feasible, offsets), feasible)
             failed = np.where(ok, failed, np.minimum(failed, offsets))
             settled = (ok & (seg >= SEGMENT_ACCEPT * bound)) | (failed - feasible <= 1)
@@ -553,6 +556,7 @@ class _Encoder:
             target = np.where((target <= feasible) | (target >= failed), (feasible + failed) // 2, target)
             offsets = np.where(settled, offsets, target).astype(np.int64)
         offsets = np.where(feasible >= lowest, feasible, np.minimum(offsets, failed - 1))
+        offsets = np.maximum(offsets - (closest > MARGIN * bound), lowest)   # neighbours move the errors too
         for _ in range(SEGMENT_PASSES + 3):
             ps, seg = run(offsets)
             over = seg > bound

@@ -106,12 +106,6 @@ def _groups(skeleton: Skeleton) -> tuple[_Group, ...]:
     return tuple(out)
 
 
-@lru_cache(maxsize=64)
-def _joint_groups(skeleton: Skeleton) -> tuple[tuple[_Group, ...], ...]:
-    """The groups of each joint, in joint order (translations before rotations)."""
-    return tuple(tuple(g for g in _groups(skeleton) if g.joint == j) for j in range(len(skeleton)))
-
-
 def _group_step(g: _Group, codes: np.ndarray, skeleton: Skeleton) -> float:
     """A group's quantiser step from the payload's step codes (one per rotation joint, then
     the translation code in cm): degrees, or skeleton units for translations."""
@@ -286,10 +280,15 @@ class KinwaveCodec(Codec):
 def _decoded(skeleton: Skeleton, codes: np.ndarray, offsets: np.ndarray, const: np.ndarray, knots: np.ndarray,
              coeffs: np.ndarray, lay: trendwave.Layout) -> np.ndarray:
     """Channels ``(C, T)`` from the integers, in one reconstruction of all channels."""
+    return _reconstruct(knots, coeffs, const == 1, _channel_steps(skeleton, codes), lay, offsets)
+
+
+def _channel_steps(skeleton: Skeleton, codes: np.ndarray) -> np.ndarray:
+    """``(C, 1)``: every channel's quantiser step from the payload's step codes."""
     steps = np.empty((skeleton.num_channels, 1))
     for g in _groups(skeleton):
         steps[g.channels] = _group_step(g, codes, skeleton)
-    return _reconstruct(knots, coeffs, const == 1, steps, lay, offsets)
+    return steps
 
 
 class _Encoder:
@@ -310,7 +309,6 @@ class _Encoder:
         self.lay = trendwave.layout(self.frames, self.cfg["window"], self.cfg["levels"], keyframe, self.cfg["wavelet"])
         self.header = _HEAD.pack(FORMAT, int(keyframe) | WAVELET_IDS.index(self.cfg["wavelet"]) << 1,
                                  int(math.log2(self.cfg["window"])), self.cfg["levels"], sk.num_channels)
-        self.plan = _plan(sk)
         self.rot_joints = _rotation_joints(sk)
         self.trans = _has_translation(sk)
         self.shape_rot, self.shape_trans = self._shape()
@@ -360,46 +358,26 @@ class _Encoder:
         return float(np.clip(bound * (1.0 + ACCEPT) / 2.0 / worst, 0.25, 4.0))
 
     def run_pass(self, codes: np.ndarray, offsets: np.ndarray | None = None) -> _Pass:
-        """Quantise and reconstruct every group, the joints of one tree depth at a time: a
-        joint's closed-loop target needs its parent's decoded orientation, and the joints of one
-        depth go through the transforms together (rows are independent, so each row's floats
+        """Quantise and reconstruct every channel down the tree (:func:`closedloop.code_down_tree`):
+        a joint's closed-loop target needs its parent's decoded orientation, and the joints of
+        one depth go through the transforms together (rows are independent, so each row's floats
         are those of coding it alone)."""
-        sk, lay, values = self.skeleton, self.lay, self.values
+        sk, lay = self.skeleton, self.lay
         offsets = np.zeros(lay.starts.size, dtype=np.int8) if offsets is None else offsets.astype(np.int8)
         C = sk.num_channels
         knots = np.zeros((C, lay.num_knots), dtype=np.int64)
         coeffs = np.zeros((C, lay.num_coeffs), dtype=np.int64)
         decoded = np.empty((C, self.frames))
-        glob = np.empty((len(sk), self.frames, 4))
-        identity = np.tile([1.0, 0.0, 0.0, 0.0], (self.frames, 1))
-        for depth in closedloop.depth_levels(sk):
-            rows, targets, steps = [], [], []
-            for j in depth:
-                p = sk.parents[j]
-                parent = glob[p] if p >= 0 else identity
-                glob[j] = parent
-                for g in _joint_groups(sk)[j]:
-                    target = values[g.channels]
-                    active = ~self.const[g.channels]
-                    if g.rotation and self.cfg["closed_loop"] and p >= 0 and active.any():
-                        target = closedloop.target_angles(target.T, g.axes, active, self.plan.axis_quat[j],
-                                                          self.plan.has_axis[j], parent, self.quats[:, j]).T
-                    rows.append(g.channels)
-                    targets.append(target)
-                    steps.append(np.full(g.channels.size, _group_step(g, codes, sk)))
-            if not rows:
-                continue
-            channels = np.concatenate(rows)
-            step = np.concatenate(steps)[:, None]
-            const = self.const[channels]
-            k_int, c_int = self._quantise(np.vstack(targets), const, step, offsets)
+        steps = _channel_steps(sk, codes)
+
+        def code(channels: np.ndarray, targets: np.ndarray) -> np.ndarray:
+            step, const = steps[channels], self.const[channels]
+            k_int, c_int = self._quantise(targets.T, const, step, offsets)
             knots[channels], coeffs[channels] = k_int, c_int
             decoded[channels] = _reconstruct(k_int, c_int, const, step, lay, offsets)
-            for j in depth:
-                for g in _joint_groups(sk)[j]:
-                    if g.rotation and sk.children[j]:
-                        glob[j] = closedloop.compose(decoded[g.channels].T, g.axes, self.plan.axis_quat[j],
-                                                     self.plan.has_axis[j], glob[j])
+            return decoded[channels].T
+
+        closedloop.code_down_tree(sk, self.values.T, ~self.const, self.quats, code, self.cfg["closed_loop"])
         return _Pass(codes, self.const.astype(np.int64), knots, coeffs, decoded, offsets)
 
     def _quantise(self, target: np.ndarray, const: np.ndarray, step: np.ndarray, offsets: np.ndarray):

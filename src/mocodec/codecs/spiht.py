@@ -58,7 +58,7 @@ from mocodec.coding import closedloop, seams, spiht, wavelets
 from mocodec.coding.parts import join_parts, split_parts
 from mocodec.coding.rangecoder import decode_ints, encode_ints
 from mocodec.errors import CodecError, CorruptStreamError
-from mocodec.kinematics import _plan, forward_kinematics
+from mocodec.kinematics import forward_kinematics
 from mocodec.skeleton import Skeleton
 
 QUANTUM = 1.0 / 256          # degrees, or cm for translations: the finest SPIHT plane
@@ -237,42 +237,17 @@ class SpihtCodec(Codec):
         joint's angles the closed-loop target that restores its original global orientation on
         top of its parent's decoded one (the stream decoded as the decoder will, before seam
         smoothing), so coding errors stop adding up along the chains; the joints of one tree
-        depth are coded together. Root translations are coded as they are. Channels without a
+        depth are coded together (:func:`closedloop.code_down_tree`). Channels without a
         budget keep their anchor line."""
         scale = channel_scale(sk)
-        plan = _plan(sk)
-        frames = len(values)
         line = values - residual
-        goal = forward_kinematics(sk, values)[1]
-        glob = np.empty((len(sk), frames, 4))
-        identity = np.tile([1.0, 0.0, 0.0, 0.0], (frames, 1))
-        for depth in closedloop.depth_levels(sk):
-            channels, targets = [], []
-            for j in depth:
-                p = sk.parents[j]
-                glob[j] = glob[p] if p >= 0 else identity
-                moves = plan.pos_index[j][plan.pos_index[j] >= 0]
-                k = int((plan.rot_index[j] >= 0).sum())
-                chans, axes = plan.rot_index[j, :k], plan.rot_axis[j, :k]
-                active = budgets[chans] > N0_BITS
-                angles = np.where(active, values[:, chans], line[:, chans])
-                if active.any() and p >= 0:
-                    angles = closedloop.target_angles(angles, axes, active, plan.axis_quat[j], plan.has_axis[j],
-                                                      glob[j], goal[:, j])
-                channels += [moves, chans]
-                targets += [values[:, moves], angles]
-            channels = np.concatenate(channels)
-            if not channels.size:
-                continue
-            decoded = line[:, channels] + self._code_channels(channels, np.hstack(targets) - line[:, channels],
-                                                              budgets, scale, streams)
-            column = {c: i for i, c in enumerate(channels)}
-            for j in depth:
-                k = int((plan.rot_index[j] >= 0).sum())
-                if k and sk.children[j]:
-                    chans = plan.rot_index[j, :k]
-                    glob[j] = closedloop.compose(decoded[:, [column[c] for c in chans]], plan.rot_axis[j, :k],
-                                                 plan.axis_quat[j], plan.has_axis[j], glob[j])
+        active = budgets > N0_BITS
+
+        def code(channels: np.ndarray, targets: np.ndarray) -> np.ndarray:
+            return line[:, channels] + self._code_channels(channels, targets - line[:, channels], budgets, scale,
+                                                           streams)
+
+        closedloop.code_down_tree(sk, np.where(active, values, line), active, forward_kinematics(sk, values)[1], code)
 
     def _segment_streams(self, levels: np.ndarray, total: int, bits: np.ndarray, cursor: int, where: str):
         """Decode one segment's channel streams from ``bits[cursor:]``: yields (channel, start

@@ -22,6 +22,7 @@ from functools import lru_cache
 import numba
 import numpy as np
 
+from mocodec.kinematics import _plan
 from mocodec.skeleton import Skeleton
 
 _DAMPING = 1e-9
@@ -160,7 +161,44 @@ def compose(angles: np.ndarray, axes: np.ndarray, axis_quat: np.ndarray, has_axi
 def depth_levels(skeleton: Skeleton) -> tuple[tuple[int, ...], ...]:
     """Joints by their depth in the tree, the root's first: the order closed-loop coding needs
     (a joint after its parent), and the joints of one depth can be coded together."""
-    depth = [0] * len(skeleton)
-    for j, p in enumerate(skeleton.parents):
-        depth[j] = depth[p] + 1 if p >= 0 else 0        # parents come before their children
-    return tuple(tuple(j for j in range(len(skeleton)) if depth[j] == d) for d in range(max(depth, default=-1) + 1))
+    depths = skeleton.depths
+    return tuple(tuple(int(j) for j in np.flatnonzero(depths == d)) for d in range(int(depths.max(initial=-1)) + 1))
+
+
+def code_down_tree(skeleton: Skeleton, start: np.ndarray, active: np.ndarray, goal: np.ndarray, code,
+                   closed_loop: bool = True) -> None:
+    """Drive a coder down the tree, the joints of one depth at a time. ``start (T, C)`` holds
+    the values each channel is coded from, ``active (C,)`` the channels the coder will change
+    (the others keep their start value), ``goal (T, joints, 4)`` the original global
+    orientations. With ``closed_loop`` a joint's active angles are replaced by the target that
+    restores its goal on top of its parent's *decoded* orientation; translations go as they
+    are. ``code(channels, targets (T, k))`` codes a depth's channels and returns what the
+    decoder will make of them ``(T, k)``."""
+    plan = _plan(skeleton)
+    frames = start.shape[0]
+    glob = np.empty((len(skeleton), frames, 4))
+    identity = np.tile([1.0, 0.0, 0.0, 0.0], (frames, 1))
+    for depth in depth_levels(skeleton):
+        channels, targets = [], []
+        for j in depth:
+            p = skeleton.parents[j]
+            glob[j] = glob[p] if p >= 0 else identity
+            moves = plan.pos_index[j][plan.pos_index[j] >= 0]
+            k = int((plan.rot_index[j] >= 0).sum())
+            chans = plan.rot_index[j, :k]
+            angles = start[:, chans]
+            if closed_loop and p >= 0 and active[chans].any():
+                angles = target_angles(angles, plan.rot_axis[j, :k], active[chans], plan.axis_quat[j],
+                                       plan.has_axis[j], glob[j], goal[:, j])
+            channels += [moves, chans]
+            targets += [start[:, moves], angles]
+        channels = np.concatenate(channels)
+        if not channels.size:
+            continue
+        decoded = code(channels, np.hstack(targets))
+        column = {c: i for i, c in enumerate(channels)}
+        for j in depth:
+            k = int((plan.rot_index[j] >= 0).sum())
+            if k and skeleton.children[j]:
+                glob[j] = compose(decoded[:, [column[c] for c in plan.rot_index[j, :k]]], plan.rot_axis[j, :k],
+                                  plan.axis_quat[j], plan.has_axis[j], glob[j])

@@ -341,14 +341,14 @@ class _Encoder:
         steps = np.append(self.shape_rot * scale, self.shape_trans * scale if self.trans else [])
         return np.clip(np.array([_code(s) for s in steps]) + self.joint_offsets, 0, 255).astype(np.uint8)
 
-    def _adapt_joints(self, ps: _Pass, bound: float) -> float:
+    def _adapt_joints(self, errors: np.ndarray, bound: float) -> float:
         """Correct the model's step shape by what a pass measured (max bounds): a joint whose
         points all stayed well below the worst one is coded finer than it needs (the model's
         uniform-noise error overstates quiet joints, whose coefficients mostly fall in the dead
         zone), so its steps grow by that slack (the clip's worst error over the worst among the
-        points it moves). Returns the scale factor that brings the pass's worst error to the
-        middle of the accepted range."""
-        err = self._joint_errors(ps.decoded).max(axis=0)
+        points it moves), from the pass's ``errors (frames, points)``. Returns the scale factor
+        that brings the pass's worst error to the middle of the accepted range."""
+        err = errors.max(axis=0)
         worst = err.max()
         if worst <= 0:
             return 1.0
@@ -470,7 +470,7 @@ class _Encoder:
     def _to_bound(self, bound: float) -> bytes:
         guess = bound / (0.3 if self.cfg["error_measure"] == "mean" else 0.8)
         if self.cfg["error_measure"] != "mean" and self.cfg["joint_feedback"] and not self.joint_offsets.any():
-            guess *= self._adapt_joints(self.run_pass(self.codes(guess)), bound)
+            guess *= self._adapt_joints(self._joint_errors(self.run_pass(self.codes(guess)).decoded), bound)
         accept = MEAN_ACCEPT if self.cfg["error_measure"] == "mean" else ACCEPT
         best, x = self._search(lambda ps: self.error(ps.decoded), bound, accept, guess, 1.0)
         for _ in range(60):
@@ -493,15 +493,15 @@ class _Encoder:
         starts = self.lay.starts
         aim = bound * (1.0 + SEGMENT_ACCEPT) / 2.0
 
-        def segment_errors(ps):
-            return np.maximum.reduceat(self._joint_errors(ps.decoded).max(axis=1), starts)
+        def segment_errors(errors):
+            return np.maximum.reduceat(errors.max(axis=1), starts)
 
         guess = bound / 0.8
         first = None
         if self.cfg["joint_feedback"]:
-            ps = self.run_pass(self.codes(guess))
-            first = segment_errors(ps)
-            guess *= self._adapt_joints(ps, bound)
+            errors = self._joint_errors(self.run_pass(self.codes(guess)).decoded)
+            first = segment_errors(errors)
+            guess *= self._adapt_joints(errors, bound)
         base = self.codes(guess)
         lowest, highest = max(-int(base.min()), -128), min(255 - int(base.max()), 127)
         passes: dict[bytes, tuple[_Pass, np.ndarray]] = {}
@@ -510,7 +510,7 @@ class _Encoder:
             key = offsets.astype(np.int8).tobytes()
             if key not in passes:
                 ps = self.run_pass(base, offsets)
-                passes[key] = ps, segment_errors(ps)
+                passes[key] = ps, segment_errors(self._joint_errors(ps.decoded))
             return passes[key]
 
         offsets = np.zeros(starts.size, dtype=np.int64)

@@ -159,13 +159,13 @@ def test_time_adaptive_steps_shrink_max_error_files(walk_amc):
     """Each segment gets its own step offset under a max-error bound: quieter stretches take
     coarser steps, the bound still holds, and the file is smaller than with one scale."""
     for measure in ("shell", "joint"):                                         # 5% and 6% smaller
-        motion = walk_amc
         codec = get_codec("kinwave", max_error_cm=0.5, error_measure=measure, window=128)     # 4 segments
-        payload = codec.encode(motion)
-        single = _Encoder(codec, motion)._to_bound(0.5)
-        assert codec.decode(payload, motion.skeleton).num_frames == motion.num_frames
-        assert len(payload) < len(codec.wrap(single, motion.num_frames, motion.fps)) * 0.96
-        assert _errors(motion, codec.decode(payload, motion.skeleton))[measure] <= 0.5
+        payload = codec.encode(walk_amc)
+        single = _Encoder(codec, walk_amc)._to_bound(0.5)
+        decoded = codec.decode(payload, walk_amc.skeleton)
+        assert decoded.num_frames == walk_amc.num_frames
+        assert len(payload) < len(codec.wrap(single, walk_amc.num_frames, walk_amc.fps)) * 0.96
+        assert _errors(walk_amc, decoded)[measure] <= 0.5
 
 
 def test_joint_feedback_coarsens_joints_with_slack(walk_amc):

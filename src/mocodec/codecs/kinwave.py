@@ -154,12 +154,12 @@ def _factors(offsets: np.ndarray, lay: trendwave.Layout) -> tuple[np.ndarray, np
 
 
 def _reconstruct(knots: np.ndarray, coeffs: np.ndarray, const: np.ndarray, step: np.ndarray,
-                 lay: trendwave.Layout, offsets: np.ndarray) -> np.ndarray:
+                 lay: trendwave.Layout, factors: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
     """Decoded channels ``(k, T)`` from their integers, steps ``(k, 1)`` and the segments'
-    step offsets: the same arithmetic on both ends (the encoder calls it a tree depth at a
-    time, the decoder for all channels at once; each row's floats are the same either way). A
-    constant channel is its first knot at the plain step."""
-    knot_f, coeff_f, seam_f = _factors(offsets, lay)
+    step :func:`_factors`: the same arithmetic on both ends (the encoder calls it a tree depth
+    at a time, the decoder for all channels at once; each row's floats are the same either
+    way). A constant channel is its first knot at the plain step."""
+    knot_f, coeff_f, seam_f = factors
     values = knots * (step * lay.knot_quantum * knot_f)
     values[const] = knots[const, :1] * step[const]
     out = trendwave.trend(values, lay) + trendwave.synthesise(coeffs * (step * coeff_f), lay)
@@ -280,7 +280,7 @@ class KinwaveCodec(Codec):
 def _decoded(skeleton: Skeleton, codes: np.ndarray, offsets: np.ndarray, const: np.ndarray, knots: np.ndarray,
              coeffs: np.ndarray, lay: trendwave.Layout) -> np.ndarray:
     """Channels ``(C, T)`` from the integers, in one reconstruction of all channels."""
-    return _reconstruct(knots, coeffs, const == 1, _channel_steps(skeleton, codes), lay, offsets)
+    return _reconstruct(knots, coeffs, const == 1, _channel_steps(skeleton, codes), lay, _factors(offsets, lay))
 
 
 def _channel_steps(skeleton: Skeleton, codes: np.ndarray) -> np.ndarray:
@@ -369,22 +369,24 @@ class _Encoder:
         coeffs = np.zeros((C, lay.num_coeffs), dtype=np.int64)
         decoded = np.empty((C, self.frames))
         steps = _channel_steps(sk, codes)
+        factors = _factors(offsets, lay)
 
         def code(channels: np.ndarray, targets: np.ndarray) -> np.ndarray:
             step, const = steps[channels], self.const[channels]
-            k_int, c_int = self._quantise(targets.T, const, step, offsets)
+            k_int, c_int = self._quantise(targets.T, const, step, factors)
             knots[channels], coeffs[channels] = k_int, c_int
-            decoded[channels] = _reconstruct(k_int, c_int, const, step, lay, offsets)
+            decoded[channels] = _reconstruct(k_int, c_int, const, step, lay, factors)
             return decoded[channels].T
 
         closedloop.code_down_tree(sk, self.values.T, ~self.const, self.quats, code, self.cfg["closed_loop"])
         return _Pass(codes, self.const.astype(np.int64), knots, coeffs, decoded, offsets)
 
-    def _quantise(self, target: np.ndarray, const: np.ndarray, step: np.ndarray, offsets: np.ndarray):
+    def _quantise(self, target: np.ndarray, const: np.ndarray, step: np.ndarray,
+                  factors: tuple[np.ndarray, np.ndarray, np.ndarray]):
         """Knots and dead-zone quantised coefficients of ``target (k, T)`` with steps ``(k, 1)``
-        and the segments' offsets."""
+        and the segments' step :func:`_factors`."""
         lay = self.lay
-        knot_f, coeff_f, _ = _factors(offsets, lay)
+        knot_f, coeff_f, _ = factors
         quantum = step * lay.knot_quantum * knot_f
         k_int = np.round(target[:, lay.knot_frames] / quantum).astype(np.int64)
         k_int[const] = np.round(target[const, :1] / step[const]).astype(np.int64)

@@ -144,6 +144,25 @@ def test_common_skeletons_cost_a_few_hundred_bytes(walk_bvh, walk_amc):
     assert cost[132] < 450 and cost[62] < 900
 
 
+def test_lossy_files_round_the_skeleton_offsets(walk_bvh, walk_amc):
+    """A lossy codec's file stores offsets to 0.001 cm (fewer bytes) and decodes on them; a
+    lossless codec's, a file given ``exact_skeleton`` or one holding only the skeleton's id keep
+    the skeleton bit for bit."""
+    saved = {}
+    for motion in (walk_bvh, walk_amc):
+        clip = motion[:10]
+        lossy = moc.unpack(data := moc.pack(clip, get_codec("kinwave")))
+        cm = 100.0 / motion.skeleton.units_per_metre
+        moved = np.abs(lossy.skeleton.offsets - motion.skeleton.offsets).max() * cm
+        assert 0 < moved <= 0.0005
+        saved[motion.num_channels] = len(moc.pack(clip, get_codec("kinwave"), exact_skeleton=True)) - len(data)
+        for exact in (moc.unpack(moc.pack(clip, get_codec("raw"))),
+                      moc.unpack(moc.pack(clip, get_codec("kinwave"), exact_skeleton=True)),
+                      moc.unpack(moc.pack(clip, get_codec("kinwave"), embed_skeleton=False), skeleton=motion.skeleton)):
+            assert container.skeleton_id(exact.skeleton) == container.skeleton_id(motion.skeleton)
+    assert saved[132] > 60 and saved[62] > 250
+
+
 def test_version_1_files_still_read():
     from mocodec import load
     from conftest import DATA

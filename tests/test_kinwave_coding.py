@@ -18,8 +18,8 @@ from mocodec.kinematics import _plan, forward_kinematics
 
 
 @given(seed=st.integers(0, 2**32 - 1), frames=st.integers(1, 700), keyframe=st.booleans(),
-       spread=st.sampled_from([0.0, 0.3, 3.0, 1e5]))
-def test_coefficient_coder_round_trips(seed, frames, keyframe, spread):
+       spread=st.sampled_from([0.0, 0.3, 3.0, 1e5]), rev=st.sampled_from([1, 2]))
+def test_coefficient_coder_round_trips(seed, frames, keyframe, spread, rev):
     rng = np.random.default_rng(seed)
     lay = trendwave.layout(frames, 128, 4, keyframe)
     channels = 5
@@ -28,12 +28,26 @@ def test_coefficient_coder_round_trips(seed, frames, keyframe, spread):
     coeffs = np.round(rng.laplace(0, spread, (channels, lay.num_coeffs)) if spread else
                       np.zeros((channels, lay.num_coeffs))).astype(np.int64)
     coeffs[const == 1] = 0
-    data = coefcoder.encode(const, knots, coeffs, lay.padded, lay.levels)
-    c2, k2, co2, used = coefcoder.decode(data, channels, lay.num_knots, lay.padded, lay.levels)
+    data = coefcoder.encode(const, knots, coeffs, lay.padded, lay.levels, revision=rev)
+    c2, k2, co2, used = coefcoder.decode(data, channels, lay.num_knots, lay.padded, lay.levels, revision=rev)
     assert used >= len(data) - 1 and np.array_equal(c2, const)
     live = const == 0
     assert np.array_equal(k2[live], knots[live]) and np.array_equal(k2[~live, 0], knots[~live, 0])
     assert np.array_equal(co2, coeffs)
+
+
+def test_differences_code_a_smooth_approximation_band_smaller():
+    """Neighbouring approximation values that are alike cost fewer bits as differences
+    (revision 2)."""
+    lay = trendwave.layout(1024, 256, 5, False)
+    rng = np.random.default_rng(3)
+    coeffs = np.zeros((4, lay.num_coeffs), dtype=np.int64)
+    for o, n, lev in zip(np.cumsum(np.r_[0, lay.padded[:-1]]), lay.padded, lay.levels):
+        coeffs[:, o:o + (n >> lev)] = np.round(200 + np.cumsum(rng.normal(0, 3, (4, n >> lev)), axis=1))
+    args = (np.zeros(4, np.int64), np.zeros((4, lay.num_knots), np.int64), coeffs, lay.padded, lay.levels)
+    plain, delta = coefcoder.encode(*args), coefcoder.encode(*args, revision=2)
+    assert len(delta) < 0.8 * len(plain)
+    assert np.array_equal(coefcoder.decode(delta, 4, lay.num_knots, lay.padded, lay.levels, revision=2)[2], coeffs)
 
 
 def test_coefficient_coder_adapts_to_sparse_data():

@@ -82,7 +82,8 @@ def cmd_encode(args) -> int:
         codec, _ = configured(args, motion)
         target = out / f"{src.stem}.moc" if out.is_dir() else out
         t0 = time.perf_counter()
-        size = moc.encode(motion, target, codec, chunk_frames=args.chunk_frames, embed_skeleton=not args.skeleton_ref)
+        size = moc.encode(motion, target, codec, chunk_frames=args.chunk_frames, embed_skeleton=not args.skeleton_ref,
+                          exact_skeleton=args.exact_skeleton)
         line = (f"{target}: {motion.num_frames} frames, {size:,} bytes, ratio {motion.raw_bits / 8 / size:.2f} "
                 f"vs 32-bit floats, {size * 8 / motion.duration / 1000:.2f} kbit/s, {codec!r}, "
                 f"{time.perf_counter() - t0:.2f} s")
@@ -298,6 +299,9 @@ def add_commands(sub, common) -> None:
                    help=f"frames per independently decodable chunk (default {moc.CHUNK_FRAMES})")
     p.add_argument("--skeleton-ref", action="store_true",
                    help="store only the skeleton's id (1-2 KB smaller); decoding then needs --skeleton")
+    p.add_argument("--exact-skeleton", action="store_true",
+                   help="keep the skeleton's offsets bit for bit (a lossy codec's file rounds them to "
+                        f"{moc.SKELETON_PRECISION_CM:g} cm, which saves 80-330 bytes)")
     add_codec_options(p)
     common(p)
     p.set_defaults(func=cmd_encode, takes_knobs=True)

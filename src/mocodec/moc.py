@@ -3,7 +3,9 @@ frames=(a, b))`` reads back the whole clip or only the chunks a frame range need
 
 Each chunk of ``chunk_frames`` frames is coded on its own by the codec (so chunks decode
 independently and a range costs only its chunks); the container stores the codec's config and
-the skeleton, so a file decodes without anything else.
+the skeleton, so a file decodes without anything else. A lossy codec's file stores the
+skeleton's offsets rounded to 0.001 cm (:func:`stored_skeleton`) and decodes on that skeleton;
+the codec is told, so an error bound it verifies holds on the decoded joints.
 """
 
 from __future__ import annotations
@@ -20,30 +22,47 @@ from mocodec.codecs import DEFAULT_CODEC, Codec, codec_from_config, get_codec
 from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.formats import container
 from mocodec.formats._io import atomic_write_bytes
+from mocodec.formats.skeleton_bin import round_offsets
 from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
 CHUNK_FRAMES = 1024
+SKELETON_PRECISION_CM = 0.001   # offsets of a lossy file: joints move by 0.003 cm at most on the shared clips
+
+
+def stored_skeleton(motion: Motion, codec: Codec, embed_skeleton: bool = True,
+                    exact_skeleton: bool = False) -> Skeleton:
+    """The skeleton a file of ``motion`` coded by ``codec`` holds, and decodes on: a lossy
+    codec's file rounds the offsets to :data:`SKELETON_PRECISION_CM` (BVH skeletons take 15%
+    fewer bytes, ASF ones 38%); a lossless codec's, a file that holds only the skeleton's id, or
+    ``exact_skeleton`` keep it bit for bit."""
+    if codec.lossless or not embed_skeleton or exact_skeleton:
+        return motion.skeleton
+    return round_offsets(motion.skeleton, SKELETON_PRECISION_CM)
 
 
 def pack(motion: Motion, codec: Codec | None = None, chunk_frames: int = CHUNK_FRAMES,
-         embed_skeleton: bool = True) -> bytes:
+         embed_skeleton: bool = True, exact_skeleton: bool = False) -> bytes:
     """The .moc bytes of ``motion`` coded by ``codec`` (default: the default codec); with
-    ``embed_skeleton=False`` the file holds only the skeleton's id."""
+    ``embed_skeleton=False`` the file holds only the skeleton's id. The codec is told the
+    :func:`stored_skeleton`, so an error bound it verifies holds on what the file decodes to."""
     codec = codec or get_codec(DEFAULT_CODEC)
     if chunk_frames < 1:
         raise CodecError(f"chunk_frames must be at least 1, got {chunk_frames}")
-    chunks = [container.Chunk(a, min(chunk_frames, motion.num_frames - a), codec.encode(motion[a:a + chunk_frames]))
+    skeleton = stored_skeleton(motion, codec, embed_skeleton, exact_skeleton)
+    output = None if skeleton is motion.skeleton else skeleton
+    chunks = [container.Chunk(a, min(chunk_frames, motion.num_frames - a),
+                              codec.encode(motion[a:a + chunk_frames], output))
               for a in range(0, motion.num_frames, chunk_frames)]
     header = {"codec": codec.get_config(), "fps": float(motion.fps), "frames": motion.num_frames,
-              "chunk_frames": chunk_frames, "skeleton": motion.skeleton}
+              "chunk_frames": chunk_frames, "skeleton": skeleton}
     return container.pack(header, chunks, embed_skeleton)
 
 
 def encode(motion: Motion, path: str | os.PathLike, codec: Codec | None = None,
-           chunk_frames: int = CHUNK_FRAMES, embed_skeleton: bool = True) -> int:
+           chunk_frames: int = CHUNK_FRAMES, embed_skeleton: bool = True, exact_skeleton: bool = False) -> int:
     """Write ``motion`` to ``path`` (atomically); return the file size in bytes."""
-    data = pack(motion, codec, chunk_frames, embed_skeleton)
+    data = pack(motion, codec, chunk_frames, embed_skeleton, exact_skeleton)
     atomic_write_bytes(path, data)
     return len(data)
 

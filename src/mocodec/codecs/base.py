@@ -153,8 +153,11 @@ class Codec:
         return type(self)(**{**self.config, name: value})
 
     # ----- whole clips ------------------------------------------------------------------
-    def encode(self, motion: Motion) -> bytes:
-        """The payload of ``motion``: envelope + codec body."""
+    def encode(self, motion: Motion, output_skeleton: Skeleton | None = None) -> bytes:
+        """The payload of ``motion``: envelope + codec body. ``output_skeleton``: the skeleton
+        the decoder will be given when it is not quite ``motion``'s own (a lossy .moc file
+        stores offsets rounded, :func:`mocodec.moc.pack`); a codec that verifies an error bound
+        verifies it on the joints that skeleton gives."""
         if not np.isfinite(motion.channels).all():
             f, c = np.argwhere(~np.isfinite(motion.channels))[0]
             raise CodecError(f"cannot encode: frame {f}, channel {motion.skeleton.channel_names[c]} is "
@@ -162,7 +165,8 @@ class Codec:
         if motion.num_frames > MAX_FRAMES:
             raise CodecError(f"cannot encode {motion.num_frames} frames in one payload (limit {MAX_FRAMES}); "
                              "use the container, which splits clips into chunks")
-        return self.wrap(self._encode(motion), motion.num_frames, motion.fps)
+        body = self._encode(motion) if output_skeleton is None else self._encode_for(motion, output_skeleton)
+        return self.wrap(body, motion.num_frames, motion.fps)
 
     @staticmethod
     def wrap(body: bytes, frames: int, fps: float) -> bytes:
@@ -187,6 +191,11 @@ class Codec:
 
     def _encode(self, motion: Motion) -> bytes:
         raise NotImplementedError
+
+    def _encode_for(self, motion: Motion, output_skeleton: Skeleton) -> bytes:
+        """The body for a decoder given ``output_skeleton`` (same structure as ``motion``'s, offsets
+        rounded): the same as :meth:`_encode` for codecs that do not check the joints' error."""
+        return self._encode(motion)
 
     def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:
         raise NotImplementedError

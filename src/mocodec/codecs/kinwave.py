@@ -29,7 +29,8 @@ Per payload of T frames:
    own (1/8 octave), searched on its own worst error, so quiet stretches are not coded as
    finely as the busiest one needs.
 
-Payload body: u8 version, u8 flags (bit 0 keyframe, bits 1-2 wavelet, bit 3 segment offsets),
+Payload body: u8 format (2; format 1, whose approximation bands are coded as they are, is
+still read), u8 flags (bit 0 keyframe, bits 1-2 wavelet, bit 3 segment offsets),
 u8 log2 window, u8 levels, u16 channels (a payload for another skeleton is refused), one u8
 step code per joint with rotation channels and one for translations (step = 2^(code/8 - 20)
 degrees or cm), with flag bit 3 one i8 step offset per segment, then the arithmetic-coded
@@ -54,7 +55,8 @@ from mocodec.metrics.pose import bone_joints, shell_errors
 from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
-FORMAT = 1
+FORMAT = 2                      # 2: approximation bands coded as differences (coefcoder); 1 is still read
+FORMATS = (1, 2)
 _HEAD = struct.Struct("<BBBBH")     # format, flags, log2 window, levels, channels
 FLAG_OFFSETS = 8                # flags bit 3: a signed step offset per segment follows the step codes
 WAVELET_IDS = ("cdf97", "d4", "haar")
@@ -240,6 +242,9 @@ class KinwaveCodec(Codec):
     def _encode(self, motion: Motion) -> bytes:
         return _Encoder(self, motion).run()
 
+    def _encode_for(self, motion: Motion, output_skeleton: Skeleton) -> bytes:
+        return _Encoder(self, motion, output_skeleton).run()
+
     # ----- decoding -----------------------------------------------------------------------
     def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:
         rot_joints = _rotation_joints(skeleton)
@@ -248,8 +253,8 @@ class KinwaveCodec(Codec):
         if len(body) < head:
             raise CorruptStreamError(f"kinwave payload of {len(body)} bytes is shorter than its {head}-byte header")
         version, flags, log_w, levels, channels = _HEAD.unpack_from(body)
-        if version != FORMAT:
-            raise CorruptStreamError(f"kinwave payload format {version}, this mocodec reads {FORMAT}")
+        if version not in FORMATS:
+            raise CorruptStreamError(f"kinwave payload format {version}, this mocodec reads {FORMATS}")
         if channels != skeleton.num_channels:
             raise CorruptStreamError(f"kinwave payload has {channels} channels, the skeleton {skeleton.num_channels}: "
                                      "wrong skeleton?")
@@ -264,7 +269,7 @@ class KinwaveCodec(Codec):
             offsets = np.frombuffer(body, dtype=np.int8, count=offsets.size, offset=head)
             head += offsets.size
         const, knots, coeffs, _ = coefcoder.decode(body[head:], skeleton.num_channels, lay.num_knots, lay.padded,
-                                                   lay.levels)
+                                                   lay.levels, revision=version)
         if not frames:
             return np.zeros((0, skeleton.num_channels))
         return _decoded(skeleton, codes, offsets, const, knots, coeffs, lay).T
@@ -294,9 +299,10 @@ def _channel_steps(skeleton: Skeleton, codes: np.ndarray) -> np.ndarray:
 class _Encoder:
     """One payload: the passes of the scale search and the final bytes."""
 
-    def __init__(self, codec: KinwaveCodec, motion: Motion):
+    def __init__(self, codec: KinwaveCodec, motion: Motion, output_skeleton: Skeleton | None = None):
         self.cfg = codec.config
         self.skeleton = sk = motion.skeleton
+        self.output_skeleton = output_skeleton or sk        # the decoder's: errors are measured on its joints
         self.motion = motion.continuous() if motion.num_frames else motion
         self.values = self.motion.channels.T.copy()                         # (C, T)
         self.frames = motion.num_frames
@@ -401,7 +407,7 @@ class _Encoder:
     def _joint_errors(self, decoded: np.ndarray) -> np.ndarray:
         """``(frames, points)`` cm: the decoded output's error at every joint, or at the worst
         shell point of every bone."""
-        pos, quat = forward_kinematics(self.skeleton, decoded.T)
+        pos, quat = forward_kinematics(self.output_skeleton, decoded.T)
         pos = pos * self.cm
         if self.cfg["error_measure"] == "shell":
             return shell_errors(self.skeleton, self.positions, self.quats, pos, quat).per_frame
@@ -417,7 +423,8 @@ class _Encoder:
             head = bytes([head[0], head[1] | FLAG_OFFSETS]) + head[2:] + ps.steps.tobytes() + ps.offsets.tobytes()
         else:
             head += ps.steps.tobytes()
-        return head + coefcoder.encode(ps.const, ps.knots, ps.coeffs, self.lay.padded, self.lay.levels)
+        return head + coefcoder.encode(ps.const, ps.knots, ps.coeffs, self.lay.padded, self.lay.levels,
+                                       revision=FORMAT)
 
     def run(self) -> bytes:
         if self.frames == 0:

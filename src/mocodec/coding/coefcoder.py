@@ -7,7 +7,9 @@ The binary range coder and the binarisation of integers are :mod:`mocodec.coding
   activity (``2|v[i-1]| + |v[i-2]|`` in the same band, four classes) and the parent
   coefficient's magnitude (the coefficient one level coarser at ``i // 2``, three classes);
 * size-class unary bits: subband, activity and position in the unary code;
-* sign: subband;
+* sign: subband (revision 2: and the signs of the previous value and of the parent);
+* revision 2 codes the approximation band of a block as differences from its previous value
+  (neighbours 32 frames apart are alike), the first value and the rest in contexts of their own;
 * per channel: a "constant" flag; per segment block: an "all zero" flag, in the context of the
   previous block of the same channel; knots: their own set of the above.
 
@@ -41,13 +43,19 @@ _KM = _KU + 2 * 24                              # knots: top mantissa bit per cl
 _KS = _KM + MAX_CLASS                          # knots: sign
 _CONST = _KS + 2                                # channel is constant
 _BLOCK = _CONST + 1                             # block has a nonzero coefficient (prev block: 0/1)
-_CONTEXTS = _BLOCK + 2
+_S2 = _BLOCK + 2                                # revision 2 signs: band x previous sign x parent sign
+_CONTEXTS = _S2 + _BANDS * 9
 
 
 @numba.njit(inline="always")
 def _activity(a, b):
     s = 2 * (a if a >= 0 else -a) + (b if b >= 0 else -b)
     return 0 if s == 0 else (1 if s <= 2 else (2 if s <= 6 else 3))
+
+
+@numba.njit(inline="always")
+def _sign_class(v):
+    return 0 if v == 0 else (1 if v > 0 else 2)
 
 
 @numba.njit(inline="always")
@@ -58,7 +66,7 @@ def _parent_class(v):
 
 # ----- payloads -----------------------------------------------------------------------------
 @numba.njit(cache=True)
-def _encode(const, knots, coeffs, seg_pad, seg_lev, buf):
+def _encode(const, knots, coeffs, seg_pad, seg_lev, rev2, buf):
     st = encoder_state()
     pf = np.full(_CONTEXTS, INIT, dtype=np.int64)
     ps = np.full(_CONTEXTS, INIT, dtype=np.int64)
@@ -90,21 +98,27 @@ def _encode(const, knots, coeffs, seg_pad, seg_lev, buf):
                 L = seg_lev[s]
                 start = off
                 blen = n >> L
+                prev_v = 0
                 for b in range(L + 1):
                     band = 0 if b == 0 else min(L - b + 1, _BANDS - 1)
                     p1 = 0
                     p2 = 0
                     for i in range(blen):
-                        if b == 0:
-                            par = 0
-                        elif b == 1:
-                            par = _parent_class(coeffs[c, off + i])
-                        else:
-                            par = _parent_class(coeffs[c, start - (blen >> 1) + (i >> 1)])
-                        act = _activity(p1, p2)
                         v = coeffs[c, start + i]
+                        pv = 0
+                        if b == 0:
+                            par = 1 if rev2 and i > 0 else 0
+                            if rev2:                 # the difference from the previous value
+                                u = v - prev_v
+                                prev_v = v
+                                v = u
+                        else:
+                            pv = coeffs[c, off + i] if b == 1 else coeffs[c, start - (blen >> 1) + (i >> 1)]
+                            par = _parent_class(pv)
+                        act = _activity(p1, p2)
+                        sctx = _S2 + (band * 3 + _sign_class(p1)) * 3 + _sign_class(pv) if rev2 else _S0 + band
                         put_int(st, buf, pf, ps, v, _Z0 + (band * _ACT + act) * _PAR + par,
-                                 _U0 + (band * _ACT + act) * _UNARY, _UNARY, _M0, _S0 + band)
+                                 _U0 + (band * _ACT + act) * _UNARY, _UNARY, _M0, sctx)
                         p2 = p1
                         p1 = v
                     start += blen
@@ -115,7 +129,7 @@ def _encode(const, knots, coeffs, seg_pad, seg_lev, buf):
 
 
 @numba.njit(cache=True)
-def _decode(data, channels, num_knots, num_coeffs, seg_pad, seg_lev, const, knots, coeffs):
+def _decode(data, channels, num_knots, num_coeffs, seg_pad, seg_lev, rev2, const, knots, coeffs):
     st = start_decoder(data)
     pf = np.full(_CONTEXTS, INIT, dtype=np.int64)
     ps = np.full(_CONTEXTS, INIT, dtype=np.int64)
@@ -141,23 +155,28 @@ def _decode(data, channels, num_knots, num_coeffs, seg_pad, seg_lev, const, knot
                 L = seg_lev[s]
                 start = off
                 blen = n >> L
+                prev_v = 0
                 for b in range(L + 1):
                     band = 0 if b == 0 else min(L - b + 1, _BANDS - 1)
                     p1 = 0
                     p2 = 0
                     for i in range(blen):
+                        pv = 0
                         if b == 0:
-                            par = 0
-                        elif b == 1:
-                            par = _parent_class(coeffs[c, off + i])
+                            par = 1 if rev2 and i > 0 else 0
                         else:
-                            par = _parent_class(coeffs[c, start - (blen >> 1) + (i >> 1)])
+                            pv = coeffs[c, off + i] if b == 1 else coeffs[c, start - (blen >> 1) + (i >> 1)]
+                            par = _parent_class(pv)
                         act = _activity(p1, p2)
+                        sctx = _S2 + (band * 3 + _sign_class(p1)) * 3 + _sign_class(pv) if rev2 else _S0 + band
                         v = get_int(st, data, pf, ps, _Z0 + (band * _ACT + act) * _PAR + par,
-                                     _U0 + (band * _ACT + act) * _UNARY, _UNARY, _M0, _S0 + band)
-                        coeffs[c, start + i] = v
+                                     _U0 + (band * _ACT + act) * _UNARY, _UNARY, _M0, sctx)
                         p2 = p1
                         p1 = v
+                        if b == 0 and rev2:
+                            prev_v += v
+                            v = prev_v
+                        coeffs[c, start + i] = v
                     start += blen
                     if b > 0:
                         blen <<= 1
@@ -165,21 +184,35 @@ def _decode(data, channels, num_knots, num_coeffs, seg_pad, seg_lev, const, knot
     return st[2]
 
 
+def _approx_differences(coeffs: np.ndarray, seg_pad: np.ndarray, seg_lev: np.ndarray) -> np.ndarray:
+    """The values :func:`encode` codes in place of the approximation bands after their first."""
+    offsets = np.concatenate([[0], np.cumsum(seg_pad)[:-1]]).astype(np.int64)
+    parts = [np.diff(coeffs[:, o:o + (n >> lev)], axis=1).ravel() for o, n, lev in zip(offsets, seg_pad, seg_lev) if n]
+    return np.concatenate(parts) if parts else np.zeros(0, dtype=np.int64)
+
+
 def encode(const: np.ndarray, knots: np.ndarray, coeffs: np.ndarray, seg_pad: np.ndarray,
-           seg_lev: np.ndarray) -> bytes:
+           seg_lev: np.ndarray, revision: int = 1) -> bytes:
     """Bytes for ``const (C,)`` flags, ``knots (C, K)`` and ``coeffs (C, N)`` integers laid out
-    as segments of ``seg_pad`` coefficients (0: no block) with ``seg_lev`` wavelet levels."""
+    as segments of ``seg_pad`` coefficients (0: no block) with ``seg_lev`` wavelet levels.
+    ``revision`` 2 codes each block's approximation band as differences from the previous value
+    and a sign in the context of the previous value's and the parent's signs: 3.7% fewer bytes
+    than revision 1 (kinwave's payload format 1) at a mean joint bound of 0.5 cm, 4.3% at 1 cm,
+    1.7-2.2% at max bounds (geometric mean over 23 shared clips)."""
     const = np.ascontiguousarray(const, dtype=np.int64)
     knots = np.ascontiguousarray(knots, dtype=np.int64)
     coeffs = np.ascontiguousarray(coeffs, dtype=np.int64)
-    values = np.concatenate([coeffs.ravel(), knots[:, :1].ravel(), np.diff(knots, axis=1).ravel()])
-    buf = buffer_for(const.size + int_decisions(values) + 2 * len(seg_pad) * const.size)
-    n = _encode(const, knots, coeffs, np.asarray(seg_pad, dtype=np.int64), np.asarray(seg_lev, dtype=np.int64), buf)
+    seg_pad, seg_lev = np.asarray(seg_pad, dtype=np.int64), np.asarray(seg_lev, dtype=np.int64)
+    values = [coeffs.ravel(), knots[:, :1].ravel(), np.diff(knots, axis=1).ravel()]
+    if revision >= 2:
+        values.append(_approx_differences(coeffs, seg_pad, seg_lev))
+    buf = buffer_for(const.size + int_decisions(np.concatenate(values)) + 2 * len(seg_pad) * const.size)
+    n = _encode(const, knots, coeffs, seg_pad, seg_lev, revision >= 2, buf)
     return buf[:n].tobytes()
 
 
-def decode(data: bytes, channels: int, num_knots: int, seg_pad: np.ndarray, seg_lev: np.ndarray
-           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+def decode(data: bytes, channels: int, num_knots: int, seg_pad: np.ndarray, seg_lev: np.ndarray,
+           revision: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """Inverse of :func:`encode`: (const, knots, coeffs, bytes read)."""
     seg_pad = np.asarray(seg_pad, dtype=np.int64)
     n = int(seg_pad.sum())
@@ -187,5 +220,5 @@ def decode(data: bytes, channels: int, num_knots: int, seg_pad: np.ndarray, seg_
     knots = np.zeros((channels, num_knots), dtype=np.int64)
     coeffs = np.zeros((channels, n), dtype=np.int64)
     used = _decode(np.frombuffer(data, dtype=np.uint8), channels, num_knots, n, seg_pad,
-                   np.asarray(seg_lev, dtype=np.int64), const, knots, coeffs)
+                   np.asarray(seg_lev, dtype=np.int64), revision >= 2, const, knots, coeffs)
     return const, knots, coeffs, int(used)

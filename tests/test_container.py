@@ -126,12 +126,24 @@ def test_skeleton_by_reference(walk_amc, tmp_path):
         moc.unpack(ref, skeleton=load(DATA / "135_08.amc").skeleton)
 
 
-def test_header_dictionary_never_changes():
-    """The preset dictionary is part of the format: files written with it need these bytes."""
+def test_header_dictionaries_never_change():
+    """The preset dictionaries are part of the format: files written with them need these bytes."""
     import hashlib
-    from mocodec.formats.header_dict import DICTIONARY
-    assert hashlib.sha256(DICTIONARY).hexdigest() == (
+    from mocodec.formats.header_dict import dictionary
+    assert hashlib.sha256(dictionary(2)).hexdigest() == (
         "4e8fe4351d431fc5702e77ca6c720405ca8b064aca5d8f007516f9fff8b7b37a")
+    assert hashlib.sha256(dictionary(3)).hexdigest() == (
+        "8185b93c45d27ec9fbc28f57c1963049b0024915bcc6b4ab3687b1738498f965")
+
+
+def test_framing_costs_38_bytes(walk_bvh):
+    """Start and header CRC (16 bytes), one chunk's length and CRC (6 for a payload under 16 KB),
+    the index (8) and the footer (8): 29 bytes fewer than version 2."""
+    clip = walk_bvh[:20]
+    data = moc.pack(clip, get_codec("raw"), embed_skeleton=False)
+    c = container.open_container(__import__("io").BytesIO(data), len(data), "f.moc", clip.skeleton)
+    head_len = int.from_bytes(data[8:12], "little")
+    assert len(data) - head_len - len(c.read_chunk(0)) == 38
 
 
 def test_common_skeletons_cost_a_few_hundred_bytes(walk_bvh, walk_amc):
@@ -161,6 +173,19 @@ def test_lossy_files_round_the_skeleton_offsets(walk_bvh, walk_amc):
                       moc.unpack(moc.pack(clip, get_codec("kinwave"), embed_skeleton=False), skeleton=motion.skeleton)):
             assert container.skeleton_id(exact.skeleton) == container.skeleton_id(motion.skeleton)
     assert saved[132] > 60 and saved[62] > 250
+
+
+def test_version_2_files_still_read():
+    from mocodec import load
+    from conftest import DATA
+    data = (DATA / "version2.moc").read_bytes()
+    assert data[4] == 2
+    original = load(DATA / "09_02.bvh")[:2]
+    c = container.open_container(__import__("io").BytesIO(data), len(data), "version2.moc")
+    assert [(e.first, e.count) for e in c.index] == [(0, 1), (1, 1)]
+    motion = moc.unpack(data)
+    assert np.array_equal(motion.channels, original.channels.astype(np.float32))
+    assert container.skeleton_id(motion.skeleton) == container.skeleton_id(original.skeleton)
 
 
 def test_version_1_files_still_read():

@@ -1,28 +1,36 @@
 """The .moc container: a coded motion that decodes on its own, with random access.
 
-Layout (little-endian)::
+Layout (little-endian, version 3)::
 
     "MOC1"  u16 version  u16 flags (bit 0: the header holds a compact skeleton)
     u32 header length, header (zlib, deflated with the preset dictionary of
-        :mod:`mocodec.formats.header_dict`; version 1, still read: without it), holding JSON
-        with the codec config, fps, frame count, chunk size and, without flag 0, the
-        skeleton's id; with flag 0, a zero byte and the compact skeleton of
-        :mod:`mocodec.formats.skeleton_bin` follow the JSON;
+        :mod:`mocodec.formats.header_dict` for this version), holding JSON with the codec
+        config, fps, frame count, chunk size and, without flag 0, the skeleton's id; with
+        flag 0, a zero byte and the compact skeleton of :mod:`mocodec.formats.skeleton_bin`
+        follow the JSON;
         u32 CRC32 of the header bytes
-    chunks: u32 first frame, u32 frame count, u32 payload length, payload,
-            u32 CRC32 of those 12 header bytes and the payload
-    index:  u32 chunk count, per chunk (u64 file offset, u32 first frame, u32 frame count),
+    chunks: varint payload length, payload, u32 CRC32 of the length and the payload
+    index:  varint chunk count, per chunk (varint frame count, varint bytes of the chunk),
             u32 CRC32 of the index
-    footer: u64 index offset, "MOCX"
+    footer: u32 index length, "MOCX"
 
-The index at the end lets a reader fetch only the chunks that cover a frame range. Every
-part is length-checked and CRC-checked before it is used, and a failure raises
-:class:`~mocodec.errors.CorruptStreamError` naming the part (chunk number) and byte offset.
-A file can hold its skeleton (self-contained: about 390 bytes for the 57 joints of the CMU BVH
-skeletons, 830 for CMU ASF ones, whose bone vectors are not short decimals) or only the skeleton's
-id, a hash of its canonical form: a library of clips on one skeleton, or a stream whose receiver
-already has it, then pays 32 bytes instead; the reader must be given the skeleton, and a
-skeleton with another id is refused.
+Chunks follow the header back to back, so the index's sizes give every chunk's offset and its
+frame counts every chunk's first frame. The index at the end lets a reader fetch only the
+chunks that cover a frame range. Every part is length-checked and CRC-checked before it is
+used, and a failure raises :class:`~mocodec.errors.CorruptStreamError` naming the part (chunk
+number) and byte offset.
+
+Versions 1 and 2 are still read. They frame each chunk with u32 first frame, frame count and
+payload length and give the index u32 count and u32 entries (u64 offset, u32 first frame, u32
+frame count) and the footer a u64 index offset: 29 bytes more for a one-chunk file. Version 1
+deflates the header without a dictionary, version 2 with the dictionary before the current
+codec settings were added to it.
+
+A file can hold its skeleton (self-contained: about 360 bytes for the 57 joints of the CMU BVH
+skeletons in a lossy file, 550 for CMU ASF ones) or only the skeleton's id, a hash of its
+canonical form: a library of clips on one skeleton, or a stream whose receiver already has it,
+then pays 32 bytes instead; the reader must be given the skeleton, and a skeleton with another
+id is refused.
 
 This module handles bytes and the skeleton only; codecs are applied by :mod:`mocodec.moc`.
 """
@@ -38,22 +46,24 @@ from dataclasses import dataclass
 from typing import BinaryIO
 
 from mocodec.errors import CorruptStreamError, SkeletonMismatchError
-from mocodec.formats.header_dict import DICTIONARY
+from mocodec.formats.header_dict import dictionary
 from mocodec.formats.skeleton_bin import pack_skeleton, unpack_skeleton
 from mocodec.skeleton import Joint, Skeleton
 
 MAGIC = b"MOC1"
 FOOTER_MAGIC = b"MOCX"
-VERSION = 2
-VERSIONS = (1, 2)               # the versions this module reads
+VERSION = 3
+VERSIONS = (1, 2, 3)            # the versions this module reads
 MAX_HEADER = 1 << 24
 MAX_CHUNKS = 1 << 20
 FLAG_SKELETON = 1
 _START = struct.Struct("<4sHHI")
 _CHUNK = struct.Struct("<III")
 _ENTRY = struct.Struct("<QII")
-_FOOTER = struct.Struct("<Q4s")
+_FOOTER = struct.Struct("<Q4s")        # versions 1 and 2
+_FOOTER_3 = struct.Struct("<I4s")
 _U32 = struct.Struct("<I")
+_MAX_VARINT = 10
 
 
 # ----- skeleton <-> JSON ------------------------------------------------------------------------
@@ -113,19 +123,45 @@ def pack(header: dict, chunks: list[Chunk], embed_skeleton: bool = True) -> byte
     text = json.dumps(meta, separators=(",", ":"), allow_nan=False).encode()
     if embed_skeleton:
         text += b"\0" + pack_skeleton(skeleton)
-    deflate = zlib.compressobj(9, zdict=DICTIONARY)
+    deflate = zlib.compressobj(9, zdict=dictionary(VERSION))
     head = deflate.compress(text) + deflate.flush()
     flags = FLAG_SKELETON if embed_skeleton else 0
     out = bytearray(_START.pack(MAGIC, VERSION, flags, len(head)) + head + _U32.pack(zlib.crc32(head)))
-    entries = []
+    index = bytearray(_varint(len(chunks)))
+    expected = 0
     for chunk in chunks:
-        entries.append(_ENTRY.pack(len(out), chunk.first, chunk.count))
-        body = _CHUNK.pack(chunk.first, chunk.count, len(chunk.payload)) + chunk.payload
+        if chunk.first != expected or chunk.count < 1:
+            raise ValueError(f"chunk of frames {chunk.first}+{chunk.count} does not follow frame {expected}")
+        expected += chunk.count
+        body = _varint(len(chunk.payload)) + chunk.payload
+        index += _varint(chunk.count) + _varint(len(body) + 4)
         out += body + _U32.pack(zlib.crc32(body))
-    index = _U32.pack(len(entries)) + b"".join(entries)
-    index_offset = len(out)
-    out += index + _U32.pack(zlib.crc32(index)) + _FOOTER.pack(index_offset, FOOTER_MAGIC)
+    index += _U32.pack(zlib.crc32(index))
+    out += index + _FOOTER_3.pack(len(index), FOOTER_MAGIC)
     return bytes(out)
+
+
+def _varint(v: int) -> bytes:
+    out = bytearray()
+    while True:
+        out.append((v & 0x7F) | (0x80 if v > 0x7F else 0))
+        v >>= 7
+        if not v:
+            return bytes(out)
+
+
+def _read_varint(data: bytes, pos: int, where: str) -> tuple[int, int]:
+    """(value, next position) of the varint at ``pos``."""
+    v = shift = 0
+    for k in range(_MAX_VARINT):
+        if pos + k >= len(data):
+            raise CorruptStreamError(f"{where}: ends inside a number at byte {pos + k}")
+        b = data[pos + k]
+        v |= (b & 0x7F) << shift
+        if not b & 0x80:
+            return v, pos + k + 1
+        shift += 7
+    raise CorruptStreamError(f"{where}: bad number at byte {pos}")
 
 
 # ----- reading --------------------------------------------------------------------------------
@@ -134,6 +170,7 @@ class IndexEntry:
     offset: int
     first: int
     count: int
+    size: int = 0               # bytes of the chunk with its framing (0: versions 1 and 2, which frame it themselves)
 
 
 @dataclass(frozen=True)
@@ -163,6 +200,15 @@ class Container:
         """Payload of chunk ``k``, length- and CRC-checked."""
         e = self.index[k]
         where = f"{self.name}: chunk {k} at byte {e.offset}"
+        if e.size:
+            body = _read_at(self.source, e.offset, e.size, self.size, where)
+            length, start = _read_varint(body, 0, where)
+            if start + length + 4 != e.size:
+                raise CorruptStreamError(f"{where}: a {length}-byte payload does not fill the {e.size} bytes the "
+                                         "index gives the chunk")
+            if zlib.crc32(body[:-4]) != _U32.unpack(body[-4:])[0]:
+                raise CorruptStreamError(f"{where}: CRC mismatch, the chunk is damaged")
+            return body[start:-4]
         raw = _read_at(self.source, e.offset, _CHUNK.size, self.size, where)
         first, count, length = _CHUNK.unpack(raw)
         if (first, count) != (e.first, e.count):
@@ -202,7 +248,7 @@ def open_container(source: BinaryIO, size: int, name: str, skeleton: Skeleton | 
     if zlib.crc32(head[:-4]) != _U32.unpack(head[-4:])[0]:
         raise CorruptStreamError(f"{name}: header CRC mismatch at byte {_START.size}, the header is damaged")
     try:
-        inflate = zlib.decompressobj(zdict=DICTIONARY) if version >= 2 else zlib.decompressobj()
+        inflate = zlib.decompressobj(zdict=dictionary(version)) if version >= 2 else zlib.decompressobj()
         text = inflate.decompress(head[:-4]) + inflate.flush()
         if not inflate.eof:
             raise ValueError("the compressed header is cut short")
@@ -228,6 +274,46 @@ def open_container(source: BinaryIO, size: int, name: str, skeleton: Skeleton | 
     skeleton = embedded or skeleton
     if frames < 0 or not (math.isfinite(fps) and fps > 0):
         raise CorruptStreamError(f"{name}: header says {frames} frames at {fps} fps")
+    chunks_at = _START.size + head_len + 4
+    index = (_index(source, size, name, chunks_at) if version >= 3 else
+             _index_v2(source, size, name, chunks_at))
+    if sum(e.count for e in index) != frames:
+        raise CorruptStreamError(f"{name}: the index's chunks cover {sum(e.count for e in index)} frames, the header "
+                                 f"says {frames}")
+    return Container(source, size, name, header, skeleton, index)
+
+
+def _index(source: BinaryIO, size: int, name: str, chunks_at: int) -> tuple[IndexEntry, ...]:
+    """The index of a version 3 file, checked against the file's layout."""
+    foot_at = size - _FOOTER_3.size
+    length, foot_magic = _FOOTER_3.unpack(_read_at(source, foot_at, _FOOTER_3.size, size, f"{name}: footer"))
+    if foot_magic != FOOTER_MAGIC:
+        raise CorruptStreamError(f"{name}: footer at byte {foot_at} is damaged or the file is truncated")
+    index_at = foot_at - length
+    where = f"{name}: index at byte {index_at}"
+    if length < 5 or index_at < chunks_at:
+        raise CorruptStreamError(f"{where}: an index of {length} bytes does not fit in the file")
+    raw = _read_at(source, index_at, length, size, where)
+    if zlib.crc32(raw[:-4]) != _U32.unpack(raw[-4:])[0]:
+        raise CorruptStreamError(f"{where}: CRC mismatch, the index is damaged")
+    n, pos = _read_varint(raw, 0, where)
+    if n > MAX_CHUNKS:
+        raise CorruptStreamError(f"{where}: {n} chunks is implausible")
+    entries, offset, first = [], chunks_at, 0
+    for k in range(n):
+        count, pos = _read_varint(raw, pos, where)
+        chunk_size, pos = _read_varint(raw, pos, where)
+        if count == 0 or chunk_size < 5:
+            raise CorruptStreamError(f"{where}: entry {k} ({count} frames in {chunk_size} bytes) is invalid")
+        entries.append(IndexEntry(offset, first, count, chunk_size))
+        offset, first = offset + chunk_size, first + count
+    if pos != length - 4 or offset != index_at:
+        raise CorruptStreamError(f"{where}: the entries do not match the file's layout")
+    return tuple(entries)
+
+
+def _index_v2(source: BinaryIO, size: int, name: str, chunks_at: int) -> tuple[IndexEntry, ...]:
+    """The index of a version 1 or 2 file (explicit offsets and first frames)."""
     foot_at = size - _FOOTER.size
     index_offset, foot_magic = _FOOTER.unpack(_read_at(source, foot_at, _FOOTER.size, size, f"{name}: footer"))
     if foot_magic != FOOTER_MAGIC:
@@ -242,9 +328,7 @@ def open_container(source: BinaryIO, size: int, name: str, skeleton: Skeleton | 
     index = tuple(IndexEntry(*_ENTRY.unpack_from(raw, 4 + k * _ENTRY.size)) for k in range(n))
     expected = 0
     for k, e in enumerate(index):
-        if e.first != expected or e.count == 0 or not _START.size + head_len + 4 <= e.offset < index_offset:
+        if e.first != expected or e.count == 0 or not chunks_at <= e.offset < index_offset:
             raise CorruptStreamError(f"{where}: entry {k} (frames {e.first}+{e.count} at byte {e.offset}) is invalid")
         expected += e.count
-    if expected != frames:
-        raise CorruptStreamError(f"{where}: chunks cover {expected} frames, the header says {frames}")
-    return Container(source, size, name, header, skeleton, index)
+    return index

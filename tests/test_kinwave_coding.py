@@ -28,8 +28,11 @@ def test_coefficient_coder_round_trips(seed, frames, keyframe, spread, rev):
     coeffs = np.round(rng.laplace(0, spread, (channels, lay.num_coeffs)) if spread else
                       np.zeros((channels, lay.num_coeffs))).astype(np.int64)
     coeffs[const == 1] = 0
-    data = coefcoder.encode(const, knots, coeffs, lay.padded, lay.levels, revision=rev)
-    c2, k2, co2, used = coefcoder.decode(data, channels, lay.num_knots, lay.padded, lay.levels, revision=rev)
+    side = (rng.integers(0, 256, rng.integers(0, 50)), rng.integers(-128, 128, rng.integers(0, 9)))
+    data = coefcoder.encode(const, knots, coeffs, lay.padded, lay.levels, revision=rev, side=side)
+    out = coefcoder.decode(data, channels, lay.num_knots, lay.padded, lay.levels, rev, tuple(map(len, side)))
+    c2, k2, co2, used = out.const, out.knots, out.coeffs, out.used
+    assert all(np.array_equal(a, b) for a, b in zip(out.side, side))
     assert used >= len(data) - 1 and np.array_equal(c2, const)
     live = const == 0
     assert np.array_equal(k2[live], knots[live]) and np.array_equal(k2[~live, 0], knots[~live, 0])
@@ -47,7 +50,7 @@ def test_differences_code_a_smooth_approximation_band_smaller():
     args = (np.zeros(4, np.int64), np.zeros((4, lay.num_knots), np.int64), coeffs, lay.padded, lay.levels)
     plain, delta = coefcoder.encode(*args), coefcoder.encode(*args, revision=2)
     assert len(delta) < 0.8 * len(plain)
-    assert np.array_equal(coefcoder.decode(delta, 4, lay.num_knots, lay.padded, lay.levels, revision=2)[2], coeffs)
+    assert np.array_equal(coefcoder.decode(delta, 4, lay.num_knots, lay.padded, lay.levels, revision=2).coeffs, coeffs)
 
 
 def test_coefficient_coder_adapts_to_sparse_data():
@@ -59,8 +62,8 @@ def test_coefficient_coder_adapts_to_sparse_data():
     data = coefcoder.encode(np.zeros(10, np.int64), np.zeros((10, lay.num_knots), np.int64), coeffs, lay.padded,
                             lay.levels)
     assert len(data) * 8 < 0.2 * coeffs.size       # 1% nonzero: about 0.09 bits of entropy each for the zero flags
-    const, knots, out, _ = coefcoder.decode(bytes(range(256)) * 3, 10, lay.num_knots, lay.padded, lay.levels)
-    assert out.shape == coeffs.shape
+    out = coefcoder.decode(bytes(range(256)) * 3, 10, lay.num_knots, lay.padded, lay.levels, 2, (5, 3))
+    assert out.coeffs.shape == coeffs.shape and [len(q) for q in out.side] == [5, 3]
 
 
 def test_layout_keyframe_and_knots():

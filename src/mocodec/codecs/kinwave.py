@@ -29,12 +29,13 @@ Per payload of T frames:
    own (1/8 octave), searched on its own worst error, so quiet stretches are not coded as
    finely as the busiest one needs.
 
-Payload body: u8 format (2; format 1, whose approximation bands are coded as they are, is
-still read), u8 flags (bit 0 keyframe, bits 1-2 wavelet, bit 3 segment offsets),
-u8 log2 window, u8 levels, u16 channels (a payload for another skeleton is refused), one u8
-step code per joint with rotation channels and one for translations (step = 2^(code/8 - 20)
-degrees or cm), with flag bit 3 one i8 step offset per segment, then the arithmetic-coded
-stream.
+Payload body: u8 format (2), u8 flags (bit 0 keyframe, bits 1-2 wavelet, bit 3 segment
+offsets), u8 log2 window, u8 levels, u16 channels (a payload for another skeleton is refused),
+then the arithmetic-coded stream (:mod:`mocodec.coding.coefcoder`, revision 2), which opens with
+one step code per joint with rotation channels and one for translations (step = 2^(code/8 - 20)
+degrees or cm) and, with flag bit 3, one step offset per segment. Format 1, still read, wrote
+the codes and offsets as bytes (u8, i8) before the stream, and coded the approximation bands as
+they are.
 """
 
 from __future__ import annotations
@@ -249,9 +250,10 @@ class KinwaveCodec(Codec):
     def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:
         rot_joints = _rotation_joints(skeleton)
         trans = _has_translation(skeleton)
-        head = _HEAD.size + len(rot_joints) + trans
-        if len(body) < head:
-            raise CorruptStreamError(f"kinwave payload of {len(body)} bytes is shorter than its {head}-byte header")
+        num_codes = len(rot_joints) + trans
+        if len(body) < _HEAD.size:
+            raise CorruptStreamError(f"kinwave payload of {len(body)} bytes is shorter than its {_HEAD.size}-byte "
+                                     "header")
         version, flags, log_w, levels, channels = _HEAD.unpack_from(body)
         if version not in FORMATS:
             raise CorruptStreamError(f"kinwave payload format {version}, this mocodec reads {FORMATS}")
@@ -260,19 +262,27 @@ class KinwaveCodec(Codec):
                                      "wrong skeleton?")
         if log_w > 16 or not 1 <= levels <= 10 or (flags >> 1) & 3 >= len(WAVELET_IDS):
             raise CorruptStreamError(f"kinwave payload header is damaged (window 2^{log_w}, levels {levels})")
-        codes = np.frombuffer(body, dtype=np.uint8, count=head - _HEAD.size, offset=_HEAD.size)
         lay = trendwave.layout(frames, 1 << log_w, levels, bool(flags & 1), WAVELET_IDS[(flags >> 1) & 3])
-        offsets = np.zeros(lay.starts.size, dtype=np.int8)
-        if flags & FLAG_OFFSETS:
-            if len(body) < head + offsets.size:
-                raise CorruptStreamError(f"kinwave payload of {len(body)} bytes ends inside its segment offsets")
-            offsets = np.frombuffer(body, dtype=np.int8, count=offsets.size, offset=head)
-            head += offsets.size
-        const, knots, coeffs, _ = coefcoder.decode(body[head:], skeleton.num_channels, lay.num_knots, lay.padded,
-                                                   lay.levels, revision=version)
+        num_offsets = lay.starts.size if flags & FLAG_OFFSETS else 0
+        if version == 1:            # step codes and offsets as bytes before the coded stream
+            head = _HEAD.size + num_codes + num_offsets
+            if len(body) < head:
+                raise CorruptStreamError(f"kinwave payload of {len(body)} bytes is shorter than its {head}-byte header")
+            codes = np.frombuffer(body, dtype=np.uint8, count=num_codes, offset=_HEAD.size)
+            offsets = np.frombuffer(body, dtype=np.int8, count=num_offsets, offset=_HEAD.size + num_codes)
+            coded = coefcoder.decode(body[head:], skeleton.num_channels, lay.num_knots, lay.padded, lay.levels)
+        else:                       # ... inside it
+            coded = coefcoder.decode(body[_HEAD.size:], skeleton.num_channels, lay.num_knots, lay.padded,
+                                     lay.levels, 2, (num_codes, num_offsets))
+            codes, offsets = coded.side
+            if ((codes.size and not 0 <= codes.min() <= codes.max() <= 255)
+                    or np.abs(offsets).max(initial=0) > 128):
+                raise CorruptStreamError("kinwave payload's step codes are damaged")
+        if not num_offsets:
+            offsets = np.zeros(lay.starts.size, dtype=np.int8)
         if not frames:
             return np.zeros((0, skeleton.num_channels))
-        return _decoded(skeleton, codes, offsets, const, knots, coeffs, lay).T
+        return _decoded(skeleton, codes, offsets, coded.const, coded.knots, coded.coeffs, lay).T
 
     # ----- streaming ------------------------------------------------------------------------
     def encoder(self, skeleton: Skeleton, fps: float) -> StreamEncoder:
@@ -419,12 +429,12 @@ class _Encoder:
 
     def body(self, ps: _Pass) -> bytes:
         head = self.header
+        side = (ps.steps,)
         if ps.offsets.any():
-            head = bytes([head[0], head[1] | FLAG_OFFSETS]) + head[2:] + ps.steps.tobytes() + ps.offsets.tobytes()
-        else:
-            head += ps.steps.tobytes()
+            head = bytes([head[0], head[1] | FLAG_OFFSETS]) + head[2:]
+            side += (ps.offsets,)
         return head + coefcoder.encode(ps.const, ps.knots, ps.coeffs, self.lay.padded, self.lay.levels,
-                                       revision=FORMAT)
+                                       revision=FORMAT, side=side)
 
     def run(self) -> bytes:
         if self.frames == 0:

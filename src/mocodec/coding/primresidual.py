@@ -46,7 +46,7 @@ def pack(coeffs: np.ndarray) -> bytes:
 
 def unpack(data: bytes, n: int) -> np.ndarray:
     """Inverse of :func:`pack` for ``n`` segments."""
-    _, _, blocks, _ = coefcoder.decode(data, 3, 0, np.full(n, quatseg.NORMAL_FRAMES), np.full(n, LEVELS))
+    blocks = coefcoder.decode(data, 3, 0, np.full(n, quatseg.NORMAL_FRAMES), np.full(n, LEVELS)).coeffs
     return blocks.reshape(3, n, quatseg.NORMAL_FRAMES).transpose(1, 0, 2).reshape(n, COEFFS)
 
 

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from mocodec import rotations
 from mocodec.coding import closedloop, coefcoder, kinalloc, trendwave
 from mocodec.errors import CorruptStreamError
-from mocodec.formats import container
+from mocodec.formats import container, skeleton_bin
 from mocodec.formats.skeleton_bin import pack_skeleton, unpack_skeleton
 from mocodec.human import human_model
 from mocodec.kinematics import _plan, forward_kinematics
@@ -170,6 +170,21 @@ def test_compact_skeleton_keeps_mirrored_and_signed_zero_offsets_exact():
     assert [np.copysign(1.0, j.offset) .tolist() for j in back.joints] == \
         [np.copysign(1.0, j.offset).tolist() for j in joints]
     assert container.skeleton_id(back) == container.skeleton_id(sk)
+
+
+def test_rounded_offsets_are_written_in_fixed_point(walk_bvh, walk_amc):
+    """Offsets rounded to 0.001 cm (a lossy file's) go as untagged integers at a fixed number
+    of places: exact, and at least a seventh smaller than the tagged column."""
+    import zlib
+    from mocodec.formats.skeleton_bin import round_offsets
+    for motion in (walk_bvh, walk_amc):
+        rounded = round_offsets(motion.skeleton, 0.001)
+        data = pack_skeleton(rounded)
+        assert container.skeleton_id(unpack_skeleton(data)) == container.skeleton_id(rounded)
+        offsets = [tuple(map(float, j.offset)) for j in rounded.joints]
+        tagged = skeleton_bin._offset_column(offsets, None)
+        fixed = skeleton_bin._offset_column(offsets, skeleton_bin._fixed_places(offsets))
+        assert fixed[0] > 0 and fixed in data and len(zlib.compress(fixed)) < 6 / 7 * len(zlib.compress(tagged))
 
 
 def test_compact_skeleton_rejects_damage(walk_bvh):

@@ -301,7 +301,7 @@ def add_commands(sub, common) -> None:
                    help="store only the skeleton's id (1-2 KB smaller); decoding then needs --skeleton")
     p.add_argument("--exact-skeleton", action="store_true",
                    help="keep the skeleton's offsets bit for bit (a lossy codec's file rounds them to "
-                        f"{moc.SKELETON_PRECISION_CM:g} cm, which saves 80-330 bytes)")
+                        f"{moc.SKELETON_PRECISION_CM:g} cm, which saves 130-360 bytes on CMU skeletons)")
     add_codec_options(p)
     common(p)
     p.set_defaults(func=cmd_encode, takes_knobs=True)

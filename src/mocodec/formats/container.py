@@ -26,8 +26,8 @@ frame count) and the footer a u64 index offset: 29 bytes more for a one-chunk fi
 deflates the header without a dictionary, version 2 with the dictionary before the current
 codec settings were added to it.
 
-A file can hold its skeleton (self-contained: about 360 bytes for the 57 joints of the CMU BVH
-skeletons in a lossy file, 550 for CMU ASF ones) or only the skeleton's id, a hash of its
+A file can hold its skeleton (self-contained: about 310 bytes for the 57 joints of the CMU BVH
+skeletons in a lossy file, 530 for CMU ASF ones) or only the skeleton's id, a hash of its
 canonical form: a library of clips on one skeleton, or a stream whose receiver already has it,
 then pays 32 bytes instead; the reader must be given the skeleton, and a skeleton with another
 id is refused.

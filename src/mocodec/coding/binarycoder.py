@@ -21,6 +21,8 @@ HALF = 1 << 15
 FAST, SLOW = 4, 7
 INIT = 1 << 15
 MAX_CLASS = 62             # |v| < 2^62
+WARM_DONE = 126            # decisions after which a warm context adapts at the fixed rates
+_WARM_SHIFT = np.array([min((n + 2).bit_length(), SLOW) for n in range(WARM_DONE + 1)], dtype=np.int64)
 
 
 @numba.njit(inline="always")
@@ -46,23 +48,37 @@ def shift_low(st, buf):
     st[0] = (low & 0x00FFFFFF) << 8
 
 
+def new_state(contexts: int, warm: bool = False) -> np.ndarray:
+    """Adaptive state of ``contexts`` binary contexts: rows fast probability, slow probability
+    (of a 0, out of 65536) and decisions seen. ``warm`` contexts start adapting at 1/4 and slow
+    down to their rates as decisions come (a context learns its first symbols at once, as a
+    counting estimator would): 1.9% fewer bytes for kinwave at a mean bound of 0.5 cm, 0.7% at
+    max shell 0.1 cm. Without, they adapt at the fixed rates from the start."""
+    state = np.full((3, contexts), INIT, dtype=np.int64)
+    state[2] = 0 if warm else WARM_DONE
+    return state
+
+
 @numba.njit(inline="always")
-def _adapt(pf, ps, ctx, mask):
+def _adapt(state, ctx, mask):
     """Move the context's probabilities of a 0 towards 0 (mask -1: a 1 was coded) or 65536
     (mask 0), without a branch: coded bits are unpredictable, so branches cost more."""
-    f, s = pf[ctx], ps[ctx]
-    pf[ctx] = f + (((65536 - f) >> FAST) & ~mask) - ((f >> FAST) & mask)
-    ps[ctx] = s + (((65536 - s) >> SLOW) & ~mask) - ((s >> SLOW) & mask)
+    n = state[2, ctx]
+    fast, slow = min(FAST, _WARM_SHIFT[n]), _WARM_SHIFT[n]
+    f, s = state[0, ctx], state[1, ctx]
+    state[0, ctx] = f + (((65536 - f) >> fast) & ~mask) - ((f >> fast) & mask)
+    state[1, ctx] = s + (((65536 - s) >> slow) & ~mask) - ((s >> slow) & mask)
+    state[2, ctx] = min(n + 1, WARM_DONE)
 
 
 @numba.njit(inline="always")
-def put(st, buf, pf, ps, ctx, bit):
+def put(st, buf, state, ctx, bit):
     rng = st[1]
-    bound = (rng >> 16) * ((pf[ctx] + ps[ctx]) >> 1)
+    bound = (rng >> 16) * ((state[0, ctx] + state[1, ctx]) >> 1)
     mask = -np.int64(bit)
     st[0] += bound & mask
     rng = (bound & ~mask) | ((rng - bound) & mask)
-    _adapt(pf, ps, ctx, mask)
+    _adapt(state, ctx, mask)
     while rng < TOP:
         rng <<= 8
         shift_low(st, buf)
@@ -83,14 +99,14 @@ def put_even(st, buf, bit):
 
 
 @numba.njit(inline="always")
-def get(st, data, pf, ps, ctx):
+def get(st, data, state, ctx):
     rng = st[1]
-    bound = (rng >> 16) * ((pf[ctx] + ps[ctx]) >> 1)
+    bound = (rng >> 16) * ((state[0, ctx] + state[1, ctx]) >> 1)
     bit = np.int64(st[0] >= bound)
     mask = -bit
     st[0] -= bound & mask
     rng = (bound & ~mask) | ((rng - bound) & mask)
-    _adapt(pf, ps, ctx, mask)
+    _adapt(state, ctx, mask)
     while rng < TOP:
         rng <<= 8
         nxt = data[st[2]] if st[2] < data.size else 0
@@ -120,39 +136,39 @@ def get_even(st, data):
 
 # ----- integers -----------------------------------------------------------------------------
 @numba.njit(inline="always")
-def put_int(st, buf, pf, ps, v, zctx, uctx, ulen, mctx, sctx):
+def put_int(st, buf, state, v, zctx, uctx, ulen, mctx, sctx):
     if v == 0:
-        put(st, buf, pf, ps, zctx, 0)
+        put(st, buf, state, zctx, 0)
         return
-    put(st, buf, pf, ps, zctx, 1)
+    put(st, buf, state, zctx, 1)
     m = -v if v < 0 else v
     k = 0
     while (m >> (k + 1)) != 0:
         k += 1
     for i in range(k):
-        put(st, buf, pf, ps, uctx + min(i, ulen - 1), 1)
+        put(st, buf, state, uctx + min(i, ulen - 1), 1)
     if k < MAX_CLASS:
-        put(st, buf, pf, ps, uctx + min(k, ulen - 1), 0)
+        put(st, buf, state, uctx + min(k, ulen - 1), 0)
     if k > 0:
-        put(st, buf, pf, ps, mctx + k, (m >> (k - 1)) & 1)
+        put(st, buf, state, mctx + k, (m >> (k - 1)) & 1)
         for b in range(k - 2, -1, -1):
             put_even(st, buf, (m >> b) & 1)
-    put(st, buf, pf, ps, sctx, 1 if v < 0 else 0)
+    put(st, buf, state, sctx, 1 if v < 0 else 0)
 
 
 @numba.njit(inline="always")
-def get_int(st, data, pf, ps, zctx, uctx, ulen, mctx, sctx):
-    if get(st, data, pf, ps, zctx) == 0:
+def get_int(st, data, state, zctx, uctx, ulen, mctx, sctx):
+    if get(st, data, state, zctx) == 0:
         return 0
     k = 0
-    while k < MAX_CLASS and get(st, data, pf, ps, uctx + min(k, ulen - 1)) == 1:
+    while k < MAX_CLASS and get(st, data, state, uctx + min(k, ulen - 1)) == 1:
         k += 1
     m = 1
     if k > 0:
-        m = (m << 1) | get(st, data, pf, ps, mctx + k)
+        m = (m << 1) | get(st, data, state, mctx + k)
         for _ in range(k - 1):
             m = (m << 1) | get_even(st, data)
-    return -m if get(st, data, pf, ps, sctx) == 1 else m
+    return -m if get(st, data, state, sctx) == 1 else m
 
 
 @numba.njit(inline="always")

@@ -23,7 +23,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from mocodec.coding.binarycoder import (INIT, MAX_CLASS, buffer_for, encoder_state, finish, get, get_even, get_int,
+from mocodec.coding.binarycoder import (MAX_CLASS, buffer_for, encoder_state, finish, get, get_even, get_int, new_state,
                                         int_decisions, put, put_even, put_int, start_decoder)
 
 _ACT = 3                    # previous value: zero, |v| <= 2, larger
@@ -63,36 +63,35 @@ class Model:
         self.tree_bits = min(self.bits, _TREE_BITS)
         per_channel = (_PREV_SETS << self.tree_bits) if levels else _PER_CHANNEL
         size = MAX_CLASS + channels * per_channel
-        self.pf = np.full(size, INIT, dtype=np.int64)
-        self.ps = np.full(size, INIT, dtype=np.int64)
+        self.state = new_state(size)
         self.prev = np.zeros(channels, dtype=np.int64)
 
     def copy(self) -> "Model":
         other = Model(self.channels, self.levels)
-        other.pf[:], other.ps[:], other.prev[:] = self.pf, self.ps, self.prev
+        other.state[:], other.prev[:] = self.state, self.prev
         return other
 
 
 @numba.njit(cache=True)
-def _encode(values, buf, pf, ps, prev):
+def _encode(values, buf, state, prev):
     frames, channels = values.shape
     st = encoder_state()
     for t in range(frames):
         for c in range(channels):
             z, u, s = _contexts(c, prev[c])
             v = values[t, c]
-            put_int(st, buf, pf, ps, v, z, u, _UNARY, 0, s)
+            put_int(st, buf, state, v, z, u, _UNARY, 0, s)
             prev[c] = v
     return finish(st, buf)
 
 
 @numba.njit(cache=True)
-def _decode(data, frames, channels, out, pf, ps, prev):
+def _decode(data, frames, channels, out, state, prev):
     st = start_decoder(data)
     for t in range(frames):
         for c in range(channels):
             z, u, s = _contexts(c, prev[c])
-            v = get_int(st, data, pf, ps, z, u, _UNARY, 0, s)
+            v = get_int(st, data, state, z, u, _UNARY, 0, s)
             out[t, c] = v
             prev[c] = v
     return st[2]
@@ -105,7 +104,7 @@ def _tree_base(c, prev_u, shift, size):
 
 
 @numba.njit(cache=True)
-def _encode_tree(values, buf, pf, ps, prev, half, bits, tree_bits):
+def _encode_tree(values, buf, state, prev, half, bits, tree_bits):
     frames, channels = values.shape
     st = encoder_state()
     size = 1 << tree_bits
@@ -117,7 +116,7 @@ def _encode_tree(values, buf, pf, ps, prev, half, bits, tree_bits):
             node = 1
             for i in range(bits - 1, bits - 1 - tree_bits, -1):
                 b = (u >> i) & 1
-                put(st, buf, pf, ps, base + node, b)
+                put(st, buf, state, base + node, b)
                 node = 2 * node + b
             for i in range(bits - 1 - tree_bits, -1, -1):
                 put_even(st, buf, (u >> i) & 1)
@@ -126,7 +125,7 @@ def _encode_tree(values, buf, pf, ps, prev, half, bits, tree_bits):
 
 
 @numba.njit(cache=True)
-def _decode_tree(data, out, pf, ps, prev, half, bits, tree_bits):
+def _decode_tree(data, out, state, prev, half, bits, tree_bits):
     frames, channels = out.shape
     st = start_decoder(data)
     size = 1 << tree_bits
@@ -136,7 +135,7 @@ def _decode_tree(data, out, pf, ps, prev, half, bits, tree_bits):
             base = _tree_base(c, prev[c] + half, shift, size)
             node = 1
             for _ in range(tree_bits):
-                node = 2 * node + get(st, data, pf, ps, base + node)
+                node = 2 * node + get(st, data, state, base + node)
             u = node - size
             for _ in range(bits - tree_bits):
                 u = 2 * u + get_even(st, data)
@@ -165,9 +164,9 @@ def encode(values: np.ndarray, model: Model | None = None) -> bytes:
         if values.size and (values.min() < -half or values.max() >= m.levels - half):
             raise ValueError(f"values outside the {m.levels} levels the model codes")
         buf = buffer_for(values.size * m.bits)
-        return buf[:_encode_tree(values, buf, m.pf, m.ps, m.prev, half, m.bits, m.tree_bits)].tobytes()
+        return buf[:_encode_tree(values, buf, m.state, m.prev, half, m.bits, m.tree_bits)].tobytes()
     buf = buffer_for(int_decisions(values))
-    return buf[:_encode(values, buf, m.pf, m.ps, m.prev)].tobytes()
+    return buf[:_encode(values, buf, m.state, m.prev)].tobytes()
 
 
 def decode(data: bytes, frames: int, channels: int, model: Model | None = None) -> np.ndarray:
@@ -176,7 +175,7 @@ def decode(data: bytes, frames: int, channels: int, model: Model | None = None) 
     m = _model(model, channels)
     out = np.zeros((frames, channels), dtype=np.int64)
     if m.levels:
-        _decode_tree(np.frombuffer(data, dtype=np.uint8), out, m.pf, m.ps, m.prev, m.levels // 2, m.bits, m.tree_bits)
+        _decode_tree(np.frombuffer(data, dtype=np.uint8), out, m.state, m.prev, m.levels // 2, m.bits, m.tree_bits)
         return out
-    _decode(np.frombuffer(data, dtype=np.uint8), frames, channels, out, m.pf, m.ps, m.prev)
+    _decode(np.frombuffer(data, dtype=np.uint8), frames, channels, out, m.state, m.prev)
     return out

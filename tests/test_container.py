@@ -137,8 +137,9 @@ def test_header_dictionaries_never_change():
 
 
 def test_framing_costs_38_bytes(walk_bvh):
-    """Start and header CRC (16 bytes), one chunk's length and CRC (6 for a payload under 16 KB),
-    the index (8) and the footer (8): 29 bytes fewer than version 2."""
+    """Start and header CRC (16 bytes), one chunk's length and CRC (6 for a body under 16 KB),
+    the index (8) and the footer (8): 29 bytes fewer than version 2, which also kept each
+    payload's 17-byte envelope."""
     clip = walk_bvh[:20]
     data = moc.pack(clip, get_codec("raw"), embed_skeleton=False)
     c = container.open_container(__import__("io").BytesIO(data), len(data), "f.moc", clip.skeleton)

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from mocodec.codecs import DEFAULT_CODEC, Codec, codec_from_config, get_codec
+from mocodec.codecs.base import read_envelope
 from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.formats import container
 from mocodec.formats._io import atomic_write_bytes
@@ -52,11 +53,23 @@ def pack(motion: Motion, codec: Codec | None = None, chunk_frames: int = CHUNK_F
     skeleton = stored_skeleton(motion, codec, embed_skeleton, exact_skeleton)
     output = None if skeleton is motion.skeleton else skeleton
     chunks = [container.Chunk(a, min(chunk_frames, motion.num_frames - a),
-                              codec.encode(motion[a:a + chunk_frames], output))
+                              chunk_body(codec.encode(motion[a:a + chunk_frames], output)))
               for a in range(0, motion.num_frames, chunk_frames)]
     header = {"codec": codec.get_config(), "fps": float(motion.fps), "frames": motion.num_frames,
               "chunk_frames": chunk_frames, "skeleton": skeleton}
     return container.pack(header, chunks, embed_skeleton)
+
+
+def chunk_body(payload: bytes) -> bytes:
+    """What a chunk stores of a codec's payload: its body (the container knows the frames and
+    the rate, and its CRC covers the body)."""
+    return read_envelope(payload)[2]
+
+
+def chunk_payload(c: container.Container, k: int) -> bytes:
+    """Chunk ``k`` of an open file as the payload its codec decodes (envelope and body)."""
+    stored = c.read_chunk(k)
+    return Codec.wrap(stored, c.index[k].count, c.fps) if c.version >= 3 else stored
 
 
 def encode(motion: Motion, path: str | os.PathLike, codec: Codec | None = None,
@@ -120,7 +133,7 @@ def _decode(c: container.Container, frames: tuple[int, int] | None, knobs: dict 
     for k in c.chunks_for(first, stop):
         e = c.index[k]
         try:
-            motion = codec.decode(c.read_chunk(k), c.skeleton)
+            motion = codec.decode(chunk_payload(c, k), c.skeleton)
         except CorruptStreamError as err:
             raise CorruptStreamError(f"{c.name}: chunk {k} at byte {e.offset}: {err}") from None
         if motion.num_frames != e.count:
@@ -143,7 +156,7 @@ def truncate(data: bytes, ratio: float | None = None, bitrate: float | None = No
     codec = codec_from_config(c.header["codec"])
     if not hasattr(codec, "truncator"):
         raise CodecError(f"{name}: codec {codec.id} is not embedded; encode again with a smaller target")
-    cutters = [codec.truncator(c.read_chunk(k), c.skeleton) for k in range(len(c.index))]
+    cutters = [codec.truncator(chunk_payload(c, k), c.skeleton) for k in range(len(c.index))]
     duration = c.frames / c.fps
     raw = c.frames * c.skeleton.num_channels * 4
     target = raw / ratio if ratio is not None else bitrate * duration / 8
@@ -152,7 +165,7 @@ def truncate(data: bytes, ratio: float | None = None, bitrate: float | None = No
 
     def at(bps: float) -> bytes:
         cut = [cutter(bps) for cutter in cutters]
-        chunks = [container.Chunk(e.first, e.count, payload) for e, (_, payload) in zip(c.index, cut)]
+        chunks = [container.Chunk(e.first, e.count, chunk_body(payload)) for e, (_, payload) in zip(c.index, cut)]
         new_codec = cut[0][0] if cut else codec
         header = {k: v for k, v in c.header.items() if k != "skeleton_id"}
         return container.pack(dict(header, codec=new_codec.get_config(), skeleton=c.skeleton), chunks, embedded)

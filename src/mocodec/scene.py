@@ -88,7 +88,7 @@ def encode_scene(motions: list[Motion], bits_per_second: float, distances, weigh
         for first in range(0, motion.num_frames, chunk_frames):
             part = motion[first:first + chunk_frames]
             seg = row[first // window:first // window + -(-part.num_frames // window)]
-            chunks.append(container.Chunk(first, part.num_frames, codec.encode_with_budgets(part, seg)))
+            chunks.append(container.Chunk(first, part.num_frames, moc.chunk_body(codec.encode_with_budgets(part, seg))))
         header = {"codec": codec.get_config(), "fps": float(motion.fps), "frames": motion.num_frames,
                   "chunk_frames": chunk_frames, "skeleton": motion.skeleton}
         parts.append(container.pack(header, chunks))

@@ -9,7 +9,9 @@ Layout (little-endian, version 3)::
         flag 0, a zero byte and the compact skeleton of :mod:`mocodec.formats.skeleton_bin`
         follow the JSON;
         u32 CRC32 of the header bytes
-    chunks: varint payload length, payload, u32 CRC32 of the length and the payload
+    chunks: varint body length, the codec's body (its payload without the envelope of
+            :mod:`mocodec.codecs.base`, whose frame count, rate and CRC the index, the header
+            and the chunk's CRC give), u32 CRC32 of the length and the body
     index:  varint chunk count, per chunk (varint frame count, varint bytes of the chunk),
             u32 CRC32 of the index
     footer: u32 index length, "MOCX"
@@ -20,9 +22,10 @@ chunks that cover a frame range. Every part is length-checked and CRC-checked be
 used, and a failure raises :class:`~mocodec.errors.CorruptStreamError` naming the part (chunk
 number) and byte offset.
 
-Versions 1 and 2 are still read. They frame each chunk with u32 first frame, frame count and
-payload length and give the index u32 count and u32 entries (u64 offset, u32 first frame, u32
-frame count) and the footer a u64 index offset: 29 bytes more for a one-chunk file. Version 1
+Versions 1 and 2 are still read. They store whole payloads (envelope and body), frame each
+chunk with u32 first frame, frame count and payload length, and give the index u32 count and
+u32 entries (u64 offset, u32 first frame, u32 frame count) and the footer a u64 index offset:
+46 bytes more for a one-chunk file. Version 1
 deflates the header without a dictionary, version 2 with the dictionary before the current
 codec settings were added to it.
 
@@ -183,6 +186,7 @@ class Container:
     header: dict
     skeleton: Skeleton
     index: tuple[IndexEntry, ...]
+    version: int = VERSION      # 3 on: chunks hold codec bodies, without the payload envelope
 
     @property
     def frames(self) -> int:
@@ -280,7 +284,7 @@ def open_container(source: BinaryIO, size: int, name: str, skeleton: Skeleton | 
     if sum(e.count for e in index) != frames:
         raise CorruptStreamError(f"{name}: the index's chunks cover {sum(e.count for e in index)} frames, the header "
                                  f"says {frames}")
-    return Container(source, size, name, header, skeleton, index)
+    return Container(source, size, name, header, skeleton, index, version)
 
 
 def _index(source: BinaryIO, size: int, name: str, chunks_at: int) -> tuple[IndexEntry, ...]:

@@ -10,8 +10,11 @@ independent joints add in quadrature; a joint with ``m`` coded angles of step ``
 
 The rate of a joint falls by ``m log2 s`` bits per frame (high-rate approximation), so:
 
-* ``mean`` (mean joint error): minimise rate subject to the mean over points of the squared
-  error; Lagrange gives the closed form ``s_j ~ 1 / sqrt(mean_p lever_jp^2)``;
+* ``mean`` (mean joint error): minimise rate subject to the mean over points of the error's
+  norm, ``sqrt`` of the squared error (convex in ``log u``), starting from the closed form
+  that bounds the mean *squared* error instead, ``s_j ~ 1 / sqrt(mean_p lever_jp^2)``: the
+  norm lets points that already move a lot take more error, 1.4% smaller kinwave files at a
+  mean bound of 0.5 cm and 0.7% at 1 cm than the closed form;
 * ``joint`` / ``shell`` (max error): subject to every point's (every shell's) squared error
   at most 1 — a convex program in ``u = s^2`` solved by SLSQP.
 
@@ -91,12 +94,33 @@ def steps(skeleton: Skeleton, angles: tuple[int, ...], translations: int, mode: 
     mean = lever2.mean(axis=1)
     useful = mean > 0
     u = np.where(useful, weight / (weight[useful].sum() * np.where(useful, mean, 1.0)), 1.0)
-    if mode != "mean" and useful.any():
-        u[useful] = _max_program(weight[useful], lever2[useful], u[useful])
+    if useful.any():
+        program = _mean_program if mode == "mean" else _max_program
+        u[useful] = program(weight[useful], lever2[useful], u[useful])
     s = np.sqrt(u)
     rot = np.full(len(m), np.nan)
     rot[coded] = s[:coded.size]
     return rot, float(s[-1]) if translations else 1.0
+
+
+def _mean_program(weight: np.ndarray, lever2: np.ndarray, start: np.ndarray) -> np.ndarray:
+    """maximise sum w log u subject to mean_p sqrt(lever2^T u) <= 1, in x = log u."""
+
+    def objective(x):
+        return -weight @ x, -weight
+
+    def slack(x):
+        return 1.0 - np.sqrt(lever2.T @ np.exp(x)).mean()
+
+    def slack_jac(x):
+        v = lever2.T @ np.exp(x)
+        return -(lever2 * np.exp(x)[:, None]) @ (0.5 / np.sqrt(np.maximum(v, 1e-300)) / v.size)
+
+    res = minimize(objective, np.log(start), jac=True, method="SLSQP",
+                   constraints=[{"type": "ineq", "fun": slack, "jac": slack_jac}],
+                   options={"maxiter": 300, "ftol": 1e-10})
+    u = np.exp(res.x) if np.isfinite(res.x).all() else start
+    return u / np.sqrt(lever2.T @ u).mean() ** 2     # the bound met whatever SLSQP returned
 
 
 def _max_program(weight: np.ndarray, lever2: np.ndarray, start: np.ndarray) -> np.ndarray:

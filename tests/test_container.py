@@ -133,7 +133,7 @@ def test_header_dictionaries_never_change():
     assert hashlib.sha256(dictionary(2)).hexdigest() == (
         "4e8fe4351d431fc5702e77ca6c720405ca8b064aca5d8f007516f9fff8b7b37a")
     assert hashlib.sha256(dictionary(3)).hexdigest() == (
-        "8185b93c45d27ec9fbc28f57c1963049b0024915bcc6b4ab3687b1738498f965")
+        "131adf69f48cfefbc27cf81324902dfd91c22fe87ce3ce18ef0e8c7b23193cdd")
 
 
 def test_framing_costs_38_bytes(walk_bvh):

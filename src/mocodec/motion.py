@@ -154,11 +154,7 @@ class Motion:
             unwrapped[idx] = False                # _follow sets these below
         out[:, unwrapped] = np.unwrap(out[:, unwrapped], period=360.0, axis=0)
         for j, idx in followed.items():
-            joint = sk.joints[j]
-            angles = self.channels[:, idx]
-            alt = angles + np.array([180.0, 0.0, 180.0])
-            alt[:, 1] = -angles[:, 1] if joint.rotation_order[0] == joint.rotation_order[2] else 180.0 - angles[:, 1]
-            out[:, idx] = _follow(np.ascontiguousarray(angles), np.ascontiguousarray(alt))
+            out[:, idx] = continuous_triples(self.channels[:, idx], sk.joints[j].rotation_order)
         return replace(self, channels=out)
 
     def aligned_to(self, reference: "Motion") -> "Motion":
@@ -211,6 +207,15 @@ class Motion:
             out[:, idx] = _nearest_euler(rotations.quat_to_euler(qs, joint.rotation_order),
                                          joint.rotation_order, linear[:, idx])
         return Motion(sk, float(fps), out)
+
+
+def continuous_triples(angles: np.ndarray, order: str) -> np.ndarray:
+    """Euler triples ``(T, 3)`` in ``order``, each frame replaced by whichever of its two
+    equivalent triples, shifted by turns of 360, lies nearest the previous frame's (frame 0
+    stays): the same rotations, as continuous curves."""
+    alt = angles + np.array([180.0, 0.0, 180.0])
+    alt[:, 1] = -angles[:, 1] if order[0] == order[2] else 180.0 - angles[:, 1]
+    return _follow(np.ascontiguousarray(angles, dtype=np.float64), np.ascontiguousarray(alt))
 
 
 @numba.njit(cache=True)

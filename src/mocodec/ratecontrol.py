@@ -61,7 +61,8 @@ def measure(codec: Codec, motion: Motion, positions_cm: np.ndarray | None = None
         positions_cm = forward_kinematics(sk, motion.channels)[0] * (100.0 / sk.units_per_metre)
     decoded_cm = forward_kinematics(decoded.skeleton, decoded.channels)[0] * (100.0 / sk.units_per_metre)
     err = np.linalg.norm(decoded_cm - positions_cm, axis=2)     # on the file's skeleton (offsets rounded)
-    psnr = dof_errors(motion.channels, decoded.channels, sk.rotation_mask).body_psnr
+    aligned = decoded.aligned_to(motion).channels          # equivalent Euler triples are not errors
+    psnr = dof_errors(motion.channels, aligned, sk.rotation_mask).body_psnr
     return Measurement(codec, data, motion.raw_bits / 8 / size, size * 8 / max(motion.duration, 1e-12),
                        psnr, float(err.mean()) if err.size else 0.0, float(err.max()) if err.size else 0.0)
 

@@ -47,19 +47,21 @@ from functools import lru_cache
 
 import numpy as np
 
+from mocodec import rotations
 from mocodec.codecs.base import Codec, Knob, QualityKnob, StreamDecoder, StreamEncoder
 from mocodec.codecs.registry import register
 from mocodec.coding import closedloop, coefcoder, kinalloc, seams, trendwave
 from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.kinematics import _plan, forward_kinematics
 from mocodec.metrics.pose import bone_joints, shell_errors
-from mocodec.motion import Motion
+from mocodec.motion import Motion, continuous_triples
 from mocodec.skeleton import Skeleton
 
 FORMAT = 2                      # 2: approximation bands coded as differences (coefcoder); 1 is still read
 FORMATS = (1, 2)
 _HEAD = struct.Struct("<BBBBH")     # format, flags, log2 window, levels, channels
 FLAG_OFFSETS = 8                # flags bit 3: a signed step offset per segment follows the step codes
+FLAG_ROTVEC = 16                # flags bit 4: a flag per 3-angle joint, 1: coded as a rotation vector
 WAVELET_IDS = ("cdf97", "d4", "haar")
 CONSTANT = 1e-6                 # a channel whose range is below this is one knot
 MAX_PASSES = 8                  # secant passes before falling back to halving
@@ -146,6 +148,34 @@ def _has_translation(skeleton: Skeleton) -> bool:
     return any(not g.rotation for g in _groups(skeleton))
 
 
+@lru_cache(maxsize=64)
+def _three_angle_groups(skeleton: Skeleton) -> tuple[tuple[np.ndarray, str], ...]:
+    """``(channels, order)`` of every joint with three rotation channels (in rotation order):
+    the joints that may be coded as rotation vectors. None on a skeleton with axis
+    pre-rotations (ASF): its angles are about axes chosen for each bone, and there the
+    open-loop choice of :meth:`_Encoder._choose_rotvec` saved 4% at a mean bound but cost 1-14%
+    at max bounds on the shared clips."""
+    if any(j.has_axis for j in skeleton.joints):
+        return ()
+    return tuple((g.channels, "".join("XYZ"[a] for a in g.axes)) for g in _groups(skeleton)
+                 if g.rotation and g.channels.size == 3 and len(set(g.axes.tolist())) == 3)
+
+
+def _to_rotvec(euler: np.ndarray, order: str) -> np.ndarray:
+    """Euler angles ``(T, 3)`` (degrees) as rotation vectors (degrees), continuous in time: a
+    joint's rotation as one turn about one axis, whose three numbers move less jointly than
+    Euler angles do when a joint swings far (the study's "rotation vectors")."""
+    q = rotations.quat_continuous(rotations.euler_to_quat(euler, order))
+    return np.degrees(2.0 * rotations.quat_log(q))
+
+
+def _from_rotvec(vectors: np.ndarray, order: str) -> np.ndarray:
+    """Inverse of :func:`_to_rotvec`: continuous Euler angles ``(T, 3)``, the same arithmetic
+    on both ends."""
+    q = rotations.quat_exp(np.radians(vectors) / 2.0)
+    return continuous_triples(rotations.quat_to_euler(q, order), order)
+
+
 def _factors(offsets: np.ndarray, lay: trendwave.Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Step factors of the segments' offsets (1/8 octave each) at every knot (a knot takes its
     segment's; the end knot the last segment's), every coefficient, and every seam (the finer
@@ -210,6 +240,8 @@ class KinwaveCodec(Codec):
              "pass measured at the points it moves"),
         Knob("segment_steps", bool, True, "under a max-error bound, give each segment its own step offset (time-"
              "adaptive steps, from 4 segments on): quiet stretches get coarser steps"),
+        Knob("rotation_vectors", bool, True, "code each 3-angle joint as a rotation vector where that costs fewer "
+             "bytes than its Euler angles (skeletons without axis pre-rotations, such as BVH ones)"),
         Knob("keyframes", bool, False, "code a frame 0 that jumps away from frame 1 on its own (the knot at "
              "frame 0 already keeps such a T-pose out of the transform: off by default, see docs/kinwave.md)"),
     )
@@ -264,6 +296,8 @@ class KinwaveCodec(Codec):
             raise CorruptStreamError(f"kinwave payload header is damaged (window 2^{log_w}, levels {levels})")
         lay = trendwave.layout(frames, 1 << log_w, levels, bool(flags & 1), WAVELET_IDS[(flags >> 1) & 3])
         num_offsets = lay.starts.size if flags & FLAG_OFFSETS else 0
+        num_rotvec = len(_three_angle_groups(skeleton)) if flags & FLAG_ROTVEC else 0
+        rotvec = np.zeros(0, dtype=np.int64)
         if version == 1:            # step codes and offsets as bytes before the coded stream
             head = _HEAD.size + num_codes + num_offsets
             if len(body) < head:
@@ -273,16 +307,16 @@ class KinwaveCodec(Codec):
             coded = coefcoder.decode(body[head:], skeleton.num_channels, lay.num_knots, lay.padded, lay.levels)
         else:                       # ... inside it
             coded = coefcoder.decode(body[_HEAD.size:], skeleton.num_channels, lay.num_knots, lay.padded,
-                                     lay.levels, 2, (num_codes, num_offsets))
-            codes, offsets = coded.side
+                                     lay.levels, 2, (num_codes, num_offsets, num_rotvec))
+            codes, offsets, rotvec = coded.side
             if ((codes.size and not 0 <= codes.min() <= codes.max() <= 255)
-                    or np.abs(offsets).max(initial=0) > 128):
+                    or np.abs(offsets).max(initial=0) > 128 or not np.isin(rotvec, (0, 1)).all()):
                 raise CorruptStreamError("kinwave payload's step codes are damaged")
         if not num_offsets:
             offsets = np.zeros(lay.starts.size, dtype=np.int8)
         if not frames:
             return np.zeros((0, skeleton.num_channels))
-        return _decoded(skeleton, codes, offsets, coded.const, coded.knots, coded.coeffs, lay).T
+        return _decoded(skeleton, codes, offsets, coded.const, coded.knots, coded.coeffs, lay, rotvec).T
 
     # ----- streaming ------------------------------------------------------------------------
     def encoder(self, skeleton: Skeleton, fps: float) -> StreamEncoder:
@@ -293,9 +327,14 @@ class KinwaveCodec(Codec):
 
 
 def _decoded(skeleton: Skeleton, codes: np.ndarray, offsets: np.ndarray, const: np.ndarray, knots: np.ndarray,
-             coeffs: np.ndarray, lay: trendwave.Layout) -> np.ndarray:
-    """Channels ``(C, T)`` from the integers, in one reconstruction of all channels."""
-    return _reconstruct(knots, coeffs, const == 1, _channel_steps(skeleton, codes), lay, _factors(offsets, lay))
+             coeffs: np.ndarray, lay: trendwave.Layout, rotvec: np.ndarray) -> np.ndarray:
+    """Channels ``(C, T)`` from the integers, in one reconstruction of all channels; the
+    joints flagged in ``rotvec`` back from rotation vectors to Euler angles."""
+    out = _reconstruct(knots, coeffs, const == 1, _channel_steps(skeleton, codes), lay, _factors(offsets, lay))
+    for flag, (channels, order) in zip(rotvec, _three_angle_groups(skeleton)):
+        if flag:
+            out[channels] = _from_rotvec(out[channels].T, order).T
+    return out
 
 
 def _channel_steps(skeleton: Skeleton, codes: np.ndarray) -> np.ndarray:
@@ -329,6 +368,7 @@ class _Encoder:
         self.trans = _has_translation(sk)
         self.shape_rot, self.shape_trans = self._shape()
         self.joint_offsets = np.zeros(len(self.rot_joints) + self.trans, dtype=np.int64)
+        self.rotvec = self._choose_rotvec() if self.cfg["rotation_vectors"] else np.zeros(0, dtype=np.int64)
 
     def _shape(self) -> tuple[np.ndarray, float]:
         """Steps (degrees per rotation joint, cm for translations) whose modelled bound is 1 cm."""
@@ -351,6 +391,41 @@ class _Encoder:
             rot, trans = kinalloc.steps(sk, tuple(coded), translations, measure, self.cfg["closed_loop"])
         rot = np.where(np.isfinite(rot), rot, np.nanmax(rot) if np.isfinite(rot).any() else 1.0)
         return rot[self.rot_joints], trans
+
+    def _choose_rotvec(self) -> np.ndarray:
+        """Per 3-angle joint (:func:`_three_angle_groups`), 1 where its rotation vectors take
+        fewer bytes than its Euler angles at the same rotation error, both coded on their own
+        (open loop) at the step the search starts from; a joint with a constant angle stays
+        Euler. On the shared BVH clips 12-16 of the 43 joints choose vectors."""
+        groups = _three_angle_groups(self.skeleton)
+        if not groups or not self.frames:
+            return np.zeros(len(groups), dtype=np.int64)
+        steps = _channel_steps(self.skeleton, self.codes(self._first_scale()))
+        factors = _factors(np.zeros(self.lay.starts.size), self.lay)
+        choice = np.zeros(len(groups), dtype=np.int64)
+        for k, (channels, order) in enumerate(groups):
+            if self.const[channels].any():
+                continue
+            euler = self.values[channels]
+            original = rotations.euler_to_quat(euler.T, order)
+            cost = []
+            for rv in (False, True):
+                v = _to_rotvec(euler.T, order).T if rv else euler
+                k_int, c_int = self._quantise(v, np.zeros(3, bool), steps[channels], factors)
+                size = len(coefcoder.encode(np.zeros(3, np.int64), k_int, c_int, self.lay.padded, self.lay.levels,
+                                            revision=FORMAT))
+                rec = _reconstruct(k_int, c_int, np.zeros(3, bool), steps[channels], self.lay, factors)
+                rec = _from_rotvec(rec.T, order) if rv else rec.T
+                err = rotations.quat_distance(original, rotations.euler_to_quat(rec, order)).mean()
+                cost.append((size, int((c_int != 0).sum()), max(err, 1e-12)))
+            (euler_bytes, _, euler_err), (vector_bytes, nonzero, vector_err) = cost
+            # at the Euler angles' error: a nonzero coefficient takes a bit more per halving of the error
+            choice[k] = vector_bytes + nonzero / 8.0 * math.log2(vector_err / euler_err) < euler_bytes
+        return choice
+
+    def _first_scale(self) -> float:
+        """The scale the bound's search starts from (the model's, before any pass)."""
+        return self.cfg["max_error_cm"] / (0.3 if self.cfg["error_measure"] == "mean" else 0.8)
 
     # ----- one pass -------------------------------------------------------------------------
     def codes(self, scale: float) -> np.ndarray:
@@ -386,13 +461,23 @@ class _Encoder:
         decoded = np.empty((C, self.frames))
         steps = _channel_steps(sk, codes)
         factors = _factors(offsets, lay)
+        rotvec_groups = _three_angle_groups(sk)
 
         def code(channels: np.ndarray, targets: np.ndarray) -> np.ndarray:
             step, const = steps[channels], self.const[channels]
-            k_int, c_int = self._quantise(targets.T, const, step, factors)
+            column = {c: i for i, c in enumerate(channels)}
+            vectors = [([column[c] for c in g], order) for flag, (g, order) in zip(self.rotvec, rotvec_groups)
+                       if flag and g[0] in column]
+            values = targets.T.copy()
+            for cols, order in vectors:
+                values[cols] = _to_rotvec(targets[:, cols], order).T
+            k_int, c_int = self._quantise(values, const, step, factors)
             knots[channels], coeffs[channels] = k_int, c_int
-            decoded[channels] = _reconstruct(k_int, c_int, const, step, lay, factors)
-            return decoded[channels].T
+            out = _reconstruct(k_int, c_int, const, step, lay, factors)
+            for cols, order in vectors:
+                out[cols] = _from_rotvec(out[cols].T, order).T
+            decoded[channels] = out
+            return out.T
 
         closedloop.code_down_tree(sk, self.values.T, ~self.const, self.quats, code, self.cfg["closed_loop"])
         return _Pass(codes, self.const.astype(np.int64), knots, coeffs, decoded, offsets)
@@ -428,11 +513,12 @@ class _Encoder:
         return float(err.mean() if self.cfg["error_measure"] == "mean" else err.max())
 
     def body(self, ps: _Pass) -> bytes:
-        head = self.header
-        side = (ps.steps,)
+        flags, side = self.header[1], (ps.steps,)
         if ps.offsets.any():
-            head = bytes([head[0], head[1] | FLAG_OFFSETS]) + head[2:]
-            side += (ps.offsets,)
+            flags, side = flags | FLAG_OFFSETS, side + (ps.offsets,)
+        if self.rotvec.any():
+            flags, side = flags | FLAG_ROTVEC, side + (self.rotvec,)
+        head = self.header[:1] + bytes([flags]) + self.header[2:]
         return head + coefcoder.encode(ps.const, ps.knots, ps.coeffs, self.lay.padded, self.lay.levels,
                                        revision=FORMAT, side=side)
 
@@ -487,7 +573,7 @@ class _Encoder:
         return (lo[2] if lo else None), x
 
     def _to_bound(self, bound: float) -> bytes:
-        guess = bound / (0.3 if self.cfg["error_measure"] == "mean" else 0.8)
+        guess = self._first_scale()
         if self.cfg["error_measure"] != "mean" and self.cfg["joint_feedback"] and not self.joint_offsets.any():
             guess *= self._adapt_joints(self._joint_errors(self.run_pass(self.codes(guess)).decoded), bound)
         accept = MEAN_ACCEPT if self.cfg["error_measure"] == "mean" else ACCEPT
@@ -515,7 +601,7 @@ class _Encoder:
         def segment_errors(errors):
             return np.maximum.reduceat(errors.max(axis=1), starts)
 
-        guess = bound / 0.8
+        guess = self._first_scale()
         first = None
         if self.cfg["joint_feedback"]:
             errors = self._joint_errors(self.run_pass(self.codes(guess)).decoded)

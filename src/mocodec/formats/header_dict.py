@@ -68,7 +68,7 @@ _SETTINGS_3 = [
     {"codec": {"codec": "kinwave", "knobs": {"max_error_cm": 0.5, "error_measure": "joint", "bits_per_second": 0.0,
                                              "window": 256, "levels": 5, "wavelet": "cdf97", "deadzone": 0.4,
                                              "closed_loop": True, "allocation": "convex", "joint_feedback": True,
-                                             "segment_steps": True, "keyframes": False}},
+                                             "segment_steps": True, "rotation_vectors": True, "keyframes": False}},
      "fps": 120.0, "frames": 1000, "chunk_frames": 1024},
 ]
 

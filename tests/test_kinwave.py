@@ -12,7 +12,7 @@ import pytest
 from mocodec import moc, ratecontrol
 from mocodec.codecs import get_codec
 from mocodec.codecs.kinwave import _Encoder
-from mocodec.errors import CodecError, CorruptStreamError
+from mocodec.errors import CodecError
 from mocodec.formats import container
 from mocodec.kinematics import forward_kinematics
 from mocodec.metrics.pose import shell_errors

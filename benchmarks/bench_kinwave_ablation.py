@@ -25,6 +25,7 @@ VARIANTS = {
     "T-pose keyframe apart (keyframes=True)": {"keyframes": True},
     "model steps only (joint_feedback=False)": {"joint_feedback": False},
     "one scale for all segments (segment_steps=False)": {"segment_steps": False},
+    "Euler angles only (rotation_vectors=False)": {"rotation_vectors": False},
     "window 128": {"window": 128},
     "window 512": {"window": 512},
     "4 levels": {"levels": 4},

@@ -161,19 +161,35 @@ def _three_angle_groups(skeleton: Skeleton) -> tuple[tuple[np.ndarray, str], ...
                  if g.rotation and g.channels.size == 3 and len(set(g.axes.tolist())) == 3)
 
 
-def _to_rotvec(euler: np.ndarray, order: str) -> np.ndarray:
-    """Euler angles ``(T, 3)`` (degrees) as rotation vectors (degrees), continuous in time: a
+def _euler_quats(euler: np.ndarray, orders: tuple[str, ...]) -> np.ndarray:
+    """Unit quaternions ``(T, n, 4)`` of ``n`` joints' Euler angles ``(T, n, 3)`` (degrees),
+    each in its own order; the joints of one order in one call."""
+    out = np.empty(euler.shape[:2] + (4,))
+    for order in sorted(set(orders)):
+        idx = [i for i, o in enumerate(orders) if o == order]
+        out[:, idx] = rotations.euler_to_quat(euler[:, idx], order)
+    return out
+
+
+def _to_rotvec(euler: np.ndarray, orders: tuple[str, ...]) -> np.ndarray:
+    """Euler angles ``(T, n, 3)`` (degrees) as rotation vectors (degrees), continuous in time: a
     joint's rotation as one turn about one axis, whose three numbers move less jointly than
     Euler angles do when a joint swings far (the study's "rotation vectors")."""
-    q = rotations.quat_continuous(rotations.euler_to_quat(euler, order))
-    return np.degrees(2.0 * rotations.quat_log(q))
+    return np.degrees(2.0 * rotations.quat_log(rotations.quat_continuous(_euler_quats(euler, orders))))
 
 
-def _from_rotvec(vectors: np.ndarray, order: str) -> np.ndarray:
-    """Inverse of :func:`_to_rotvec`: continuous Euler angles ``(T, 3)``, the same arithmetic
-    on both ends."""
+def _from_rotvec(vectors: np.ndarray, orders: tuple[str, ...]) -> np.ndarray:
+    """Inverse of :func:`_to_rotvec`: continuous Euler angles ``(T, n, 3)``. Every operation
+    is elementwise or per joint, so the encoder (a tree depth at a time) and the decoder (all
+    joints at once) get the same floats."""
     q = rotations.quat_exp(np.radians(vectors) / 2.0)
-    return continuous_triples(rotations.quat_to_euler(q, order), order)
+    out = np.empty_like(vectors)
+    for order in sorted(set(orders)):
+        idx = [i for i, o in enumerate(orders) if o == order]
+        out[:, idx] = rotations.quat_to_euler(q[:, idx], order)
+    for i, order in enumerate(orders):
+        out[:, i] = continuous_triples(out[:, i], order)
+    return out
 
 
 def _factors(offsets: np.ndarray, lay: trendwave.Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -331,10 +347,21 @@ def _decoded(skeleton: Skeleton, codes: np.ndarray, offsets: np.ndarray, const: 
     """Channels ``(C, T)`` from the integers, in one reconstruction of all channels; the
     joints flagged in ``rotvec`` back from rotation vectors to Euler angles."""
     out = _reconstruct(knots, coeffs, const == 1, _channel_steps(skeleton, codes), lay, _factors(offsets, lay))
-    for flag, (channels, order) in zip(rotvec, _three_angle_groups(skeleton)):
-        if flag:
-            out[channels] = _from_rotvec(out[channels].T, order).T
+    vectors = [g for flag, g in zip(rotvec, _three_angle_groups(skeleton)) if flag]
+    if vectors:
+        rows = np.concatenate([channels for channels, _ in vectors])
+        out[rows] = _stacked(_from_rotvec(_unstacked(out[rows]), tuple(o for _, o in vectors)))
     return out
+
+
+def _unstacked(rows: np.ndarray) -> np.ndarray:
+    """``(3n, T)`` rows, three per joint, as ``(T, n, 3)``."""
+    return rows.T.reshape(rows.shape[1], -1, 3)
+
+
+def _stacked(values: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`_unstacked`."""
+    return values.reshape(values.shape[0], -1).T
 
 
 def _channel_steps(skeleton: Skeleton, codes: np.ndarray) -> np.ndarray:
@@ -396,31 +423,36 @@ class _Encoder:
         """Per 3-angle joint (:func:`_three_angle_groups`), 1 where its rotation vectors take
         fewer bytes than its Euler angles at the same rotation error, both coded on their own
         (open loop) at the step the search starts from; a joint with a constant angle stays
-        Euler. On the shared BVH clips 12-16 of the 43 joints choose vectors."""
+        Euler. On the shared BVH clips 12-16 of the 43 joints choose vectors. All joints go
+        through each transform together; only the byte counts are per joint."""
         groups = _three_angle_groups(self.skeleton)
-        if not groups or not self.frames:
-            return np.zeros(len(groups), dtype=np.int64)
-        steps = _channel_steps(self.skeleton, self.codes(self._first_scale()))
-        factors = _factors(np.zeros(self.lay.starts.size), self.lay)
         choice = np.zeros(len(groups), dtype=np.int64)
-        for k, (channels, order) in enumerate(groups):
-            if self.const[channels].any():
-                continue
-            euler = self.values[channels]
-            original = rotations.euler_to_quat(euler.T, order)
-            cost = []
-            for rv in (False, True):
-                v = _to_rotvec(euler.T, order).T if rv else euler
-                k_int, c_int = self._quantise(v, np.zeros(3, bool), steps[channels], factors)
-                size = len(coefcoder.encode(np.zeros(3, np.int64), k_int, c_int, self.lay.padded, self.lay.levels,
-                                            revision=FORMAT))
-                rec = _reconstruct(k_int, c_int, np.zeros(3, bool), steps[channels], self.lay, factors)
-                rec = _from_rotvec(rec.T, order) if rv else rec.T
-                err = rotations.quat_distance(original, rotations.euler_to_quat(rec, order)).mean()
-                cost.append((size, int((c_int != 0).sum()), max(err, 1e-12)))
-            (euler_bytes, _, euler_err), (vector_bytes, nonzero, vector_err) = cost
-            # at the Euler angles' error: a nonzero coefficient takes a bit more per halving of the error
-            choice[k] = vector_bytes + nonzero / 8.0 * math.log2(vector_err / euler_err) < euler_bytes
+        live = [k for k, (channels, _) in enumerate(groups) if not self.const[channels].any()]
+        if not live or not self.frames:
+            return choice
+        channels = np.concatenate([groups[k][0] for k in live])
+        orders = tuple(groups[k][1] for k in live)
+        euler = self.values[channels]
+        step = _channel_steps(self.skeleton, self.codes(self._first_scale()))[channels]
+        factors = _factors(np.zeros(self.lay.starts.size), self.lay)
+        flat = np.zeros(channels.size, dtype=bool)
+
+        original = _euler_quats(_unstacked(euler), orders)
+        cost = []
+        for values in (euler, _stacked(_to_rotvec(_unstacked(euler), orders))):
+            k_int, c_int = self._quantise(values, flat, step, factors)
+            sizes = [len(coefcoder.encode(np.zeros(3, np.int64), k_int[3 * i:3 * i + 3], c_int[3 * i:3 * i + 3],
+                                          self.lay.padded, self.lay.levels, revision=FORMAT))
+                     for i in range(len(live))]
+            rec = _reconstruct(k_int, c_int, flat, step, self.lay, factors)
+            turned = (_euler_quats(_unstacked(rec), orders) if values is euler else
+                      rotations.quat_exp(np.radians(_unstacked(rec)) / 2.0))
+            err = np.maximum(rotations.quat_distance(original, turned).mean(axis=0), 1e-12)
+            nonzero = (c_int != 0).reshape(len(live), -1).sum(axis=1)
+            cost.append((np.array(sizes), nonzero, err))
+        (euler_bytes, _, euler_err), (vector_bytes, nonzero, vector_err) = cost
+        # at the Euler angles' error: a nonzero coefficient takes a bit more per halving of the error
+        choice[live] = vector_bytes + nonzero / 8.0 * np.log2(vector_err / euler_err) < euler_bytes
         return choice
 
     def _first_scale(self) -> float:
@@ -466,16 +498,17 @@ class _Encoder:
         def code(channels: np.ndarray, targets: np.ndarray) -> np.ndarray:
             step, const = steps[channels], self.const[channels]
             column = {c: i for i, c in enumerate(channels)}
-            vectors = [([column[c] for c in g], order) for flag, (g, order) in zip(self.rotvec, rotvec_groups)
-                       if flag and g[0] in column]
+            vectors = [(g, order) for flag, (g, order) in zip(self.rotvec, rotvec_groups) if flag and g[0] in column]
             values = targets.T.copy()
-            for cols, order in vectors:
-                values[cols] = _to_rotvec(targets[:, cols], order).T
+            if vectors:
+                cols = [column[c] for g, _ in vectors for c in g]
+                orders = tuple(o for _, o in vectors)
+                values[cols] = _stacked(_to_rotvec(_unstacked(values[cols]), orders))
             k_int, c_int = self._quantise(values, const, step, factors)
             knots[channels], coeffs[channels] = k_int, c_int
             out = _reconstruct(k_int, c_int, const, step, lay, factors)
-            for cols, order in vectors:
-                out[cols] = _from_rotvec(out[cols].T, order).T
+            if vectors:
+                out[cols] = _stacked(_from_rotvec(_unstacked(out[cols]), orders))
             decoded[channels] = out
             return out.T
 

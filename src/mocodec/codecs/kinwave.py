@@ -151,12 +151,7 @@ def _has_translation(skeleton: Skeleton) -> bool:
 @lru_cache(maxsize=64)
 def _three_angle_groups(skeleton: Skeleton) -> tuple[tuple[np.ndarray, str], ...]:
     """``(channels, order)`` of every joint with three rotation channels (in rotation order):
-    the joints that may be coded as rotation vectors. None on a skeleton with axis
-    pre-rotations (ASF): its angles are about axes chosen for each bone, and there the
-    open-loop choice of :meth:`_Encoder._choose_rotvec` saved 4% at a mean bound but cost 1-14%
-    at max bounds on the shared clips."""
-    if any(j.has_axis for j in skeleton.joints):
-        return ()
+    the joints that may be coded as rotation vectors."""
     return tuple((g.channels, "".join("XYZ"[a] for a in g.axes)) for g in _groups(skeleton)
                  if g.rotation and g.channels.size == 3 and len(set(g.axes.tolist())) == 3)
 
@@ -257,7 +252,7 @@ class KinwaveCodec(Codec):
         Knob("segment_steps", bool, True, "under a max-error bound, give each segment its own step offset (time-"
              "adaptive steps, from 4 segments on): quiet stretches get coarser steps"),
         Knob("rotation_vectors", bool, True, "code each 3-angle joint as a rotation vector where that costs fewer "
-             "bytes than its Euler angles (skeletons without axis pre-rotations, such as BVH ones)"),
+             "bytes than its Euler angles (BVH skeletons; ASF ones under a mean bound only)"),
         Knob("keyframes", bool, False, "code a frame 0 that jumps away from frame 1 on its own (the knot at "
              "frame 0 already keeps such a T-pose out of the transform: off by default, see docs/kinwave.md)"),
     )
@@ -423,10 +418,17 @@ class _Encoder:
         """Per 3-angle joint (:func:`_three_angle_groups`), 1 where its rotation vectors take
         fewer bytes than its Euler angles at the same rotation error, both coded on their own
         (open loop) at the step the search starts from; a joint with a constant angle stays
-        Euler. On the shared BVH clips 12-16 of the 43 joints choose vectors. All joints go
-        through each transform together; only the byte counts are per joint."""
+        Euler. The trial weighs the mean rotation error, which is what decides a mean bound;
+        under a max bound it misjudged ASF joints (angles about axes chosen for each bone, small
+        and decoupled), whose files came out 1-14% larger, so a skeleton with axis
+        pre-rotations tries vectors only under a mean bound (4% smaller there). On the shared
+        BVH clips 12-16 of the 43 joints choose vectors. All joints go through each transform
+        together; only the byte counts are per joint."""
         groups = _three_angle_groups(self.skeleton)
         choice = np.zeros(len(groups), dtype=np.int64)
+        pre_rotated = any(j.has_axis for j in self.skeleton.joints)
+        if pre_rotated and self.cfg["error_measure"] != "mean":
+            return choice
         live = [k for k, (channels, _) in enumerate(groups) if not self.const[channels].any()]
         if not live or not self.frames:
             return choice

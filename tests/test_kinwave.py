@@ -218,20 +218,6 @@ def test_rotation_vectors_shrink_bvh_files_within_the_bound(walk_amc):
     assert _errors(walk_amc, mean.decode(mean.encode(walk_amc), walk_amc.skeleton))["mean"] <= 0.5
 
 
-def test_rotation_vectors_round_trip_continuously(walk_bvh):
-    from mocodec import rotations
-    from mocodec.codecs.kinwave import _from_rotvec, _to_rotvec
-    sk = walk_bvh.skeleton
-    j = sk.index("lShldr")
-    idx = sk.channel_offsets[j] + np.array(sk.joints[j].rotation_channel_indices())
-    order = sk.joints[j].rotation_order
-    euler = walk_bvh.continuous().channels[:, idx]
-    back = _from_rotvec(_to_rotvec(euler[:, None], (order,)), (order,))[:, 0]
-    turn = rotations.quat_distance(rotations.euler_to_quat(euler, order), rotations.euler_to_quat(back, order))
-    assert turn.max() < 1e-6                                        # arccos: 3e-8 rad of noise
-    assert np.abs(back - euler).max() < 1e-9            # the very triples continuous() gives, not equivalents
-
-
 def test_segment_offsets_keep_the_encoder_bit_exact(walk_bvh):
     enc = _Encoder(get_codec("kinwave", max_error_cm=0.3), walk_bvh)
     offsets = np.arange(enc.lay.starts.size) * 3 - 4

@@ -209,6 +209,23 @@ def test_rounded_offsets_are_written_in_fixed_point(walk_bvh, walk_amc):
         assert fixed[0] > 0 and fixed in data and len(zlib.compress(fixed)) < 6 / 7 * len(zlib.compress(tagged))
 
 
+def test_rotation_vectors_round_trip_continuously(walk_bvh):
+    """Euler angle rows to rotation vectors and back: the same rotations, as the very triples
+    Motion.continuous gives (frame 0 of the walk is in the principal range)."""
+    from mocodec.coding import rotvec
+    sk = walk_bvh.skeleton
+    rows, orders = [], []
+    for name in ("lShldr", "rThigh", "hip"):
+        j = sk.index(name)
+        rows.append(sk.channel_offsets[j] + np.array(sk.joints[j].rotation_channel_indices()))
+        orders.append(sk.joints[j].rotation_order)
+    euler = walk_bvh.continuous().channels[:, np.concatenate(rows)].T
+    back = rotvec.to_euler(rotvec.to_vectors(euler, tuple(orders)), tuple(orders))
+    turn = rotations.quat_distance(rotvec.euler_quats(euler, tuple(orders)), rotvec.euler_quats(back, tuple(orders)))
+    assert turn.max() < 1e-6                                        # arccos: 3e-8 rad of noise
+    assert np.abs(back - euler).max() < 1e-9
+
+
 def test_compact_skeleton_rejects_damage(walk_bvh):
     data = pack_skeleton(walk_bvh.skeleton)
     for bad in (data[:-3], data + b"\x00", b"\x07" + data[1:], data[:40]):

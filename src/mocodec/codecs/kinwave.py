@@ -50,11 +50,11 @@ import numpy as np
 from mocodec import rotations
 from mocodec.codecs.base import Codec, Knob, QualityKnob, StreamDecoder, StreamEncoder
 from mocodec.codecs.registry import register
-from mocodec.coding import closedloop, coefcoder, kinalloc, seams, trendwave
+from mocodec.coding import closedloop, coefcoder, kinalloc, rotvec, seams, trendwave
 from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.kinematics import _plan, forward_kinematics
 from mocodec.metrics.pose import bone_joints, shell_errors
-from mocodec.motion import Motion, continuous_triples
+from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
 FORMAT = 2                      # 2: approximation bands coded as differences (coefcoder); 1 is still read
@@ -154,37 +154,6 @@ def _three_angle_groups(skeleton: Skeleton) -> tuple[tuple[np.ndarray, str], ...
     the joints that may be coded as rotation vectors."""
     return tuple((g.channels, "".join("XYZ"[a] for a in g.axes)) for g in _groups(skeleton)
                  if g.rotation and g.channels.size == 3 and len(set(g.axes.tolist())) == 3)
-
-
-def _euler_quats(euler: np.ndarray, orders: tuple[str, ...]) -> np.ndarray:
-    """Unit quaternions ``(T, n, 4)`` of ``n`` joints' Euler angles ``(T, n, 3)`` (degrees),
-    each in its own order; the joints of one order in one call."""
-    out = np.empty(euler.shape[:2] + (4,))
-    for order in sorted(set(orders)):
-        idx = [i for i, o in enumerate(orders) if o == order]
-        out[:, idx] = rotations.euler_to_quat(euler[:, idx], order)
-    return out
-
-
-def _to_rotvec(euler: np.ndarray, orders: tuple[str, ...]) -> np.ndarray:
-    """Euler angles ``(T, n, 3)`` (degrees) as rotation vectors (degrees), continuous in time: a
-    joint's rotation as one turn about one axis, whose three numbers move less jointly than
-    Euler angles do when a joint swings far (the study's "rotation vectors")."""
-    return np.degrees(2.0 * rotations.quat_log(rotations.quat_continuous(_euler_quats(euler, orders))))
-
-
-def _from_rotvec(vectors: np.ndarray, orders: tuple[str, ...]) -> np.ndarray:
-    """Inverse of :func:`_to_rotvec`: continuous Euler angles ``(T, n, 3)``. Every operation
-    is elementwise or per joint, so the encoder (a tree depth at a time) and the decoder (all
-    joints at once) get the same floats."""
-    q = rotations.quat_exp(np.radians(vectors) / 2.0)
-    out = np.empty_like(vectors)
-    for order in sorted(set(orders)):
-        idx = [i for i, o in enumerate(orders) if o == order]
-        out[:, idx] = rotations.quat_to_euler(q[:, idx], order)
-    for i, order in enumerate(orders):
-        out[:, i] = continuous_triples(out[:, i], order)
-    return out
 
 
 def _factors(offsets: np.ndarray, lay: trendwave.Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -307,8 +276,8 @@ class KinwaveCodec(Codec):
             raise CorruptStreamError(f"kinwave payload header is damaged (window 2^{log_w}, levels {levels})")
         lay = trendwave.layout(frames, 1 << log_w, levels, bool(flags & 1), WAVELET_IDS[(flags >> 1) & 3])
         num_offsets = lay.starts.size if flags & FLAG_OFFSETS else 0
-        num_rotvec = len(_three_angle_groups(skeleton)) if flags & FLAG_ROTVEC else 0
-        rotvec = np.zeros(0, dtype=np.int64)
+        num_vectors = len(_three_angle_groups(skeleton)) if flags & FLAG_ROTVEC else 0
+        vector_flags = np.zeros(0, dtype=np.int64)
         if version == 1:            # step codes and offsets as bytes before the coded stream
             head = _HEAD.size + num_codes + num_offsets
             if len(body) < head:
@@ -318,16 +287,16 @@ class KinwaveCodec(Codec):
             coded = coefcoder.decode(body[head:], skeleton.num_channels, lay.num_knots, lay.padded, lay.levels)
         else:                       # ... inside it
             coded = coefcoder.decode(body[_HEAD.size:], skeleton.num_channels, lay.num_knots, lay.padded,
-                                     lay.levels, 2, (num_codes, num_offsets, num_rotvec))
-            codes, offsets, rotvec = coded.side
+                                     lay.levels, 2, (num_codes, num_offsets, num_vectors))
+            codes, offsets, vector_flags = coded.side
             if ((codes.size and not 0 <= codes.min() <= codes.max() <= 255)
-                    or np.abs(offsets).max(initial=0) > 128 or not np.isin(rotvec, (0, 1)).all()):
+                    or np.abs(offsets).max(initial=0) > 128 or not np.isin(vector_flags, (0, 1)).all()):
                 raise CorruptStreamError("kinwave payload's step codes are damaged")
         if not num_offsets:
             offsets = np.zeros(lay.starts.size, dtype=np.int8)
         if not frames:
             return np.zeros((0, skeleton.num_channels))
-        return _decoded(skeleton, codes, offsets, coded.const, coded.knots, coded.coeffs, lay, rotvec).T
+        return _decoded(skeleton, codes, offsets, coded.const, coded.knots, coded.coeffs, lay, vector_flags).T
 
     # ----- streaming ------------------------------------------------------------------------
     def encoder(self, skeleton: Skeleton, fps: float) -> StreamEncoder:
@@ -338,25 +307,15 @@ class KinwaveCodec(Codec):
 
 
 def _decoded(skeleton: Skeleton, codes: np.ndarray, offsets: np.ndarray, const: np.ndarray, knots: np.ndarray,
-             coeffs: np.ndarray, lay: trendwave.Layout, rotvec: np.ndarray) -> np.ndarray:
+             coeffs: np.ndarray, lay: trendwave.Layout, vector_flags: np.ndarray) -> np.ndarray:
     """Channels ``(C, T)`` from the integers, in one reconstruction of all channels; the
-    joints flagged in ``rotvec`` back from rotation vectors to Euler angles."""
+    joints flagged in ``vector_flags`` back from rotation vectors to Euler angles."""
     out = _reconstruct(knots, coeffs, const == 1, _channel_steps(skeleton, codes), lay, _factors(offsets, lay))
-    vectors = [g for flag, g in zip(rotvec, _three_angle_groups(skeleton)) if flag]
+    vectors = [g for flag, g in zip(vector_flags, _three_angle_groups(skeleton)) if flag]
     if vectors:
         rows = np.concatenate([channels for channels, _ in vectors])
-        out[rows] = _stacked(_from_rotvec(_unstacked(out[rows]), tuple(o for _, o in vectors)))
+        out[rows] = rotvec.to_euler(out[rows], tuple(o for _, o in vectors))
     return out
-
-
-def _unstacked(rows: np.ndarray) -> np.ndarray:
-    """``(3n, T)`` rows, three per joint, as ``(T, n, 3)``."""
-    return rows.T.reshape(rows.shape[1], -1, 3)
-
-
-def _stacked(values: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`_unstacked`."""
-    return values.reshape(values.shape[0], -1).T
 
 
 def _channel_steps(skeleton: Skeleton, codes: np.ndarray) -> np.ndarray:
@@ -439,16 +398,15 @@ class _Encoder:
         factors = _factors(np.zeros(self.lay.starts.size), self.lay)
         flat = np.zeros(channels.size, dtype=bool)
 
-        original = _euler_quats(_unstacked(euler), orders)
+        original = rotvec.euler_quats(euler, orders)
         cost = []
-        for values in (euler, _stacked(_to_rotvec(_unstacked(euler), orders))):
+        for values in (euler, rotvec.to_vectors(euler, orders)):
             k_int, c_int = self._quantise(values, flat, step, factors)
             sizes = [len(coefcoder.encode(np.zeros(3, np.int64), k_int[3 * i:3 * i + 3], c_int[3 * i:3 * i + 3],
                                           self.lay.padded, self.lay.levels, revision=FORMAT))
                      for i in range(len(live))]
             rec = _reconstruct(k_int, c_int, flat, step, self.lay, factors)
-            turned = (_euler_quats(_unstacked(rec), orders) if values is euler else
-                      rotations.quat_exp(np.radians(_unstacked(rec)) / 2.0))
+            turned = rotvec.euler_quats(rec, orders) if values is euler else rotvec.vector_quats(rec)
             err = np.maximum(rotations.quat_distance(original, turned).mean(axis=0), 1e-12)
             nonzero = (c_int != 0).reshape(len(live), -1).sum(axis=1)
             cost.append((np.array(sizes), nonzero, err))
@@ -505,12 +463,12 @@ class _Encoder:
             if vectors:
                 cols = [column[c] for g, _ in vectors for c in g]
                 orders = tuple(o for _, o in vectors)
-                values[cols] = _stacked(_to_rotvec(_unstacked(values[cols]), orders))
+                values[cols] = rotvec.to_vectors(values[cols], orders)
             k_int, c_int = self._quantise(values, const, step, factors)
             knots[channels], coeffs[channels] = k_int, c_int
             out = _reconstruct(k_int, c_int, const, step, lay, factors)
             if vectors:
-                out[cols] = _stacked(_from_rotvec(_unstacked(out[cols]), orders))
+                out[cols] = rotvec.to_euler(out[cols], orders)
             decoded[channels] = out
             return out.T
 

@@ -400,7 +400,7 @@ class _Encoder:
 
         original = rotvec.euler_quats(euler, orders)
         cost = []
-        for values in (euler, rotvec.to_vectors(euler, orders)):
+        for values in (euler, rotvec.vectors_of(original)):
             k_int, c_int = self._quantise(values, flat, step, factors)
             sizes = [len(coefcoder.encode(np.zeros(3, np.int64), k_int[3 * i:3 * i + 3], c_int[3 * i:3 * i + 3],
                                           self.lay.padded, self.lay.levels, revision=FORMAT))

@@ -103,11 +103,17 @@ def steps(skeleton: Skeleton, angles: tuple[int, ...], translations: int, mode: 
     return rot, float(s[-1]) if translations else 1.0
 
 
+def _most_rate_saved(weight: np.ndarray, x0: np.ndarray, slack, slack_jac, maxiter: int) -> np.ndarray | None:
+    """x = log u maximising sum w x subject to ``slack(x) >= 0`` (SLSQP from ``x0``), or None if
+    the solver returned non-finite values."""
+    res = minimize(lambda x: (-weight @ x, -weight), x0, jac=True, method="SLSQP",
+                   constraints=[{"type": "ineq", "fun": slack, "jac": slack_jac}],
+                   options={"maxiter": maxiter, "ftol": 1e-10})
+    return res.x if np.isfinite(res.x).all() else None
+
+
 def _mean_program(weight: np.ndarray, lever2: np.ndarray, start: np.ndarray) -> np.ndarray:
     """maximise sum w log u subject to mean_p sqrt(lever2^T u) <= 1, in x = log u."""
-
-    def objective(x):
-        return -weight @ x, -weight
 
     def slack(x):
         return 1.0 - np.sqrt(lever2.T @ np.exp(x)).mean()
@@ -116,10 +122,8 @@ def _mean_program(weight: np.ndarray, lever2: np.ndarray, start: np.ndarray) -> 
         v = lever2.T @ np.exp(x)
         return -(lever2 * np.exp(x)[:, None]) @ (0.5 / np.sqrt(np.maximum(v, 1e-300)) / v.size)
 
-    res = minimize(objective, np.log(start), jac=True, method="SLSQP",
-                   constraints=[{"type": "ineq", "fun": slack, "jac": slack_jac}],
-                   options={"maxiter": 300, "ftol": 1e-10})
-    u = np.exp(res.x) if np.isfinite(res.x).all() else start
+    x = _most_rate_saved(weight, np.log(start), slack, slack_jac, 300)
+    u = start if x is None else np.exp(x)
     return u / np.sqrt(lever2.T @ u).mean() ** 2     # the bound met whatever SLSQP returned
 
 
@@ -127,18 +131,12 @@ def _max_program(weight: np.ndarray, lever2: np.ndarray, start: np.ndarray) -> n
     """maximise sum w log u subject to lever2^T u <= 1 (every point), in x = log u."""
     x0 = np.log(start / max((lever2.T @ start).max(), 1e-300))
 
-    def objective(x):
-        return -weight @ x, -weight
-
     def slack(x):
         return 1.0 - lever2.T @ np.exp(x)
 
     def slack_jac(x):
         return -(lever2.T * np.exp(x))
 
-    res = minimize(objective, x0, jac=True, method="SLSQP",
-                   constraints=[{"type": "ineq", "fun": slack, "jac": slack_jac}],
-                   options={"maxiter": 200, "ftol": 1e-10})
-    x = res.x if np.isfinite(res.x).all() else x0
-    u = np.exp(x)
+    x = _most_rate_saved(weight, x0, slack, slack_jac, 200)
+    u = np.exp(x0 if x is None else x)
     return u / max((lever2.T @ u).max(), 1e-300)     # feasible whatever SLSQP returned

@@ -45,9 +45,14 @@ def vector_quats(rows: np.ndarray) -> np.ndarray:
     return rotations.quat_exp(np.radians(_per_joint(rows)) / 2.0)
 
 
+def vectors_of(quats: np.ndarray) -> np.ndarray:
+    """Rotation vector rows of unit quaternions ``(T, n, 4)``, continuous in time."""
+    return _rows(np.degrees(2.0 * rotations.quat_log(rotations.quat_continuous(quats))))
+
+
 def to_vectors(rows: np.ndarray, orders: tuple[str, ...]) -> np.ndarray:
     """Euler angle rows as rotation vector rows, continuous in time."""
-    return _rows(np.degrees(2.0 * rotations.quat_log(rotations.quat_continuous(euler_quats(rows, orders)))))
+    return vectors_of(euler_quats(rows, orders))
 
 
 def to_euler(rows: np.ndarray, orders: tuple[str, ...]) -> np.ndarray:

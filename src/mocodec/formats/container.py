@@ -49,6 +49,7 @@ from dataclasses import dataclass
 from typing import BinaryIO
 
 from mocodec.errors import CorruptStreamError, SkeletonMismatchError
+from mocodec.formats import varint
 from mocodec.formats.header_dict import dictionary
 from mocodec.formats.skeleton_bin import pack_skeleton, unpack_skeleton
 from mocodec.skeleton import Joint, Skeleton
@@ -66,7 +67,6 @@ _ENTRY = struct.Struct("<QII")
 _FOOTER = struct.Struct("<Q4s")        # versions 1 and 2
 _FOOTER_3 = struct.Struct("<I4s")
 _U32 = struct.Struct("<I")
-_MAX_VARINT = 10
 
 
 # ----- skeleton <-> JSON ------------------------------------------------------------------------
@@ -130,41 +130,26 @@ def pack(header: dict, chunks: list[Chunk], embed_skeleton: bool = True) -> byte
     head = deflate.compress(text) + deflate.flush()
     flags = FLAG_SKELETON if embed_skeleton else 0
     out = bytearray(_START.pack(MAGIC, VERSION, flags, len(head)) + head + _U32.pack(zlib.crc32(head)))
-    index = bytearray(_varint(len(chunks)))
+    index = bytearray(varint.pack(len(chunks)))
     expected = 0
     for chunk in chunks:
         if chunk.first != expected or chunk.count < 1:
             raise ValueError(f"chunk of frames {chunk.first}+{chunk.count} does not follow frame {expected}")
         expected += chunk.count
-        body = _varint(len(chunk.payload)) + chunk.payload
-        index += _varint(chunk.count) + _varint(len(body) + 4)
+        body = varint.pack(len(chunk.payload)) + chunk.payload
+        index += varint.pack(chunk.count) + varint.pack(len(body) + 4)
         out += body + _U32.pack(zlib.crc32(body))
     index += _U32.pack(zlib.crc32(index))
     out += index + _FOOTER_3.pack(len(index), FOOTER_MAGIC)
     return bytes(out)
 
 
-def _varint(v: int) -> bytes:
-    out = bytearray()
-    while True:
-        out.append((v & 0x7F) | (0x80 if v > 0x7F else 0))
-        v >>= 7
-        if not v:
-            return bytes(out)
-
-
 def _read_varint(data: bytes, pos: int, where: str) -> tuple[int, int]:
     """(value, next position) of the varint at ``pos``."""
-    v = shift = 0
-    for k in range(_MAX_VARINT):
-        if pos + k >= len(data):
-            raise CorruptStreamError(f"{where}: ends inside a number at byte {pos + k}")
-        b = data[pos + k]
-        v |= (b & 0x7F) << shift
-        if not b & 0x80:
-            return v, pos + k + 1
-        shift += 7
-    raise CorruptStreamError(f"{where}: bad number at byte {pos}")
+    try:
+        return varint.unpack(data, pos)
+    except ValueError as e:
+        raise CorruptStreamError(f"{where}: {e}") from None
 
 
 # ----- reading --------------------------------------------------------------------------------

@@ -23,6 +23,7 @@ import math
 import struct
 
 from mocodec.errors import CorruptStreamError
+from mocodec.formats import varint
 from mocodec.skeleton import BODY_PARTS, CHANNEL_NAMES, Joint, Skeleton
 
 VERSION = 3
@@ -39,12 +40,7 @@ class _Writer:
         self.out = bytearray()
 
     def uint(self, v: int) -> None:
-        while True:
-            byte = v & 0x7F
-            v >>= 7
-            self.out.append(byte | (0x80 if v else 0))
-            if not v:
-                return
+        self.out += varint.pack(v)
 
     def sint(self, v: int) -> None:
         self.uint(2 * v if v >= 0 else -2 * v - 1)
@@ -84,15 +80,11 @@ class _Reader:
         return self.data[self.pos - 1]
 
     def uint(self) -> int:
-        v, shift = 0, 0
-        while True:
-            b = self.byte()
-            v |= (b & 0x7F) << shift
-            if not b & 0x80:
-                return v
-            shift += 7
-            if shift > 70:
-                raise CorruptStreamError(f"compact skeleton: bad number at byte {self.pos}")
+        try:
+            v, self.pos = varint.unpack(self.data, self.pos, max_bytes=11)
+        except ValueError as e:
+            raise CorruptStreamError(f"compact skeleton: {e}") from None
+        return v
 
     def sint(self) -> int:
         v = self.uint()

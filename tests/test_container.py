@@ -138,7 +138,7 @@ def test_header_dictionaries_never_change():
 
 def test_framing_costs_38_bytes(walk_bvh):
     """Start and header CRC (16 bytes), one chunk's length and CRC (6 for a body under 16 KB),
-    the index (8) and the footer (8): 29 bytes fewer than version 2, which also kept each
+    the index (8) and the footer (8): 30 bytes fewer than version 2's 68, which also kept each
     payload's 17-byte envelope."""
     clip = walk_bvh[:20]
     data = moc.pack(clip, get_codec("raw"), embed_skeleton=False)

@@ -25,7 +25,7 @@ number) and byte offset.
 Versions 1 and 2 are still read. They store whole payloads (envelope and body), frame each
 chunk with u32 first frame, frame count and payload length, and give the index u32 count and
 u32 entries (u64 offset, u32 first frame, u32 frame count) and the footer a u64 index offset:
-46 bytes more for a one-chunk file. Version 1
+47 bytes more for a one-chunk file. Version 1
 deflates the header without a dictionary, version 2 with the dictionary before the current
 codec settings were added to it.
 

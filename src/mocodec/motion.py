@@ -151,7 +151,7 @@ class Motion:
                     if len(joint.rotation_order) == 3 and len(set(joint.rotation_order)) >= 2}
         unwrapped = sk.rotation_mask.copy()
         for idx in followed.values():
-            unwrapped[idx] = False                # _follow sets these below
+            unwrapped[idx] = False                # follow_nearest sets these below
         out[:, unwrapped] = np.unwrap(out[:, unwrapped], period=360.0, axis=0)
         for j, idx in followed.items():
             out[:, idx] = continuous_triples(self.channels[:, idx], sk.joints[j].rotation_order)
@@ -215,11 +215,11 @@ def continuous_triples(angles: np.ndarray, order: str) -> np.ndarray:
     stays): the same rotations, as continuous curves."""
     alt = angles + np.array([180.0, 0.0, 180.0])
     alt[:, 1] = -angles[:, 1] if order[0] == order[2] else 180.0 - angles[:, 1]
-    return _follow(np.ascontiguousarray(angles, dtype=np.float64), np.ascontiguousarray(alt))
+    return follow_nearest(np.ascontiguousarray(angles, dtype=np.float64), np.ascontiguousarray(alt))
 
 
 @numba.njit(cache=True)
-def _follow(angles, alt):
+def follow_nearest(angles, alt):
     """Frame by frame, the candidate triple (shifted by turns of 360) nearest the previous."""
     out = np.empty_like(angles)
     out[0] = angles[0]

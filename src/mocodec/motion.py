@@ -213,24 +213,28 @@ def continuous_triples(angles: np.ndarray, order: str) -> np.ndarray:
     """Euler triples ``(T, 3)`` in ``order``, each frame replaced by whichever of its two
     equivalent triples, shifted by turns of 360, lies nearest the previous frame's (frame 0
     stays): the same rotations, as continuous curves."""
-    alt = angles + np.array([180.0, 0.0, 180.0])
-    alt[:, 1] = -angles[:, 1] if order[0] == order[2] else 180.0 - angles[:, 1]
-    return follow_nearest(np.ascontiguousarray(angles, dtype=np.float64), np.ascontiguousarray(alt))
+    return follow_nearest(np.ascontiguousarray(angles, dtype=np.float64), order[0] == order[2])
 
 
 @numba.njit(cache=True)
-def follow_nearest(angles, alt):
-    """Frame by frame, the candidate triple (shifted by turns of 360) nearest the previous."""
+def follow_nearest(angles, proper):
+    """Frame by frame, of the triple and its equivalent (a+180, 180-b, c+180), or (a+180, -b,
+    c+180) for a ``proper`` Euler order, shifted by turns of 360, the one nearest the previous."""
     out = np.empty_like(angles)
     out[0] = angles[0]
     shifted = np.empty(3)
+    cand = np.empty(3)
     for f in range(1, angles.shape[0]):
         best = np.inf
         for c in range(2):
-            cand = angles if c == 0 else alt
+            if c == 0:
+                cand[0], cand[1], cand[2] = angles[f, 0], angles[f, 1], angles[f, 2]
+            else:
+                cand[0], cand[2] = angles[f, 0] + 180.0, angles[f, 2] + 180.0
+                cand[1] = -angles[f, 1] if proper else 180.0 - angles[f, 1]
             cost = 0.0
             for k in range(3):
-                d = cand[f, k] - out[f - 1, k]
+                d = cand[k] - out[f - 1, k]
                 d -= 360.0 * np.floor((d + 180.0) / 360.0)
                 shifted[k] = out[f - 1, k] + d
                 cost += abs(d)

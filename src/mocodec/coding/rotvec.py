@@ -78,7 +78,6 @@ def _euler_kernel(vectors, axes):
     frames, joints = vectors.shape[0], vectors.shape[1]
     out = np.empty((frames, joints, 3))
     angles = np.empty((frames, 3))
-    alt = np.empty((frames, 3))
     for j in range(joints):
         i, jj, k = axes[j, 2], axes[j, 1], axes[j, 0]          # the extrinsic sequence: reversed
         eps = (i - jj) * (jj - k) * (k - i) / 2.0
@@ -94,8 +93,7 @@ def _euler_kernel(vectors, axes):
             triple = ((plus + minus) * eps, theta2, plus - minus)
             for m in range(3):
                 angles[t, m] = (((triple[m] + math.pi) % (2.0 * math.pi)) - math.pi) / _DEG
-            alt[t, 0], alt[t, 1], alt[t, 2] = angles[t, 0] + 180.0, 180.0 - angles[t, 1], angles[t, 2] + 180.0
-        out[:, j, :] = follow_nearest(angles, alt)
+        out[:, j, :] = follow_nearest(angles, False)           # three distinct axes: Tait-Bryan
     return out
 
 

@@ -42,7 +42,7 @@ from __future__ import annotations
 
 import math
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
@@ -57,13 +57,14 @@ from mocodec.metrics.pose import bone_joints, shell_errors
 from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
-FORMAT = 2                      # 2: approximation bands coded as differences (coefcoder); 1 is still read
-FORMATS = (1, 2)
+FORMAT = 3                      # 3: constant channels at 1/8 of their step; 2 and 1 are still read
+FORMATS = (1, 2, 3)
 _HEAD = struct.Struct("<BBBBH")     # format, flags, log2 window, levels, channels
 FLAG_OFFSETS = 8                # flags bit 3: a signed step offset per segment follows the step codes
 FLAG_ROTVEC = 16                # flags bit 4: a flag per 3-angle joint, 1: coded as a rotation vector
 WAVELET_IDS = ("cdf97", "d4", "haar")
 CONSTANT = 1e-6                 # a channel whose range is below this is one knot
+CONST_FRACTION = 1.0 / 8.0      # format 3: a constant channel's quantum, in steps of its joint
 MAX_PASSES = 8                  # secant passes before falling back to halving
 JOINT_FEEDBACK = 1.0            # share of a joint's measured slack (in octaves) its steps take on
 ACCEPT = 0.9                    # a max-error bound is met well enough at 90-100% of it
@@ -166,15 +167,23 @@ def _factors(offsets: np.ndarray, lay: trendwave.Layout) -> tuple[np.ndarray, np
     return knot, np.repeat(f, lay.padded), np.minimum(f[:-1], f[1:])
 
 
+def _const_fraction(version: int) -> float:
+    """A constant channel's quantum relative to its step: a constant's error is the same in
+    every frame and is not noise that the closed loop averages out (a dummy root's rotation
+    turns the whole body), so from format 3 on it is 8 times finer than the step."""
+    return 1.0 if version < 3 else CONST_FRACTION
+
+
 def _reconstruct(knots: np.ndarray, coeffs: np.ndarray, const: np.ndarray, step: np.ndarray,
-                 lay: trendwave.Layout, factors: tuple[np.ndarray, np.ndarray, np.ndarray]) -> np.ndarray:
+                 lay: trendwave.Layout, factors: tuple[np.ndarray, np.ndarray, np.ndarray],
+                 const_fraction: float = 1.0) -> np.ndarray:
     """Decoded channels ``(k, T)`` from their integers, steps ``(k, 1)`` and the segments'
     step :func:`_factors`: the same arithmetic on both ends (the encoder calls it a tree depth
     at a time, the decoder for all channels at once; each row's floats are the same either
-    way). A constant channel is its first knot at the plain step."""
+    way). A constant channel is its first knot at ``const_fraction`` of its step."""
     knot_f, coeff_f, seam_f = factors
     values = knots * (step * lay.knot_quantum * knot_f)
-    values[const] = knots[const, :1] * step[const]
+    values[const] = knots[const, :1] * (step[const] * const_fraction)
     out = trendwave.trend(values, lay) + trendwave.synthesise(coeffs * (step * coeff_f), lay)
     limits = SEAM_LIMIT * seam_f[:, None] * step[:, 0]
     return seams.smooth_seams(out.T, lay.starts[1:], SEAM_HALF_WIDTH, limits).T
@@ -296,7 +305,8 @@ class KinwaveCodec(Codec):
             offsets = np.zeros(lay.starts.size, dtype=np.int8)
         if not frames:
             return np.zeros((0, skeleton.num_channels))
-        return _decoded(skeleton, codes, offsets, coded.const, coded.knots, coded.coeffs, lay, vector_flags).T
+        return _decoded(skeleton, codes, offsets, coded.const, coded.knots, coded.coeffs, lay, vector_flags,
+                        _const_fraction(version)).T
 
     # ----- streaming ------------------------------------------------------------------------
     def encoder(self, skeleton: Skeleton, fps: float) -> StreamEncoder:
@@ -307,15 +317,34 @@ class KinwaveCodec(Codec):
 
 
 def _decoded(skeleton: Skeleton, codes: np.ndarray, offsets: np.ndarray, const: np.ndarray, knots: np.ndarray,
-             coeffs: np.ndarray, lay: trendwave.Layout, vector_flags: np.ndarray) -> np.ndarray:
+             coeffs: np.ndarray, lay: trendwave.Layout, vector_flags: np.ndarray, const_fraction: float) -> np.ndarray:
     """Channels ``(C, T)`` from the integers, in one reconstruction of all channels; the
     joints flagged in ``vector_flags`` back from rotation vectors to Euler angles."""
-    out = _reconstruct(knots, coeffs, const == 1, _channel_steps(skeleton, codes), lay, _factors(offsets, lay))
+    out = _reconstruct(knots, coeffs, const == 1, _channel_steps(skeleton, codes), lay, _factors(offsets, lay),
+                       const_fraction)
     vectors = [g for flag, g in zip(vector_flags, _three_angle_groups(skeleton)) if flag]
     if vectors:
         rows = np.concatenate([channels for channels, _ in vectors])
         out[rows] = rotvec.to_euler(out[rows], tuple(o for _, o in vectors))
     return out
+
+
+def _bone_skeleton(skeleton: Skeleton, values: np.ndarray, const: np.ndarray) -> Skeleton:
+    """The skeleton with each non-root joint's constant translation channels (``values (C, T)``)
+    added to its offset: the bones the motion really has, whose lengths are the allocation's
+    levers (a MotionBuilder export keeps every bone in position channels)."""
+    plan = _plan(skeleton)
+    joints = list(skeleton.joints)
+    for j in range(1, len(joints)):
+        held = [(k, c) for k, c in enumerate(plan.pos_index[j]) if c >= 0 and const[c]]
+        if held and values.shape[1]:
+            offset = list(joints[j].offset)
+            for k, c in held:
+                offset[k] += float(values[c, 0])
+            joints[j] = replace(joints[j], offset=tuple(offset))
+    if joints == list(skeleton.joints):
+        return skeleton
+    return Skeleton(tuple(joints), skeleton.units_per_metre, skeleton.name)
 
 
 def _channel_steps(skeleton: Skeleton, codes: np.ndarray) -> np.ndarray:
@@ -352,25 +381,30 @@ class _Encoder:
         self.rotvec = self._choose_rotvec() if self.cfg["rotation_vectors"] else np.zeros(0, dtype=np.int64)
 
     def _shape(self) -> tuple[np.ndarray, float]:
-        """Steps (degrees per rotation joint, cm for translations) whose modelled bound is 1 cm."""
-        sk = self.skeleton
-        coded = [0] * len(sk)
+        """Steps (degrees per rotation joint, cm for translations) whose modelled bound is 1 cm.
+        The levers are those of the motion's own bones (:func:`_bone_skeleton`), and a joint
+        whose angles are all constant takes the step the model would give it if they moved:
+        its constants turn everything below it (a dummy root: the whole body)."""
+        sk = _bone_skeleton(self.skeleton, self.values, self.const)
+        coded, rotating = [0] * len(sk), [0] * len(sk)
         translations = 0
-        for g in _groups(sk):
+        for g in _groups(self.skeleton):
             n = int((~self.const[g.channels]).sum())
             if g.rotation:
-                coded[g.joint] = n
+                coded[g.joint], rotating[g.joint] = n, g.channels.size
             else:
                 translations += n
-        measure = self.cfg["error_measure"]
+        measure, closed = self.cfg["error_measure"], self.cfg["closed_loop"]
         if self.cfg["allocation"] == "uniform":
-            rot, trans = kinalloc.steps(sk, tuple(int(c > 0) for c in coded), int(translations > 0), measure,
-                                        self.cfg["closed_loop"])
+            rot, trans = kinalloc.steps(sk, tuple(int(c > 0) for c in coded), int(translations > 0), measure, closed)
             finite = rot[np.isfinite(rot)]
             rot = np.full(len(sk), finite.min() if finite.size else 1.0)
         else:
-            rot, trans = kinalloc.steps(sk, tuple(coded), translations, measure, self.cfg["closed_loop"])
-        rot = np.where(np.isfinite(rot), rot, np.nanmax(rot) if np.isfinite(rot).any() else 1.0)
+            rot, trans = kinalloc.steps(sk, tuple(coded), translations, measure, closed)
+        if not np.isfinite(rot).all() and any(rotating):
+            still, _ = kinalloc.steps(sk, tuple(rotating), max(translations, 1), measure, closed)
+            rot = np.where(np.isfinite(rot), rot, still)
+        rot = np.where(np.isfinite(rot), rot, np.nanmin(rot) if np.isfinite(rot).any() else 1.0)
         return rot[self.rot_joints], trans
 
     def _choose_rotvec(self) -> np.ndarray:
@@ -466,13 +500,14 @@ class _Encoder:
                 values[cols] = rotvec.to_vectors(values[cols], orders)
             k_int, c_int = self._quantise(values, const, step, factors)
             knots[channels], coeffs[channels] = k_int, c_int
-            out = _reconstruct(k_int, c_int, const, step, lay, factors)
+            out = _reconstruct(k_int, c_int, const, step, lay, factors, CONST_FRACTION)
             if vectors:
                 out[cols] = rotvec.to_euler(out[cols], orders)
             decoded[channels] = out
             return out.T
 
-        closedloop.code_down_tree(sk, self.values.T, ~self.const, self.quats, code, self.cfg["closed_loop"])
+        closedloop.code_down_tree(sk, self.values.T, ~self.const, self.quats, code, self.cfg["closed_loop"],
+                                  self.positions / self.cm)
         return _Pass(codes, self.const.astype(np.int64), knots, coeffs, decoded, offsets)
 
     def _quantise(self, target: np.ndarray, const: np.ndarray, step: np.ndarray,
@@ -483,7 +518,7 @@ class _Encoder:
         knot_f, coeff_f, _ = factors
         quantum = step * lay.knot_quantum * knot_f
         k_int = np.round(target[:, lay.knot_frames] / quantum).astype(np.int64)
-        k_int[const] = np.round(target[const, :1] / step[const]).astype(np.int64)
+        k_int[const] = np.round(target[const, :1] / (step[const] * CONST_FRACTION)).astype(np.int64)
         residual = target - trendwave.trend(k_int * quantum, lay)
         residual[const] = 0.0
         c = trendwave.analyse(residual, lay) / (step * coeff_f)

@@ -22,6 +22,7 @@ from functools import lru_cache
 import numba
 import numpy as np
 
+from mocodec import rotations
 from mocodec.kinematics import _plan
 from mocodec.skeleton import Skeleton
 
@@ -165,19 +166,43 @@ def depth_levels(skeleton: Skeleton) -> tuple[tuple[int, ...], ...]:
     return tuple(tuple(int(j) for j in np.flatnonzero(depths == d)) for d in range(int(depths.max(initial=-1)) + 1))
 
 
+def _placing(skeleton: Skeleton, active: np.ndarray) -> np.ndarray:
+    """Joints whose decoded position closed-loop translations need: the ancestors of every
+    non-root joint with an active translation channel."""
+    plan = _plan(skeleton)
+    out = np.zeros(len(skeleton), dtype=bool)
+    for j in range(1, len(skeleton)):
+        moves = plan.pos_index[j][plan.pos_index[j] >= 0]
+        p = skeleton.parents[j]
+        while active[moves].any() and p >= 0 and not out[p]:
+            out[p] = True
+            p = skeleton.parents[p]
+    return out
+
+
+def _rotate_back(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``v (T, 3)`` rotated by the inverse of unit quaternions ``q (T, 4)``."""
+    return rotations.quat_rotate(rotations.quat_conjugate(q), v)
+
+
 def code_down_tree(skeleton: Skeleton, start: np.ndarray, active: np.ndarray, goal: np.ndarray, code,
-                   closed_loop: bool = True) -> None:
+                   closed_loop: bool = True, goal_positions: np.ndarray | None = None) -> None:
     """Drive a coder down the tree, the joints of one depth at a time. ``start (T, C)`` holds
     the values each channel is coded from, ``active (C,)`` the channels the coder will change
     (the others keep their start value), ``goal (T, joints, 4)`` the original global
     orientations. With ``closed_loop`` a joint's active angles are replaced by the target that
-    restores its goal on top of its parent's *decoded* orientation; translations go as they
+    restores its goal on top of its parent's *decoded* orientation; with ``goal_positions
+    (T, joints, 3)`` (skeleton units) too, a non-root joint's active translations are replaced
+    by those that restore its original position from its parent's decoded position and
+    orientation (a translated joint below a rotated dummy root), else translations go as they
     are. ``code(channels, targets (T, k))`` codes a depth's channels and returns what the
     decoder will make of them ``(T, k)``."""
     plan = _plan(skeleton)
     frames = start.shape[0]
     glob = np.empty((len(skeleton), frames, 4))
     identity = np.tile([1.0, 0.0, 0.0, 0.0], (frames, 1))
+    placing = _placing(skeleton, active) if closed_loop and goal_positions is not None else np.zeros(0, bool)
+    where = np.zeros((len(skeleton), frames, 3)) if placing.any() else None
     for depth in depth_levels(skeleton):
         channels, targets = [], []
         for j in depth:
@@ -190,8 +215,13 @@ def code_down_tree(skeleton: Skeleton, start: np.ndarray, active: np.ndarray, go
             if closed_loop and p >= 0 and active[chans].any():
                 angles = target_angles(angles, plan.rot_axis[j, :k], active[chans], plan.axis_quat[j],
                                        plan.has_axis[j], glob[j], goal[:, j])
+            shifts = start[:, moves]
+            if where is not None and p >= 0 and active[moves].any():
+                wanted = _rotate_back(glob[p], goal_positions[:, j] - where[p]) - plan.offsets[j]
+                axes = np.flatnonzero(plan.pos_index[j] >= 0)
+                shifts = np.where(active[moves], wanted[:, axes], shifts)
             channels += [moves, chans]
-            targets += [start[:, moves], angles]
+            targets += [shifts, angles]
         channels = np.concatenate(channels)
         if not channels.size:
             continue
@@ -202,3 +232,10 @@ def code_down_tree(skeleton: Skeleton, start: np.ndarray, active: np.ndarray, go
             if k and skeleton.children[j]:
                 glob[j] = compose(decoded[:, [column[c] for c in plan.rot_index[j, :k]]], plan.rot_axis[j, :k],
                                   plan.axis_quat[j], plan.has_axis[j], glob[j])
+            if where is not None and placing[j]:
+                bone = np.tile(plan.offsets[j], (frames, 1))
+                for axis, c in enumerate(plan.pos_index[j]):
+                    if c >= 0:
+                        bone[:, axis] += decoded[:, column[c]]
+                p = skeleton.parents[j]
+                where[j] = bone if p < 0 else where[p] + rotations.quat_rotate(glob[p], bone)

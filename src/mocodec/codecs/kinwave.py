@@ -62,6 +62,8 @@ FORMATS = (1, 2, 3)
 _HEAD = struct.Struct("<BBBBH")     # format, flags, log2 window, levels, channels
 FLAG_OFFSETS = 8                # flags bit 3: a signed step offset per segment follows the step codes
 FLAG_ROTVEC = 16                # flags bit 4: a flag per 3-angle joint, 1: coded as a rotation vector
+FLAG_KEYFRAME = 1               # flags bit 0: frame 0 is a keyframe (a one-frame segment)
+FLAG_SECOND_KEYFRAME = 32       # flags bit 5 (with bit 0): frame 1 is one too
 WAVELET_IDS = ("cdf97", "d4", "haar")
 CONSTANT = 1e-6                 # a channel whose range is below this is one knot
 CONST_FRACTION = 1.0 / 8.0      # format 3: a constant channel's quantum, in steps of its joint
@@ -154,7 +156,7 @@ def _three_angle_groups(skeleton: Skeleton) -> tuple[tuple[np.ndarray, str], ...
     """``(channels, order)`` of every joint with three rotation channels (in rotation order):
     the joints that may be coded as rotation vectors."""
     return tuple((g.channels, "".join("XYZ"[a] for a in g.axes)) for g in _groups(skeleton)
-                 if g.rotation and g.channels.size == 3 and len(set(g.axes.tolist())) == 3)
+                 if g.rotation and g.channels.size == 3)
 
 
 def _factors(offsets: np.ndarray, lay: trendwave.Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -189,12 +191,16 @@ def _reconstruct(knots: np.ndarray, coeffs: np.ndarray, const: np.ndarray, step:
     return seams.smooth_seams(out.T, lay.starts[1:], SEAM_HALF_WIDTH, limits).T
 
 
-def _keyframe(positions_cm: np.ndarray) -> bool:
-    """Frame 0 jumps far from frame 1 compared with the clip's own frame-to-frame motion."""
+def _keyframes(positions_cm: np.ndarray) -> int:
+    """How many leading frames (0, 1 or 2: a bind pose, a T-pose, or both) jump far from the
+    next one compared with the clip's own frame-to-frame motion after them."""
     if len(positions_cm) < 8:
-        return False
+        return 0
     moves = np.linalg.norm(np.diff(positions_cm, axis=0), axis=2).max(axis=1)
-    return bool(moves[0] > 4.0 * np.percentile(moves[1:], 99) + 1.0)
+    for count in (2, 1):
+        if moves[count - 1] > 4.0 * np.percentile(moves[count:], 99) + 1.0:
+            return count
+    return 0
 
 
 @dataclass
@@ -231,8 +237,8 @@ class KinwaveCodec(Codec):
              "adaptive steps, from 4 segments on): quiet stretches get coarser steps"),
         Knob("rotation_vectors", bool, True, "code each 3-angle joint as a rotation vector where that costs fewer "
              "bytes than its Euler angles (BVH skeletons; ASF ones under a mean bound only)"),
-        Knob("keyframes", bool, False, "code a frame 0 that jumps away from frame 1 on its own (the knot at "
-             "frame 0 already keeps such a T-pose out of the transform: off by default, see docs/kinwave.md)"),
+        Knob("keyframes", bool, True, "code the first one or two frames on their own where they jump far from the "
+             "rest (a bind pose or T-pose in frame 0), so they do not cost the wavelet"),
     )
     quality = QualityKnob("max_error_cm", higher_is_better=False, log_scale=True)
     streaming = True
@@ -283,7 +289,8 @@ class KinwaveCodec(Codec):
                                      "wrong skeleton?")
         if log_w > 16 or not 1 <= levels <= 10 or (flags >> 1) & 3 >= len(WAVELET_IDS):
             raise CorruptStreamError(f"kinwave payload header is damaged (window 2^{log_w}, levels {levels})")
-        lay = trendwave.layout(frames, 1 << log_w, levels, bool(flags & 1), WAVELET_IDS[(flags >> 1) & 3])
+        keyframes = int(bool(flags & FLAG_KEYFRAME)) * (2 if flags & FLAG_SECOND_KEYFRAME else 1)
+        lay = trendwave.layout(frames, 1 << log_w, levels, keyframes, WAVELET_IDS[(flags >> 1) & 3])
         num_offsets = lay.starts.size if flags & FLAG_OFFSETS else 0
         num_vectors = len(_three_angle_groups(skeleton)) if flags & FLAG_ROTVEC else 0
         vector_flags = np.zeros(0, dtype=np.int64)
@@ -370,9 +377,11 @@ class _Encoder:
         self.positions = pos * self.cm
         self.quats = quat
         self.const = (np.ptp(self.values, axis=1) <= CONSTANT) if self.frames else np.ones(sk.num_channels, bool)
-        keyframe = self.cfg["keyframes"] and _keyframe(self.positions)
-        self.lay = trendwave.layout(self.frames, self.cfg["window"], self.cfg["levels"], keyframe, self.cfg["wavelet"])
-        self.header = _HEAD.pack(FORMAT, int(keyframe) | WAVELET_IDS.index(self.cfg["wavelet"]) << 1,
+        keyframes = _keyframes(self.positions) if self.cfg["keyframes"] else 0
+        self.lay = trendwave.layout(self.frames, self.cfg["window"], self.cfg["levels"], keyframes,
+                                    self.cfg["wavelet"])
+        flags = (FLAG_KEYFRAME if keyframes else 0) | (FLAG_SECOND_KEYFRAME if keyframes == 2 else 0)
+        self.header = _HEAD.pack(FORMAT, flags | WAVELET_IDS.index(self.cfg["wavelet"]) << 1,
                                  int(math.log2(self.cfg["window"])), self.cfg["levels"], sk.num_channels)
         self.rot_joints = _rotation_joints(sk)
         self.trans = _has_translation(sk)
@@ -413,16 +422,16 @@ class _Encoder:
         (open loop) at the step the search starts from; a joint with a constant angle stays
         Euler. The trial weighs the mean rotation error, which is what decides a mean bound;
         under a max bound it misjudged ASF joints (angles about axes chosen for each bone, small
-        and decoupled), whose files came out 1-14% larger, so a skeleton with axis
-        pre-rotations tries vectors only under a mean bound (4% smaller there). On the shared
-        BVH clips 12-16 of the 43 joints choose vectors. All joints go through each transform
+        and decoupled), whose files came out 1-14% larger, so a joint with an axis pre-rotation
+        tries vectors only under a mean bound (4% smaller there); any other joint, in any of the
+        12 Euler orders (an ASF root too), may take them. All joints go through each transform
         together; only the byte counts are per joint."""
         groups = _three_angle_groups(self.skeleton)
         choice = np.zeros(len(groups), dtype=np.int64)
-        pre_rotated = any(j.has_axis for j in self.skeleton.joints)
-        if pre_rotated and self.cfg["error_measure"] != "mean":
-            return choice
-        live = [k for k, (channels, _) in enumerate(groups) if not self.const[channels].any()]
+        joints = self.skeleton.channel_joints
+        axis_free = self.cfg["error_measure"] == "mean"
+        live = [k for k, (channels, _) in enumerate(groups) if not self.const[channels].any()
+                and (axis_free or not self.skeleton.joints[joints[channels[0]]].has_axis)]
         if not live or not self.frames:
             return choice
         channels = np.concatenate([groups[k][0] for k in live])
@@ -506,8 +515,10 @@ class _Encoder:
             decoded[channels] = out
             return out.T
 
+        exact = np.zeros(len(sk), dtype=bool)
+        exact[sk.channel_joints[[g[0] for flag, (g, _) in zip(self.rotvec, rotvec_groups) if flag]]] = True
         closedloop.code_down_tree(sk, self.values.T, ~self.const, self.quats, code, self.cfg["closed_loop"],
-                                  self.positions / self.cm)
+                                  self.positions / self.cm, exact)
         return _Pass(codes, self.const.astype(np.int64), knots, coeffs, decoded, offsets)
 
     def _quantise(self, target: np.ndarray, const: np.ndarray, step: np.ndarray,
@@ -556,7 +567,7 @@ class _Encoder:
         if self.cfg["bits_per_second"] > 0:
             return self._to_rate(self.cfg["bits_per_second"] * self.frames / self.motion.fps / 8.0)
         if (self.cfg["segment_steps"] and self.cfg["error_measure"] != "mean"
-                and self.lay.starts.size >= ADAPTIVE_SEGMENTS):
+                and np.count_nonzero(self.lay.padded) >= ADAPTIVE_SEGMENTS):
             return self._to_bound_by_segment(self.cfg["max_error_cm"])
         return self._to_bound(self.cfg["max_error_cm"])
 

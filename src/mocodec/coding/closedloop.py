@@ -185,8 +185,22 @@ def _rotate_back(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     return rotations.quat_rotate(rotations.quat_conjugate(q), v)
 
 
+def exact_angles(axes: np.ndarray, axis_quat: np.ndarray, has_axis: bool, parent: np.ndarray,
+                 goal: np.ndarray) -> np.ndarray:
+    """Euler angles ``(T, 3)`` (degrees, rotation-order steps, a three-axis joint) of exactly
+    the local rotation that restores ``goal`` on top of ``parent``: ``C^-1 conj(G'_p) G_j C``.
+    For joints coded as rotation vectors, where a Gauss-Newton step in Euler angles near a
+    gimbal lock (a proper order's rest pose) would not converge."""
+    local = rotations.quat_multiply(rotations.quat_conjugate(parent), goal)
+    if has_axis:
+        c = np.broadcast_to(axis_quat, local.shape)
+        local = rotations.quat_multiply(rotations.quat_multiply(rotations.quat_conjugate(c), local), c)
+    return rotations.quat_to_euler(local, "".join("XYZ"[a] for a in axes))
+
+
 def code_down_tree(skeleton: Skeleton, start: np.ndarray, active: np.ndarray, goal: np.ndarray, code,
-                   closed_loop: bool = True, goal_positions: np.ndarray | None = None) -> None:
+                   closed_loop: bool = True, goal_positions: np.ndarray | None = None,
+                   exact: np.ndarray | None = None) -> None:
     """Drive a coder down the tree, the joints of one depth at a time. ``start (T, C)`` holds
     the values each channel is coded from, ``active (C,)`` the channels the coder will change
     (the others keep their start value), ``goal (T, joints, 4)`` the original global
@@ -195,8 +209,9 @@ def code_down_tree(skeleton: Skeleton, start: np.ndarray, active: np.ndarray, go
     (T, joints, 3)`` (skeleton units) too, a non-root joint's active translations are replaced
     by those that restore its original position from its parent's decoded position and
     orientation (a translated joint below a rotated dummy root), else translations go as they
-    are. ``code(channels, targets (T, k))`` codes a depth's channels and returns what the
-    decoder will make of them ``(T, k)``."""
+    are. Joints flagged in ``exact (joints,)`` (three axes, all active) take
+    :func:`exact_angles` as their target. ``code(channels, targets (T, k))`` codes a depth's
+    channels and returns what the decoder will make of them ``(T, k)``."""
     plan = _plan(skeleton)
     frames = start.shape[0]
     glob = np.empty((len(skeleton), frames, 4))
@@ -212,7 +227,9 @@ def code_down_tree(skeleton: Skeleton, start: np.ndarray, active: np.ndarray, go
             k = int((plan.rot_index[j] >= 0).sum())
             chans = plan.rot_index[j, :k]
             angles = start[:, chans]
-            if closed_loop and p >= 0 and active[chans].any():
+            if closed_loop and p >= 0 and exact is not None and exact[j]:
+                angles = exact_angles(plan.rot_axis[j, :k], plan.axis_quat[j], plan.has_axis[j], glob[j], goal[:, j])
+            elif closed_loop and p >= 0 and active[chans].any():
                 angles = target_angles(angles, plan.rot_axis[j, :k], active[chans], plan.axis_quat[j],
                                        plan.has_axis[j], glob[j], goal[:, j])
             shifts = start[:, moves]

@@ -2,8 +2,7 @@
 
 A joint's rotation as one turn about one axis: its three numbers move less jointly than Euler
 angles do when a joint swings far, so they cost fewer bytes to code (BVH joints, 9-12%). Rows
-come three per joint, ``(3n, T)``, in each joint's rotation order (three distinct axes),
-degrees. The conversions run in numba kernels, a joint at a time, so a coder converting a few
+come three per joint, ``(3n, T)``, in each joint's rotation order (any of the 12), degrees. The conversions run in numba kernels, a joint at a time, so a coder converting a few
 joints (kinwave's encoder, a tree depth at a time) and one converting them all (its decoder)
 get the same floats; they compute what :mod:`mocodec.rotations` does (``euler_to_quat``,
 ``quat_continuous``, ``quat_log`` and back, ``quat_to_euler``), to rounding.
@@ -74,12 +73,16 @@ def _vectors_kernel(q):
 
 @numba.njit(cache=True)
 def _euler_kernel(vectors, axes):
-    """Euler angles (degrees, each joint's triples continuous in time) of rotation vectors."""
+    """Euler angles (degrees, each joint's triples continuous in time) of rotation vectors, in
+    Tait-Bryan or proper orders (the formula of :func:`mocodec.rotations.quat_to_euler`)."""
     frames, joints = vectors.shape[0], vectors.shape[1]
     out = np.empty((frames, joints, 3))
     angles = np.empty((frames, 3))
     for j in range(joints):
         i, jj, k = axes[j, 2], axes[j, 1], axes[j, 0]          # the extrinsic sequence: reversed
+        proper = i == k
+        if proper:
+            k = 3 - i - jj
         eps = (i - jj) * (jj - k) * (k - i) / 2.0
         for t in range(frames):
             vx, vy, vz = vectors[t, j, 0] * _DEG / 2.0, vectors[t, j, 1] * _DEG / 2.0, vectors[t, j, 2] * _DEG / 2.0
@@ -87,13 +90,19 @@ def _euler_kernel(vectors, axes):
             sinc = 1.0 if n < 1e-12 else math.sin(n) / n
             q = (math.cos(n), vx * sinc, vy * sinc, vz * sinc)
             w, qi, qj, qk = q[0], q[1 + i], q[1 + jj], q[1 + k]
-            a, b, c, d = w - qj, qi + qk * eps, qj + w, qk * eps - qi
-            theta2 = 2.0 * math.atan2(math.hypot(c, d), math.hypot(a, b)) - math.pi / 2.0
+            if proper:
+                a, b, c, d = w, qi, qj, qk * eps
+            else:
+                a, b, c, d = w - qj, qi + qk * eps, qj + w, qk * eps - qi
+            theta2 = 2.0 * math.atan2(math.hypot(c, d), math.hypot(a, b))
             plus, minus = math.atan2(b, a), math.atan2(d, c)
-            triple = ((plus + minus) * eps, theta2, plus - minus)
+            if proper:
+                triple = (plus + minus, theta2, plus - minus)
+            else:
+                triple = ((plus + minus) * eps, theta2 - math.pi / 2.0, plus - minus)
             for m in range(3):
                 angles[t, m] = (((triple[m] + math.pi) % (2.0 * math.pi)) - math.pi) / _DEG
-        out[:, j, :] = follow_nearest(angles, False)           # three distinct axes: Tait-Bryan
+        out[:, j, :] = follow_nearest(angles, proper)
     return out
 
 

@@ -1,7 +1,7 @@
 """Channels as a piecewise-linear trend through knots plus a wavelet-coded residual.
 
-A payload of T frames is cut into segments of W frames (after an optional one-frame keyframe
-segment, for the T-pose frame 0 of many clips: kinwave.md 6). Knots sit at every segment start
+A payload of T frames is cut into segments of W frames (after up to two one-frame keyframe
+segments, for a bind pose or T-pose at the start of many clips: kinwave.md 6). Knots sit at every segment start
 and on the last frame; the trend joins them linearly, so it is continuous across seams, and
 the residual of a segment is close to zero at both of its ends, which is what a periodised
 transform needs (kinwave.md 4: detrend, zero-pad to a multiple of 2^levels, periodise). Each
@@ -48,10 +48,11 @@ class Layout:
 
 
 @lru_cache(maxsize=256)
-def layout(frames: int, window: int, levels: int, keyframe: bool, wavelet: str = "cdf97") -> Layout:
-    """The segments and knots of a ``frames``-long payload (``window`` a power of two)."""
-    first = 1 if keyframe and frames > 1 else 0
-    starts = np.array(([0] if first else []) + list(range(first, max(frames, 1), window)), dtype=np.int64)
+def layout(frames: int, window: int, levels: int, keyframes: int, wavelet: str = "cdf97") -> Layout:
+    """The segments and knots of a ``frames``-long payload (``window`` a power of two), its
+    first ``keyframes`` frames (a bind pose, a T-pose) one-frame segments of their own."""
+    first = min(int(keyframes), frames - 1) if frames > 1 else 0
+    starts = np.array(list(range(first)) + list(range(first, max(frames, 1), window)), dtype=np.int64)
     if frames == 0:
         starts = np.zeros(0, dtype=np.int64)
     lengths = np.diff(np.append(starts, frames))
@@ -70,8 +71,7 @@ def layout(frames: int, window: int, levels: int, keyframe: bool, wavelet: str =
             frac[a:a + n] = (np.arange(n) / (end - a))
     # a keyframe has no residual to correct its knot: it gets an twice finer step
     quantum = np.ones(knots.size)
-    if first:
-        quantum[0] = KEYFRAME_QUANTUM
+    quantum[:first] = KEYFRAME_QUANTUM
     padded = padded.astype(np.int64)
     return Layout(frames, wavelet, starts, lengths, padded, seg_levels, knots, left, frac, quantum,
                   _blocks(padded, seg_levels))

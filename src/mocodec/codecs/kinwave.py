@@ -388,6 +388,10 @@ class _Encoder:
         self.shape_rot, self.shape_trans = self._shape()
         self.joint_offsets = np.zeros(len(self.rot_joints) + self.trans, dtype=np.int64)
         self.rotvec = self._choose_rotvec() if self.cfg["rotation_vectors"] else np.zeros(0, dtype=np.int64)
+        vector_channels = [g for flag, (g, _) in zip(self.rotvec, _three_angle_groups(sk)) if flag]
+        if vector_channels and self.const[np.concatenate(vector_channels)].any():
+            self.const[np.concatenate(vector_channels)] = False      # a vector moves in all three
+            self.shape_rot, self.shape_trans = self._shape()
 
     def _shape(self) -> tuple[np.ndarray, float]:
         """Steps (degrees per rotation joint, cm for translations) whose modelled bound is 1 cm.
@@ -419,8 +423,8 @@ class _Encoder:
     def _choose_rotvec(self) -> np.ndarray:
         """Per 3-angle joint (:func:`_three_angle_groups`), 1 where its rotation vectors take
         fewer bytes than its Euler angles at the same rotation error, both coded on their own
-        (open loop) at the step the search starts from; a joint with a constant angle stays
-        Euler. The trial weighs the mean rotation error, which is what decides a mean bound;
+        (open loop) at the step the search starts from (its constant angles cost nothing); a
+        joint whose angles are all constant stays Euler. The trial weighs the mean rotation error, which is what decides a mean bound;
         under a max bound it misjudged ASF joints (angles about axes chosen for each bone, small
         and decoupled), whose files came out 1-14% larger, so a joint with an axis pre-rotation
         tries vectors only under a mean bound (4% smaller there); any other joint, in any of the
@@ -430,7 +434,7 @@ class _Encoder:
         choice = np.zeros(len(groups), dtype=np.int64)
         joints = self.skeleton.channel_joints
         axis_free = self.cfg["error_measure"] == "mean"
-        live = [k for k, (channels, _) in enumerate(groups) if not self.const[channels].any()
+        live = [k for k, (channels, _) in enumerate(groups) if not self.const[channels].all()
                 and (axis_free or not self.skeleton.joints[joints[channels[0]]].has_axis)]
         if not live or not self.frames:
             return choice

@@ -4,8 +4,8 @@ re-expression of :mod:`mocodec.reexpress` (every joint position unchanged).
     python benchmarks/bench_invariance.py [--clips N] [--bounds 1 0.1] [--jobs 2]
 
 For every clip (the first N of CMU BVH, CMU ASF/AMC and Bandai Namco, sorted) and every max
-shell bound, the payload of each transformed clip is compared with the clip's own; frame-rate
-rows compare the resampled clip's payload with the original's (the same motion in fewer
+shell bound, the whole .moc file (skeleton included) of each transformed clip is compared with
+the clip's own; frame-rate rows compare the resampled clip's file with the original's (the same motion in fewer
 frames) and check the bound against the resampled clip itself. Prints one row per transform:
 median and worst growth, and how many encodings went over the bound.
 """
@@ -18,7 +18,7 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 from common import SHARED
 
-from mocodec import load, reexpress
+from mocodec import load, moc, reexpress
 from mocodec.codecs import get_codec
 from mocodec.kinematics import forward_kinematics
 from mocodec.metrics.pose import shell_errors
@@ -44,11 +44,12 @@ def transforms(motion, rng):
             yield f"g {fps:g} fps", motion.resample(fps)
 
 
-def shell_max(motion, channels) -> float:
+def shell_max(motion, decoded) -> float:
+    """Max shell error (cm) of ``decoded`` (on its stored skeleton) against ``motion``."""
     sk = motion.skeleton
     cm = 100.0 / sk.units_per_metre
     p0, q0 = forward_kinematics(sk, motion.channels)
-    p1, q1 = forward_kinematics(sk, channels)
+    p1, q1 = forward_kinematics(decoded.skeleton, decoded.channels)
     return shell_errors(sk, p0 * cm, q0, p1 * cm, q1).max
 
 
@@ -59,12 +60,11 @@ def measure(path: str, bounds: tuple[float, ...]) -> list[tuple[str, float, floa
     rows = []
     for bound in bounds:
         codec = get_codec("kinwave", max_error_cm=bound, error_measure="shell")
-        base = len(codec.encode(motion))
+        base = len(moc.pack(motion, codec))
         for name, moved in transforms(motion, rng):
-            payload = codec.encode(moved)
-            decoded = codec.decode(payload, moved.skeleton)
-            over = shell_max(moved, decoded.channels) > bound
-            rows.append((name, bound, len(payload) / base - 1.0, len(payload), base, over))
+            data = moc.pack(moved, codec)
+            over = shell_max(moved, moc.unpack(data)) > bound
+            rows.append((name, bound, len(data) / base - 1.0, len(data), base, over))
     return rows
 
 
@@ -81,7 +81,7 @@ def main() -> None:
     with ProcessPoolExecutor(args.jobs) as pool:
         results = {name: list(pool.map(measure, map(str, files), [tuple(args.bounds)] * len(files)))
                    for name, files in chosen.items()}
-    print(f"kinwave, max shell bounds {args.bounds} cm; growth of the payload against the clip's own")
+    print(f"kinwave, max shell bounds {args.bounds} cm; growth of the whole file against the clip's own")
     print(f"{'transform':42s} {'source':13s} {'median':>8s} {'worst':>8s} {'over':>5s}")
     everything = []
     for source, clips in results.items():

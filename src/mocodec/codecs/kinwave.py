@@ -169,23 +169,42 @@ def _factors(offsets: np.ndarray, lay: trendwave.Layout) -> tuple[np.ndarray, np
     return knot, np.repeat(f, lay.padded), np.minimum(f[:-1], f[1:])
 
 
-def _const_fraction(version: int) -> float:
-    """A constant channel's quantum relative to its step: a constant's error is the same in
-    every frame and is not noise that the closed loop averages out (a dummy root's rotation
-    turns the whole body), so from format 3 on it is 8 times finer than the step."""
-    return 1.0 if version < 3 else CONST_FRACTION
+@dataclass(frozen=True)
+class _Constants:
+    """How constant channels are coded: one knot, ``fraction`` of the joint's step, about
+    ``base (C,)``. Format 3: a constant's error is the same in every frame and is not noise
+    that the closed loop averages out (a dummy root's rotation turns the whole body), so its
+    quantum is 8 times finer than the step, and a constant translation is coded as its
+    difference from the joint's offset on the decoder's skeleton (a MotionBuilder export
+    repeats every offset in its position channels: these cost one decision each)."""
+
+    fraction: float
+    base: np.ndarray
+
+
+def _constants(skeleton: Skeleton, version: int) -> _Constants:
+    base = np.zeros(skeleton.num_channels)
+    if version < 3:
+        return _Constants(1.0, base)
+    plan = _plan(skeleton)
+    for j in range(len(skeleton)):
+        for axis, c in enumerate(plan.pos_index[j]):
+            if c >= 0:
+                base[c] = plan.offsets[j, axis]
+    return _Constants(CONST_FRACTION, base)
 
 
 def _reconstruct(knots: np.ndarray, coeffs: np.ndarray, const: np.ndarray, step: np.ndarray,
                  lay: trendwave.Layout, factors: tuple[np.ndarray, np.ndarray, np.ndarray],
-                 const_fraction: float = 1.0) -> np.ndarray:
+                 constants: _Constants) -> np.ndarray:
     """Decoded channels ``(k, T)`` from their integers, steps ``(k, 1)`` and the segments'
     step :func:`_factors`: the same arithmetic on both ends (the encoder calls it a tree depth
     at a time, the decoder for all channels at once; each row's floats are the same either
-    way). A constant channel is its first knot at ``const_fraction`` of its step."""
+    way). A constant channel is its first knot as :class:`_Constants` says (``base`` of these
+    rows)."""
     knot_f, coeff_f, seam_f = factors
     values = knots * (step * lay.knot_quantum * knot_f)
-    values[const] = knots[const, :1] * (step[const] * const_fraction)
+    values[const] = constants.base[const, None] + knots[const, :1] * (step[const] * constants.fraction)
     out = trendwave.trend(values, lay) + trendwave.synthesise(coeffs * (step * coeff_f), lay)
     limits = SEAM_LIMIT * seam_f[:, None] * step[:, 0]
     return seams.smooth_seams(out.T, lay.starts[1:], SEAM_HALF_WIDTH, limits).T
@@ -313,7 +332,7 @@ class KinwaveCodec(Codec):
         if not frames:
             return np.zeros((0, skeleton.num_channels))
         return _decoded(skeleton, codes, offsets, coded.const, coded.knots, coded.coeffs, lay, vector_flags,
-                        _const_fraction(version)).T
+                        _constants(skeleton, version)).T
 
     # ----- streaming ------------------------------------------------------------------------
     def encoder(self, skeleton: Skeleton, fps: float) -> StreamEncoder:
@@ -324,11 +343,11 @@ class KinwaveCodec(Codec):
 
 
 def _decoded(skeleton: Skeleton, codes: np.ndarray, offsets: np.ndarray, const: np.ndarray, knots: np.ndarray,
-             coeffs: np.ndarray, lay: trendwave.Layout, vector_flags: np.ndarray, const_fraction: float) -> np.ndarray:
+             coeffs: np.ndarray, lay: trendwave.Layout, vector_flags: np.ndarray, constants: _Constants) -> np.ndarray:
     """Channels ``(C, T)`` from the integers, in one reconstruction of all channels; the
     joints flagged in ``vector_flags`` back from rotation vectors to Euler angles."""
     out = _reconstruct(knots, coeffs, const == 1, _channel_steps(skeleton, codes), lay, _factors(offsets, lay),
-                       const_fraction)
+                       constants)
     vectors = [g for flag, g in zip(vector_flags, _three_angle_groups(skeleton)) if flag]
     if vectors:
         rows = np.concatenate([channels for channels, _ in vectors])
@@ -369,6 +388,7 @@ class _Encoder:
         self.cfg = codec.config
         self.skeleton = sk = motion.skeleton
         self.output_skeleton = output_skeleton or sk        # the decoder's: errors are measured on its joints
+        self.constants = _constants(self.output_skeleton, FORMAT)
         self.motion = motion.continuous() if motion.num_frames else motion
         self.values = self.motion.channels.T.copy()                         # (C, T)
         self.frames = motion.num_frames
@@ -448,11 +468,12 @@ class _Encoder:
         original = rotvec.euler_quats(euler, orders)
         cost = []
         for values in (euler, rotvec.vectors_of(original)):
-            k_int, c_int = self._quantise(values, flat, step, factors)
+            none = _Constants(1.0, np.zeros(channels.size))
+            k_int, c_int = self._quantise(values, flat, step, factors, none)
             sizes = [len(coefcoder.encode(np.zeros(3, np.int64), k_int[3 * i:3 * i + 3], c_int[3 * i:3 * i + 3],
                                           self.lay.padded, self.lay.levels, revision=FORMAT))
                      for i in range(len(live))]
-            rec = _reconstruct(k_int, c_int, flat, step, self.lay, factors)
+            rec = _reconstruct(k_int, c_int, flat, step, self.lay, factors, none)
             turned = rotvec.euler_quats(rec, orders) if values is euler else rotvec.vector_quats(rec)
             err = np.maximum(rotations.quat_distance(original, turned).mean(axis=0), 1e-12)
             nonzero = (c_int != 0).reshape(len(live), -1).sum(axis=1)
@@ -511,9 +532,10 @@ class _Encoder:
                 cols = [column[c] for g, _ in vectors for c in g]
                 orders = tuple(o for _, o in vectors)
                 values[cols] = rotvec.to_vectors(values[cols], orders)
-            k_int, c_int = self._quantise(values, const, step, factors)
+            constants = _Constants(self.constants.fraction, self.constants.base[channels])
+            k_int, c_int = self._quantise(values, const, step, factors, constants)
             knots[channels], coeffs[channels] = k_int, c_int
-            out = _reconstruct(k_int, c_int, const, step, lay, factors, CONST_FRACTION)
+            out = _reconstruct(k_int, c_int, const, step, lay, factors, constants)
             if vectors:
                 out[cols] = rotvec.to_euler(out[cols], orders)
             decoded[channels] = out
@@ -526,14 +548,15 @@ class _Encoder:
         return _Pass(codes, self.const.astype(np.int64), knots, coeffs, decoded, offsets)
 
     def _quantise(self, target: np.ndarray, const: np.ndarray, step: np.ndarray,
-                  factors: tuple[np.ndarray, np.ndarray, np.ndarray]):
-        """Knots and dead-zone quantised coefficients of ``target (k, T)`` with steps ``(k, 1)``
-        and the segments' step :func:`_factors`."""
+                  factors: tuple[np.ndarray, np.ndarray, np.ndarray], constants: _Constants):
+        """Knots and dead-zone quantised coefficients of ``target (k, T)`` with steps ``(k, 1)``,
+        the segments' step :func:`_factors` and the rows' :class:`_Constants`."""
         lay = self.lay
         knot_f, coeff_f, _ = factors
         quantum = step * lay.knot_quantum * knot_f
         k_int = np.round(target[:, lay.knot_frames] / quantum).astype(np.int64)
-        k_int[const] = np.round(target[const, :1] / (step[const] * CONST_FRACTION)).astype(np.int64)
+        k_int[const] = np.round((target[const, :1] - constants.base[const, None])
+                                / (step[const] * constants.fraction)).astype(np.int64)
         residual = target - trendwave.trend(k_int * quantum, lay)
         residual[const] = 0.0
         c = trendwave.analyse(residual, lay) / (step * coeff_f)

@@ -62,6 +62,9 @@ FORMATS = (1, 2, 3)
 _HEAD = struct.Struct("<BBBBH")     # format, flags, log2 window, levels, channels
 FLAG_OFFSETS = 8                # flags bit 3: a signed step offset per segment follows the step codes
 FLAG_ROTVEC = 16                # flags bit 4: a flag per 3-angle joint, 1: coded as a rotation vector
+FLAG_MEANS = 64                 # flags bit 6: three integers per 3-angle joint, a vector joint's mean rotation
+MEAN_QUANTUM = 2.0              # degrees: a vector joint's mean rotation, as a rotation vector in these steps
+MEAN_LEAST = 20.0               # degrees: a mean rotation smaller than this is left at the identity
 FLAG_KEYFRAME = 1               # flags bit 0: frame 0 is a keyframe (a one-frame segment)
 FLAG_SECOND_KEYFRAME = 32       # flags bit 5 (with bit 0): frame 1 is one too
 WAVELET_IDS = ("cdf97", "d4", "haar")
@@ -312,7 +315,7 @@ class KinwaveCodec(Codec):
         lay = trendwave.layout(frames, 1 << log_w, levels, keyframes, WAVELET_IDS[(flags >> 1) & 3])
         num_offsets = lay.starts.size if flags & FLAG_OFFSETS else 0
         num_vectors = len(_three_angle_groups(skeleton)) if flags & FLAG_ROTVEC else 0
-        vector_flags = np.zeros(0, dtype=np.int64)
+        vector_flags = means = np.zeros(0, dtype=np.int64)
         if version == 1:            # step codes and offsets as bytes before the coded stream
             head = _HEAD.size + num_codes + num_offsets
             if len(body) < head:
@@ -321,18 +324,21 @@ class KinwaveCodec(Codec):
             offsets = np.frombuffer(body, dtype=np.int8, count=num_offsets, offset=_HEAD.size + num_codes)
             coded = coefcoder.decode(body[head:], skeleton.num_channels, lay.num_knots, lay.padded, lay.levels)
         else:                       # ... inside it
+            num_means = 3 * num_vectors if flags & FLAG_MEANS else 0
             coded = coefcoder.decode(body[_HEAD.size:], skeleton.num_channels, lay.num_knots, lay.padded,
-                                     lay.levels, 2, (num_codes, num_offsets, num_vectors))
-            codes, offsets, vector_flags = coded.side
+                                     lay.levels, 2, (num_codes, num_offsets, num_vectors, num_means))
+            codes, offsets, vector_flags, running = coded.side
+            means = np.diff(running, prepend=0).reshape(-1, 3)
             if ((codes.size and not 0 <= codes.min() <= codes.max() <= 255)
-                    or np.abs(offsets).max(initial=0) > 128 or not np.isin(vector_flags, (0, 1)).all()):
+                    or np.abs(offsets).max(initial=0) > 128 or not np.isin(vector_flags, (0, 1)).all()
+                    or np.abs(means).max(initial=0) * MEAN_QUANTUM > 360.0):
                 raise CorruptStreamError("kinwave payload's step codes are damaged")
         if not num_offsets:
             offsets = np.zeros(lay.starts.size, dtype=np.int8)
         if not frames:
             return np.zeros((0, skeleton.num_channels))
         return _decoded(skeleton, codes, offsets, coded.const, coded.knots, coded.coeffs, lay, vector_flags,
-                        _constants(skeleton, version)).T
+                        _constants(skeleton, version), means).T
 
     # ----- streaming ------------------------------------------------------------------------
     def encoder(self, skeleton: Skeleton, fps: float) -> StreamEncoder:
@@ -343,15 +349,18 @@ class KinwaveCodec(Codec):
 
 
 def _decoded(skeleton: Skeleton, codes: np.ndarray, offsets: np.ndarray, const: np.ndarray, knots: np.ndarray,
-             coeffs: np.ndarray, lay: trendwave.Layout, vector_flags: np.ndarray, constants: _Constants) -> np.ndarray:
+             coeffs: np.ndarray, lay: trendwave.Layout, vector_flags: np.ndarray, constants: _Constants,
+             means: np.ndarray) -> np.ndarray:
     """Channels ``(C, T)`` from the integers, in one reconstruction of all channels; the
-    joints flagged in ``vector_flags`` back from rotation vectors to Euler angles."""
+    joints flagged in ``vector_flags`` back from rotation vectors (about their ``means``, a
+    row of integers per three-angle joint, or none) to Euler angles."""
     out = _reconstruct(knots, coeffs, const == 1, _channel_steps(skeleton, codes), lay, _factors(offsets, lay),
                        constants)
     vectors = [g for flag, g in zip(vector_flags, _three_angle_groups(skeleton)) if flag]
     if vectors:
         rows = np.concatenate([channels for channels, _ in vectors])
-        out[rows] = rotvec.to_euler(out[rows], tuple(o for _, o in vectors))
+        turns = rotvec.mean_quats(means[vector_flags == 1], MEAN_QUANTUM) if len(means) else None
+        out[rows] = rotvec.to_euler(out[rows], tuple(o for _, o in vectors), turns)
     return out
 
 
@@ -407,6 +416,7 @@ class _Encoder:
         self.trans = _has_translation(sk)
         self.shape_rot, self.shape_trans = self._shape()
         self.joint_offsets = np.zeros(len(self.rot_joints) + self.trans, dtype=np.int64)
+        self.means = np.zeros((len(_three_angle_groups(sk)), 3), dtype=np.int64)
         self.rotvec = self._choose_rotvec() if self.cfg["rotation_vectors"] else np.zeros(0, dtype=np.int64)
         vector_channels = [g for flag, (g, _) in zip(self.rotvec, _three_angle_groups(sk)) if flag]
         if vector_channels and self.const[np.concatenate(vector_channels)].any():
@@ -466,21 +476,28 @@ class _Encoder:
         flat = np.zeros(channels.size, dtype=bool)
 
         original = rotvec.euler_quats(euler, orders)
+        self.means[live] = rotvec.mean_codes(original, MEAN_QUANTUM, MEAN_LEAST)
+        turns = rotvec.mean_quats(self.means[live], MEAN_QUANTUM)
+        about_mean = rotations.quat_multiply(rotations.quat_conjugate(turns)[None], original)
         cost = []
-        for values in (euler, rotvec.vectors_of(original)):
+        for values in (euler, rotvec.vectors_of(about_mean)):
             none = _Constants(1.0, np.zeros(channels.size))
             k_int, c_int = self._quantise(values, flat, step, factors, none)
             sizes = [len(coefcoder.encode(np.zeros(3, np.int64), k_int[3 * i:3 * i + 3], c_int[3 * i:3 * i + 3],
                                           self.lay.padded, self.lay.levels, revision=FORMAT))
                      for i in range(len(live))]
             rec = _reconstruct(k_int, c_int, flat, step, self.lay, factors, none)
-            turned = rotvec.euler_quats(rec, orders) if values is euler else rotvec.vector_quats(rec)
-            err = np.maximum(rotations.quat_distance(original, turned).mean(axis=0), 1e-12)
+            if values is euler:
+                err = rotations.quat_distance(original, rotvec.euler_quats(rec, orders))
+            else:
+                err = rotations.quat_distance(about_mean, rotvec.vector_quats(rec))
+            err = np.maximum(err.mean(axis=0), 1e-12)
             nonzero = (c_int != 0).reshape(len(live), -1).sum(axis=1)
             cost.append((np.array(sizes), nonzero, err))
         (euler_bytes, _, euler_err), (vector_bytes, nonzero, vector_err) = cost
         # at the Euler angles' error: a nonzero coefficient takes a bit more per halving of the error
         choice[live] = vector_bytes + nonzero / 8.0 * np.log2(vector_err / euler_err) < euler_bytes
+        self.means[choice == 0] = 0
         return choice
 
     def _first_scale(self) -> float:
@@ -526,18 +543,20 @@ class _Encoder:
         def code(channels: np.ndarray, targets: np.ndarray) -> np.ndarray:
             step, const = steps[channels], self.const[channels]
             column = {c: i for i, c in enumerate(channels)}
-            vectors = [(g, order) for flag, (g, order) in zip(self.rotvec, rotvec_groups) if flag and g[0] in column]
+            vectors = [(g, order, mean) for flag, (g, order), mean in zip(self.rotvec, rotvec_groups, self.means)
+                       if flag and g[0] in column]
             values = targets.T.copy()
             if vectors:
-                cols = [column[c] for g, _ in vectors for c in g]
-                orders = tuple(o for _, o in vectors)
-                values[cols] = rotvec.to_vectors(values[cols], orders)
+                cols = [column[c] for g, _, _ in vectors for c in g]
+                orders = tuple(o for _, o, _ in vectors)
+                turns = rotvec.mean_quats(np.array([m for _, _, m in vectors]), MEAN_QUANTUM)
+                values[cols] = rotvec.to_vectors(values[cols], orders, turns)
             constants = _Constants(self.constants.fraction, self.constants.base[channels])
             k_int, c_int = self._quantise(values, const, step, factors, constants)
             knots[channels], coeffs[channels] = k_int, c_int
             out = _reconstruct(k_int, c_int, const, step, lay, factors, constants)
             if vectors:
-                out[cols] = rotvec.to_euler(out[cols], orders)
+                out[cols] = rotvec.to_euler(out[cols], orders, turns)
             decoded[channels] = out
             return out.T
 
@@ -584,6 +603,8 @@ class _Encoder:
             flags, side = flags | FLAG_OFFSETS, side + (ps.offsets,)
         if self.rotvec.any():
             flags, side = flags | FLAG_ROTVEC, side + (self.rotvec,)
+        if self.means.any():        # side sequences go as differences: a running sum sends the values
+            flags, side = flags | FLAG_MEANS, side + (np.cumsum(self.means.ravel()),)
         head = self.header[:1] + bytes([flags]) + self.header[2:]
         return head + coefcoder.encode(ps.const, ps.knots, ps.coeffs, self.lay.padded, self.lay.levels,
                                        revision=FORMAT, side=side)

@@ -38,6 +38,13 @@ def _turn(w, x, y, z, axis, angle_deg):
     return w * c - z * s, x * c + y * s, y * c - x * s, z * c + w * s
 
 
+@numba.njit(inline="always")
+def _product(aw, ax, ay, az, bw, bx, by, bz):
+    """The Hamilton product of two quaternions."""
+    return (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
+
+
 @numba.njit(cache=True)
 def _quats_kernel(euler, axes):
     frames, joints = euler.shape[0], euler.shape[1]
@@ -72,7 +79,7 @@ def _vectors_kernel(q):
 
 
 @numba.njit(cache=True)
-def _euler_kernel(vectors, axes):
+def _euler_kernel(vectors, axes, means):
     """Euler angles (degrees, each joint's triples continuous in time) of rotation vectors, in
     Tait-Bryan or proper orders (the formula of :func:`mocodec.rotations.quat_to_euler`)."""
     frames, joints = vectors.shape[0], vectors.shape[1]
@@ -88,7 +95,8 @@ def _euler_kernel(vectors, axes):
             vx, vy, vz = vectors[t, j, 0] * _DEG / 2.0, vectors[t, j, 1] * _DEG / 2.0, vectors[t, j, 2] * _DEG / 2.0
             n = math.sqrt(vx * vx + vy * vy + vz * vz)
             sinc = 1.0 if n < 1e-12 else math.sin(n) / n
-            q = (math.cos(n), vx * sinc, vy * sinc, vz * sinc)
+            q = _product(means[j, 0], means[j, 1], means[j, 2], means[j, 3],
+                         math.cos(n), vx * sinc, vy * sinc, vz * sinc)
             w, qi, qj, qk = q[0], q[1 + i], q[1 + jj], q[1 + k]
             if proper:
                 a, b, c, d = w, qi, qj, qk * eps
@@ -131,12 +139,43 @@ def vectors_of(quats: np.ndarray) -> np.ndarray:
     return _rows(_vectors_kernel(np.ascontiguousarray(quats, dtype=np.float64)))
 
 
-def to_vectors(rows: np.ndarray, orders: tuple[str, ...]) -> np.ndarray:
-    """Euler angle rows as rotation vector rows, continuous in time."""
-    return vectors_of(euler_quats(rows, orders))
+def _identity_means(n: int) -> np.ndarray:
+    means = np.zeros((n, 4))
+    means[:, 0] = 1.0
+    return means
 
 
-def to_euler(rows: np.ndarray, orders: tuple[str, ...]) -> np.ndarray:
+def mean_codes(quats: np.ndarray, quantum: float, least: float) -> np.ndarray:
+    """``(n, 3)`` integers: each joint's mean rotation over time (the normalised mean of its
+    sign-aligned quaternions ``(T, n, 4)``) as a rotation vector in steps of ``quantum``
+    degrees; zero for a joint whose mean turns less than ``least`` degrees."""
+    aligned = np.where((np.sum(quats * quats[:1], axis=2) < 0.0)[..., None], -quats, quats)
+    mean = rotations.quat_normalize(aligned.mean(axis=0))
+    mean = np.where(mean[:, :1] < 0.0, -mean, mean)
+    vector = np.degrees(2.0 * rotations.quat_log(mean))
+    codes = np.round(vector / quantum).astype(np.int64)
+    codes[np.linalg.norm(vector, axis=1) < least] = 0
+    return codes
+
+
+def mean_quats(codes: np.ndarray, quantum: float) -> np.ndarray:
+    """Unit quaternions ``(n, 4)`` of :func:`mean_codes`' integers: the same floats on both
+    ends of a coder."""
+    return rotations.quat_exp(np.radians(np.asarray(codes, dtype=np.float64) * quantum) / 2.0)
+
+
+def to_vectors(rows: np.ndarray, orders: tuple[str, ...], means: np.ndarray | None = None) -> np.ndarray:
+    """Euler angle rows as rotation vector rows, continuous in time, each joint's taken about
+    its mean rotation ``means (n, 4)`` (``conj(mean) q``; default: the identity)."""
+    quats = euler_quats(rows, orders)
+    if means is not None:
+        quats = rotations.quat_multiply(rotations.quat_conjugate(means)[None], quats)
+    return vectors_of(quats)
+
+
+def to_euler(rows: np.ndarray, orders: tuple[str, ...], means: np.ndarray | None = None) -> np.ndarray:
     """Inverse of :func:`to_vectors`: Euler angle rows, each joint's triples as continuous as
     the Euler form allows (frame 0 in the principal range)."""
-    return _rows(_euler_kernel(_per_joint(rows), _axes(orders)))
+    n = len(orders)
+    means = _identity_means(n) if means is None else np.ascontiguousarray(means, dtype=np.float64)
+    return _rows(_euler_kernel(_per_joint(rows), _axes(orders), means))

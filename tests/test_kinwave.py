@@ -196,7 +196,7 @@ def test_joint_feedback_coarsens_joints_with_slack(walk_amc):
 
 
 def test_rotation_vectors_shrink_bvh_files_within_the_bound(walk_amc):
-    """On a BVH clip (09_02, a run: 13% and 17% smaller) some joints go as rotation vectors
+    """On a BVH clip (09_02, a run: 5% and 14% smaller, the mean rotations included) some joints go as rotation vectors
     (flag 16), the file is smaller than with Euler angles only and the bound holds; ASF joints
     with axis pre-rotations keep Euler angles under a max bound (only the root may take
     vectors), and may use vectors under a mean bound. (Over the shared BVH clips files are up to 30% smaller;
@@ -209,7 +209,7 @@ def test_rotation_vectors_shrink_bvh_files_within_the_bound(walk_amc):
         codec = get_codec("kinwave", max_error_cm=0.5, error_measure=measure)
         vectors = codec.encode(run)
         euler = get_codec("kinwave", max_error_cm=0.5, error_measure=measure, rotation_vectors=False).encode(run)
-        assert vectors[17 + 1] & 16 and len(vectors) < 0.92 * len(euler)
+        assert vectors[17 + 1] & 16 and len(vectors) < 0.96 * len(euler)
         assert _errors(run, codec.decode(vectors, run.skeleton))[measure] <= 0.5
     from mocodec.codecs.kinwave import _three_angle_groups
     sk = walk_amc.skeleton

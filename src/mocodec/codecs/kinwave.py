@@ -81,6 +81,7 @@ SEGMENT_ACCEPT = 0.8            # a segment's worst error is near enough to the 
 ADAPTIVE_SEGMENTS = 4           # time-adaptive steps from this many segments on (at W = 128 on fewer they
                                 # measured 1.6% larger than one scale, from 4 on 3% smaller, from 8 on 9%)
 RATE_TOLERANCE = 0.02
+GIMBAL_MARGIN = 15.0            # degrees from an Euler order's lock within which a joint goes as a vector
 COARSEST_BAND_S = 0.25          # seconds between the coarsest band's samples (the automatic levels)
 SEAM_HALF_WIDTH = 8             # frames each side of a seam over which its step is spread
 SEAM_LIMIT = 1.0                # the largest step removed, in quantiser steps of the channel
@@ -212,6 +213,17 @@ def _reconstruct(knots: np.ndarray, coeffs: np.ndarray, const: np.ndarray, step:
     out = trendwave.trend(values, lay) + trendwave.synthesise(coeffs * (step * coeff_f), lay)
     limits = SEAM_LIMIT * seam_f[:, None] * step[:, 0]
     return seams.smooth_seams(out.T, lay.starts[1:], SEAM_HALF_WIDTH, limits).T
+
+
+def _near_gimbal_lock(rows: np.ndarray, orders: tuple[str, ...]) -> np.ndarray:
+    """Per joint (Euler angle rows, three per joint), whether its middle angle ever comes within
+    GIMBAL_MARGIN degrees of the lock (90 for Tait-Bryan orders, 0 or 180 for proper ones, which
+    sit there at rest): the closed loop's Gauss-Newton step and the angles' own swings make
+    such a joint expensive in Euler angles, whatever the open-loop trial says."""
+    middle = np.radians(rows[1::3])
+    proper = np.array([o[0] == o[2] for o in orders])[:, None]
+    closeness = np.where(proper, np.abs(np.sin(middle)), np.abs(np.cos(middle)))
+    return (closeness.min(axis=1, initial=1.0) < math.sin(math.radians(GIMBAL_MARGIN))).astype(np.int64)
 
 
 def _levels_for(fps: float) -> int:
@@ -507,6 +519,7 @@ class _Encoder:
         (euler_bytes, _, euler_err), (vector_bytes, nonzero, vector_err) = cost
         # at the Euler angles' error: a nonzero coefficient takes a bit more per halving of the error
         choice[live] = vector_bytes + nonzero / 8.0 * np.log2(vector_err / euler_err) < euler_bytes
+        choice[live] |= _near_gimbal_lock(euler, orders)
         self.means[choice == 0] = 0
         return choice
 

@@ -61,7 +61,8 @@ FORMAT = 3                      # 3: constant channels at 1/8 of their step; 2 a
 FORMATS = (1, 2, 3)
 _HEAD = struct.Struct("<BBBBH")     # format, flags, log2 window, levels, channels
 FLAG_OFFSETS = 8                # flags bit 3: a signed step offset per segment follows the step codes
-FLAG_ROTVEC = 16                # flags bit 4: a flag per 3-angle joint, 1: coded as a rotation vector
+FLAG_FORMS = 16                 # flags bit 4: per 3-angle joint its coding form (rotvec: 0 the file's Euler angles,
+                                # 1 a rotation vector, 2-7 Euler angles in a Tait-Bryan order; formats 1-2: 0 or 1)
 FLAG_MEANS = 64                 # flags bit 6: three integers per 3-angle joint, a vector joint's mean rotation
 MEAN_QUANTUM = 2.0              # degrees: a vector joint's mean rotation, as a rotation vector in these steps
 MEAN_LEAST = 20.0               # degrees: a mean rotation smaller than this is left at the identity
@@ -215,17 +216,6 @@ def _reconstruct(knots: np.ndarray, coeffs: np.ndarray, const: np.ndarray, step:
     return seams.smooth_seams(out.T, lay.starts[1:], SEAM_HALF_WIDTH, limits).T
 
 
-def _near_gimbal_lock(rows: np.ndarray, orders: tuple[str, ...]) -> np.ndarray:
-    """Per joint (Euler angle rows, three per joint), whether its middle angle ever comes within
-    GIMBAL_MARGIN degrees of the lock (90 for Tait-Bryan orders, 0 or 180 for proper ones, which
-    sit there at rest): the closed loop's Gauss-Newton step and the angles' own swings make
-    such a joint expensive in Euler angles, whatever the open-loop trial says."""
-    middle = np.radians(rows[1::3])
-    proper = np.array([o[0] == o[2] for o in orders])[:, None]
-    closeness = np.where(proper, np.abs(np.sin(middle)), np.abs(np.cos(middle)))
-    return (closeness.min(axis=1, initial=1.0) < math.sin(math.radians(GIMBAL_MARGIN))).astype(np.int64)
-
-
 def _levels_for(fps: float) -> int:
     """Wavelet levels whose coarsest band samples every ~1/4 s (COARSEST_BAND_S): the depth
     that was best at 120 fps (5) keeps its meaning at other rates; at 30 fps 3 levels made
@@ -335,8 +325,8 @@ class KinwaveCodec(Codec):
         keyframes = int(bool(flags & FLAG_KEYFRAME)) * (2 if flags & FLAG_SECOND_KEYFRAME else 1)
         lay = trendwave.layout(frames, 1 << log_w, levels, keyframes, WAVELET_IDS[(flags >> 1) & 3])
         num_offsets = lay.starts.size if flags & FLAG_OFFSETS else 0
-        num_vectors = len(_three_angle_groups(skeleton)) if flags & FLAG_ROTVEC else 0
-        vector_flags = means = np.zeros(0, dtype=np.int64)
+        num_vectors = len(_three_angle_groups(skeleton)) if flags & FLAG_FORMS else 0
+        forms = means = np.zeros(0, dtype=np.int64)
         if version == 1:            # step codes and offsets as bytes before the coded stream
             head = _HEAD.size + num_codes + num_offsets
             if len(body) < head:
@@ -348,17 +338,18 @@ class KinwaveCodec(Codec):
             num_means = 3 * num_vectors if flags & FLAG_MEANS else 0
             coded = coefcoder.decode(body[_HEAD.size:], skeleton.num_channels, lay.num_knots, lay.padded,
                                      lay.levels, 2, (num_codes, num_offsets, num_vectors, num_means))
-            codes, offsets, vector_flags, running = coded.side
+            codes, offsets, forms, running = coded.side
             means = np.diff(running, prepend=0).reshape(-1, 3)
+            known = rotvec.FORMS if version >= 3 else 2
             if ((codes.size and not 0 <= codes.min() <= codes.max() <= 255)
-                    or np.abs(offsets).max(initial=0) > 128 or not np.isin(vector_flags, (0, 1)).all()
+                    or np.abs(offsets).max(initial=0) > 128 or not ((forms >= 0) & (forms < known)).all()
                     or np.abs(means).max(initial=0) * MEAN_QUANTUM > 360.0):
                 raise CorruptStreamError("kinwave payload's step codes are damaged")
         if not num_offsets:
             offsets = np.zeros(lay.starts.size, dtype=np.int8)
         if not frames:
             return np.zeros((0, skeleton.num_channels))
-        return _decoded(skeleton, codes, offsets, coded.const, coded.knots, coded.coeffs, lay, vector_flags,
+        return _decoded(skeleton, codes, offsets, coded.const, coded.knots, coded.coeffs, lay, forms,
                         _constants(skeleton, version), means).T
 
     # ----- streaming ------------------------------------------------------------------------
@@ -370,18 +361,19 @@ class KinwaveCodec(Codec):
 
 
 def _decoded(skeleton: Skeleton, codes: np.ndarray, offsets: np.ndarray, const: np.ndarray, knots: np.ndarray,
-             coeffs: np.ndarray, lay: trendwave.Layout, vector_flags: np.ndarray, constants: _Constants,
+             coeffs: np.ndarray, lay: trendwave.Layout, forms: np.ndarray, constants: _Constants,
              means: np.ndarray) -> np.ndarray:
     """Channels ``(C, T)`` from the integers, in one reconstruction of all channels; the
-    joints flagged in ``vector_flags`` back from rotation vectors (about their ``means``, a
-    row of integers per three-angle joint, or none) to Euler angles."""
+    joints coded in another form (``forms``, one per three-angle joint, :mod:`rotvec`; ``means``
+    a row of integers per such joint, or none) back to the file's Euler angles."""
     out = _reconstruct(knots, coeffs, const == 1, _channel_steps(skeleton, codes), lay, _factors(offsets, lay),
                        constants)
-    vectors = [g for flag, g in zip(vector_flags, _three_angle_groups(skeleton)) if flag]
-    if vectors:
-        rows = np.concatenate([channels for channels, _ in vectors])
-        turns = rotvec.mean_quats(means[vector_flags == 1], MEAN_QUANTUM) if len(means) else None
-        out[rows] = rotvec.to_euler(out[rows], tuple(o for _, o in vectors), turns)
+    groups = _three_angle_groups(skeleton)
+    coded = np.flatnonzero(forms) if len(forms) else np.zeros(0, dtype=np.int64)
+    if coded.size:
+        rows = np.concatenate([groups[k][0] for k in coded])
+        turns = rotvec.mean_quats(means[coded] if len(means) else np.zeros((coded.size, 3)), MEAN_QUANTUM)
+        out[rows] = rotvec.from_forms(out[rows], tuple(groups[k][1] for k in coded), forms[coded], turns)
     return out
 
 
@@ -439,11 +431,8 @@ class _Encoder:
         self.shape_rot, self.shape_trans = self._shape()
         self.joint_offsets = np.zeros(len(self.rot_joints) + self.trans, dtype=np.int64)
         self.means = np.zeros((len(_three_angle_groups(sk)), 3), dtype=np.int64)
-        self.rotvec = self._choose_rotvec() if self.cfg["rotation_vectors"] else np.zeros(0, dtype=np.int64)
-        vector_channels = [g for flag, (g, _) in zip(self.rotvec, _three_angle_groups(sk)) if flag]
-        if vector_channels and self.const[np.concatenate(vector_channels)].any():
-            self.const[np.concatenate(vector_channels)] = False      # a vector moves in all three
-            self.shape_rot, self.shape_trans = self._shape()
+        self.forms = self._choose_forms() if self.cfg["rotation_vectors"] else np.zeros(0, dtype=np.int64)
+        self._constant_in_forms()
 
     def _shape(self) -> tuple[np.ndarray, float]:
         """Steps (degrees per rotation joint, cm for translations) whose modelled bound is 1 cm.
@@ -472,16 +461,19 @@ class _Encoder:
         rot = np.where(np.isfinite(rot), rot, np.nanmin(rot) if np.isfinite(rot).any() else 1.0)
         return rot[self.rot_joints], trans
 
-    def _choose_rotvec(self) -> np.ndarray:
-        """Per 3-angle joint (:func:`_three_angle_groups`), 1 where its rotation vectors take
-        fewer bytes than its Euler angles at the same rotation error, both coded on their own
-        (open loop) at the step the search starts from (its constant angles cost nothing); a
-        joint whose angles are all constant stays Euler. The trial weighs the mean rotation error, which is what decides a mean bound;
-        under a max bound it misjudged ASF joints (angles about axes chosen for each bone, small
-        and decoupled), whose files came out 1-14% larger, so a joint with an axis pre-rotation
-        tries vectors only under a mean bound (4% smaller there); any other joint, in any of the
-        12 Euler orders (an ASF root too), may take them. All joints go through each transform
-        together; only the byte counts are per joint."""
+    def _choose_forms(self) -> np.ndarray:
+        """Per 3-angle joint (:func:`_three_angle_groups`), the form its rotation is coded in
+        (:mod:`mocodec.coding.rotvec`: the file's Euler angles, a rotation vector about the
+        joint's mean rotation, or Euler angles in one of the six Tait-Bryan orders): each form
+        of every joint is coded once on its own (open loop) at the step the search starts from,
+        and the fewest bytes win, moved to the file angles' rotation error along the high-rate
+        slope (a nonzero coefficient takes a bit more per halving of the error). A form whose
+        middle angle comes within GIMBAL_MARGIN of its lock is out. The trial weighs the mean
+        rotation error, which is what decides a mean bound; under a max bound it misjudged ASF
+        joints (angles about axes chosen for each bone, small and decoupled), whose files came
+        out 1-14% larger with vectors, so a joint with an axis pre-rotation keeps its Euler
+        angles there; a joint whose angles are all constant keeps them always. All joints go
+        through each transform together; only the byte counts are per joint."""
         groups = _three_angle_groups(self.skeleton)
         choice = np.zeros(len(groups), dtype=np.int64)
         joints = self.skeleton.channel_joints
@@ -496,32 +488,48 @@ class _Encoder:
         step = _channel_steps(self.skeleton, self.codes(self._first_scale()))[channels]
         factors = _factors(np.zeros(self.lay.starts.size), self.lay)
         flat = np.zeros(channels.size, dtype=bool)
+        none = _Constants(1.0, np.zeros(channels.size))
 
         original = rotvec.euler_quats(euler, orders)
         self.means[live] = rotvec.mean_codes(original, MEAN_QUANTUM, MEAN_LEAST)
         turns = rotvec.mean_quats(self.means[live], MEAN_QUANTUM)
-        about_mean = rotations.quat_multiply(rotations.quat_conjugate(turns)[None], original)
-        cost = []
-        for values in (euler, rotvec.vectors_of(about_mean)):
-            none = _Constants(1.0, np.zeros(channels.size))
+        costs = np.full((rotvec.FORMS, len(live)), np.inf)
+        reference = None
+        for form in range(rotvec.FORMS):
+            forms = np.full(len(live), form)
+            values = euler if form == 0 else rotvec.to_forms(euler, orders, forms, turns)
+            locked = rotvec.near_lock(values, orders if form == 0 else (rotvec.CODING_ORDERS[form - 2],) * len(live),
+                                      GIMBAL_MARGIN) if form != rotvec.VECTOR else np.zeros(len(live), bool)
             k_int, c_int = self._quantise(values, flat, step, factors, none)
-            sizes = [len(coefcoder.encode(np.zeros(3, np.int64), k_int[3 * i:3 * i + 3], c_int[3 * i:3 * i + 3],
-                                          self.lay.padded, self.lay.levels, revision=FORMAT))
-                     for i in range(len(live))]
+            sizes = np.array([len(coefcoder.encode(np.zeros(3, np.int64), k_int[3 * i:3 * i + 3],
+                                                   c_int[3 * i:3 * i + 3], self.lay.padded, self.lay.levels,
+                                                   revision=FORMAT)) for i in range(len(live))])
             rec = _reconstruct(k_int, c_int, flat, step, self.lay, factors, none)
-            if values is euler:
-                err = rotations.quat_distance(original, rotvec.euler_quats(rec, orders))
-            else:
-                err = rotations.quat_distance(about_mean, rotvec.vector_quats(rec))
-            err = np.maximum(err.mean(axis=0), 1e-12)
+            back = rotvec.euler_quats(rotvec.from_forms(rec, orders, forms, turns), orders) if form else \
+                rotvec.euler_quats(rec, orders)
+            err = np.maximum(rotations.quat_distance(original, back).mean(axis=0), 1e-12)
+            reference = err if reference is None else reference
             nonzero = (c_int != 0).reshape(len(live), -1).sum(axis=1)
-            cost.append((np.array(sizes), nonzero, err))
-        (euler_bytes, _, euler_err), (vector_bytes, nonzero, vector_err) = cost
-        # at the Euler angles' error: a nonzero coefficient takes a bit more per halving of the error
-        choice[live] = vector_bytes + nonzero / 8.0 * np.log2(vector_err / euler_err) < euler_bytes
-        choice[live] |= _near_gimbal_lock(euler, orders)
-        self.means[choice == 0] = 0
+            costs[form] = np.where(locked, np.inf, sizes + nonzero / 8.0 * np.log2(err / reference))
+        choice[live] = np.argmin(costs, axis=0)
+        self.means[choice != rotvec.VECTOR] = 0
         return choice
+
+    def _constant_in_forms(self) -> None:
+        """Which channels of the joints coded in another form are constant in that form (a
+        hinge written in a proper order is one moving angle again); the steps follow."""
+        coded = [(g, order, form, mean) for (g, order), form, mean in
+                 zip(_three_angle_groups(self.skeleton), self.forms, self.means) if form]
+        if not coded:
+            return
+        rows = np.concatenate([g for g, _, _, _ in coded])
+        values = rotvec.to_forms(self.values[rows], tuple(o for _, o, _, _ in coded),
+                                 np.array([f for _, _, f, _ in coded]),
+                                 rotvec.mean_quats(np.array([m for _, _, _, m in coded]), MEAN_QUANTUM))
+        const = np.ptp(values, axis=1) <= CONSTANT
+        if (const != self.const[rows]).any():
+            self.const[rows] = const
+            self.shape_rot, self.shape_trans = self._shape()
 
     def _first_scale(self) -> float:
         """The scale the bound's search starts from (the model's, before any pass)."""
@@ -566,25 +574,26 @@ class _Encoder:
         def code(channels: np.ndarray, targets: np.ndarray) -> np.ndarray:
             step, const = steps[channels], self.const[channels]
             column = {c: i for i, c in enumerate(channels)}
-            vectors = [(g, order, mean) for flag, (g, order), mean in zip(self.rotvec, rotvec_groups, self.means)
-                       if flag and g[0] in column]
+            vectors = [(g, order, form, mean) for (g, order), form, mean in zip(rotvec_groups, self.forms, self.means)
+                       if form and g[0] in column]
             values = targets.T.copy()
             if vectors:
-                cols = [column[c] for g, _, _ in vectors for c in g]
-                orders = tuple(o for _, o, _ in vectors)
-                turns = rotvec.mean_quats(np.array([m for _, _, m in vectors]), MEAN_QUANTUM)
-                values[cols] = rotvec.to_vectors(values[cols], orders, turns)
+                cols = [column[c] for g, _, _, _ in vectors for c in g]
+                orders = tuple(o for _, o, _, _ in vectors)
+                forms = np.array([f for _, _, f, _ in vectors])
+                turns = rotvec.mean_quats(np.array([m for _, _, _, m in vectors]), MEAN_QUANTUM)
+                values[cols] = rotvec.to_forms(values[cols], orders, forms, turns)
             constants = _Constants(self.constants.fraction, self.constants.base[channels])
             k_int, c_int = self._quantise(values, const, step, factors, constants)
             knots[channels], coeffs[channels] = k_int, c_int
             out = _reconstruct(k_int, c_int, const, step, lay, factors, constants)
             if vectors:
-                out[cols] = rotvec.to_euler(out[cols], orders, turns)
+                out[cols] = rotvec.from_forms(out[cols], orders, forms, turns)
             decoded[channels] = out
             return out.T
 
         exact = np.zeros(len(sk), dtype=bool)
-        exact[sk.channel_joints[[g[0] for flag, (g, _) in zip(self.rotvec, rotvec_groups) if flag]]] = True
+        exact[sk.channel_joints[[g[0] for form, (g, _) in zip(self.forms, rotvec_groups) if form]]] = True
         closedloop.code_down_tree(sk, self.values.T, ~self.const, self.quats, code, self.cfg["closed_loop"],
                                   self.positions / self.cm, exact)
         return _Pass(codes, self.const.astype(np.int64), knots, coeffs, decoded, offsets)
@@ -624,8 +633,8 @@ class _Encoder:
         flags, side = self.header[1], (ps.steps,)
         if ps.offsets.any():
             flags, side = flags | FLAG_OFFSETS, side + (ps.offsets,)
-        if self.rotvec.any():
-            flags, side = flags | FLAG_ROTVEC, side + (self.rotvec,)
+        if self.forms.any():
+            flags, side = flags | FLAG_FORMS, side + (self.forms,)
         if self.means.any():        # side sequences go as differences: a running sum sends the values
             flags, side = flags | FLAG_MEANS, side + (np.cumsum(self.means.ravel()),)
         head = self.header[:1] + bytes([flags]) + self.header[2:]

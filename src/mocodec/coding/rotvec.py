@@ -1,11 +1,19 @@
-"""Joint rotations as rotation vectors instead of Euler angles (kinwave.md, "what mattered" 5).
+"""The form a three-angle joint's rotation is coded in (kinwave.md, "what mattered" 5).
 
-A joint's rotation as one turn about one axis: its three numbers move less jointly than Euler
-angles do when a joint swings far, so they cost fewer bytes to code (BVH joints, 9-12%). Rows
-come three per joint, ``(3n, T)``, in each joint's rotation order (any of the 12), degrees. The conversions run in numba kernels, a joint at a time, so a coder converting a few
-joints (kinwave's encoder, a tree depth at a time) and one converting them all (its decoder)
-get the same floats; they compute what :mod:`mocodec.rotations` does (``euler_to_quat``,
-``quat_continuous``, ``quat_log`` and back, ``quat_to_euler``), to rounding.
+A file's Euler angles are one way to write a joint's rotation, chosen by its exporter; where
+they are unfavourable (near their gimbal lock, a proper order at rest, a large constant
+turn) a coder does better with another form of the same rotation. Forms, per joint:
+
+* ``0``: the file's own Euler angles (no conversion);
+* ``VECTOR`` (1): the rotation vector of ``conj(mean) q``, about a mean rotation of the joint;
+* ``2 + k``: Euler angles in the Tait-Bryan order ``CODING_ORDERS[k]``, whatever the file's
+  order: a hinge written in a proper order (at its lock) is one angle again.
+
+Rows come three per joint, ``(3n, T)``, degrees. The way back (:func:`from_forms`) runs in a
+numba kernel, a joint at a time, so a coder converting a few joints (kinwave's encoder, a tree
+depth at a time) and one converting them all (its decoder) get the same floats; it gives the
+file's Euler triple nearest the previous frame's (the formula of
+:func:`mocodec.rotations.quat_to_euler`, any of the 12 orders).
 """
 
 from __future__ import annotations
@@ -19,6 +27,9 @@ from mocodec import rotations
 from mocodec.motion import follow_nearest
 
 _DEG = math.pi / 180.0
+VECTOR = 1
+CODING_ORDERS = ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX")
+FORMS = 2 + len(CODING_ORDERS)
 
 
 def _axes(orders: tuple[str, ...]) -> np.ndarray:
@@ -79,10 +90,11 @@ def _vectors_kernel(q):
 
 
 @numba.njit(cache=True)
-def _euler_kernel(vectors, axes, means):
-    """Euler angles (degrees, each joint's triples continuous in time) of rotation vectors, in
-    Tait-Bryan or proper orders (the formula of :func:`mocodec.rotations.quat_to_euler`)."""
-    frames, joints = vectors.shape[0], vectors.shape[1]
+def _euler_kernel(values, form_axes, vector, axes, means):
+    """File-order Euler angles (degrees, each joint's triples continuous in time) of rotations
+    coded as rotation vectors (``vector[j]``) or Euler angles about ``form_axes[j]``, each
+    times its mean ``means[j]`` on the left; in Tait-Bryan or proper file orders."""
+    frames, joints = values.shape[0], values.shape[1]
     out = np.empty((frames, joints, 3))
     angles = np.empty((frames, 3))
     for j in range(joints):
@@ -92,11 +104,16 @@ def _euler_kernel(vectors, axes, means):
             k = 3 - i - jj
         eps = (i - jj) * (jj - k) * (k - i) / 2.0
         for t in range(frames):
-            vx, vy, vz = vectors[t, j, 0] * _DEG / 2.0, vectors[t, j, 1] * _DEG / 2.0, vectors[t, j, 2] * _DEG / 2.0
-            n = math.sqrt(vx * vx + vy * vy + vz * vz)
-            sinc = 1.0 if n < 1e-12 else math.sin(n) / n
-            q = _product(means[j, 0], means[j, 1], means[j, 2], means[j, 3],
-                         math.cos(n), vx * sinc, vy * sinc, vz * sinc)
+            if vector[j]:
+                vx, vy, vz = values[t, j, 0] * _DEG / 2.0, values[t, j, 1] * _DEG / 2.0, values[t, j, 2] * _DEG / 2.0
+                n = math.sqrt(vx * vx + vy * vy + vz * vz)
+                sinc = 1.0 if n < 1e-12 else math.sin(n) / n
+                rw, rx, ry, rz = math.cos(n), vx * sinc, vy * sinc, vz * sinc
+            else:
+                rw, rx, ry, rz = 1.0, 0.0, 0.0, 0.0
+                for m in range(3):
+                    rw, rx, ry, rz = _turn(rw, rx, ry, rz, form_axes[j, m], values[t, j, m])
+            q = _product(means[j, 0], means[j, 1], means[j, 2], means[j, 3], rw, rx, ry, rz)
             w, qi, qj, qk = q[0], q[1 + i], q[1 + jj], q[1 + k]
             if proper:
                 a, b, c, d = w, qi, qj, qk * eps
@@ -164,18 +181,40 @@ def mean_quats(codes: np.ndarray, quantum: float) -> np.ndarray:
     return rotations.quat_exp(np.radians(np.asarray(codes, dtype=np.float64) * quantum) / 2.0)
 
 
-def to_vectors(rows: np.ndarray, orders: tuple[str, ...], means: np.ndarray | None = None) -> np.ndarray:
-    """Euler angle rows as rotation vector rows, continuous in time, each joint's taken about
-    its mean rotation ``means (n, 4)`` (``conj(mean) q``; default: the identity)."""
+def _form_axes(forms: np.ndarray) -> np.ndarray:
+    return _axes(tuple(CODING_ORDERS[f - 2] if f >= 2 else "XYZ" for f in forms))
+
+
+def to_forms(rows: np.ndarray, orders: tuple[str, ...], forms: np.ndarray, means: np.ndarray) -> np.ndarray:
+    """File-order Euler angle rows in each joint's coding form (``forms`` >= 1), continuous in
+    time; ``means (n, 4)`` are the vector joints' mean rotations (ignored for Euler forms)."""
+    forms = np.asarray(forms)
     quats = euler_quats(rows, orders)
-    if means is not None:
-        quats = rotations.quat_multiply(rotations.quat_conjugate(means)[None], quats)
-    return vectors_of(quats)
+    out = np.empty((rows.shape[1], len(orders), 3))
+    vector = forms == VECTOR
+    if vector.any():
+        turned = rotations.quat_multiply(rotations.quat_conjugate(means[vector])[None], quats[:, vector])
+        out[:, vector] = _vectors_kernel(np.ascontiguousarray(turned))
+    for k in np.flatnonzero(~vector):
+        order = CODING_ORDERS[forms[k] - 2]
+        out[:, k] = follow_nearest(rotations.quat_to_euler(quats[:, k], order), False)
+    return _rows(out)
 
 
-def to_euler(rows: np.ndarray, orders: tuple[str, ...], means: np.ndarray | None = None) -> np.ndarray:
-    """Inverse of :func:`to_vectors`: Euler angle rows, each joint's triples as continuous as
-    the Euler form allows (frame 0 in the principal range)."""
-    n = len(orders)
-    means = _identity_means(n) if means is None else np.ascontiguousarray(means, dtype=np.float64)
-    return _rows(_euler_kernel(_per_joint(rows), _axes(orders), means))
+def from_forms(rows: np.ndarray, orders: tuple[str, ...], forms: np.ndarray, means: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`to_forms`: file-order Euler angle rows, each joint's triples as
+    continuous as the Euler form allows (frame 0 in the principal range)."""
+    forms = np.asarray(forms)
+    means = np.where((forms == VECTOR)[:, None], means, _identity_means(len(orders)))
+    return _rows(_euler_kernel(_per_joint(rows), _form_axes(forms), forms == VECTOR, _axes(orders),
+                               np.ascontiguousarray(means, dtype=np.float64)))
+
+
+def near_lock(rows: np.ndarray, orders: tuple[str, ...], margin_deg: float) -> np.ndarray:
+    """Per joint (Euler angle rows, three per joint), whether its middle angle ever comes
+    within ``margin_deg`` of its order's gimbal lock (90 for Tait-Bryan orders, 0 or 180 for
+    proper ones, which sit there at rest)."""
+    middle = np.radians(rows[1::3])
+    proper = np.array([o[0] == o[2] for o in orders])[:, None]
+    closeness = np.where(proper, np.abs(np.sin(middle)), np.abs(np.cos(middle)))
+    return closeness.min(axis=1, initial=1.0) < math.sin(math.radians(margin_deg))

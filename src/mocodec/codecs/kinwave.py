@@ -224,13 +224,15 @@ def _levels_for(fps: float) -> int:
 
 
 def _keyframes(positions_cm: np.ndarray) -> int:
-    """How many leading frames (0, 1 or 2: a bind pose, a T-pose, or both) jump far from the
-    next one compared with the clip's own frame-to-frame motion after them."""
+    """How many leading frames (0, 1 or 2: a bind pose, a T-pose, or both) stand apart: the
+    last of them jumps far to the next frame, from which the clip moves as it does after it
+    (a clip that starts with a fast transition has no such frame)."""
     if len(positions_cm) < 8:
         return 0
     moves = np.linalg.norm(np.diff(positions_cm, axis=0), axis=2).max(axis=1)
     for count in (2, 1):
-        if moves[count - 1] > 4.0 * np.percentile(moves[count:], 99) + 1.0:
+        usual = np.percentile(moves[count + 1:], 99)
+        if moves[count - 1] > 4.0 * usual + 1.0 and moves[count] <= 2.0 * usual + 1.0:
             return count
     return 0
 
@@ -419,13 +421,7 @@ class _Encoder:
         self.positions = pos * self.cm
         self.quats = quat
         self.const = (np.ptp(self.values, axis=1) <= CONSTANT) if self.frames else np.ones(sk.num_channels, bool)
-        keyframes = _keyframes(self.positions) if self.cfg["keyframes"] else 0
-        levels = self.cfg["levels"] or _levels_for(motion.fps)
-        self.lay = trendwave.layout(self.frames, self.cfg["window"], levels, keyframes,
-                                    self.cfg["wavelet"])
-        flags = (FLAG_KEYFRAME if keyframes else 0) | (FLAG_SECOND_KEYFRAME if keyframes == 2 else 0)
-        self.header = _HEAD.pack(FORMAT, flags | WAVELET_IDS.index(self.cfg["wavelet"]) << 1,
-                                 int(math.log2(self.cfg["window"])), levels, sk.num_channels)
+        self._set_layout(_keyframes(self.positions) if self.cfg["keyframes"] else 0)
         self.rot_joints = _rotation_joints(sk)
         self.trans = _has_translation(sk)
         self.shape_rot, self.shape_trans = self._shape()
@@ -433,7 +429,29 @@ class _Encoder:
         self.means = np.zeros((len(_three_angle_groups(sk)), 3), dtype=np.int64)
         self.forms = self._choose_forms() if self.cfg["rotation_vectors"] else np.zeros(0, dtype=np.int64)
         self._constant_in_forms()
+        if self.keyframes:
+            self._keep_keyframes_if_cheaper()
 
+    def _set_layout(self, keyframes: int) -> None:
+        """Segments and knots with ``keyframes`` leading one-frame segments, and the header."""
+        self.keyframes = keyframes
+        levels = self.cfg["levels"] or _levels_for(self.motion.fps)
+        self.lay = trendwave.layout(self.frames, self.cfg["window"], levels, keyframes, self.cfg["wavelet"])
+        flags = (FLAG_KEYFRAME if keyframes else 0) | (FLAG_SECOND_KEYFRAME if keyframes == 2 else 0)
+        self.header = _HEAD.pack(FORMAT, flags | WAVELET_IDS.index(self.cfg["wavelet"]) << 1,
+                                 int(math.log2(self.cfg["window"])), levels, self.skeleton.num_channels)
+
+    def _keep_keyframes_if_cheaper(self) -> None:
+        """Leading frames that stand apart cost the wavelet a jump, but as keyframes a finely
+        quantised pose each: at a tight bound the jump can be cheaper (a CMU T-pose at 0.1 cm).
+        One pass at the starting scale with and without them decides."""
+        def size() -> int:                # same steps, so about the same error either way
+            return len(self.body(self.run_pass(self.codes(self._first_scale()))))
+
+        keyed, frames = size(), self.keyframes
+        self._set_layout(0)
+        if keyed < size():
+            self._set_layout(frames)
     def _shape(self) -> tuple[np.ndarray, float]:
         """Steps (degrees per rotation joint, cm for translations) whose modelled bound is 1 cm.
         The levers are those of the motion's own bones (:func:`_bone_skeleton`), and a joint

@@ -209,21 +209,30 @@ def test_rounded_offsets_are_written_in_fixed_point(walk_bvh, walk_amc):
         assert fixed[0] > 0 and fixed in data and len(zlib.compress(fixed)) < 6 / 7 * len(zlib.compress(tagged))
 
 
-def test_rotation_vectors_round_trip_continuously(walk_bvh):
-    """Euler angle rows to rotation vectors and back: the same rotations, as the very triples
-    Motion.continuous gives (frame 0 of the walk is in the principal range)."""
+@pytest.mark.parametrize("form", range(1, 8))
+def test_every_coding_form_round_trips_continuously(walk_bvh, form):
+    """Euler angle rows to a coding form (a rotation vector about the mean, Euler angles in a
+    Tait-Bryan order) and back: the same rotations, as the very triples Motion.continuous gives
+    (frame 0 of the walk is in the principal range), in the file's order or a proper one."""
     from mocodec.coding import rotvec
-    sk = walk_bvh.skeleton
-    rows, orders = [], []
-    for name in ("lShldr", "rThigh", "hip"):
-        j = sk.index(name)
-        rows.append(sk.channel_offsets[j] + np.array(sk.joints[j].rotation_channel_indices()))
-        orders.append(sk.joints[j].rotation_order)
-    euler = walk_bvh.continuous().channels[:, np.concatenate(rows)].T
-    back = rotvec.to_euler(rotvec.to_vectors(euler, tuple(orders)), tuple(orders))
-    turn = rotations.quat_distance(rotvec.euler_quats(euler, tuple(orders)), rotvec.euler_quats(back, tuple(orders)))
-    assert turn.max() < 1e-6                                        # arccos: 3e-8 rad of noise
-    assert np.abs(back - euler).max() < 1e-9
+    from mocodec.reexpress import with_euler_orders
+    for motion in (walk_bvh, with_euler_orders(walk_bvh, "YXY")):
+        sk = motion.skeleton
+        rows, orders = [], []
+        for name in ("lShldr", "rThigh", "hip"):
+            j = sk.index(name)
+            rows.append(sk.channel_offsets[j] + np.array(sk.joints[j].rotation_channel_indices()))
+            orders.append(sk.joints[j].rotation_order)
+        orders = tuple(orders)
+        euler = motion.continuous().channels[:, np.concatenate(rows)].T
+        quats = rotvec.euler_quats(euler, orders)
+        means = rotvec.mean_quats(rotvec.mean_codes(quats, 2.0, 0.0), 2.0)
+        forms = np.full(len(orders), form)
+        back = rotvec.from_forms(rotvec.to_forms(euler, orders, forms, means), orders, forms, means)
+        turn = rotations.quat_distance(quats, rotvec.euler_quats(back, orders))
+        assert turn.max() < 1e-6                                        # arccos: 3e-8 rad of noise
+        if orders[0][0] != orders[0][2]:       # at a proper order's lock the split of its angles is free
+            assert np.abs(back - euler).max() < 1e-9
 
 
 def test_compact_skeleton_rejects_damage(walk_bvh):

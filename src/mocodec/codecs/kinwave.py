@@ -82,6 +82,7 @@ SEGMENT_ACCEPT = 0.8            # a segment's worst error is near enough to the 
 ADAPTIVE_SEGMENTS = 4           # time-adaptive steps from this many segments on (at W = 128 on fewer they
                                 # measured 1.6% larger than one scale, from 4 on 3% smaller, from 8 on 9%)
 RATE_TOLERANCE = 0.02
+TRIAL_FRAMES = 1024             # frames the choice of forms codes each form of every joint on
 GIMBAL_MARGIN = 15.0            # degrees from an Euler order's lock within which a joint goes as a vector
 COARSEST_BAND_S = 0.25          # seconds between the coarsest band's samples (the automatic levels)
 SEAM_HALF_WIDTH = 8             # frames each side of a seam over which its step is spread
@@ -479,7 +480,8 @@ class _Encoder:
         """Per 3-angle joint (:func:`_three_angle_groups`), the form its rotation is coded in
         (:mod:`mocodec.coding.rotvec`: the file's Euler angles, a rotation vector about the
         joint's mean rotation, or Euler angles in one of the six Tait-Bryan orders): each form
-        of every joint is coded once on its own (open loop) at the step the search starts from,
+        of every joint is coded once on its own (open loop, the first TRIAL_FRAMES frames) at the
+        step the search starts from,
         and the fewest bytes win, moved to the file angles' rotation error along the high-rate
         slope (a nonzero coefficient takes a bit more per halving of the error). A form whose
         middle angle comes within GIMBAL_MARGIN of its lock is out. The trial weighs the mean
@@ -498,14 +500,17 @@ class _Encoder:
             return choice
         channels = np.concatenate([groups[k][0] for k in live])
         orders = tuple(groups[k][1] for k in live)
-        euler = self.values[channels]
+        euler = self.values[channels, :TRIAL_FRAMES]
+        lay = trendwave.layout(euler.shape[1], self.cfg["window"], int(self.lay.levels.max(initial=1)), 0,
+                               self.cfg["wavelet"])
         step = _channel_steps(self.skeleton, self.codes(self._first_scale()))[channels]
-        factors = _factors(np.zeros(self.lay.starts.size), self.lay)
+        factors = _factors(np.zeros(lay.starts.size), lay)
         flat = np.zeros(channels.size, dtype=bool)
         none = _Constants(1.0, np.zeros(channels.size))
 
         original = rotvec.euler_quats(euler, orders)
-        self.means[live] = rotvec.mean_codes(original, MEAN_QUANTUM, MEAN_LEAST)
+        self.means[live] = rotvec.mean_codes(rotvec.euler_quats(self.values[channels], orders), MEAN_QUANTUM,
+                                             MEAN_LEAST)
         turns = rotvec.mean_quats(self.means[live], MEAN_QUANTUM)
         costs = np.full((rotvec.FORMS, len(live)), np.inf)
         reference = None
@@ -514,11 +519,11 @@ class _Encoder:
             values = euler if form == 0 else rotvec.to_forms(euler, orders, forms, turns)
             locked = rotvec.near_lock(values, orders if form == 0 else (rotvec.CODING_ORDERS[form - 2],) * len(live),
                                       GIMBAL_MARGIN) if form != rotvec.VECTOR else np.zeros(len(live), bool)
-            k_int, c_int = self._quantise(values, flat, step, factors, none)
+            k_int, c_int = self._quantise(values, flat, step, factors, none, lay)
             sizes = np.array([len(coefcoder.encode(np.zeros(3, np.int64), k_int[3 * i:3 * i + 3],
-                                                   c_int[3 * i:3 * i + 3], self.lay.padded, self.lay.levels,
+                                                   c_int[3 * i:3 * i + 3], lay.padded, lay.levels,
                                                    revision=FORMAT)) for i in range(len(live))])
-            rec = _reconstruct(k_int, c_int, flat, step, self.lay, factors, none)
+            rec = _reconstruct(k_int, c_int, flat, step, lay, factors, none)
             back = rotvec.euler_quats(rotvec.from_forms(rec, orders, forms, turns), orders) if form else \
                 rotvec.euler_quats(rec, orders)
             err = np.maximum(rotations.quat_distance(original, back).mean(axis=0), 1e-12)
@@ -613,10 +618,12 @@ class _Encoder:
         return _Pass(codes, self.const.astype(np.int64), knots, coeffs, decoded, offsets)
 
     def _quantise(self, target: np.ndarray, const: np.ndarray, step: np.ndarray,
-                  factors: tuple[np.ndarray, np.ndarray, np.ndarray], constants: _Constants):
+                  factors: tuple[np.ndarray, np.ndarray, np.ndarray], constants: _Constants,
+                  lay: trendwave.Layout | None = None):
         """Knots and dead-zone quantised coefficients of ``target (k, T)`` with steps ``(k, 1)``,
-        the segments' step :func:`_factors` and the rows' :class:`_Constants`."""
-        lay = self.lay
+        the segments' step :func:`_factors` and the rows' :class:`_Constants`, laid out as
+        ``lay`` (default: the payload's)."""
+        lay = lay or self.lay
         knot_f, coeff_f, _ = factors
         quantum = step * lay.knot_quantum * knot_f
         k_int = np.round(target[:, lay.knot_frames] / quantum).astype(np.int64)

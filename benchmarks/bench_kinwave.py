@@ -1,7 +1,9 @@
 """kinwave against SZ3 (pysz, one channel at a time, absolute bound) at equal max shell error,
-its ratio at a mean joint error bound, the guarantee on every clip, and its speed.
+its ratio at a mean joint error bound, the guarantee on every clip (and how much of a max
+bound it uses), and its speed; every figure per source (CMU BVH, CMU ASF/AMC, Bandai Namco),
+side by side.
 
-    python benchmarks/bench_kinwave.py [--set bvh|amc|all] [--limit N]
+    python benchmarks/bench_kinwave.py [--set bvh|amc|bandai|all] [--limit N]
 
 SZ3's bound (degrees, and cm for translations) is bisected per clip to the largest one whose
 decoded max shell error is within the target; kinwave is given the target as its bound. Sizes
@@ -22,6 +24,9 @@ from mocodec import load, moc
 from mocodec.codecs import get_codec
 from mocodec.kinematics import forward_kinematics
 from mocodec.metrics.pose import shell_errors
+
+SOURCES = (("CMU BVH", "cmu/bvh", "*.bvh"), ("CMU ASF/AMC", "cmu/asf_amc", "*.amc"),
+           ("Bandai Namco", "bandai", "*.bvh"))
 
 
 def errors(motion, channels):
@@ -49,34 +54,32 @@ def sz3_at_shell(motion, target):
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--set", choices=("bvh", "amc", "all"), default="all")
+    ap.add_argument("--set", choices=("bvh", "amc", "bandai", "all"), default="all")
     ap.add_argument("--limit", type=int, default=0, help="only the first N clips of each set")
     args = ap.parse_args()
-    sets = {"bvh": ["bvh"], "amc": ["asf_amc"], "all": ["bvh", "asf_amc"]}[args.set]
+    sources = {"bvh": [SOURCES[0]], "amc": [SOURCES[1]], "bandai": [SOURCES[2]], "all": SOURCES}[args.set]
     clips = []
-    for s in sets:
-        found = sorted((SHARED / "cmu" / s).glob("*.bvh" if s == "bvh" else "*.amc"))
-        clips += found[:args.limit] if args.limit else found
-    rel = {0.1: [], 1.0: []}
-    ratio = {0.5: [], 1.0: []}
-    over = {}
-    enc_fps, dec_fps = [], []
-    print(f"{'clip':12s} {'frames':>6s} | shell 0.1: kinwave/SZ3 | shell 1.0: kinwave/SZ3 | mean 0.5 / 1.0 ratio")
-    for path in clips:
+    for name, folder, pattern in sources:
+        found = sorted((SHARED / folder).glob(pattern))
+        clips += [(name, p) for p in (found[:args.limit] if args.limit else found)]
+    rel, ratio, over, used, enc_fps, dec_fps = {}, {}, {}, {}, [], []
+    print(f"{'clip':36s} {'frames':>6s} | shell 0.1: kinwave/SZ3 | shell 1.0: kinwave/SZ3 | mean 0.5 / 1.0 ratio")
+    for source, path in clips:
         motion = load(path)
-        row = [f"{path.name:12s} {motion.num_frames:6d}"]
+        row = [f"{path.name[:36]:36s} {motion.num_frames:6d}"]
         for bound in (0.1, 1.0):
             codec = get_codec("kinwave", max_error_cm=bound, error_measure="shell")
             payload = codec.encode(motion)
             err = errors(motion, codec.decode(payload, motion.skeleton).channels)["shell"]
-            over.setdefault(("shell", bound), []).append(err > bound)
+            over.setdefault((source, "shell", bound), []).append(err > bound)
+            used.setdefault((source, "shell", bound), []).append(err / bound)
             ref = sz3_at_shell(motion, bound)
-            rel[bound].append(len(payload) / ref)
+            rel.setdefault((source, bound), []).append(len(payload) / ref)
             row.append(f"{len(payload):7d}/{ref:7d} = {len(payload) / ref:.2f}")
         for bound in (0.5, 1.0):
             data = moc.pack(motion, get_codec("kinwave", max_error_cm=bound, error_measure="mean"))
-            ratio[bound].append(motion.raw_bits / 8 / len(data))
-            row.append(f"{ratio[bound][-1]:6.1f}")
+            ratio.setdefault((source, bound), []).append(motion.raw_bits / 8 / len(data))
+            row.append(f"{ratio[(source, bound)][-1]:6.1f}")
         for bound in (0.1, 0.5, 1.0):
             codec = get_codec("kinwave", max_error_cm=bound, error_measure="joint")
             t0 = time.perf_counter()
@@ -84,18 +87,32 @@ def main() -> None:
             t1 = time.perf_counter()
             decoded = codec.decode(payload, motion.skeleton)
             t2 = time.perf_counter()
-            over.setdefault(("joint", bound), []).append(errors(motion, decoded.channels)["joint"] > bound)
+            err = errors(motion, decoded.channels)["joint"]
+            over.setdefault((source, "joint", bound), []).append(err > bound)
+            used.setdefault((source, "joint", bound), []).append(err / bound)
             if motion.num_channels == 62 and bound == 0.5:
                 enc_fps.append(motion.num_frames / (t1 - t0))
                 dec_fps.append(motion.num_frames / (t2 - t1))
         print(" | ".join(row), flush=True)
-    print(f"\n{len(clips)} clips")
-    for bound, r in rel.items():
-        print(f"max shell error {bound} cm: kinwave bytes / SZ3 bytes median {np.median(r):.2f}, worst {max(r):.2f}")
-    for bound, r in ratio.items():
-        print(f"mean joint error {bound} cm: median ratio {np.median(r):.0f}:1 (whole file, skeleton included)")
-    for (measure, bound), flags in sorted(over.items()):
-        print(f"guarantee {measure} {bound} cm: {sum(flags)} of {len(flags)} clips over the bound")
+    names = [name for name, _, _ in sources]
+    print(f"\n{len(clips)} clips; per source: " + ", ".join(f"{n} ({sum(s == n for s, _ in clips)})" for n in names))
+    print(f"{'':44s}" + "".join(f"{n:>16s}" for n in names))
+
+    def line(label, values):
+        print(f"{label:44s}" + "".join(f"{v:>16s}" for v in values))
+
+    for bound in (0.1, 1.0):
+        line(f"kinwave / SZ3 bytes, max shell {bound} cm (median)",
+             [f"{np.median(rel[(n, bound)]):.2f}" if (n, bound) in rel else "-" for n in names])
+    for bound in (0.5, 1.0):
+        line(f"whole-file ratio, mean joint {bound} cm (median)",
+             [f"{np.median(ratio[(n, bound)]):.0f}:1" if (n, bound) in ratio else "-" for n in names])
+    for measure, bound in sorted({(m, b) for _, m, b in over}):
+        line(f"clips over the bound, {measure} {bound} cm",
+             [f"{sum(over[(n, measure, bound)])} of {len(over[(n, measure, bound)])}"
+              if (n, measure, bound) in over else "-" for n in names])
+        line(f"share of the bound used, {measure} {bound} cm (least)",
+             [f"{min(used[(n, measure, bound)]):.2f}" if (n, measure, bound) in used else "-" for n in names])
     if enc_fps:
         print(f"62-channel clips, joint 0.5 cm: encode median {np.median(enc_fps):,.0f} frames/s, "
               f"decode {np.median(dec_fps):,.0f} frames/s (one core, after compilation)")

@@ -30,8 +30,8 @@ from mocodec.ratecontrol import tune
 TARGET_OF = {"error": "max_error_cm", "ratio": "ratio", "bitrate": "bitrate"}
 MEASURES = ("psnr_db", "vpsnr_db", "mean_joint_error_cm", "max_joint_error_cm", "mean_shell_error_cm",
             "max_shell_error_cm", "foot_slide_original_cm_s", "foot_slide_decoded_cm_s", "jerk_ratio")
-COLUMNS = ("clip", "format", "frames", "fps", "channels", "codec", "baseline", "point", "target", "knob",
-           "knob_value", "status", "bytes", "ratio", "bitrate", "bits_per_dof_sample", *MEASURES,
+COLUMNS = ("clip", "source", "format", "frames", "fps", "channels", "codec", "baseline", "point", "target",
+           "knob", "knob_value", "status", "bytes", "ratio", "bitrate", "bits_per_dof_sample", *MEASURES,
            "encode_us_per_frame", "decode_us_per_frame", "message")
 WARM_FRAMES = 64
 SEARCH_RESOLUTION = 0.01      # rate control stops at knob steps of 1%: finer changes sizes by less
@@ -70,6 +70,15 @@ def find_clips(paths) -> list[tuple[str, str]]:
     return sorted(found.items(), key=lambda pn: (-Path(pn[0]).stat().st_size, pn[1]))
 
 
+def clip_source(name: str) -> str:
+    """The pipeline a clip comes from, for tables that show sources side by side: the first
+    folder of its name under the folder given and its format (``cmu bvh``, ``bandai bvh``), or
+    its format alone."""
+    path = Path(name)
+    fmt = path.suffix.lstrip(".").lower()
+    return f"{path.parts[0]} {fmt}" if len(path.parts) > 1 else fmt
+
+
 def _warm(codec_id: str, motion: Motion) -> None:
     """Code a few frames once per process, so compile time is not counted as coding time."""
     if codec_id not in _warmed:
@@ -83,7 +92,8 @@ def _warm(codec_id: str, motion: Motion) -> None:
 def _base_row(task: Task, motion: Motion | None, point: Point) -> dict:
     cls = codec_class(task.codec)
     knob = cls.quality.name if cls.quality else ""
-    return {"clip": task.name, "format": Path(task.path).suffix.lstrip(".").lower(),
+    return {"clip": task.name, "source": clip_source(task.name),
+            "format": Path(task.path).suffix.lstrip(".").lower(),
             "frames": motion.num_frames if motion else None, "fps": motion.fps if motion else None,
             "channels": motion.skeleton.num_channels if motion else None, "codec": task.codec,
             "baseline": cls.baseline,

@@ -179,14 +179,19 @@ def _f(x, digits: int = 3) -> str:
     return f"{x:.{digits}g}"
 
 
+def _source(row: dict) -> str:
+    """The row's source (results of runs before the column existed: its format)."""
+    return row.get("source") or row["format"]
+
+
 def _tables(rows, meta) -> list[tuple[str, list[str], list[list[str]], str]]:
     """(title, header, body, note) of every table in the report."""
     out = []
     summary = error_summary(rows)
     if summary:
-        formats = sorted({r["format"] for r in rows})
-        split = [(f, e) for f in formats for e in error_summary([r for r in rows if r["format"] == f])] \
-            if len(formats) > 1 else []
+        sources = sorted({_source(r) for r in rows})
+        split = [(f, e) for f in sources for e in error_summary([r for r in rows if _source(r) == f])] \
+            if len(sources) > 1 else []
         body = [[label, _f(e["level_cm"]), e.get("best", "none reached it on every clip"), _f(e.get("best_ratio")),
                  _f(e.get(f"vs_{ERROR_BASELINE}")), _f(e.get(f"vs_{LOSSLESS_BASELINE}"))]
                 for label, e in [("all", e) for e in summary] + split]

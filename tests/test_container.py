@@ -134,6 +134,8 @@ def test_header_dictionaries_never_change():
         "4e8fe4351d431fc5702e77ca6c720405ca8b064aca5d8f007516f9fff8b7b37a")
     assert hashlib.sha256(dictionary(3)).hexdigest() == (
         "131adf69f48cfefbc27cf81324902dfd91c22fe87ce3ce18ef0e8c7b23193cdd")
+    assert hashlib.sha256(dictionary(4)).hexdigest() == (
+        "fa16a5c4da355da4b2481bff71f69fe0fc2fce99e1b69dbf02ea2352496ff950")
 
 
 def test_framing_costs_38_bytes(walk_bvh):

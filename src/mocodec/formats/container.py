@@ -1,6 +1,6 @@
 """The .moc container: a coded motion that decodes on its own, with random access.
 
-Layout (little-endian, version 3)::
+Layout (little-endian, versions 3 and 4, which differ in the header's preset dictionary only)::
 
     "MOC1"  u16 version  u16 flags (bit 0: the header holds a compact skeleton)
     u32 header length, header (zlib, deflated with the preset dictionary of
@@ -56,8 +56,8 @@ from mocodec.skeleton import Joint, Skeleton
 
 MAGIC = b"MOC1"
 FOOTER_MAGIC = b"MOCX"
-VERSION = 3
-VERSIONS = (1, 2, 3)            # the versions this module reads
+VERSION = 4
+VERSIONS = (1, 2, 3, 4)         # the versions this module reads
 MAX_HEADER = 1 << 24
 MAX_CHUNKS = 1 << 20
 FLAG_SKELETON = 1

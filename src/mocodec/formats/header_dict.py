@@ -84,7 +84,40 @@ DICTIONARY = b"".join([
 DICTIONARY_3 = DICTIONARY + b"".join(json.dumps(s, separators=(",", ":")).encode() for s in _SETTINGS_3)
 
 
+# version 4: the naming conventions of more pipelines (Unity's humanoid bones, also with _L/_R
+# suffixes; Unreal's mannequin; SMPL), and kinwave's settings of its day
+_UNITY = _end_sites(
+    "Hips Spine Chest UpperChest Neck Head LeftShoulder LeftUpperArm LeftLowerArm LeftHand RightShoulder "
+    "RightUpperArm RightLowerArm RightHand LeftUpperLeg LeftLowerLeg LeftFoot LeftToes RightUpperLeg RightLowerLeg "
+    "RightFoot RightToes", "Head LeftHand RightHand LeftToes RightToes")
+_UNITY_SUFFIXED = _end_sites(
+    "Hips Spine Chest Neck Head Shoulder_L UpperArm_L LowerArm_L Hand_L Shoulder_R UpperArm_R LowerArm_R Hand_R "
+    "UpperLeg_L LowerLeg_L Foot_L Toes_L UpperLeg_R LowerLeg_R Foot_R Toes_R",
+    "Head Hand_L Hand_R Toes_L Toes_R")
+_UNREAL = ("root pelvis spine_01 spine_02 spine_03 neck_01 head clavicle_l upperarm_l lowerarm_l hand_l clavicle_r "
+           "upperarm_r lowerarm_r hand_r thigh_l calf_l foot_l ball_l thigh_r calf_r foot_r ball_r")
+_SMPL = ("pelvis left_hip right_hip spine1 left_knee right_knee spine2 left_ankle right_ankle spine3 left_foot "
+         "right_foot neck left_collar right_collar head left_shoulder right_shoulder left_elbow right_elbow "
+         "left_wrist right_wrist left_hand right_hand")
+_SETTINGS_4 = [
+    {"codec": {"codec": "kinwave", "knobs": {"max_error_cm": 0.5, "error_measure": "joint", "bits_per_second": 0.0,
+                                             "window": 256, "levels": 0, "wavelet": "cdf97", "deadzone": 0.4,
+                                             "closed_loop": True, "allocation": "convex", "joint_feedback": True,
+                                             "segment_steps": True, "rotation_vectors": True, "keyframes": True}},
+     "fps": 30.0, "frames": 1000, "chunk_frames": 1024},
+]
+DICTIONARY_4 = DICTIONARY_3 + b"".join([
+    _name_column(_SMPL),
+    _name_column(_UNREAL),
+    _name_column(_UNITY),
+    _name_column(_UNITY_SUFFIXED),
+    *(json.dumps(s, separators=(",", ":")).encode() for s in _SETTINGS_4),
+])
+
+
 def dictionary(version: int) -> bytes:
-    """The preset dictionary of .moc ``version`` (2 or 3): version 3 adds the codec settings
-    of its day, so a kinwave file's header JSON costs 26-31 bytes instead of 64-70."""
-    return DICTIONARY_3 if version >= 3 else DICTIONARY
+    """The preset dictionary of .moc ``version`` (2 to 4): version 3 adds the codec settings
+    of its day, so a kinwave file's header JSON costs 26-31 bytes instead of 64-70; version 4
+    more pipelines' joint names (a 22-joint Unity-style skeleton's names cost a few bytes
+    instead of about 100) and kinwave's settings of its day."""
+    return DICTIONARY_4 if version >= 4 else DICTIONARY_3 if version == 3 else DICTIONARY

@@ -201,6 +201,19 @@ def test_error_summary_picks_the_smallest_codec_that_reached_every_clip():
     assert level["codecs"]["dpcm"]["reached"] == 1
 
 
+def test_clips_are_grouped_by_source_and_the_report_shows_sources_side_by_side():
+    from mocodec.bench.engine import clip_source
+    assert clip_source("cmu/bvh/01_01.bvh") == "cmu bvh"
+    assert clip_source("bandai/dataset-1_bow_active_001.bvh") == "bandai bvh"
+    assert clip_source("walk.amc") == "amc"
+    rows = [_row(c, codec, "error", 1.0, size, source=clip_source(c), format="bvh")
+            for c, codec, size in (("cmu/bvh/a.bvh", "kinwave", 50), ("cmu/bvh/a.bvh", "sz3", 200),
+                                   ("bandai/b.bvh", "kinwave", 100), ("bandai/b.bvh", "sz3", 300))]
+    summaries = report.source_summaries(rows)
+    assert [label for label, _ in summaries] == ["all", "bandai bvh", "cmu bvh"]
+    assert [e["vs_sz3"] for _, e in summaries] == [3.5, 3.0, 4.0]        # x smaller than SZ3, per source
+
+
 def test_the_report_shows_every_codec_and_its_plots(tmp_path):
     suite.run([SMALL], tmp_path, ["kinwave", "dpcm", "sz3", "zstd", "fpzip"], ("knob", "error"), errors=(1.0,),
               jobs=2)

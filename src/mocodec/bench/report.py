@@ -184,17 +184,24 @@ def _source(row: dict) -> str:
     return row.get("source") or row["format"]
 
 
+def source_summaries(rows) -> list[tuple[str, dict]]:
+    """:func:`error_summary` of all clips, then of each source's (CMU BVH beside Bandai Namco
+    BVH, say) when the run has more than one: ``(label, summary)`` per error level."""
+    out = [("all", e) for e in error_summary(rows)]
+    sources = sorted({_source(r) for r in rows})
+    if len(sources) > 1:
+        out += [(f, e) for f in sources for e in error_summary([r for r in rows if _source(r) == f])]
+    return out
+
+
 def _tables(rows, meta) -> list[tuple[str, list[str], list[list[str]], str]]:
     """(title, header, body, note) of every table in the report."""
     out = []
     summary = error_summary(rows)
     if summary:
-        sources = sorted({_source(r) for r in rows})
-        split = [(f, e) for f in sources for e in error_summary([r for r in rows if _source(r) == f])] \
-            if len(sources) > 1 else []
         body = [[label, _f(e["level_cm"]), e.get("best", "none reached it on every clip"), _f(e.get("best_ratio")),
                  _f(e.get(f"vs_{ERROR_BASELINE}")), _f(e.get(f"vs_{LOSSLESS_BASELINE}"))]
-                for label, e in [("all", e) for e in summary] + split]
+                for label, e in source_summaries(rows)]
         out.append(("Smallest codec at each max joint error",
                     ["clips", "max joint error (cm)", "smallest codec", "its median ratio", "x smaller than SZ3",
                      "x smaller than zstd"], body,

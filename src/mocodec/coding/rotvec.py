@@ -71,11 +71,12 @@ def _quats_kernel(euler, axes):
 
 @numba.njit(cache=True)
 def _vectors_kernel(q):
-    """Rotation vectors (degrees) of quaternions ``(T, n, 4)``, signs made continuous in time."""
+    """Rotation vectors (degrees) of quaternions ``(T, n, 4)``, signs made continuous in time
+    from a frame 0 on the short way round."""
     frames, joints = q.shape[0], q.shape[1]
     out = np.empty((frames, joints, 3))
     for j in range(joints):
-        sign = 1.0
+        sign = 1.0 if frames == 0 or q[0, j, 0] >= 0.0 else -1.0      # frame 0 turns by at most 180 degrees
         for t in range(frames):
             if t > 0 and (q[t, j, 0] * q[t - 1, j, 0] + q[t, j, 1] * q[t - 1, j, 1] + q[t, j, 2] * q[t - 1, j, 2]
                           + q[t, j, 3] * q[t - 1, j, 3]) < 0.0:

@@ -23,6 +23,7 @@ import numba
 import numpy as np
 
 from mocodec import rotations
+from mocodec.coding import rotvec
 from mocodec.kinematics import _plan
 from mocodec.skeleton import Skeleton
 
@@ -185,17 +186,17 @@ def _rotate_back(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     return rotations.quat_rotate(rotations.quat_conjugate(q), v)
 
 
-def exact_angles(axes: np.ndarray, axis_quat: np.ndarray, has_axis: bool, parent: np.ndarray,
-                 goal: np.ndarray) -> np.ndarray:
-    """Euler angles ``(T, 3)`` (degrees, rotation-order steps, a three-axis joint) of exactly
-    the local rotation that restores ``goal`` on top of ``parent``: ``C^-1 conj(G'_p) G_j C``.
-    For joints coded as rotation vectors, where a Gauss-Newton step in Euler angles near a
-    gimbal lock (a proper order's rest pose) would not converge."""
+def exact_rotation(axis_quat: np.ndarray, has_axis: bool, parent: np.ndarray, goal: np.ndarray) -> np.ndarray:
+    """Quaternions ``(T, 4)`` of exactly the local rotation (the one its Euler angles make,
+    without the axis pre-rotation) that restores ``goal`` on top of ``parent``:
+    ``C^-1 conj(G'_p) G_j C``. For joints coded in another form than their Euler angles, where
+    a Gauss-Newton step in Euler angles near a gimbal lock (a proper order's rest pose) would
+    not converge."""
     local = rotations.quat_multiply(rotations.quat_conjugate(parent), goal)
     if has_axis:
         c = np.broadcast_to(axis_quat, local.shape)
         local = rotations.quat_multiply(rotations.quat_multiply(rotations.quat_conjugate(c), local), c)
-    return rotations.quat_to_euler(local, "".join("XYZ"[a] for a in axes))
+    return local
 
 
 def code_down_tree(skeleton: Skeleton, start: np.ndarray, active: np.ndarray, goal: np.ndarray, code,
@@ -209,9 +210,11 @@ def code_down_tree(skeleton: Skeleton, start: np.ndarray, active: np.ndarray, go
     (T, joints, 3)`` (skeleton units) too, a non-root joint's active translations are replaced
     by those that restore its original position from its parent's decoded position and
     orientation (a translated joint below a rotated dummy root), else translations go as they
-    are. Joints flagged in ``exact (joints,)`` (three axes, all active) take
-    :func:`exact_angles` as their target. ``code(channels, targets (T, k))`` codes a depth's
-    channels and returns what the decoder will make of them ``(T, k)``."""
+    are. ``code(channels, targets (T, k))`` codes a depth's channels and returns what the
+    decoder will make of them ``(T, k)``; with ``exact (joints,)`` (joints of three axes, all
+    active) it is called as ``code(channels, targets, rotations)``, where ``rotations`` maps
+    each flagged joint of the depth to its :func:`exact_rotation`, its target instead of the
+    (then meaningless) angles in ``targets``."""
     plan = _plan(skeleton)
     frames = start.shape[0]
     glob = np.empty((len(skeleton), frames, 4))
@@ -219,7 +222,7 @@ def code_down_tree(skeleton: Skeleton, start: np.ndarray, active: np.ndarray, go
     placing = _placing(skeleton, active) if closed_loop and goal_positions is not None else np.zeros(0, bool)
     where = np.zeros((len(skeleton), frames, 3)) if placing.any() else None
     for depth in depth_levels(skeleton):
-        channels, targets = [], []
+        channels, targets, exact_targets = [], [], {}
         for j in depth:
             p = skeleton.parents[j]
             glob[j] = glob[p] if p >= 0 else identity
@@ -228,7 +231,7 @@ def code_down_tree(skeleton: Skeleton, start: np.ndarray, active: np.ndarray, go
             chans = plan.rot_index[j, :k]
             angles = start[:, chans]
             if closed_loop and p >= 0 and exact is not None and exact[j]:
-                angles = exact_angles(plan.rot_axis[j, :k], plan.axis_quat[j], plan.has_axis[j], glob[j], goal[:, j])
+                exact_targets[j] = exact_rotation(plan.axis_quat[j], plan.has_axis[j], glob[j], goal[:, j])
             elif closed_loop and p >= 0 and active[chans].any():
                 angles = target_angles(angles, plan.rot_axis[j, :k], active[chans], plan.axis_quat[j],
                                        plan.has_axis[j], glob[j], goal[:, j])
@@ -242,7 +245,8 @@ def code_down_tree(skeleton: Skeleton, start: np.ndarray, active: np.ndarray, go
         channels = np.concatenate(channels)
         if not channels.size:
             continue
-        decoded = code(channels, np.hstack(targets))
+        decoded = code(channels, np.hstack(targets)) if exact is None else \
+            code(channels, np.hstack(targets), exact_targets)
         column = {c: i for i, c in enumerate(channels)}
         for j in depth:
             k = int((plan.rot_index[j] >= 0).sum())

@@ -90,6 +90,35 @@ def _vectors_kernel(q):
     return out
 
 
+@numba.njit(inline="always")
+def _order(axes_j):
+    """The extrinsic sequence (i, j, k) of an intrinsic order's axes, whether it is proper,
+    and the permutation's sign: the set-up of Bernardes and Viollet's formula."""
+    i, jj, k = axes_j[2], axes_j[1], axes_j[0]
+    proper = i == k
+    if proper:
+        k = 3 - i - jj
+    return i, jj, k, proper, (i - jj) * (jj - k) * (k - i) / 2.0
+
+
+@numba.njit(inline="always")
+def _euler_of(q, i, jj, k, proper, eps, angles, t):
+    """Row ``t`` of ``angles``: the Euler triple (degrees, principal range) of quaternion ``q``."""
+    w, qi, qj, qk = q[0], q[1 + i], q[1 + jj], q[1 + k]
+    if proper:
+        a, b, c, d = w, qi, qj, qk * eps
+    else:
+        a, b, c, d = w - qj, qi + qk * eps, qj + w, qk * eps - qi
+    theta2 = 2.0 * math.atan2(math.hypot(c, d), math.hypot(a, b))
+    plus, minus = math.atan2(b, a), math.atan2(d, c)
+    if proper:
+        triple = (plus + minus, theta2, plus - minus)
+    else:
+        triple = ((plus + minus) * eps, theta2 - math.pi / 2.0, plus - minus)
+    for m in range(3):
+        angles[t, m] = (((triple[m] + math.pi) % (2.0 * math.pi)) - math.pi) / _DEG
+
+
 @numba.njit(cache=True)
 def _euler_kernel(values, form_axes, vector, axes, means):
     """File-order Euler angles (degrees, each joint's triples continuous in time) of rotations
@@ -99,11 +128,7 @@ def _euler_kernel(values, form_axes, vector, axes, means):
     out = np.empty((frames, joints, 3))
     angles = np.empty((frames, 3))
     for j in range(joints):
-        i, jj, k = axes[j, 2], axes[j, 1], axes[j, 0]          # the extrinsic sequence: reversed
-        proper = i == k
-        if proper:
-            k = 3 - i - jj
-        eps = (i - jj) * (jj - k) * (k - i) / 2.0
+        i, jj, k, proper, eps = _order(axes[j])
         for t in range(frames):
             if vector[j]:
                 vx, vy, vz = values[t, j, 0] * _DEG / 2.0, values[t, j, 1] * _DEG / 2.0, values[t, j, 2] * _DEG / 2.0
@@ -115,19 +140,22 @@ def _euler_kernel(values, form_axes, vector, axes, means):
                 for m in range(3):
                     rw, rx, ry, rz = _turn(rw, rx, ry, rz, form_axes[j, m], values[t, j, m])
             q = _product(means[j, 0], means[j, 1], means[j, 2], means[j, 3], rw, rx, ry, rz)
-            w, qi, qj, qk = q[0], q[1 + i], q[1 + jj], q[1 + k]
-            if proper:
-                a, b, c, d = w, qi, qj, qk * eps
-            else:
-                a, b, c, d = w - qj, qi + qk * eps, qj + w, qk * eps - qi
-            theta2 = 2.0 * math.atan2(math.hypot(c, d), math.hypot(a, b))
-            plus, minus = math.atan2(b, a), math.atan2(d, c)
-            if proper:
-                triple = (plus + minus, theta2, plus - minus)
-            else:
-                triple = ((plus + minus) * eps, theta2 - math.pi / 2.0, plus - minus)
-            for m in range(3):
-                angles[t, m] = (((triple[m] + math.pi) % (2.0 * math.pi)) - math.pi) / _DEG
+            _euler_of(q, i, jj, k, proper, eps, angles, t)
+        out[:, j, :] = follow_nearest(angles, proper)
+    return out
+
+
+@numba.njit(cache=True)
+def _quat_euler_kernel(quats, axes):
+    """Euler angles (degrees, each joint's triples continuous in time) of quaternions
+    ``(T, n, 4)`` in the orders ``axes (n, 3)``."""
+    frames, joints = quats.shape[0], quats.shape[1]
+    out = np.empty((frames, joints, 3))
+    angles = np.empty((frames, 3))
+    for j in range(joints):
+        i, jj, k, proper, eps = _order(axes[j])
+        for t in range(frames):
+            _euler_of(quats[t, j], i, jj, k, proper, eps, angles, t)
         out[:, j, :] = follow_nearest(angles, proper)
     return out
 
@@ -186,20 +214,27 @@ def _form_axes(forms: np.ndarray) -> np.ndarray:
     return _axes(tuple(CODING_ORDERS[f - 2] if f >= 2 else "XYZ" for f in forms))
 
 
-def to_forms(rows: np.ndarray, orders: tuple[str, ...], forms: np.ndarray, means: np.ndarray) -> np.ndarray:
+def to_forms(rows: np.ndarray, orders: tuple[str, ...], forms: np.ndarray, means: np.ndarray,
+             quats: np.ndarray | None = None) -> np.ndarray:
     """File-order Euler angle rows in each joint's coding form (``forms`` >= 1), continuous in
-    time; ``means (n, 4)`` are the vector joints' mean rotations (ignored for Euler forms)."""
+    time; ``means (n, 4)`` are the vector joints' mean rotations (ignored for Euler forms).
+    ``quats (T, n, 4)``, when given, are the rotations themselves (``rows`` is then unused)."""
     forms = np.asarray(forms)
-    quats = euler_quats(rows, orders)
+    quats = euler_quats(rows, orders) if quats is None else quats
     out = np.empty((rows.shape[1], len(orders), 3))
     vector = forms == VECTOR
     if vector.any():
         turned = rotations.quat_multiply(rotations.quat_conjugate(means[vector])[None], quats[:, vector])
         out[:, vector] = _vectors_kernel(np.ascontiguousarray(turned))
-    for k in np.flatnonzero(~vector):
-        order = CODING_ORDERS[forms[k] - 2]
-        out[:, k] = follow_nearest(rotations.quat_to_euler(quats[:, k], order), False)
+    if (~vector).any():
+        out[:, ~vector] = _quat_euler_kernel(np.ascontiguousarray(quats[:, ~vector]), _form_axes(forms[~vector]))
     return _rows(out)
+
+
+def quat_euler(quats: np.ndarray, order: str) -> np.ndarray:
+    """Euler angles ``(T, 3)`` (degrees, continuous in time) of quaternions ``(T, 4)`` in
+    ``order`` (any of the 12)."""
+    return _quat_euler_kernel(np.ascontiguousarray(quats, dtype=np.float64)[:, None], _axes((order,)))[:, 0]
 
 
 def from_forms(rows: np.ndarray, orders: tuple[str, ...], forms: np.ndarray, means: np.ndarray) -> np.ndarray:

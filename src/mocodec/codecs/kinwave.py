@@ -3,12 +3,17 @@
 Per payload of T frames:
 
 1. Angles are made continuous (:meth:`Motion.continuous`); channels constant to 1e-6 are
-   collapsed to one knot; a frame 0 that jumps far from frame 1 (the T-pose of many clips) is
-   coded as its own one-frame segment (keyframe).
+   collapsed to one knot (1/8 of a step; a translation about its joint's offset); leading
+   frames that jump away (a bind pose, a T-pose) may be coded as one-frame segments
+   (keyframes) where a trial pass says it is cheaper. Each three-angle joint is coded in the
+   form that costs least (:mod:`mocodec.coding.rotvec`: its Euler angles, a rotation vector
+   about its mean rotation, Euler angles in another order), so the file's Euler order, a
+   gimbal lock or a rotated dummy root above it do not change what is coded.
 2. Joints are coded parents first. Each joint's angles are the *closed-loop* target: the
    angles that restore its original global orientation on top of its parent's decoded one
-   (:mod:`mocodec.coding.closedloop`), so errors do not pile up along chains. Translations
-   (the root's, in cm) are coded as they are.
+   (:mod:`mocodec.coding.closedloop`), so errors do not pile up along chains. The root's
+   translations (in cm) are coded as they are; a translated joint below the root restores its
+   original position from its parent's decoded one.
 3. Every channel becomes knots at segment starts plus a wavelet-coded residual per segment of
    ``window`` frames (:mod:`mocodec.coding.trendwave`: CDF 9/7, ``levels`` deep, periodised),
    quantised with a dead zone by its joint's step, and the integers go through the
@@ -29,13 +34,16 @@ Per payload of T frames:
    own (1/8 octave), searched on its own worst error, so quiet stretches are not coded as
    finely as the busiest one needs.
 
-Payload body: u8 format (2), u8 flags (bit 0 keyframe, bits 1-2 wavelet, bit 3 segment
-offsets), u8 log2 window, u8 levels, u16 channels (a payload for another skeleton is refused),
-then the arithmetic-coded stream (:mod:`mocodec.coding.coefcoder`, revision 2), which opens with
-one step code per joint with rotation channels and one for translations (step = 2^(code/8 - 20)
-degrees or cm) and, with flag bit 3, one step offset per segment. Format 1, still read, wrote
-the codes and offsets as bytes (u8, i8) before the stream, and coded the approximation bands as
-they are.
+Payload body: u8 format (3), u8 flags (bits 0 and 5: one or two leading keyframes, bits 1-2
+wavelet, bit 3 segment offsets, bit 4 coding forms, bit 6 mean rotations), u8 log2 window, u8
+levels, u16 channels (a payload for another skeleton is refused), then the arithmetic-coded
+stream (:mod:`mocodec.coding.coefcoder`, revision 2), which opens with one step code per joint
+with rotation channels and one for translations (step = 2^(code/8 - 20) degrees or cm), with
+bit 3 one step offset per segment, with bit 4 a coding form per three-angle joint
+(:mod:`mocodec.coding.rotvec`) and with bit 6 three mean-rotation integers per such joint.
+Format 2, still read, coded constants at the plain step and had a 0/1 rotation-vector flag per
+joint; format 1 wrote the codes and offsets as bytes (u8, i8) before the stream, and coded the
+approximation bands as they are.
 """
 
 from __future__ import annotations

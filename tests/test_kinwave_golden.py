@@ -1,0 +1,61 @@
+"""kinwave's payload format 3 pinned: a checked-in file (a CMU walk re-expressed as another
+pipeline writes it: a MotionBuilder dummy root at (0, -90, 0), a bind pose in frame 0, a
+proper Euler order on the legs) must decode to the same channels, and encoding its input with
+the same settings must give the very same bytes.
+
+Regenerate, after a deliberate format change only: ``python tests/test_kinwave_golden.py``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+from pathlib import Path
+
+import numpy as np
+
+from mocodec import load, moc, reexpress
+from mocodec.codecs import get_codec
+from mocodec.formats import container
+from mocodec.kinematics import forward_kinematics
+from mocodec.metrics.pose import shell_errors
+
+DATA = Path(__file__).parent / "data"
+GOLDEN = DATA / "kinwave_format3.moc"
+KNOBS = {"max_error_cm": 0.5, "error_measure": "shell"}
+DECODED_SHA256 = "62fb5c5d2de67706a5946b613599737c2e792804c9487099a7d948a57e0e99b7"
+
+
+def _input():
+    walk = load(DATA / "07_03.bvh")[:200]
+    legs = {name: "XYX" for name in ("lThigh", "lShin", "rThigh", "rShin")}
+    return reexpress.with_bind_frame(reexpress.with_dummy_root(reexpress.with_euler_orders(walk, legs),
+                                                               (0.0, -90.0, 0.0), position_channels=True))
+
+
+def _decoded_digest(data: bytes) -> str:
+    return hashlib.sha256(np.ascontiguousarray(moc.unpack(data).channels).tobytes()).hexdigest()
+
+
+def test_the_golden_file_decodes_to_the_same_channels_within_its_bound():
+    data = GOLDEN.read_bytes()
+    assert _decoded_digest(data) == DECODED_SHA256
+    original, decoded = _input(), moc.unpack(data)
+    assert decoded.skeleton.names == original.skeleton.names
+    assert decoded.skeleton.channel_names == original.skeleton.channel_names
+    sk, cm = original.skeleton, 100.0 / original.skeleton.units_per_metre
+    p0, q0 = forward_kinematics(sk, original.channels)
+    p1, q1 = forward_kinematics(decoded.skeleton, decoded.channels)
+    assert shell_errors(sk, p0 * cm, q0, p1 * cm, q1).max <= KNOBS["max_error_cm"]
+    assert data[4] == 4                                                     # .moc version 4
+    assert container.open_container(io.BytesIO(data), len(data), "golden").read_chunk(0)[0] == 3   # payload format 3
+
+
+def test_encoding_the_golden_input_gives_the_same_bytes():
+    assert moc.pack(_input(), get_codec("kinwave", **KNOBS)) == GOLDEN.read_bytes()
+
+
+if __name__ == "__main__":
+    golden = moc.pack(_input(), get_codec("kinwave", **KNOBS))
+    GOLDEN.write_bytes(golden)
+    print(f"{GOLDEN}: {len(golden)} bytes, decoded sha256 {_decoded_digest(golden)}")

@@ -120,15 +120,12 @@ def _euler_of(q, i, jj, k, proper, eps, angles, t):
 
 
 @numba.njit(cache=True)
-def _euler_kernel(values, form_axes, vector, axes, means):
-    """File-order Euler angles (degrees, each joint's triples continuous in time) of rotations
-    coded as rotation vectors (``vector[j]``) or Euler angles about ``form_axes[j]``, each
-    times its mean ``means[j]`` on the left; in Tait-Bryan or proper file orders."""
+def _form_quats_kernel(values, form_axes, vector, means):
+    """Quaternions ``(T, n, 4)`` of rotations coded as rotation vectors (``vector[j]``) or Euler
+    angles about ``form_axes[j]`` (degrees), each times its mean ``means[j]`` on the left."""
     frames, joints = values.shape[0], values.shape[1]
-    out = np.empty((frames, joints, 3))
-    angles = np.empty((frames, 3))
+    out = np.empty((frames, joints, 4))
     for j in range(joints):
-        i, jj, k, proper, eps = _order(axes[j])
         for t in range(frames):
             if vector[j]:
                 vx, vy, vz = values[t, j, 0] * _DEG / 2.0, values[t, j, 1] * _DEG / 2.0, values[t, j, 2] * _DEG / 2.0
@@ -139,9 +136,8 @@ def _euler_kernel(values, form_axes, vector, axes, means):
                 rw, rx, ry, rz = 1.0, 0.0, 0.0, 0.0
                 for m in range(3):
                     rw, rx, ry, rz = _turn(rw, rx, ry, rz, form_axes[j, m], values[t, j, m])
-            q = _product(means[j, 0], means[j, 1], means[j, 2], means[j, 3], rw, rx, ry, rz)
-            _euler_of(q, i, jj, k, proper, eps, angles, t)
-        out[:, j, :] = follow_nearest(angles, proper)
+            out[t, j, 0], out[t, j, 1], out[t, j, 2], out[t, j, 3] = _product(
+                means[j, 0], means[j, 1], means[j, 2], means[j, 3], rw, rx, ry, rz)
     return out
 
 
@@ -242,8 +238,9 @@ def from_forms(rows: np.ndarray, orders: tuple[str, ...], forms: np.ndarray, mea
     continuous as the Euler form allows (frame 0 in the principal range)."""
     forms = np.asarray(forms)
     means = np.where((forms == VECTOR)[:, None], means, _identity_means(len(orders)))
-    return _rows(_euler_kernel(_per_joint(rows), _form_axes(forms), forms == VECTOR, _axes(orders),
-                               np.ascontiguousarray(means, dtype=np.float64)))
+    quats = _form_quats_kernel(_per_joint(rows), _form_axes(forms), forms == VECTOR,
+                               np.ascontiguousarray(means, dtype=np.float64))
+    return _rows(_quat_euler_kernel(quats, _axes(orders)))
 
 
 def near_lock(rows: np.ndarray, orders: tuple[str, ...], margin_deg: float) -> np.ndarray:

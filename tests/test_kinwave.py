@@ -192,15 +192,29 @@ def test_time_adaptive_steps_shrink_max_error_files(walk_amc):
 
 def test_joint_feedback_coarsens_joints_with_slack(walk_amc):
     """Under a max shell bound the model over-protects quiet joints (the spine and arms of the
-    AMC walk stay far below the legs' error); steps corrected by a measured pass give a smaller
-    file within the same bound."""
+    AMC walk stay far below the legs' error); with time-adaptive steps (window 128: 4
+    segments), steps corrected by a measured pass give a 19% smaller file within the same bound.
+    (With one scale the final slack rounds do the same: within 1% either way.)"""
     sizes = {}
     for feedback in (True, False):
-        codec = get_codec("kinwave", max_error_cm=0.1, error_measure="shell", joint_feedback=feedback)
+        codec = get_codec("kinwave", max_error_cm=0.1, error_measure="shell", joint_feedback=feedback, window=128)
         payload = codec.encode(walk_amc)
         assert _errors(walk_amc, codec.decode(payload, walk_amc.skeleton))["shell"] <= 0.1
         sizes[feedback] = len(payload)
-    assert sizes[True] < 0.93 * sizes[False]
+    assert sizes[True] < 0.9 * sizes[False]
+
+
+def test_the_final_slack_rounds_coarsen_quiet_joints_within_the_bound(walk_amc):
+    """One scale (no time-adaptive steps), no joint feedback: the final pass still gives the
+    slack of quiet joints away, so the file is no larger than with the feedback (within 2%)."""
+    sizes = {}
+    for feedback in (True, False):
+        codec = get_codec("kinwave", max_error_cm=0.1, error_measure="shell", joint_feedback=feedback,
+                          segment_steps=False)
+        payload = codec.encode(walk_amc)
+        assert _errors(walk_amc, codec.decode(payload, walk_amc.skeleton))["shell"] <= 0.1
+        sizes[feedback] = len(payload)
+    assert sizes[False] < 1.02 * sizes[True]
 
 
 def test_coding_forms_shrink_files_within_the_bound(walk_amc):

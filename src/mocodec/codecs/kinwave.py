@@ -92,6 +92,7 @@ SEGMENT_ACCEPT = 0.8            # a segment's worst error is near enough to the 
 ADAPTIVE_SEGMENTS = 4           # time-adaptive steps from this many segments on (at W = 128 on fewer they
                                 # measured 1.6% larger than one scale, from 4 on 3% smaller, from 8 on 9%)
 RATE_TOLERANCE = 0.02
+ASF_FORMS = "root"
 TRIAL_FRAMES = 1024             # frames the choice of forms codes each form of every joint on
 GIMBAL_MARGIN = 15.0            # degrees from an Euler order's lock within which a joint goes as a vector
 COARSEST_BAND_S = 0.25          # seconds between the coarsest band's samples (the automatic levels)
@@ -240,7 +241,7 @@ def _jumps_at_start(positions_cm: np.ndarray) -> bool:
     if len(positions_cm) < 8:
         return False
     moves = np.linalg.norm(np.diff(positions_cm, axis=0), axis=2).max(axis=1)
-    return bool(moves[:2].max() > 2.0 * np.percentile(moves[2:], 99) + 1.0)
+    return bool(moves[:2].max() > 4.0 * np.percentile(moves[2:], 99) + 1.0)
 
 
 @dataclass
@@ -503,9 +504,10 @@ class _Encoder:
         groups = _three_angle_groups(self.skeleton)
         choice = np.zeros(len(groups), dtype=np.int64)
         joints = self.skeleton.channel_joints
-        axis_free = self.cfg["error_measure"] == "mean"
+        any_joint = self.cfg["error_measure"] == "mean" or ASF_FORMS == "all"
+        pre_rotated = any(j.has_axis for j in self.skeleton.joints)
         live = [k for k, (channels, _) in enumerate(groups) if not self.const[channels].all()
-                and (axis_free or not self.skeleton.joints[joints[channels[0]]].has_axis)]
+                and (any_joint or not pre_rotated or (ASF_FORMS == "root" and joints[channels[0]] == 0))]
         if not live or not self.frames:
             return choice
         channels = np.concatenate([groups[k][0] for k in live])

@@ -204,17 +204,22 @@ def test_joint_feedback_coarsens_joints_with_slack(walk_amc):
     assert sizes[True] < 0.9 * sizes[False]
 
 
-def test_the_final_slack_rounds_coarsen_quiet_joints_within_the_bound(walk_amc):
-    """One scale (no time-adaptive steps), no joint feedback: the final pass still gives the
-    slack of quiet joints away, so the file is no larger than with the feedback (within 2%)."""
+def test_the_final_slack_rounds_coarsen_quiet_joints_within_the_bound(walk_amc, monkeypatch):
+    """One scale (no time-adaptive steps): the final pass gives the slack of quiet joints to
+    their codes, with or without the joint feedback (17% and 4% smaller at max shell 0.1 cm on
+    the AMC walk), and the bound holds."""
+    from mocodec.codecs import kinwave
     sizes = {}
-    for feedback in (True, False):
-        codec = get_codec("kinwave", max_error_cm=0.1, error_measure="shell", joint_feedback=feedback,
-                          segment_steps=False)
-        payload = codec.encode(walk_amc)
-        assert _errors(walk_amc, codec.decode(payload, walk_amc.skeleton))["shell"] <= 0.1
-        sizes[feedback] = len(payload)
-    assert sizes[False] < 1.02 * sizes[True]
+    for rounds in (kinwave.SLACK_PASSES, 0):
+        monkeypatch.setattr(kinwave, "SLACK_PASSES", rounds)
+        for feedback in (True, False):
+            codec = get_codec("kinwave", max_error_cm=0.1, error_measure="shell", joint_feedback=feedback,
+                              segment_steps=False)
+            payload = codec.encode(walk_amc)
+            assert _errors(walk_amc, codec.decode(payload, walk_amc.skeleton))["shell"] <= 0.1
+            sizes[rounds > 0, feedback] = len(payload)
+    assert sizes[True, False] < 0.9 * sizes[False, False]
+    assert sizes[True, True] < 0.98 * sizes[False, True]
 
 
 def test_coding_forms_shrink_files_within_the_bound(walk_amc):

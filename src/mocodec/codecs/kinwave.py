@@ -92,7 +92,6 @@ SEGMENT_ACCEPT = 0.8            # a segment's worst error is near enough to the 
 ADAPTIVE_SEGMENTS = 4           # time-adaptive steps from this many segments on (at W = 128 on fewer they
                                 # measured 1.6% larger than one scale, from 4 on 3% smaller, from 8 on 9%)
 RATE_TOLERANCE = 0.02
-ASF_FORMS = "root"
 TRIAL_FRAMES = 1024             # frames the choice of forms codes each form of every joint on
 GIMBAL_MARGIN = 15.0            # degrees from an Euler order's lock within which a joint goes as a vector
 COARSEST_BAND_S = 0.25          # seconds between the coarsest band's samples (the automatic levels)
@@ -498,16 +497,20 @@ class _Encoder:
         middle angle comes within GIMBAL_MARGIN of its lock is out. The trial weighs the mean
         rotation error, which is what decides a mean bound; under a max bound it misjudged ASF
         joints (angles about axes chosen for each bone, small and decoupled), whose files came
-        out 1-14% larger with vectors, so a joint with an axis pre-rotation keeps its Euler
-        angles there; a joint whose angles are all constant keeps them always. All joints go
-        through each transform together; only the byte counts are per joint."""
+        out 1-14% larger with vectors (and every axis-free bone taking forms was within 1.3%
+        either way, a third slower), so there only the body's root (the first joint that turns,
+        below any dummy root) and joints near their gimbal lock may change form; a joint whose
+        angles are all constant keeps them always. All joints go through each transform
+        together; only the byte counts are per joint."""
         groups = _three_angle_groups(self.skeleton)
         choice = np.zeros(len(groups), dtype=np.int64)
-        joints = self.skeleton.channel_joints
-        any_joint = self.cfg["error_measure"] == "mean" or ASF_FORMS == "all"
-        pre_rotated = any(j.has_axis for j in self.skeleton.joints)
-        live = [k for k, (channels, _) in enumerate(groups) if not self.const[channels].all()
-                and (any_joint or not pre_rotated or (ASF_FORMS == "root" and joints[channels[0]] == 0))]
+        moving = [k for k, (channels, _) in enumerate(groups) if not self.const[channels].all()]
+        if self.cfg["error_measure"] == "mean" or not any(j.has_axis for j in self.skeleton.joints):
+            live = moving
+        else:       # ASF: the body's root (under a dummy root too) and joints near their gimbal lock
+            locked = rotvec.near_lock(self.values[np.concatenate([groups[k][0] for k in moving])],
+                                      tuple(groups[k][1] for k in moving), GIMBAL_MARGIN) if moving else []
+            live = [k for i, k in enumerate(moving) if i == 0 or locked[i]]
         if not live or not self.frames:
             return choice
         channels = np.concatenate([groups[k][0] for k in live])

@@ -23,7 +23,6 @@ import numba
 import numpy as np
 
 from mocodec import rotations
-from mocodec.coding import rotvec
 from mocodec.kinematics import _plan
 from mocodec.skeleton import Skeleton
 

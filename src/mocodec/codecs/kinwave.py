@@ -92,6 +92,7 @@ SEGMENT_ACCEPT = 0.8            # a segment's worst error is near enough to the 
 ADAPTIVE_SEGMENTS = 4           # time-adaptive steps from this many segments on (at W = 128 on fewer they
                                 # measured 1.6% larger than one scale, from 4 on 3% smaller, from 8 on 9%)
 RATE_TOLERANCE = 0.02
+JUMP_CM = 10.0                  # a leading frame jumping less than this is not tried as a keyframe
 TRIAL_FRAMES = 1024             # frames the choice of forms codes each form of every joint on
 GIMBAL_MARGIN = 15.0            # degrees from an Euler order's lock within which a joint goes as a vector
 COARSEST_BAND_S = 0.25          # seconds between the coarsest band's samples (the automatic levels)
@@ -235,12 +236,13 @@ def _levels_for(fps: float) -> int:
 
 
 def _jumps_at_start(positions_cm: np.ndarray) -> bool:
-    """Whether the first or second frame jumps far from the next one compared with the clip's
-    own frame-to-frame motion after them (a bind pose, a T-pose, or both, lead the clip)."""
+    """Whether the first or second frame jumps far from the next one: twice the clip's own
+    largest frame-to-frame motion after them, and at least JUMP_CM (a bind pose, a T-pose, or
+    both, lead the clip; a walk's first step does not)."""
     if len(positions_cm) < 8:
         return False
     moves = np.linalg.norm(np.diff(positions_cm, axis=0), axis=2).max(axis=1)
-    return bool(moves[:2].max() > 4.0 * np.percentile(moves[2:], 99) + 1.0)
+    return bool(moves[:2].max() > max(2.0 * np.percentile(moves[2:], 99) + 1.0, JUMP_CM))
 
 
 @dataclass
@@ -428,6 +430,7 @@ class _Encoder:
         self.quats = quat
         self.const = (np.ptp(self.values, axis=1) <= CONSTANT) if self.frames else np.ones(sk.num_channels, bool)
         self._set_layout(0)
+        self.first_pass: _Pass | None = None
         self.rot_joints = _rotation_joints(sk)
         self.trans = _has_translation(sk)
         self.shape_rot, self.shape_trans = self._shape()
@@ -453,11 +456,17 @@ class _Encoder:
         bound (a CMU T-pose at max shell 0.1 cm cost 16% more as a keyframe, a bind pose before
         it 13% less). One pass at the starting scale with 0, 1 and 2 keyframes decides: at the
         same steps the errors are about the same."""
-        sizes = []
+        passes = []
         for count in range(3):
             self._set_layout(count)
-            sizes.append(len(self.body(self.run_pass(self.codes(self._first_scale())))))
-        self._set_layout(int(np.argmin(sizes)))
+            passes.append(self.run_pass(self.codes(self._first_scale())))
+        best = int(np.argmin([len(self.body(ps)) for ps in passes]))
+        self._set_layout(best)
+        self.first_pass = passes[best]          # the search starts from it
+
+    def _starting_pass(self) -> _Pass:
+        """The pass at the starting scale (the keyframes' trial may have run it already)."""
+        return self.first_pass or self.run_pass(self.codes(self._first_scale()))
 
     def _shape(self) -> tuple[np.ndarray, float]:
         """Steps (degrees per rotation joint, cm for translations) whose modelled bound is 1 cm.
@@ -765,7 +774,7 @@ class _Encoder:
     def _to_bound(self, bound: float) -> bytes:
         guess = self._first_scale()
         if self.cfg["error_measure"] != "mean" and self.cfg["joint_feedback"] and not self.joint_offsets.any():
-            guess *= self._adapt_joints(self._joint_errors(self.run_pass(self.codes(guess)).decoded), bound)
+            guess *= self._adapt_joints(self._joint_errors(self._starting_pass().decoded), bound)
         accept = MEAN_ACCEPT if self.cfg["error_measure"] == "mean" else ACCEPT
         best, x = self._search(lambda ps: self.error(ps.decoded), bound, accept, guess, 1.0)
         for _ in range(60):
@@ -794,7 +803,7 @@ class _Encoder:
         guess = self._first_scale()
         first = None
         if self.cfg["joint_feedback"]:
-            errors = self._joint_errors(self.run_pass(self.codes(guess)).decoded)
+            errors = self._joint_errors(self._starting_pass().decoded)
             first = segment_errors(errors)
             guess *= self._adapt_joints(errors, bound)
         base = self.codes(guess)

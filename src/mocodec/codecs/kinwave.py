@@ -278,8 +278,9 @@ class KinwaveCodec(Codec):
              "pass measured at the points it moves"),
         Knob("segment_steps", bool, True, "under a max-error bound, give each segment its own step offset (time-"
              "adaptive steps, from 4 segments on): quiet stretches get coarser steps"),
-        Knob("rotation_vectors", bool, True, "code each 3-angle joint as a rotation vector where that costs fewer "
-             "bytes than its Euler angles (BVH skeletons; ASF ones under a mean bound only)"),
+        Knob("rotation_vectors", bool, True, "code each 3-angle joint in the form that costs least: its Euler "
+             "angles, a rotation vector about its mean rotation, or Euler angles in another order (off: the file's "
+             "Euler angles always; ASF skeletons under a max bound: the root and joints near gimbal lock only)"),
         Knob("keyframes", bool, True, "code the first one or two frames on their own where they jump far from the "
              "rest (a bind pose or T-pose in frame 0), so they do not cost the wavelet"),
     )

@@ -254,3 +254,35 @@ def test_segment_offsets_keep_the_encoder_bit_exact(walk_bvh):
     ps = enc.run_pass(enc.codes(0.4), offsets)
     body = enc.body(ps)
     assert body[1] & 8 and np.array_equal(enc._decode_body(body), ps.decoded)
+
+
+def test_an_isolated_glitch_frame_is_coded_apart(walk_bvh):
+    """One frame 25 degrees off on every angle (a glitch) is found, coded apart (flag 128),
+    and costs a few percent instead of the wavelet's 60%; the bound holds on the glitch too."""
+    from mocodec.codecs.kinwave import FLAG_ISOLATED
+    glitch = walk_bvh.channels.copy()
+    glitch[200] += np.where(walk_bvh.skeleton.rotation_mask, 25.0, 5.0)
+    spiked = walk_bvh.with_channels(glitch)
+    codec = get_codec("kinwave", max_error_cm=1.0, error_measure="shell")
+    assert _Encoder(codec, spiked).isolated.tolist() == [200]
+    assert _Encoder(codec, walk_bvh).isolated.size == 0
+    payload = codec.encode(spiked)
+    assert payload[17 + 1] & FLAG_ISOLATED
+    assert _errors(spiked, codec.decode(payload, spiked.skeleton))["shell"] <= 1.0
+    plain = get_codec("kinwave", max_error_cm=1.0, error_measure="shell", keyframes=False).encode(spiked)
+    assert len(payload) < 0.8 * len(plain)
+    assert len(payload) < 1.1 * len(codec.encode(walk_bvh))
+
+
+def test_a_damaged_isolated_frame_count_is_refused(walk_bvh):
+    from mocodec.codecs.base import read_envelope
+    from mocodec.errors import CorruptStreamError
+    glitch = walk_bvh.channels.copy()
+    glitch[100] += np.where(walk_bvh.skeleton.rotation_mask, 25.0, 5.0)
+    codec = get_codec("kinwave", max_error_cm=1.0)
+    payload = codec.encode(walk_bvh.with_channels(glitch))
+    frames, fps, body = read_envelope(payload)
+    for count in (0, 200):
+        bad = body[:6] + bytes([count]) + body[7:]
+        with pytest.raises(CorruptStreamError):
+            codec.decode(codec.wrap(bad, frames, fps), walk_bvh.skeleton)

@@ -240,13 +240,18 @@ def _levels_for(fps: float) -> int:
     return int(np.clip(round(math.log2(max(fps, 1.0) * COARSEST_BAND_S)), 1, 10))
 
 
+def _frame_moves(positions_cm: np.ndarray) -> np.ndarray:
+    """``(T - 1,)`` cm: how far the farthest-moving joint goes from each frame to the next."""
+    return np.linalg.norm(np.diff(positions_cm, axis=0), axis=2).max(axis=1)
+
+
 def _jumps_at_start(positions_cm: np.ndarray) -> bool:
     """Whether the first or second frame jumps far from the next one: twice the clip's own
     largest frame-to-frame motion after them, and at least JUMP_CM (a bind pose, a T-pose, or
     both, lead the clip; a walk's first step does not)."""
     if len(positions_cm) < 8:
         return False
-    moves = np.linalg.norm(np.diff(positions_cm, axis=0), axis=2).max(axis=1)
+    moves = _frame_moves(positions_cm)
     return bool(moves[:2].max() > max(2.0 * np.percentile(moves[2:], 99) + 1.0, JUMP_CM))
 
 
@@ -420,7 +425,7 @@ def _isolated_frames(positions_cm: np.ndarray, skip: int) -> np.ndarray:
     frames = len(positions_cm)
     if frames < 8:
         return np.zeros(0, dtype=np.int64)
-    moves = np.linalg.norm(np.diff(positions_cm, axis=0), axis=2).max(axis=1)
+    moves = _frame_moves(positions_cm)
     usual = np.percentile(moves, 90)
     across = np.linalg.norm(positions_cm[2:] - positions_cm[:-2], axis=2).max(axis=1)
     far = 4.0 * usual + 1.0
@@ -641,10 +646,16 @@ class _Encoder:
         worst = err.max()
         if worst <= 0:
             return 1.0
-        moved = _influence(self.skeleton, self.cfg["error_measure"])
-        own = np.array([err[row].max() if row.any() else worst for row in moved])
-        self.joint_offsets = np.floor(8.0 * JOINT_FEEDBACK * np.log2(worst / np.maximum(own, worst * 2.0 ** -8)))
+        self.joint_offsets = self._slack_codes(err, worst, JOINT_FEEDBACK)
         return float(np.clip(bound * (1.0 + ACCEPT) / 2.0 / worst, 0.25, 4.0))
+
+    def _slack_codes(self, errors: np.ndarray, reference: float, share: float = 1.0) -> np.ndarray:
+        """Per step code, the 1/8 octaves (times ``share``, floored) between ``reference`` and
+        the worst of ``errors (points,)`` among the points the code moves (the joints below it,
+        and with ``shell`` its own bone's shell; the translations: all)."""
+        moved = _influence(self.skeleton, self.cfg["error_measure"])
+        own = np.array([errors[row].max() if row.any() else errors.max() for row in moved])
+        return np.floor(8.0 * share * np.log2(reference / np.maximum(own, reference * 2.0 ** -8)))
 
     def run_pass(self, codes: np.ndarray, offsets: np.ndarray | None = None) -> _Pass:
         """Quantise and reconstruct every channel down the tree (:func:`closedloop.code_down_tree`):
@@ -813,19 +824,18 @@ class _Encoder:
         the encoding speed for 0.2% of the bytes)."""
         if self.cfg["error_measure"] == "mean":
             return best
-        moved = _influence(self.skeleton, self.cfg["error_measure"])
+        errors = self._joint_errors(best.decoded).max(axis=0)           # per point, over the frames
         for _ in range(SLACK_PASSES):
-            errors = self._joint_errors(best.decoded).max(axis=0)
             if errors.max() >= below * bound:
                 return best
-            own = np.array([errors[row].max() if row.any() else errors.max() for row in moved])
-            coarser = np.floor(8.0 * np.log2(bound / np.maximum(own, bound * 2.0 ** -8)))
+            coarser = self._slack_codes(errors, bound)
             for _ in range(2):
                 if not coarser.any():
                     return best
                 ps = self.run_pass(np.clip(best.steps + coarser, 0, 255).astype(np.uint8), best.offsets)
-                if self.error(ps.decoded) <= bound:
-                    best = ps
+                trial = self._joint_errors(ps.decoded).max(axis=0)
+                if trial.max() <= bound:
+                    best, errors = ps, trial
                     break
                 coarser = np.floor(coarser / 2.0)
             else:

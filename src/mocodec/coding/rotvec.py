@@ -171,16 +171,6 @@ def euler_quats(rows: np.ndarray, orders: tuple[str, ...]) -> np.ndarray:
     return _quats_kernel(_per_joint(rows), _axes(orders))
 
 
-def vector_quats(rows: np.ndarray) -> np.ndarray:
-    """Unit quaternions ``(T, n, 4)`` of the joints' rotation vector rows."""
-    return rotations.quat_exp(np.radians(_per_joint(rows)) / 2.0)
-
-
-def vectors_of(quats: np.ndarray) -> np.ndarray:
-    """Rotation vector rows of unit quaternions ``(T, n, 4)``, continuous in time."""
-    return _rows(_vectors_kernel(np.ascontiguousarray(quats, dtype=np.float64)))
-
-
 def _identity_means(n: int) -> np.ndarray:
     means = np.zeros((n, 4))
     means[:, 0] = 1.0
@@ -225,12 +215,6 @@ def to_forms(rows: np.ndarray, orders: tuple[str, ...], forms: np.ndarray, means
     if (~vector).any():
         out[:, ~vector] = _quat_euler_kernel(np.ascontiguousarray(quats[:, ~vector]), _form_axes(forms[~vector]))
     return _rows(out)
-
-
-def quat_euler(quats: np.ndarray, order: str) -> np.ndarray:
-    """Euler angles ``(T, 3)`` (degrees, continuous in time) of quaternions ``(T, 4)`` in
-    ``order`` (any of the 12)."""
-    return _quat_euler_kernel(np.ascontiguousarray(quats, dtype=np.float64)[:, None], _axes((order,)))[:, 0]
 
 
 def from_forms(rows: np.ndarray, orders: tuple[str, ...], forms: np.ndarray, means: np.ndarray) -> np.ndarray:

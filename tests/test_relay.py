@@ -23,7 +23,7 @@ from mocodec.stream.bus import NatsBus
 from mocodec.stream.client import RelayRefused, connect, publish_clip, record
 from mocodec.stream.live import receive_clip, stream_clip
 from mocodec.stream.packets import pack_batch
-from mocodec.stream.relay import BAD_MESSAGE, RATE_LIMIT, Limits, Relay, Viewer, on_ladder
+from mocodec.stream.relay import BAD_MESSAGE, RATE_LIMIT, Limits, Relay, Viewer, on_ladder, start
 
 SECRET = "test-secret"
 
@@ -32,14 +32,12 @@ SECRET = "test-secret"
 async def serving(relay: Relay | None = None):
     """A relay on a free loopback port: yields its ws:// address."""
     relay = relay or Relay(SECRET)
-    runner = web.AppRunner(relay.app())
-    await runner.setup()
-    site = web.TCPSite(runner, "127.0.0.1", 0)
-    await site.start()
-    port = site._server.sockets[0].getsockname()[1]
+    runner, server = await start(relay, "127.0.0.1", 0)
+    port = server.sockets[0].getsockname()[1]
     try:
         yield f"ws://127.0.0.1:{port}"
     finally:
+        server.close()
         await runner.cleanup()
 
 

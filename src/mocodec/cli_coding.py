@@ -12,7 +12,7 @@ import sys
 import time
 from pathlib import Path
 
-from mocodec import moc, ratecontrol
+from mocodec import limits, moc, ratecontrol
 from mocodec.codecs import DEFAULT_CODEC, codec_class, codec_ids, get_codec
 from mocodec.coding import motiontables, primdb, rhythmdb, segmentation, vqbook
 from mocodec.errors import CodecError
@@ -120,9 +120,9 @@ def cmd_decode(args) -> int:
     frames = parse_frames(args.frames)
     if frames and frames[1] == -1:
         frames = (frames[0], moc.info(args.input, skeleton).frames)
-    knobs = {name: path for name, path in (("codebook", args.codebook), ("db", args.db), ("tables", args.tables))
+    files = {name: path for name, path in (("codebook", args.codebook), ("db", args.db), ("tables", args.tables))
              if path}
-    motion = moc.decode(args.input, frames=frames, skeleton=skeleton, knobs=knobs or None)
+    motion = moc.decode(args.input, frames=frames, skeleton=skeleton, local_files=files, max_values=args.max_values)
     written = save(motion, args.output, asf=args.out_asf)
     print(f"wrote {', '.join(str(p) for p in written)} ({motion.num_frames} frames)")
     return 0
@@ -313,10 +313,13 @@ def add_commands(sub, common) -> None:
     p.add_argument("--frames", help="FIRST:STOP, a frame range (e.g. 120:240)")
     p.add_argument("--skeleton", help="the skeleton (.asf, .bvh or .amc) of a file encoded with --skeleton-ref")
     p.add_argument("--out-asf", help="where to write the ASF when the output is .amc")
-    p.add_argument("--codebook", help="the VQ codebook file (svq, tvq) here, if not where the encoder had it")
-    p.add_argument("--db", help="the primitive or rhythm database (primitives, rhythmic) here, if not where the "
-                                "encoder had it")
-    p.add_argument("--tables", help="the motion tables (posture, gesture) here, if not where the encoder had them")
+    p.add_argument("--codebook", help="the VQ codebook file (svq, tvq) the file was coded with; a file never "
+                                      "names what is opened, the payload's fingerprint is checked against it")
+    p.add_argument("--db", help="the primitive or rhythm database (primitives, rhythmic) the file was coded with")
+    p.add_argument("--tables", help="the motion tables (posture, gesture) the file was coded with")
+    p.add_argument("--max-values", type=int, default=limits.MAX_DECODED_VALUES,
+                   help=f"refuse to decode more than this many values, frames x channels (default "
+                        f"{limits.MAX_DECODED_VALUES:,}: a damaged file cannot exhaust memory)")
     p.set_defaults(func=cmd_decode)
 
     p = sub.add_parser("codebook", help="train VQ codebooks for svq and tvq (000 7.9)",

@@ -18,7 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mocodec.codecs import DEFAULT_CODEC, Codec, codec_from_config, get_codec
+from mocodec import limits
+from mocodec.codecs import DEFAULT_CODEC, Codec, codec_from_untrusted, get_codec
 from mocodec.codecs.base import read_envelope
 from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.formats import container
@@ -81,10 +82,14 @@ def encode(motion: Motion, path: str | os.PathLike, codec: Codec | None = None,
 
 
 def unpack(data: bytes, frames: tuple[int, int] | None = None, name: str = "<bytes>",
-           skeleton: Skeleton | None = None) -> Motion:
+           skeleton: Skeleton | None = None, max_values: int = limits.MAX_DECODED_VALUES,
+           codec: Codec | None = None) -> Motion:
     """Decode .moc bytes (all frames, or ``frames=(first, stop)``); ``skeleton`` for a file
-    that holds only its skeleton's id."""
-    return _decode(container.open_container(io.BytesIO(data), len(data), name, skeleton), frames)
+    that holds only its skeleton's id; ``max_values`` caps frames x channels
+    (:mod:`mocodec.limits`). ``codec``: the codec that wrote ``data`` in this process (a round
+    trip), which then decodes it as trusted (:meth:`Codec.decode`), its model files included."""
+    return _decode(container.open_container(io.BytesIO(data), len(data), name, skeleton), frames,
+                   max_values=max_values, codec=codec)
 
 
 @dataclass(frozen=True)
@@ -100,17 +105,20 @@ def round_trip(motion: Motion, codec: Codec) -> RoundTrip:
     t0 = time.perf_counter()
     data = pack(motion, codec)
     t1 = time.perf_counter()
-    decoded = unpack(data)
+    decoded = unpack(data, codec=codec)
     return RoundTrip(data, decoded, t1 - t0, time.perf_counter() - t1)
 
 
 def decode(path: str | os.PathLike, frames: tuple[int, int] | None = None, skeleton: Skeleton | None = None,
-           knobs: dict | None = None) -> Motion:
-    """Decode a .moc file, reading only the chunks that ``frames=(first, stop)`` needs;
-    ``knobs`` override the stored codec's (a codebook file's path on this machine, say)."""
+           local_files: dict | None = None, max_values: int = limits.MAX_DECODED_VALUES) -> Motion:
+    """Decode a .moc file, reading only the chunks that ``frames=(first, stop)`` needs.
+    ``local_files``: the model files the caller allows (``{"db": path}``); a file never
+    chooses what is opened (:func:`codec_from_untrusted`). ``max_values`` caps frames x
+    channels (:mod:`mocodec.limits`)."""
     path = Path(path)
     with open(path, "rb") as f:
-        return _decode(container.open_container(f, path.stat().st_size, str(path), skeleton), frames, knobs)
+        return _decode(container.open_container(f, path.stat().st_size, str(path), skeleton), frames, local_files,
+                       max_values)
 
 
 def info(path: str | os.PathLike, skeleton: Skeleton | None = None) -> container.Container:
@@ -120,20 +128,23 @@ def info(path: str | os.PathLike, skeleton: Skeleton | None = None) -> container
         return container.open_container(f, path.stat().st_size, str(path), skeleton)
 
 
-def _decode(c: container.Container, frames: tuple[int, int] | None, knobs: dict | None = None) -> Motion:
+def _decode(c: container.Container, frames: tuple[int, int] | None, local_files: dict | None = None,
+            max_values: int = limits.MAX_DECODED_VALUES, codec: Codec | None = None) -> Motion:
     first, stop = (0, c.frames) if frames is None else frames
     if not 0 <= first <= stop <= c.frames:
         raise CodecError(f"{c.name}: frames {first}:{stop} are outside 0:{c.frames}")
-    try:
-        config = c.header["codec"]
-        codec = codec_from_config({**config, "knobs": {**config.get("knobs", {}), **(knobs or {})}})
-    except CodecError as e:
-        raise CorruptStreamError(f"{c.name}: header names a codec this mocodec cannot build ({e})") from None
+    wanted = c.chunks_for(first, stop)
+    values = sum(c.index[k].count for k in wanted) * c.skeleton.num_channels
+    if values > max_values:
+        raise CorruptStreamError(f"{c.name}: decoding frames {first}:{stop} makes {values:,} values, over the limit of "
+                                 f"{max_values:,} (raise it with --max-values, or decode a frame range)")
+    trusted = codec is not None
+    codec = codec or codec_from_untrusted(c.header["codec"], f"{c.name}: header", local_files)
     parts = []
-    for k in c.chunks_for(first, stop):
+    for k in wanted:
         e = c.index[k]
         try:
-            motion = codec.decode(chunk_payload(c, k), c.skeleton)
+            motion = codec.decode(chunk_payload(c, k), c.skeleton, max_values, trusted)
         except CorruptStreamError as err:
             raise CorruptStreamError(f"{c.name}: chunk {k} at byte {e.offset}: {err}") from None
         if motion.num_frames != e.count:
@@ -153,7 +164,7 @@ def truncate(data: bytes, ratio: float | None = None, bitrate: float | None = No
         raise CodecError("truncate needs exactly one of ratio and bitrate")
     c = container.open_container(io.BytesIO(data), len(data), name, skeleton)
     embedded = "skeleton_id" not in c.header
-    codec = codec_from_config(c.header["codec"])
+    codec = codec_from_untrusted(c.header["codec"], f"{name}: header")
     if not hasattr(codec, "truncator"):
         raise CodecError(f"{name}: codec {codec.id} is not embedded; encode again with a smaller target")
     cutters = [codec.truncator(chunk_payload(c, k), c.skeleton) for k in range(len(c.index))]

@@ -18,13 +18,14 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from mocodec import limits, sandbox
 from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
 ENVELOPE_VERSION = 1
 _ENVELOPE = struct.Struct("<BIdI")     # version, frames, fps, CRC32 of those fields and the body
-MAX_FRAMES = 1 << 20                   # 2.4 hours at 120 fps per payload; the container chunks clips
+MAX_FRAMES = limits.MAX_PAYLOAD_FRAMES
 
 
 @dataclass(frozen=True)
@@ -38,6 +39,7 @@ class Knob:
     low: float | None = None
     high: float | None = None
     choices: tuple | None = None
+    path: bool = False          # names a local file: never taken from a file or a stream (docs/security.md)
 
     def parse(self, value: Any) -> Any:
         try:
@@ -127,6 +129,7 @@ class Codec:
     delay_frames: ClassVar[int] = 0
     variable_delay: ClassVar[bool] = False     # the delay depends on the motion (000 ch. 8)
     baseline: ClassVar[bool] = False           # a generic float compressor, for comparison
+    native_decoder: ClassVar[bool] = False     # hands the body to a C library: untrusted bodies decode in a child
 
     def __init__(self, **knobs):
         specs = {k.name: k for k in self.knobs}
@@ -171,14 +174,27 @@ class Codec:
     @staticmethod
     def wrap(body: bytes, frames: int, fps: float) -> bytes:
         """Envelope + body: version, frames, fps and the CRC over them and the body."""
+        if not 0 <= frames <= MAX_FRAMES:
+            raise CorruptStreamError(f"{frames} frames in one payload: the limit is {MAX_FRAMES}")
         fields = _ENVELOPE.pack(ENVELOPE_VERSION, frames, float(fps), 0)[:-4]
         return fields + struct.pack("<I", zlib.crc32(body, zlib.crc32(fields))) + body
 
-    def decode(self, payload: bytes, skeleton: Skeleton) -> Motion:
-        """The motion in ``payload`` (from :meth:`encode`), on ``skeleton``."""
+    def decode(self, payload: bytes, skeleton: Skeleton, max_values: int = limits.MAX_DECODED_VALUES,
+               trusted: bool = False) -> Motion:
+        """The motion in ``payload`` (from :meth:`encode`), on ``skeleton``. A payload that
+        declares more than ``max_values`` values (frames x channels) is refused before anything
+        is allocated; decoded values are finite or the payload is refused. ``trusted``: the
+        payload was encoded by this process, so a native decoder may run here rather than in a
+        child (:mod:`mocodec.sandbox`)."""
         frames, fps, body = read_envelope(payload)
+        if frames * skeleton.num_channels > max_values:
+            raise CorruptStreamError(f"{self.id} payload declares {frames} frames of {skeleton.num_channels} channels, "
+                                     f"over the limit of {max_values:,} values (raise it with --max-values)")
         try:
-            channels = self._decode(body, skeleton, frames, fps)
+            if self.native_decoder and not trusted:
+                channels = sandbox.call_isolated(self._decode, body, skeleton, frames, fps, what=f"{self.id} payload")
+            else:
+                channels = self._decode(body, skeleton, frames, fps)
         except (CorruptStreamError, CodecError):
             raise
         except Exception as e:   # noqa: BLE001 - a payload that passed its CRC but does not parse
@@ -187,6 +203,10 @@ class Codec:
         if channels.shape != (frames, skeleton.num_channels):
             raise CorruptStreamError(f"{self.id} payload decodes to {channels.shape}, expected "
                                      f"({frames}, {skeleton.num_channels}): wrong skeleton?")
+        if not np.isfinite(channels).all():
+            f, c = np.argwhere(~np.isfinite(channels))[0]
+            raise CorruptStreamError(f"{self.id} payload decodes to {channels[f, c]} at frame {f}, channel "
+                                     f"{skeleton.channel_names[c]}: the data is damaged")
         return Motion(skeleton, fps, channels)
 
     def _encode(self, motion: Motion) -> bytes:
@@ -218,6 +238,6 @@ def read_envelope(payload: bytes) -> tuple[int, float, bytes]:
     body = payload[_ENVELOPE.size:]
     if zlib.crc32(body, zlib.crc32(payload[:_ENVELOPE.size - 4])) != crc:
         raise CorruptStreamError(f"payload CRC mismatch ({len(body)}-byte body): the data is damaged")
-    if frames > MAX_FRAMES or not (np.isfinite(fps) and fps > 0):
+    if frames > MAX_FRAMES or not (np.isfinite(fps) and 0 < fps <= limits.MAX_FPS):
         raise CorruptStreamError(f"payload header: {frames} frames at {fps} fps is not plausible")
     return frames, fps, body

@@ -7,7 +7,9 @@ Each codes the continuous angles (:meth:`Motion.continuous`: no 360-degree wraps
 cost these coders dearly and no motion codec pays for) as 32-bit floats in the time-contiguous
 layout, one channel after another. Error bounds are in degrees for rotation channels and in
 centimetres for translations. SZ3, ZFP and fpzip come with ``pip install mocodec[bench]``;
-without them these codecs say so instead of failing later.
+without them these codecs say so instead of failing later. Their C decoders are not safe on
+damaged bytes, so a body that did not come from this process decodes in a child process
+(:attr:`Codec.native_decoder`, :mod:`mocodec.sandbox`).
 """
 
 from __future__ import annotations
@@ -55,6 +57,7 @@ class _PerChannel(Codec):
     """An error-bounded compressor run on each channel's samples on its own."""
 
     baseline = True
+    native_decoder = True
     knobs = (Knob("bound", float, 0.01, "absolute error bound per sample: degrees, cm for translations",
                   1e-6, 1000.0),)
     quality = QualityKnob("bound", higher_is_better=False, log_scale=True)
@@ -131,6 +134,7 @@ class FpzipCodec(Codec):
     quality = QualityKnob("precision", higher_is_better=True)
     package = "fpzip"
     baseline = True
+    native_decoder = True
 
     def _encode(self, motion: Motion) -> bytes:
         fpzip = _module(self.package)

@@ -64,7 +64,7 @@ class PrimitivesCodec(Codec):
         Knob("max_segment", int, 32, "S_M: longest segment in frames, the coding delay (the thesis: 16, 32, 64)",
              low=quatseg.MIN_SEGMENT, high=256),
         Knob("bits", int, 10, "quantisation bits of the wavelet coefficients", low=4, high=20),
-        Knob("db", str, "", "a primitive database file (mocodec primitives train); empty: none"),
+        Knob("db", str, "", "a primitive database file (mocodec primitives train); empty: none", path=True),
         Knob("history", int, 16, "earlier decoded segments of the joint offered as candidates (0: the thesis)",
              low=0, high=256),
         Knob("smooth", int, 0, "M: frames each side of a seam searched by the smoothing of 5.3.4 (0: none)",

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from mocodec.codecs.base import Codec
-from mocodec.errors import CodecError
+from mocodec.errors import CodecError, CorruptStreamError
 
 _CODECS: dict[str, type[Codec]] = {}
 DEFAULT_CODEC = "kinwave"
@@ -31,6 +31,29 @@ def get_codec(codec_id: str = DEFAULT_CODEC, **knobs) -> Codec:
 
 def codec_from_config(config: dict) -> Codec:
     return codec_class(config.get("codec", "")).from_config(config)
+
+
+def codec_from_untrusted(config: object, where: str, local_files: dict[str, str] | None = None) -> Codec:
+    """A codec from the config a file or a stream carries, which may be hostile: it must be a
+    dict naming a codec, with knobs a dict of strings, numbers and booleans, each parsed by its
+    knob. A knob that names a local file (:attr:`Knob.path`) is never taken from the config
+    (a file could make the reader open ``/dev/zero``, or learn which paths exist): it is the
+    caller's ``local_files`` entry, or empty; the payload names the model it needs by content
+    hash, and the codec checks the one given against it. CorruptStreamError names ``where``."""
+    if not isinstance(config, dict) or not isinstance(config.get("codec"), str):
+        raise CorruptStreamError(f"{where}: the codec config must be an object naming a codec")
+    knobs = config.get("knobs", {})
+    if not isinstance(knobs, dict) or not all(isinstance(k, str) and isinstance(v, (str, int, float, bool))
+                                              for k, v in knobs.items()):
+        raise CorruptStreamError(f"{where}: the codec's knobs must be an object of strings, numbers and booleans")
+    try:
+        cls = codec_class(config["codec"])
+        paths = {k.name for k in cls.knobs if k.path}
+        chosen = {k: v for k, v in knobs.items() if k not in paths}
+        chosen.update({k: v for k, v in (local_files or {}).items() if k in paths and v})
+        return cls(**chosen)
+    except CodecError as e:
+        raise CorruptStreamError(f"{where}: names a codec this mocodec cannot build ({e})") from None
 
 
 def codec_ids() -> list[str]:

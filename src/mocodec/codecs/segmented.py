@@ -37,7 +37,7 @@ ROOT_KNOBS = (
     Knob("root_step", float, 1.0, "quantiser step of the root samples (cm, degrees)", low=0.001, high=100),
 )
 TABLE_KNOBS = (
-    Knob("tables", str, "", "a motion tables file (mocodec tables train); empty: trained on the clip, carried"),
+    Knob("tables", str, "", "a motion tables file (mocodec tables train); empty: trained on the clip, carried", path=True),
     Knob("spacing", float, motiontables.SPACING_CM, "posture table spacing in cm (tables trained on the clip)",
          low=0.01, high=1000),
 )

@@ -49,7 +49,7 @@ class SvqCodec(FramewiseCodec):
     knobs = (
         Knob("size", int, 32, "entries of each group's codebook (the thesis: 16-512)", low=2, high=4096),
         Knob("predictive", bool, True, "code each group's change from its last decoded frame"),
-        Knob("codebook", str, "", "a codebook file (mocodec codebook train); empty: train on the clip, send in-band"),
+        Knob("codebook", str, "", "a codebook file (mocodec codebook train); empty: train on the clip, send in-band", path=True),
     )
     quality = QualityKnob("size", higher_is_better=True, log_scale=True)
 

@@ -40,7 +40,7 @@ class TvqCodec(FramewiseCodec):
         Knob("size", int, 256, "codebook entries (the thesis: 16-512)", low=2, high=4096),
         Knob("length", int, 6, "samples per vector (the coding delay + 1)", low=2, high=64),
         Knob("predictive", bool, True, "code each vector minus the channel's last decoded sample"),
-        Knob("codebook", str, "", "a codebook file (mocodec codebook train); empty: train on the clip, send in-band"),
+        Knob("codebook", str, "", "a codebook file (mocodec codebook train); empty: train on the clip, send in-band", path=True),
     )
     quality = QualityKnob("size", higher_is_better=True, log_scale=True)
 

@@ -48,6 +48,7 @@ import zlib
 from dataclasses import dataclass
 from typing import BinaryIO
 
+from mocodec import limits
 from mocodec.errors import CorruptStreamError, SkeletonMismatchError
 from mocodec.formats import varint
 from mocodec.formats.header_dict import dictionary
@@ -144,6 +145,20 @@ def pack(header: dict, chunks: list[Chunk], embed_skeleton: bool = True) -> byte
     return bytes(out)
 
 
+def inflate_capped(data: bytes, zdict: bytes, limit: int) -> bytes:
+    """``data`` inflated (with the preset dictionary ``zdict``), refusing output over ``limit``
+    bytes before it is made (a deflate bomb turns a megabyte into a gigabyte) and input that
+    ends early; ValueError says which."""
+    inflate = zlib.decompressobj(zdict=zdict) if zdict else zlib.decompressobj()
+    text = inflate.decompress(data, limit + 1)
+    if len(text) > limit or inflate.unconsumed_tail:
+        raise ValueError(f"it inflates to over {limit:,} bytes")
+    text += inflate.flush()
+    if not inflate.eof or len(text) > limit:
+        raise ValueError("the compressed header is cut short" if not inflate.eof else f"it inflates to over {limit:,} bytes")
+    return text
+
+
 def _read_varint(data: bytes, pos: int, where: str) -> tuple[int, int]:
     """(value, next position) of the varint at ``pos``."""
     try:
@@ -237,10 +252,7 @@ def open_container(source: BinaryIO, size: int, name: str, skeleton: Skeleton | 
     if zlib.crc32(head[:-4]) != _U32.unpack(head[-4:])[0]:
         raise CorruptStreamError(f"{name}: header CRC mismatch at byte {_START.size}, the header is damaged")
     try:
-        inflate = zlib.decompressobj(zdict=dictionary(version)) if version >= 2 else zlib.decompressobj()
-        text = inflate.decompress(head[:-4]) + inflate.flush()
-        if not inflate.eof:
-            raise ValueError("the compressed header is cut short")
+        text = inflate_capped(head[:-4], dictionary(version) if version >= 2 else b"", limits.MAX_HEADER_TEXT)
         if flags & FLAG_SKELETON:
             text, _, compact = text.partition(b"\0")
         header = json.loads(text)
@@ -250,8 +262,9 @@ def open_container(source: BinaryIO, size: int, name: str, skeleton: Skeleton | 
             embedded = skeleton_from_dict(header.pop("skeleton")) if "skeleton" in header else None
         wanted = None if embedded else str(header["skeleton_id"])
         frames, fps = int(header["frames"]), float(header["fps"])
-        header["codec"]["codec"]
-    except (ValueError, KeyError, TypeError, zlib.error) as e:
+        if not isinstance(header["codec"], dict):
+            raise ValueError("the codec config is not an object")
+    except (ValueError, KeyError, TypeError, AttributeError, zlib.error) as e:
         raise CorruptStreamError(f"{name}: header at byte {_START.size} does not parse ({e})") from None
     if embedded is None:
         if skeleton is None:
@@ -261,7 +274,7 @@ def open_container(source: BinaryIO, size: int, name: str, skeleton: Skeleton | 
             raise SkeletonMismatchError(f"{name}: the file was coded for skeleton {wanted}, the one given is "
                                         f"{skeleton_id(skeleton)}")
     skeleton = embedded or skeleton
-    if frames < 0 or not (math.isfinite(fps) and fps > 0):
+    if frames < 0 or not (math.isfinite(fps) and 0 < fps <= limits.MAX_FPS):
         raise CorruptStreamError(f"{name}: header says {frames} frames at {fps} fps")
     chunks_at = _START.size + head_len + 4
     index = (_index(source, size, name, chunks_at) if version >= 3 else
@@ -292,7 +305,7 @@ def _index(source: BinaryIO, size: int, name: str, chunks_at: int) -> tuple[Inde
     for k in range(n):
         count, pos = _read_varint(raw, pos, where)
         chunk_size, pos = _read_varint(raw, pos, where)
-        if count == 0 or chunk_size < 5:
+        if not 0 < count <= limits.MAX_PAYLOAD_FRAMES or chunk_size < 5:
             raise CorruptStreamError(f"{where}: entry {k} ({count} frames in {chunk_size} bytes) is invalid")
         entries.append(IndexEntry(offset, first, count, chunk_size))
         offset, first = offset + chunk_size, first + count
@@ -317,7 +330,7 @@ def _index_v2(source: BinaryIO, size: int, name: str, chunks_at: int) -> tuple[I
     index = tuple(IndexEntry(*_ENTRY.unpack_from(raw, 4 + k * _ENTRY.size)) for k in range(n))
     expected = 0
     for k, e in enumerate(index):
-        if e.first != expected or e.count == 0 or not chunks_at <= e.offset < index_offset:
+        if e.first != expected or not 0 < e.count <= limits.MAX_PAYLOAD_FRAMES or not chunks_at <= e.offset < index_offset:
             raise CorruptStreamError(f"{where}: entry {k} (frames {e.first}+{e.count} at byte {e.offset}) is invalid")
         expected += e.count
     return index

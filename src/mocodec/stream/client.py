@@ -114,7 +114,8 @@ async def _drain(ws) -> None:
 class Watcher:
     """What a viewer holds: a decoder per stream, the frames received so far (or, with
     ``keep=False``, only each stream's newest frame, for watching without end), and the bytes
-    each stream has brought."""
+    each stream has brought. A message, packet or stream header that does not parse is
+    skipped and counted (``refused``): one stream's damage never stops the others."""
 
     def __init__(self, conceal: str = "hold", keep: bool = True):
         self.conceal, self.keep = conceal, keep
@@ -122,14 +123,25 @@ class Watcher:
         self.frames: dict[int, list[np.ndarray]] = {}
         self.counts: dict[int, int] = {}
         self.bytes: dict[int, int] = {}
+        self.refused = 0
 
     def take(self, data: bytes) -> None:
-        for raw in split_batch(data):
-            p = parse(raw)
-            if p.kind == HEADER:
-                if p.stream not in self.decoders:
-                    self.decoders[p.stream] = LiveDecoder(StreamInfo.from_payload(p.payload), self.conceal)
+        try:
+            raws = split_batch(data)
+        except MocodecError:
+            self.refused += 1
+            return
+        for raw in raws:
+            try:
+                p = parse(raw)
+                if p.kind == HEADER and p.stream not in self.decoders:
+                    decoder = LiveDecoder(StreamInfo.from_payload(p.payload), self.conceal)
+                    self.decoders[p.stream] = decoder
                     self.frames[p.stream], self.counts[p.stream], self.bytes[p.stream] = [], 0, 0
+            except MocodecError:
+                self.refused += 1
+                continue
+            if p.kind == HEADER:
                 continue
             dec = self.decoders.get(p.stream)
             if dec is not None:

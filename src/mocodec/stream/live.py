@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mocodec.codecs import get_codec
+from mocodec.codecs import codec_from_untrusted
 from mocodec.codecs.base import Codec, checked_frames
 from mocodec.coding.rangecoder import encode_ints
 from mocodec.errors import CodecError
@@ -37,6 +37,11 @@ PRIMER_S = 1.0
 #: measured over.
 EXTRAPOLATE_S = 0.25
 VELOCITY_FRAMES = 5
+#: The longest gap a receiver fills with concealed frames (seconds, and values: frames x
+#: channels); a packet further ahead (a hostile first_frame of 2**32 - 200) restarts the
+#: frame count there instead, so a packet cannot make a receiver allocate without bound.
+MAX_CONCEAL_S = 10.0
+MAX_CONCEAL_VALUES = 1 << 22
 
 
 def now_us() -> int:
@@ -166,13 +171,16 @@ class ReceiverStats:
 class LiveDecoder:
     """Packets in, frames out, for one stream. Never raises on a bad or missing packet: it
     conceals (``hold`` the last frame, or ``extrapolate`` the velocity of the last few frames
-    for a quarter second, then hold) until the next keyframe."""
+    for a quarter second, then hold) until the next keyframe. The stream header is checked
+    when the decoder is made (CorruptStreamError for one no codec can be made of; a knob naming
+    a local file is the caller's ``local_files`` entry, never the header's)."""
 
-    def __init__(self, info: StreamInfo, conceal: str = "hold"):
+    def __init__(self, info: StreamInfo, conceal: str = "hold", local_files: dict | None = None):
         if conceal not in ("hold", "extrapolate"):
             raise CodecError(f"concealment must be hold or extrapolate, got {conceal!r}")
         self.info = info
-        self.codec = get_codec(info.codec["codec"], **info.codec.get("knobs", {}))
+        self.codec = codec_from_untrusted(info.codec, "stream header", local_files)
+        self.max_gap = max(min(int(MAX_CONCEAL_S * info.fps), MAX_CONCEAL_VALUES // info.skeleton.num_channels), 1)
         self.conceal = conceal
         self.decoder = None
         self.expected: int | None = None      # next sequence number
@@ -186,7 +194,16 @@ class LiveDecoder:
         return self.decoder is not None
 
     def push(self, packet: Packet) -> np.ndarray:
-        """The frames up to the end of this packet's range: decoded, or concealed."""
+        """The frames up to the end of this packet's range: decoded, or concealed (none for
+        a gap over :data:`MAX_CONCEAL_S`)."""
+        try:
+            return self._push(packet)
+        except Exception:   # noqa: BLE001 - a hostile packet must not take the receiver down
+            self.decoder = None
+            self.stats.dropped += 1
+            return np.zeros((0, self.info.skeleton.num_channels))
+
+    def _push(self, packet: Packet) -> np.ndarray:
         empty = np.zeros((0, self.info.skeleton.num_channels))
         if packet.kind != DATA or packet.codec != self.codec.id:
             self.stats.dropped += 1
@@ -239,6 +256,9 @@ class LiveDecoder:
                 self.next_frame = upto        # joined mid-stream: start at the keyframe
             return np.zeros((0, n_ch))
         n = upto - self.next_frame
+        if n > self.max_gap:                  # too far ahead to fill: count on from there
+            self.next_frame = upto
+            return np.zeros((0, n_ch))
         last = self.tail[-1]
         out = np.repeat(last[None], n, axis=0)
         if self.conceal == "extrapolate" and len(self.tail) == VELOCITY_FRAMES:

@@ -30,8 +30,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from mocodec import limits
 from mocodec.errors import CorruptStreamError
-from mocodec.formats.container import skeleton_from_dict, skeleton_to_dict
+from mocodec.formats.container import inflate_capped, skeleton_from_dict, skeleton_to_dict
 from mocodec.skeleton import Skeleton
 
 MAGIC = b"MP"
@@ -156,10 +157,24 @@ class StreamInfo:
 
     @classmethod
     def from_payload(cls, payload: bytes, where: str = "stream header") -> "StreamInfo":
+        """The header's contents, every field checked: inflated to at most
+        :data:`~mocodec.limits.MAX_HEADER_TEXT` bytes, a skeleton of at most
+        :data:`~mocodec.limits.MAX_JOINTS` joints, a finite positive frame rate up to
+        :data:`~mocodec.limits.MAX_FPS`, the codec config an object (its knobs are checked when
+        a codec is made of it: :func:`~mocodec.codecs.codec_from_untrusted`)."""
         try:
-            doc = json.loads(zlib.decompress(payload))
-            return cls(skeleton_from_dict(doc["skeleton"]), float(doc["fps"]), dict(doc["codec"]),
-                       str(doc.get("name", "")), dict(doc.get("extra", {})))
+            doc = json.loads(inflate_capped(payload, b"", limits.MAX_HEADER_TEXT))
+            if not isinstance(doc, dict) or not isinstance(doc.get("codec"), dict) \
+                    or not isinstance(doc["codec"].get("codec"), str):
+                raise ValueError("expected an object with a codec config naming a codec")
+            if not isinstance(doc.get("skeleton"), dict) or len(doc["skeleton"].get("joints", ())) > limits.MAX_JOINTS:
+                raise ValueError(f"expected a skeleton of at most {limits.MAX_JOINTS} joints")
+            fps = float(doc["fps"])
+            if not 0 < fps <= limits.MAX_FPS:
+                raise ValueError(f"frame rate {fps} is outside (0, {limits.MAX_FPS:g}]")
+            extra = doc.get("extra", {})
+            return cls(skeleton_from_dict(doc["skeleton"]), fps, doc["codec"], str(doc.get("name", "")),
+                       extra if isinstance(extra, dict) else {})
         except Exception as e:   # noqa: BLE001 - anything malformed in a header
             raise CorruptStreamError(f"{where}: does not parse ({type(e).__name__}: {e})") from None
 

@@ -22,23 +22,31 @@ one batch queued per viewer: a slow viewer misses ticks and resynchronises at th
 keyframe, and missing ticks for ``slow_viewer_s`` drops it (its connection is cut, as a close
 frame would wait behind the data its link cannot take), so memory does not grow with slow
 links. A malformed message closes its connection only, with a close code and the reason.
+Connections are counted before HTTP parses anything (:class:`ConnectionGuard`): at most
+``max_connections`` in all and ``max_connections_per_host`` from one address, and one that has
+not made its request within ``request_timeout_s`` is cut. A connection is closed when its
+token expires. ``/status`` shows totals only: room names are for token holders.
+Threat model: docs/security.md.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import functools
 import json
 import logging
 import math
+import resource
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from aiohttp import WSMsgType, web
+from aiohttp.abc import AbstractAccessLogger
 
-from mocodec.codecs import get_codec
+from mocodec.codecs import codec_from_untrusted
 from mocodec.coding.rangecoder import decode_ints
 from mocodec.errors import MocodecError
 from mocodec.scene import bandwidth_scores, split_budget
@@ -66,6 +74,9 @@ class Limits:
     max_gop_packets: int = 512
     max_streams_per_room: int = 5000
     min_distance_m: float = 0.1
+    max_connections: int = 2000
+    max_connections_per_host: int = 200
+    request_timeout_s: float = 10.0
 
 
 class Bucket:
@@ -140,6 +151,11 @@ class Room:
     streams: dict[int, StreamState] = field(default_factory=dict)
     viewers: list[Viewer] = field(default_factory=list)
     fresh: list[Forward] = field(default_factory=list)
+    publishers: int = 0                  # connected senders (a room with one is kept, streams or not)
+
+    @property
+    def idle(self) -> bool:
+        return not (self.streams or self.viewers or self.publishers)
 
 
 async def messages_of(ws: web.WebSocketResponse, kind: WSMsgType, refusal: str):
@@ -158,7 +174,7 @@ def stream_setup(header_payload: bytes) -> tuple[StreamInfo, object]:
     """A stream header's contents and codec, parsed once for every avatar that sends the same
     header (a crowd of one kind joins at the cost of one)."""
     info = StreamInfo.from_payload(header_payload)
-    return info, get_codec(info.codec["codec"], **info.codec.get("knobs", {}))
+    return info, codec_from_untrusted(info.codec, "stream header")
 
 
 class Relay:
@@ -168,13 +184,14 @@ class Relay:
         self.secret, self.limits, self.tick_s = secret, limits or Limits(), 1.0 / tick_hz
         self.rooms: dict[str, Room] = {}
         self.bus = bus
+        self.guard: ConnectionGuard | None = None       # set by start()
         self.started = time.monotonic()
         self.counters = {"packets_in": 0, "batches_out": 0, "missed_ticks": 0, "closed_bad": 0,
-                         "closed_rate": 0, "dropped_slow": 0}
+                         "closed_rate": 0, "closed_expired": 0, "dropped_slow": 0}
 
     # ----- the application -------------------------------------------------------------------
     def app(self) -> web.Application:
-        app = web.Application()
+        app = web.Application(middlewares=[self._served])
         app.router.add_get("/ws", self.handle_ws)
         app.router.add_get("/status", self.handle_status)
         if STATIC.is_dir():
@@ -183,6 +200,13 @@ class Relay:
         app.on_startup.append(self._start)
         app.on_cleanup.append(self._stop)
         return app
+
+    @web.middleware
+    async def _served(self, request: web.Request, handler):
+        """Every request that reaches a handler marks its connection as past the guard's timeout."""
+        if self.guard is not None:
+            self.guard.served(request.transport)
+        return await handler(request)
 
     async def _start(self, app: web.Application) -> None:
         self._ticker = asyncio.create_task(self._tick_loop())
@@ -198,9 +222,11 @@ class Relay:
         return web.FileResponse(STATIC / "index.html")
 
     async def handle_status(self, request: web.Request) -> web.Response:
-        rooms = {name: {"streams": len(r.streams), "viewers": len(r.viewers)} for name, r in self.rooms.items()}
-        return web.json_response({"rooms": rooms, "uptime_s": round(time.monotonic() - self.started, 1),
-                                  **self.counters})
+        """Totals only: a room's name is what its tokens are issued for."""
+        rooms = self.rooms.values()
+        return web.json_response({"rooms": len(self.rooms), "streams": sum(len(r.streams) for r in rooms),
+                                  "viewers": sum(len(r.viewers) for r in rooms),
+                                  "uptime_s": round(time.monotonic() - self.started, 1), **self.counters})
 
     async def handle_ws(self, request: web.Request) -> web.WebSocketResponse:
         room_name = request.query.get("room", "")
@@ -213,25 +239,38 @@ class Relay:
             if role not in ("publish", "subscribe"):
                 raise Closing(BAD_MESSAGE, f"role must be publish or subscribe, got {role!r}")
             try:
-                tokens.verify(self.secret, token, room_name, role)
+                claims = tokens.verify(self.secret, token, room_name, role)
             except tokens.TokenError as e:
                 raise Closing(BAD_TOKEN, str(e)) from None
             room = self.rooms.setdefault(room_name, Room())
+            expiry = asyncio.get_running_loop().call_later(max(float(claims["exp"]) - time.time(), 0.0),
+                                                           self._expire, ws)
             await ws.send_json({"welcome": room_name, "role": role})
-            if role == "publish":
-                await self._publisher(ws, room_name, room)
-            else:
-                await self._viewer(ws, room, request.transport)
+            try:
+                if role == "publish":
+                    await self._publisher(ws, room_name, room)
+                else:
+                    await self._viewer(ws, room, request.transport)
+            finally:
+                expiry.cancel()
         except Closing as c:
             self.counters["closed_rate" if c.code == RATE_LIMIT else "closed_bad"] += 1
             log.info("closing a connection: %s", c.reason)
             await ws.close(code=c.code, message=c.reason[:120].encode())
         return ws
 
+    def _expire(self, ws: web.WebSocketResponse) -> None:
+        """A connection's token has expired: close it (a viewer stops receiving, a sender's
+        streams end)."""
+        self.counters["closed_expired"] += 1
+        log.info("closing a connection: token expired")
+        asyncio.ensure_future(ws.close(code=BAD_TOKEN, message=b"token expired"))
+
     # ----- senders -----------------------------------------------------------------------------
     async def _publisher(self, ws: web.WebSocketResponse, room_name: str, room: Room) -> None:
         messages = Bucket(self.limits.publish_messages_per_s, self.limits.burst_s)
         volume = Bucket(self.limits.publish_bytes_per_s, self.limits.burst_s)
+        room.publishers += 1
         try:
             async for data in messages_of(ws, WSMsgType.BINARY, "a sender sends binary packet batches only"):
                 if not messages.take() or not volume.take(len(data)):
@@ -241,6 +280,7 @@ class Relay:
                 if self.bus is not None:
                     await self.bus.publish(room_name, data)
         finally:                            # streams left without their end: end them for everyone
+            room.publishers -= 1
             ends = [s.end_packet(k).to_bytes() for k, s in room.streams.items() if s.owner is ws and not s.ended]
             if ends:
                 self._ingest(room, pack_batch(ends), owner=ws)
@@ -350,7 +390,7 @@ class Relay:
                     self._dispatch(room)
                 except Exception:   # noqa: BLE001 - one room's fault must not stop the others
                     log.exception("dispatching room %s failed", name)
-            for name in [n for n, r in self.rooms.items() if not r.streams and not r.viewers]:
+            for name in [n for n, r in self.rooms.items() if r.idle]:
                 del self.rooms[name]
 
     def _dispatch(self, room: Room) -> None:
@@ -428,7 +468,7 @@ class Relay:
             if f.cutter is None:
                 f.cutter = state.codec.packet_cutter(f.packet.payload, state.info.skeleton, f.cuts, state.info.fps)
             payload = f.cutter(rate)
-        except MocodecError as e:            # a cut table that does not fit: pass the packet whole
+        except Exception as e:   # noqa: BLE001 - a cut table that does not fit the payload: pass it whole
             log.warning("stream %d: packet %d not cut: %s", f.packet.stream, f.packet.sequence, e)
             f.cuts = None
             return f.data
@@ -443,7 +483,122 @@ def on_ladder(bits_per_second: float) -> float:
     return 2.0 ** (math.floor(math.log2(bits_per_second) * LADDER_STEPS) / LADDER_STEPS)
 
 
+class ConnectionGuard:
+    """The relay's protocol factory around aiohttp's: counts connections before HTTP parses
+    a byte, refuses those over ``max_connections`` (or ``max_connections_per_host`` from one
+    address), and cuts one whose request has not reached a handler within
+    ``request_timeout_s`` (slow openers hold a descriptor each; 300 of them once exhausted a
+    relay's 256). Handlers mark their connection as served (:meth:`served`)."""
+
+    def __init__(self, factory, limits: Limits):
+        self.factory, self.limits = factory, limits
+        self.open: dict[object, str] = {}           # transport -> peer host
+        self.per_host: dict[str, int] = {}
+        self.refused = 0
+        self._served: set[int] = set()
+
+    def served(self, transport) -> None:
+        if transport is not None:
+            self._served.add(id(transport))
+
+    def __call__(self) -> asyncio.Protocol:
+        return _Guarded(self, self.factory())
+
+    def admit(self, transport) -> bool:
+        """Count a new connection, or refuse it (False: it has been aborted)."""
+        peer = transport.get_extra_info("peername")
+        host = str(peer[0]) if isinstance(peer, tuple) and peer else "?"
+        if len(self.open) >= self.limits.max_connections or \
+                self.per_host.get(host, 0) >= self.limits.max_connections_per_host:
+            self.refused += 1
+            transport.abort()
+            return False
+        self.open[transport] = host
+        self.per_host[host] = self.per_host.get(host, 0) + 1
+        asyncio.get_running_loop().call_later(self.limits.request_timeout_s, self._check, transport)
+        return True
+
+    def release(self, transport) -> None:
+        if transport in self.open:
+            self._forget(transport)
+
+    def _check(self, transport) -> None:
+        if transport in self.open and id(transport) not in self._served:
+            self.refused += 1
+            transport.abort()
+
+    def _forget(self, transport) -> None:
+        host = self.open.pop(transport)
+        self._served.discard(id(transport))
+        self.per_host[host] -= 1
+        if not self.per_host[host]:
+            del self.per_host[host]
+
+
+class _Guarded(asyncio.Protocol):
+    """aiohttp's protocol for one connection, admitted and released by the guard."""
+
+    def __init__(self, guard: ConnectionGuard, inner: asyncio.Protocol):
+        self.guard, self.inner, self.transport = guard, inner, None
+
+    def connection_made(self, transport) -> None:
+        self.transport = transport
+        self.inner.connection_made(transport)
+        self.guard.admit(transport)
+
+    def data_received(self, data: bytes) -> None:
+        self.inner.data_received(data)
+
+    def eof_received(self):
+        return self.inner.eof_received()
+
+    def pause_writing(self) -> None:
+        self.inner.pause_writing()
+
+    def resume_writing(self) -> None:
+        self.inner.resume_writing()
+
+    def connection_lost(self, exc) -> None:
+        self.guard.release(self.transport)
+        self.inner.connection_lost(exc)
+
+
+class PathOnlyAccessLogger(AbstractAccessLogger):
+    """The access log without query strings: a token in ``?token=`` must not reach a log."""
+
+    def log(self, request, response, time_s: float) -> None:
+        self.logger.info("%s %s %s %d %.3fs", request.remote, request.method, request.path, response.status, time_s)
+
+
+async def start(relay: Relay, host: str, port: int) -> tuple[web.AppRunner, asyncio.AbstractServer]:
+    """The relay listening on ``host:port`` (0: any free port) behind its
+    :class:`ConnectionGuard`; stop with ``server.close()`` and ``runner.cleanup()``."""
+    runner = web.AppRunner(relay.app(), access_log_class=PathOnlyAccessLogger)
+    await runner.setup()
+    relay.guard = ConnectionGuard(runner.server, relay.limits)
+    server = await asyncio.get_running_loop().create_server(relay.guard, host, port)
+    return runner, server
+
+
+def raise_descriptor_limit() -> None:
+    """Raise the soft limit on open files to the hard one: every viewer holds a descriptor."""
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if hard == resource.RLIM_INFINITY or soft < hard:
+        resource.setrlimit(resource.RLIMIT_NOFILE, (hard if hard != resource.RLIM_INFINITY else max(soft, 65536),
+                                                    hard))
+
+
 def run(host: str, port: int, secret: str, limits: Limits | None = None, bus=None, tick_hz: float = 30.0) -> None:
     """Serve until interrupted (``mocodec serve``)."""
-    web.run_app(Relay(secret, limits, tick_hz, bus).app(), host=host, port=port, print=None,
-                handle_signals=True)
+    raise_descriptor_limit()
+
+    async def serve() -> None:
+        runner, server = await start(Relay(secret, limits, tick_hz, bus), host, port)
+        try:
+            await asyncio.Event().wait()
+        finally:
+            server.close()
+            await runner.cleanup()
+
+    with contextlib.suppress(KeyboardInterrupt):
+        asyncio.run(serve())

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import os
 from pathlib import Path
 
 from mocodec.cli_coding import add_codec_options, configured
@@ -14,6 +15,32 @@ from mocodec.stream import client, tokens
 from mocodec.stream.relay import Limits, run
 
 PUBLISH_CODEC = "spiht"
+
+
+SECRET_ENV = "MOCODEC_RELAY_SECRET"
+
+
+def secret_of(args) -> str:
+    """The relay secret from ``--secret-file``, ``--secret`` (visible in ``ps``: for tests
+    and one-off use) or the environment (MOCODEC_RELAY_SECRET), in that order."""
+    if args.secret_file:
+        try:
+            secret = Path(args.secret_file).read_text().strip()
+        except OSError as e:
+            raise MocodecError(f"{args.secret_file}: cannot read the secret ({e.strerror})") from None
+        if not secret:
+            raise MocodecError(f"{args.secret_file}: the secret file is empty")
+        return secret
+    secret = args.secret or os.environ.get(SECRET_ENV, "")
+    if not secret:
+        raise MocodecError(f"give the relay secret in a file (--secret-file), in {SECRET_ENV}, or with --secret")
+    return secret
+
+
+def add_secret_options(p) -> None:
+    p.add_argument("--secret-file", metavar="FILE", help="a file holding the secret room tokens are signed with")
+    p.add_argument("--secret", help=f"the secret itself (visible to every user in `ps`; prefer --secret-file or "
+                                    f"{SECRET_ENV})")
 
 
 def cmd_serve(args) -> int:
@@ -28,12 +55,12 @@ def cmd_serve(args) -> int:
                     publish_bytes_per_s=args.max_bytes_per_s)
     print(f"mocodec relay on http://{args.host}:{args.port} (WebSocket /ws, status /status)"
           + (f", bus {args.bus}" if bus else ""), flush=True)
-    run(args.host, args.port, args.secret, limits, bus, args.tick_hz)
+    run(args.host, args.port, secret_of(args), limits, bus, args.tick_hz)
     return 0
 
 
 def cmd_token(args) -> int:
-    print(tokens.issue(args.secret, args.room, args.role, args.ttl))
+    print(tokens.issue(secret_of(args), args.room, args.role, args.ttl))
     return 0
 
 
@@ -83,7 +110,7 @@ def add_commands(sub) -> None:
                                    "rule of 001 (6.4, 6.5). Publish and subscribe need a token from `mocodec token`.")
     p.add_argument("--port", type=int, default=8765)
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1; 0.0.0.0: all)")
-    p.add_argument("--secret", required=True, help="the secret room tokens are signed with")
+    add_secret_options(p)
     p.add_argument("--bus", metavar="nats://HOST:4222", help="share rooms with other relays through NATS")
     p.add_argument("--tick-hz", type=float, default=30.0, help="batches per second to each viewer (default 30)")
     p.add_argument("--max-message-bytes", type=int, default=Limits.max_message_bytes)
@@ -95,7 +122,7 @@ def add_commands(sub) -> None:
     p.set_defaults(func=cmd_serve)
 
     p = sub.add_parser("token", help="issue a room token signed with the relay's secret")
-    p.add_argument("--secret", required=True)
+    add_secret_options(p)
     p.add_argument("--room", required=True)
     p.add_argument("--role", choices=tokens.ROLES, default="both", help="what it allows (default both)")
     p.add_argument("--ttl", type=float, default=24 * 3600.0, help="lifetime in seconds (default a day)")

@@ -421,6 +421,9 @@ class SpihtCodec(Codec):
             raise CorruptStreamError(f"spiht packet: {len(parts)} parts, expected 4 or 5")
         levels = decode_ints(parts[-3])
         total = _packet_total(parts[-2])
+        if len(parts[-1]) < _U32.size:
+            raise CorruptStreamError(f"spiht packet: its bit stream part is {len(parts[-1])} bytes, shorter than "
+                                     "its 4-byte length")
         (n_bits,) = _U32.unpack_from(parts[-1])
         bits = np.unpackbits(np.frombuffer(parts[-1], dtype=np.uint8, offset=4))[:n_bits]
         if levels.size != skeleton.num_channels or bits.size != n_bits \

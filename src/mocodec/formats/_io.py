@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import os
+import re
+import stat
 import tempfile
+import time
 import warnings
 from pathlib import Path
 
@@ -42,21 +45,98 @@ def atomic_write(path: str | os.PathLike, text: str) -> None:
     atomic_write_bytes(path, text.encode("utf-8"))
 
 
+#: A temporary file of an interrupted write older than this is removed by the next write
+#: beside it (a younger one may belong to a write still running).
+STALE_TEMP_S = 3600.0
+_TEMP_NAME = re.compile(r"^\..+\.[a-z0-9_]{8}\.tmp$")
+
+
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
-    """:func:`atomic_write` for bytes."""
+    """:func:`atomic_write` for bytes. A symbolic link is followed (its target is replaced);
+    a device, FIFO or socket (``/dev/null``, ``/dev/stdout``, a pipe) is written through, as
+    there is nothing to replace; a regular file keeps its mode, a new one takes the umask's.
+    The data is on disk (fsync) before the rename; stale temporary files of interrupted writes
+    in that directory are removed."""
     path = Path(path)
-    directory = path.parent if str(path.parent) else Path(".")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=directory)
+    target = Path(os.path.realpath(path))
+    try:
+        existing = target.stat()
+    except FileNotFoundError:
+        existing = None
+    except OSError as e:
+        raise FormatError(path, None, f"cannot write: {e.strerror}") from None
+    if existing is not None and stat.S_ISDIR(existing.st_mode):
+        raise FormatError(path, None, "is a directory, expected a file to write")
+    if existing is not None and not stat.S_ISREG(existing.st_mode):
+        with open(target, "wb") as f:
+            f.write(data)
+        return
+    directory = target.parent
+    if not directory.is_dir():
+        raise FormatError(path, None, f"cannot write: the directory {directory} does not exist")
+    _remove_stale_temps(directory)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=directory)
+    except OSError as e:
+        raise FormatError(path, None, f"cannot write: {e.strerror}") from None
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
-        os.replace(tmp, path)
+            f.flush()
+            os.fsync(f.fileno())
+        os.chmod(tmp, stat.S_IMODE(existing.st_mode) if existing is not None else 0o666 & ~_umask())
+        os.replace(tmp, target)
     except BaseException:
         try:
             os.unlink(tmp)
         except FileNotFoundError:
             pass
         raise
+    _sync_directory(directory)
+
+
+def _umask() -> int:
+    """The process's umask (read from /proc, as setting it to read it races with threads)."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _remove_stale_temps(directory: Path) -> None:
+    """Remove temporary files that interrupted writes left in ``directory``."""
+    now = time.time()
+    try:
+        entries = list(os.scandir(directory))
+    except OSError:
+        return
+    for entry in entries:
+        if _TEMP_NAME.match(entry.name):
+            try:
+                if entry.is_file(follow_symlinks=False) and now - entry.stat().st_mtime > STALE_TEMP_S:
+                    os.unlink(entry.path)
+            except OSError:
+                pass
+
+
+def _sync_directory(directory: Path) -> None:
+    """Make the rename durable (best effort: not every file system lets a directory be synced)."""
+    try:
+        fd = os.open(directory, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
 
 
 def parse_number(token: str, path, line: int, what: str = "a number") -> float:

@@ -185,7 +185,9 @@ class _AsfParser:
                 dofs = [t.lower() for t in toks[1:]]
                 for d in dofs:
                     if d not in _DOF_CHANNEL:
-                        raise self.error(n, f"dof {d!r} is not supported, expected rx, ry, rz, tx, ty or tz")
+                        raise self.error(n, f"dof {d[:20]!r} is not supported, expected rx, ry, rz, tx, ty or tz")
+                if len(set(dofs)) != len(dofs):
+                    raise self.error(n, f"dof {' '.join(dofs)}: a dof is listed twice")
                 bone["dof"] = dofs
             elif key == "limits" or continues_limits:
                 bone["in_limits"] = True
@@ -235,6 +237,8 @@ class _AsfParser:
                         raise self.error(n, f"bone {name!r} is not defined in :bonedata")
                 parent = toks[0]
                 for child in toks[1:]:
+                    if child == "root":
+                        raise self.error(n, "root cannot be the child of another bone")
                     if child in self.hierarchy_line:
                         raise self.error(n, f"bone {child!r} has two parents")
                     self.hierarchy_line[child] = n
@@ -243,6 +247,13 @@ class _AsfParser:
         raise self.error(n - 1, ":hierarchy has no 'end'")
 
     def skeleton(self) -> Skeleton:
+        """The skeleton the file describes; FormatError for one the data model refuses."""
+        try:
+            return self._skeleton()
+        except ValueError as e:
+            raise FormatError(self.path, None, str(e)) from None
+
+    def _skeleton(self) -> Skeleton:
         root_order = self.root["order"]
         root_rot = [t[1] for t in root_order if t.startswith("R")]
         joints = [Joint(
@@ -255,25 +266,25 @@ class _AsfParser:
         index = {"root": 0}
         bone_vec = {"root": np.zeros(3)}
 
-        def add(name: str, parent: str) -> None:
+        todo = [(child, "root") for child in reversed(self.hierarchy.get("root", []))]
+        while todo:                 # depth first, children in file order (a chain may be thousands deep)
+            name, parent = todo.pop()
             b = self.bones[name]
             rot = [d[1].upper() for d in b["dof"] if d.startswith("r")]
-            limits = tuple(b["limits"])
             joints.append(Joint(
                 name=name, parent=index[parent], offset=tuple(bone_vec[parent]),
                 channels=tuple(_DOF_CHANNEL[d] for d in b["dof"]), rotation_order="".join(reversed(rot)),
-                axis=tuple(reversed(b["axis"])), axis_order=b["axis_order"][::-1], limits=limits,
+                axis=tuple(reversed(b["axis"])), axis_order=b["axis_order"][::-1], limits=tuple(b["limits"]),
             ))
             index[name] = len(joints) - 1
             bone_vec[name] = np.asarray(b["direction"]) * b["length"]
             kids = self.hierarchy.get(name, [])
             if not kids:
+                if f"{name}_end" in self.bones:
+                    raise self.error(self.bones[f"{name}_end"]["line"], f"bone name {name}_end is the name of "
+                                     f"the end site of leaf bone {name!r}")
                 joints.append(Joint(name=f"{name}_end", parent=index[name], offset=tuple(bone_vec[name])))
-            for child in kids:
-                add(child, name)
-
-        for child in self.hierarchy.get("root", []):
-            add(child, "root")
+            todo.extend((child, name) for child in reversed(kids))
         missing = [b for b in self.bones if b not in index]
         if missing:
             b = missing[0]
@@ -334,6 +345,11 @@ def read_amc(path: str | os.PathLike, skeleton: Skeleton | str | os.PathLike | N
     return Motion(skeleton, fps, channels)
 
 
+def _frame_number(token: str) -> int | None:
+    """The frame number ``token`` is (ASCII digits, at most 9 of them), or None."""
+    return int(token) if token.isascii() and token.isdigit() and len(token) <= 9 else None
+
+
 def _frame_layout(skeleton: Skeleton) -> dict[str, tuple[int, int]]:
     """Bone name -> (first channel, channel count) for every joint with channels."""
     return {j.name: (int(skeleton.channel_offsets[i]), len(j.channels))
@@ -351,7 +367,7 @@ def _fast_frames(lines: list[str], start: int, layout: dict, path) -> np.ndarray
         end -= 1
     order = []
     k = start + 1
-    while k < end and not lines[k].strip().isdigit():
+    while k < end and _frame_number(lines[k].strip()) is None:
         name = lines[k].split(None, 1)[0] if lines[k].strip() else ""
         if name not in layout or name in order:
             return None
@@ -363,10 +379,9 @@ def _fast_frames(lines: list[str], start: int, layout: dict, path) -> np.ndarray
     if (end - start) % block:
         return None
     frames = (end - start) // block
-    first = lines[start].strip()
-    if not first.isdigit():
+    f0 = _frame_number(lines[start].strip())
+    if f0 is None:
         return None
-    f0 = int(first)
     if [s.strip() for s in lines[start:end:block]] != [str(f0 + i) for i in range(frames)]:
         return None
     width = sum(c for _, c in layout.values())
@@ -406,9 +421,8 @@ def _slow_frames(lines: list[str], start: int, layout: dict, skeleton: Skeleton,
         toks = lines[n].split()
         if not toks:
             continue
-        if toks[0].isdigit() and len(toks) == 1:
+        if len(toks) == 1 and (number := _frame_number(toks[0])) is not None:
             close()
-            number = int(toks[0])
             if expected_frame is not None and number != expected_frame + 1:
                 raise FormatError(path, n + 1, f"frame number {number}, expected {expected_frame + 1}")
             expected_frame = number
@@ -417,7 +431,7 @@ def _slow_frames(lines: list[str], start: int, layout: dict, skeleton: Skeleton,
             frame_line = n
             continue
         if current is None:
-            raise FormatError(path, n + 1, f"expected a frame number, found {toks[0]!r}")
+            raise FormatError(path, n + 1, f"expected a frame number, found {toks[0][:40]!r}")
         name = toks[0]
         if name not in layout:
             if name in skeleton.names:

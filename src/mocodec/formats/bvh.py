@@ -14,6 +14,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from mocodec import limits
 from mocodec.errors import FormatError
 from mocodec.formats._io import atomic_write, format_rows, parse_number, parse_number_block, read_text
 from mocodec.motion import Motion
@@ -142,15 +143,17 @@ class _HierarchyParser:
 
     def skeleton(self, units_per_metre: float) -> Skeleton:
         names: set[str] = {j["name"] for j in self.joints if j["name"]}
+        suffix: dict[str, int] = {}             # the last number given to each end site base name
         joints = []
         for j in self.joints:
             name = j["name"]
             if name is None:
                 base = f"{self.joints[j['parent']]['name']}_end"
-                name, k = base, 1
+                name, k = base, suffix.get(base, 1)
                 while name in names:
                     k += 1
                     name = f"{base}{k}"
+                suffix[base] = k
                 names.add(name)
                 j["name"] = name
             order = "".join(c[0] for c in j["channels"] if c.endswith("rotation"))
@@ -198,7 +201,12 @@ def read_bvh(path: str | os.PathLike, units_per_metre: float | None = None) -> M
     frame_time = parse_number(token, path, at, "the frame time in seconds")
     if frame_time <= 0:
         raise FormatError(path, at, f"frame time {token} must be positive")
-    skeleton = parser.skeleton(1.0)
+    if frame_time < 1.0 / limits.MAX_FPS:
+        raise FormatError(path, at, f"frame time {token} s is over {limits.MAX_FPS:g} frames per second")
+    try:
+        skeleton = parser.skeleton(1.0)
+    except ValueError as e:
+        raise FormatError(path, None, str(e)) from None
     if skeleton_units is None:
         skeleton_units = guess_units_per_metre(skeleton.height())
     skeleton = replace(skeleton, units_per_metre=skeleton_units)

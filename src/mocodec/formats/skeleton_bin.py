@@ -148,16 +148,23 @@ def _as_product(offset: tuple[float, ...]) -> bytes | None:
     return best
 
 
-def _mirror(offsets: list[tuple[float, ...]], i: int) -> int:
-    """``back << 3 | signs``: joint ``i``'s offset is joint ``i - back``'s with the coordinates
-    in ``signs`` (bit a for axis a) negated, bit for bit; 0 if no earlier joint's is."""
-    mine = struct.pack("<3d", *offsets[i])
-    for k in range(i - 1, -1, -1):
-        for signs in range(8):
-            flipped = tuple(-x if signs >> a & 1 else x for a, x in enumerate(offsets[k]))
-            if any(flipped) and struct.pack("<3d", *flipped) == mine:
-                return (i - k) << 3 | signs
-    return 0
+def _mirrors(offsets: list[tuple[float, ...]]) -> list[int]:
+    """Per joint ``i``, ``back << 3 | signs``: its offset is joint ``i - back``'s with the
+    coordinates in ``signs`` (bit a for axis a) negated, bit for bit, the nearest such joint
+    and then the fewest signs; 0 if no earlier joint's is (or the offset is zero). One pass with
+    a table of the offsets seen, so a skeleton of thousands of joints packs in linear time."""
+    last: dict[bytes, int] = {}                 # an offset's exact bytes -> the last joint with it
+    out = []
+    for i, offset in enumerate(offsets):
+        best = 0
+        if any(offset):
+            for signs in range(8):              # joint k's offset flipped by signs is mine: k's is mine flipped
+                k = last.get(struct.pack("<3d", *(-x if signs >> a & 1 else x for a, x in enumerate(offset))))
+                if k is not None and (not best or i - k < best >> 3):
+                    best = (i - k) << 3 | signs
+        out.append(best)
+        last[struct.pack("<3d", *offset)] = i
+    return out
 
 
 def round_offsets(skeleton: Skeleton, precision_cm: float) -> Skeleton:
@@ -191,8 +198,8 @@ def _offset_column(offsets: list[tuple[float, ...]], places: int | None) -> byte
     integers / 10^places. The column opens with places + 1 (0: tagged)."""
     w = _Writer()
     w.uint(0 if places is None else places + 1)
-    for i, offset in enumerate(offsets):
-        if mirror := _mirror(offsets, i):
+    for offset, mirror in zip(offsets, _mirrors(offsets)):
+        if mirror:
             w.uint(mirror)
             continue
         w.uint(_PLAIN)

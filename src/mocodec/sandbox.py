@@ -9,6 +9,7 @@ exhaustion or hang becomes a :class:`~mocodec.errors.CorruptStreamError` here.
 
 from __future__ import annotations
 
+import faulthandler
 import multiprocessing
 import os
 import resource
@@ -31,6 +32,7 @@ def _mapped_bytes() -> int:
 
 
 def _child(conn, func, args, memory_bytes: int) -> None:
+    faulthandler.disable()          # a crash here is expected and reported by the parent
     limit = _mapped_bytes() + memory_bytes
     resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
     try:

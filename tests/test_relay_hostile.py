@@ -1,0 +1,184 @@
+"""The relay under attack (docs/security.md): hostile publishers, slow openers, expired tokens.
+Each test is one defect fuzzing found; the last runs them all beside a viewer that must get
+its stream exactly as if nothing had happened."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import socket
+import zlib
+
+import aiohttp
+import numpy as np
+
+from mocodec.codecs import get_codec
+from mocodec.coding.parts import join_parts, split_parts
+from mocodec.codecs.spiht import _PACKET
+from mocodec.stream import tokens
+from mocodec.stream.client import Watcher, connect, publish_clip, record
+from mocodec.stream.live import receive_clip, stream_clip
+from mocodec.stream.packets import CUTS, END, HEADER, Packet, pack_batch, with_cuts
+from mocodec.stream.relay import BAD_MESSAGE, BAD_TOKEN, Limits, Relay, on_ladder
+from test_relay import SECRET, serving, token
+
+
+def header_bytes(doc_change, walk, stream: int = 7) -> bytes:
+    """A stream header packet of ``walk`` with its JSON changed by ``doc_change``."""
+    header = stream_clip(walk[:10], get_codec("dpcm"))[0]
+    doc = json.loads(zlib.decompress(header.payload))
+    doc_change(doc)
+    payload = zlib.compress(json.dumps(doc).encode())
+    return Packet(stream, 0, 0, "dpcm", 0, 0, payload, kind=HEADER).to_bytes()
+
+
+async def refused_with(url: str, message: bytes) -> tuple[int, str]:
+    """Publish one message; the close code and reason the relay answers with."""
+    async with connect(url, "lobby", token(), "publish") as ws:
+        await ws.send_bytes(message)
+        msg = await ws.receive(timeout=10)
+        return ws.close_code, str(msg.extra)
+
+
+def hostile_messages(walk) -> list[bytes]:
+    bomb = Packet(8, 0, 0, "dpcm", 0, 0, zlib.compress(b"\0" * (64 << 20), 9), kind=HEADER).to_bytes()
+    return [
+        bomb,                                                               # 64 MiB of header from 64 KB
+        header_bytes(lambda d: d.update(codec={}), walk),
+        header_bytes(lambda d: d.update(codec={"codec": "dpcm", "knobs": [1, 2]}), walk),
+        header_bytes(lambda d: d.update(codec={"codec": "dpcm", "knobs": "levels=3"}), walk),
+        header_bytes(lambda d: d.update(fps=float("nan")), walk),
+        header_bytes(lambda d: d.update(codec={"codec": "primitives", "knobs": {"db": "/dev/zero"}}), walk)[:-9],
+    ]
+
+
+def test_each_hostile_header_closes_its_connection_with_a_reason(walk_bvh):
+    async def go():
+        async with serving() as url:
+            return [await refused_with(url, pack_batch([m])) for m in hostile_messages(walk_bvh)[:5]]
+
+    for code, reason in asyncio.run(go()):
+        assert code == BAD_MESSAGE and reason
+
+
+def test_a_publisher_that_waits_before_its_first_packet_keeps_its_room(walk_bvh):
+    """Its first packet 0.3 s after it connects (a link with a long round trip): the room is
+    still there, and a viewer that joins later gets the stream."""
+    codec = get_codec("dpcm")
+    packets = stream_clip(walk_bvh[:240], codec)
+
+    async def go():
+        async with serving() as url:
+            async with connect(url, "lobby", token(), "publish") as ws:
+                await asyncio.sleep(0.3)
+                viewer = asyncio.create_task(record(url, "lobby", token(), timeout_s=20))
+                await asyncio.sleep(0.2)
+                for k in range(0, len(packets), 4):
+                    await ws.send_bytes(pack_batch([p.to_bytes() for p in packets[k:k + 4]]))
+                    await asyncio.sleep(1 / 30)
+                return await viewer
+
+    got = asyncio.run(go())
+    np.testing.assert_array_equal(got[0].channels, receive_clip(packets).channels)
+
+
+def test_connections_close_when_their_tokens_expire(walk_bvh):
+    async def go():
+        async with serving() as url:
+            short = tokens.issue(SECRET, "lobby", "both", ttl_s=1.5)
+            async with connect(url, "lobby", short, "subscribe") as ws:
+                msg = await ws.receive(timeout=10)
+                while msg.type == aiohttp.WSMsgType.BINARY:
+                    msg = await ws.receive(timeout=10)
+                return ws.close_code, msg.extra
+
+    code, reason = asyncio.run(go())
+    assert code == BAD_TOKEN and "expired" in reason
+
+
+def test_status_shows_totals_and_the_log_shows_no_tokens(walk_bvh, caplog):
+    secret_token = token("hidden-room")
+
+    async def go():
+        async with serving() as url:
+            base = url.replace("ws://", "http://")
+            async with connect(url, "hidden-room", secret_token, "subscribe"):
+                async with aiohttp.ClientSession() as s:
+                    async with s.get(f"{base}/status?token={secret_token}") as r:
+                        return await r.json()
+
+    with caplog.at_level(logging.INFO, logger="aiohttp.access"):
+        status = asyncio.run(go())
+    assert status["rooms"] == 1 and status["viewers"] == 1 and "hidden-room" not in json.dumps(status)
+    assert "/status" in caplog.text and secret_token not in caplog.text
+
+
+def test_slow_openers_are_cut_and_cannot_exhaust_the_relay(walk_bvh):
+    limits = Limits(max_connections_per_host=6, request_timeout_s=0.5)
+
+    async def go():
+        relay = Relay(SECRET, limits)
+        async with serving(relay) as url:
+            port = int(url.rsplit(":", 1)[1])
+            idle = [socket.create_connection(("127.0.0.1", port)) for _ in range(8)]
+            await asyncio.sleep(0.2)
+            held = relay.guard.per_host.get("127.0.0.1", 0)
+            refused_early = relay.guard.refused
+            await asyncio.sleep(0.8)                         # past the request timeout: all cut
+            after = relay.guard.per_host.get("127.0.0.1", 0)
+            for s in idle:
+                s.close()
+            got = await record(url, "lobby", token(), timeout_s=0.5)    # a real viewer still gets in
+            return held, refused_early, after, got
+
+    held, refused_early, after, got = asyncio.run(go())
+    assert held == 6 and refused_early == 2 and after == 0 and got == {}
+
+
+def test_a_hostile_publisher_does_not_disturb_a_viewer(walk_bvh, caplog):
+    """Bombs, malformed headers, a cut table that does not fit its packet and a packet 2**32
+    frames ahead, from other connections in the same room, while a viewer with a budget (so the
+    relay cuts packets) records a spiht stream: the viewer gets exactly the offline decode at
+    its share, and the relay keeps going."""
+    codec = get_codec("spiht", bits_per_second=8000)
+    spiht = stream_clip(walk_bvh[:360], codec)
+    cut = next(p for p in spiht[1:] if p.flags & CUTS)
+    parts = split_parts(cut.codec_payload, None, "spiht packet", start=_PACKET.size)
+    short = cut.codec_payload[:_PACKET.size] + join_parts([*parts[:-1], b"\1\2"])
+    bad_cut = cut.with_payload(with_cuts(short, cut.cuts))
+    header = spiht[0]
+    rogue_stream = [Packet(99, 0, 0, "spiht", 0, 0, header.payload, kind=HEADER).to_bytes(),
+                    Packet(99, 1, 0, "spiht", 0, bad_cut.frames, bad_cut.payload, flags=bad_cut.flags | 1).to_bytes(),
+                    Packet(99, 2, 0, "spiht", 2 ** 32 - 200, cut.frames, cut.payload, flags=cut.flags | END).to_bytes()]
+
+    async def attack(url):
+        for message in hostile_messages(walk_bvh):
+            await refused_with(url, pack_batch([message]))
+
+    async def go():
+        relay = Relay(SECRET)
+        async with serving(relay) as url:
+            viewer = asyncio.create_task(record(url, "lobby", token(), timeout_s=30, stream=0, budget=3000))
+            await asyncio.sleep(0.2)
+            async with connect(url, "lobby", token(), "publish") as ws:    # a stream that ends at once (it
+                await ws.send_bytes(pack_batch(rogue_stream))              # would take a share of the budget)
+                await asyncio.sleep(0.3)
+            await asyncio.gather(attack(url), publish_clip(url, "lobby", token(), walk_bvh[:360], codec, speed=2.0))
+            return await viewer, relay.counters
+
+    with caplog.at_level(logging.WARNING, logger="mocodec.relay"):
+        got, counters = asyncio.run(go())
+    assert "stream 99: packet 1 not cut" in caplog.text          # passed whole, the tick went on
+    offline = receive_clip(stream_clip(walk_bvh[:360], get_codec("spiht", bits_per_second=on_ladder(3000))))
+    np.testing.assert_array_equal(got[0].channels, offline.channels)
+    assert counters["closed_bad"] >= 5
+
+
+def test_a_watcher_survives_damaged_messages_and_streams(walk_bvh):
+    watcher = Watcher()
+    packets = stream_clip(walk_bvh[:120], get_codec("dpcm"))
+    watcher.take(b"MB garbage")
+    watcher.take(pack_batch([header_bytes(lambda d: d.update(fps=-1.0), walk_bvh, stream=5), b"MP short"]))
+    watcher.take(pack_batch([p.to_bytes() for p in packets]))
+    assert watcher.refused == 3 and watcher.motion(0).num_frames == 120

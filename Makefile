@@ -8,7 +8,7 @@ THREE_VERSION := 0.187.0
 VENDOR := src/mocodec/viewer/static/vendor
 THREE := $(VENDOR)/three.module.js
 
-.PHONY: demo test bench bench-suite vendor clean
+.PHONY: demo test test-fast bench bench-suite vendor clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -37,10 +37,14 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(BIN)/python -m pytest
 
+# everything but the slow tier (the fuzz suite): for the edit-test loop
+test-fast: $(STAMP)
+	$(BIN)/python -m pytest -m "not slow"
+
 # every benchmark script of benchmarks/ (speed and rate-distortion of each issue), one after another
 bench: $(STAMP)
 	for script in foundation measures coding lossless codec_speed seams ratecontrol kinwave kinwave_ablation invariance \
-	              primitives rhythmic model_based; do \
+	              primitives rhythmic model_based hostile; do \
 		$(BIN)/python benchmarks/bench_$$script.py || exit 1; done
 	$(BIN)/python benchmarks/bench_perceptual.py --set amc
 	$(BIN)/python benchmarks/bench_waveform.py --set amc

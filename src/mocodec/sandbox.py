@@ -34,9 +34,14 @@ def _mapped_bytes() -> int:
 def _child(conn, func, args, memory_bytes: int) -> None:
     faulthandler.disable()          # a crash here is expected and reported by the parent
     limit = _mapped_bytes() + memory_bytes
-    resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+    _, hard = resource.getrlimit(resource.RLIMIT_AS)
+    if hard != resource.RLIM_INFINITY:
+        limit = min(limit, hard)
+    resource.setrlimit(resource.RLIMIT_AS, (limit, hard))
     try:
         result = ("ok", func(*args))
+    except MemoryError:
+        result = ("error", f"it asks for more than the child's {memory_bytes:,}-byte memory limit")
     except BaseException as e:      # noqa: BLE001 - every failure goes back to the parent as text
         result = ("codec" if isinstance(e, CodecError) else "error", f"{type(e).__name__}: {e}")
     try:

@@ -26,6 +26,7 @@ from typing import Any, Callable, ClassVar
 
 import numpy as np
 
+from mocodec import limits
 from mocodec.codecs.base import Codec, StreamDecoder, StreamEncoder, continuous_frames
 from mocodec.coding import intcoder
 from mocodec.coding.parts import join_parts, split_parts
@@ -198,8 +199,9 @@ class _FrameDecoder(StreamDecoder):
             self.state = self.codec._load(parts.pop(0), self.skeleton, self.fps)
         elif self.state is None:
             raise CorruptStreamError(f"{self.codec.id} stream: the first packet carries no header")
-        if n > (1 << 24):
-            raise CorruptStreamError(f"{self.codec.id} packet claims {n} frames")
+        if n * self.skeleton.num_channels > limits.MAX_DECODED_VALUES:
+            raise CorruptStreamError(f"{self.codec.id} packet claims {n} frames, over the limit of "
+                                     f"{limits.MAX_DECODED_VALUES:,} values")
         counter = itertools.count()
 
         def read(rows: int, cols: int) -> np.ndarray:

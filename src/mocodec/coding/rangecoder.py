@@ -22,7 +22,8 @@ import constriction
 import numpy as np
 
 from mocodec.coding.bitio import BitReader, BitWriter, unzigzag, zigzag
-from mocodec.errors import CorruptStreamError
+from mocodec import limits
+from mocodec.errors import CodecError, CorruptStreamError
 
 _MODEL = constriction.stream.model
 _QUEUE = constriction.stream.queue
@@ -30,7 +31,7 @@ FIRST_BLOCK = 16
 LAST_BLOCK = 2048
 COUNT_LIMIT = 1 << 20
 MAX_ALPHABET = 1 << 16
-MAX_VALUES = 1 << 28
+MAX_VALUES = limits.MAX_DECODED_VALUES       # values one integer stream may declare
 
 
 def _blocks(n: int):
@@ -114,6 +115,8 @@ def encode_ints(values: np.ndarray) -> bytes:
     """Any int64 values -> a self-describing byte string: the magnitude classes range coded
     adaptively, the bits below them raw."""
     u = zigzag(np.asarray(values, dtype=np.int64).ravel())
+    if u.size > MAX_VALUES:
+        raise CodecError(f"integer stream: {u.size} values, more than a decoder accepts ({MAX_VALUES})")
     symbols, raw, width = int_symbols(u)
     words = encode_symbols(symbols, ALPHABET)
     w = BitWriter()

@@ -1,0 +1,307 @@
+"""A seeded fuzzer for everything that reads bytes from outside (docs/security.md).
+
+``python tests/fuzzing.py TARGET SEED SECONDS`` runs one target for about SECONDS and prints a
+JSON summary; it exits 1 if any input ended in anything but a clean mocodec error (or, for the
+decoders, finite output of the declared shape). tests/test_fuzz.py runs every target in a child
+process under a memory limit, so an unbounded allocation fails as a MemoryError instead of
+taking the machine.
+
+Inputs: random bytes, truncations, bit flips and byte changes of valid inputs, with their CRCs
+recomputed (else the CRC rejects nearly everything and the parsers behind it go untested), and
+crafted ones: decompression bombs and huge declared sizes.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import re
+import struct
+import sys
+import time
+import traceback
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).parent
+sys.path.insert(0, str(HERE))
+
+from mocodec import load, moc  # noqa: E402
+from mocodec.codecs import Codec, codec_ids, get_codec  # noqa: E402
+from mocodec.codecs.base import read_envelope  # noqa: E402
+from mocodec.errors import MocodecError  # noqa: E402
+from mocodec.formats import container  # noqa: E402
+from mocodec.formats.asf_amc import read_amc, read_asf  # noqa: E402
+from mocodec.stream.live import LiveDecoder, stream_clip  # noqa: E402
+from mocodec.stream.packets import (HEADER, Packet, StreamInfo, pack_batch, parse,  # noqa: E402
+                                    split_batch)
+from mocodec.stream.relay import Closing, Relay, Room, Viewer  # noqa: E402
+
+DATA = HERE / "data"
+#: Codecs whose decoders need a model file the fuzzer has not got; their payloads still go
+#: through the container and the stream checks.
+NEEDS_FILES = {"rhythmic", "posture", "gesture", "hybrid"}
+
+
+def mutate(data: bytes, rng: np.random.Generator) -> bytes:
+    """One random change: flipped bits, changed or inserted bytes, a cut, or a spliced copy."""
+    data = bytearray(data)
+    kind = rng.integers(6)
+    if not data or kind == 0:
+        return bytes(rng.integers(0, 256, int(rng.integers(0, 64)), dtype=np.uint8))
+    if kind == 1:
+        for at in rng.integers(0, len(data), int(rng.integers(1, 8))):
+            data[at] ^= 1 << int(rng.integers(8))
+    elif kind == 2:
+        for at in rng.integers(0, len(data), int(rng.integers(1, 4))):
+            data[at] = int(rng.choice([0, 1, 0x7F, 0x80, 0xFF, int(rng.integers(256))]))
+    elif kind == 3:
+        del data[int(rng.integers(len(data))):]
+    elif kind == 4:
+        at = int(rng.integers(len(data) + 1))
+        data[at:at] = bytes(rng.integers(0, 256, int(rng.integers(1, 16)), dtype=np.uint8))
+    else:
+        a, b = sorted(rng.integers(0, len(data) + 1, 2))
+        data[a:a] = data[a:b]
+    return bytes(data)
+
+
+def clean(call) -> str | None:
+    """None if ``call()`` returns or raises a mocodec error; else what went wrong."""
+    try:
+        call()
+    except MocodecError as e:
+        if "MemoryError" in str(e):
+            return f"MemoryError inside {type(e).__name__}: {e}"
+        return None
+    except Exception:   # noqa: BLE001 - the fuzzer's whole point
+        return traceback.format_exc(limit=-3)
+    return None
+
+
+class Run:
+    def __init__(self, seed: int, seconds: float):
+        self.rng = np.random.default_rng(seed)
+        self.deadline = time.monotonic() + seconds
+        self.cases = 0
+        self.failures: list[str] = []
+
+    def more(self) -> bool:
+        return time.monotonic() < self.deadline
+
+    def check(self, what: str, call) -> None:
+        self.cases += 1
+        problem = clean(call)
+        if problem and len(self.failures) < 20:
+            self.failures.append(f"{what}: {problem}")
+
+
+def _walk():
+    return load(DATA / "07_03.bvh")[:96]
+
+
+def _decoded_ok(codec: Codec, payload: bytes, skeleton) -> None:
+    out = codec.decode(payload, skeleton)
+    if not np.isfinite(out.channels).all():
+        raise AssertionError("non-finite output")
+
+
+# ----- targets ----------------------------------------------------------------------------------
+def fuzz_decoders(run: Run) -> None:
+    """Every codec's decoder on mutated bodies with a recomputed envelope CRC."""
+    walk = _walk()
+    payloads = {}
+    for cid in codec_ids():
+        try:
+            payloads[cid] = get_codec(cid).encode(walk)
+        except MocodecError:
+            continue                    # an optional package is missing
+    while run.more():
+        for cid, payload in payloads.items():
+            frames, fps, body = read_envelope(payload)
+            damaged = Codec.wrap(mutate(body, run.rng), frames, fps)
+            codec = get_codec(cid)
+            run.check(f"{cid} decoder", lambda: _decoded_ok(codec, damaged, walk.skeleton))
+
+
+def fuzz_container(run: Run) -> None:
+    """.moc files: mutated whole files, mutated headers with their CRC recomputed, bombs and
+    huge declared sizes."""
+    walk = _walk()
+    files = [moc.pack(walk, get_codec(c), chunk_frames=40) for c in ("kinwave", "raw", "lossless", "spiht")]
+    while run.more():
+        data = files[int(run.rng.integers(len(files)))]
+        run.check("moc file", lambda: moc.unpack(mutate(data, run.rng)))
+        start = container._START.unpack_from(data)
+        head = data[container._START.size:container._START.size + start[3]]
+        text = zlib.decompressobj(zdict=container.dictionary(4)).decompress(head)
+        meta, _, compact = text.partition(b"\0")
+        choice = run.rng.integers(3)
+        if choice == 0:
+            new_text = mutate(meta, run.rng) + b"\0" + compact
+        elif choice == 1:
+            new_text = meta + b"\0" + mutate(compact, run.rng)
+        else:
+            doc = json.loads(meta)
+            key = str(run.rng.choice(["frames", "fps", "chunk_frames", "codec"]))
+            values = ([{"codec": "raw", "knobs": [1]}, {"codec": "raw", "knobs": "x"}, {"codec": {}}, [],
+                       {"codec": "svq", "knobs": {"codebook": "/dev/zero"}}] if key == "codec" else
+                      [2 ** 32, 2 ** 20, -1, 1e8, 1e-300, "x", [1], {}, None])
+            doc[key] = values[int(run.rng.integers(len(values)))]
+            new_text = json.dumps(doc).encode() + b"\0" + compact
+        deflate = zlib.compressobj(9, zdict=container.dictionary(4))
+        new_head = deflate.compress(new_text) + deflate.flush()
+        forged = (container._START.pack(start[0], start[1], start[2], len(new_head)) + new_head
+                  + struct.pack("<I", zlib.crc32(new_head)) + data[container._START.size + start[3] + 4:])
+        run.check("moc header", lambda: moc.unpack(forged))
+    bomb = zlib.compress(b"{" + b" " * (64 << 20), 9)
+    forged = container._START.pack(container.MAGIC, 4, 0, len(bomb)) + bomb + struct.pack("<I", zlib.crc32(bomb))
+    run.check("moc header bomb", lambda: moc.unpack(forged + files[0][-40:]))
+
+
+def _packets():
+    walk = _walk()
+    return [stream_clip(walk, get_codec(c)) for c in ("dpcm", "spiht", "kinwave", "primitives", "adpcm")]
+
+
+def _reframed(p: Packet, rng) -> Packet:
+    """``p`` with its payload or one header field changed (the CRC is recomputed on send)."""
+    field = rng.integers(4)
+    if field == 0:
+        return p.with_payload(mutate(p.payload, rng), p.flags)
+    if field == 1:
+        return Packet(p.stream, p.sequence, p.timestamp_us, p.codec,
+                      int(rng.choice([0, 2 ** 32 - 200, 2 ** 31, p.first_frame + 1])), p.frames, p.payload, p.kind,
+                      p.flags, p.position)
+    if field == 2:
+        return Packet(p.stream, p.sequence, p.timestamp_us, p.codec, p.first_frame, int(rng.integers(0, 2 ** 16)),
+                      p.payload, p.kind, int(rng.integers(0, 8)), p.position)
+    return Packet(p.stream, int(rng.integers(0, 2 ** 32)), p.timestamp_us, p.codec, p.first_frame, p.frames,
+                  p.payload, p.kind, p.flags, (float("nan"), 1e38, -0.0))
+
+
+def fuzz_live(run: Run) -> None:
+    """The packet parser, stream headers and LiveDecoder on mutated packets."""
+    streams = _packets()
+    while run.more():
+        packets = streams[int(run.rng.integers(len(streams)))]
+        raw = packets[int(run.rng.integers(len(packets)))].to_bytes()
+        run.check("packet parser", lambda: parse(mutate(raw, run.rng)))
+        run.check("batch parser", lambda: split_batch(mutate(pack_batch([raw, raw]), run.rng)))
+        run.check("stream header", lambda: LiveDecoder(StreamInfo.from_payload(mutate(packets[0].payload, run.rng))))
+
+        def play():
+            dec = LiveDecoder(StreamInfo.from_payload(packets[0].payload))
+            for p in packets[1:]:
+                if run.rng.random() < 0.3:
+                    p = _reframed(p, run.rng)
+                out = dec.push(parse(p.to_bytes()))
+                if out.shape[1:] != (dec.info.skeleton.num_channels,):
+                    raise AssertionError(f"LiveDecoder returned {out.shape}")
+        run.check("LiveDecoder", play)
+
+
+class _Transport:
+    def abort(self) -> None:
+        pass
+
+
+class _Socket:
+    closed = False
+
+    async def send_bytes(self, data) -> None:
+        pass
+
+
+def fuzz_relay(run: Run) -> None:
+    """The relay's message handler and its tick on mutated batches from publishers, with a
+    viewer that has a budget (so packets are cut)."""
+    streams = _packets()
+    relay = Relay("fuzz")
+    while run.more():
+        room = Room()
+        room.viewers.append(Viewer(_Socket(), _Transport(), budget=float(run.rng.choice([0, 2000, 9000]))))
+        packets = streams[int(run.rng.integers(len(streams)))]
+        owner = object()
+        for k in range(0, len(packets), 3):
+            group = [_reframed(p, run.rng) if run.rng.random() < 0.3 and p.kind != HEADER else p
+                     for p in packets[k:k + 3]]
+            data = pack_batch([p.to_bytes() for p in group])
+            if run.rng.random() < 0.2:
+                data = mutate(data, run.rng)
+
+            def ingest():
+                try:
+                    relay._ingest(room, data, owner)
+                except Closing:
+                    pass
+                relay._dispatch(room)
+                while not room.viewers[0].queue.empty():
+                    room.viewers[0].queue.get_nowait()
+            run.check("relay", ingest)
+
+
+def _text_mutation(text: str, rng) -> str:
+    lines = text.split("\n")
+    for _ in range(int(rng.integers(1, 4))):
+        k = int(rng.integers(len(lines)))
+        kind = rng.integers(5)
+        if kind == 0:
+            del lines[k]
+        elif kind == 1:
+            lines.insert(k, lines[int(rng.integers(len(lines)))])
+        elif kind == 2:
+            toks = lines[k].split()
+            if toks:
+                toks[int(rng.integers(len(toks)))] = str(rng.choice(
+                    ["nan", "inf", "1e-320", "1e400", "-0", "²", "9" * 5000, "", "{", "}", "End", "root", "rx",
+                     "CHANNELS", "99999999999", "-1"]))
+                lines[k] = " ".join(toks)
+        elif kind == 3:
+            lines[k] = lines[k][:int(rng.integers(len(lines[k]) + 1))]
+        else:
+            lines[k] = mutate(lines[k].encode("latin-1", "replace"), rng).decode("latin-1")
+    return "\n".join(lines)
+
+
+def fuzz_parsers(run: Run, folder: Path) -> None:
+    """BVH, ASF and AMC readers on mutated text."""
+    bvh = (DATA / "09_02.bvh").read_text()
+    bvh = "\n".join(bvh.split("\n")[:400])
+    header, frames = bvh.split("MOTION")
+    bvh = header + "MOTION\n" + re.sub(r"Frames:\s*\d+", "Frames: 20", frames.split("\n", 1)[1])
+    bvh = "\n".join(bvh.split("\n")[:bvh.split("\n").index("Frames: 20") + 22])
+    asf = (DATA / "07.asf").read_text()
+    amc = "\n".join((DATA / "07_03.amc").read_text().split("\n")[:200])
+    (folder / "good.asf").write_text(asf)
+    while run.more():
+        (folder / "x.bvh").write_text(_text_mutation(bvh, run.rng), encoding="latin-1")
+        run.check("bvh", lambda: load(folder / "x.bvh"))
+        (folder / "x.asf").write_text(_text_mutation(asf, run.rng), encoding="latin-1")
+        run.check("asf", lambda: read_asf(folder / "x.asf"))
+        (folder / "x.amc").write_text(_text_mutation(amc, run.rng), encoding="latin-1")
+        run.check("amc", lambda: read_amc(folder / "x.amc", folder / "good.asf"))
+
+
+TARGETS = {"decoders": fuzz_decoders, "container": fuzz_container, "live": fuzz_live, "relay": fuzz_relay,
+           "parsers": fuzz_parsers}
+
+
+def main(argv: list[str]) -> int:
+    import tempfile
+
+    target, seed, seconds = argv[0], int(argv[1]), float(argv[2])
+    run = Run(seed, seconds)
+    if target == "parsers":
+        with tempfile.TemporaryDirectory() as folder:
+            fuzz_parsers(run, Path(folder))
+    else:
+        TARGETS[target](run)
+    print(json.dumps({"target": target, "cases": run.cases, "failures": run.failures}))
+    return 1 if run.failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

@@ -227,6 +227,29 @@ def test_a_fifo_is_written_through(tmp_path):
     assert got == [b"through"] and stat.S_ISFIFO(fifo.stat().st_mode)
 
 
+def test_a_link_to_a_descriptor_is_written_through(tmp_path):
+    read_end, write_end = os.pipe()
+    link = tmp_path / "out.moc"
+    link.symlink_to(f"/proc/self/fd/{write_end}")
+    try:
+        atomic_write_bytes(link, b"to the pipe")
+        os.close(write_end)
+        assert os.read(read_end, 100) == b"to the pipe" and link.is_symlink()
+    finally:
+        os.close(read_end)
+
+
+def test_a_live_packet_that_decodes_to_nan_is_concealed(walk_bvh):
+    packets = stream_clip(walk_bvh[:60], get_codec("raw"))
+    dec = LiveDecoder(StreamInfo.from_payload(packets[0].payload))
+    good = dec.push(packets[1])
+    p = packets[2]
+    values = np.frombuffer(p.payload, "<f4").copy()
+    values[3] = np.inf
+    out = dec.push(p.with_payload(values.tobytes()))
+    assert np.isfinite(out).all() and dec.stats.dropped == 1 and len(good)
+
+
 def test_stale_temporaries_are_removed_and_errors_name_the_target(tmp_path):
     stale, fresh = tmp_path / ".a.moc.abcd1234.tmp", tmp_path / ".b.moc.efgh5678.tmp"
     stale.write_bytes(b"")

@@ -182,3 +182,17 @@ def test_a_watcher_survives_damaged_messages_and_streams(walk_bvh):
     watcher.take(pack_batch([header_bytes(lambda d: d.update(fps=-1.0), walk_bvh, stream=5), b"MP short"]))
     watcher.take(pack_batch([p.to_bytes() for p in packets]))
     assert watcher.refused == 3 and watcher.motion(0).num_frames == 120
+
+
+def test_the_secret_comes_from_a_file_or_the_environment(tmp_path, capsys, monkeypatch):
+    from mocodec.cli import main
+
+    (tmp_path / "secret").write_text("from-a-file\n")
+    assert main(["token", "--secret-file", str(tmp_path / "secret"), "--room", "r"]) == 0
+    tokens.verify("from-a-file", capsys.readouterr().out.strip(), "r", "publish")
+    monkeypatch.setenv("MOCODEC_RELAY_SECRET", "from-the-environment")
+    assert main(["token", "--room", "r"]) == 0
+    tokens.verify("from-the-environment", capsys.readouterr().out.strip(), "r", "publish")
+    monkeypatch.delenv("MOCODEC_RELAY_SECRET")
+    assert main(["token", "--room", "r"]) == 2
+    assert "--secret-file" in capsys.readouterr().err

@@ -58,9 +58,8 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
     The data is on disk (fsync) before the rename; stale temporary files of interrupted writes
     in that directory are removed."""
     path = Path(path)
-    target = Path(os.path.realpath(path))
     try:
-        existing = target.stat()
+        existing = os.stat(path)                # through links, /proc's magic ones too
     except FileNotFoundError:
         existing = None
     except OSError as e:
@@ -68,9 +67,10 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
     if existing is not None and stat.S_ISDIR(existing.st_mode):
         raise FormatError(path, None, "is a directory, expected a file to write")
     if existing is not None and not stat.S_ISREG(existing.st_mode):
-        with open(target, "wb") as f:
+        with open(path, "wb") as f:
             f.write(data)
         return
+    target = Path(os.path.realpath(path))
     directory = target.parent
     if not directory.is_dir():
         raise FormatError(path, None, f"cannot write: the directory {directory} does not exist")

@@ -231,6 +231,8 @@ class LiveDecoder:
             if len(frames) != packet.frames:
                 raise CodecError(f"packet {packet.sequence} decodes to {len(frames)} frames, its header says "
                                  f"{packet.frames}")
+            if not np.isfinite(frames).all():
+                raise CodecError(f"packet {packet.sequence} decodes to values that are not finite")
         except Exception:   # noqa: BLE001 - whatever a damaged payload does to a codec, conceal
             self.decoder = None
             self.stats.dropped += 1

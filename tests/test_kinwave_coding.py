@@ -209,11 +209,12 @@ def test_rounded_offsets_are_written_in_fixed_point(walk_bvh, walk_amc):
         assert fixed[0] > 0 and fixed in data and len(zlib.compress(fixed)) < 6 / 7 * len(zlib.compress(tagged))
 
 
-@pytest.mark.parametrize("form", range(1, 8))
+@pytest.mark.parametrize("form", [*range(1, 8), 8, 9, 12])
 def test_every_coding_form_round_trips_continuously(walk_bvh, form):
     """Euler angle rows to a coding form (a rotation vector about the mean, Euler angles in a
-    Tait-Bryan order) and back: the same rotations, as the very triples Motion.continuous gives
-    (frame 0 of the walk is in the principal range), in the file's order or a proper one."""
+    Tait-Bryan order, either of the rotation turned by a constant: WORLD) and back: the same
+    rotations, as the very triples Motion.continuous gives (frame 0 of the walk is in the
+    principal range), in the file's order or a proper one."""
     from mocodec.coding import rotvec
     from mocodec.reexpress import with_euler_orders
     for motion in (walk_bvh, with_euler_orders(walk_bvh, "YXY")):
@@ -226,9 +227,13 @@ def test_every_coding_form_round_trips_continuously(walk_bvh, form):
         orders = tuple(orders)
         euler = motion.continuous().channels[:, np.concatenate(rows)].T
         quats = rotvec.euler_quats(euler, orders)
+        pre = rotations.quat_normalize(np.array([[0.3, 0.5, -0.2, 0.7]] * len(orders)))  # a WORLD form's turn
+        if form >= rotvec.WORLD:
+            quats = rotations.quat_multiply(pre[None], quats)
         means = rotvec.mean_quats(rotvec.mean_codes(quats, 2.0, 0.0), 2.0)
+        quats = rotvec.euler_quats(euler, orders)
         forms = np.full(len(orders), form)
-        back = rotvec.from_forms(rotvec.to_forms(euler, orders, forms, means), orders, forms, means)
+        back = rotvec.from_forms(rotvec.to_forms(euler, orders, forms, means, pre=pre), orders, forms, means, pre)
         turn = rotations.quat_distance(quats, rotvec.euler_quats(back, orders))
         assert turn.max() < 1e-6                                        # arccos: 3e-8 rad of noise
         if orders[0][0] != orders[0][2]:       # at a proper order's lock the split of its angles is free

@@ -73,7 +73,8 @@ FORMATS = (1, 2, 3)
 _HEAD = struct.Struct("<BBBBH")     # format, flags, log2 window, levels, channels
 FLAG_OFFSETS = 8                # flags bit 3: a signed step offset per segment follows the step codes
 FLAG_FORMS = 16                 # flags bit 4: per 3-angle joint its coding form (rotvec: 0 the file's Euler angles,
-                                # 1 a rotation vector, 2-7 Euler angles in a Tait-Bryan order; formats 1-2: 0 or 1)
+                                # 1 a rotation vector, 2-7 Euler angles in a Tait-Bryan order, 8-15 those forms of
+                                # the rotation turned by the constant joints above, rotvec.WORLD; formats 1-2: 0, 1)
 FLAG_MEANS = 64                 # flags bit 6: three integers per 3-angle joint, a vector joint's mean rotation
 MEAN_QUANTUM = 2.0              # degrees: a vector joint's mean rotation, as a rotation vector in these steps
 MEAN_LEAST = 20.0               # degrees: a mean rotation smaller than this is left at the identity
@@ -180,6 +181,24 @@ def _three_angle_groups(skeleton: Skeleton) -> tuple[tuple[np.ndarray, str], ...
     the joints that may be coded as rotation vectors."""
     return tuple((g.channels, "".join("XYZ"[a] for a in g.axes)) for g in _groups(skeleton)
                  if g.rotation and g.channels.size == 3)
+
+
+def _parent_turns(skeleton: Skeleton, frame: np.ndarray) -> np.ndarray:
+    """``(n, 4)``: per three-angle joint, ``conj(C) G_p C``, its parent's orientation in one
+    frame of channels ``frame (C,)`` seen through the joint's own pre-rotation ``C``: the turn a
+    WORLD form (:mod:`mocodec.coding.rotvec`) puts on the joint's rotation ``M``, since
+    ``G = G_p C M C^-1 = C (conj(C) G_p C M) C^-1``. Encoder and decoder compute it from the same
+    decoded constants, so it is the same floats on both ends."""
+    _, quats = forward_kinematics(skeleton, frame[None])
+    axes = rotations.matrix_to_quat(skeleton.axis_matrices)
+    joints = np.array([skeleton.channel_joints[g[0]] for g, _ in _three_angle_groups(skeleton)], dtype=np.int64)
+    parents = skeleton.parents[joints]
+    out = np.where((parents >= 0)[:, None], quats[0, np.maximum(parents, 0)], np.array([1.0, 0.0, 0.0, 0.0]))
+    axis = np.array([skeleton.joints[j].has_axis for j in joints])
+    if axis.any():
+        c = axes[joints[axis]]
+        out[axis] = rotations.quat_multiply(rotations.quat_conjugate(c), rotations.quat_multiply(out[axis], c))
+    return out
 
 
 def _factors(offsets: np.ndarray, lay: trendwave.Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -372,9 +391,9 @@ class KinwaveCodec(Codec):
             patches = np.diff(patched, prepend=0).reshape(skeleton.num_channels, num_isolated)
             if num_isolated and not (1 <= isolated[0] and (np.diff(isolated) > 1).all() and isolated[-1] < frames - 1):
                 raise CorruptStreamError("kinwave payload's isolated frames are damaged")
-            known = rotvec.FORMS if version >= 3 else 2
+            forms_ok = rotvec.valid_forms(forms) if version >= 3 else ((forms >= 0) & (forms < 2)).all()
             if ((codes.size and not 0 <= codes.min() <= codes.max() <= 255)
-                    or np.abs(offsets).max(initial=0) > 128 or not ((forms >= 0) & (forms < known)).all()
+                    or np.abs(offsets).max(initial=0) > 128 or not forms_ok
                     or np.abs(means).max(initial=0) * MEAN_QUANTUM > 360.0):
                 raise CorruptStreamError("kinwave payload's step codes are damaged")
         if not num_offsets:
@@ -397,8 +416,9 @@ def _decoded(skeleton: Skeleton, codes: np.ndarray, offsets: np.ndarray, const: 
              means: np.ndarray, isolated: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
     """Channels ``(C, T)`` from the integers, in one reconstruction of all channels; the
     joints coded in another form (``forms``, one per three-angle joint, :mod:`rotvec`; ``means``
-    a row of integers per such joint, or none) back to the file's Euler angles; ``isolated``
-    frames and their patches (:func:`_patch`)."""
+    a row of integers per such joint, or none; a WORLD form's turn from the decoded constants
+    above it, :func:`_parent_turns`) back to the file's Euler angles; ``isolated`` frames and
+    their patches (:func:`_patch`)."""
     steps = _channel_steps(skeleton, codes)
     out = _reconstruct(knots, coeffs, const == 1, steps, lay, _factors(offsets, lay), constants)
     _patch(out, steps, *isolated)
@@ -407,7 +427,8 @@ def _decoded(skeleton: Skeleton, codes: np.ndarray, offsets: np.ndarray, const: 
     if coded.size:
         rows = np.concatenate([groups[k][0] for k in coded])
         turns = rotvec.mean_quats(means[coded] if len(means) else np.zeros((coded.size, 3)), MEAN_QUANTUM)
-        out[rows] = rotvec.from_forms(out[rows], tuple(groups[k][1] for k in coded), forms[coded], turns)
+        pre = _parent_turns(skeleton, out[:, 0])[coded] if (forms >= rotvec.WORLD).any() else None
+        out[rows] = rotvec.from_forms(out[rows], tuple(groups[k][1] for k in coded), forms[coded], turns, pre)
     return out
 
 
@@ -488,10 +509,30 @@ class _Encoder:
         self.shape_rot, self.shape_trans = self._shape()
         self.joint_offsets = np.zeros(len(self.rot_joints) + self.trans, dtype=np.int64)
         self.means = np.zeros((len(_three_angle_groups(sk)), 3), dtype=np.int64)
+        self.turns, self.turned = self._turns()
         self.forms = self._choose_forms() if self.cfg["rotation_vectors"] else np.zeros(0, dtype=np.int64)
         self._constant_in_forms()
         if self.cfg["keyframes"] and _jumps_at_start(self.positions):
             self._choose_keyframes()
+
+    def _turns(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per three-angle joint, the turn a WORLD form would take off (:func:`_parent_turns`,
+        exact) and whether it may: every joint above it holds a constant rotation, and together
+        they turn it (a dummy root's constant rotation)."""
+        groups = _three_angle_groups(self.skeleton)
+        if not self.frames or not groups:
+            return np.tile([1.0, 0.0, 0.0, 0.0], (len(groups), 1)), np.zeros(len(groups), dtype=bool)
+        sk = self.skeleton
+        still = np.ones(len(sk), dtype=bool)            # the joint and every joint above it turn by constants
+        for g in _groups(sk):
+            if g.rotation:
+                still[g.joint] = self.const[g.channels].all()
+        for j in range(len(sk)):
+            still[j] &= sk.parents[j] < 0 or still[sk.parents[j]]
+        parents = sk.parents[[sk.channel_joints[g[0]] for g, _ in groups]]
+        above = np.where(parents >= 0, still[np.maximum(parents, 0)], False)
+        turns = _parent_turns(sk, self.values[:, 0])
+        return turns, above & (np.abs(turns[:, 0]) < 1.0 - 1e-12)
 
     def _set_layout(self, keyframes: int) -> None:
         """Segments and knots with ``keyframes`` leading one-frame segments, and the header."""
@@ -581,46 +622,65 @@ class _Encoder:
                                self.cfg["wavelet"])
         step = _channel_steps(self.skeleton, self.codes(self._first_scale()))[channels]
         factors = _factors(np.zeros(lay.starts.size), lay)
-        flat = np.zeros(channels.size, dtype=bool)
-        none = _Constants(1.0, np.zeros(channels.size))
-
         original = rotvec.euler_quats(euler, orders)
-        self.means[live] = rotvec.mean_codes(rotvec.euler_quats(self.values[channels], orders), MEAN_QUANTUM,
-                                             MEAN_LEAST)
-        turns = rotvec.mean_quats(self.means[live], MEAN_QUANTUM)
-        costs = np.full((rotvec.FORMS, len(live)), np.inf)
-        reference = None
-        for form in range(rotvec.FORMS):
-            forms = np.full(len(live), form)
-            values = euler if form == 0 else rotvec.to_forms(euler, orders, forms, turns)
-            locked = rotvec.near_lock(values, orders if form == 0 else (rotvec.CODING_ORDERS[form - 2],) * len(live),
-                                      GIMBAL_MARGIN) if form != rotvec.VECTOR else np.zeros(len(live), bool)
-            k_int, c_int = self._quantise(values, flat, step, factors, none, lay)
+        pre = self.turns[live]
+        whole = rotvec.euler_quats(self.values[channels], orders)
+        turned = np.flatnonzero(self.turned[live])
+        whole[:, turned] = rotations.quat_multiply(pre[turned][None], whole[:, turned])
+        means = rotvec.mean_codes(whole, MEAN_QUANTUM, MEAN_LEAST)      # of pre q for the joints that may turn
+        self.means[live] = means
+        turns = rotvec.mean_quats(means, MEAN_QUANTUM)
+
+        def trial(form: int, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            """The joints ``idx`` (of ``live``) coded in ``form``: (bytes, nonzero coefficients,
+            mean rotation error), infinite bytes within GIMBAL_MARGIN of the form's lock."""
+            rows = (3 * idx[:, None] + np.arange(3)).ravel()
+            sub, kept = euler[rows], tuple(orders[i] for i in idx)
+            forms = np.full(idx.size, form)
+            values = sub if form == 0 else rotvec.to_forms(sub, kept, forms, turns[idx], pre=pre[idx])
+            base = form % rotvec.WORLD
+            locked = rotvec.near_lock(values, kept if base == 0 else (rotvec.CODING_ORDERS[base - 2],) * idx.size,
+                                      GIMBAL_MARGIN) if base != rotvec.VECTOR else np.zeros(idx.size, bool)
+            flat, none = np.zeros(rows.size, dtype=bool), _Constants(1.0, np.zeros(rows.size))
+            k_int, c_int = self._quantise(values, flat, step[rows], factors, none, lay)
             sizes = np.array([len(coefcoder.encode(np.zeros(3, np.int64), k_int[3 * i:3 * i + 3],
                                                    c_int[3 * i:3 * i + 3], lay.padded, lay.levels,
-                                                   revision=FORMAT)) for i in range(len(live))])
-            rec = _reconstruct(k_int, c_int, flat, step, lay, factors, none)
-            back = rotvec.euler_quats(rotvec.from_forms(rec, orders, forms, turns), orders) if form else \
-                rotvec.euler_quats(rec, orders)
-            err = np.maximum(rotations.quat_distance(original, back).mean(axis=0), 1e-12)
-            reference = err if reference is None else reference
-            nonzero = (c_int != 0).reshape(len(live), -1).sum(axis=1)
-            costs[form] = np.where(locked, np.inf, sizes + nonzero / 8.0 * np.log2(err / reference))
-        choice[live] = np.argmin(costs, axis=0)
-        self.means[choice != rotvec.VECTOR] = 0
+                                                   revision=FORMAT)) for i in range(idx.size)])
+            rec = _reconstruct(k_int, c_int, flat, step[rows], lay, factors, none)
+            back = rotvec.from_forms(rec, kept, forms, turns[idx], pre[idx]) if form else rec
+            err = np.maximum(rotations.quat_distance(original[:, idx], rotvec.euler_quats(back, kept)).mean(axis=0),
+                             1e-12)
+            nonzero = (c_int != 0).reshape(idx.size, -1).sum(axis=1)
+            return np.where(locked, np.inf, sizes), nonzero, err
+
+        local = np.flatnonzero(~self.turned[live])
+        candidates = [(form, local) for form in range(rotvec.FORMS)]
+        candidates += [(rotvec.WORLD + form, turned) for form in range(rotvec.FORMS)]
+        costs = np.full((len(candidates), len(live)), np.inf)
+        reference = np.ones(len(live))         # the error of the file's own angles (forms 0 and WORLD)
+        results = []
+        for form, idx in candidates:
+            results.append(trial(form, idx) if idx.size else None)
+            if form % rotvec.WORLD == 0 and idx.size:
+                reference[idx] = results[-1][2]
+        for row, ((form, idx), result) in enumerate(zip(candidates, results)):
+            if result is not None:
+                sizes, nonzero, err = result
+                costs[row, idx] = sizes + nonzero / 8.0 * np.log2(err / reference[idx])
+        choice[live] = np.array([form for form, _ in candidates])[np.argmin(costs, axis=0)]
+        self.means[choice % rotvec.WORLD != rotvec.VECTOR] = 0
         return choice
 
     def _constant_in_forms(self) -> None:
         """Which channels of the joints coded in another form are constant in that form (a
         hinge written in a proper order is one moving angle again); the steps follow."""
-        coded = [(g, order, form, mean) for (g, order), form, mean in
-                 zip(_three_angle_groups(self.skeleton), self.forms, self.means) if form]
-        if not coded:
+        coded = np.flatnonzero(self.forms)
+        if not coded.size:
             return
-        rows = np.concatenate([g for g, _, _, _ in coded])
-        values = rotvec.to_forms(self.values[rows], tuple(o for _, o, _, _ in coded),
-                                 np.array([f for _, _, f, _ in coded]),
-                                 rotvec.mean_quats(np.array([m for _, _, _, m in coded]), MEAN_QUANTUM))
+        groups = _three_angle_groups(self.skeleton)
+        rows = np.concatenate([groups[k][0] for k in coded])
+        values = rotvec.to_forms(self.values[rows], tuple(groups[k][1] for k in coded), self.forms[coded],
+                                 rotvec.mean_quats(self.means[coded], MEAN_QUANTUM), pre=self.turns[coded])
         const = np.ptp(values, axis=1) <= CONSTANT
         if (const != self.const[rows]).any():
             self.const[rows] = const
@@ -667,7 +727,7 @@ class _Encoder:
         C = sk.num_channels
         knots = np.zeros((C, lay.num_knots), dtype=np.int64)
         coeffs = np.zeros((C, lay.num_coeffs), dtype=np.int64)
-        decoded = np.empty((C, self.frames))
+        decoded = np.zeros((C, self.frames))            # zeros: a WORLD form's turn reads the rows above it
         patches = np.zeros((C, self.isolated.size), dtype=np.int64)
         steps = _channel_steps(sk, codes)
         factors = _factors(offsets, lay)
@@ -676,18 +736,20 @@ class _Encoder:
         def code(channels: np.ndarray, targets: np.ndarray, exact: dict) -> np.ndarray:
             step, const = steps[channels], self.const[channels]
             column = {c: i for i, c in enumerate(channels)}
-            vectors = [(g, order, form, mean) for (g, order), form, mean in zip(rotvec_groups, self.forms, self.means)
-                       if form and g[0] in column]
+            vectors = [k for k, (g, _) in enumerate(rotvec_groups) if self.forms[k] and g[0] in column] \
+                if len(self.forms) else []
             values = targets.T.copy()
             if vectors:
-                cols = [column[c] for g, _, _, _ in vectors for c in g]
-                orders = tuple(o for _, o, _, _ in vectors)
-                forms = np.array([f for _, _, f, _ in vectors])
-                turns = rotvec.mean_quats(np.array([m for _, _, _, m in vectors]), MEAN_QUANTUM)
-                joints = [sk.channel_joints[g[0]] for g, _, _, _ in vectors]
-                quats = np.stack([exact[j] if j in exact else rotvec.euler_quats(values[[column[c] for c in g]], (o,))[:, 0]
-                                  for j, (g, o, _, _) in zip(joints, vectors)], axis=1)
-                values[cols] = rotvec.to_forms(values[cols], orders, forms, turns, quats)
+                cols = [column[c] for k in vectors for c in rotvec_groups[k][0]]
+                orders = tuple(rotvec_groups[k][1] for k in vectors)
+                forms = self.forms[vectors]
+                turns = rotvec.mean_quats(self.means[vectors], MEAN_QUANTUM)
+                pre = _parent_turns(sk, decoded[:, 0])[vectors] if (forms >= rotvec.WORLD).any() else None
+                quats = np.stack([exact[j] if j in exact else
+                                  rotvec.euler_quats(values[[column[c] for c in g]], (o,))[:, 0]
+                                  for j, (g, o) in ((sk.channel_joints[rotvec_groups[k][0][0]], rotvec_groups[k])
+                                                    for k in vectors)], axis=1)
+                values[cols] = rotvec.to_forms(values[cols], orders, forms, turns, quats, pre)
             constants = _Constants(self.constants.fraction, self.constants.base[channels])
             iso = self.isolated
             wanted = values[:, iso]
@@ -702,7 +764,7 @@ class _Encoder:
                 _patch(out, step, iso, patch)
                 patches[channels] = patch
             if vectors:
-                out[cols] = rotvec.from_forms(out[cols], orders, forms, turns)
+                out[cols] = rotvec.from_forms(out[cols], orders, forms, turns, pre)
             decoded[channels] = out
             return out.T
 
@@ -831,13 +893,31 @@ class _Encoder:
             coarser = self._slack_codes(errors, bound)
             for _ in range(2):
                 if not coarser.any():
-                    return best
+                    break
                 ps = self.run_pass(np.clip(best.steps + coarser, 0, 255).astype(np.uint8), best.offsets)
                 trial = self._joint_errors(ps.decoded).max(axis=0)
                 if trial.max() <= bound:
                     best, errors = ps, trial
                     break
                 coarser = np.floor(coarser / 2.0)
+            else:
+                break
+        return self._scale_up(best, errors.max(), bound)
+
+    def _scale_up(self, best: _Pass, worst: float, bound: float) -> _Pass:
+        """A final pass still under ACCEPT x bound (the time-adaptive search once stopped at 81%
+        of it, after a seam made one segment's error jump and the segment went eight codes finer)
+        takes every code coarser together by the 1/8 octaves between its worst error and the
+        bound, halved while that breaks the bound."""
+        while worst < ACCEPT * bound:
+            shift = int(np.floor(8.0 * math.log2(bound / max(worst, bound * 2.0 ** -8))))
+            while shift > 0:
+                ps = self.run_pass(np.clip(best.steps.astype(np.int64) + shift, 0, 255).astype(np.uint8), best.offsets)
+                trial = self._joint_errors(ps.decoded).max()
+                if trial <= bound:
+                    best, worst = ps, trial
+                    break
+                shift //= 2
             else:
                 return best
         return best

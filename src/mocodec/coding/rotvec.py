@@ -7,7 +7,12 @@ turn) a coder does better with another form of the same rotation. Forms, per joi
 * ``0``: the file's own Euler angles (no conversion);
 * ``VECTOR`` (1): the rotation vector of ``conj(mean) q``, about a mean rotation of the joint;
 * ``2 + k``: Euler angles in the Tait-Bryan order ``CODING_ORDERS[k]``, whatever the file's
-  order: a hinge written in a proper order (at its lock) is one angle again.
+  order: a hinge written in a proper order (at its lock) is one angle again;
+* ``WORLD + f``: the form ``f`` of ``pre q`` instead of ``q``, ``pre`` a constant rotation the
+  coder gives per joint: under a dummy root turned by a constant rotation, the joint's
+  rotation as if the dummy were not there, whose angles the file's exporter chose (a body
+  turned 90 degrees about X by its dummy root cost 19% more in any local form; a vector about
+  the mean of ``pre q`` has the same mean, so the same quantised mean, as without the dummy).
 
 Rows come three per joint, ``(3n, T)``, degrees. The way back (:func:`from_forms`) runs in a
 numba kernel, a joint at a time, so a coder converting a few joints (kinwave's encoder, a tree
@@ -30,6 +35,13 @@ _DEG = math.pi / 180.0
 VECTOR = 1
 CODING_ORDERS = ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX")
 FORMS = 2 + len(CODING_ORDERS)
+WORLD = 8                       # added to an Euler form: the form of pre q
+
+
+def valid_forms(forms: np.ndarray) -> bool:
+    """Whether every code of ``forms`` names a form."""
+    forms = np.asarray(forms)
+    return bool(((forms >= 0) & (forms < 2 * WORLD)).all())
 
 
 def _axes(orders: tuple[str, ...]) -> np.ndarray:
@@ -196,34 +208,53 @@ def mean_quats(codes: np.ndarray, quantum: float) -> np.ndarray:
     return rotations.quat_exp(np.radians(np.asarray(codes, dtype=np.float64) * quantum) / 2.0)
 
 
-def _form_axes(forms: np.ndarray) -> np.ndarray:
-    return _axes(tuple(CODING_ORDERS[f - 2] if f >= 2 else "XYZ" for f in forms))
+def _form_axes(forms: np.ndarray, orders: tuple[str, ...]) -> np.ndarray:
+    """Each Euler form's axes: a coding order, or the file's own (form 0, WORLD)."""
+    base = np.asarray(forms) % WORLD
+    return _axes(tuple(CODING_ORDERS[f - 2] if f >= 2 else o for f, o in zip(base, orders)))
+
+
+def _turned(quats: np.ndarray, forms: np.ndarray, pre: np.ndarray | None, inverse: bool) -> np.ndarray:
+    """``quats (T, n, 4)`` with the WORLD joints' turned by ``pre (n, 4)`` on the left (by its
+    conjugate with ``inverse``)."""
+    world = np.asarray(forms) >= WORLD
+    if pre is None or not world.any():
+        return quats
+    turn = pre[world] if not inverse else rotations.quat_conjugate(pre[world])
+    out = quats.copy()
+    out[:, world] = rotations.quat_multiply(turn[None], quats[:, world])
+    return out
 
 
 def to_forms(rows: np.ndarray, orders: tuple[str, ...], forms: np.ndarray, means: np.ndarray,
-             quats: np.ndarray | None = None) -> np.ndarray:
+             quats: np.ndarray | None = None, pre: np.ndarray | None = None) -> np.ndarray:
     """File-order Euler angle rows in each joint's coding form (``forms`` >= 1), continuous in
-    time; ``means (n, 4)`` are the vector joints' mean rotations (ignored for Euler forms).
-    ``quats (T, n, 4)``, when given, are the rotations themselves (``rows`` is then unused)."""
+    time; ``means (n, 4)`` are the vector joints' mean rotations (ignored for Euler forms),
+    ``pre (n, 4)`` the WORLD joints' turns. ``quats (T, n, 4)``, when given, are the rotations
+    themselves (``rows`` is then unused)."""
     forms = np.asarray(forms)
-    quats = euler_quats(rows, orders) if quats is None else quats
+    quats = _turned(euler_quats(rows, orders) if quats is None else quats, forms, pre, inverse=False)
     out = np.empty((rows.shape[1], len(orders), 3))
-    vector = forms == VECTOR
+    vector = forms % WORLD == VECTOR
     if vector.any():
         turned = rotations.quat_multiply(rotations.quat_conjugate(means[vector])[None], quats[:, vector])
         out[:, vector] = _vectors_kernel(np.ascontiguousarray(turned))
     if (~vector).any():
-        out[:, ~vector] = _quat_euler_kernel(np.ascontiguousarray(quats[:, ~vector]), _form_axes(forms[~vector]))
+        kept = tuple(o for o, v in zip(orders, vector) if not v)
+        out[:, ~vector] = _quat_euler_kernel(np.ascontiguousarray(quats[:, ~vector]), _form_axes(forms[~vector], kept))
     return _rows(out)
 
 
-def from_forms(rows: np.ndarray, orders: tuple[str, ...], forms: np.ndarray, means: np.ndarray) -> np.ndarray:
+def from_forms(rows: np.ndarray, orders: tuple[str, ...], forms: np.ndarray, means: np.ndarray,
+               pre: np.ndarray | None = None) -> np.ndarray:
     """Inverse of :func:`to_forms`: file-order Euler angle rows, each joint's triples as
     continuous as the Euler form allows (frame 0 in the principal range)."""
     forms = np.asarray(forms)
-    means = np.where((forms == VECTOR)[:, None], means, _identity_means(len(orders)))
-    quats = _form_quats_kernel(_per_joint(rows), _form_axes(forms), forms == VECTOR,
+    vector = forms % WORLD == VECTOR
+    means = np.where(vector[:, None], means, _identity_means(len(orders)))
+    quats = _form_quats_kernel(_per_joint(rows), _form_axes(forms, orders), vector,
                                np.ascontiguousarray(means, dtype=np.float64))
+    quats = np.ascontiguousarray(_turned(quats, forms, pre, inverse=True))
     return _rows(_quat_euler_kernel(quats, _axes(orders)))
 
 

@@ -183,22 +183,49 @@ def _three_angle_groups(skeleton: Skeleton) -> tuple[tuple[np.ndarray, str], ...
                  if g.rotation and g.channels.size == 3)
 
 
+def _parent_orientations(skeleton: Skeleton, frame: np.ndarray) -> np.ndarray:
+    """``(joints, 4)``: each joint's parent's orientation ``G_p`` in one frame of channels
+    ``frame (C,)`` (the identity for the root)."""
+    _, quats = forward_kinematics(skeleton, frame[None])
+    parents = skeleton.parents
+    return np.where((parents >= 0)[:, None], quats[0, np.maximum(parents, 0)], np.array([1.0, 0.0, 0.0, 0.0]))
+
+
 def _parent_turns(skeleton: Skeleton, frame: np.ndarray) -> np.ndarray:
     """``(n, 4)``: per three-angle joint, ``conj(C) G_p C``, its parent's orientation in one
     frame of channels ``frame (C,)`` seen through the joint's own pre-rotation ``C``: the turn a
     WORLD form (:mod:`mocodec.coding.rotvec`) puts on the joint's rotation ``M``, since
     ``G = G_p C M C^-1 = C (conj(C) G_p C M) C^-1``. Encoder and decoder compute it from the same
     decoded constants, so it is the same floats on both ends."""
-    _, quats = forward_kinematics(skeleton, frame[None])
-    axes = rotations.matrix_to_quat(skeleton.axis_matrices)
     joints = np.array([skeleton.channel_joints[g[0]] for g, _ in _three_angle_groups(skeleton)], dtype=np.int64)
-    parents = skeleton.parents[joints]
-    out = np.where((parents >= 0)[:, None], quats[0, np.maximum(parents, 0)], np.array([1.0, 0.0, 0.0, 0.0]))
-    axis = np.array([skeleton.joints[j].has_axis for j in joints])
+    out = _parent_orientations(skeleton, frame)[joints]
+    axis = np.array([skeleton.joints[j].has_axis for j in joints], dtype=bool)
     if axis.any():
-        c = axes[joints[axis]]
+        c = rotations.matrix_to_quat(skeleton.axis_matrices)[joints[axis]]
         out[axis] = rotations.quat_multiply(rotations.quat_conjugate(c), rotations.quat_multiply(out[axis], c))
     return out
+
+
+def _world_translations(skeleton: Skeleton, forms: np.ndarray, const: np.ndarray) -> list[tuple[int, np.ndarray]]:
+    """``(joint, its X, Y, Z position channels)`` of every joint in a WORLD form whose three
+    translations all move: they are coded on the world's axes, ``G_p t`` (the decoded
+    constants' turn, as its rotation), so a dummy's turn does not tilt their quantisation grid.
+    Implied by the forms and the constant flags: no side data."""
+    if not len(forms):
+        return []
+    plan, out = _plan(skeleton), []
+    for k, (g, _) in enumerate(_three_angle_groups(skeleton)):
+        j = skeleton.channel_joints[g[0]]
+        pos = plan.pos_index[j]
+        if forms[k] >= rotvec.WORLD and (pos >= 0).all() and not const[pos].any():
+            out.append((int(j), pos.copy()))
+    return out
+
+
+def _on_axes(rows: np.ndarray, turn: np.ndarray, inverse: bool = False) -> np.ndarray:
+    """Translation rows ``(3, T)`` turned by the unit quaternion ``turn`` (its inverse)."""
+    q = rotations.quat_conjugate(turn) if inverse else turn
+    return rotations.quat_rotate(np.broadcast_to(q, (rows.shape[1], 4)), rows.T).T
 
 
 def _factors(offsets: np.ndarray, lay: trendwave.Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -428,6 +455,11 @@ def _decoded(skeleton: Skeleton, codes: np.ndarray, offsets: np.ndarray, const: 
         rows = np.concatenate([groups[k][0] for k in coded])
         turns = rotvec.mean_quats(means[coded] if len(means) else np.zeros((coded.size, 3)), MEAN_QUANTUM)
         pre = _parent_turns(skeleton, out[:, 0])[coded] if (forms >= rotvec.WORLD).any() else None
+        moved = _world_translations(skeleton, forms, const == 1)
+        if moved:
+            parent = _parent_orientations(skeleton, out[:, 0])
+            for j, pos in moved:
+                out[pos] = _on_axes(out[pos], parent[j], inverse=True)
         out[rows] = rotvec.from_forms(out[rows], tuple(groups[k][1] for k in coded), forms[coded], turns, pre)
     return out
 
@@ -512,6 +544,7 @@ class _Encoder:
         self.turns, self.turned = self._turns()
         self.forms = self._choose_forms() if self.cfg["rotation_vectors"] else np.zeros(0, dtype=np.int64)
         self._constant_in_forms()
+        self.world_translations = _world_translations(sk, self.forms, self.const)
         if self.cfg["keyframes"] and _jumps_at_start(self.positions):
             self._choose_keyframes()
 
@@ -750,6 +783,11 @@ class _Encoder:
                                   for j, (g, o) in ((sk.channel_joints[rotvec_groups[k][0][0]], rotvec_groups[k])
                                                     for k in vectors)], axis=1)
                 values[cols] = rotvec.to_forms(values[cols], orders, forms, turns, quats, pre)
+            moved = [(j, [column[c] for c in pos]) for j, pos in self.world_translations if pos[0] in column]
+            if moved:
+                parent = _parent_orientations(sk, decoded[:, 0])
+                for j, rows in moved:
+                    values[rows] = _on_axes(values[rows], parent[j])
             constants = _Constants(self.constants.fraction, self.constants.base[channels])
             iso = self.isolated
             wanted = values[:, iso]
@@ -763,6 +801,8 @@ class _Encoder:
                 patch[const] = 0
                 _patch(out, step, iso, patch)
                 patches[channels] = patch
+            for j, rows in moved:
+                out[rows] = _on_axes(out[rows], parent[j], inverse=True)
             if vectors:
                 out[cols] = rotvec.from_forms(out[cols], orders, forms, turns, pre)
             decoded[channels] = out

@@ -206,19 +206,21 @@ def _parent_turns(skeleton: Skeleton, frame: np.ndarray) -> np.ndarray:
     return out
 
 
-def _world_translations(skeleton: Skeleton, forms: np.ndarray, const: np.ndarray) -> list[tuple[int, np.ndarray]]:
-    """``(joint, its X, Y, Z position channels)`` of every joint in a WORLD form whose three
-    translations all move: they are coded on the world's axes, ``G_p t`` (the decoded
-    constants' turn, as its rotation), so a dummy's turn does not tilt their quantisation grid.
-    Implied by the forms and the constant flags: no side data."""
-    if not len(forms):
-        return []
+def _world_translations(skeleton: Skeleton, const: np.ndarray) -> list[tuple[int, np.ndarray]]:
+    """``(joint, its X, Y, Z position channels)`` of every non-root joint whose three
+    translations all move and whose ancestors' rotations are all constant (the body's root
+    under a dummy root): they are coded on the world's axes, ``G_p t`` with ``G_p`` from the
+    decoded constants, so a dummy's turn does not tilt their quantisation grid (under no turn
+    ``G_p`` is the identity and nothing changes). Implied by the constant flags: no side data."""
     plan, out = _plan(skeleton), []
-    for k, (g, _) in enumerate(_three_angle_groups(skeleton)):
-        j = skeleton.channel_joints[g[0]]
+    still = np.ones(len(skeleton), dtype=bool)          # the joint and all above it hold constant rotations
+    for j in range(len(skeleton)):
+        rot = plan.rot_index[j][plan.rot_index[j] >= 0]
+        p = skeleton.parents[j]
+        still[j] = not const.size or (bool(const[rot].all()) and (p < 0 or still[p]))
         pos = plan.pos_index[j]
-        if forms[k] >= rotvec.WORLD and (pos >= 0).all() and not const[pos].any():
-            out.append((int(j), pos.copy()))
+        if p >= 0 and still[p] and (pos >= 0).all() and not const[pos].any():
+            out.append((j, pos.copy()))
     return out
 
 
@@ -428,7 +430,7 @@ class KinwaveCodec(Codec):
         if not frames:
             return np.zeros((0, skeleton.num_channels))
         return _decoded(skeleton, codes, offsets, coded.const, coded.knots, coded.coeffs, lay, forms,
-                        _constants(skeleton, version), means, (isolated, patches)).T
+                        _constants(skeleton, version), means, (isolated, patches), version).T
 
     # ----- streaming ------------------------------------------------------------------------
     def encoder(self, skeleton: Skeleton, fps: float) -> StreamEncoder:
@@ -440,26 +442,27 @@ class KinwaveCodec(Codec):
 
 def _decoded(skeleton: Skeleton, codes: np.ndarray, offsets: np.ndarray, const: np.ndarray, knots: np.ndarray,
              coeffs: np.ndarray, lay: trendwave.Layout, forms: np.ndarray, constants: _Constants,
-             means: np.ndarray, isolated: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+             means: np.ndarray, isolated: tuple[np.ndarray, np.ndarray], version: int) -> np.ndarray:
     """Channels ``(C, T)`` from the integers, in one reconstruction of all channels; the
     joints coded in another form (``forms``, one per three-angle joint, :mod:`rotvec`; ``means``
     a row of integers per such joint, or none; a WORLD form's turn from the decoded constants
-    above it, :func:`_parent_turns`) back to the file's Euler angles; ``isolated`` frames and
+    above it, :func:`_parent_turns`) back to the file's Euler angles; translations coded on the
+    world's axes back on their parent's (:func:`_world_translations`); ``isolated`` frames and
     their patches (:func:`_patch`)."""
     steps = _channel_steps(skeleton, codes)
     out = _reconstruct(knots, coeffs, const == 1, steps, lay, _factors(offsets, lay), constants)
     _patch(out, steps, *isolated)
+    moved = _world_translations(skeleton, const == 1) if version >= 3 else []
+    if moved and out.shape[1]:
+        parent = _parent_orientations(skeleton, out[:, 0])
+        for j, pos in moved:
+            out[pos] = _on_axes(out[pos], parent[j], inverse=True)
     groups = _three_angle_groups(skeleton)
     coded = np.flatnonzero(forms) if len(forms) else np.zeros(0, dtype=np.int64)
     if coded.size:
         rows = np.concatenate([groups[k][0] for k in coded])
         turns = rotvec.mean_quats(means[coded] if len(means) else np.zeros((coded.size, 3)), MEAN_QUANTUM)
         pre = _parent_turns(skeleton, out[:, 0])[coded] if (forms >= rotvec.WORLD).any() else None
-        moved = _world_translations(skeleton, forms, const == 1)
-        if moved:
-            parent = _parent_orientations(skeleton, out[:, 0])
-            for j, pos in moved:
-                out[pos] = _on_axes(out[pos], parent[j], inverse=True)
         out[rows] = rotvec.from_forms(out[rows], tuple(groups[k][1] for k in coded), forms[coded], turns, pre)
     return out
 
@@ -544,7 +547,7 @@ class _Encoder:
         self.turns, self.turned = self._turns()
         self.forms = self._choose_forms() if self.cfg["rotation_vectors"] else np.zeros(0, dtype=np.int64)
         self._constant_in_forms()
-        self.world_translations = _world_translations(sk, self.forms, self.const)
+        self.world_translations = _world_translations(sk, self.const)
         if self.cfg["keyframes"] and _jumps_at_start(self.positions):
             self._choose_keyframes()
 

@@ -22,6 +22,8 @@ BOUND = 1.0
 GROWTH = 0.15                  # any one re-expression of one short test clip (the search lands anywhere in 90-100%
                                # of the bound, a few percent of bytes either way)
 MEDIAN_GROWTH = 0.03           # over all the re-expressions of a clip: the median target
+DUMMY_GROWTH = 0.05            # a dummy root: the body is coded as without it (WORLD forms, world-axis translations);
+                               # the dummy joint itself costs 20-30 bytes of skeleton, 2% of a 1.2 KB file
 
 
 @pytest.fixture(scope="module")
@@ -94,7 +96,7 @@ turns = st.tuples(*[st.floats(-180.0, 180.0, allow_nan=False)] * 3)
 @settings(max_examples=3)
 @given(turn=st.one_of(turns, st.sampled_from([(0.0, -90.0, 0.0), (0.0, 90.0, 0.0)])))
 def test_a_dummy_root_with_a_constant_rotation_changes_nothing(bvh, turn):
-    _check_invariant(bvh, reexpress.with_dummy_root(bvh, turn))
+    _check_invariant(bvh, reexpress.with_dummy_root(bvh, turn), DUMMY_GROWTH)
 
 
 @pytest.mark.parametrize("factor", [0.01, 2.54])
@@ -155,7 +157,7 @@ def test_generated_skeletons_under_a_rotated_dummy_root_keep_the_bound(seed, tur
 @given(seed=st.integers(0, 2 ** 16), turn=turns)
 def test_generated_skeletons_under_a_rotated_dummy_root_cost_about_the_same(seed, turn):
     motion = _chain(seed)
-    _check_invariant(motion, reexpress.with_dummy_root(motion, turn))
+    _check_invariant(motion, reexpress.with_dummy_root(motion, turn), DUMMY_GROWTH)
 
 
 def test_reexpressions_keep_every_joint_in_place(bvh, amc):

@@ -315,3 +315,20 @@ def test_a_turned_dummy_root_codes_the_body_as_without_it(walk_amc, turn):
     p0, q0 = forward_kinematics(sk, moved.channels)
     p1, q1 = forward_kinematics(decoded.skeleton, decoded.channels)
     assert shell_errors(sk, p0 * cm, q0, p1 * cm, q1).max <= 1.0
+
+
+def test_a_final_pass_far_under_its_bound_is_scaled_up(walk_bvh):
+    """_scale_up: a pass at a quarter of the bound goes coarser, every code together, until its
+    worst error is within the accepted range (or one more code would break the bound): fewer
+    bytes, the bound held."""
+    from mocodec.codecs.kinwave import ACCEPT
+
+    enc = _Encoder(get_codec("kinwave", max_error_cm=1.0, error_measure="shell"), walk_bvh[:300])
+    fine = enc.run_pass(enc.codes(enc._first_scale() / 4.0))
+    worst = enc.error(fine.decoded)
+    assert worst < 0.5
+    up = enc._scale_up(fine, worst, 1.0)
+    assert (up.steps > fine.steps).all() and (up.steps - fine.steps == (up.steps - fine.steps)[0]).all()
+    after = enc.error(up.decoded)
+    assert after <= 1.0 and len(enc.body(up)) < len(enc.body(fine))
+    assert after >= ACCEPT or enc.error(enc.run_pass(up.steps + 1, up.offsets).decoded) > 1.0

@@ -28,7 +28,7 @@ import numpy as np
 HERE = Path(__file__).parent
 sys.path.insert(0, str(HERE))
 
-from mocodec import load, moc  # noqa: E402
+from mocodec import load, moc, reexpress  # noqa: E402
 from mocodec.codecs import Codec, codec_ids, get_codec  # noqa: E402
 from mocodec.codecs.base import read_envelope  # noqa: E402
 from mocodec.errors import MocodecError  # noqa: E402
@@ -112,18 +112,20 @@ def _decoded_ok(codec: Codec, payload: bytes, skeleton) -> None:
 def fuzz_decoders(run: Run) -> None:
     """Every codec's decoder on mutated bodies with a recomputed envelope CRC."""
     walk = _walk()
+    turned = reexpress.with_dummy_root(walk, (0.0, 90.0, 0.0))      # kinwave's WORLD forms and world-axis translations
     payloads = {}
     for cid in codec_ids():
         try:
-            payloads[cid] = get_codec(cid).encode(walk)
+            payloads[cid] = get_codec(cid).encode(walk), walk.skeleton
         except MocodecError:
             continue                    # an optional package is missing
+    payloads["kinwave under a turned dummy"] = get_codec("kinwave").encode(turned), turned.skeleton
     while run.more():
-        for cid, payload in payloads.items():
+        for name, (payload, skeleton) in payloads.items():
             frames, fps, body = read_envelope(payload)
             damaged = Codec.wrap(mutate(body, run.rng), frames, fps)
-            codec = get_codec(cid)
-            run.check(f"{cid} decoder", lambda: _decoded_ok(codec, damaged, walk.skeleton))
+            codec = get_codec(name.split()[0])
+            run.check(f"{name} decoder", lambda: _decoded_ok(codec, damaged, skeleton))
 
 
 def fuzz_container(run: Run) -> None:

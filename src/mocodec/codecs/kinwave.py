@@ -191,19 +191,30 @@ def _parent_orientations(skeleton: Skeleton, frame: np.ndarray) -> np.ndarray:
     return np.where((parents >= 0)[:, None], quats[0, np.maximum(parents, 0)], np.array([1.0, 0.0, 0.0, 0.0]))
 
 
-def _parent_turns(skeleton: Skeleton, frame: np.ndarray) -> np.ndarray:
-    """``(n, 4)``: per three-angle joint, ``conj(C) G_p C``, its parent's orientation in one
-    frame of channels ``frame (C,)`` seen through the joint's own pre-rotation ``C``: the turn a
-    WORLD form (:mod:`mocodec.coding.rotvec`) puts on the joint's rotation ``M``, since
-    ``G = G_p C M C^-1 = C (conj(C) G_p C M) C^-1``. Encoder and decoder compute it from the same
-    decoded constants, so it is the same floats on both ends."""
+def _parent_turns(skeleton: Skeleton, parents: np.ndarray) -> np.ndarray:
+    """``(n, 4)``: per three-angle joint, ``conj(C) G_p C``, its parent's orientation
+    (``parents``, :func:`_parent_orientations`) seen through the joint's own pre-rotation ``C``:
+    the turn a WORLD form (:mod:`mocodec.coding.rotvec`) puts on the joint's rotation ``M``,
+    since ``G = G_p C M C^-1 = C (conj(C) G_p C M) C^-1``. Encoder and decoder compute it from
+    the same decoded constants, so it is the same floats on both ends."""
     joints = np.array([skeleton.channel_joints[g[0]] for g, _ in _three_angle_groups(skeleton)], dtype=np.int64)
-    out = _parent_orientations(skeleton, frame)[joints]
+    out = parents[joints]
     axis = np.array([skeleton.joints[j].has_axis for j in joints], dtype=bool)
     if axis.any():
         c = rotations.matrix_to_quat(skeleton.axis_matrices)[joints[axis]]
         out[axis] = rotations.quat_multiply(rotations.quat_conjugate(c), rotations.quat_multiply(out[axis], c))
     return out
+
+
+def _still_rotations(skeleton: Skeleton, const: np.ndarray) -> np.ndarray:
+    """``(joints,)``: whether a joint and every joint above it hold constant rotations
+    (``const (C,)`` per channel)."""
+    plan = _plan(skeleton)
+    still = np.ones(len(skeleton), dtype=bool)
+    for j in range(len(skeleton)):
+        p = skeleton.parents[j]
+        still[j] = bool(const[plan.rot_index[j][plan.rot_index[j] >= 0]].all()) and (p < 0 or still[p])
+    return still
 
 
 def _world_translations(skeleton: Skeleton, const: np.ndarray) -> list[tuple[int, np.ndarray]]:
@@ -212,14 +223,12 @@ def _world_translations(skeleton: Skeleton, const: np.ndarray) -> list[tuple[int
     under a dummy root): they are coded on the world's axes, ``G_p t`` with ``G_p`` from the
     decoded constants, so a dummy's turn does not tilt their quantisation grid (under no turn
     ``G_p`` is the identity and nothing changes). Implied by the constant flags: no side data."""
-    plan, out = _plan(skeleton), []
-    still = np.ones(len(skeleton), dtype=bool)          # the joint and all above it hold constant rotations
-    for j in range(len(skeleton)):
-        rot = plan.rot_index[j][plan.rot_index[j] >= 0]
-        p = skeleton.parents[j]
-        still[j] = not const.size or (bool(const[rot].all()) and (p < 0 or still[p]))
+    if not const.size:
+        return []
+    plan, still, out = _plan(skeleton), _still_rotations(skeleton, const), []
+    for j in range(1, len(skeleton)):
         pos = plan.pos_index[j]
-        if p >= 0 and still[p] and (pos >= 0).all() and not const[pos].any():
+        if still[skeleton.parents[j]] and (pos >= 0).all() and not const[pos].any():
             out.append((j, pos.copy()))
     return out
 
@@ -453,16 +462,16 @@ def _decoded(skeleton: Skeleton, codes: np.ndarray, offsets: np.ndarray, const: 
     out = _reconstruct(knots, coeffs, const == 1, steps, lay, _factors(offsets, lay), constants)
     _patch(out, steps, *isolated)
     moved = _world_translations(skeleton, const == 1) if version >= 3 else []
-    if moved and out.shape[1]:
-        parent = _parent_orientations(skeleton, out[:, 0])
-        for j, pos in moved:
-            out[pos] = _on_axes(out[pos], parent[j], inverse=True)
+    world = bool(len(forms)) and bool((forms >= rotvec.WORLD).any())
+    parents = _parent_orientations(skeleton, out[:, 0]) if moved or world else None    # (the caller has frames)
+    for j, pos in moved:
+        out[pos] = _on_axes(out[pos], parents[j], inverse=True)
     groups = _three_angle_groups(skeleton)
     coded = np.flatnonzero(forms) if len(forms) else np.zeros(0, dtype=np.int64)
     if coded.size:
         rows = np.concatenate([groups[k][0] for k in coded])
         turns = rotvec.mean_quats(means[coded] if len(means) else np.zeros((coded.size, 3)), MEAN_QUANTUM)
-        pre = _parent_turns(skeleton, out[:, 0])[coded] if (forms >= rotvec.WORLD).any() else None
+        pre = _parent_turns(skeleton, parents)[coded] if world else None
         out[rows] = rotvec.from_forms(out[rows], tuple(groups[k][1] for k in coded), forms[coded], turns, pre)
     return out
 
@@ -559,15 +568,10 @@ class _Encoder:
         if not self.frames or not groups:
             return np.tile([1.0, 0.0, 0.0, 0.0], (len(groups), 1)), np.zeros(len(groups), dtype=bool)
         sk = self.skeleton
-        still = np.ones(len(sk), dtype=bool)            # the joint and every joint above it turn by constants
-        for g in _groups(sk):
-            if g.rotation:
-                still[g.joint] = self.const[g.channels].all()
-        for j in range(len(sk)):
-            still[j] &= sk.parents[j] < 0 or still[sk.parents[j]]
+        still = _still_rotations(sk, self.const)
         parents = sk.parents[[sk.channel_joints[g[0]] for g, _ in groups]]
         above = np.where(parents >= 0, still[np.maximum(parents, 0)], False)
-        turns = _parent_turns(sk, self.values[:, 0])
+        turns = _parent_turns(sk, _parent_orientations(sk, self.values[:, 0]))
         return turns, above & (np.abs(turns[:, 0]) < 1.0 - 1e-12)
 
     def _set_layout(self, keyframes: int) -> None:
@@ -774,23 +778,23 @@ class _Encoder:
             column = {c: i for i, c in enumerate(channels)}
             vectors = [k for k, (g, _) in enumerate(rotvec_groups) if self.forms[k] and g[0] in column] \
                 if len(self.forms) else []
+            moved = [(j, [column[c] for c in pos]) for j, pos in self.world_translations if pos[0] in column]
+            turned = moved or any(self.forms[k] >= rotvec.WORLD for k in vectors)
+            parents = _parent_orientations(sk, decoded[:, 0]) if turned else None     # of the decoded rows above
             values = targets.T.copy()
             if vectors:
                 cols = [column[c] for k in vectors for c in rotvec_groups[k][0]]
                 orders = tuple(rotvec_groups[k][1] for k in vectors)
                 forms = self.forms[vectors]
                 turns = rotvec.mean_quats(self.means[vectors], MEAN_QUANTUM)
-                pre = _parent_turns(sk, decoded[:, 0])[vectors] if (forms >= rotvec.WORLD).any() else None
+                pre = _parent_turns(sk, parents)[vectors] if (forms >= rotvec.WORLD).any() else None
                 quats = np.stack([exact[j] if j in exact else
                                   rotvec.euler_quats(values[[column[c] for c in g]], (o,))[:, 0]
                                   for j, (g, o) in ((sk.channel_joints[rotvec_groups[k][0][0]], rotvec_groups[k])
                                                     for k in vectors)], axis=1)
                 values[cols] = rotvec.to_forms(values[cols], orders, forms, turns, quats, pre)
-            moved = [(j, [column[c] for c in pos]) for j, pos in self.world_translations if pos[0] in column]
-            if moved:
-                parent = _parent_orientations(sk, decoded[:, 0])
-                for j, rows in moved:
-                    values[rows] = _on_axes(values[rows], parent[j])
+            for j, rows in moved:
+                values[rows] = _on_axes(values[rows], parents[j])
             constants = _Constants(self.constants.fraction, self.constants.base[channels])
             iso = self.isolated
             wanted = values[:, iso]
@@ -805,7 +809,7 @@ class _Encoder:
                 _patch(out, step, iso, patch)
                 patches[channels] = patch
             for j, rows in moved:
-                out[rows] = _on_axes(out[rows], parent[j], inverse=True)
+                out[rows] = _on_axes(out[rows], parents[j], inverse=True)
             if vectors:
                 out[cols] = rotvec.from_forms(out[cols], orders, forms, turns, pre)
             decoded[channels] = out

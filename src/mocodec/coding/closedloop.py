@@ -23,17 +23,12 @@ import numba
 import numpy as np
 
 from mocodec import rotations
+from mocodec.coding.rotvec import quat_product
 from mocodec.kinematics import _plan
 from mocodec.skeleton import Skeleton
 
 _DAMPING = 1e-9
 _ITERATIONS = 1
-
-
-@numba.njit(inline="always")
-def _mul(aw, ax, ay, az, bw, bx, by, bz):
-    return (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
 
 
 @numba.njit(inline="always")
@@ -64,8 +59,8 @@ def _targets(angles, axes, active, cq, has_axis, parent, goal, out):
         for i in range(k):
             theta[i] = angles[f, i] * (np.pi / 180.0)
         # wanted local rotation M = conj(parent) * goal
-        mw, mx, my, mz = _mul(parent[f, 0], -parent[f, 1], -parent[f, 2], -parent[f, 3],
-                              goal[f, 0], goal[f, 1], goal[f, 2], goal[f, 3])
+        mw, mx, my, mz = quat_product(parent[f, 0], -parent[f, 1], -parent[f, 2], -parent[f, 3],
+                                      goal[f, 0], goal[f, 1], goal[f, 2], goal[f, 3])
         for _ in range(_ITERATIONS):
             for i in range(k):
                 steps[i, 0], steps[i, 1], steps[i, 2], steps[i, 3] = _axis_quat(axes[i], theta[i])
@@ -77,13 +72,13 @@ def _targets(angles, axes, active, cq, has_axis, parent, goal, out):
                 if has_axis:
                     jx, jy, jz = _rotate(cq[0], cq[1], cq[2], cq[3], jx, jy, jz)
                 jac[i, 0], jac[i, 1], jac[i, 2] = jx, jy, jz
-                sw, sx, sy, sz = _mul(steps[i, 0], steps[i, 1], steps[i, 2], steps[i, 3], sw, sx, sy, sz)
+                sw, sx, sy, sz = quat_product(steps[i, 0], steps[i, 1], steps[i, 2], steps[i, 3], sw, sx, sy, sz)
             lw, lx, ly, lz = sw, sx, sy, sz
             if has_axis:
-                lw, lx, ly, lz = _mul(cq[0], cq[1], cq[2], cq[3], lw, lx, ly, lz)
-                lw, lx, ly, lz = _mul(lw, lx, ly, lz, cq[0], -cq[1], -cq[2], -cq[3])
+                lw, lx, ly, lz = quat_product(cq[0], cq[1], cq[2], cq[3], lw, lx, ly, lz)
+                lw, lx, ly, lz = quat_product(lw, lx, ly, lz, cq[0], -cq[1], -cq[2], -cq[3])
             # remaining rotation in the body frame: E = conj(L) M, as a rotation vector r
-            ew, ex, ey, ez = _mul(lw, -lx, -ly, -lz, mw, mx, my, mz)
+            ew, ex, ey, ez = quat_product(lw, -lx, -ly, -lz, mw, mx, my, mz)
             if ew < 0.0:
                 ew, ex, ey, ez = -ew, -ex, -ey, -ez
             norm = np.sqrt(ex * ex + ey * ey + ez * ez)
@@ -129,12 +124,12 @@ def _compose(angles, axes, cq, has_axis, parent, out):
         w, x, y, z = 1.0, 0.0, 0.0, 0.0
         for i in range(axes.size):
             sw, sx, sy, sz = _axis_quat(axes[i], angles[f, i] * (np.pi / 180.0))
-            w, x, y, z = _mul(w, x, y, z, sw, sx, sy, sz)
+            w, x, y, z = quat_product(w, x, y, z, sw, sx, sy, sz)
         if has_axis:
-            w, x, y, z = _mul(cq[0], cq[1], cq[2], cq[3], w, x, y, z)
-            w, x, y, z = _mul(w, x, y, z, cq[0], -cq[1], -cq[2], -cq[3])
-        out[f, 0], out[f, 1], out[f, 2], out[f, 3] = _mul(parent[f, 0], parent[f, 1], parent[f, 2], parent[f, 3],
-                                                          w, x, y, z)
+            w, x, y, z = quat_product(cq[0], cq[1], cq[2], cq[3], w, x, y, z)
+            w, x, y, z = quat_product(w, x, y, z, cq[0], -cq[1], -cq[2], -cq[3])
+        out[f, 0], out[f, 1], out[f, 2], out[f, 3] = quat_product(parent[f, 0], parent[f, 1], parent[f, 2],
+                                                                  parent[f, 3], w, x, y, z)
 
 
 def target_angles(angles: np.ndarray, axes: np.ndarray, active: np.ndarray, axis_quat: np.ndarray, has_axis: bool,

@@ -62,8 +62,9 @@ def _turn(w, x, y, z, axis, angle_deg):
 
 
 @numba.njit(inline="always")
-def _product(aw, ax, ay, az, bw, bx, by, bz):
-    """The Hamilton product of two quaternions."""
+def quat_product(aw, ax, ay, az, bw, bx, by, bz):
+    """The Hamilton product of two quaternions, component by component (for numba kernels;
+    :func:`mocodec.rotations.quat_multiply` is the array form)."""
     return (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
             aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
 
@@ -148,7 +149,7 @@ def _form_quats_kernel(values, form_axes, vector, means):
                 rw, rx, ry, rz = 1.0, 0.0, 0.0, 0.0
                 for m in range(3):
                     rw, rx, ry, rz = _turn(rw, rx, ry, rz, form_axes[j, m], values[t, j, m])
-            out[t, j, 0], out[t, j, 1], out[t, j, 2], out[t, j, 3] = _product(
+            out[t, j, 0], out[t, j, 1], out[t, j, 2], out[t, j, 3] = quat_product(
                 means[j, 0], means[j, 1], means[j, 2], means[j, 3], rw, rx, ry, rz)
     return out
 

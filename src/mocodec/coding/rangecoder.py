@@ -21,8 +21,8 @@ import struct
 import constriction
 import numpy as np
 
-from mocodec.coding.bitio import BitReader, BitWriter, unzigzag, zigzag
 from mocodec import limits
+from mocodec.coding.bitio import BitReader, BitWriter, unzigzag, zigzag
 from mocodec.errors import CodecError, CorruptStreamError
 
 _MODEL = constriction.stream.model

@@ -151,11 +151,12 @@ def inflate_capped(data: bytes, zdict: bytes, limit: int) -> bytes:
     ends early; ValueError says which."""
     inflate = zlib.decompressobj(zdict=zdict) if zdict else zlib.decompressobj()
     text = inflate.decompress(data, limit + 1)
+    if not inflate.unconsumed_tail:
+        text += inflate.flush()
     if len(text) > limit or inflate.unconsumed_tail:
         raise ValueError(f"it inflates to over {limit:,} bytes")
-    text += inflate.flush()
-    if not inflate.eof or len(text) > limit:
-        raise ValueError("the compressed header is cut short" if not inflate.eof else f"it inflates to over {limit:,} bytes")
+    if not inflate.eof:
+        raise ValueError("the compressed header is cut short")
     return text
 
 

@@ -205,7 +205,7 @@ class Relay:
     async def _served(self, request: web.Request, handler):
         """Every request that reaches a handler marks its connection as past the guard's timeout."""
         if self.guard is not None:
-            self.guard.served(request.transport)
+            self.guard.mark_served(request.transport)
         return await handler(request)
 
     async def _start(self, app: web.Application) -> None:
@@ -488,51 +488,48 @@ class ConnectionGuard:
     a byte, refuses those over ``max_connections`` (or ``max_connections_per_host`` from one
     address), and cuts one whose request has not reached a handler within
     ``request_timeout_s`` (slow openers hold a descriptor each; 300 of them once exhausted a
-    relay's 256). Handlers mark their connection as served (:meth:`served`)."""
+    relay's 256). Handlers mark their connection as served (:meth:`mark_served`)."""
 
     def __init__(self, factory, limits: Limits):
         self.factory, self.limits = factory, limits
         self.open: dict[object, str] = {}           # transport -> peer host
         self.per_host: dict[str, int] = {}
+        self._served: set = set()                   # the open transports whose request reached a handler
         self.refused = 0
-        self._served: set[int] = set()
-
-    def served(self, transport) -> None:
-        if transport is not None:
-            self._served.add(id(transport))
 
     def __call__(self) -> asyncio.Protocol:
         return _Guarded(self, self.factory())
 
-    def admit(self, transport) -> bool:
-        """Count a new connection, or refuse it (False: it has been aborted)."""
+    def admit(self, transport) -> None:
+        """Count a new connection, or refuse it (abort it) over a limit."""
         peer = transport.get_extra_info("peername")
         host = str(peer[0]) if isinstance(peer, tuple) and peer else "?"
         if len(self.open) >= self.limits.max_connections or \
                 self.per_host.get(host, 0) >= self.limits.max_connections_per_host:
             self.refused += 1
             transport.abort()
-            return False
+            return
         self.open[transport] = host
         self.per_host[host] = self.per_host.get(host, 0) + 1
         asyncio.get_running_loop().call_later(self.limits.request_timeout_s, self._check, transport)
-        return True
+
+    def mark_served(self, transport) -> None:
+        if transport in self.open:
+            self._served.add(transport)
 
     def release(self, transport) -> None:
-        if transport in self.open:
-            self._forget(transport)
-
-    def _check(self, transport) -> None:
-        if transport in self.open and id(transport) not in self._served:
-            self.refused += 1
-            transport.abort()
-
-    def _forget(self, transport) -> None:
-        host = self.open.pop(transport)
-        self._served.discard(id(transport))
+        host = self.open.pop(transport, None)
+        if host is None:
+            return
+        self._served.discard(transport)
         self.per_host[host] -= 1
         if not self.per_host[host]:
             del self.per_host[host]
+
+    def _check(self, transport) -> None:
+        if transport in self.open and transport not in self._served:
+            self.refused += 1
+            transport.abort()
 
 
 class _Guarded(asyncio.Protocol):

@@ -8,14 +8,16 @@ THREE_VERSION := 0.187.0
 VENDOR := src/mocodec/viewer/static/vendor
 THREE := $(VENDOR)/three.module.js
 
-.PHONY: demo test test-fast bench bench-suite vendor clean
+.PHONY: demo test test-fast lint bench bench-suite vendor clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
+# every extra, then the numerical kernels compiled once (numba caches them)
 $(STAMP): $(BIN)/python pyproject.toml $(THREE)
-	$(BIN)/python -m pip install --quiet -e ".[test,plot,bench]"
+	$(BIN)/python -m pip install --quiet -e ".[test,plot,bench,stream,view,lint]"
+	$(BIN)/mocodec warmup
 	touch $(STAMP)
 
 # the viewer's three.js, fetched from npm once (pinned; npm checks its integrity) and served
@@ -37,9 +39,16 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(BIN)/python -m pytest
 
-# everything but the slow tier (the fuzz suite): for the edit-test loop
+# the edit-test loop: everything but the slow tier (fuzzing, corruption sweeps, every shared
+# clip), the browser and the network (relay, NATS) tests
 test-fast: $(STAMP)
-	$(BIN)/python -m pytest -m "not slow"
+	$(BIN)/python -m pytest -n auto -m "not slow and not browser and not network"
+
+# ruff (lint and format check) and mypy
+lint: $(STAMP)
+	$(BIN)/ruff check src tests benchmarks
+	$(BIN)/ruff format --check src tests benchmarks
+	$(BIN)/mypy
 
 # every benchmark script of benchmarks/ (speed and rate-distortion of each issue), one after another
 bench: $(STAMP)

@@ -7,7 +7,7 @@ import numpy as np
 
 from mocodec import Motion
 from mocodec.codecs import get_codec
-from mocodec.coding.parts import split_parts
+from mocodec.coding.entropy.parts import split_parts
 
 
 def sz3_per_channel(motion: Motion, bound: float) -> tuple[int, np.ndarray]:

@@ -12,7 +12,6 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from common import best_of  # noqa: E402
-
 from mocodec import rotations  # noqa: E402
 from mocodec.capture.converter import Converter  # noqa: E402
 from mocodec.capture.simulate import random_poses, simulate  # noqa: E402

@@ -14,14 +14,13 @@ import subprocess
 import sys
 import tempfile
 
-
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 from common import DATA, best_of, tile  # noqa: E402
-
 from mocodec import load  # noqa: E402
 from mocodec.codecs import codec_ids, get_codec  # noqa: E402
-from mocodec.coding import primdb, vqbook  # noqa: E402
+from mocodec.codecs.motionprimitives import primdb
+from mocodec.codecs.shared import vqbook
 
 FRAMES = 10_000
 SETTINGS = {"pwavelet": {"alpha": 0.02}, "spiht": {"bits_per_second": 4000}}

@@ -8,9 +8,9 @@ import time
 
 import numpy as np
 
-from mocodec.coding import huffman, rangecoder, rle
-from mocodec.coding.bitio import BitReader, BitWriter, zigzag
-from mocodec.coding.quantizers import AdaptiveQuantizer, MuLawQuantizer, UniformQuantizer
+from mocodec.coding.entropy import huffman, rangecoder, rle
+from mocodec.coding.entropy.bitio import BitReader, BitWriter, zigzag
+from mocodec.coding.quantisation.quantizers import AdaptiveQuantizer, MuLawQuantizer, UniformQuantizer
 
 N = 1_000_000
 

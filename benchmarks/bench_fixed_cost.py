@@ -16,7 +16,6 @@ import json
 import zlib
 
 from common import SHARED
-
 from mocodec import load, moc
 from mocodec.codecs import get_codec
 from mocodec.formats import container

@@ -13,7 +13,6 @@ import tempfile
 from pathlib import Path
 
 from common import DATA, ROOT, SHARED, best_of, tile
-
 from mocodec import load, save
 from mocodec.kinematics import forward_kinematics
 

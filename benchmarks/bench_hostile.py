@@ -12,8 +12,8 @@ import tracemalloc
 import zlib
 
 import numpy as np
-from common import DATA, best_of
 
+from common import DATA, best_of
 from mocodec import limits, load, moc
 from mocodec.codecs import get_codec
 from mocodec.errors import MocodecError

@@ -16,8 +16,8 @@ import argparse
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
-from common import SHARED
 
+from common import SHARED
 from mocodec import load, moc, reexpress
 from mocodec.codecs import get_codec
 from mocodec.kinematics import forward_kinematics

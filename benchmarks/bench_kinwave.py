@@ -17,9 +17,9 @@ import argparse
 import time
 
 import numpy as np
+
 from baselines import sz3_per_channel
 from common import SHARED
-
 from mocodec import load, moc
 from mocodec.codecs import get_codec
 from mocodec.kinematics import forward_kinematics

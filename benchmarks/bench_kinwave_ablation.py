@@ -11,7 +11,6 @@ import argparse
 import numpy as np
 
 from common import SHARED
-
 from mocodec import load
 from mocodec.codecs import get_codec
 

@@ -10,10 +10,8 @@ import numpy as np
 import zstandard
 
 from common import SHARED
-
 from mocodec import load, moc
 from mocodec.codecs import get_codec
-
 
 
 def main() -> None:

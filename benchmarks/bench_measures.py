@@ -6,11 +6,9 @@ each part so regressions are easy to place. Run: `.venv/bin/python benchmarks/be
 
 from __future__ import annotations
 
-
 import numpy as np
 
 from common import DATA, best_of, tile
-
 from mocodec import load
 from mocodec.kinematics import forward_kinematics
 from mocodec.metrics import compare, dof_errors, visual_errors

@@ -27,10 +27,9 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from common import SHARED, best_of  # noqa: E402
-
 from mocodec import load  # noqa: E402
 from mocodec.codecs import get_codec  # noqa: E402
-from mocodec.coding import motiontables  # noqa: E402
+from mocodec.codecs.model import motiontables
 from mocodec.metrics import compare  # noqa: E402
 
 DANCERS = ("05", "60", "61", "94", "131")

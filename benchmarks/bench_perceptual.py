@@ -25,7 +25,6 @@ from pysz import sz, szConfig, szErrorBoundMode
 
 from baselines import sz3_per_channel
 from common import ROOT, SHARED
-
 from mocodec import Motion, load, moc, ratecontrol
 from mocodec.codecs import get_codec
 from mocodec.formats import container

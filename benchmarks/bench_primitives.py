@@ -29,10 +29,9 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from common import ROOT, SHARED, best_of, tile  # noqa: E402
-
 from mocodec import load  # noqa: E402
 from mocodec.codecs import get_codec  # noqa: E402
-from mocodec.coding import primdb  # noqa: E402
+from mocodec.codecs.motionprimitives import primdb
 from mocodec.metrics import compare  # noqa: E402
 
 TRAIN = {"bvh": ["61_04", "94_07", "02_02"], "amc": ["131_04", "05_02", "07_03"]}

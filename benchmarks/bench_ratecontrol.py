@@ -9,8 +9,8 @@ import argparse
 import time
 
 import numpy as np
-from common import SHARED
 
+from common import SHARED
 from mocodec import load, moc, ratecontrol
 from mocodec.codecs import get_codec
 from mocodec.metrics import compare

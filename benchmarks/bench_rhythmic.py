@@ -24,10 +24,9 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from common import SHARED  # noqa: E402
-
 from mocodec import load  # noqa: E402
 from mocodec.codecs import get_codec  # noqa: E402
-from mocodec.coding import rhythmdb  # noqa: E402
+from mocodec.codecs.motionprimitives import rhythmdb
 from mocodec.metrics import compare  # noqa: E402
 
 DANCE = ("61_04", "61_06", "61_09", "60_04")

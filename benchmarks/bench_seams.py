@@ -12,7 +12,6 @@ from pathlib import Path
 import numpy as np
 
 from common import SHARED
-
 from mocodec import load
 from mocodec.codecs import get_codec
 from mocodec.kinematics import forward_kinematics

@@ -14,7 +14,6 @@ import time
 import numpy as np
 
 from common import DATA, SHARED
-
 from mocodec import load
 from mocodec.codecs import get_codec
 from mocodec.metrics import compare

@@ -21,10 +21,9 @@ from pathlib import Path
 import numpy as np
 
 from common import SHARED
-
 from mocodec import load
 from mocodec.codecs import get_codec
-from mocodec.coding import vqbook
+from mocodec.codecs.shared import vqbook
 from mocodec.metrics import compare
 
 THESIS_DOFS = 52

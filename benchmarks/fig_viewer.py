@@ -17,7 +17,7 @@ def main() -> None:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    server = subprocess.Popen([sys.executable, "-m", "mocodec.cli", "view", str(DATA / "07_03.bvh"), "--codec", "spiht",
+    server = subprocess.Popen([sys.executable, "-m", "mocodec", "view", str(DATA / "07_03.bvh"), "--codec", "spiht",
                                "--ratio", "60", "--port", str(port), "--no-browser"], stdout=subprocess.PIPE, text=True)
     try:
         server.stdout.readline()

@@ -156,8 +156,14 @@ def viewers(url: str, token: str, count: int, seconds: float, loss: float, follo
             warmup_s: float, budget: float) -> None:
     import aiohttp
 
-    from mocodec.stream.packets import (SEQUENCE_OFFSET, STREAM_OFFSET, TIMESTAMP_OFFSET, batch_offsets,
-                                        read_u32, read_u64)
+    from mocodec.stream.packets import (
+        SEQUENCE_OFFSET,
+        STREAM_OFFSET,
+        TIMESTAMP_OFFSET,
+        batch_offsets,
+        read_u32,
+        read_u64,
+    )
 
     hist = np.zeros(int(MAX_MS / BINS_MS) + 1, dtype=np.int64)
     tally = {"received": 0, "dropped": 0, "batches": 0, "lost": 0}
@@ -180,7 +186,7 @@ def viewers(url: str, token: str, count: int, seconds: float, loss: float, follo
         while time.monotonic() < end:
             try:
                 msg = await ws.receive(timeout=max(end - time.monotonic(), 0.01))
-            except asyncio.TimeoutError:
+            except TimeoutError:
                 break
             if msg.type != aiohttp.WSMsgType.BINARY:
                 break
@@ -319,7 +325,7 @@ def main() -> None:
         nats_url = f"nats://127.0.0.1:{nport}"
     for _ in range(2 if args.nats else 1):
         port = free_port()
-        cmd = [sys.executable, "-m", "mocodec.cli", "serve", "--port", str(port), "--secret", SECRET,
+        cmd = [sys.executable, "-m", "mocodec", "serve", "--port", str(port), "--secret", SECRET,
                "--max-messages-per-s", "1000", "--max-bytes-per-s", "1e8"]
         if nats_url:
             cmd += ["--bus", nats_url]

@@ -30,6 +30,17 @@ def _shared_data() -> Path | None:
 SHARED = _shared_data()
 
 
+def pytest_collection_modifyitems(items):
+    """Tests that use the ``browser`` fixture are marked ``browser`` (and ``network``: they
+    load pages from a server); those over every shared clip are ``slow``."""
+    for item in items:
+        if item.get_closest_marker("shared_data"):
+            item.add_marker(pytest.mark.slow)
+        if "browser" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.browser)
+            item.add_marker(pytest.mark.network)
+
+
 def free_port() -> int:
     """A loopback port nothing listens on (for servers the tests start)."""
     with socket.socket() as s:
@@ -64,7 +75,7 @@ def codebooks(martial_amc, tmp_path_factory):
     """{(codec id, predictive): codebook file} trained at 30 Hz on ``martial_amc`` (and, for the
     temporal ones, which serve any skeleton, on the BVH clip 09_02 too), never on the walk."""
     from mocodec import load
-    from mocodec.coding import vqbook
+    from mocodec.codecs.shared import vqbook
 
     folder, out = tmp_path_factory.mktemp("codebooks"), {}
     clips = [martial_amc.resample(30.0), load(DATA / "09_02.bvh").resample(30.0)]

@@ -13,7 +13,6 @@ crafted ones: decompression bombs and huge declared sizes.
 
 from __future__ import annotations
 
-import io
 import json
 import re
 import struct
@@ -33,10 +32,10 @@ from mocodec.codecs import Codec, codec_ids, get_codec  # noqa: E402
 from mocodec.codecs.base import read_envelope  # noqa: E402
 from mocodec.errors import MocodecError  # noqa: E402
 from mocodec.formats import container  # noqa: E402
-from mocodec.formats.asf_amc import read_amc, read_asf  # noqa: E402
+from mocodec.formats.amc import read_amc  # noqa: E402
+from mocodec.formats.asf import read_asf  # noqa: E402
 from mocodec.stream.live import LiveDecoder, stream_clip  # noqa: E402
-from mocodec.stream.packets import (HEADER, Packet, StreamInfo, pack_batch, parse,  # noqa: E402
-                                    split_batch)
+from mocodec.stream.packets import HEADER, Packet, StreamInfo, pack_batch, parse, split_batch  # noqa: E402
 from mocodec.stream.relay import Closing, Relay, Room, Viewer  # noqa: E402
 
 DATA = HERE / "data"

@@ -49,7 +49,9 @@ def model_path(codec_id: str) -> Path:
 def train_model(codec_id: str, path: Path) -> None:
     """A small model for ``codec_id`` trained (seeded) on the martial-arts clip."""
     from mocodec import load
-    from mocodec.coding import motiontables, primdb, rhythmdb, vqbook
+    from mocodec.codecs.model import motiontables
+    from mocodec.codecs.motionprimitives import primdb, rhythmdb
+    from mocodec.codecs.shared import vqbook
 
     martial = load(DATA / "135_08.amc")
     if codec_id in ("gesture", "posture"):

@@ -7,7 +7,7 @@ import numpy as np
 
 from mocodec.codecs import Codec, Knob, QualityKnob, register
 from mocodec.codecs.registry import codec_ids
-from mocodec.coding.rangecoder import decode_ints, encode_ints
+from mocodec.coding.entropy.rangecoder import decode_ints, encode_ints
 
 
 class StepCodec(Codec):

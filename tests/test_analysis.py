@@ -7,10 +7,9 @@ import json
 import numpy as np
 import pytest
 
+from conftest import DATA
 from mocodec.analysis import analyze, density, spectrum, stats, temporal
 from mocodec.cli import main
-
-from conftest import DATA
 
 FPS = 120.0
 

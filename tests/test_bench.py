@@ -11,14 +11,13 @@ import sys
 import numpy as np
 import pytest
 
+from conftest import DATA
 from mocodec import moc
 from mocodec.bench import compressdir, engine, points, report, runner, suite
 from mocodec.cli import main
 from mocodec.codecs import codec_class, get_codec
 from mocodec.errors import CodecError, MocodecError
 from mocodec.ratecontrol import tune
-
-from conftest import DATA
 
 SMALL = DATA / "09_02.bvh"          # 131 frames, 132 channels
 
@@ -163,6 +162,7 @@ def test_the_process_pool_returns_every_result_and_each_exception():
         list(runner.execute(_square, [1], jobs=0))
 
 
+@pytest.mark.slow
 def test_a_dask_cluster_runs_the_benchmark(tmp_path):
     distributed = pytest.importorskip("dask.distributed")
     with distributed.LocalCluster(n_workers=1, threads_per_worker=1, dashboard_address=None) as cluster:
@@ -173,6 +173,7 @@ def test_a_dask_cluster_runs_the_benchmark(tmp_path):
     assert [r["bytes"] for r in result.rows] == [r["bytes"] for r in local.rows]     # same bytes anywhere
 
 
+@pytest.mark.slow
 def test_a_local_dask_cluster_runs_compress_dir(tmp_path):
     pytest.importorskip("dask.distributed")
     data = tmp_path / "clips"

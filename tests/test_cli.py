@@ -3,10 +3,9 @@ import sys
 
 import pytest
 
+from conftest import DATA
 from mocodec import load
 from mocodec.cli import main
-
-from conftest import DATA
 
 
 def test_info(capsys):
@@ -30,15 +29,51 @@ def test_convert_both_ways(tmp_path, capsys):
 ])
 def test_user_errors_print_one_line_and_exit_2(argv, message, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    proc = subprocess.run([sys.executable, "-m", "mocodec.cli", *argv], capture_output=True, text=True)
+    proc = subprocess.run([sys.executable, "-m", "mocodec", *argv], capture_output=True, text=True)
     assert proc.returncode == 2
     assert proc.stderr.count("\n") == 1 and message in proc.stderr and "Traceback" not in proc.stderr
 
 
 def test_help_on_every_command():
-    for cmd in ([], ["info"], ["convert"], ["demo"]):
-        proc = subprocess.run([sys.executable, "-m", "mocodec.cli", *cmd, "--help"], capture_output=True, text=True)
-        assert proc.returncode == 0 and "usage: mocodec" in proc.stdout
+    from mocodec.cli import COMMANDS
+
+    proc = subprocess.run([sys.executable, "-m", "mocodec", "--help"], capture_output=True, text=True)
+    assert proc.returncode == 0 and all(name in proc.stdout for name in COMMANDS)
+    for name in COMMANDS:
+        with pytest.raises(SystemExit) as done:
+            main([name, "--help"])
+        assert done.value.code == 0
+
+
+def test_the_full_parser_has_every_command_with_its_help_line():
+    from mocodec.cli import COMMANDS, build_parser
+
+    text = build_parser("all").format_help()
+    assert all(name in text and help_line.split()[0] in text for name, (_, help_line) in COMMANDS.items())
+
+
+def test_help_imports_no_command_module():
+    code = "import sys; from mocodec.cli import build_parser; build_parser(); print(sorted(sys.modules))"
+    modules = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert "numpy" not in modules and "mocodec.codecs.base" not in modules and "mocodec.cli.files" not in modules
+
+
+def test_model_training_defaults_are_the_training_modules_own():
+    from mocodec.cli import build_parser
+    from mocodec.codecs.model import motiontables, segmentation
+    from mocodec.codecs.motionprimitives import primdb, rhythmdb
+
+    def parsed(kind):
+        return build_parser("model").parse_args(["model", "train", kind, "clip.bvh", "-o", "model.bin"])
+
+    tables, gesture = parsed("tables"), segmentation.GestureParams()
+    assert (tables.spacing, tables.discard, tables.norm, tables.interior) == (
+        motiontables.SPACING_CM, motiontables.DISCARD_DEG, motiontables.NORM, motiontables.INTERIOR_WEIGHT)
+    assert (tables.beta, tables.window, tables.min_length, tables.max_length) == (
+        gesture.beta, gesture.window, gesture.min_length, gesture.max_length)
+    prims = parsed("primitives")
+    assert (prims.threshold, prims.max_clusters) == (primdb.ERROR_THRESHOLD, primdb.MAX_CLUSTERS)
+    assert parsed("rhythm").count == rhythmdb.COUNT
 
 
 def test_demo_runs(capsys):

@@ -5,8 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from hypothesis import given, settings, strategies as st
 
 import stepcodec  # noqa: F401  (registers test-step)
 from mocodec.codecs import codec_class, codec_from_config, codec_ids, get_codec

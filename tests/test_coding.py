@@ -5,13 +5,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from hypothesis import given, settings, strategies as st
 from hypothesis.extra import numpy as hnp
 
-from mocodec.coding import huffman, rangecoder, rle
-from mocodec.coding.bitio import BitReader, BitWriter, unzigzag, zigzag
-from mocodec.coding.quantizers import AdaptiveQuantizer, MuLawQuantizer, UniformQuantizer, multipliers
+from mocodec.coding.entropy import huffman, rangecoder, rle
+from mocodec.coding.entropy.bitio import BitReader, BitWriter, unzigzag, zigzag
+from mocodec.coding.quantisation.quantizers import AdaptiveQuantizer, MuLawQuantizer, UniformQuantizer, multipliers
 from mocodec.errors import CorruptStreamError
 
 small_ints = hnp.arrays(np.int64, st.integers(0, 300), elements=st.integers(-50, 50))

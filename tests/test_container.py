@@ -4,8 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from hypothesis import given, settings, strategies as st
 
 from mocodec import Motion, moc
 from mocodec.codecs import get_codec
@@ -65,6 +64,7 @@ def small_file(walk_amc):
     return moc.pack(walk_amc[:50], get_codec("lossless"), chunk_frames=20)
 
 
+@pytest.mark.slow
 def test_every_truncation_is_caught(small_file):
     for cut in range(len(small_file)):
         with pytest.raises(CorruptStreamError):
@@ -120,8 +120,8 @@ def test_skeleton_by_reference(walk_amc, tmp_path):
         moc.unpack(ref)
     other = container.skeleton_from_dict(container.skeleton_to_dict(walk_amc.skeleton))
     assert container.skeleton_id(other) == container.skeleton_id(walk_amc.skeleton)
-    from mocodec import load
     from conftest import DATA
+    from mocodec import load
     with pytest.raises(SkeletonMismatchError, match="coded for skeleton"):
         moc.unpack(ref, skeleton=load(DATA / "135_08.amc").skeleton)
 
@@ -129,6 +129,7 @@ def test_skeleton_by_reference(walk_amc, tmp_path):
 def test_header_dictionaries_never_change():
     """The preset dictionaries are part of the format: files written with them need these bytes."""
     import hashlib
+
     from mocodec.formats.header_dict import dictionary
     assert hashlib.sha256(dictionary(2)).hexdigest() == (
         "4e8fe4351d431fc5702e77ca6c720405ca8b064aca5d8f007516f9fff8b7b37a")
@@ -179,8 +180,8 @@ def test_lossy_files_round_the_skeleton_offsets(walk_bvh, walk_amc):
 
 
 def test_version_2_files_still_read():
-    from mocodec import load
     from conftest import DATA
+    from mocodec import load
     data = (DATA / "version2.moc").read_bytes()
     assert data[4] == 2
     original = load(DATA / "09_02.bvh")[:2]
@@ -192,8 +193,8 @@ def test_version_2_files_still_read():
 
 
 def test_version_1_files_still_read():
-    from mocodec import load
     from conftest import DATA
+    from mocodec import load
     motion = moc.unpack((DATA / "version1.moc").read_bytes())
     original = load(DATA / "09_02.bvh")[:2]
     assert np.array_equal(motion.channels, original.channels.astype(np.float32))     # raw: 32-bit floats

@@ -1,11 +1,10 @@
 import numpy as np
 import pytest
 
+from conftest import DATA
 from mocodec import ConversionError, FormatError, load, save
 from mocodec.formats import read_asf, to_asf_form, to_bvh_form, write_bvh
 from mocodec.formats.bvh import guess_units_per_metre
-
-from conftest import DATA
 
 SMALL_BVH = """HIERARCHY
 ROOT Hips

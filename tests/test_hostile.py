@@ -13,7 +13,6 @@ import struct
 import threading
 import time
 import zlib
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,17 +22,16 @@ from mocodec import limits, load, moc
 from mocodec.cli import main
 from mocodec.codecs import Codec, codec_from_untrusted, get_codec
 from mocodec.codecs.base import read_envelope
-from mocodec.codecs.spiht import _PACKET
-from mocodec.coding.parts import join_parts, split_parts
+from mocodec.codecs.perceptual.spiht import _PACKET
+from mocodec.coding.entropy.parts import join_parts, split_parts
 from mocodec.errors import CorruptStreamError, FormatError, MocodecError
 from mocodec.formats import container
-from mocodec.formats._io import STALE_TEMP_S, atomic_write_bytes
-from mocodec.formats.asf_amc import read_asf
+from mocodec.formats.asf import read_asf
+from mocodec.formats.fileio import STALE_TEMP_S, atomic_write_bytes
 from mocodec.formats.skeleton_bin import _mirrors, pack_skeleton, unpack_skeleton
 from mocodec.skeleton import Joint, Skeleton
 from mocodec.stream.live import LiveDecoder, stream_clip
-from mocodec.stream.packets import DATA as DATA_PACKET
-from mocodec.stream.packets import Packet, StreamInfo
+from mocodec.stream.packets import DATA as DATA_PACKET, Packet, StreamInfo
 
 
 def crafted_moc(skeleton: Skeleton, codec: dict, frames: int, fps: float = 120.0, body: bytes = b"\0" * 8) -> bytes:
@@ -90,7 +88,7 @@ def test_a_packet_far_ahead_does_not_make_the_receiver_allocate(walk_bvh):
 
 
 def test_a_stream_header_never_opens_a_file_it_names(walk_bvh, monkeypatch):
-    from mocodec.coding.primdb import PrimitiveDB
+    from mocodec.codecs.motionprimitives.primdb import PrimitiveDB
 
     def refuse(path):
         raise AssertionError(f"opened {path}")
@@ -154,7 +152,7 @@ def test_a_moc_header_bomb_is_refused(walk_bvh):
 @pytest.mark.parametrize("path", ["/dev/zero", "/dev/stdin", "/etc/passwd", "/no/such/file"])
 def test_a_moc_never_opens_the_model_file_it_names(walk_amc, tmp_path, path):
     db = tmp_path / "db.mocdb"
-    assert main(["primitives", "train", str(DATA / "135_08.amc"), "-o", str(db)]) == 0
+    assert main(["model", "train", "primitives", str(DATA / "135_08.amc"), "-o", str(db)]) == 0
     coded = moc.pack(walk_amc[:200], get_codec("primitives", db=str(db)))
     c = container.open_container(io.BytesIO(coded), len(coded), "x")
     config = dict(c.header["codec"], knobs={**c.header["codec"]["knobs"], "db": path})

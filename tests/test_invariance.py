@@ -7,8 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from hypothesis import given, settings, strategies as st
 
 from mocodec import load, moc, reexpress
 from mocodec.codecs import get_codec
@@ -83,6 +82,7 @@ def _all_reexpressions(motion: Motion):
     yield reexpress.with_dummy_root(motion, position_channels=True)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("clip", ["bvh", "amc"])
 def test_the_median_re_expression_costs_at_most_3_percent(clip, request):
     motion = request.getfixturevalue(clip)

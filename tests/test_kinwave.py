@@ -11,7 +11,7 @@ import pytest
 
 from mocodec import moc, ratecontrol
 from mocodec.codecs import get_codec
-from mocodec.codecs.kinwave import _Encoder
+from mocodec.codecs.kinwave.codec import _Encoder
 from mocodec.errors import CodecError
 from mocodec.formats import container
 from mocodec.kinematics import forward_kinematics
@@ -177,7 +177,7 @@ def test_time_adaptive_steps_shrink_max_error_files(walk_amc):
     """Each segment gets its own step offset under a max-error bound: quieter stretches take
     coarser steps and the bound still holds; under a shell bound the file is smaller than with
     one scale (2%; over the shared clips 0.1-2.5% at shell and joint bounds, docs/kinwave.md)."""
-    from mocodec.codecs.kinwave import FLAG_OFFSETS
+    from mocodec.codecs.kinwave.codec import FLAG_OFFSETS
     for measure in ("shell", "joint"):
         codec = get_codec("kinwave", max_error_cm=0.5, error_measure=measure, window=128)     # 4 segments
         payload = codec.encode(walk_amc)
@@ -208,7 +208,7 @@ def test_the_final_slack_rounds_coarsen_quiet_joints_within_the_bound(walk_amc, 
     """One scale (no time-adaptive steps): the final pass gives the slack of quiet joints to
     their codes, with or without the joint feedback (17% and 4% smaller at max shell 0.1 cm on
     the AMC walk), and the bound holds."""
-    from mocodec.codecs import kinwave
+    from mocodec.codecs.kinwave import codec as kinwave
     sizes = {}
     for rounds in (kinwave.SLACK_PASSES, 0):
         monkeypatch.setattr(kinwave, "SLACK_PASSES", rounds)
@@ -229,7 +229,7 @@ def test_coding_forms_shrink_files_within_the_bound(walk_amc):
     Euler angles under a max bound, and may change form under a mean bound."""
     from conftest import DATA
     from mocodec import load
-    from mocodec.codecs.kinwave import FLAG_FORMS, _three_angle_groups
+    from mocodec.codecs.kinwave.codec import FLAG_FORMS, _three_angle_groups
     run = load(DATA / "09_02.bvh")
     for measure in ("mean", "joint"):
         codec = get_codec("kinwave", max_error_cm=0.5, error_measure=measure)
@@ -259,7 +259,7 @@ def test_segment_offsets_keep_the_encoder_bit_exact(walk_bvh):
 def test_an_isolated_glitch_frame_is_coded_apart(walk_bvh):
     """One frame 25 degrees off on every angle (a glitch) is found, coded apart (flag 128),
     and costs a few percent instead of the wavelet's 60%; the bound holds on the glitch too."""
-    from mocodec.codecs.kinwave import FLAG_ISOLATED
+    from mocodec.codecs.kinwave.codec import FLAG_ISOLATED
     glitch = walk_bvh.channels.copy()
     glitch[200] += np.where(walk_bvh.skeleton.rotation_mask, 25.0, 5.0)
     spiked = walk_bvh.with_channels(glitch)
@@ -296,7 +296,7 @@ def test_a_turned_dummy_root_codes_the_body_as_without_it(walk_amc, turn):
     same bytes within 1% (the dummy's constants) and the same worst error within 1e-6; the
     bound holds. (Where the bound's search stops is another matter: on this clip it stops at a
     different scale, docs/kinwave.md.)"""
-    from mocodec.coding import rotvec
+    from mocodec.codecs.shared import rotvec
     from mocodec.reexpress import with_dummy_root
 
     codec = get_codec("kinwave", max_error_cm=1.0, error_measure="shell")
@@ -321,7 +321,7 @@ def test_a_final_pass_far_under_its_bound_is_scaled_up(walk_bvh):
     """_scale_up: a pass at a quarter of the bound goes coarser, every code together, until its
     worst error is within the accepted range (or one more code would break the bound): fewer
     bytes, the bound held."""
-    from mocodec.codecs.kinwave import ACCEPT
+    from mocodec.codecs.kinwave.codec import ACCEPT
 
     enc = _Encoder(get_codec("kinwave", max_error_cm=1.0, error_measure="shell"), walk_bvh[:300])
     fine = enc.run_pass(enc.codes(enc._first_scale() / 4.0))

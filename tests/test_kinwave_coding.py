@@ -5,16 +5,18 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given
-from hypothesis import strategies as st
+from hypothesis import given, strategies as st
 
 from mocodec import rotations
-from mocodec.coding import closedloop, coefcoder, kinalloc, trendwave
+from mocodec.codecs.kinwave import kinalloc
+from mocodec.codecs.shared import closedloop
+from mocodec.coding.entropy import coefcoder
+from mocodec.coding.transforms import trendwave
 from mocodec.errors import CorruptStreamError
 from mocodec.formats import container, skeleton_bin
 from mocodec.formats.skeleton_bin import pack_skeleton, unpack_skeleton
 from mocodec.human import human_model
-from mocodec.kinematics import _plan, forward_kinematics
+from mocodec.kinematics import channel_plan, forward_kinematics
 
 
 @given(seed=st.integers(0, 2**32 - 1), frames=st.integers(1, 700), keyframe=st.booleans(),
@@ -58,7 +60,8 @@ def test_warm_contexts_learn_a_skewed_source_sooner():
     in half the bytes of a cold one (beyond the 5 the coder's flush takes); after WARM_DONE
     decisions both adapt alike."""
     import numba
-    from mocodec.coding import binarycoder as bc
+
+    from mocodec.coding.entropy import binarycoder as bc
 
     @numba.njit
     def code(bits, state):
@@ -116,7 +119,7 @@ def test_closed_loop_targets_restore_the_global_orientation(walk_bvh, walk_amc):
     rng = np.random.default_rng(2)
     for motion in (walk_bvh[:50], walk_amc[:50]):
         sk = motion.skeleton
-        plan = _plan(sk)
+        plan = channel_plan(sk)
         _, quat = forward_kinematics(sk, motion.channels)
         for j in range(1, len(sk)):
             k = int((plan.rot_index[j] >= 0).sum())
@@ -142,7 +145,7 @@ def test_closed_loop_targets_restore_the_global_orientation(walk_bvh, walk_amc):
 
 def test_compose_matches_forward_kinematics(walk_amc):
     sk = walk_amc.skeleton
-    plan = _plan(sk)
+    plan = channel_plan(sk)
     _, quat = forward_kinematics(sk, walk_amc.channels)
     for j in range(1, len(sk)):
         k = int((plan.rot_index[j] >= 0).sum())
@@ -198,6 +201,7 @@ def test_rounded_offsets_are_written_in_fixed_point(walk_bvh, walk_amc):
     """Offsets rounded to 0.001 cm (a lossy file's) go as untagged integers at a fixed number
     of places: exact, and at least a seventh smaller than the tagged column."""
     import zlib
+
     from mocodec.formats.skeleton_bin import round_offsets
     for motion in (walk_bvh, walk_amc):
         rounded = round_offsets(motion.skeleton, 0.001)
@@ -215,7 +219,7 @@ def test_every_coding_form_round_trips_continuously(walk_bvh, form):
     Tait-Bryan order, either of the rotation turned by a constant: WORLD) and back: the same
     rotations, as the very triples Motion.continuous gives (frame 0 of the walk is in the
     principal range), in the file's order or a proper one."""
-    from mocodec.coding import rotvec
+    from mocodec.codecs.shared import rotvec
     from mocodec.reexpress import with_euler_orders
     for motion in (walk_bvh, with_euler_orders(walk_bvh, "YXY")):
         sk = motion.skeleton

@@ -9,10 +9,17 @@ import numpy as np
 import pytest
 
 from mocodec import Joint, Motion, Skeleton, human_model
-from mocodec.metrics import (MismatchError, band_split, compare, dof_errors, visual_errors, weighted_error)
-from mocodec.metrics import groups as grp
-from mocodec.metrics import natural as nat
-from mocodec.metrics import pose
+from mocodec.metrics import (
+    MismatchError,
+    band_split,
+    compare,
+    dof_errors,
+    groups as grp,
+    natural as nat,
+    pose,
+    visual_errors,
+    weighted_error,
+)
 
 FPS = 120.0
 

@@ -6,14 +6,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from conftest import DATA
 from mocodec import ratecontrol
 from mocodec.cli import main
 from mocodec.codecs import get_codec
-from mocodec.coding import animate, modelgroups, motiontables, segmentation
+from mocodec.codecs.model import animate, modelgroups, motiontables, segmentation
 from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.metrics import compare
-
-from conftest import DATA
 
 
 @pytest.fixture(scope="module")
@@ -208,8 +207,8 @@ def test_payload_damage_is_caught(walk30, martial_tables):
 
 def test_cli_trains_tables_and_codes_with_them(tmp_path, capsys):
     tables = tmp_path / "t.moctb"
-    assert main(["tables", "train", str(DATA / "135_08.amc"), "-o", str(tables)]) == 0
-    assert main(["tables", "info", str(tables)]) == 0
+    assert main(["model", "train", "tables", str(DATA / "135_08.amc"), "-o", str(tables)]) == 0
+    assert main(["model", "info", str(tables)]) == 0
     assert "fingerprint" in capsys.readouterr().out
     moc = tmp_path / "w.moc"
     assert main(["encode", str(DATA / "07_03.amc"), "--codec", "gesture", "--tables", str(tables),
@@ -217,7 +216,9 @@ def test_cli_trains_tables_and_codes_with_them(tmp_path, capsys):
     moved = tmp_path / "moved.moctb"
     tables.rename(moved)
     assert main(["decode", str(moc), "-o", str(tmp_path / "w.amc"), "--tables", str(moved)]) == 0
-    assert main(["tables", "train", str(DATA / "135_08.amc")]) != 0
+    with pytest.raises(SystemExit) as missing:          # no -o FILE
+        main(["model", "train", "tables", str(DATA / "135_08.amc")])
+    assert missing.value.code == 2
     capsys.readouterr()
     assert main(["eval", str(DATA / "07_03.amc"), "--codec", "hybrid"]) == 0
     assert "coding delay mean / max" in capsys.readouterr().out

@@ -1,8 +1,7 @@
 import numpy as np
 import pytest
 
-from mocodec import Joint, Motion, Skeleton
-from mocodec import rotations as r
+from mocodec import Joint, Motion, Skeleton, rotations as r
 
 
 def spinner():
@@ -66,3 +65,8 @@ def test_resample_keeps_euler_curves_continuous(walk_bvh):
     jumps = np.abs(np.diff(up.channels[:, rot], axis=0)).max()
     assert jumps < np.abs(np.diff(walk_bvh.channels[:, rot], axis=0)).max() + 1e-6
     np.testing.assert_allclose(up.positions()[::2][:50], walk_bvh.positions()[:50], atol=1e-6)
+
+
+def test_root_positions_are_joint_0s_forward_kinematics(walk_bvh, walk_amc):
+    for motion in (walk_bvh, walk_amc):
+        assert np.allclose(motion.root_positions(), motion.positions()[:, 0], atol=1e-9)

@@ -5,15 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from conftest import DATA
 from mocodec import rotations
 from mocodec.cli import main
 from mocodec.codecs import get_codec
-from mocodec.coding import primdb, primresidual, quatseg
+from mocodec.codecs.motionprimitives import primdb, primresidual, quatseg
 from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.metrics import compare
 from mocodec.motion import Motion
-
-from conftest import DATA
 
 
 @pytest.fixture(scope="module")
@@ -230,9 +229,9 @@ def test_database_mismatches_are_clear_errors(walk_amc, walk_bvh, martial_db, ma
 
 def test_primitives_on_the_command_line(tmp_path, capsys):
     db = tmp_path / "db.mocdb"
-    assert main(["primitives", "train", str(DATA / "135_08.amc"), "-o", str(db)]) == 0
+    assert main(["model", "train", "primitives", str(DATA / "135_08.amc"), "-o", str(db)]) == 0
     assert "primitives for 29 joints" in capsys.readouterr().out
-    assert main(["primitives", "info", str(db)]) == 0
+    assert main(["model", "info", str(db)]) == 0
     assert "trained on 135_08.amc" in capsys.readouterr().out
     moc = tmp_path / "walk.moc"
     assert main(["encode", str(DATA / "07_03.amc"), "-o", str(moc), "--codec", "primitives", "--db", str(db)]) == 0
@@ -244,4 +243,6 @@ def test_primitives_on_the_command_line(tmp_path, capsys):
     assert main(["decode", str(moc), "-o", str(tmp_path / "w.amc"), "--db", str(moved)]) == 0
     assert main(["eval", str(DATA / "07_03.amc"), "--codec", "primitives", "--db", str(moved), "--t-lower", "0.02"]) == 0
     assert "joint error mean / max" in capsys.readouterr().out
-    assert main(["primitives", "train", str(DATA / "135_08.amc")]) == 2
+    with pytest.raises(SystemExit) as missing:          # no -o FILE
+        main(["model", "train", "primitives", str(DATA / "135_08.amc")])
+    assert missing.value.code == 2

@@ -8,7 +8,7 @@ import pytest
 
 from mocodec import ratecontrol
 from mocodec.codecs import get_codec
-from mocodec.codecs import pwavelet as pw
+from mocodec.codecs.perceptual import pwavelet as pw
 from mocodec.metrics import compare
 
 

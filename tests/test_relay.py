@@ -13,7 +13,6 @@ import time
 import aiohttp
 import numpy as np
 import pytest
-from aiohttp import web
 
 from conftest import DATA, free_port
 from mocodec.cli import main
@@ -24,6 +23,8 @@ from mocodec.stream.client import RelayRefused, connect, publish_clip, record
 from mocodec.stream.live import receive_clip, stream_clip
 from mocodec.stream.packets import pack_batch
 from mocodec.stream.relay import BAD_MESSAGE, RATE_LIMIT, Limits, Relay, Viewer, on_ladder, start
+
+pytestmark = pytest.mark.network        # a relay (and NATS) on loopback sockets
 
 SECRET = "test-secret"
 
@@ -273,7 +274,7 @@ def test_a_stalled_viewer_is_dropped_and_the_others_go_on(walk_bvh):
 def test_the_commands_end_to_end(tmp_path):
     """serve, token, publish and subscribe as a user types them: an AMC clip recorded as BVH."""
     port = free_port()
-    mocodec = [sys.executable, "-m", "mocodec.cli"]
+    mocodec = [sys.executable, "-m", "mocodec"]
     server = subprocess.Popen(mocodec + ["serve", "--port", str(port), "--secret", SECRET], stdout=subprocess.PIPE,
                               text=True)
     try:

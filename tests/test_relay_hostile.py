@@ -11,17 +11,20 @@ import socket
 import zlib
 
 import aiohttp
+import pytest
 import numpy as np
 
 from mocodec.codecs import get_codec
-from mocodec.coding.parts import join_parts, split_parts
-from mocodec.codecs.spiht import _PACKET
+from mocodec.codecs.perceptual.spiht import _PACKET
+from mocodec.coding.entropy.parts import join_parts, split_parts
 from mocodec.stream import tokens
 from mocodec.stream.client import Watcher, connect, publish_clip, record
 from mocodec.stream.live import receive_clip, stream_clip
 from mocodec.stream.packets import CUTS, END, HEADER, Packet, pack_batch, with_cuts
 from mocodec.stream.relay import BAD_MESSAGE, BAD_TOKEN, Limits, Relay, on_ladder
 from test_relay import SECRET, serving, token
+
+pytestmark = pytest.mark.network        # a relay (and NATS) on loopback sockets
 
 
 def header_bytes(doc_change, walk, stream: int = 7) -> bytes:

@@ -5,14 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from conftest import DATA, SHARED
 from mocodec import ratecontrol, rotations
 from mocodec.cli import main
 from mocodec.codecs import get_codec
-from mocodec.coding import blend, quatseg, rhythmdb
+from mocodec.codecs.motionprimitives import blend, quatseg, rhythmdb
 from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.metrics import compare
-
-from conftest import DATA, SHARED
 
 
 @pytest.fixture(scope="module")
@@ -143,14 +142,16 @@ def test_external_database_and_its_errors(walk_amc, walk_bvh, martial_db, martia
 
 def test_rhythm_on_the_command_line(tmp_path, capsys):
     db = tmp_path / "dance.mocrd"
-    assert main(["rhythm", "train", str(DATA / "135_08.amc"), "-o", str(db), "--count", "12"]) == 0
+    assert main(["model", "train", "rhythm", str(DATA / "135_08.amc"), "-o", str(db), "--count", "12"]) == 0
     assert "12 whole-body primitives" in capsys.readouterr().out
-    assert main(["rhythm", "info", str(db)]) == 0
+    assert main(["model", "info", str(db)]) == 0
     assert "trained on 135_08.amc" in capsys.readouterr().out
     assert main(["eval", str(DATA / "07_03.amc"), "--codec", "rhythmic", "--db", str(db)]) == 0
     assert "joint error mean / max" in capsys.readouterr().out
-    assert main(["rhythm", "train", str(DATA / "135_08.amc")]) == 2
-    assert main(["rhythm", "train", str(DATA / "135_08.amc"), "-o", str(db), "--count", "0"]) == 2
+    with pytest.raises(SystemExit) as missing:          # no -o FILE
+        main(["model", "train", "rhythm", str(DATA / "135_08.amc")])
+    assert missing.value.code == 2
+    assert main(["model", "train", "rhythm", str(DATA / "135_08.amc"), "-o", str(db), "--count", "0"]) == 2
 
 
 @pytest.mark.shared_data

@@ -3,9 +3,8 @@
 import numpy as np
 import pytest
 
-from mocodec import load, save
-
 from conftest import SHARED
+from mocodec import load, save
 
 pytestmark = [pytest.mark.shared_data, pytest.mark.skipif(SHARED is None, reason="../shared/data is absent")]
 

@@ -10,7 +10,7 @@ import pytest
 
 from mocodec import perception
 from mocodec.codecs import get_codec
-from mocodec.codecs import spiht as sp
+from mocodec.codecs.perceptual import spiht as sp
 from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.metrics import compare
 
@@ -126,7 +126,7 @@ def test_streaming_decodes_exactly_like_the_whole_clip(walk_amc, closed_loop):
 
 
 def test_seams_are_smoothed():
-    from mocodec.coding.seams import smooth_seams
+    from mocodec.coding.transforms.seams import smooth_seams
 
     t = np.arange(64, dtype=float)[:, None]
     curve = 0.01 * t ** 2
@@ -162,8 +162,7 @@ def test_seam_smoothing_can_be_switched_off(walk_amc):
 
 
 def test_stream_decoder_survives_garbage(walk_amc):
-    from hypothesis import given, settings
-    from hypothesis import strategies as st
+    from hypothesis import given, settings, strategies as st
 
     codec = get_codec("spiht", bits_per_second=6000)
     good = codec.encoder(walk_amc.skeleton, walk_amc.fps).push(walk_amc.channels[:200])[0]

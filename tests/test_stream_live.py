@@ -9,8 +9,20 @@ from mocodec.codecs import get_codec
 from mocodec.errors import CorruptStreamError
 from mocodec.stream import tokens
 from mocodec.stream.live import LiveDecoder, receive_clip, refresh_frames, stream_clip
-from mocodec.stream.packets import (DATA, HEADER, Packet, StreamInfo, batch_offsets, pack_batch, parse, read_u32,
-                                    read_u64, split_batch, SEQUENCE_OFFSET, TIMESTAMP_OFFSET)
+from mocodec.stream.packets import (
+    DATA,
+    HEADER,
+    SEQUENCE_OFFSET,
+    TIMESTAMP_OFFSET,
+    Packet,
+    StreamInfo,
+    batch_offsets,
+    pack_batch,
+    parse,
+    read_u32,
+    read_u64,
+    split_batch,
+)
 
 REALTIME = ("dpcm", "adpcm", "deadreckoning", "dct", "spiht", "primitives")
 

@@ -99,7 +99,7 @@ def test_report_dmos_and_thresholds_with_confidence_intervals(tmp_path):
 
 def run_session(config, out, browser, clicks):
     port = free_port()
-    proc = subprocess.Popen([sys.executable, "-m", "mocodec.cli", "study", "run", str(config), "--out", str(out),
+    proc = subprocess.Popen([sys.executable, "-m", "mocodec", "study", "run", str(config), "--out", str(out),
                              "--participant", "p7", "--port", str(port), "--no-browser"], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True)
     try:

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 from aiohttp import web
 
+from conftest import DATA, free_port
 from mocodec import Motion, load
 from mocodec.viewer.server import make_app
 from mocodec.viewer.session import ViewSession
 
-from conftest import DATA, free_port
 
 def positions(b64: str, frames: int, joints: int) -> np.ndarray:
     return np.frombuffer(base64.b64decode(b64), dtype="<f4").reshape(frames, joints, 3)
@@ -69,7 +69,7 @@ def test_encode_api_re_encodes_and_reports_bad_requests(session):
 @contextlib.contextmanager
 def viewer_process(*args):
     port = free_port()
-    proc = subprocess.Popen([sys.executable, "-m", "mocodec.cli", "view", *args, "--port", str(port), "--no-browser"],
+    proc = subprocess.Popen([sys.executable, "-m", "mocodec", "view", *args, "--port", str(port), "--no-browser"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         line = proc.stdout.readline()
@@ -134,7 +134,7 @@ def test_the_page_plays_both_figures_and_shows_the_servers_numbers(browser, tmp_
 def test_view_refuses_a_bad_file_with_one_line(tmp_path):
     bad = tmp_path / "bad.bvh"
     bad.write_text("HIERARCHY\nROOT hip\n{\n")
-    out = subprocess.run([sys.executable, "-m", "mocodec.cli", "view", str(bad), "--no-browser"], capture_output=True,
+    out = subprocess.run([sys.executable, "-m", "mocodec", "view", str(bad), "--no-browser"], capture_output=True,
                          text=True, timeout=60)
     assert out.returncode == 2 and "bad.bvh" in out.stderr and "Traceback" not in out.stderr
 
@@ -146,7 +146,7 @@ def test_the_page_watches_a_relay_room_live(browser):
     from mocodec.stream.client import publish_clip
 
     relay_port = free_port()
-    relay = subprocess.Popen([sys.executable, "-m", "mocodec.cli", "serve", "--port", str(relay_port),
+    relay = subprocess.Popen([sys.executable, "-m", "mocodec", "serve", "--port", str(relay_port),
                               "--secret", "s"], stdout=subprocess.PIPE, text=True)
     try:
         assert "relay on" in relay.stdout.readline()
@@ -176,7 +176,7 @@ def test_the_page_watches_a_relay_room_live(browser):
             assert sum(figure_pixels(shot)) > 300
             sender.join()
             page.close()
-        bad = subprocess.run([sys.executable, "-m", "mocodec.cli", "view", "--no-browser"], capture_output=True,
+        bad = subprocess.run([sys.executable, "-m", "mocodec", "view", "--no-browser"], capture_output=True,
                              text=True, timeout=60)
         assert bad.returncode == 2 and "needs a FILE" in bad.stderr
     finally:

@@ -8,7 +8,8 @@ import pytest
 
 from mocodec import cli
 from mocodec.codecs import get_codec
-from mocodec.coding import vq, vqbook
+from mocodec.codecs.shared import vqbook
+from mocodec.coding.quantisation import vq
 from mocodec.errors import CodecError
 from mocodec.metrics import compare
 
@@ -115,9 +116,9 @@ def test_cli_trains_encodes_and_decodes_with_a_codebook(tmp_path, capsys):
     from tests.conftest import DATA
 
     book = tmp_path / "t.mocvq"
-    assert cli.main(["codebook", "train", "--kind", "temporal", "--max-size", "64", str(DATA / "135_08.amc"),
+    assert cli.main(["model", "train", "codebook", "--vectors", "temporal", "--max-size", "64", str(DATA / "135_08.amc"),
                      "-o", str(book)]) == 0
-    assert cli.main(["codebook", "info", str(book)]) == 0
+    assert cli.main(["model", "info", str(book)]) == 0
     assert "sizes [16, 32, 64]" in capsys.readouterr().out
     moc = tmp_path / "w.moc"
     assert cli.main(["encode", str(DATA / "07_03.amc"), "-o", str(moc), "--codec", "tvq", "--size", "64",
@@ -129,4 +130,4 @@ def test_cli_trains_encodes_and_decodes_with_a_codebook(tmp_path, capsys):
     assert "codebook" in capsys.readouterr().err
     assert cli.main(["decode", str(moc), "-o", str(out), "--codebook", str(moved)]) == 0
     assert out.exists()
-    assert cli.main(["codebook", "train", str(DATA / "07_03.amc"), "-o", str(book), "--max-size", "100"]) == 2
+    assert cli.main(["model", "train", "codebook", str(DATA / "07_03.amc"), "-o", str(book), "--max-size", "100"]) == 2

@@ -7,9 +7,11 @@ import pytest
 
 from mocodec import ratecontrol
 from mocodec.codecs import get_codec
-from mocodec.codecs.deadreckoning import update_intervals
-from mocodec.coding import blockdct, blocks, intcoder, predictive, subbands
-from mocodec.coding.quantizers import MuLawQuantizer, UniformQuantizer
+from mocodec.codecs.waveform.deadreckoning import update_intervals
+from mocodec.coding.entropy import intcoder
+from mocodec.coding.quantisation import predictive
+from mocodec.coding.quantisation.quantizers import MuLawQuantizer, UniformQuantizer
+from mocodec.coding.transforms import blockdct, blocks, subbands
 from mocodec.metrics import compare
 from mocodec.motion import Motion
 
@@ -274,7 +276,7 @@ def test_streams_frame_by_frame_within_the_delay(cid, walk_amc, codebooks):
 
 
 def _joined(packets):
-    from mocodec.coding.parts import join_parts
+    from mocodec.coding.entropy.parts import join_parts
 
     return [join_parts(packets)]
 

@@ -30,7 +30,10 @@ _AXIS_ID = {"X": 0, "Y": 1, "Z": 2}
 
 
 @dataclass(frozen=True)
-class _Plan:
+class ChannelPlan:
+    """Where each joint's channels sit (the forward-kinematics kernel's and the closed loop's
+    index tables), computed once per skeleton."""
+
     rot_index: np.ndarray  # (J, 3) channel of each rotation step, -1 = none
     rot_axis: np.ndarray  # (J, 3) axis (0 = X, 1 = Y, 2 = Z) of each step
     pos_index: np.ndarray  # (J, 3) channel of X/Y/Z translation, -1 = none
@@ -41,7 +44,8 @@ class _Plan:
 
 
 @lru_cache(maxsize=64)
-def _plan(skeleton: Skeleton) -> _Plan:
+def channel_plan(skeleton: Skeleton) -> ChannelPlan:
+    """The :class:`ChannelPlan` of ``skeleton`` (cached)."""
     n = len(skeleton)
     rot_index = -np.ones((n, 3), dtype=np.int64)
     rot_axis = np.zeros((n, 3), dtype=np.int64)
@@ -56,7 +60,7 @@ def _plan(skeleton: Skeleton) -> _Plan:
                 pos_index[i, k] = first + j.channels.index(f"{axis}position")
     axis_quat = np.ascontiguousarray(rotations.matrix_to_quat(skeleton.axis_matrices))
     has_axis = np.array([j.has_axis for j in skeleton.joints])
-    return _Plan(rot_index, rot_axis, pos_index, axis_quat, has_axis,
+    return ChannelPlan(rot_index, rot_axis, pos_index, axis_quat, has_axis,
                  np.ascontiguousarray(skeleton.offsets, dtype=np.float64), skeleton.parents.astype(np.int64))
 
 
@@ -138,7 +142,7 @@ def _half_angles(channels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _run(skeleton: Skeleton, channels: np.ndarray, want_local: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     channels = _checked(skeleton, channels)
-    plan = _plan(skeleton)
+    plan = channel_plan(skeleton)
     frames, joints = len(channels), len(skeleton)
     pos, quat = np.empty((frames, joints, 3)), np.empty((frames, joints, 4))
     local = np.empty((frames, joints, 4) if want_local else (0, 0, 4))

@@ -23,7 +23,7 @@ from mocodec.codecs import DEFAULT_CODEC, Codec, codec_from_untrusted, get_codec
 from mocodec.codecs.base import read_envelope
 from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.formats import container
-from mocodec.formats._io import atomic_write_bytes
+from mocodec.formats.fileio import atomic_write_bytes
 from mocodec.formats.skeleton_bin import round_offsets
 from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton

@@ -63,7 +63,7 @@ class Motion:
         return 32.0 * self.num_channels * self.fps
 
     # ----- selection ------------------------------------------------------------------
-    def __getitem__(self, frames: slice) -> "Motion":
+    def __getitem__(self, frames: slice) -> Motion:
         """Frames by a slice: ``motion[100:200]`` (steps allowed; fps divides by the step)."""
         if not isinstance(frames, slice):
             raise TypeError("index a Motion with a slice of frames, e.g. motion[10:20]")
@@ -93,13 +93,23 @@ class Motion:
         """The ``(frames, k)`` values of the channels named by ``keys`` (see channel_indices)."""
         return self.channels[:, self.channel_indices(keys)]
 
-    def with_channels(self, channels: np.ndarray) -> "Motion":
+    def with_channels(self, channels: np.ndarray) -> Motion:
         return replace(self, channels=np.asarray(channels, dtype=np.float64))
 
     # ----- kinematics -----------------------------------------------------------------
     def positions(self) -> np.ndarray:
         """Global pivot positions ``(frames, joints, 3)`` in skeleton units."""
         return kinematics.forward_kinematics(self.skeleton, self.channels)[0]
+
+    def root_positions(self) -> np.ndarray:
+        """Joint 0's world position ``(frames, 3)`` in skeleton units: its offset plus its
+        translation channels (no forward kinematics: the root has no parent)."""
+        root, first = self.skeleton.joints[0], self.skeleton.channel_offsets[0]
+        out = np.tile(np.asarray(root.offset, dtype=np.float64), (self.num_frames, 1))
+        for k, axis in enumerate("XYZ"):
+            if f"{axis}position" in root.channels:
+                out[:, k] += self.channels[:, first + root.channels.index(f"{axis}position")]
+        return out
 
     def positions_m(self) -> np.ndarray:
         """Global pivot positions in metres."""
@@ -109,7 +119,7 @@ class Motion:
         return kinematics.forward_kinematics(self.skeleton, self.channels)[1]
 
     # ----- comparison -----------------------------------------------------------------
-    def difference(self, other: "Motion", atol_degrees: float = 1e-6, atol_units: float = 1e-6) -> str | None:
+    def difference(self, other: Motion, atol_degrees: float = 1e-6, atol_units: float = 1e-6) -> str | None:
         """A one-line description of the first difference, or None. Angles compare modulo 360."""
         d = self.skeleton.difference(other.skeleton, atol=atol_units)
         if d:
@@ -130,11 +140,11 @@ class Motion:
                     f"{self.channels[f, c]!r} vs {other.channels[f, c]!r}")
         return None
 
-    def isclose(self, other: "Motion", atol_degrees: float = 1e-6, atol_units: float = 1e-6) -> bool:
+    def isclose(self, other: Motion, atol_degrees: float = 1e-6, atol_units: float = 1e-6) -> bool:
         """Equal skeletons and fps, channels within the tolerances (angles modulo 360)."""
         return self.difference(other, atol_degrees, atol_units) is None
 
-    def continuous(self) -> "Motion":
+    def continuous(self) -> Motion:
         """The same poses with every angle curve as continuous as the Euler form allows.
 
         Each joint with three rotation channels takes, frame by frame, whichever of its two
@@ -157,7 +167,7 @@ class Motion:
             out[:, idx] = continuous_triples(self.channels[:, idx], sk.joints[j].rotation_order)
         return replace(self, channels=out)
 
-    def aligned_to(self, reference: "Motion") -> "Motion":
+    def aligned_to(self, reference: Motion) -> Motion:
         """The same poses, each 3-axis joint's angles given as whichever equivalent triple
         (shifted by turns of 360) lies nearest ``reference``'s in that frame, and other angles
         wrapped to within 180 degrees of it. Channel-space errors then measure pose differences
@@ -174,7 +184,7 @@ class Motion:
         return replace(self, channels=out)
 
     # ----- resampling -----------------------------------------------------------------
-    def resample(self, fps: float) -> "Motion":
+    def resample(self, fps: float) -> Motion:
         """The motion at another frame rate over the same time span.
 
         Joints with three rotation channels are interpolated by quaternion slerp and turned

@@ -18,9 +18,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from mocodec import moc
-from mocodec.formats import container
 from mocodec.codecs import Codec
 from mocodec.errors import CodecError
+from mocodec.formats import container
 from mocodec.kinematics import forward_kinematics
 from mocodec.metrics.waveform import dof_errors
 from mocodec.motion import Motion

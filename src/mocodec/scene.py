@@ -19,7 +19,7 @@ import numpy as np
 
 from mocodec import moc
 from mocodec.codecs import get_codec
-from mocodec.coding.parts import join_parts, split_parts
+from mocodec.coding.entropy.parts import join_parts, split_parts
 from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.formats import container
 from mocodec.motion import Motion

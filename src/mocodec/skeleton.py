@@ -241,11 +241,11 @@ class Skeleton:
         return float(y.max() - y.min())
 
     # ----- comparison and editing --------------------------------------------------------
-    def isclose(self, other: "Skeleton", atol: float = 1e-6) -> bool:
+    def isclose(self, other: Skeleton, atol: float = 1e-6) -> bool:
         """Same structure, names, channels, orders and limits; offsets and axes within ``atol``."""
         return self.difference(other, atol) is None
 
-    def difference(self, other: "Skeleton", atol: float = 1e-6) -> str | None:
+    def difference(self, other: Skeleton, atol: float = 1e-6) -> str | None:
         """A one-line description of the first difference from ``other``, or None."""
         if len(self) != len(other):
             return f"{len(self)} joints vs {len(other)}"

@@ -9,15 +9,12 @@ import numpy as np
 
 from mocodec.analysis import density, spectrum, temporal
 from mocodec.analysis.report import group_dofs, representative_dof
-from mocodec.errors import MocodecError
+from mocodec.extras import require
 from mocodec.motion import Motion
 
 
 def _pyplot():
-    try:
-        import matplotlib
-    except ImportError:
-        raise MocodecError("plots need matplotlib: pip install 'mocodec[plot]'") from None
+    matplotlib = require("matplotlib", "plot", "plotting")
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 

@@ -15,7 +15,7 @@ from mocodec.bench.runner import execute
 from mocodec.codecs import get_codec
 from mocodec.errors import MocodecError
 from mocodec.formats import load
-from mocodec.formats._io import atomic_write_bytes
+from mocodec.formats.fileio import atomic_write_bytes
 
 
 @dataclass(frozen=True)

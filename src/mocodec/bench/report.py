@@ -16,7 +16,7 @@ from pathlib import Path
 from statistics import median
 
 from mocodec.bench import published
-from mocodec.formats._io import atomic_write
+from mocodec.formats.fileio import atomic_write
 
 LOSSLESS_BASELINE = "zstd"
 ERROR_BASELINE = "sz3"

@@ -15,6 +15,7 @@ from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 
 from mocodec.errors import MocodecError
+from mocodec.extras import require
 
 
 def default_jobs() -> int:
@@ -26,7 +27,7 @@ def default_jobs() -> int:
 
 
 def _progress(total: int, show: bool, what: str):
-    from tqdm import tqdm
+    tqdm = require("tqdm", "bench", "the progress bar").tqdm
     return tqdm(total=total, disable=not show, file=sys.stderr, unit=what, dynamic_ncols=True)
 
 
@@ -64,10 +65,8 @@ def _on_pool(fn: Callable, tasks: Sequence, jobs: int) -> Iterator:
 
 
 def _on_dask(fn: Callable, tasks: Sequence, jobs: int, scheduler: str | None) -> Iterator:
-    try:
-        from dask.distributed import Client, LocalCluster, as_completed as dask_completed
-    except ImportError:
-        raise MocodecError("Dask runs need dask.distributed: pip install 'mocodec[bench]'") from None
+    distributed = require("dask.distributed", "bench", "a run on Dask")
+    Client, LocalCluster, dask_completed = distributed.Client, distributed.LocalCluster, distributed.as_completed
     cluster = None if scheduler else LocalCluster(n_workers=jobs, threads_per_worker=1, dashboard_address=None)
     try:
         try:

@@ -21,7 +21,7 @@ from mocodec.bench.points import DEFAULT_BITRATES, DEFAULT_ERRORS_CM, DEFAULT_KI
 from mocodec.bench.runner import default_jobs, execute
 from mocodec.codecs import codec_class, codec_ids
 from mocodec.errors import MocodecError
-from mocodec.formats._io import atomic_write
+from mocodec.formats.fileio import atomic_write
 
 SKIPPED_BY_DEFAULT = ("raw",)      # the reference itself: ratio 1 by definition
 PACKAGES = ("mocodec", "numpy", "scipy", "PyWavelets", "numba", "constriction", "zstandard", "pysz", "zfpy",

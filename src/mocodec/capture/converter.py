@@ -97,7 +97,7 @@ class Calibration:
     ankles: dict[str, np.ndarray]          # side -> (3,) fixed ankle position
 
     @classmethod
-    def from_reference(cls, readings: dict[str, np.ndarray], skeleton: Skeleton) -> "Calibration":
+    def from_reference(cls, readings: dict[str, np.ndarray], skeleton: Skeleton) -> Calibration:
         pos, quat = forward_kinematics(skeleton, np.zeros((1, skeleton.num_channels)))
         rot = rotations.quat_to_matrix(quat[0])
         frames = {t: pose(rot[skeleton.index(seg)], pos[0, skeleton.index(at)]) for t, (seg, at) in MOUNTS.items()}

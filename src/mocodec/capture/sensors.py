@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from mocodec.errors import FormatError
-from mocodec.formats._io import atomic_write_bytes
+from mocodec.formats.fileio import atomic_write_bytes
 
 TRACKERS = ("hips", "head", "left_wrist", "right_wrist")
 GLOVES = ("left_glove", "right_glove")

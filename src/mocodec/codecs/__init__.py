@@ -1,10 +1,26 @@
-"""Codecs, one module each, registered by id: ``get_codec(id, **knobs)``."""
+"""Codecs by family (waveform, model, motionprimitives, perceptual, kinwave, reference), each
+registered by id: ``get_codec(id, **knobs)`` imports the one asked for."""
 
-from mocodec.codecs import (adpcm, dct, deadreckoning, dpcm, floats, gesture, hybrid, kinwave, lossless, posture,  # noqa: F401
-                            primitives, pwavelet, quant, raw, rhythmic, spiht, subband, svq, tvq)  # noqa: F401
-from mocodec.codecs.base import Codec, Knob, QualityKnob, StreamDecoder, StreamEncoder
-from mocodec.codecs.registry import (DEFAULT_CODEC, codec_class, codec_from_config, codec_from_untrusted,
-                                     codec_ids, get_codec, register)
+from mocodec.codecs.registry import (
+    DEFAULT_CODEC,
+    codec_class,
+    codec_from_config,
+    codec_from_untrusted,
+    codec_ids,
+    get_codec,
+    register,
+)
 
-__all__ = ["Codec", "Knob", "QualityKnob", "StreamDecoder", "StreamEncoder", "DEFAULT_CODEC", "codec_class",
-           "codec_from_config", "codec_from_untrusted", "codec_ids", "get_codec", "register"]
+_BASE = ("Codec", "Knob", "QualityKnob", "StreamDecoder", "StreamEncoder")
+
+
+def __getattr__(name: str):
+    if name in _BASE:            # the interface, loaded with the first codec that needs it
+        from mocodec.codecs import base
+
+        return getattr(base, name)
+    raise AttributeError(f"module 'mocodec.codecs' has no attribute {name!r}")
+
+
+__all__ = [*_BASE, "DEFAULT_CODEC", "codec_class", "codec_from_config", "codec_from_untrusted", "codec_ids",
+           "get_codec", "register"]

@@ -147,12 +147,12 @@ class Codec:
         return {"codec": self.id, "knobs": dict(self.config)}
 
     @classmethod
-    def from_config(cls, config: dict) -> "Codec":
+    def from_config(cls, config: dict) -> Codec:
         if config.get("codec") != cls.id:
             raise CodecError(f"config is for codec {config.get('codec')!r}, not {cls.id!r}")
         return cls(**config.get("knobs", {}))
 
-    def with_knob(self, name: str, value) -> "Codec":
+    def with_knob(self, name: str, value) -> Codec:
         return type(self)(**{**self.config, name: value})
 
     # ----- whole clips ------------------------------------------------------------------

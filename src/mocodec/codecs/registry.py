@@ -1,12 +1,39 @@
-"""The codec registry: ids to codec classes, and ``get_codec(id, **knobs)``."""
+"""The codec registry: ids to codec classes, and ``get_codec(id, **knobs)``.
+
+The built-in codecs are imported when first asked for (:data:`BUILT_IN` names each one's
+module), so a command that codes with one codec loads only that one; :func:`register` adds
+any other codec class.
+"""
 
 from __future__ import annotations
 
-from mocodec.codecs.base import Codec
+import importlib
+from typing import TYPE_CHECKING
+
 from mocodec.errors import CodecError, CorruptStreamError
+
+if TYPE_CHECKING:
+    from mocodec.codecs.base import Codec
 
 _CODECS: dict[str, type[Codec]] = {}
 DEFAULT_CODEC = "kinwave"
+BUILT_IN = {
+    **dict.fromkeys(("adpcm", "dct", "deadreckoning", "dpcm", "quant", "subband", "svq", "tvq"), "waveform"),
+    **dict.fromkeys(("gesture", "hybrid", "posture"), "model"),
+    **dict.fromkeys(("primitives", "rhythmic"), "motionprimitives"),
+    **dict.fromkeys(("pwavelet", "spiht"), "perceptual"),
+    "kinwave": "kinwave.codec", "raw": "reference", "lossless": "reference",
+    **dict.fromkeys(("zstd", "sz3", "zfp", "fpzip"), "reference"),
+}
+_MODULE = {"raw": "raw", "lossless": "lossless", "zstd": "floats", "sz3": "floats", "zfp": "floats",
+           "fpzip": "floats"}
+
+
+def built_in_module(codec_id: str) -> str:
+    """The module that defines the built-in codec ``codec_id``."""
+    family = BUILT_IN[codec_id]
+    leaf = "" if "." in family else "." + _MODULE.get(codec_id, codec_id)
+    return f"mocodec.codecs.{family}{leaf}"
 
 
 def register(cls: type[Codec]) -> type[Codec]:
@@ -18,10 +45,12 @@ def register(cls: type[Codec]) -> type[Codec]:
 
 
 def codec_class(codec_id: str) -> type[Codec]:
+    if codec_id not in _CODECS and codec_id in BUILT_IN:
+        importlib.import_module(built_in_module(codec_id))
     try:
         return _CODECS[codec_id]
     except KeyError:
-        raise CodecError(f"unknown codec {codec_id!r} (available: {', '.join(sorted(_CODECS))})") from None
+        raise CodecError(f"unknown codec {codec_id!r} (available: {', '.join(codec_ids())})") from None
 
 
 def get_codec(codec_id: str = DEFAULT_CODEC, **knobs) -> Codec:
@@ -57,4 +86,4 @@ def codec_from_untrusted(config: object, where: str, local_files: dict[str, str]
 
 
 def codec_ids() -> list[str]:
-    return sorted(_CODECS)
+    return sorted(set(_CODECS) | set(BUILT_IN))

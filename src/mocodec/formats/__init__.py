@@ -6,7 +6,8 @@ import os
 from pathlib import Path
 
 from mocodec.errors import ConversionError, FormatError
-from mocodec.formats.asf_amc import CMU_FPS, find_asf, read_amc, read_asf, write_amc, write_asf
+from mocodec.formats.amc import CMU_FPS, find_asf, read_amc, write_amc
+from mocodec.formats.asf import read_asf, write_asf
 from mocodec.formats.bvh import guess_units_per_metre, read_bvh, write_bvh
 from mocodec.formats.convert import to_asf_form, to_bvh_form, with_units
 from mocodec.motion import Motion

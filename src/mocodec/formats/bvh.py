@@ -16,7 +16,7 @@ import numpy as np
 
 from mocodec import limits
 from mocodec.errors import FormatError
-from mocodec.formats._io import atomic_write, format_rows, parse_number, parse_number_block, read_text
+from mocodec.formats.fileio import atomic_write, format_rows, parse_number, parse_number_block, read_text
 from mocodec.motion import Motion
 from mocodec.skeleton import CHANNEL_NAMES, Joint, Skeleton
 

@@ -2,8 +2,14 @@
 centimetres. :func:`compare` computes all of them for an original/decoded pair."""
 
 from mocodec.metrics.compare import Comparison, MismatchError, check_pair, compare
-from mocodec.metrics.groups import (configuration_error, group_channels, group_joints, joint_position_error,
-                                    max_vector_error, vector_error)
+from mocodec.metrics.groups import (
+                                    configuration_error,
+                                    group_channels,
+                                    group_joints,
+                                    joint_position_error,
+                                    max_vector_error,
+                                    vector_error,
+)
 from mocodec.metrics.natural import derivative_outliers, limit_violations, naturalness
 from mocodec.metrics.pose import foot_sliding, jerk, joint_errors, shell_errors
 from mocodec.metrics.visual import BAND_EDGES_HZ, BAND_WEIGHTS, band_split, visual_errors, weighted_error

@@ -22,12 +22,20 @@ from mocodec.jsonable import jsonable
 from mocodec.kinematics import forward_kinematics
 from mocodec.metrics import groups as grp
 from mocodec.metrics.natural import Naturalness, naturalness
-from mocodec.metrics.pose import (SHELL_CM, FootSliding, Jerk, JointErrors, bone_joints, foot_sliding, jerk,
-                                  joint_errors, shell_errors)
+from mocodec.metrics.pose import (
+    SHELL_CM,
+    FootSliding,
+    Jerk,
+    JointErrors,
+    bone_joints,
+    foot_sliding,
+    jerk,
+    joint_errors,
+    shell_errors,
+)
 from mocodec.metrics.visual import VisualErrors, visual_errors
 from mocodec.metrics.waveform import DofErrors, channel_error, errors_of
 from mocodec.motion import Motion
-
 
 SKELETON_TOLERANCE_CM = 0.001     # offsets closer than this are the same skeleton (a lossy file rounds them)
 

@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import base64
 import logging
-from typing import Awaitable, Callable
+from collections.abc import Awaitable, Callable
 
 from mocodec.errors import MocodecError
+from mocodec.extras import require
 
 PREFIX = "mocodec.room."
 log = logging.getLogger("mocodec.relay")
@@ -36,7 +37,7 @@ class NatsBus:
         self.stopping = False
 
     async def start(self, deliver: Callable[[str, bytes], Awaitable[None]]) -> None:
-        import nats
+        nats = require("nats", "stream", "a relay with --bus")
         from nats.errors import NoServersError
 
         async def on_message(msg) -> None:

@@ -25,6 +25,7 @@ from mocodec.motion import Motion
 from mocodec.stream.live import TICK_HZ, LiveDecoder, clip_encoder, tick_frames
 from mocodec.stream.packets import HEADER, Packet, StreamInfo, pack_batch, parse, split_batch
 
+
 class RelayRefused(MocodecError):
     """The relay refused the connection, closed it, or could not be reached."""
 
@@ -105,7 +106,7 @@ async def _drain(ws) -> None:
     """Wait briefly for the relay to close on us (a refused stream says why), then go."""
     try:
         msg = await ws.receive(timeout=2.0 / TICK_HZ)
-    except asyncio.TimeoutError:
+    except TimeoutError:
         return
     if msg.type == aiohttp.WSMsgType.CLOSE and ws.close_code and ws.close_code >= 4000:
         raise RelayRefused(f"the relay closed the stream: {closed_reason(ws, msg)}")
@@ -176,7 +177,7 @@ async def record(url: str, room: str, token: str, frames: int | None = None, str
                 break
             try:
                 msg = await ws.receive(timeout=left)
-            except asyncio.TimeoutError:
+            except TimeoutError:
                 break
             if msg.type in (aiohttp.WSMsgType.CLOSE, aiohttp.WSMsgType.CLOSED, aiohttp.WSMsgType.ERROR):
                 if ws.close_code and ws.close_code >= 4000:

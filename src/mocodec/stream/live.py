@@ -22,12 +22,11 @@ import numpy as np
 
 from mocodec.codecs import codec_from_untrusted
 from mocodec.codecs.base import Codec, checked_frames
-from mocodec.coding.rangecoder import encode_ints
+from mocodec.coding.entropy.rangecoder import encode_ints
 from mocodec.errors import CodecError
 from mocodec.motion import Motion
 from mocodec.skeleton import POSITION_CHANNELS, Skeleton
-from mocodec.stream.packets import (CUTS, DATA, END, HEADER, KEYFRAME, Packet, StreamInfo, header_packet,
-                                    with_cuts)
+from mocodec.stream.packets import CUTS, DATA, END, HEADER, KEYFRAME, Packet, StreamInfo, header_packet, with_cuts
 
 #: A sender's tick (Hz): frames are pushed, and packets sent, this often.
 TICK_HZ = 30.0

@@ -89,10 +89,10 @@ class Packet:
             raise CorruptStreamError(f"packet {self.sequence} of stream {self.stream}: its cut table overruns it")
         return _U16.unpack_from(self.payload)[0]
 
-    def with_payload(self, payload: bytes, flags: int | None = None) -> "Packet":
+    def with_payload(self, payload: bytes, flags: int | None = None) -> Packet:
         return replace(self, payload=payload, flags=self.flags if flags is None else flags)
 
-    def without_cuts(self) -> "Packet":
+    def without_cuts(self) -> Packet:
         return self.with_payload(self.codec_payload, self.flags & ~CUTS) if self.flags & CUTS else self
 
     def to_bytes(self) -> bytes:
@@ -156,7 +156,7 @@ class StreamInfo:
         return zlib.compress(json.dumps(doc, sort_keys=True, separators=(",", ":")).encode(), 9)
 
     @classmethod
-    def from_payload(cls, payload: bytes, where: str = "stream header") -> "StreamInfo":
+    def from_payload(cls, payload: bytes, where: str = "stream header") -> StreamInfo:
         """The header's contents, every field checked: inflated to at most
         :data:`~mocodec.limits.MAX_HEADER_TEXT` bytes, a skeleton of at most
         :data:`~mocodec.limits.MAX_JOINTS` joints, a finite positive frame rate up to

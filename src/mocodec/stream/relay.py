@@ -47,12 +47,11 @@ from aiohttp import WSMsgType, web
 from aiohttp.abc import AbstractAccessLogger
 
 from mocodec.codecs import codec_from_untrusted
-from mocodec.coding.rangecoder import decode_ints
+from mocodec.coding.entropy.rangecoder import decode_ints
 from mocodec.errors import MocodecError
 from mocodec.scene import bandwidth_scores, split_budget
 from mocodec.stream import tokens
-from mocodec.stream.packets import (BATCH_MAGIC, CUTS, END, HEADER, Packet, StreamInfo, pack_batch, parse,
-                                    split_batch)
+from mocodec.stream.packets import BATCH_MAGIC, CUTS, END, HEADER, Packet, StreamInfo, pack_batch, parse, split_batch
 
 log = logging.getLogger("mocodec.relay")
 

@@ -24,6 +24,7 @@ from mocodec.formats import load
 from mocodec.metrics import compare
 from mocodec.motion import Motion
 
+
 def base64_f32(values: np.ndarray) -> str:
     """An array as base64 little-endian float32 (compact for the page, decoded with atob)."""
     return base64.b64encode(np.ascontiguousarray(values, dtype="<f4").tobytes()).decode()

@@ -29,7 +29,7 @@ from mocodec import moc, ratecontrol
 from mocodec.codecs import get_codec
 from mocodec.errors import FormatError, MocodecError
 from mocodec.formats import load
-from mocodec.formats._io import atomic_write
+from mocodec.formats.fileio import atomic_write
 from mocodec.motion import Motion
 from mocodec.viewer.session import base64_f32
 

@@ -1,0 +1,202 @@
+"""The commands on motion files: ``info``, ``convert``, ``compare``, ``analyze`` and ``demo``."""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from mocodec.cli.options import add_codec_options, add_input_options
+from mocodec.formats import load, save
+from mocodec.motion import Motion
+
+
+def _human_bytes(n: float) -> str:
+    for unit in ("B", "KB", "MB", "GB"):
+        if n < 1024 or unit == "GB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1024
+    return f"{n} B"  # pragma: no cover
+
+
+def describe(motion: Motion, path: str) -> str:
+    """The ``info`` summary of a motion."""
+    sk = motion.skeleton
+    parts: dict[str, int] = {}
+    for i, part in enumerate(sk.body_parts):
+        parts[part] = parts.get(part, 0) + len(sk.joints[i].channels)
+    root = motion.root_positions() / sk.units_per_metre
+    height = float(np.ptp(sk.rest_positions[:, 1])) / sk.units_per_metre
+    lines = [
+        f"file        {path}",
+        f"skeleton    {len(sk)} joints ({int(sk.end_sites.sum())} end sites), {sk.num_channels} channels "
+        f"({int(sk.rotation_mask.sum())} rotation, {int((~sk.rotation_mask).sum())} translation)",
+        f"units       {sk.units_per_metre:.6g} per metre; rest-pose height {height:.2f} m",
+        f"frames      {motion.num_frames} at {motion.fps:g} fps = {motion.duration:.2f} s",
+        f"raw size    {_human_bytes(motion.raw_bits / 8)} at 32-bit floats, "
+        f"{motion.raw_bitrate / 1000:.1f} kbit/s",
+        f"root path   {np.linalg.norm(np.diff(root[:, [0, 2]], axis=0), axis=1).sum():.2f} m horizontal",
+        "body parts  " + ", ".join(f"{p} {n}" for p, n in parts.items() if n),
+    ]
+    return "\n".join(lines)
+
+
+def cmd_info(args) -> int:
+    for path in args.files:
+        motion = load(path, asf=args.asf, fps=args.fps)
+        print(describe(motion, path))
+        if args.joints:
+            sk = motion.skeleton
+            print(f"{'joint':<22}{'parent':<18}{'part':<12}{'depth':>5}{'bone m':>9}  channels")
+            for i, j in enumerate(sk.joints):
+                parent = sk.names[j.parent] if j.parent >= 0 else "-"
+                print(f"{j.name:<22}{parent:<18}{sk.body_parts[i]:<12}{sk.chain_depths[i]:>5}"
+                      f"{sk.bone_lengths[i] / sk.units_per_metre:>9.3f}  {' '.join(j.channels)}")
+        if len(args.files) > 1:
+            print()
+    return 0
+
+
+def cmd_convert(args) -> int:
+    motion = load(args.input, asf=args.asf, fps=args.fps)
+    written = save(motion, args.output, asf=args.out_asf)
+    print(f"wrote {', '.join(str(p) for p in written)} ({motion.num_frames} frames)")
+    return 0
+
+
+def cmd_compare(args) -> int:
+    import json
+
+    from mocodec.metrics import compare
+
+    original = load(args.original, asf=args.asf, fps=args.fps)
+    decoded = load(args.decoded, asf=args.decoded_asf or args.asf, fps=args.fps)
+    result = compare(original, decoded, shell_cm=args.shell_cm)
+    if args.json:
+        print(json.dumps(result.as_dict(per_joint=args.per_joint), indent=2, allow_nan=False))
+        return 0
+    print(f"original    {args.original}\ndecoded     {args.decoded}\n")
+    print(result.table())
+    if args.per_joint:
+        print()
+        print(result.per_joint_table())
+    return 0
+
+
+def cmd_analyze(args) -> int:
+    import json
+
+    from mocodec.analysis import analyze, summary_text
+    from mocodec.formats.fileio import atomic_write
+
+    motion = load(args.file, asf=args.asf, fps=args.fps)
+    result = analyze(motion, noise_deg=args.noise_deg, noise_cm=args.noise_cm)
+    print(summary_text(result, args.file))
+    if args.out:
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        atomic_write(out / "analysis.json", json.dumps(result, indent=1, allow_nan=False) + "\n")
+        written = [out / "analysis.json"]
+        if not args.no_plots:
+            from mocodec.analysis.plots import write_plots
+
+            written += write_plots(motion, out)
+        print(f"\nwrote {', '.join(str(p) for p in written)}")
+    return 0
+
+
+def cmd_demo(args) -> int:
+    """``eval`` of the default codec on the bundled sample clip."""
+    from mocodec.cli.coding import evaluate
+
+    sample = resources.files("mocodec") / "data" / "sample_walk_02_02.bvh"
+    with resources.as_file(sample) as path:
+        motion = load(path)
+        print(describe(motion, f"(bundled) {Path(path).name}"))
+    print()
+    print(evaluate(motion, args))
+    print("\nTry: mocodec codecs; mocodec eval FILE --codec ID; mocodec encode FILE -o out.moc")
+    return 0
+
+
+def cmd_warmup(args) -> int:
+    """Code one second of the bundled clip with every built-in codec that needs no trained
+    model or optional library: numba compiles each kernel once and caches it (beside the
+    package, or in the user's cache directory when the package is read-only)."""
+    import time
+
+    from mocodec import moc
+    from mocodec.codecs import codec_class, codec_ids, get_codec
+    from mocodec.errors import CodecError
+
+    sample = resources.files("mocodec") / "data" / "sample_walk_02_02.bvh"
+    with resources.as_file(sample) as path:
+        motion = load(path)
+    clip = motion[:int(motion.fps)]
+    t0 = time.perf_counter()
+    warmed, skipped = [], []
+    for cid in codec_ids():
+        if codec_class(cid).baseline or any(k.path for k in codec_class(cid).knobs):
+            continue
+        try:
+            moc.round_trip(clip, get_codec(cid))
+            warmed.append(cid)
+        except CodecError:
+            skipped.append(cid)
+    motion.positions_m()
+    print(f"compiled or loaded the kernels of {len(warmed)} codecs in {time.perf_counter() - t0:.1f} s"
+          + (f" (skipped: {', '.join(skipped)})" if skipped else ""))
+    return 0
+
+
+def add_commands(sub) -> None:
+    p = sub.add_parser("info", description="Skeleton, frames, rate, duration, "
+                       "channels, raw size and bit rate at 32-bit floats.")
+    p.add_argument("files", nargs="+", metavar="FILE", help=".bvh or .amc file")
+    p.add_argument("--joints", action="store_true", help="also list every joint")
+    add_input_options(p)
+    p.set_defaults(func=cmd_info)
+
+    p = sub.add_parser("convert", description="Convert a motion file; the pose of every frame is kept exactly. "
+                                   "Writing .amc also writes its .asf (same stem unless --out-asf).")
+    p.add_argument("input", metavar="IN", help=".bvh or .amc file")
+    p.add_argument("output", metavar="OUT", help=".bvh or .amc file to write")
+    p.add_argument("--out-asf", help="where to write the ASF when OUT is .amc")
+    add_input_options(p)
+    p.set_defaults(func=cmd_convert)
+
+    p = sub.add_parser("compare", description="PSNR, NSNR, VPSNR (000 ch. 6), group measures (6-9 to 6-14), joint and "
+                                   "shell position errors in cm, foot sliding, jerk, joint-limit violations "
+                                   "and derivative outliers. Both files need the same skeleton, rate and "
+                                   "frame count.")
+    p.add_argument("original", metavar="ORIGINAL", help=".bvh or .amc file")
+    p.add_argument("decoded", metavar="DECODED", help=".bvh or .amc file")
+    p.add_argument("--decoded-asf", help="ASF skeleton of an .amc DECODED (default: as for ORIGINAL)")
+    p.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    p.add_argument("--per-joint", action="store_true", help="also list errors per joint (and per DOF in JSON)")
+    p.add_argument("--shell-cm", type=float, default=3.0, help="shell distance off each bone (default 3 cm)")
+    add_input_options(p)
+    p.set_defaults(func=cmd_compare)
+
+    p = sub.add_parser("analyze", description="Per-DOF ranges, usable resolution in bits and the raw bit rate; per body "
+                                   "part the spectra (Welch, Blackman-Tukey, AR) with their 99%% power "
+                                   "frequency and 40/50 dB cut-offs, the Markov fit of the autocorrelation, "
+                                   "a stationarity check and the shape of the first-difference PDF.")
+    p.add_argument("file", metavar="FILE", help=".bvh or .amc file")
+    p.add_argument("--out", metavar="DIR", help="write analysis.json and PNG plots here")
+    p.add_argument("--no-plots", action="store_true", help="with --out, write only the JSON")
+    p.add_argument("--noise-deg", type=float, default=0.1, help="sensor noise of angles (std, default 0.1 deg)")
+    p.add_argument("--noise-cm", type=float, default=0.1, help="sensor noise of positions (std, default 0.1 cm)")
+    add_input_options(p)
+    p.set_defaults(func=cmd_analyze)
+
+    p = sub.add_parser("demo", description="Encode and decode the bundled CMU walk with the default codec and "
+                                   "report ratio, bit rate, error and speed (the `eval` table).")
+    add_codec_options(p)
+    p.set_defaults(func=cmd_demo, takes_knobs=True)
+
+    p = sub.add_parser("warmup", description="Compile and cache the numerical kernels of every codec that needs "
+                                             "no trained model (a minute once after install; `make demo` and "
+                                             "`make test` run it), so no later command pays for it.")
+    p.set_defaults(func=cmd_warmup)

@@ -1,0 +1,49 @@
+"""Options several commands share: the input options of .amc files, the codec and its knobs,
+and a rate-control target. Light to import: every command's parser uses them."""
+
+from __future__ import annotations
+
+from mocodec.codecs.registry import DEFAULT_CODEC
+from mocodec.errors import CodecError
+
+
+def add_input_options(p) -> None:
+    p.add_argument("--asf", help="ASF skeleton of an .amc input (default: <subject>.asf beside it)")
+    p.add_argument("--fps", type=float, help="frame rate of an .amc input (default 120, the CMU rate)")
+
+
+TARGET_OPTIONS = (("ratio", "ratio", "compression ratio vs 32-bit floats, e.g. 50"),
+                  ("bitrate", "bitrate", "bits per second"),
+                  ("psnr", "psnr", "whole-body PSNR in dB (mean over DOFs)"),
+                  ("mean-error-cm", "mean_error_cm", "mean joint position error bound in cm"),
+                  ("max-error-cm", "max_error_cm", "max joint position error bound in cm (guaranteed)"))
+
+
+def add_codec_options(p, default: str = DEFAULT_CODEC) -> None:
+    p.add_argument("--codec", default=default, help=f"codec id (default {default}; see `mocodec codecs`)")
+    group = p.add_mutually_exclusive_group()
+    for flag, dest, text in TARGET_OPTIONS:
+        group.add_argument(f"--{flag}", dest=dest, type=float, help=text)
+
+
+def knobs_from(extra: list[str]) -> dict[str, str]:
+    """``--name value`` pairs left over by argparse, as codec knobs."""
+    knobs, k = {}, 0
+    while k < len(extra):
+        flag = extra[k]
+        if not flag.startswith("--") or k + 1 >= len(extra):
+            raise CodecError(f"unexpected argument {flag!r} (codec knobs are given as --name value)")
+        name, _, value = flag[2:].partition("=")
+        if not value:
+            value, k = extra[k + 1], k + 1
+        knobs[name.replace("-", "_")] = value
+        k += 1
+    return knobs
+
+
+def target_of(args) -> tuple[str, float] | None:
+    """The rate-control target given on the command line, as (name, value), or None."""
+    return next(((dest, getattr(args, dest)) for _, dest, _ in TARGET_OPTIONS if getattr(args, dest) is not None),
+                None)
+
+

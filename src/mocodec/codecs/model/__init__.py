@@ -1,0 +1,2 @@
+"""Model-based codecs (posture and gesture tables, segment transform coding): posture, gesture,
+hybrid, and what they share."""

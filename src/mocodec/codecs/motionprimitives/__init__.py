@@ -1,0 +1,2 @@
+"""Motion-primitive codecs: primitives (per-joint primitive databases) and rhythmic
+(whole-body primitives)."""

@@ -1,0 +1,1 @@
+"""Perceptually guided wavelet codecs: pwavelet and the embedded spiht."""

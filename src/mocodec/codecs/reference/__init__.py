@@ -1,0 +1,2 @@
+"""Reference and baseline codecs: raw floats, lossless, and the generic float compressors
+(zstd, SZ3, ZFP, fpzip) a user might pick instead."""

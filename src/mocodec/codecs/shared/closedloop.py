@@ -1,0 +1,256 @@
+"""Closed-loop coding down the kinematic tree (kinwave.md, "what mattered" 1).
+
+A joint is coded so that, on top of its parent's *decoded* global orientation, it restores
+its *original* global orientation: the target local rotation is ``conj(G'_p) G_j``. The
+encoder therefore needs, per joint, the Euler angles (in the joint's own channels, order and
+ASF pre-rotation ``C``) of that target, near the original angles; :func:`target_angles` finds
+them by one damped Gauss-Newton step from the original angles (for three-DOF joints what is
+left is second order in the parent's error: 1% of it for a 2 degree error, where a second step
+would cost the encoder 15% more time per pass and not a byte less; for one- and two-DOF joints
+the step heads for the least-squares best rotation). Quantisation errors then stop
+accumulating from the hips to the fingertips, as in a DPCM coder that predicts from the
+decoded signal. :func:`compose` gives the decoded global orientation for the children.
+
+Quaternions are (w, x, y, z), Hamilton products, the conventions of
+:mod:`mocodec.kinematics`: ``L = C R_1 R_2 R_3 C^-1`` with ``R_k`` about axis ``a_k``.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numba
+import numpy as np
+
+from mocodec import rotations
+from mocodec.codecs.shared.rotvec import quat_product
+from mocodec.kinematics import channel_plan
+from mocodec.skeleton import Skeleton
+
+_DAMPING = 1e-9
+_ITERATIONS = 1
+
+
+@numba.njit(inline="always")
+def _rotate(w, x, y, z, vx, vy, vz):
+    """Vector (vx, vy, vz) rotated by the unit quaternion (w, x, y, z)."""
+    tx, ty, tz = 2.0 * (y * vz - z * vy), 2.0 * (z * vx - x * vz), 2.0 * (x * vy - y * vx)
+    return vx + w * tx + y * tz - z * ty, vy + w * ty + z * tx - x * tz, vz + w * tz + x * ty - y * tx
+
+
+@numba.njit(inline="always")
+def _axis_quat(axis, angle):
+    c, s = np.cos(0.5 * angle), np.sin(0.5 * angle)
+    if axis == 0:
+        return c, s, 0.0, 0.0
+    if axis == 1:
+        return c, 0.0, s, 0.0
+    return c, 0.0, 0.0, s
+
+
+@numba.njit(cache=True)
+def _targets(angles, axes, active, cq, has_axis, parent, goal, out):
+    k = axes.size
+    theta = np.empty(3)
+    steps = np.empty((3, 4))
+    jac = np.empty((3, 3))
+    a = np.empty((3, 4))                     # normal equations | right-hand side
+    for f in range(angles.shape[0]):
+        for i in range(k):
+            theta[i] = angles[f, i] * (np.pi / 180.0)
+        # wanted local rotation M = conj(parent) * goal
+        mw, mx, my, mz = quat_product(parent[f, 0], -parent[f, 1], -parent[f, 2], -parent[f, 3],
+                                      goal[f, 0], goal[f, 1], goal[f, 2], goal[f, 3])
+        for _ in range(_ITERATIONS):
+            for i in range(k):
+                steps[i, 0], steps[i, 1], steps[i, 2], steps[i, 3] = _axis_quat(axes[i], theta[i])
+            # suffix products S_i = R_{i+1} ... R_k give the body-frame axis of step i
+            sw, sx, sy, sz = 1.0, 0.0, 0.0, 0.0
+            for i in range(k - 1, -1, -1):
+                ex, ey, ez = (1.0 if axes[i] == 0 else 0.0), (1.0 if axes[i] == 1 else 0.0), (1.0 if axes[i] == 2 else 0.0)
+                jx, jy, jz = _rotate(sw, -sx, -sy, -sz, ex, ey, ez)
+                if has_axis:
+                    jx, jy, jz = _rotate(cq[0], cq[1], cq[2], cq[3], jx, jy, jz)
+                jac[i, 0], jac[i, 1], jac[i, 2] = jx, jy, jz
+                sw, sx, sy, sz = quat_product(steps[i, 0], steps[i, 1], steps[i, 2], steps[i, 3], sw, sx, sy, sz)
+            lw, lx, ly, lz = sw, sx, sy, sz
+            if has_axis:
+                lw, lx, ly, lz = quat_product(cq[0], cq[1], cq[2], cq[3], lw, lx, ly, lz)
+                lw, lx, ly, lz = quat_product(lw, lx, ly, lz, cq[0], -cq[1], -cq[2], -cq[3])
+            # remaining rotation in the body frame: E = conj(L) M, as a rotation vector r
+            ew, ex, ey, ez = quat_product(lw, -lx, -ly, -lz, mw, mx, my, mz)
+            if ew < 0.0:
+                ew, ex, ey, ez = -ew, -ex, -ey, -ez
+            norm = np.sqrt(ex * ex + ey * ey + ez * ez)
+            scale = 2.0 if norm < 1e-12 else 2.0 * np.arctan2(norm, ew) / norm
+            rx, ry, rz = ex * scale, ey * scale, ez * scale
+            # damped normal equations over the active steps: (J^T J + d I) delta = J^T r
+            a[:] = 0.0
+            for i in range(k):
+                if not active[i]:
+                    a[i, i] = 1.0
+                    continue
+                for m in range(k):
+                    if active[m]:
+                        a[i, m] = jac[i, 0] * jac[m, 0] + jac[i, 1] * jac[m, 1] + jac[i, 2] * jac[m, 2]
+                a[i, i] += _DAMPING
+                a[i, 3] = jac[i, 0] * rx + jac[i, 1] * ry + jac[i, 2] * rz
+            for i in range(k):                       # Gaussian elimination with partial pivoting
+                piv = i
+                for m in range(i + 1, k):
+                    if abs(a[m, i]) > abs(a[piv, i]):
+                        piv = m
+                if piv != i:
+                    for col in range(4):
+                        a[i, col], a[piv, col] = a[piv, col], a[i, col]
+                for m in range(i + 1, k):
+                    factor = a[m, i] / a[i, i]
+                    for col in range(i, 4):
+                        a[m, col] -= factor * a[i, col]
+            for i in range(k - 1, -1, -1):
+                v = a[i, 3]
+                for m in range(i + 1, k):
+                    v -= a[i, m] * a[m, 3]
+                a[i, 3] = v / a[i, i]
+                if active[i]:
+                    theta[i] += a[i, 3]
+        for i in range(k):
+            out[f, i] = theta[i] * (180.0 / np.pi)
+
+
+@numba.njit(cache=True)
+def _compose(angles, axes, cq, has_axis, parent, out):
+    for f in range(angles.shape[0]):
+        w, x, y, z = 1.0, 0.0, 0.0, 0.0
+        for i in range(axes.size):
+            sw, sx, sy, sz = _axis_quat(axes[i], angles[f, i] * (np.pi / 180.0))
+            w, x, y, z = quat_product(w, x, y, z, sw, sx, sy, sz)
+        if has_axis:
+            w, x, y, z = quat_product(cq[0], cq[1], cq[2], cq[3], w, x, y, z)
+            w, x, y, z = quat_product(w, x, y, z, cq[0], -cq[1], -cq[2], -cq[3])
+        out[f, 0], out[f, 1], out[f, 2], out[f, 3] = quat_product(parent[f, 0], parent[f, 1], parent[f, 2],
+                                                                  parent[f, 3], w, x, y, z)
+
+
+def target_angles(angles: np.ndarray, axes: np.ndarray, active: np.ndarray, axis_quat: np.ndarray, has_axis: bool,
+                  parent: np.ndarray, goal: np.ndarray) -> np.ndarray:
+    """Euler angles ``(T, k)`` (degrees, in rotation-order steps) whose local rotation on top
+    of the decoded ``parent (T, 4)`` global orientation comes closest to ``goal (T, 4)``,
+    starting from ``angles``; inactive steps keep their value."""
+    out = np.empty_like(angles)
+    _targets(np.ascontiguousarray(angles, dtype=np.float64), np.ascontiguousarray(axes, dtype=np.int64),
+             np.ascontiguousarray(active, dtype=np.bool_), np.ascontiguousarray(axis_quat, dtype=np.float64),
+             bool(has_axis), np.ascontiguousarray(parent), np.ascontiguousarray(goal), out)
+    return out
+
+
+def compose(angles: np.ndarray, axes: np.ndarray, axis_quat: np.ndarray, has_axis: bool,
+            parent: np.ndarray) -> np.ndarray:
+    """Global orientation ``(T, 4)`` of a joint with local Euler ``angles`` under ``parent``."""
+    out = np.empty((angles.shape[0], 4))
+    _compose(np.ascontiguousarray(angles, dtype=np.float64), np.ascontiguousarray(axes, dtype=np.int64),
+             np.ascontiguousarray(axis_quat, dtype=np.float64), bool(has_axis), np.ascontiguousarray(parent), out)
+    return out
+
+
+@lru_cache(maxsize=64)
+def depth_levels(skeleton: Skeleton) -> tuple[tuple[int, ...], ...]:
+    """Joints by their depth in the tree, the root's first: the order closed-loop coding needs
+    (a joint after its parent), and the joints of one depth can be coded together."""
+    depths = skeleton.depths
+    return tuple(tuple(int(j) for j in np.flatnonzero(depths == d)) for d in range(int(depths.max(initial=-1)) + 1))
+
+
+def _placing(skeleton: Skeleton, active: np.ndarray) -> np.ndarray:
+    """Joints whose decoded position closed-loop translations need: the ancestors of every
+    non-root joint with an active translation channel."""
+    plan = channel_plan(skeleton)
+    out = np.zeros(len(skeleton), dtype=bool)
+    for j in range(1, len(skeleton)):
+        moves = plan.pos_index[j][plan.pos_index[j] >= 0]
+        p = skeleton.parents[j]
+        while active[moves].any() and p >= 0 and not out[p]:
+            out[p] = True
+            p = skeleton.parents[p]
+    return out
+
+
+def _rotate_back(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``v (T, 3)`` rotated by the inverse of unit quaternions ``q (T, 4)``."""
+    return rotations.quat_rotate(rotations.quat_conjugate(q), v)
+
+
+def exact_rotation(axis_quat: np.ndarray, has_axis: bool, parent: np.ndarray, goal: np.ndarray) -> np.ndarray:
+    """Quaternions ``(T, 4)`` of exactly the local rotation (the one its Euler angles make,
+    without the axis pre-rotation) that restores ``goal`` on top of ``parent``:
+    ``C^-1 conj(G'_p) G_j C``. For joints coded in another form than their Euler angles, where
+    a Gauss-Newton step in Euler angles near a gimbal lock (a proper order's rest pose) would
+    not converge."""
+    local = rotations.quat_multiply(rotations.quat_conjugate(parent), goal)
+    if has_axis:
+        c = np.broadcast_to(axis_quat, local.shape)
+        local = rotations.quat_multiply(rotations.quat_multiply(rotations.quat_conjugate(c), local), c)
+    return local
+
+
+def code_down_tree(skeleton: Skeleton, start: np.ndarray, active: np.ndarray, goal: np.ndarray, code,
+                   closed_loop: bool = True, goal_positions: np.ndarray | None = None,
+                   exact: np.ndarray | None = None) -> None:
+    """Drive a coder down the tree, the joints of one depth at a time. ``start (T, C)`` holds
+    the values each channel is coded from, ``active (C,)`` the channels the coder will change
+    (the others keep their start value), ``goal (T, joints, 4)`` the original global
+    orientations. With ``closed_loop`` a joint's active angles are replaced by the target that
+    restores its goal on top of its parent's *decoded* orientation; with ``goal_positions
+    (T, joints, 3)`` (skeleton units) too, a non-root joint's active translations are replaced
+    by those that restore its original position from its parent's decoded position and
+    orientation (a translated joint below a rotated dummy root), else translations go as they
+    are. ``code(channels, targets (T, k))`` codes a depth's channels and returns what the
+    decoder will make of them ``(T, k)``; with ``exact (joints,)`` (joints of three axes, all
+    active) it is called as ``code(channels, targets, rotations)``, where ``rotations`` maps
+    each flagged joint of the depth to its :func:`exact_rotation`, its target instead of the
+    (then meaningless) angles in ``targets``."""
+    plan = channel_plan(skeleton)
+    frames = start.shape[0]
+    glob = np.empty((len(skeleton), frames, 4))
+    identity = np.tile([1.0, 0.0, 0.0, 0.0], (frames, 1))
+    placing = _placing(skeleton, active) if closed_loop and goal_positions is not None else np.zeros(0, bool)
+    where = np.zeros((len(skeleton), frames, 3)) if placing.any() else None
+    for depth in depth_levels(skeleton):
+        channels, targets, exact_targets = [], [], {}
+        for j in depth:
+            p = skeleton.parents[j]
+            glob[j] = glob[p] if p >= 0 else identity
+            moves = plan.pos_index[j][plan.pos_index[j] >= 0]
+            k = int((plan.rot_index[j] >= 0).sum())
+            chans = plan.rot_index[j, :k]
+            angles = start[:, chans]
+            if closed_loop and p >= 0 and exact is not None and exact[j]:
+                exact_targets[j] = exact_rotation(plan.axis_quat[j], plan.has_axis[j], glob[j], goal[:, j])
+            elif closed_loop and p >= 0 and active[chans].any():
+                angles = target_angles(angles, plan.rot_axis[j, :k], active[chans], plan.axis_quat[j],
+                                       plan.has_axis[j], glob[j], goal[:, j])
+            shifts = start[:, moves]
+            if where is not None and p >= 0 and active[moves].any():
+                wanted = _rotate_back(glob[p], goal_positions[:, j] - where[p]) - plan.offsets[j]
+                axes = np.flatnonzero(plan.pos_index[j] >= 0)
+                shifts = np.where(active[moves], wanted[:, axes], shifts)
+            channels += [moves, chans]
+            targets += [shifts, angles]
+        channels = np.concatenate(channels)
+        if not channels.size:
+            continue
+        decoded = code(channels, np.hstack(targets)) if exact is None else \
+            code(channels, np.hstack(targets), exact_targets)
+        column = {c: i for i, c in enumerate(channels)}
+        for j in depth:
+            k = int((plan.rot_index[j] >= 0).sum())
+            if k and skeleton.children[j]:
+                glob[j] = compose(decoded[:, [column[c] for c in plan.rot_index[j, :k]]], plan.rot_axis[j, :k],
+                                  plan.axis_quat[j], plan.has_axis[j], glob[j])
+            if where is not None and placing[j]:
+                bone = np.tile(plan.offsets[j], (frames, 1))
+                for axis, c in enumerate(plan.pos_index[j]):
+                    if c >= 0:
+                        bone[:, axis] += decoded[:, column[c]]
+                p = skeleton.parents[j]
+                where[j] = bone if p < 0 else where[p] + rotations.quat_rotate(glob[p], bone)

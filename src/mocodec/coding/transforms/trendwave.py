@@ -1,0 +1,123 @@
+"""Channels as a piecewise-linear trend through knots plus a wavelet-coded residual.
+
+A payload of T frames is cut into segments of W frames (after up to two one-frame keyframe
+segments, for a bind pose or T-pose at the start of many clips: kinwave.md 6). Knots sit at every segment start
+and on the last frame; the trend joins them linearly, so it is continuous across seams, and
+the residual of a segment is close to zero at both of its ends, which is what a periodised
+transform needs (kinwave.md 4: detrend, zero-pad to a multiple of 2^levels, periodise). Each
+segment's residual is transformed on its own (CDF 9/7 by default), so segments are the unit
+of streaming delay.
+
+Encoder and decoder reconstruct through the same functions (:func:`trend`, :func:`synthesise`)
+on the same integers, so the encoder knows the decoder's output bit for bit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from mocodec.coding.transforms import wavelets
+
+KEYFRAME_QUANTUM = 0.5
+
+
+@dataclass(frozen=True, eq=False)
+class Layout:
+    frames: int
+    wavelet: str
+    starts: np.ndarray          # (S,) first frame of each segment
+    lengths: np.ndarray         # (S,) frames in each segment
+    padded: np.ndarray          # (S,) coefficients of each segment's block (0: no block)
+    levels: np.ndarray          # (S,) wavelet levels of each block
+    knot_frames: np.ndarray     # (K,)
+    left: np.ndarray            # (T,) knot index before each frame
+    frac: np.ndarray            # (T,) position between knot `left` and the next one
+    knot_quantum: np.ndarray    # (K,) knot step relative to the channel's step
+    blocks: tuple               # segments with a block, grouped by (length, levels): (n, levels, segs, offsets)
+
+    @property
+    def num_knots(self) -> int:
+        return int(self.knot_frames.size)
+
+    @property
+    def num_coeffs(self) -> int:
+        return int(self.padded.sum())
+
+
+@lru_cache(maxsize=256)
+def layout(frames: int, window: int, levels: int, keyframes: int, wavelet: str = "cdf97") -> Layout:
+    """The segments and knots of a ``frames``-long payload (``window`` a power of two), its
+    first ``keyframes`` frames (a bind pose, a T-pose) one-frame segments of their own."""
+    first = min(int(keyframes), frames - 1) if frames > 1 else 0
+    starts = np.array(list(range(first)) + list(range(first, max(frames, 1), window)), dtype=np.int64)
+    if frames == 0:
+        starts = np.zeros(0, dtype=np.int64)
+    lengths = np.diff(np.append(starts, frames))
+    seg_levels = np.array([0 if n < 2 else min(levels, int(np.log2(n))) for n in lengths], dtype=np.int64)
+    unit = 1 << seg_levels
+    padded = np.where(lengths < 2, 0, -(-lengths // unit) * unit)
+    knots = starts.copy()
+    if frames > 0 and frames - 1 != starts[-1]:
+        knots = np.append(knots, frames - 1)
+    left = np.zeros(frames, dtype=np.int64)
+    frac = np.zeros(frames)
+    for s, (a, n) in enumerate(zip(starts, lengths)):
+        end = knots[s + 1] if s + 1 < knots.size else a
+        left[a:a + n] = s
+        if end > a:
+            frac[a:a + n] = (np.arange(n) / (end - a))
+    # a keyframe has no residual to correct its knot: it gets an twice finer step
+    quantum = np.ones(knots.size)
+    quantum[:first] = KEYFRAME_QUANTUM
+    padded = padded.astype(np.int64)
+    return Layout(frames, wavelet, starts, lengths, padded, seg_levels, knots, left, frac, quantum,
+                  _blocks(padded, seg_levels))
+
+
+def trend(knot_values: np.ndarray, lay: Layout) -> np.ndarray:
+    """The piecewise-linear trend ``(channels, T)`` through ``knot_values (channels, K)``."""
+    right = np.minimum(lay.left + 1, lay.num_knots - 1)
+    a, b = knot_values[:, lay.left], knot_values[:, right]
+    return a + (b - a) * lay.frac
+
+
+def _blocks(padded: np.ndarray, levels: np.ndarray) -> tuple:
+    """Segments with a block, grouped by (padded length, levels), with their coefficient
+    offsets: each group is transformed in one call."""
+    offsets = np.concatenate([[0], np.cumsum(padded)[:-1]]).astype(np.int64)
+    groups: dict[tuple[int, int], list[int]] = {}
+    for s in np.flatnonzero(padded):
+        groups.setdefault((int(padded[s]), int(levels[s])), []).append(int(s))
+    return tuple((n, lev, np.array(segs), offsets[segs]) for (n, lev), segs in groups.items())
+
+
+def analyse(residual: np.ndarray, lay: Layout) -> np.ndarray:
+    """Wavelet coefficients ``(channels, N)`` of each segment of ``residual (channels, T)``,
+    zero-padded to its block length, coarsest band first."""
+    channels = residual.shape[0]
+    out = np.zeros((channels, lay.num_coeffs))
+    for n, lev, segs, offs in lay.blocks:
+        block = np.zeros((channels, segs.size, n))
+        for k, s in enumerate(segs):
+            a, m = lay.starts[s], lay.lengths[s]
+            block[:, k, :m] = residual[:, a:a + m]
+        coeffs = wavelets.forward(block.reshape(-1, n), lay.wavelet, lev).reshape(channels, segs.size, n)
+        for k, o in enumerate(offs):
+            out[:, o:o + n] = coeffs[:, k]
+    return out
+
+
+def synthesise(coeffs: np.ndarray, lay: Layout) -> np.ndarray:
+    """Inverse of :func:`analyse`: the residual ``(channels, T)`` (zero where no block)."""
+    channels = coeffs.shape[0]
+    out = np.zeros((channels, lay.frames))
+    for n, lev, segs, offs in lay.blocks:
+        block = np.stack([coeffs[:, o:o + n] for o in offs], axis=1).reshape(-1, n)
+        signal = wavelets.inverse(block, n, lay.wavelet, lev).reshape(channels, segs.size, n)
+        for k, s in enumerate(segs):
+            a, m = lay.starts[s], lay.lengths[s]
+            out[:, a:a + m] = signal[:, k, :m]
+    return out

@@ -29,13 +29,19 @@ def main() -> None:
     log = simulate(poses, seed=1)
     conv = Converter()
     seconds = best_of(lambda: conv.convert(log), 3)
-    print(f"convert {FRAMES:,} sensor frames: {seconds:.3f} s = {FRAMES / seconds:,.0f} frames/s on one core "
-          f"(first call, imports and compilation included: {first:.2f} s)")
+    print(
+        f"convert {FRAMES:,} sensor frames: {seconds:.3f} s = {FRAMES / seconds:,.0f} frames/s on one core "
+        f"(first call, imports and compilation included: {first:.2f} s)"
+    )
     sk = poses.skeleton
     truth_p, truth_q = forward_kinematics(sk, poses.channels)
     print(f"{'trackers':24s} {'head top cm':>16s} {'wrists cm':>16s} {'ankles cm':>16s} {'forearms deg':>16s}")
-    for label, noise in (("exact", (0.0, 0.0, 0.0)), ("0.5 deg, 0.3 cm", (0.5, 0.3, 0.016)),
-                         ("1 deg, 0.5 cm", (1.0, 0.5, 0.016)), ("2 deg, 1 cm", (2.0, 1.0, 0.016))):
+    for label, noise in (
+        ("exact", (0.0, 0.0, 0.0)),
+        ("0.5 deg, 0.3 cm", (0.5, 0.3, 0.016)),
+        ("1 deg, 0.5 cm", (1.0, 0.5, 0.016)),
+        ("2 deg, 1 cm", (2.0, 1.0, 0.016)),
+    ):
         got = conv.convert(simulate(poses, noise[0], noise[1], seed=2, glove_noise=noise[2]))
         p, q = forward_kinematics(sk, got.channels)
 
@@ -43,10 +49,16 @@ def main() -> None:
             e = np.concatenate([np.linalg.norm(p[:, sk.index(j)] - truth_p[:, sk.index(j)], axis=1) for j in joints])
             return f"{100 * e.mean():6.2f} / {100 * e.max():5.2f}"
 
-        deg = np.concatenate([np.degrees(rotations.quat_distance(q[:, sk.index(j)], truth_q[:, sk.index(j)]))
-                              for j in ("left_elbow", "right_elbow")])
-        print(f"{label:24s} {cm('head_top'):>16s} {cm('left_wrist', 'right_wrist'):>16s} "
-              f"{cm('left_ankle', 'right_ankle'):>16s} {f'{np.median(deg):6.2f} / {deg.max():5.1f}':>16s}")
+        deg = np.concatenate(
+            [
+                np.degrees(rotations.quat_distance(q[:, sk.index(j)], truth_q[:, sk.index(j)]))
+                for j in ("left_elbow", "right_elbow")
+            ]
+        )
+        print(
+            f"{label:24s} {cm('head_top'):>16s} {cm('left_wrist', 'right_wrist'):>16s} "
+            f"{cm('left_ankle', 'right_ankle'):>16s} {f'{np.median(deg):6.2f} / {deg.max():5.1f}':>16s}"
+        )
     print("(mean / max; forearms: median / max of the orientation error)")
 
 

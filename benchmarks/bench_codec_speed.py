@@ -31,7 +31,7 @@ from mocodec import load
 from mocodec.codecs import get_codec
 m = load({path!r})[:256]
 c = get_codec({cid!r})
-c.decode(c.encode(m), m.skeleton)
+c.decode(c.encode(m), m.skeleton, m.num_frames, m.fps)
 print(time.perf_counter() - t0)
 """
 
@@ -58,14 +58,20 @@ def main() -> None:
         codec = get_codec(cid, **SETTINGS.get(cid, {}))
         payload = codec.encode(motion)
         enc = best_of(lambda: codec.encode(motion), 3)
-        dec = best_of(lambda: codec.decode(payload, motion.skeleton), 3)
+        dec = best_of(lambda: codec.decode(payload, motion.skeleton, motion.num_frames, motion.fps), 3)
         script = FIRST_CALL.format(path=str(DATA / "135_08.amc"), cid=cid)
         cached = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True).stdout.strip()
         with tempfile.TemporaryDirectory() as empty:
-            cold = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                                  env={**os.environ, "NUMBA_CACHE_DIR": empty}).stdout.strip()
-        print(f"{cid:<14}{FRAMES / enc:>12,.0f}{FRAMES / dec:>12,.0f}{motion.raw_bits / 8 / len(payload):>8.1f}"
-              f"{float(cached):>18.2f} s{float(cold):>9.2f} s")
+            cold = subprocess.run(
+                [sys.executable, "-c", script],
+                capture_output=True,
+                text=True,
+                env={**os.environ, "NUMBA_CACHE_DIR": empty},
+            ).stdout.strip()
+        print(
+            f"{cid:<14}{FRAMES / enc:>12,.0f}{FRAMES / dec:>12,.0f}{motion.raw_bits / 8 / len(payload):>8.1f}"
+            f"{float(cached):>18.2f} s{float(cold):>9.2f} s"
+        )
 
 
 if __name__ == "__main__":

@@ -16,7 +16,7 @@ N = 1_000_000
 
 
 def rate(fn, n=N):
-    fn()                                   # compile / warm up
+    fn()  # compile / warm up
     t0 = time.perf_counter()
     out = fn()
     return n / (time.perf_counter() - t0) / 1e6, out
@@ -48,10 +48,17 @@ def main() -> None:
     d, _ = rate(lambda: huffman.decode_adaptive(data, 64), len(small))
     print(f"{'adaptive Huffman encode (every sym)':<34}{e:>8.2f}{len(data) * 8 / len(small):>10.3f}")
     print(f"{'adaptive Huffman decode':<34}{d:>8.2f}")
-    bits_row("range coder (adaptive ints)", lambda: rangecoder.encode_ints(x), rangecoder.decode_ints,
-             lambda d: len(d) * 8 / N)
+    bits_row(
+        "range coder (adaptive ints)",
+        lambda: rangecoder.encode_ints(x),
+        rangecoder.decode_ints,
+        lambda d: len(d) * 8 / N,
+    )
     f = rng.laplace(0, 3, N)
-    for name, q in (("uniform quantiser 256", UniformQuantizer(-30, 30, 256)), ("mu-law quantiser 256", MuLawQuantizer(255, 30, 256))):
+    for name, q in (
+        ("uniform quantiser 256", UniformQuantizer(-30, 30, 256)),
+        ("mu-law quantiser 256", MuLawQuantizer(255, 30, 256)),
+    ):
         e, _ = rate(lambda: q.reconstruct(q.quantize(f)))
         print(f"{name + ' (q + r)':<34}{e:>8.2f}")
     aq = AdaptiveQuantizer(16, 1.0, 1e-3, 1e3)

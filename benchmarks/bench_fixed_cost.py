@@ -41,12 +41,18 @@ def main() -> None:
         c = container.open_container(io.BytesIO(data), len(data), name)
         motion_bytes = sum(len(c.read_chunk(k)) for k in range(len(c.index)))
         header = int.from_bytes(data[8:12], "little")
-        meta = {"codec": codec.get_config(), "fps": float(motion.fps), "frames": motion.num_frames,
-                "chunk_frames": moc.CHUNK_FRAMES}
+        meta = {
+            "codec": codec.get_config(),
+            "fps": float(motion.fps),
+            "frames": motion.num_frames,
+            "chunk_frames": moc.CHUNK_FRAMES,
+        }
         text = json.dumps(meta, separators=(",", ":")).encode()
         skeleton = deflated(pack_skeleton(moc.stored_skeleton(motion, codec)))
-        print(f"{name:12s} {motion.num_frames:6d} {len(data):6d} {motion.raw_bits / 8 / len(data):6.1f} | "
-              f"{header:6d} ({deflated(text)}, {skeleton}) | {len(data) - header - motion_bytes:7d} | {motion_bytes:6d}")
+        print(
+            f"{name:12s} {motion.num_frames:6d} {len(data):6d} {motion.raw_bits / 8 / len(data):6.1f} | "
+            f"{header:6d} ({deflated(text)}, {skeleton}) | {len(data) - header - motion_bytes:7d} | {motion_bytes:6d}"
+        )
 
 
 if __name__ == "__main__":

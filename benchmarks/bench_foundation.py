@@ -35,8 +35,10 @@ def main() -> None:
         save(bvh10k, tmp / "big.bvh")
         size = (tmp / "big.bvh").stat().st_size
         t = best_of(lambda: load(tmp / "big.bvh"), args.repeats)
-        print(f"BVH  10,000 frames x {bvh10k.num_channels} channels ({size / 1e6:.1f} MB, written by mocodec): "
-              f"{size / t / 1e6:.1f} MB/s   (target >= 20 MB/s)")
+        print(
+            f"BVH  10,000 frames x {bvh10k.num_channels} channels ({size / 1e6:.1f} MB, written by mocodec): "
+            f"{size / t / 1e6:.1f} MB/s   (target >= 20 MB/s)"
+        )
     cmu = args.shared / "cmu" / "bvh" / "13_26.bvh"
     if cmu.exists():
         size = cmu.stat().st_size
@@ -45,8 +47,10 @@ def main() -> None:
     sk = bvh10k.skeleton
     articulated = int((~sk.end_sites).sum())
     t = best_of(lambda: forward_kinematics(sk, bvh10k.channels), args.repeats)
-    print(f"FK   10,000 frames x {len(sk)} pivots ({articulated} joints + {len(sk) - articulated} end sites): "
-          f"{t:.3f} s   (target < 0.2 s for 43 joints)")
+    print(
+        f"FK   10,000 frames x {len(sk)} pivots ({articulated} joints + {len(sk) - articulated} end sites): "
+        f"{t:.3f} s   (target < 0.2 s for 43 joints)"
+    )
     t = best_of(lambda: forward_kinematics(amc10k.skeleton, amc10k.channels), args.repeats)
     print(f"FK   10,000 frames x {len(amc10k.skeleton)} pivots (ASF, with bone axes): {t:.3f} s")
 

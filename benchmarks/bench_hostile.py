@@ -40,7 +40,7 @@ def measured(what: str, fn) -> None:
     outcome_of(fn)
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
-    print(f"{what:<44} {seconds * 1000:9.1f} ms  {peak / 2 ** 20:8.1f} MiB  {outcome}")
+    print(f"{what:<44} {seconds * 1000:9.1f} ms  {peak / 2**20:8.1f} MiB  {outcome}")
 
 
 def main() -> None:
@@ -49,8 +49,10 @@ def main() -> None:
 
     folder = Path(tempfile.mkdtemp())
     ends = "".join("\tEnd Site\n\t{\n\t\tOFFSET 0 1 0\n\t}\n" for _ in range(16_000))
-    (folder / "ends.bvh").write_text("HIERARCHY\nROOT Hips\n{\n\tOFFSET 0 0 0\n\tCHANNELS 3 Xposition Yposition "
-                                     f"Zposition\n{ends}}}\nMOTION\nFrames: 1\nFrame Time: 0.01\n0 0 0\n")
+    (folder / "ends.bvh").write_text(
+        "HIERARCHY\nROOT Hips\n{\n\tOFFSET 0 0 0\n\tCHANNELS 3 Xposition Yposition "
+        f"Zposition\n{ends}}}\nMOTION\nFrames: 1\nFrame Time: 0.01\n0 0 0\n"
+    )
     rng = np.random.default_rng(1)
     big = Skeleton([Joint(f"j{i}", i - 1 if i else -1, tuple(rng.normal(size=3))) for i in range(4001)])
     walk = load(DATA / "07_03.bvh")
@@ -63,8 +65,16 @@ def main() -> None:
     measured(f"stream header bomb ({len(bomb) / 1e6:.2f} MB -> 900 MB)", lambda: StreamInfo.from_payload(bomb))
     head = container._START.pack(container.MAGIC, 4, 0, len(bomb)) + bomb + zlib.crc32(bomb).to_bytes(4, "little")
     measured(".moc header bomb (same)", lambda: moc.unpack(head + bytes(40)))
-    claim = container.pack({"codec": get_codec("kinwave").get_config(), "fps": 120.0, "frames": 1 << 20,
-                            "chunk_frames": 1 << 20, "skeleton": walk.skeleton}, [container.Chunk(0, 1 << 20, bytes(8))])
+    claim = container.pack(
+        {
+            "codec": get_codec("kinwave").get_config(),
+            "fps": 120.0,
+            "frames": 1 << 20,
+            "chunk_frames": 1 << 20,
+            "skeleton": walk.skeleton,
+        },
+        [container.Chunk(0, 1 << 20, bytes(8))],
+    )
     measured(f".moc of {len(claim):,} bytes claiming 2**20 frames", lambda: moc.unpack(claim))
     try:
         fpzip = moc.pack(walk, get_codec("fpzip"))
@@ -73,8 +83,10 @@ def main() -> None:
         return
     inside = best_of(lambda: moc.unpack(fpzip, codec=get_codec("fpzip")), 5)
     child = best_of(lambda: moc.unpack(fpzip), 5)
-    print(f"fpzip decode of {walk.num_frames} frames: {inside * 1000:.1f} ms in this process (trusted), "
-          f"{child * 1000:.1f} ms in a child (untrusted), limit {limits.MAX_DECODED_VALUES:,} values")
+    print(
+        f"fpzip decode of {walk.num_frames} frames: {inside * 1000:.1f} ms in this process (trusted), "
+        f"{child * 1000:.1f} ms in a child (untrusted), limit {limits.MAX_DECODED_VALUES:,} values"
+    )
 
 
 if __name__ == "__main__":

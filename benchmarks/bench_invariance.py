@@ -74,13 +74,17 @@ def main() -> None:
     ap.add_argument("--bounds", type=float, nargs="+", default=[1.0, 0.1])
     ap.add_argument("--jobs", type=int, default=2)
     args = ap.parse_args()
-    sources = {"CMU BVH": sorted((SHARED / "cmu" / "bvh").glob("*.bvh")),
-               "CMU ASF/AMC": sorted((SHARED / "cmu" / "asf_amc").glob("*.amc")),
-               "Bandai Namco": sorted((SHARED / "bandai").glob("*.bvh"))}
-    chosen = {name: (files[:args.clips] if args.clips else files) for name, files in sources.items()}
+    sources = {
+        "CMU BVH": sorted((SHARED / "cmu" / "bvh").glob("*.bvh")),
+        "CMU ASF/AMC": sorted((SHARED / "cmu" / "asf_amc").glob("*.amc")),
+        "Bandai Namco": sorted((SHARED / "bandai").glob("*.bvh")),
+    }
+    chosen = {name: (files[: args.clips] if args.clips else files) for name, files in sources.items()}
     with ProcessPoolExecutor(args.jobs) as pool:
-        results = {name: list(pool.map(measure, map(str, files), [tuple(args.bounds)] * len(files)))
-                   for name, files in chosen.items()}
+        results = {
+            name: list(pool.map(measure, map(str, files), [tuple(args.bounds)] * len(files)))
+            for name, files in chosen.items()
+        }
     print(f"kinwave, max shell bounds {args.bounds} cm; growth of the whole file against the clip's own")
     print(f"{'transform':42s} {'source':13s} {'median':>8s} {'worst':>8s} {'over':>5s}")
     everything = []
@@ -92,8 +96,10 @@ def main() -> None:
             over = sum(r[5] for r in rows if r[0] == name)
             print(f"{name:42s} {source:13s} {100 * np.median(growth):+7.1f}% {100 * growth.max():+7.1f}% {over:5d}")
     growth = np.array([r[2] for r in everything if not r[0].startswith("g ")])
-    print(f"all but frame rates: median {100 * np.median(growth):+.1f}%, worst {100 * growth.max():+.1f}%, "
-          f"{sum(r[5] for r in everything)} of {len(everything)} encodings over the bound")
+    print(
+        f"all but frame rates: median {100 * np.median(growth):+.1f}%, worst {100 * growth.max():+.1f}%, "
+        f"{sum(r[5] for r in everything)} of {len(everything)} encodings over the bound"
+    )
 
 
 if __name__ == "__main__":

@@ -25,8 +25,11 @@ from mocodec.codecs import get_codec
 from mocodec.kinematics import forward_kinematics
 from mocodec.metrics.pose import shell_errors
 
-SOURCES = (("CMU BVH", "cmu/bvh", "*.bvh"), ("CMU ASF/AMC", "cmu/asf_amc", "*.amc"),
-           ("Bandai Namco", "bandai", "*.bvh"))
+SOURCES = (
+    ("CMU BVH", "cmu/bvh", "*.bvh"),
+    ("CMU ASF/AMC", "cmu/asf_amc", "*.amc"),
+    ("Bandai Namco", "bandai", "*.bvh"),
+)
 
 
 def errors(motion, channels):
@@ -61,7 +64,7 @@ def main() -> None:
     clips = []
     for name, folder, pattern in sources:
         found = sorted((SHARED / folder).glob(pattern))
-        clips += [(name, p) for p in (found[:args.limit] if args.limit else found)]
+        clips += [(name, p) for p in (found[: args.limit] if args.limit else found)]
     rel, ratio, over, used, enc_fps, dec_fps = {}, {}, {}, {}, [], []
     print(f"{'clip':36s} {'frames':>6s} | shell 0.1: kinwave/SZ3 | shell 1.0: kinwave/SZ3 | mean 0.5 / 1.0 ratio")
     for source, path in clips:
@@ -70,7 +73,9 @@ def main() -> None:
         for bound in (0.1, 1.0):
             codec = get_codec("kinwave", max_error_cm=bound, error_measure="shell")
             payload = codec.encode(motion)
-            err = errors(motion, codec.decode(payload, motion.skeleton).channels)["shell"]
+            err = errors(motion, codec.decode(payload, motion.skeleton, motion.num_frames, motion.fps).channels)[
+                "shell"
+            ]
             over.setdefault((source, "shell", bound), []).append(err > bound)
             used.setdefault((source, "shell", bound), []).append(err / bound)
             ref = sz3_at_shell(motion, bound)
@@ -85,7 +90,7 @@ def main() -> None:
             t0 = time.perf_counter()
             payload = codec.encode(motion)
             t1 = time.perf_counter()
-            decoded = codec.decode(payload, motion.skeleton)
+            decoded = codec.decode(payload, motion.skeleton, motion.num_frames, motion.fps)
             t2 = time.perf_counter()
             err = errors(motion, decoded.channels)["joint"]
             over.setdefault((source, "joint", bound), []).append(err > bound)
@@ -102,20 +107,34 @@ def main() -> None:
         print(f"{label:44s}" + "".join(f"{v:>16s}" for v in values))
 
     for bound in (0.1, 1.0):
-        line(f"kinwave / SZ3 bytes, max shell {bound} cm (median)",
-             [f"{np.median(rel[(n, bound)]):.2f}" if (n, bound) in rel else "-" for n in names])
+        line(
+            f"kinwave / SZ3 bytes, max shell {bound} cm (median)",
+            [f"{np.median(rel[(n, bound)]):.2f}" if (n, bound) in rel else "-" for n in names],
+        )
     for bound in (0.5, 1.0):
-        line(f"whole-file ratio, mean joint {bound} cm (median)",
-             [f"{np.median(ratio[(n, bound)]):.0f}:1" if (n, bound) in ratio else "-" for n in names])
+        line(
+            f"whole-file ratio, mean joint {bound} cm (median)",
+            [f"{np.median(ratio[(n, bound)]):.0f}:1" if (n, bound) in ratio else "-" for n in names],
+        )
     for measure, bound in sorted({(m, b) for _, m, b in over}):
-        line(f"clips over the bound, {measure} {bound} cm",
-             [f"{sum(over[(n, measure, bound)])} of {len(over[(n, measure, bound)])}"
-              if (n, measure, bound) in over else "-" for n in names])
-        line(f"share of the bound used, {measure} {bound} cm (least)",
-             [f"{min(used[(n, measure, bound)]):.2f}" if (n, measure, bound) in used else "-" for n in names])
+        line(
+            f"clips over the bound, {measure} {bound} cm",
+            [
+                f"{sum(over[(n, measure, bound)])} of {len(over[(n, measure, bound)])}"
+                if (n, measure, bound) in over
+                else "-"
+                for n in names
+            ],
+        )
+        line(
+            f"share of the bound used, {measure} {bound} cm (least)",
+            [f"{min(used[(n, measure, bound)]):.2f}" if (n, measure, bound) in used else "-" for n in names],
+        )
     if enc_fps:
-        print(f"62-channel clips, joint 0.5 cm: encode median {np.median(enc_fps):,.0f} frames/s, "
-              f"decode {np.median(dec_fps):,.0f} frames/s (one core, after compilation)")
+        print(
+            f"62-channel clips, joint 0.5 cm: encode median {np.median(enc_fps):,.0f} frames/s, "
+            f"decode {np.median(dec_fps):,.0f} frames/s (one core, after compilation)"
+        )
 
 
 if __name__ == "__main__":

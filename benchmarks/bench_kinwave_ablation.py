@@ -37,18 +37,23 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--clips", type=int, default=4, help="clips per set (BVH and AMC)")
     args = ap.parse_args()
-    clips = sorted((SHARED / "cmu" / "bvh").glob("*.bvh"))[::8][:args.clips] + \
-        sorted((SHARED / "cmu" / "asf_amc").glob("*.amc"))[::4][:args.clips]
+    clips = (
+        sorted((SHARED / "cmu" / "bvh").glob("*.bvh"))[::8][: args.clips]
+        + sorted((SHARED / "cmu" / "asf_amc").glob("*.amc"))[::4][: args.clips]
+    )
     motions = [load(p) for p in clips]
     print(f"{len(motions)} clips: {', '.join(p.name for p in clips)}")
     print(f"| variant | {' | '.join(f'{m} {b} cm' for m, b in BOUNDS)} |\n|---|" + "---|" * len(BOUNDS))
-    base = {mb: [len(get_codec("kinwave", max_error_cm=mb[1], error_measure=mb[0]).encode(m)) for m in motions]
-            for mb in BOUNDS}
+    base = {
+        mb: [len(get_codec("kinwave", max_error_cm=mb[1], error_measure=mb[0]).encode(m)) for m in motions]
+        for mb in BOUNDS
+    }
     for name, knobs in VARIANTS.items():
         cells = []
         for mb in BOUNDS:
-            sizes = [len(get_codec("kinwave", max_error_cm=mb[1], error_measure=mb[0], **knobs).encode(m))
-                     for m in motions]
+            sizes = [
+                len(get_codec("kinwave", max_error_cm=mb[1], error_measure=mb[0], **knobs).encode(m)) for m in motions
+            ]
             cells.append(f"{np.exp(np.mean(np.log(np.array(sizes) / base[mb]))) - 1:+.1%}")
         print(f"| {name} | {' | '.join(cells)} |", flush=True)
 

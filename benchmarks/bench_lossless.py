@@ -36,9 +36,11 @@ def main() -> None:
         for r in sel:
             print(f"{r[1]:<14}{r[2]:>9.2f}{r[3]:>9.2f}")
         frames = sum(r[4] for r in sel)
-        print(f"{fmt}: {len(sel)} clips, median ratio {np.median([r[2] for r in sel]):.2f} (zstd on float32 "
-              f"{np.median([r[3] for r in sel]):.2f}); encode {frames / sum(r[5] for r in sel):,.0f} frames/s, "
-              f"decode {frames / sum(r[6] for r in sel):,.0f} frames/s\n")
+        print(
+            f"{fmt}: {len(sel)} clips, median ratio {np.median([r[2] for r in sel]):.2f} (zstd on float32 "
+            f"{np.median([r[3] for r in sel]):.2f}); encode {frames / sum(r[5] for r in sel):,.0f} frames/s, "
+            f"decode {frames / sum(r[6] for r in sel):,.0f} frames/s\n"
+        )
 
 
 if __name__ == "__main__":

@@ -29,7 +29,10 @@ def main() -> None:
     parts = {
         "waveform (6-1..6-8)": lambda: dof_errors(original.channels, decoded.channels, sk.rotation_mask),
         "visual (6-15..6-17)": lambda: visual_errors(err, rng, original.fps),
-        "forward kinematics x2": lambda: (forward_kinematics(sk, original.channels), forward_kinematics(sk, decoded.channels)),
+        "forward kinematics x2": lambda: (
+            forward_kinematics(sk, original.channels),
+            forward_kinematics(sk, decoded.channels),
+        ),
     }
     for name, fn in parts.items():
         print(f"  {name:<24}{best_of(fn) * 1e3:8.1f} ms")

@@ -49,7 +49,7 @@ def sz3_2d_at_ratio(motion: Motion, ratio: float, with_skeleton: bool = True) ->
     sk = motion.skeleton
     skeleton_bytes = len(zlib.compress(json.dumps(container.skeleton_to_dict(sk)).encode(), 9)) if with_skeleton else 0
     to_common = np.where(sk.rotation_mask, 1.0, 100.0 / sk.units_per_metre)
-    data = np.ascontiguousarray((motion.continuous().channels * to_common).T.astype(np.float32))   # time fastest
+    data = np.ascontiguousarray((motion.continuous().channels * to_common).T.astype(np.float32))  # time fastest
     target = motion.raw_bits / 8 / ratio
     lo, hi, best = 1e-4, 1e3, None
     for _ in range(40):
@@ -93,7 +93,7 @@ def sz3_at_ratio(motion: Motion, ratio: float, with_skeleton: bool = True) -> tu
         else:
             lo = mid
     if best is None:
-        return None       # about 100 bytes per channel of SZ3 headers: short clips cannot get there
+        return None  # about 100 bytes per channel of SZ3 headers: short clips cannot get there
     return motion.with_channels(best[1]), best[0]
 
 
@@ -102,8 +102,11 @@ def main() -> None:
     ap.add_argument("--set", choices=("amc", "bvh", "all"), default="amc")
     ap.add_argument("--ratios", type=float, nargs="+", default=[20, 40, 60, 80])
     ap.add_argument("--limit", type=int, default=0, help="at most this many clips")
-    ap.add_argument("--motion-only", action="store_true",
-                    help="count only the coded motion (no skeleton, no container), as the theses do")
+    ap.add_argument(
+        "--motion-only",
+        action="store_true",
+        help="count only the coded motion (no skeleton, no container), as the theses do",
+    )
     args = ap.parse_args()
     if SHARED is None:
         print("../shared/data is not here; skipped")
@@ -111,7 +114,7 @@ def main() -> None:
     globs = {"amc": ["asf_amc/*.amc"], "bvh": ["bvh/*.bvh"], "all": ["asf_amc/*.amc", "bvh/*.bvh"]}[args.set]
     clips = [p for g in globs for p in sorted((SHARED / "cmu").glob(g))]
     if args.limit:
-        clips = clips[:args.limit]
+        clips = clips[: args.limit]
     out_dir = ROOT / "bench-out"
     out_dir.mkdir(exist_ok=True)
     rows = []
@@ -121,9 +124,10 @@ def main() -> None:
         for ratio in args.ratios:
             for name, (cid, knobs) in CODECS.items():
                 try:
-                    m = ratecontrol.tune(get_codec(cid, **knobs), motion, "ratio", ratio,
-                                         whole_file=not args.motion_only)
-                except Exception as e:      # noqa: BLE001 - a codec that cannot reach the ratio is reported
+                    m = ratecontrol.tune(
+                        get_codec(cid, **knobs), motion, "ratio", ratio, whole_file=not args.motion_only
+                    )
+                except Exception as e:  # noqa: BLE001 - a codec that cannot reach the ratio is reported
                     rows.append({"clip": path.name, "codec": name, "ratio_target": ratio, "note": str(e)})
                     continue
                 decoded, size = moc.unpack(m.data), ratecontrol.coded_size(m.data, not args.motion_only)
@@ -150,19 +154,32 @@ def main() -> None:
             if not sel:
                 print(f"{name:<18}{ratio:>7.0f}   (no clip reached the ratio)")
                 continue
-            med = {k: float(np.median([r[k] for r in sel])) for k in ("ratio", "mean_cm", "max_cm", "shell_cm", "psnr", "vpsnr")}
+            med = {
+                k: float(np.median([r[k] for r in sel]))
+                for k in ("ratio", "mean_cm", "max_cm", "shell_cm", "psnr", "vpsnr")
+            }
             missing = sum(1 for r in rows if r["codec"] == name and r["ratio_target"] == ratio) - len(sel)
-            print(f"{name:<18}{ratio:>7.0f}{med['ratio']:>7.1f}{med['mean_cm']:>9.3f}{med['max_cm']:>8.2f}"
-                  f"{med['shell_cm']:>10.2f}{med['psnr']:>7.1f}{med['vpsnr']:>7.1f}"
-                  + (f"   ({missing} clips could not reach it)" if missing else ""))
+            print(
+                f"{name:<18}{ratio:>7.0f}{med['ratio']:>7.1f}{med['mean_cm']:>9.3f}{med['max_cm']:>8.2f}"
+                f"{med['shell_cm']:>10.2f}{med['psnr']:>7.1f}{med['vpsnr']:>7.1f}"
+                + (f"   ({missing} clips could not reach it)" if missing else "")
+            )
     print(f"\nwrote {csv_path}")
 
 
 def _row(clip, codec, target, motion, decoded, size):
     s = compare(motion, decoded).summary()
-    return {"clip": clip, "codec": codec, "ratio_target": target, "ratio": motion.raw_bits / 8 / size,
-            "mean_cm": s["mean_joint_error_cm"], "max_cm": s["max_joint_error_cm"],
-            "shell_cm": s["max_shell_error_cm"], "psnr": s["psnr_db"], "vpsnr": s["vpsnr_db"]}
+    return {
+        "clip": clip,
+        "codec": codec,
+        "ratio_target": target,
+        "ratio": motion.raw_bits / 8 / size,
+        "mean_cm": s["mean_joint_error_cm"],
+        "max_cm": s["max_joint_error_cm"],
+        "shell_cm": s["max_shell_error_cm"],
+        "psnr": s["psnr_db"],
+        "vpsnr": s["vpsnr_db"],
+    }
 
 
 if __name__ == "__main__":

@@ -49,9 +49,13 @@ def clip_path(kind: str, name: str):
 def measure(motion, knobs: dict) -> dict:
     codec = get_codec("primitives", **knobs)
     payload = codec.encode(motion)
-    s = compare(motion, codec.decode(payload, motion.skeleton)).summary()
-    return {"ratio": motion.raw_bits / 8 / len(payload), "mean_cm": s["mean_joint_error_cm"],
-            "max_cm": s["max_joint_error_cm"], "bytes": len(payload)}
+    s = compare(motion, codec.decode(payload, motion.skeleton, motion.num_frames, motion.fps)).summary()
+    return {
+        "ratio": motion.raw_bits / 8 / len(payload),
+        "mean_cm": s["mean_joint_error_cm"],
+        "max_cm": s["max_joint_error_cm"],
+        "bytes": len(payload),
+    }
 
 
 def main() -> None:
@@ -68,20 +72,26 @@ def main() -> None:
         took = time.perf_counter() - t0
         dbs[kind] = os.path.join(folder, f"{kind}.mocdb")
         db.save(dbs[kind])
-        print(f"  {kind}: {', '.join(names)} ({sum(c.num_frames for c in clips):,} frames): {db.count} primitives "
-              f"for {len(db.primitives)} joints, {os.path.getsize(dbs[kind]):,} bytes, trained in {took:.1f} s "
-              f"(the thesis: about 280 KB)")
+        print(
+            f"  {kind}: {', '.join(names)} ({sum(c.num_frames for c in clips):,} frames): {db.count} primitives "
+            f"for {len(db.primitives)} joints, {os.path.getsize(dbs[kind]):,} bytes, trained in {took:.1f} s "
+            f"(the thesis: about 280 KB)"
+        )
     thresholds = (0.01,) if args.quick else THRESHOLDS
     for kind in ("bvh", "amc"):
-        paths = sorted(p for p in (SHARED / "cmu" / ("bvh" if kind == "bvh" else "asf_amc")).glob(f"*.{kind}")
-                       if p.stem not in TRAIN[kind])
+        paths = sorted(
+            p
+            for p in (SHARED / "cmu" / ("bvh" if kind == "bvh" else "asf_amc")).glob(f"*.{kind}")
+            if p.stem not in TRAIN[kind]
+        )
         for path in paths[::3] if args.quick else paths:
             motion = load(path)
             for mode, extra in MODES.items():
                 for t in thresholds:
                     m = measure(motion, {"db": dbs[kind], "t_lower": t, **extra})
-                    rows.append({"set": kind, "clip": path.stem, "mode": mode, "t_lower": t,
-                                 "frames": motion.num_frames, **m})
+                    rows.append(
+                        {"set": kind, "clip": path.stem, "mode": mode, "t_lower": t, "frames": motion.num_frames, **m}
+                    )
     out = ROOT / "bench-out"
     out.mkdir(exist_ok=True)
     with open(out / "primitives.csv", "w", newline="") as f:
@@ -95,9 +105,11 @@ def main() -> None:
             cells = []
             for t in thresholds:
                 sel = [r for r in rows if r["set"] == kind and r["mode"] == mode and r["t_lower"] == t]
-                cells.append(f"{np.mean([r['ratio'] for r in sel]):6.1f}:1 {np.median([r['mean_cm'] for r in sel]):5.2f}"
-                             f" / {np.median([r['max_cm'] for r in sel]):5.2f} cm")
-            n = len({r['clip'] for r in rows if r['set'] == kind})
+                cells.append(
+                    f"{np.mean([r['ratio'] for r in sel]):6.1f}:1 {np.median([r['mean_cm'] for r in sel]):5.2f}"
+                    f" / {np.median([r['max_cm'] for r in sel]):5.2f} cm"
+                )
+            n = len({r["clip"] for r in rows if r["set"] == kind})
             print(f"{kind:<5}{mode:<8}" + "".join(f"{c:>26}" for c in cells) + f"   ({n} clips)")
     print("the thesis (table 5.1, t_L = 0.01, AMC, 7 clips): 48:1 on average")
 
@@ -110,14 +122,18 @@ def main() -> None:
             motion = load(path)
             for mode, extra in MODES.items():
                 m = measure(motion, {"db": dbs[kind], **extra})
-                print(f"  {name}.{kind} {mode:<7}{m['ratio']:6.1f}:1  {m['mean_cm']:.2f} / {m['max_cm']:.2f} cm"
-                      f"   (thesis {thesis}:1{', a training clip' if name in TRAIN[kind] else ''})")
+                print(
+                    f"  {name}.{kind} {mode:<7}{m['ratio']:6.1f}:1  {m['mean_cm']:.2f} / {m['max_cm']:.2f} cm"
+                    f"   (thesis {thesis}:1{', a training clip' if name in TRAIN[kind] else ''})"
+                )
 
     print("\ntable 5.4, S_M on 61_06 (BVH), t_L = 0.01:")
     motion = load(clip_path("bvh", "61_06"))
     for s_m, thesis in THESIS_5_4.items():
-        cells = [f"{mode} {measure(motion, {'db': dbs['bvh'], 'max_segment': s_m, **extra})['ratio']:5.1f}:1"
-                 for mode, extra in MODES.items()]
+        cells = [
+            f"{mode} {measure(motion, {'db': dbs['bvh'], 'max_segment': s_m, **extra})['ratio']:5.1f}:1"
+            for mode, extra in MODES.items()
+        ]
         print(f"  S_M = {s_m:<3} {'  '.join(cells)}   (thesis {thesis}:1)")
 
     print("\nsmoothing of consecutive segments (5.3.4), ours, t_L = 0.01 (mean / max joint error, jerk ratio):")
@@ -126,8 +142,12 @@ def main() -> None:
         cells = []
         for m in SMOOTH:
             codec = get_codec("primitives", db=dbs[kind], smooth=m)
-            s = compare(motion, codec.decode(codec.encode(motion), motion.skeleton)).summary()
-            cells.append(f"M={m}: {s['mean_joint_error_cm']:.3f} / {s['max_joint_error_cm']:5.2f} cm x{s['jerk_ratio']:.2f}")
+            s = compare(
+                motion, codec.decode(codec.encode(motion), motion.skeleton, motion.num_frames, motion.fps)
+            ).summary()
+            cells.append(
+                f"M={m}: {s['mean_joint_error_cm']:.3f} / {s['max_joint_error_cm']:5.2f} cm x{s['jerk_ratio']:.2f}"
+            )
         print(f"  {name}.{kind:<4}" + "   ".join(cells))
 
     print("\nspeed, one core, 10,000 frames (table 5.3: 1,660-2,370 us per frame to encode, 110-140 to decode):")
@@ -137,10 +157,12 @@ def main() -> None:
             codec = get_codec("primitives", db=dbs[kind], **extra)
             payload = codec.encode(motion)
             enc = best_of(lambda: codec.encode(motion), 3)
-            dec = best_of(lambda: codec.decode(payload, motion.skeleton), 3)
-            print(f"  {name}.{kind} ({motion.num_channels} ch) {mode:<7}encode {10_000 / enc:7,.0f} frames/s "
-                  f"({enc / 10_000 * 1e6:5.0f} us/frame), decode {10_000 / dec:8,.0f} frames/s "
-                  f"({dec / 10_000 * 1e6:5.1f} us/frame)")
+            dec = best_of(lambda: codec.decode(payload, motion.skeleton, motion.num_frames, motion.fps), 3)
+            print(
+                f"  {name}.{kind} ({motion.num_channels} ch) {mode:<7}encode {10_000 / enc:7,.0f} frames/s "
+                f"({enc / 10_000 * 1e6:5.0f} us/frame), decode {10_000 / dec:8,.0f} frames/s "
+                f"({dec / 10_000 * 1e6:5.1f} us/frame)"
+            )
 
 
 if __name__ == "__main__":

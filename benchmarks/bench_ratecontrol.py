@@ -42,7 +42,7 @@ def main() -> None:
         try:
             r = ratecontrol.tune(codec, motion, "ratio", args.ratio)
             ratios.append(r.ratio / args.ratio - 1)
-        except Exception as e:        # noqa: BLE001 - an unreachable target is reported, not hidden
+        except Exception as e:  # noqa: BLE001 - an unreachable target is reported, not hidden
             misses.append(f"{path.name}: ratio: {e}")
         passes.append(counted["n"])
         counted["n"] = 0
@@ -52,12 +52,18 @@ def main() -> None:
         errors.append(compare(motion, moc.unpack(m.data)).joints.max)
     ratios, errors = np.array(ratios), np.array(errors)
     print(f"{len(clips)} clips, spiht (impact allocation)")
-    print(f"ratio {args.ratio:g}: {len(ratios)} reached; achieved / target - 1 in "
-          f"[{ratios.min():+.3%}, {ratios.max():+.3%}], within 2%: {np.mean((ratios >= 0) & (ratios <= 0.02)):.0%}")
-    print(f"max error {args.max_error_cm:g} cm: worst decoded max joint error {errors.max():.4f} cm, "
-          f"bound held on {np.mean(errors <= args.max_error_cm):.0%} of clips")
-    print(f"passes per target: median {np.median(passes):.0f}, max {max(passes)}; "
-          f"median {np.median(seconds):.2f} s per clip for both targets")
+    print(
+        f"ratio {args.ratio:g}: {len(ratios)} reached; achieved / target - 1 in "
+        f"[{ratios.min():+.3%}, {ratios.max():+.3%}], within 2%: {np.mean((ratios >= 0) & (ratios <= 0.02)):.0%}"
+    )
+    print(
+        f"max error {args.max_error_cm:g} cm: worst decoded max joint error {errors.max():.4f} cm, "
+        f"bound held on {np.mean(errors <= args.max_error_cm):.0%} of clips"
+    )
+    print(
+        f"passes per target: median {np.median(passes):.0f}, max {max(passes)}; "
+        f"median {np.median(seconds):.2f} s per clip for both targets"
+    )
     for line in misses:
         print("  " + line)
 

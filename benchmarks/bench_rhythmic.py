@@ -43,13 +43,15 @@ def measure(motion, **knobs) -> str:
     t0 = time.perf_counter()
     payload = codec.encode(motion)
     t1 = time.perf_counter()
-    decoded = codec.decode(payload, motion.skeleton)
+    decoded = codec.decode(payload, motion.skeleton, motion.num_frames, motion.fps)
     t2 = time.perf_counter()
     s = compare(motion, decoded).summary()
     n = motion.num_frames
-    return (f"{motion.raw_bits / 8 / len(payload):6.1f}:1 {len(payload):7,} B  {s['mean_joint_error_cm']:6.2f} / "
-            f"{s['max_joint_error_cm']:6.1f} cm  jerk x{s['jerk_ratio']:5.2f}  "
-            f"enc {n / (t1 - t0):6,.0f} dec {n / (t2 - t1):7,.0f} f/s")
+    return (
+        f"{motion.raw_bits / 8 / len(payload):6.1f}:1 {len(payload):7,} B  {s['mean_joint_error_cm']:6.2f} / "
+        f"{s['max_joint_error_cm']:6.1f} cm  jerk x{s['jerk_ratio']:5.2f}  "
+        f"enc {n / (t1 - t0):6,.0f} dec {n / (t2 - t1):7,.0f} f/s"
+    )
 
 
 def main() -> None:
@@ -64,10 +66,12 @@ def main() -> None:
         motion = whole.with_channels(whole.channels[:frames])
         carried = rhythmdb.train([motion]).compact()
         print(f"{frames:,} frames (table 4.1 estimate {thesis}:1); 20 primitives carried in {len(carried):,} bytes")
-        for label, knobs in (("carried, keys root, blended", {}),
-                             ("carried, keys root, not blended", {"blend": False}),
-                             ("carried, velocity root (thesis)", {"root": "velocity"}),
-                             (f"external {OTHER} db, keys root", {"db": other})):
+        for label, knobs in (
+            ("carried, keys root, blended", {}),
+            ("carried, keys root, not blended", {"blend": False}),
+            ("carried, velocity root (thesis)", {"root": "velocity"}),
+            (f"external {OTHER} db, keys root", {"db": other}),
+        ):
             print(f"  {label:<34}{measure(motion, **knobs)}")
         print()
 

@@ -35,19 +35,28 @@ def main() -> None:
         motion = load(SHARED / "cmu" / name)
         seam = np.zeros(motion.num_frames - 3, dtype=bool)
         for k in range(128, motion.num_frames, 128):
-            seam[max(k - 3, 0):k + 1] = True
+            seam[max(k - 3, 0) : k + 1] = True
         original = jerk(motion, motion.channels)
-        settings = [(f"spiht {bps // 1000} kbit/s{' smooth' if smooth else ''}",
-                     get_codec("spiht", bits_per_second=bps, smooth_seams=smooth))
-                    for bps in (4000, 15000) for smooth in (False, True)]
-        settings += [(f"kinwave mean {bound} cm", get_codec("kinwave", max_error_cm=bound, error_measure="mean",
-                                                                     window=128))
-                     for bound in (0.5, 1.0)]
+        settings = [
+            (
+                f"spiht {bps // 1000} kbit/s{' smooth' if smooth else ''}",
+                get_codec("spiht", bits_per_second=bps, smooth_seams=smooth),
+            )
+            for bps in (4000, 15000)
+            for smooth in (False, True)
+        ]
+        settings += [
+            (f"kinwave mean {bound} cm", get_codec("kinwave", max_error_cm=bound, error_measure="mean", window=128))
+            for bound in (0.5, 1.0)
+        ]
         for label, codec in settings:
-            decoded = codec.decode(codec.encode(motion), motion.skeleton)
+            decoded = codec.decode(codec.encode(motion), motion.skeleton, motion.num_frames, motion.fps)
             j = jerk(motion, decoded.channels)
-            print(f"{Path(name).name:<12}{label:>22}{j[seam].mean():>11.3f}{j[~seam].mean():>11.3f}"
-                  f"{original[seam].mean():>10.3f}{compare(motion, decoded).joints.mean:>9.3f}", flush=True)
+            print(
+                f"{Path(name).name:<12}{label:>22}{j[seam].mean():>11.3f}{j[~seam].mean():>11.3f}"
+                f"{original[seam].mean():>10.3f}{compare(motion, decoded).joints.mean:>9.3f}",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

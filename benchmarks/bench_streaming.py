@@ -37,8 +37,10 @@ def main() -> None:
     args = ap.parse_args()
     motions = clips(args.clips)
     print(f"{len(motions)} clips; kbit/s and joint error (cm) are medians over the clips")
-    print(f"{'codec':14s} {'whole clip':>22s} " + " ".join(f"{'keyframes ' + (f'{r:g} s' if r else 'never'):>24s}"
-                                                       for r in REFRESH))
+    print(
+        f"{'codec':14s} {'whole clip':>22s} "
+        + " ".join(f"{'keyframes ' + (f'{r:g} s' if r else 'never'):>24s}" for r in REFRESH)
+    )
     for cid in CODECS:
         codec = get_codec(cid)
         cells = {}
@@ -47,10 +49,10 @@ def main() -> None:
             for m in motions:
                 if key == "batch":
                     size = len(codec.encode(m))
-                    decoded = codec.decode(codec.encode(m), m.skeleton)
+                    decoded = codec.decode(codec.encode(m), m.skeleton, m.num_frames, m.fps)
                 else:
                     packets = stream_clip(m, codec, keyframe_s=key or 1e9)
-                    size = sum(len(p.without_cuts().to_bytes()) for p in packets[1:])   # what a viewer gets
+                    size = sum(len(p.without_cuts().to_bytes()) for p in packets[1:])  # what a viewer gets
                     decoded = receive_clip(packets)
                 result = compare(m, decoded)
                 rates.append(size * 8 / m.duration / 1000)
@@ -77,9 +79,11 @@ def main() -> None:
     for p in packets:
         hi.packet_cuts(p, m.skeleton)
     per_table = (time.perf_counter() - t0) / len(packets)
-    print(f"spiht packet of {hi.config['window']} frames x {m.skeleton.num_channels} channels at 16 kbit/s, at the "
-          f"relay: parsed once in {per_parse * 1e6:.0f} us, then cut to 2-6 kbit/s in {per_cut * 1e6:.0f} us each; "
-          f"the sender's cut table: {per_table * 1e6:.0f} us")
+    print(
+        f"spiht packet of {hi.config['window']} frames x {m.skeleton.num_channels} channels at 16 kbit/s, at the "
+        f"relay: parsed once in {per_parse * 1e6:.0f} us, then cut to 2-6 kbit/s in {per_cut * 1e6:.0f} us each; "
+        f"the sender's cut table: {per_table * 1e6:.0f} us"
+    )
 
 
 if __name__ == "__main__":

@@ -37,7 +37,7 @@ def main() -> None:
     rates = np.arange(1, 11)
     rows = []
     for r in rates:
-        step = span / (2 ** r - 1)
+        step = span / (2**r - 1)
         quantised = lo + np.round((x - lo) / step) * step
         shift = int(round(0.5 * fps / r))
         keep = slice(shift, len(x))

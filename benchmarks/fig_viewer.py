@@ -17,13 +17,32 @@ def main() -> None:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    server = subprocess.Popen([sys.executable, "-m", "mocodec", "view", str(DATA / "07_03.bvh"), "--codec", "spiht",
-                               "--ratio", "60", "--port", str(port), "--no-browser"], stdout=subprocess.PIPE, text=True)
+    server = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "mocodec",
+            "view",
+            str(DATA / "07_03.bvh"),
+            "--codec",
+            "spiht",
+            "--ratio",
+            "60",
+            "--port",
+            str(port),
+            "--no-browser",
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     try:
         server.stdout.readline()
         with sync_playwright() as pw:
-            browser = pw.chromium.launch(executable_path="/usr/bin/chromium", headless=True,
-                                         args=["--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader"])
+            browser = pw.chromium.launch(
+                executable_path="/usr/bin/chromium",
+                headless=True,
+                args=["--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader"],
+            )
             page = browser.new_page(viewport={"width": 1300, "height": 820})
             page.goto(f"http://127.0.0.1:{port}/")
             page.wait_for_function("window.viewerState && window.viewerState.ready")

@@ -37,9 +37,9 @@ import numpy as np
 from common import DATA
 
 SECRET = "load-test"
-BINS_MS = 0.1                 # latency histogram resolution
+BINS_MS = 0.1  # latency histogram resolution
 MAX_MS = 5000.0
-_STAMP = struct.Struct("<IIQI")   # stream, sequence, timestamp, first frame: bytes 6..26 of a packet
+_STAMP = struct.Struct("<IIQI")  # stream, sequence, timestamp, first frame: bytes 6..26 of a packet
 
 
 def free_port() -> int:
@@ -69,7 +69,7 @@ def templates(codec_id: str, bits_per_second: float, keyframe_s: float):
     enc = clip_encoder(motion, codec, 0, keyframe_s)
     step = tick_frames(motion.fps)
     ticks = -(-motion.num_frames // step)
-    timed = [(k, p) for k in range(ticks) for p in enc.push(motion.channels[k * step:(k + 1) * step], 0)]
+    timed = [(k, p) for k in range(ticks) for p in enc.push(motion.channels[k * step : (k + 1) * step], 0)]
     timed += [(ticks - 1, p) for p in enc.close(0) if p.frames]
     data = [(k, p.with_payload(p.payload, p.flags & ~END).to_bytes()) for k, p in timed]
     return enc.header(0).to_bytes(), data, ticks, motion.num_frames
@@ -90,8 +90,7 @@ def place(stream: int) -> tuple[float, float]:
 
 
 # ----- publishers ------------------------------------------------------------------------------------
-def publisher(url: str, token: str, streams: list[int], seconds: float, codec: tuple, keyframe_s: float,
-              out) -> None:
+def publisher(url: str, token: str, streams: list[int], seconds: float, codec: tuple, keyframe_s: float, out) -> None:
     import aiohttp
 
     from mocodec.stream.packets import pack_batch
@@ -105,10 +104,10 @@ def publisher(url: str, token: str, streams: list[int], seconds: float, codec: t
 
     async def run() -> None:
         async with aiohttp.ClientSession() as session:
-            ws = await session.ws_connect(f"{url}/ws?room=load&role=publish",
-                                          headers={"Authorization": f"Bearer {token}"},
-                                          max_msg_size=64 << 20)
-            await ws.receive()                                       # welcome
+            ws = await session.ws_connect(
+                f"{url}/ws?room=load&role=publish", headers={"Authorization": f"Bearer {token}"}, max_msg_size=64 << 20
+            )
+            await ws.receive()  # welcome
             await ws.send_bytes(pack_batch([restamp(header, s, 0, 0, 0, *place(s)) for s in streams]))
             start = time.monotonic()
             tick, sent = 0, 0
@@ -118,8 +117,9 @@ def publisher(url: str, token: str, streams: list[int], seconds: float, codec: t
                 for s in streams:
                     loop, k = divmod(phase[s] + tick, ticks)
                     for idx, d, first in by_tick.get(k, ()):
-                        batch.append(restamp(d, s, loop * len(data) + idx, now_us, loop * clip_frames + first,
-                                             *place(s)))
+                        batch.append(
+                            restamp(d, s, loop * len(data) + idx, now_us, loop * clip_frames + first, *place(s))
+                        )
                 if batch:
                     await ws.send_bytes(pack_batch(batch))
                 sent += len(batch)
@@ -138,8 +138,8 @@ class Follower:
     def __init__(self, fps: float):
         self.fps = fps
         self.expected: dict[int, int] = {}
-        self.last_end: dict[int, int] = {}       # stream -> the frame after the last one received
-        self.lost_at: dict[int, int] = {}        # stream -> first frame lost
+        self.last_end: dict[int, int] = {}  # stream -> the frame after the last one received
+        self.lost_at: dict[int, int] = {}  # stream -> first frame lost
         self.resync_s: list[float] = []
 
     def see(self, stream: int, seq: int, keyframe: bool, first: int, frames: int) -> None:
@@ -152,8 +152,18 @@ class Follower:
         self.last_end[stream] = first + frames
 
 
-def viewers(url: str, token: str, count: int, seconds: float, loss: float, follow: int, seed: int, out,
-            warmup_s: float, budget: float) -> None:
+def viewers(
+    url: str,
+    token: str,
+    count: int,
+    seconds: float,
+    loss: float,
+    follow: int,
+    seed: int,
+    out,
+    warmup_s: float,
+    budget: float,
+) -> None:
     import aiohttp
 
     from mocodec.stream.packets import (
@@ -171,11 +181,11 @@ def viewers(url: str, token: str, count: int, seconds: float, loss: float, follo
     rng = np.random.default_rng(seed)
 
     async def one(k: int, session) -> None:
-        ws = await session.ws_connect(f"{url}/ws?room=load&role=subscribe",
-                                      headers={"Authorization": f"Bearer {token}"},
-                                      max_msg_size=256 << 20)
+        ws = await session.ws_connect(
+            f"{url}/ws?room=load&role=subscribe", headers={"Authorization": f"Bearer {token}"}, max_msg_size=256 << 20
+        )
         await ws.receive()
-        if budget:                                   # somewhere in the crowd, looking at it
+        if budget:  # somewhere in the crowd, looking at it
             x, z = rng.uniform(0, 50), rng.uniform(0, 40)
             await ws.send_str(json.dumps({"budget": budget, "camera": [x, 1.6, z]}))
         counts = np.zeros(1 << 12, dtype=np.int64)
@@ -196,22 +206,22 @@ def viewers(url: str, token: str, count: int, seconds: float, loss: float, follo
             data = msg.data
             offsets = batch_offsets(data)[:-1]
             ts = read_u64(data, offsets, TIMESTAMP_OFFSET)
-            live = ts > 0                                           # stream headers carry no time
+            live = ts > 0  # stream headers carry no time
             offsets, ts = offsets[live], ts[live]
             streams = read_u32(data, offsets, STREAM_OFFSET).astype(np.int64)
             seqs = read_u32(data, offsets, SEQUENCE_OFFSET).astype(np.int64)
-            n = np.bincount(streams)                                # what the relay delivered
-            counts[:len(n)] += n
-            if n.max(initial=0) > 1:                                # a late joiner's keyframe run
+            n = np.bincount(streams)  # what the relay delivered
+            counts[: len(n)] += n
+            if n.max(initial=0) > 1:  # a late joiner's keyframe run
                 np.minimum.at(lo, streams, seqs)
                 np.maximum.at(hi, streams, seqs)
             else:
                 lo[streams] = np.minimum(lo[streams], seqs)
                 hi[streams] = np.maximum(hi[streams], seqs)
             lat = np.bincount(np.clip((now_us - ts.astype(np.int64)) // int(BINS_MS * 1000), 0, len(hist) - 1))
-            hist[:len(lat)] += lat
+            hist[: len(lat)] += lat
             tally["received"] += len(offsets)
-            if loss:                                                # the emulated lossy link
+            if loss:  # the emulated lossy link
                 keep = rng.random(len(offsets)) >= loss
                 tally["dropped"] += int((~keep).sum())
                 offsets, streams, seqs = offsets[keep], streams[keep], seqs[keep]
@@ -222,8 +232,9 @@ def viewers(url: str, token: str, count: int, seconds: float, loss: float, follo
                 firsts = read_u32(data, offsets, 22)
                 frames = raw[offsets + 26].astype(np.int64) | (raw[offsets + 27].astype(np.int64) << 8)
                 f = followers[k]
-                for s, q, fl, a, n in zip(streams.tolist(), seqs.tolist(), flags.tolist(), firsts.tolist(),
-                                          frames.tolist()):
+                for s, q, fl, a, n in zip(
+                    streams.tolist(), seqs.tolist(), flags.tolist(), firsts.tolist(), frames.tolist()
+                ):
                     f.see(s, q, bool(fl & 1), a, n)
         await ws.close()
         got = counts > 0
@@ -247,22 +258,32 @@ def percentile(hist: np.ndarray, q: float) -> float:
 def drive(args, token: str, relays: list) -> tuple[list, list, list]:
     """Start the publishers and viewers, watch the relays, collect what the workers report."""
     import psutil
+
     out = mp.Queue()
     total = args.seconds + 3.0
     ids = list(range(args.avatars))
     codec = (args.codec, args.bits_per_second)
-    workers = [mp.Process(target=publisher, args=(relays[0][0], token, ids[k::args.publishers], total + 1.0, codec,
-                                                  args.keyframe_s, out)) for k in range(args.publishers)]
+    workers = [
+        mp.Process(
+            target=publisher,
+            args=(relays[0][0], token, ids[k :: args.publishers], total + 1.0, codec, args.keyframe_s, out),
+        )
+        for k in range(args.publishers)
+    ]
     per = -(-args.viewers // args.viewer_procs)
     for k in range(args.viewer_procs):
         n = min(per, args.viewers - k * per)
         url = relays[k % len(relays)][0] if args.nats else relays[0][0]
-        workers.append(mp.Process(target=viewers, args=(url, token, n, total + 1.0, args.loss, 2 if args.loss else 0,
-                                                         k, out, 4.0, args.budget)))
-    for w in workers[args.publishers:]:
+        workers.append(
+            mp.Process(
+                target=viewers,
+                args=(url, token, n, total + 1.0, args.loss, 2 if args.loss else 0, k, out, 4.0, args.budget),
+            )
+        )
+    for w in workers[args.publishers :]:
         w.start()
     time.sleep(1.0)
-    for w in workers[:args.publishers]:
+    for w in workers[: args.publishers]:
         w.start()
     time.sleep(3.0)
     clients = [psutil.Process(w.pid) for w in workers]
@@ -276,8 +297,10 @@ def drive(args, token: str, relays: list) -> tuple[list, list, list]:
             peak_rss[k] = max(peak_rss[k], pr.memory_info().rss)
     cpu = [pr.cpu_percent(None) for _, pr in relays]
     busy = [c.cpu_percent(None) for c in clients]
-    print(f"  client CPU (% of one core): publishers {sum(busy[:args.publishers]):.0f}, viewer processes "
-          f"{', '.join(f'{b:.0f}' for b in busy[args.publishers:])}")
+    print(
+        f"  client CPU (% of one core): publishers {sum(busy[: args.publishers]):.0f}, viewer processes "
+        f"{', '.join(f'{b:.0f}' for b in busy[args.publishers :])}"
+    )
     try:
         results = [out.get(timeout=60) for _ in workers]
     except queue.Empty:
@@ -296,16 +319,23 @@ def main() -> None:
     ap.add_argument("--keyframe-s", type=float, default=0.5)
     ap.add_argument("--codec", choices=("dpcm", "spiht"), default="dpcm", help="the avatars' codec (default dpcm)")
     ap.add_argument("--bits-per-second", type=float, default=16000, help="spiht's rate as sent (default 16000)")
-    ap.add_argument("--budget", type=float, default=0.0,
-                    help="each viewer's bandwidth (bit/s) from a random camera in the crowd: spiht streams are cut "
-                         "to their crowd shares (default 0: all whole)")
+    ap.add_argument(
+        "--budget",
+        type=float,
+        default=0.0,
+        help="each viewer's bandwidth (bit/s) from a random camera in the crowd: spiht streams are cut "
+        "to their crowd shares (default 0: all whole)",
+    )
     ap.add_argument("--publishers", type=int, default=10, help="sending connections (avatars spread over them)")
     ap.add_argument("--viewer-procs", type=int, default=1)
-    ap.add_argument("--nats", action="store_true", help="two relays sharing the room through a NATS server: "
-                                                        "senders on the first, viewers split over both")
+    ap.add_argument(
+        "--nats",
+        action="store_true",
+        help="two relays sharing the room through a NATS server: senders on the first, viewers split over both",
+    )
     args = ap.parse_args()
     if args.nats:
-        args.viewer_procs = max(args.viewer_procs, 2)      # viewers on both relays
+        args.viewer_procs = max(args.viewer_procs, 2)  # viewers on both relays
 
     import psutil
 
@@ -319,14 +349,29 @@ def main() -> None:
         if binary is None:
             raise SystemExit("--nats needs nats-server (apt-get install nats-server)")
         nport = free_port()
-        procs.append(subprocess.Popen([binary, "-a", "127.0.0.1", "-p", str(nport)], stdout=subprocess.DEVNULL,
-                                      stderr=subprocess.DEVNULL))
+        procs.append(
+            subprocess.Popen(
+                [binary, "-a", "127.0.0.1", "-p", str(nport)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+            )
+        )
         wait_port(nport)
         nats_url = f"nats://127.0.0.1:{nport}"
     for _ in range(2 if args.nats else 1):
         port = free_port()
-        cmd = [sys.executable, "-m", "mocodec", "serve", "--port", str(port), "--secret", SECRET,
-               "--max-messages-per-s", "1000", "--max-bytes-per-s", "1e8"]
+        cmd = [
+            sys.executable,
+            "-m",
+            "mocodec",
+            "serve",
+            "--port",
+            str(port),
+            "--secret",
+            SECRET,
+            "--max-messages-per-s",
+            "1000",
+            "--max-bytes-per-s",
+            "1e8",
+        ]
         if nats_url:
             cmd += ["--bus", nats_url]
         p = subprocess.Popen(cmd, stdout=subprocess.DEVNULL)
@@ -336,30 +381,39 @@ def main() -> None:
     try:
         results, cpu, peak_rss = drive(args, token, relays)
     finally:
-        for p in reversed(procs):                             # relays first, then NATS
+        for p in reversed(procs):  # relays first, then NATS
             p.terminate()
             p.wait(10)
     sent = sum(r[1] for r in results if r[0] == "sent")
     hist = sum(r[2] for r in results if r[0] == "viewers")
     tally = {k: sum(r[1][k] for r in results if r[0] == "viewers") for k in ("received", "dropped", "batches", "lost")}
     resync = np.array([s for r in results if r[0] == "viewers" for s in r[3]])
-    setup = (f"{args.avatars} {args.codec} avatars at 30 Hz -> {args.viewers} viewers"
-             + (f" of {args.budget:g} bit/s each" if args.budget else "")
-             + (", two relays over NATS" if args.nats else ""))
-    print(f"relay load: {setup}, {args.seconds:g} s measured, loss {args.loss:.0%}, keyframes every "
-          f"{args.keyframe_s:g} s")
-    print(f"  packets sent {sent:,}; delivered to viewers {tally['received']:,} in {tally['batches']:,} batches; "
-          f"lost on the way {tally['lost']:,}"
-          + (f"; dropped by the emulated link {tally['dropped']:,}" if args.loss else ""))
-    print(f"  latency p50 {percentile(hist, 0.5):.1f} ms, p99 {percentile(hist, 0.99):.1f} ms, "
-          f"max {percentile(hist, 1.0):.1f} ms")
-    for k, ((url, _), c, rss) in enumerate(zip(relays, cpu, peak_rss)):
+    setup = (
+        f"{args.avatars} {args.codec} avatars at 30 Hz -> {args.viewers} viewers"
+        + (f" of {args.budget:g} bit/s each" if args.budget else "")
+        + (", two relays over NATS" if args.nats else "")
+    )
+    print(
+        f"relay load: {setup}, {args.seconds:g} s measured, loss {args.loss:.0%}, keyframes every {args.keyframe_s:g} s"
+    )
+    print(
+        f"  packets sent {sent:,}; delivered to viewers {tally['received']:,} in {tally['batches']:,} batches; "
+        f"lost on the way {tally['lost']:,}"
+        + (f"; dropped by the emulated link {tally['dropped']:,}" if args.loss else "")
+    )
+    print(
+        f"  latency p50 {percentile(hist, 0.5):.1f} ms, p99 {percentile(hist, 0.99):.1f} ms, "
+        f"max {percentile(hist, 1.0):.1f} ms"
+    )
+    for k, (c, rss) in enumerate(zip(cpu, peak_rss)):
         print(f"  relay {k + 1}: CPU {c:.0f}% of one core, peak RSS {rss / 2**20:.0f} MiB")
     if args.loss:
         if len(resync):
-            print(f"  resync after a loss ({len(resync):,} events): p50 {np.median(resync):.2f} s, "
-                  f"p99 {np.quantile(resync, 0.99):.2f} s, max {resync.max():.2f} s; "
-                  f"within 1 s: {np.mean(resync <= 1.0):.1%}")
+            print(
+                f"  resync after a loss ({len(resync):,} events): p50 {np.median(resync):.2f} s, "
+                f"p99 {np.quantile(resync, 0.99):.2f} s, max {resync.max():.2f} s; "
+                f"within 1 s: {np.mean(resync <= 1.0):.1%}"
+            )
 
 
 if __name__ == "__main__":

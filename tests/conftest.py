@@ -20,8 +20,11 @@ ROOT = Path(__file__).parent.parent
 
 
 def _shared_data() -> Path | None:
-    for candidate in (os.environ.get("MOCODEC_SHARED_DATA"), ROOT.parent / "shared" / "data",
-                      Path("/work/shared/data")):
+    for candidate in (
+        os.environ.get("MOCODEC_SHARED_DATA"),
+        ROOT.parent / "shared" / "data",
+        Path("/work/shared/data"),
+    ):
         if candidate and (Path(candidate) / "cmu").is_dir():
             return Path(candidate)
     return None
@@ -88,8 +91,15 @@ def codebooks(martial_amc, tmp_path_factory):
 
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
-CHROMIUM_FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
-                  "--disable-sync", "--no-first-run", "--enable-unsafe-swiftshader"]
+CHROMIUM_FLAGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+    "--enable-unsafe-swiftshader",
+]
 
 
 @pytest.fixture(scope="module")

@@ -3,8 +3,8 @@ CMU test clip and its decoded output, in ``tests/fixtures/<codec>/``. ``test_gol
 checks that the stored bytes decode to the stored output bit for bit and that encoding the
 input again gives the same bytes: the formats are pinned.
 
-The bytes are the codec's body (:meth:`Codec.encode`'s payload without its envelope), so the
-fixtures pin what each codec writes, whatever frames it.
+The bytes are the codec's body (:meth:`Codec.encode`), what the container and the stream
+packets frame.
 
 Regenerate, after a deliberate format change only: ``python tests/golden.py [CODEC ...]``.
 """
@@ -23,14 +23,37 @@ DATA = Path(__file__).parent / "data"
 # codec id -> its knobs; the model-based codecs' models are trained on another subject and
 # motion (the martial-arts clip) and stored beside the fixture
 CONFIGS: dict[str, dict] = {
-    "adpcm": {}, "dct": {}, "deadreckoning": {}, "dpcm": {}, "fpzip": {},
-    "gesture": {}, "hybrid": {}, "kinwave": {"max_error_cm": 0.5, "error_measure": "shell"},
-    "lossless": {}, "posture": {}, "primitives": {}, "pwavelet": {}, "quant": {}, "raw": {},
-    "rhythmic": {}, "spiht": {"bits_per_second": 8000}, "subband": {}, "svq": {"size": 64}, "sz3": {},
-    "tvq": {"size": 64}, "zfp": {}, "zstd": {},
+    "adpcm": {},
+    "dct": {},
+    "deadreckoning": {},
+    "dpcm": {},
+    "fpzip": {},
+    "gesture": {},
+    "hybrid": {},
+    "kinwave": {"max_error_cm": 0.5, "error_measure": "shell"},
+    "lossless": {},
+    "posture": {},
+    "primitives": {},
+    "pwavelet": {},
+    "quant": {},
+    "raw": {},
+    "rhythmic": {},
+    "spiht": {"bits_per_second": 8000},
+    "subband": {},
+    "svq": {"size": 64},
+    "sz3": {},
+    "tvq": {"size": 64},
+    "zfp": {},
+    "zstd": {},
 }
-MODEL_KNOB = {"gesture": "tables", "posture": "tables", "svq": "codebook", "tvq": "codebook",
-              "primitives": "db", "rhythmic": "db"}
+MODEL_KNOB = {
+    "gesture": "tables",
+    "posture": "tables",
+    "svq": "codebook",
+    "tvq": "codebook",
+    "primitives": "db",
+    "rhythmic": "db",
+}
 # the baselines' libraries come with the [bench] extra
 LIBRARY = {"fpzip": "fpzip", "sz3": "pysz", "zfp": "zfpy"}
 
@@ -57,7 +80,9 @@ def train_model(codec_id: str, path: Path) -> None:
     if codec_id in ("gesture", "posture"):
         model = motiontables.train([martial], spacing_cm=6.0, discard_deg=2.0, names=["135_08.amc"])
     elif codec_id in ("svq", "tvq"):
-        model = vqbook.train("spatial" if codec_id == "svq" else "temporal", [martial], [16, 32, 64], names=["135_08.amc"])
+        model = vqbook.train(
+            "spatial" if codec_id == "svq" else "temporal", [martial], [16, 32, 64], names=["135_08.amc"]
+        )
     elif codec_id == "primitives":
         model = primdb.train([martial], max_clusters=16, names=["135_08.amc"])
     else:
@@ -75,26 +100,20 @@ def codec(codec_id: str):
     return get_codec(codec_id, **knobs)
 
 
-def body(payload: bytes) -> bytes:
-    """The codec's body in a payload (what the fixtures pin)."""
-    from mocodec.codecs.base import read_envelope
-
-    return read_envelope(payload)[2]
-
-
 def write(codec_id: str) -> None:
     folder = FIXTURES / codec_id
     folder.mkdir(parents=True, exist_ok=True)
     if codec_id in MODEL_KNOB:
         train_model(codec_id, model_path(codec_id))
     c, motion = codec(codec_id), clip()
-    payload = c.encode(motion)
-    decoded = c.decode(payload, motion.skeleton, trusted=True).channels
-    (folder / "config.json").write_text(json.dumps({"codec": codec_id, "knobs": CONFIGS[codec_id],
-                                                    "input": "07_03.amc frames 0-119"}, indent=1) + "\n")
-    (folder / "encoded.bin").write_bytes(body(payload))
+    body = c.encode(motion)
+    decoded = c.decode(body, motion.skeleton, motion.num_frames, motion.fps, trusted=True).channels
+    (folder / "config.json").write_text(
+        json.dumps({"codec": codec_id, "knobs": CONFIGS[codec_id], "input": "07_03.amc frames 0-119"}, indent=1) + "\n"
+    )
+    (folder / "encoded.bin").write_bytes(body)
     np.save(folder / "decoded.npy", decoded)
-    print(f"{codec_id}: {len(body(payload)):,} bytes")
+    print(f"{codec_id}: {len(body):,} bytes")
 
 
 if __name__ == "__main__":

@@ -16,11 +16,11 @@ FPS = 120.0
 
 def test_usable_bits_follow_5_1_and_5_2():
     # noise one hardware step -> N_h = 0; range = full scale -> N_r = 0: all 16 bits
-    assert stats.usable_bits(360.0, 360.0 / 2 ** 16, 360.0) == 16
+    assert stats.usable_bits(360.0, 360.0 / 2**16, 360.0) == 16
     # range R, noise sigma well above a step: log2(R / sigma)
     assert stats.usable_bits(131.2, 0.1, 360.0) == int(np.floor(np.log2(131.2 / 0.1)))
     assert stats.usable_bits(np.array([0.0, 70.0]), 70 / 256, 70.0, hardware_bits=8).tolist() == [0, 8]
-    assert stats.raw_bit_rate(np.array([345, 168]), 30) == 15390          # the thesis's body + hands
+    assert stats.raw_bit_rate(np.array([345, 168]), 30) == 15390  # the thesis's body + hands
 
 
 def test_autocorrelation_of_a_sine_and_of_white_noise():
@@ -34,7 +34,7 @@ def test_autocorrelation_of_a_sine_and_of_white_noise():
 
 def test_markov_fit_recovers_a_gaussian_autocorrelation():
     lags = np.arange(40)
-    fit = temporal.markov_fit(np.exp(-0.015 * lags ** 2), max_lag=10)
+    fit = temporal.markov_fit(np.exp(-0.015 * lags**2), max_lag=10)
     assert fit.decay == pytest.approx(0.015) and fit.rms_error < 1e-12
     assert fit.decay_at(120.0, 30.0) == pytest.approx(0.015 * 16)
 
@@ -53,7 +53,7 @@ def test_spectra_locate_a_band_limited_signal():
     t = np.arange(int(120 * FPS)) / FPS
     rng = np.random.default_rng(2)
     x = np.column_stack([np.sin(2 * np.pi * 2.0 * t + p) for p in rng.uniform(0, 6, 3)])
-    x += 1e-4 * rng.normal(size=x.shape)                               # -80 dB floor
+    x += 1e-4 * rng.normal(size=x.shape)  # -80 dB floor
     for s in (spectrum.welch(x, FPS), spectrum.blackman_tukey(x, FPS), spectrum.ar_spectrum(x, FPS)):
         assert s.freqs[np.argmax(s.power)] == pytest.approx(2.0, abs=0.3)
         assert spectrum.power_frequency(s, 0.99) < 3.0

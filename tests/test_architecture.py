@@ -31,7 +31,7 @@ LAYERS = [
     {"__init__", "__main__"},
 ]
 LAYER = {area: k for k, group in enumerate(LAYERS) for area in group}
-SHARED_BY_FAMILIES = {"base", "registry", "shared"}     # what every codec family may import
+SHARED_BY_FAMILIES = {"base", "registry", "shared"}  # what every codec family may import
 
 
 def _modules():
@@ -101,6 +101,11 @@ def test_no_private_names_across_modules(name, path, tree):
             pytest.fail(f"{name} imports the private module {module}")
     imported_modules = {alias for module, alias in _imports(tree) if _target(module, alias) != module}
     for node in ast.walk(tree):
-        if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id in imported_modules
-                and node.attr.startswith("_") and not node.attr.startswith("__")):
+        if (
+            isinstance(node, ast.Attribute)
+            and isinstance(node.value, ast.Name)
+            and node.value.id in imported_modules
+            and node.attr.startswith("_")
+            and not node.attr.startswith("__")
+        ):
             pytest.fail(f"{name}:{node.lineno} uses the private {node.value.id}.{node.attr}")

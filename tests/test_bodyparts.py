@@ -41,8 +41,18 @@ def test_topology_gives_the_same_chains_without_names(fixture, request):
             assert f"{side}_{chain}" in anon
 
 
-@pytest.mark.parametrize("name, side", [("LeftArm", "left"), ("mixamorig:RightHand", "right"), ("lhumerus", "left"),
-                                        ("rShldr", "right"), ("arm_L", "left"), ("lowerback", None),
-                                        ("root", None), ("rradius", "right")])
+@pytest.mark.parametrize(
+    "name, side",
+    [
+        ("LeftArm", "left"),
+        ("mixamorig:RightHand", "right"),
+        ("lhumerus", "left"),
+        ("rShldr", "right"),
+        ("arm_L", "left"),
+        ("lowerback", None),
+        ("root", None),
+        ("rradius", "right"),
+    ],
+)
 def test_name_sides(name, side):
     assert name_side(name) == side

@@ -20,12 +20,12 @@ from mocodec.kinematics import forward_kinematics
 def test_soft_clip_is_linear_then_parabolic_then_flat():
     x = np.linspace(0, 2, 2001)
     y = soft_clip_upper(x, 1.0, 0.2)
-    np.testing.assert_array_equal(y[x <= 0.8], x[x <= 0.8])            # linear up to x1 = x_c - margin
-    assert np.all(y[x >= 1.2] == 1.0)                                    # constant x_c beyond x2
+    np.testing.assert_array_equal(y[x <= 0.8], x[x <= 0.8])  # linear up to x1 = x_c - margin
+    assert np.all(y[x >= 1.2] == 1.0)  # constant x_c beyond x2
     slope = np.gradient(y, x)
     assert slope[np.searchsorted(x, 0.8)] == pytest.approx(1.0, abs=0.01)
     assert slope[np.searchsorted(x, 1.2) - 1] == pytest.approx(0.0, abs=0.01)
-    assert np.all(np.diff(y) >= -1e-12) and np.abs(np.diff(y)).max() < 0.002    # monotone, continuous
+    assert np.all(np.diff(y) >= -1e-12) and np.abs(np.diff(y)).max() < 0.002  # monotone, continuous
     both = soft_clip(np.array([-5.0, 0.0, 5.0]), -1.0, 1.0, 0.1)
     np.testing.assert_allclose(both, [-1.0, 0.0, 1.0])
     assert soft_clip(np.array([7.0]), -np.inf, np.inf, 0.1)[0] == 7.0
@@ -45,8 +45,14 @@ def poses():
 
 def test_noise_free_round_trip_puts_head_wrists_and_feet_back(poses):
     got = convert(simulate(poses, noise_deg=0, noise_cm=0, glove_noise=0, seed=1))
-    for joint, mean, worst in (("root", 1e-6, 1e-6), ("head_top", 0.2, 1.0), ("left_wrist", 0.05, 1.5),
-                               ("right_wrist", 0.05, 1.5), ("left_ankle", 0.1, 1.5), ("right_ankle", 0.1, 1.5)):
+    for joint, mean, worst in (
+        ("root", 1e-6, 1e-6),
+        ("head_top", 0.2, 1.0),
+        ("left_wrist", 0.05, 1.5),
+        ("right_wrist", 0.05, 1.5),
+        ("left_ankle", 0.1, 1.5),
+        ("right_ankle", 0.1, 1.5),
+    ):
         e = errors_cm(poses, got, joint)
         assert e.mean() < mean and e.max() < worst, (joint, e.mean(), e.max())
     sk = poses.skeleton
@@ -56,10 +62,11 @@ def test_noise_free_round_trip_puts_head_wrists_and_feet_back(poses):
     assert np.median(np.degrees(rotations.quat_distance(qa, qb))) < 0.5
     # fingers from the gloves, and what cannot be known stays at zero (hip twist, wrists)
     fingers = [sk.channel_index(f"left_{f}") for f in ("index2.Zrotation", "thumb2.Xrotation")]
-    inside = (poses.channels[:, fingers] > sk.limits[fingers, 0] + 5) & (poses.channels[:, fingers] <
-                                                                          sk.limits[fingers, 1] - 5)
+    inside = (poses.channels[:, fingers] > sk.limits[fingers, 0] + 5) & (
+        poses.channels[:, fingers] < sk.limits[fingers, 1] - 5
+    )
     np.testing.assert_allclose(got.channels[:, fingers][inside], poses.channels[:, fingers][inside], atol=1e-6)
-    assert inside.mean() > 0.5                         # (within 5 degrees of a limit, soft clipping eases)
+    assert inside.mean() > 0.5  # (within 5 degrees of a limit, soft clipping eases)
     for name in ("left_hip.Yrotation", "right_wrist.Zrotation", "left_index1.Xrotation"):
         assert np.all(got.channels[:, sk.channel_index(name)] == 0)
 
@@ -93,18 +100,21 @@ def test_log_round_trip_and_the_thesis_frames(tmp_path, poses):
     assert back.fps == pytest.approx(120.0)
     raw = np.load(path)["hips"][0]
     right_handed = log.trackers["hips"][0]
-    np.testing.assert_allclose(raw[3, :3], right_handed[:3, 3] * [1, 1, -1])   # position in the bottom row, z mirrored
+    np.testing.assert_allclose(raw[3, :3], right_handed[:3, 3] * [1, 1, -1])  # position in the bottom row, z mirrored
     np.testing.assert_allclose(to_thesis(right_handed), raw)
 
 
-@pytest.mark.parametrize("change, why", [
-    (lambda d: d.pop("head"), "missing array 'head'"),
-    (lambda d: d.__setitem__("left_glove", d["left_glove"][:, :4]), "'left_glove': expected shape"),
-    (lambda d: d["time"].__setitem__(5, 0.0), "'time': frame 5"),
-    (lambda d: d["right_wrist"].__setitem__((3, 0, 0), 2.0), "'right_wrist': frame 3: not a rigid"),
-    (lambda d: d["right_glove"].__setitem__((7, 2), 1.5), "'right_glove': frame 7"),
-    (lambda d: d["hips"].__setitem__((2, 1, 1), np.nan), "'hips': frame 2: a value is not finite"),
-])
+@pytest.mark.parametrize(
+    "change, why",
+    [
+        (lambda d: d.pop("head"), "missing array 'head'"),
+        (lambda d: d.__setitem__("left_glove", d["left_glove"][:, :4]), "'left_glove': expected shape"),
+        (lambda d: d["time"].__setitem__(5, 0.0), "'time': frame 5"),
+        (lambda d: d["right_wrist"].__setitem__((3, 0, 0), 2.0), "'right_wrist': frame 3: not a rigid"),
+        (lambda d: d["right_glove"].__setitem__((7, 2), 1.5), "'right_glove': frame 7"),
+        (lambda d: d["hips"].__setitem__((2, 1, 1), np.nan), "'hips': frame 2: a value is not finite"),
+    ],
+)
 def test_malformed_logs_are_refused_with_array_and_frame(tmp_path, poses, change, why):
     log = simulate(poses[:10], seed=6)
     path = tmp_path / "log.npz"

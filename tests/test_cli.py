@@ -22,11 +22,14 @@ def test_convert_both_ways(tmp_path, capsys):
     assert load(tmp_path / "w.amc").num_frames == 415
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["info", "missing.bvh"], "missing.bvh: no such file"),
-    (["convert", str(DATA / "09_02.bvh"), "out.xyz"], "expected .bvh or .amc"),
-    (["info", str(DATA / "07.asf")], "skeleton only"),
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["info", "missing.bvh"], "missing.bvh: no such file"),
+        (["convert", str(DATA / "09_02.bvh"), "out.xyz"], "expected .bvh or .amc"),
+        (["info", str(DATA / "07.asf")], "skeleton only"),
+    ],
+)
 def test_user_errors_print_one_line_and_exit_2(argv, message, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     proc = subprocess.run([sys.executable, "-m", "mocodec", *argv], capture_output=True, text=True)
@@ -68,9 +71,17 @@ def test_model_training_defaults_are_the_training_modules_own():
 
     tables, gesture = parsed("tables"), segmentation.GestureParams()
     assert (tables.spacing, tables.discard, tables.norm, tables.interior) == (
-        motiontables.SPACING_CM, motiontables.DISCARD_DEG, motiontables.NORM, motiontables.INTERIOR_WEIGHT)
+        motiontables.SPACING_CM,
+        motiontables.DISCARD_DEG,
+        motiontables.NORM,
+        motiontables.INTERIOR_WEIGHT,
+    )
     assert (tables.beta, tables.window, tables.min_length, tables.max_length) == (
-        gesture.beta, gesture.window, gesture.min_length, gesture.max_length)
+        gesture.beta,
+        gesture.window,
+        gesture.min_length,
+        gesture.max_length,
+    )
     prims = parsed("primitives")
     assert (prims.threshold, prims.max_clusters) == (primdb.ERROR_THRESHOLD, primdb.MAX_CLUSTERS)
     assert parsed("rhythm").count == rhythmdb.COUNT
@@ -93,8 +104,9 @@ def test_encode_decode_eval_codecs(tmp_path, capsys):
     assert main(["decode", str(out), "-o", str(tmp_path / "tail.amc"), "--frames", "400:"]) == 0
     assert load(tmp_path / "tail.amc").num_frames == 15
     capsys.readouterr()
-    assert main(["encode", str(DATA / "07_03.amc"), str(DATA / "135_08.amc"), "-o", str(tmp_path),
-                 "--codec", "raw"]) == 0
+    assert (
+        main(["encode", str(DATA / "07_03.amc"), str(DATA / "135_08.amc"), "-o", str(tmp_path), "--codec", "raw"]) == 0
+    )
     assert (tmp_path / "135_08.moc").exists()
     assert main(["eval", str(DATA / "07_03.bvh"), "--codec", "raw"]) == 0
     text = capsys.readouterr().out
@@ -107,7 +119,10 @@ def test_coding_errors_are_one_line(tmp_path, capsys):
     cases = [
         (["encode", str(DATA / "07_03.amc"), "-o", str(tmp_path / "x.moc"), "--codec", "nope"], "unknown codec"),
         (["encode", str(DATA / "07_03.amc"), "-o", str(tmp_path / "x.moc"), "--colour", "3"], "unknown knob"),
-        (["encode", str(DATA / "07_03.amc"), "-o", str(tmp_path / "x.moc"), "--codec", "lossless", "--ratio", "50"], "no quality knob"),
+        (
+            ["encode", str(DATA / "07_03.amc"), "-o", str(tmp_path / "x.moc"), "--codec", "lossless", "--ratio", "50"],
+            "no quality knob",
+        ),
         (["encode", str(DATA / "07_03.amc"), str(DATA / "135_08.amc"), "-o", str(tmp_path / "x.moc")], "directory"),
         (["decode", str(DATA / "07_03.amc"), "-o", str(tmp_path / "x.bvh")], "not a .moc file"),
         (["decode", str(tmp_path / "missing.moc"), "-o", str(tmp_path / "x.bvh")], "missing.moc"),
@@ -131,7 +146,7 @@ def test_compare_prints_every_measure(tmp_path, capsys):
         assert word in out
     assert main(["compare", str(DATA / "07_03.amc"), str(DATA / "07_03.amc"), "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
-    assert data["summary"]["max_joint_error_cm"] == 0 and data["summary"]["psnr_db"] is None   # lossless
+    assert data["summary"]["max_joint_error_cm"] == 0 and data["summary"]["psnr_db"] is None  # lossless
 
 
 def test_compare_rejects_mismatched_pairs(capsys):
@@ -144,8 +159,10 @@ def test_compare_rejects_mismatched_pairs(capsys):
 
 def test_truncate_command(tmp_path, capsys):
     full = tmp_path / "full.moc"
-    assert main(["encode", str(DATA / "07_03.amc"), "-o", str(full), "--codec", "spiht",
-                 "--bits-per-second", "30000"]) == 0
+    assert (
+        main(["encode", str(DATA / "07_03.amc"), "-o", str(full), "--codec", "spiht", "--bits-per-second", "30000"])
+        == 0
+    )
     assert main(["truncate", str(full), "--ratio", "25", "-o", str(tmp_path / "small.moc")]) == 0
     assert "ratio 2" in capsys.readouterr().out
     assert main(["decode", str(tmp_path / "small.moc"), "-o", str(tmp_path / "small.bvh")]) == 0

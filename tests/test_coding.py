@@ -14,11 +14,11 @@ from mocodec.coding.quantisation.quantizers import AdaptiveQuantizer, MuLawQuant
 from mocodec.errors import CorruptStreamError
 
 small_ints = hnp.arrays(np.int64, st.integers(0, 300), elements=st.integers(-50, 50))
-any_ints = hnp.arrays(np.int64, st.integers(0, 200), elements=st.integers(-2 ** 62, 2 ** 62))
+any_ints = hnp.arrays(np.int64, st.integers(0, 200), elements=st.integers(-(2**62), 2**62))
 
 
 # ----- bit I/O ----------------------------------------------------------------------------
-@given(st.lists(st.tuples(st.integers(0, 64), st.integers(0, 2 ** 64 - 1)), max_size=60))
+@given(st.lists(st.tuples(st.integers(0, 64), st.integers(0, 2**64 - 1)), max_size=60))
 def test_bit_fields_round_trip(fields):
     fields = [(w, v & ((1 << w) - 1) if w < 64 else v) for w, v in fields]
     w = BitWriter()
@@ -68,8 +68,8 @@ def test_mu_law_levels_follow_7_5():
     q = MuLawQuantizer(mu=255.0, limit=10.0, levels=8)
     d = q.decision_levels()
     assert d[0] == 0 and d[-1] == pytest.approx(10.0)
-    assert d[1] == pytest.approx(10 * (256 ** 0.25 - 1) / 255)          # i = 1 of N/2 = 4
-    assert np.all(np.diff(d, 2) > 0)                                     # levels widen outwards
+    assert d[1] == pytest.approx(10 * (256**0.25 - 1) / 255)  # i = 1 of N/2 = 4
+    assert np.all(np.diff(d, 2) > 0)  # levels widen outwards
     codes = q.quantize([-12.0, -0.01, 0.01, 12.0])
     assert codes.tolist() == [0, 3, 4, 7]
     r = q.reconstruct(codes)
@@ -87,10 +87,10 @@ def test_adaptive_quantiser_decoder_follows_the_encoder(x, levels):
 def test_adaptive_step_grows_on_large_codes_and_shrinks_on_small():
     q = AdaptiveQuantizer(8, step=1.0, step_min=1e-3, step_max=1e3)
     _, big = q.quantize(np.full(10, 500.0))
-    assert big[-1] > 100                                                  # tracked the jump
+    assert big[-1] > 100  # tracked the jump
     codes, small = q.quantize(np.full(40, 0.001))
     assert np.all(np.abs(codes) <= 1) and abs(small[-1]) < 0.01
-    assert multipliers(8).tolist() == [0.9, 0.9, 1.25, 1.75]             # Jayant's 3-bit table
+    assert multipliers(8).tolist() == [0.9, 0.9, 1.25, 1.75]  # Jayant's 3-bit table
 
 
 # ----- entropy coders ----------------------------------------------------------------------
@@ -141,8 +141,10 @@ def test_damaged_streams_raise_only_our_error(data):
 
 def test_truncated_streams_are_caught():
     x = np.arange(-100, 100)
-    for data, decode in ((huffman.encode_static(x + 100, 200), huffman.decode_static),
-                         (rangecoder.encode_ints(x), rangecoder.decode_ints)):
+    for data, decode in (
+        (huffman.encode_static(x + 100, 200), huffman.decode_static),
+        (rangecoder.encode_ints(x), rangecoder.decode_ints),
+    ):
         for cut in range(len(data) - 1):
             try:
                 out = decode(data[:cut])

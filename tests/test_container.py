@@ -45,10 +45,11 @@ def test_skeleton_survives_exactly(walk_amc, walk_bvh):
 def test_overhead_is_under_one_percent(long_walk):
     codec = get_codec("lossless")
     data = moc.pack(long_walk, codec)
-    chunks = moc.unpack(data)                                   # decodes
+    chunks = moc.unpack(data)  # decodes
     assert chunks.num_frames == long_walk.num_frames
-    payload = sum(len(codec.encode(long_walk[a:a + moc.CHUNK_FRAMES]))
-                  for a in range(0, long_walk.num_frames, moc.CHUNK_FRAMES))
+    payload = sum(
+        len(codec.encode(long_walk[a : a + moc.CHUNK_FRAMES])) for a in range(0, long_walk.num_frames, moc.CHUNK_FRAMES)
+    )
     framing = len(data) - payload - len(_skeleton_bytes(long_walk))
     assert framing < 0.01 * payload
 
@@ -56,6 +57,7 @@ def test_overhead_is_under_one_percent(long_walk):
 def _skeleton_bytes(motion) -> bytes:
     import json
     import zlib
+
     return zlib.compress(json.dumps(container.skeleton_to_dict(motion.skeleton), separators=(",", ":")).encode(), 9)
 
 
@@ -88,7 +90,7 @@ def test_damaged_chunk_is_reported_with_its_number_and_offset(small_file):
     data[e.offset + 20] ^= 0xFF
     with pytest.raises(CorruptStreamError, match=f"chunk 1 at byte {e.offset}: CRC mismatch"):
         moc.unpack(bytes(data), name="f.moc")
-    moc.unpack(bytes(data), frames=(0, 20), name="f.moc")        # chunk 0 alone still decodes
+    moc.unpack(bytes(data), frames=(0, 20), name="f.moc")  # chunk 0 alone still decodes
 
 
 @settings(max_examples=50)
@@ -122,21 +124,20 @@ def test_skeleton_by_reference(walk_amc, tmp_path):
     assert container.skeleton_id(other) == container.skeleton_id(walk_amc.skeleton)
     from conftest import DATA
     from mocodec import load
+
     with pytest.raises(SkeletonMismatchError, match="coded for skeleton"):
         moc.unpack(ref, skeleton=load(DATA / "135_08.amc").skeleton)
 
 
-def test_header_dictionaries_never_change():
-    """The preset dictionaries are part of the format: files written with them need these bytes."""
+def test_the_header_dictionary_never_changes():
+    """The preset dictionary is part of the format: files written with it need these bytes."""
     import hashlib
 
-    from mocodec.formats.header_dict import dictionary
-    assert hashlib.sha256(dictionary(2)).hexdigest() == (
-        "4e8fe4351d431fc5702e77ca6c720405ca8b064aca5d8f007516f9fff8b7b37a")
-    assert hashlib.sha256(dictionary(3)).hexdigest() == (
-        "131adf69f48cfefbc27cf81324902dfd91c22fe87ce3ce18ef0e8c7b23193cdd")
-    assert hashlib.sha256(dictionary(4)).hexdigest() == (
-        "fa16a5c4da355da4b2481bff71f69fe0fc2fce99e1b69dbf02ea2352496ff950")
+    from mocodec.formats.header_dict import DICTIONARY
+
+    assert hashlib.sha256(DICTIONARY).hexdigest() == (
+        "fa16a5c4da355da4b2481bff71f69fe0fc2fce99e1b69dbf02ea2352496ff950"
+    )
 
 
 def test_framing_costs_38_bytes(walk_bvh):
@@ -172,30 +173,19 @@ def test_lossy_files_round_the_skeleton_offsets(walk_bvh, walk_amc):
         moved = np.abs(lossy.skeleton.offsets - motion.skeleton.offsets).max() * cm
         assert 0 < moved <= 0.0005
         saved[motion.num_channels] = len(moc.pack(clip, get_codec("kinwave"), exact_skeleton=True)) - len(data)
-        for exact in (moc.unpack(moc.pack(clip, get_codec("raw"))),
-                      moc.unpack(moc.pack(clip, get_codec("kinwave"), exact_skeleton=True)),
-                      moc.unpack(moc.pack(clip, get_codec("kinwave"), embed_skeleton=False), skeleton=motion.skeleton)):
+        for exact in (
+            moc.unpack(moc.pack(clip, get_codec("raw"))),
+            moc.unpack(moc.pack(clip, get_codec("kinwave"), exact_skeleton=True)),
+            moc.unpack(moc.pack(clip, get_codec("kinwave"), embed_skeleton=False), skeleton=motion.skeleton),
+        ):
             assert container.skeleton_id(exact.skeleton) == container.skeleton_id(motion.skeleton)
     assert saved[132] > 60 and saved[62] > 250
 
 
-def test_version_2_files_still_read():
-    from conftest import DATA
-    from mocodec import load
-    data = (DATA / "version2.moc").read_bytes()
-    assert data[4] == 2
-    original = load(DATA / "09_02.bvh")[:2]
-    c = container.open_container(__import__("io").BytesIO(data), len(data), "version2.moc")
-    assert [(e.first, e.count) for e in c.index] == [(0, 1), (1, 1)]
-    motion = moc.unpack(data)
-    assert np.array_equal(motion.channels, original.channels.astype(np.float32))
-    assert container.skeleton_id(motion.skeleton) == container.skeleton_id(original.skeleton)
-
-
-def test_version_1_files_still_read():
-    from conftest import DATA
-    from mocodec import load
-    motion = moc.unpack((DATA / "version1.moc").read_bytes())
-    original = load(DATA / "09_02.bvh")[:2]
-    assert np.array_equal(motion.channels, original.channels.astype(np.float32))     # raw: 32-bit floats
-    assert container.skeleton_id(motion.skeleton) == container.skeleton_id(original.skeleton)
+def test_other_versions_and_unknown_flags_are_refused(walk_bvh):
+    data = moc.pack(walk_bvh[:8], get_codec("raw"))
+    assert data[4:6] == bytes([1, 0])  # .moc version 1
+    with pytest.raises(CorruptStreamError, match="version 2; this mocodec reads version 1"):
+        moc.unpack(data[:4] + bytes([2, 0]) + data[6:])
+    with pytest.raises(CorruptStreamError, match="flags"):
+        moc.unpack(data[:6] + bytes([data[6] | 2]) + data[7:])

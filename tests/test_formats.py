@@ -58,19 +58,22 @@ def test_bvh_crlf_and_spaces(tmp_path):
     assert load(write(tmp_path, "crlf.bvh", text)).isclose(load(write(tmp_path, "lf.bvh", SMALL_BVH)))
 
 
-@pytest.mark.parametrize("edit, line, message", [
-    (lambda t: t.replace("OFFSET 0 10 0", "OFSET 0 10 0"), 8, "unknown keyword 'OFSET'"),
-    (lambda t: t.replace("0 90 0 10 20 30 1 2 3 0.5 4 5 6", "0 90 0 10 20 30 1 2 3 0.5 4 5"), 24, "12 values"),
-    (lambda t: t.replace("Frames: 2", "Frames: 3"), 22, "'Frames: 3' but 2 frame lines"),
-    (lambda t: t.replace("1 91 1 11", "1 91 x 11"), 25, "'x' is not a number"),
-    (lambda t: t.replace("1 91 1 11", "1 91 nan 11"), 25, "non-finite"),
-    (lambda t: t.replace("HIERARCHY", "HIERARCH"), 1, "expected 'HIERARCHY'"),
-    (lambda t: t.replace("Zrotation Xrotation Yrotation", "Zrotation Xrotation Wrotation"), 5, "unknown channel"),
-    (lambda t: t.replace("CHANNELS 3 Xrotation", "CHANNELS 4 Xrotation"), 9, "lists 3 channel names"),
-    (lambda t: t.replace("Frame Time: 0.0333333", "Frame Time: 0"), 23, "must be positive"),
-    (lambda t: t.replace("\t\t}\n\t}\n}", "\t\t}\n\t}\n"), 21, "missing '}'"),
-    (lambda t: t.replace("OFFSET 5 0 0", "OFFSET 5 0"), 12, "OFFSET needs 3 numbers"),
-])
+@pytest.mark.parametrize(
+    "edit, line, message",
+    [
+        (lambda t: t.replace("OFFSET 0 10 0", "OFSET 0 10 0"), 8, "unknown keyword 'OFSET'"),
+        (lambda t: t.replace("0 90 0 10 20 30 1 2 3 0.5 4 5 6", "0 90 0 10 20 30 1 2 3 0.5 4 5"), 24, "12 values"),
+        (lambda t: t.replace("Frames: 2", "Frames: 3"), 22, "'Frames: 3' but 2 frame lines"),
+        (lambda t: t.replace("1 91 1 11", "1 91 x 11"), 25, "'x' is not a number"),
+        (lambda t: t.replace("1 91 1 11", "1 91 nan 11"), 25, "non-finite"),
+        (lambda t: t.replace("HIERARCHY", "HIERARCH"), 1, "expected 'HIERARCHY'"),
+        (lambda t: t.replace("Zrotation Xrotation Yrotation", "Zrotation Xrotation Wrotation"), 5, "unknown channel"),
+        (lambda t: t.replace("CHANNELS 3 Xrotation", "CHANNELS 4 Xrotation"), 9, "lists 3 channel names"),
+        (lambda t: t.replace("Frame Time: 0.0333333", "Frame Time: 0"), 23, "must be positive"),
+        (lambda t: t.replace("\t\t}\n\t}\n}", "\t\t}\n\t}\n"), 21, "missing '}'"),
+        (lambda t: t.replace("OFFSET 5 0 0", "OFFSET 5 0"), 12, "OFFSET needs 3 numbers"),
+    ],
+)
 def test_bvh_errors_name_file_line_and_expectation(tmp_path, edit, line, message):
     path = write(tmp_path, "bad.bvh", edit(SMALL_BVH))
     with pytest.raises(FormatError) as exc:
@@ -80,11 +83,14 @@ def test_bvh_errors_name_file_line_and_expectation(tmp_path, edit, line, message
     assert str(path) in str(exc.value)
 
 
-@pytest.mark.parametrize("content, message", [
-    (b"", "empty file"),
-    (b"   \n\n", "empty file"),
-    (b"\x00\x01\x02binary\xff", "binary data"),
-])
+@pytest.mark.parametrize(
+    "content, message",
+    [
+        (b"", "empty file"),
+        (b"   \n\n", "empty file"),
+        (b"\x00\x01\x02binary\xff", "binary data"),
+    ],
+)
 def test_empty_and_binary_files(tmp_path, content, message):
     for ext in (".bvh", ".amc", ".asf"):
         p = tmp_path / f"x{ext}"
@@ -168,13 +174,16 @@ def test_missing_or_mismatched_asf(tmp_path):
     assert exc.value.line is not None
 
 
-@pytest.mark.parametrize("edit, message", [
-    (lambda t: t.replace(":units", ":unitz"), "unknown section ':unitz'"),
-    (lambda t: t.replace("length 0.45", "length abc"), "'abc' is not a number"),
-    (lambda t: t.replace("dof rx ry rz", "dof rx ry rq", 1), "dof 'rq' is not supported"),
-    (lambda t: t.replace("    lfemur ltibia", "    lfemur ltibia lnothing"), "'lnothing' is not defined"),
-    (lambda t: t.replace("     direction", "     directoin", 1), "unknown bone keyword"),
-])
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (lambda t: t.replace(":units", ":unitz"), "unknown section ':unitz'"),
+        (lambda t: t.replace("length 0.45", "length abc"), "'abc' is not a number"),
+        (lambda t: t.replace("dof rx ry rz", "dof rx ry rq", 1), "dof 'rq' is not supported"),
+        (lambda t: t.replace("    lfemur ltibia", "    lfemur ltibia lnothing"), "'lnothing' is not defined"),
+        (lambda t: t.replace("     direction", "     directoin", 1), "unknown bone keyword"),
+    ],
+)
 def test_asf_errors(tmp_path, edit, message):
     p = tmp_path / "bad.asf"
     p.write_text(edit((DATA / "07.asf").read_text()))

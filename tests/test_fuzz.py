@@ -26,8 +26,13 @@ def _limit_memory() -> None:
 @pytest.mark.parametrize("target", sorted(TARGETS))
 def test_fuzz_target_ends_only_in_clean_errors(target):
     script = Path(__file__).with_name("fuzzing.py")
-    done = subprocess.run([sys.executable, str(script), target, "2026", str(SECONDS)], capture_output=True,
-                          text=True, timeout=10 * SECONDS + 120, preexec_fn=_limit_memory)
+    done = subprocess.run(
+        [sys.executable, str(script), target, "2026", str(SECONDS)],
+        capture_output=True,
+        text=True,
+        timeout=10 * SECONDS + 120,
+        preexec_fn=_limit_memory,
+    )
     assert done.returncode in (0, 1), f"the fuzzer died ({done.returncode}): {done.stderr[-2000:]}"
     summary = json.loads(done.stdout.strip().splitlines()[-1])
     assert summary["cases"] > 100

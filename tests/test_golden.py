@@ -35,7 +35,7 @@ def test_fixture_decodes_bit_exact(codec_id, clip):
     assert json.loads((folder / "config.json").read_text())["knobs"] == golden.CONFIGS[codec_id]
     codec = golden.codec(codec_id)
     stored = (folder / "encoded.bin").read_bytes()
-    decoded = codec.decode(codec.wrap(stored, clip.num_frames, clip.fps), clip.skeleton).channels
+    decoded = codec.decode(stored, clip.skeleton, clip.num_frames, clip.fps).channels
     expected = np.load(folder / "decoded.npy")
     assert decoded.dtype == expected.dtype and np.array_equal(decoded, expected)
 
@@ -44,4 +44,4 @@ def test_fixture_decodes_bit_exact(codec_id, clip):
 def test_fixture_input_encodes_to_the_same_bytes(codec_id, clip):
     _skip_without_library(codec_id)
     stored = (golden.FIXTURES / codec_id / "encoded.bin").read_bytes()
-    assert golden.body(golden.codec(codec_id).encode(clip)) == stored
+    assert golden.codec(codec_id).encode(clip) == stored

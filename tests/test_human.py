@@ -33,8 +33,19 @@ def test_groups_cover_table_5_1(male):
 
 def test_standing_figure_has_plausible_heights(male):
     pos, _ = forward_kinematics(male, np.zeros((1, 80)))
-    y = {n: pos[0, male.index(n), 1] for n in ("head_top", "root", "left_hip", "left_wrist", "right_wrist",
-                                                "left_ankle", "left_toe", "left_shoulder")}
+    y = {
+        n: pos[0, male.index(n), 1]
+        for n in (
+            "head_top",
+            "root",
+            "left_hip",
+            "left_wrist",
+            "right_wrist",
+            "left_ankle",
+            "left_toe",
+            "left_shoulder",
+        )
+    }
     assert y["head_top"] == pytest.approx(1.74, abs=0.01)
     assert y["left_toe"] == pytest.approx(0.0, abs=1e-9)
     assert 0.85 < y["left_hip"] < 1.0 and 1.35 < y["left_shoulder"] < 1.5

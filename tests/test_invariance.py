@@ -18,11 +18,11 @@ from mocodec.skeleton import Joint, Skeleton
 
 DATA = Path(__file__).parent / "data"
 BOUND = 1.0
-GROWTH = 0.15                  # any one re-expression of one short test clip (the search lands anywhere in 90-100%
-                               # of the bound, a few percent of bytes either way)
-MEDIAN_GROWTH = 0.03           # over all the re-expressions of a clip: the issue's median target
-DUMMY_GROWTH = 0.05            # a dummy root: the body is coded as without it (WORLD forms, world-axis translations);
-                               # the dummy joint itself costs 20-30 bytes of skeleton, 2% of a 1.2 KB file
+GROWTH = 0.15  # any one re-expression of one short test clip (the search lands anywhere in 90-100%
+# of the bound, a few percent of bytes either way)
+MEDIAN_GROWTH = 0.03  # over all the re-expressions of a clip: the issue's median target
+DUMMY_GROWTH = 0.05  # a dummy root: the body is coded as without it (WORLD forms, world-axis translations);
+# the dummy joint itself costs 20-30 bytes of skeleton, 2% of a 1.2 KB file
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +45,7 @@ def _same_places(a: Motion, b: Motion) -> None:
     ``a`` does, to 1e-6 cm."""
     pa, pb = _joints_cm(a), _joints_cm(b)
     assert pa.shape[0] == pb.shape[0]
-    np.testing.assert_allclose(pb[:, -pa.shape[1]:], pa, atol=1e-6)
+    np.testing.assert_allclose(pb[:, -pa.shape[1] :], pa, atol=1e-6)
 
 
 def _shell_max(motion: Motion, decoded: Motion) -> float:
@@ -104,7 +104,7 @@ def test_file_units_do_not_matter(bvh, factor):
     moved = reexpress.with_units(bvh, factor)
     np.testing.assert_allclose(_joints_cm(moved), _joints_cm(bvh), atol=1e-6)
     codec = get_codec("kinwave", max_error_cm=BOUND, error_measure="shell")
-    assert codec.encode(moved) == codec.encode(bvh)          # the coded motion is the same, byte for byte
+    assert codec.encode(moved) == codec.encode(bvh)  # the coded motion is the same, byte for byte
     _check_invariant(bvh, moved)
 
 
@@ -129,23 +129,32 @@ def test_a_lower_frame_rate_costs_no_more_and_keeps_the_bound(bvh, fps):
 def _chain(seed: int) -> Motion:
     """A generated five-joint chain in random Euler orders, 20 s of smooth random motion."""
     rng = np.random.default_rng(seed)
-    joints = [Joint("root", -1, (0.0, 90.0, 0.0), ("Xposition", "Yposition", "Zposition", "Zrotation", "Xrotation",
-                                                   "Yrotation"), "ZXY")]
+    joints = [
+        Joint(
+            "root",
+            -1,
+            (0.0, 90.0, 0.0),
+            ("Xposition", "Yposition", "Zposition", "Zrotation", "Xrotation", "Yrotation"),
+            "ZXY",
+        )
+    ]
     for k in range(1, 5):
         order = "".join(rng.permutation(list("XYZ")))
-        joints.append(Joint(f"j{k}", k - 1, tuple(rng.uniform(-20, 20, 3)), tuple(f"{a}rotation" for a in order),
-                            order))
+        joints.append(
+            Joint(f"j{k}", k - 1, tuple(rng.uniform(-20, 20, 3)), tuple(f"{a}rotation" for a in order), order)
+        )
     sk = Skeleton(tuple(joints), 100.0)
     t = np.linspace(0.0, 20.0, 1200)[:, None]
     channels = np.zeros((1200, sk.num_channels))
     channels[:, :3] = np.hstack([30 * np.sin(t), 90 + 2 * np.sin(3 * t), 40 * t])
-    channels[:, 3:] = rng.uniform(10, 40, sk.num_channels - 3) * np.sin(rng.uniform(0.5, 3, sk.num_channels - 3) * t
-                                                                     + rng.uniform(0, 6, sk.num_channels - 3))
+    channels[:, 3:] = rng.uniform(10, 40, sk.num_channels - 3) * np.sin(
+        rng.uniform(0.5, 3, sk.num_channels - 3) * t + rng.uniform(0, 6, sk.num_channels - 3)
+    )
     return Motion(sk, 60.0, channels)
 
 
 @settings(max_examples=4)
-@given(seed=st.integers(0, 2 ** 16), turn=turns)
+@given(seed=st.integers(0, 2**16), turn=turns)
 def test_generated_skeletons_under_a_rotated_dummy_root_keep_the_bound(seed, turn):
     motion = _chain(seed)
     moved = reexpress.with_dummy_root(motion, turn)
@@ -154,7 +163,7 @@ def test_generated_skeletons_under_a_rotated_dummy_root_keep_the_bound(seed, tur
 
 
 @settings(max_examples=4)
-@given(seed=st.integers(0, 2 ** 16), turn=turns)
+@given(seed=st.integers(0, 2**16), turn=turns)
 def test_generated_skeletons_under_a_rotated_dummy_root_cost_about_the_same(seed, turn):
     motion = _chain(seed)
     _check_invariant(motion, reexpress.with_dummy_root(motion, turn), DUMMY_GROWTH)
@@ -162,8 +171,12 @@ def test_generated_skeletons_under_a_rotated_dummy_root_cost_about_the_same(seed
 
 def test_reexpressions_keep_every_joint_in_place(bvh, amc):
     for motion in (bvh, amc):
-        for moved in (reexpress.with_dummy_root(motion, (10.0, -90.0, 30.0)), reexpress.with_position_channels(motion),
-                      reexpress.with_euler_orders(motion, "ZYZ"), reexpress.with_dummy_root(motion, position_channels=True)):
+        for moved in (
+            reexpress.with_dummy_root(motion, (10.0, -90.0, 30.0)),
+            reexpress.with_position_channels(motion),
+            reexpress.with_euler_orders(motion, "ZYZ"),
+            reexpress.with_dummy_root(motion, position_channels=True),
+        ):
             _same_places(motion, moved)
 
 

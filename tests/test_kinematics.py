@@ -6,11 +6,13 @@ from mocodec.kinematics import forward_kinematics, global_matrices
 
 
 def two_joint_arm():
-    return Skeleton((
-        Joint("root", -1, (0.0, 0.0, 0.0), ("Xposition", "Yposition", "Zposition", "Zrotation"), "Z"),
-        Joint("elbow", 0, (2.0, 0.0, 0.0), ("Zrotation",), "Z"),
-        Joint("hand", 1, (1.0, 0.0, 0.0)),
-    ))
+    return Skeleton(
+        (
+            Joint("root", -1, (0.0, 0.0, 0.0), ("Xposition", "Yposition", "Zposition", "Zrotation"), "Z"),
+            Joint("elbow", 0, (2.0, 0.0, 0.0), ("Zrotation",), "Z"),
+            Joint("hand", 1, (1.0, 0.0, 0.0)),
+        )
+    )
 
 
 def test_two_joint_planar_arm_has_known_positions():
@@ -32,9 +34,13 @@ def test_bvh_channel_order_is_intrinsic():
 
 def test_asf_axis_rotates_in_the_bone_frame():
     # a bone whose frame is turned 90 deg about Z: its local X is world Y
-    sk = Skeleton((Joint("root", -1, (0, 0, 0)),
-                   Joint("b", 0, (0, 0, 0), ("Xrotation",), "X", axis=(90.0, 0.0, 0.0), axis_order="ZYX"),
-                   Joint("tip", 1, (0, 0, 1))))
+    sk = Skeleton(
+        (
+            Joint("root", -1, (0, 0, 0)),
+            Joint("b", 0, (0, 0, 0), ("Xrotation",), "X", axis=(90.0, 0.0, 0.0), axis_order="ZYX"),
+            Joint("tip", 1, (0, 0, 1)),
+        )
+    )
     pos, _ = forward_kinematics(sk, np.array([[90.0]]))
     # rotation of 90 deg about world Y takes +Z to +X
     np.testing.assert_allclose(pos[0, 2], [1, 0, 0], atol=1e-12)
@@ -45,8 +51,11 @@ def test_bone_lengths_constant_and_matrices_orthonormal(walk_bvh, walk_amc):
         pos = m.positions()
         sk = m.skeleton
         bones = np.linalg.norm(pos[:, 1:] - pos[:, sk.parents[1:]], axis=2)
-        np.testing.assert_allclose(bones, np.broadcast_to(np.linalg.norm(sk.offsets[1:], axis=1), bones.shape),
-                                   atol=1e-9 * sk.units_per_metre * 100)
+        np.testing.assert_allclose(
+            bones,
+            np.broadcast_to(np.linalg.norm(sk.offsets[1:], axis=1), bones.shape),
+            atol=1e-9 * sk.units_per_metre * 100,
+        )
         rot = global_matrices(sk, m.channels[:20])
         np.testing.assert_allclose(np.linalg.det(rot), 1.0, atol=1e-12)
 

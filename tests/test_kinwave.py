@@ -4,8 +4,6 @@ each technique the codec claims does what it claims."""
 
 from __future__ import annotations
 
-import io
-
 import numpy as np
 import pytest
 
@@ -13,7 +11,6 @@ from mocodec import moc, ratecontrol
 from mocodec.codecs import get_codec
 from mocodec.codecs.kinwave.codec import _Encoder
 from mocodec.errors import CodecError
-from mocodec.formats import container
 from mocodec.kinematics import forward_kinematics
 from mocodec.metrics.pose import shell_errors
 
@@ -22,10 +19,9 @@ def _errors(original, decoded):
     sk = original.skeleton
     cm = 100.0 / sk.units_per_metre
     p0, q0 = forward_kinematics(sk, original.channels)
-    p1, q1 = forward_kinematics(decoded.skeleton, decoded.channels)        # a file's, offsets rounded
+    p1, q1 = forward_kinematics(decoded.skeleton, decoded.channels)  # a file's, offsets rounded
     joint = np.linalg.norm((p1 - p0) * cm, axis=2)
-    return {"joint": joint.max(), "mean": joint.mean(),
-            "shell": shell_errors(sk, p0 * cm, q0, p1 * cm, q1).max}
+    return {"joint": joint.max(), "mean": joint.mean(), "shell": shell_errors(sk, p0 * cm, q0, p1 * cm, q1).max}
 
 
 @pytest.mark.parametrize("measure", ["joint", "shell", "mean"])
@@ -36,18 +32,7 @@ def test_error_bound_holds_on_the_decoded_file(walk_bvh, walk_amc, measure, boun
         decoded = moc.unpack(moc.pack(motion, codec))
         err = _errors(motion, decoded)[measure]
         assert err <= bound
-        assert err >= 0.5 * bound            # and the search does not waste bits far below it
-
-
-def test_format_1_payloads_still_decode(walk_bvh):
-    """A file written before the approximation bands were coded as differences (format 1, the
-    first 160 frames of the walk at max joint error 0.5 cm) decodes within its bound."""
-    from conftest import DATA
-    from mocodec.codecs.base import read_envelope
-    data = (DATA / "kinwave_format1.moc").read_bytes()
-    chunk = container.open_container(io.BytesIO(data), len(data), "format 1").read_chunk(0)
-    assert read_envelope(chunk)[2][0] == 1
-    assert _errors(walk_bvh[:160], moc.unpack(data))["joint"] <= 0.5
+        assert err >= 0.5 * bound  # and the search does not waste bits far below it
 
 
 def test_looser_bounds_give_smaller_files(walk_amc):
@@ -74,7 +59,7 @@ def test_bit_rate_is_hit_within_two_percent(walk_amc):
         codec = get_codec("kinwave", bits_per_second=bps)
         payload = codec.encode(walk_amc)
         achieved = len(payload) * 8 / walk_amc.duration
-        assert abs(achieved - bps) <= 0.02 * bps + 8 * 20 / walk_amc.duration      # + the 17-byte envelope
+        assert abs(achieved - bps) <= 0.02 * bps + 8 * 20 / walk_amc.duration  # + the 17-byte envelope
 
 
 @pytest.mark.parametrize("target,value", [("ratio", 40.0), ("bitrate", 9000.0)])
@@ -103,11 +88,12 @@ def test_keyframes_are_chosen_by_cost_and_keep_the_bound(walk_amc):
     """A bind pose before the walk is coded as a keyframe (a pass with it is smaller), the
     walk alone has none; either way the bound holds."""
     from mocodec.reexpress import with_bind_frame
+
     bound = with_bind_frame(walk_amc)
     codec = get_codec("kinwave", max_error_cm=0.3)
     assert _Encoder(codec, bound).lay.starts[:2].tolist() == [0, 1]
     assert _Encoder(codec, walk_amc).keyframes == 0
-    decoded = codec.decode(codec.encode(bound), bound.skeleton)
+    decoded = codec.decode(codec.encode(bound), bound.skeleton, bound.num_frames, bound.fps)
     assert _errors(bound, decoded)["joint"] <= 0.3
 
 
@@ -115,14 +101,14 @@ def test_constant_channels_cost_almost_nothing(walk_amc):
     still = walk_amc.with_channels(np.tile(walk_amc.channels[5], (walk_amc.num_frames, 1)))
     payload = get_codec("kinwave", max_error_cm=0.01).encode(still)
     assert len(payload) < 300
-    decoded = get_codec("kinwave").decode(payload, still.skeleton)
+    decoded = get_codec("kinwave").decode(payload, still.skeleton, still.num_frames, still.fps)
     assert _errors(still, decoded)["joint"] <= 0.01
 
 
 @pytest.mark.parametrize("frames", [1, 2, 3, 130])
 def test_short_clips(walk_amc, frames):
     clip = walk_amc[:frames]
-    decoded = get_codec("kinwave").decode(get_codec("kinwave").encode(clip), clip.skeleton)
+    decoded = get_codec("kinwave").decode(get_codec("kinwave").encode(clip), clip.skeleton, clip.num_frames, clip.fps)
     assert decoded.num_frames == frames and _errors(clip, decoded)["joint"] <= 0.5
 
 
@@ -131,7 +117,7 @@ def test_streaming_sends_one_payload_per_window_within_the_bound(walk_amc):
     enc, dec = codec.encoder(walk_amc.skeleton, walk_amc.fps), codec.decoder(walk_amc.skeleton, walk_amc.fps)
     packets = []
     for f in range(0, walk_amc.num_frames, 10):
-        packets += enc.push(walk_amc.channels[f:f + 10])
+        packets += enc.push(walk_amc.channels[f : f + 10])
         assert len(packets) == (f + 10) // 64 or f + 10 > walk_amc.num_frames
     packets += enc.flush()
     out = np.vstack([dec.push(p) for p in packets])
@@ -161,7 +147,7 @@ def _seam_jerk_ratio(motion, decoded, window=128):
     jerk = np.linalg.norm(np.diff(p, n=3, axis=0), axis=2).mean(axis=1)
     seam = np.zeros(len(jerk), dtype=bool)
     for k in range(window, motion.num_frames, window):
-        seam[k - 3:k + 1] = True
+        seam[k - 3 : k + 1] = True
     return jerk[seam].mean() / jerk[~seam].mean()
 
 
@@ -170,7 +156,10 @@ def test_segment_seams_are_smoothed(martial_amc, walk_bvh):
     (07_03) what it is elsewhere at this bound; smoothed, 12x and 4x."""
     for motion, most in ((martial_amc, 25.0), (walk_bvh, 8.0)):
         codec = get_codec("kinwave", max_error_cm=1.0, error_measure="mean", window=128)
-        assert _seam_jerk_ratio(motion, codec.decode(codec.encode(motion), motion.skeleton)) < most
+        assert (
+            _seam_jerk_ratio(motion, codec.decode(codec.encode(motion), motion.skeleton, motion.num_frames, motion.fps))
+            < most
+        )
 
 
 def test_time_adaptive_steps_shrink_max_error_files(walk_amc):
@@ -178,16 +167,18 @@ def test_time_adaptive_steps_shrink_max_error_files(walk_amc):
     coarser steps and the bound still holds; under a shell bound the file is smaller than with
     one scale (2%; over the shared clips 0.1-2.5% at shell and joint bounds, docs/kinwave.md)."""
     from mocodec.codecs.kinwave.codec import FLAG_OFFSETS
+
     for measure in ("shell", "joint"):
-        codec = get_codec("kinwave", max_error_cm=0.5, error_measure=measure, window=128)     # 4 segments
+        codec = get_codec("kinwave", max_error_cm=0.5, error_measure=measure, window=128)  # 4 segments
         payload = codec.encode(walk_amc)
-        assert payload[17 + 1] & FLAG_OFFSETS
-        decoded = codec.decode(payload, walk_amc.skeleton)
+        assert payload[1] & FLAG_OFFSETS
+        decoded = codec.decode(payload, walk_amc.skeleton, walk_amc.num_frames, walk_amc.fps)
         assert decoded.num_frames == walk_amc.num_frames
         assert _errors(walk_amc, decoded)[measure] <= 0.5
-    single = _Encoder(codec := get_codec("kinwave", max_error_cm=0.5, error_measure="shell", window=128),
-                      walk_amc)._to_bound(0.5)
-    assert len(codec.encode(walk_amc)) < len(codec.wrap(single, walk_amc.num_frames, walk_amc.fps))
+    single = _Encoder(
+        codec := get_codec("kinwave", max_error_cm=0.5, error_measure="shell", window=128), walk_amc
+    )._to_bound(0.5)
+    assert len(codec.encode(walk_amc)) < len(single)
 
 
 def test_joint_feedback_coarsens_joints_with_slack(walk_amc):
@@ -199,7 +190,10 @@ def test_joint_feedback_coarsens_joints_with_slack(walk_amc):
     for feedback in (True, False):
         codec = get_codec("kinwave", max_error_cm=0.1, error_measure="shell", joint_feedback=feedback, window=128)
         payload = codec.encode(walk_amc)
-        assert _errors(walk_amc, codec.decode(payload, walk_amc.skeleton))["shell"] <= 0.1
+        assert (
+            _errors(walk_amc, codec.decode(payload, walk_amc.skeleton, walk_amc.num_frames, walk_amc.fps))["shell"]
+            <= 0.1
+        )
         sizes[feedback] = len(payload)
     assert sizes[True] < 0.9 * sizes[False]
 
@@ -209,14 +203,19 @@ def test_the_final_slack_rounds_coarsen_quiet_joints_within_the_bound(walk_amc, 
     their codes, with or without the joint feedback (17% and 4% smaller at max shell 0.1 cm on
     the AMC walk), and the bound holds."""
     from mocodec.codecs.kinwave import codec as kinwave
+
     sizes = {}
     for rounds in (kinwave.SLACK_PASSES, 0):
         monkeypatch.setattr(kinwave, "SLACK_PASSES", rounds)
         for feedback in (True, False):
-            codec = get_codec("kinwave", max_error_cm=0.1, error_measure="shell", joint_feedback=feedback,
-                              segment_steps=False)
+            codec = get_codec(
+                "kinwave", max_error_cm=0.1, error_measure="shell", joint_feedback=feedback, segment_steps=False
+            )
             payload = codec.encode(walk_amc)
-            assert _errors(walk_amc, codec.decode(payload, walk_amc.skeleton))["shell"] <= 0.1
+            assert (
+                _errors(walk_amc, codec.decode(payload, walk_amc.skeleton, walk_amc.num_frames, walk_amc.fps))["shell"]
+                <= 0.1
+            )
             sizes[rounds > 0, feedback] = len(payload)
     assert sizes[True, False] < 0.9 * sizes[False, False]
     assert sizes[True, True] < 0.98 * sizes[False, True]
@@ -230,22 +229,32 @@ def test_coding_forms_shrink_files_within_the_bound(walk_amc):
     from conftest import DATA
     from mocodec import load
     from mocodec.codecs.kinwave.codec import FLAG_FORMS, _three_angle_groups
+
     run = load(DATA / "09_02.bvh")
     for measure in ("mean", "joint"):
         codec = get_codec("kinwave", max_error_cm=0.5, error_measure=measure)
         forms = codec.encode(run)
         euler = get_codec("kinwave", max_error_cm=0.5, error_measure=measure, rotation_vectors=False).encode(run)
-        assert forms[17 + 1] & FLAG_FORMS and len(forms) < 0.96 * len(euler)
-        assert _errors(run, codec.decode(forms, run.skeleton))[measure] <= 0.5
+        assert forms[1] & FLAG_FORMS and len(forms) < 0.96 * len(euler)
+        assert _errors(run, codec.decode(forms, run.skeleton, run.num_frames, run.fps))[measure] <= 0.5
     sk = walk_amc.skeleton
     chosen = _Encoder(get_codec("kinwave"), walk_amc).forms
-    assert all(not sk.joints[sk.channel_joints[g[0]]].has_axis
-               for form, (g, _) in zip(chosen, _three_angle_groups(sk)) if form)
+    assert all(
+        not sk.joints[sk.channel_joints[g[0]]].has_axis for form, (g, _) in zip(chosen, _three_angle_groups(sk)) if form
+    )
     mean = get_codec("kinwave", error_measure="mean")
-    with_axes = [form for form, (g, _) in zip(_Encoder(mean, walk_amc).forms, _three_angle_groups(sk))
-                 if sk.joints[sk.channel_joints[g[0]]].has_axis]
+    with_axes = [
+        form
+        for form, (g, _) in zip(_Encoder(mean, walk_amc).forms, _three_angle_groups(sk))
+        if sk.joints[sk.channel_joints[g[0]]].has_axis
+    ]
     assert any(with_axes)
-    assert _errors(walk_amc, mean.decode(mean.encode(walk_amc), walk_amc.skeleton))["mean"] <= 0.5
+    assert (
+        _errors(walk_amc, mean.decode(mean.encode(walk_amc), walk_amc.skeleton, walk_amc.num_frames, walk_amc.fps))[
+            "mean"
+        ]
+        <= 0.5
+    )
 
 
 def test_segment_offsets_keep_the_encoder_bit_exact(walk_bvh):
@@ -260,6 +269,7 @@ def test_an_isolated_glitch_frame_is_coded_apart(walk_bvh):
     """One frame 25 degrees off on every angle (a glitch) is found, coded apart (flag 128),
     and costs a few percent instead of the wavelet's 60%; the bound holds on the glitch too."""
     from mocodec.codecs.kinwave.codec import FLAG_ISOLATED
+
     glitch = walk_bvh.channels.copy()
     glitch[200] += np.where(walk_bvh.skeleton.rotation_mask, 25.0, 5.0)
     spiked = walk_bvh.with_channels(glitch)
@@ -267,25 +277,24 @@ def test_an_isolated_glitch_frame_is_coded_apart(walk_bvh):
     assert _Encoder(codec, spiked).isolated.tolist() == [200]
     assert _Encoder(codec, walk_bvh).isolated.size == 0
     payload = codec.encode(spiked)
-    assert payload[17 + 1] & FLAG_ISOLATED
-    assert _errors(spiked, codec.decode(payload, spiked.skeleton))["shell"] <= 1.0
+    assert payload[1] & FLAG_ISOLATED
+    assert _errors(spiked, codec.decode(payload, spiked.skeleton, spiked.num_frames, spiked.fps))["shell"] <= 1.0
     plain = get_codec("kinwave", max_error_cm=1.0, error_measure="shell", keyframes=False).encode(spiked)
     assert len(payload) < 0.8 * len(plain)
     assert len(payload) < 1.1 * len(codec.encode(walk_bvh))
 
 
 def test_a_damaged_isolated_frame_count_is_refused(walk_bvh):
-    from mocodec.codecs.base import read_envelope
     from mocodec.errors import CorruptStreamError
+
     glitch = walk_bvh.channels.copy()
     glitch[100] += np.where(walk_bvh.skeleton.rotation_mask, 25.0, 5.0)
     codec = get_codec("kinwave", max_error_cm=1.0)
-    payload = codec.encode(walk_bvh.with_channels(glitch))
-    frames, fps, body = read_envelope(payload)
+    body = codec.encode(walk_bvh.with_channels(glitch))
     for count in (0, 200):
         bad = body[:6] + bytes([count]) + body[7:]
         with pytest.raises(CorruptStreamError):
-            codec.decode(codec.wrap(bad, frames, fps), walk_bvh.skeleton)
+            codec.decode(bad, walk_bvh.skeleton, walk_bvh.num_frames, walk_bvh.fps)
 
 
 @pytest.mark.parametrize("turn", [(0.0, 90.0, 0.0), (30.0, -20.0, 10.0)])

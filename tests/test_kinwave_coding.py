@@ -19,16 +19,22 @@ from mocodec.human import human_model
 from mocodec.kinematics import channel_plan, forward_kinematics
 
 
-@given(seed=st.integers(0, 2**32 - 1), frames=st.integers(1, 700), keyframe=st.booleans(),
-       spread=st.sampled_from([0.0, 0.3, 3.0, 1e5]), rev=st.sampled_from([1, 2]))
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    frames=st.integers(1, 700),
+    keyframe=st.booleans(),
+    spread=st.sampled_from([0.0, 0.3, 3.0, 1e5]),
+    rev=st.sampled_from([1, 2]),
+)
 def test_coefficient_coder_round_trips(seed, frames, keyframe, spread, rev):
     rng = np.random.default_rng(seed)
     lay = trendwave.layout(frames, 128, 4, keyframe)
     channels = 5
     const = (rng.random(channels) < 0.3).astype(np.int64)
     knots = np.cumsum(rng.integers(-3000, 3000, (channels, lay.num_knots)), axis=1)
-    coeffs = np.round(rng.laplace(0, spread, (channels, lay.num_coeffs)) if spread else
-                      np.zeros((channels, lay.num_coeffs))).astype(np.int64)
+    coeffs = np.round(
+        rng.laplace(0, spread, (channels, lay.num_coeffs)) if spread else np.zeros((channels, lay.num_coeffs))
+    ).astype(np.int64)
     coeffs[const == 1] = 0
     side = (rng.integers(0, 256, rng.integers(0, 50)), rng.integers(-128, 128, rng.integers(0, 9)))
     data = coefcoder.encode(const, knots, coeffs, lay.padded, lay.levels, revision=rev, side=side)
@@ -48,7 +54,7 @@ def test_differences_code_a_smooth_approximation_band_smaller():
     rng = np.random.default_rng(3)
     coeffs = np.zeros((4, lay.num_coeffs), dtype=np.int64)
     for o, n, lev in zip(np.cumsum(np.r_[0, lay.padded[:-1]]), lay.padded, lay.levels):
-        coeffs[:, o:o + (n >> lev)] = np.round(200 + np.cumsum(rng.normal(0, 3, (4, n >> lev)), axis=1))
+        coeffs[:, o : o + (n >> lev)] = np.round(200 + np.cumsum(rng.normal(0, 3, (4, n >> lev)), axis=1))
     args = (np.zeros(4, np.int64), np.zeros((4, lay.num_knots), np.int64), coeffs, lay.padded, lay.levels)
     plain, delta = coefcoder.encode(*args), coefcoder.encode(*args, revision=2)
     assert len(delta) < 0.8 * len(plain)
@@ -84,9 +90,10 @@ def test_coefficient_coder_adapts_to_sparse_data():
     lay = trendwave.layout(1024, 128, 4, False)
     coeffs = np.zeros((10, lay.num_coeffs), dtype=np.int64)
     coeffs[:, ::97] = 3
-    data = coefcoder.encode(np.zeros(10, np.int64), np.zeros((10, lay.num_knots), np.int64), coeffs, lay.padded,
-                            lay.levels)
-    assert len(data) * 8 < 0.2 * coeffs.size       # 1% nonzero: about 0.09 bits of entropy each for the zero flags
+    data = coefcoder.encode(
+        np.zeros(10, np.int64), np.zeros((10, lay.num_knots), np.int64), coeffs, lay.padded, lay.levels
+    )
+    assert len(data) * 8 < 0.2 * coeffs.size  # 1% nonzero: about 0.09 bits of entropy each for the zero flags
     out = coefcoder.decode(bytes(range(256)) * 3, 10, lay.num_knots, lay.padded, lay.levels, 2, (5, 3))
     assert out.coeffs.shape == coeffs.shape and [len(q) for q in out.side] == [5, 3]
 
@@ -106,8 +113,8 @@ def test_trend_and_wavelets_reconstruct_exactly():
     x = np.cumsum(rng.normal(size=(3, 333)), axis=1)
     knots = x[:, lay.knot_frames]
     tr = trendwave.trend(knots, lay)
-    assert np.allclose(tr[:, lay.knot_frames], knots)                       # passes through its knots
-    assert np.abs(np.diff(tr, axis=1)).max() < np.abs(np.diff(x, axis=1)).max() + np.ptp(x)   # no jumps
+    assert np.allclose(tr[:, lay.knot_frames], knots)  # passes through its knots
+    assert np.abs(np.diff(tr, axis=1)).max() < np.abs(np.diff(x, axis=1)).max() + np.ptp(x)  # no jumps
     residual = x - tr
     back = trendwave.synthesise(trendwave.analyse(residual, lay), lay)
     assert np.allclose(back, residual, atol=1e-10)
@@ -130,16 +137,20 @@ def test_closed_loop_targets_restore_the_global_orientation(walk_bvh, walk_amc):
             # a parent decoded 2 degrees off about a random axis
             axis = rng.normal(size=3)
             wrong = rotations.quat_multiply(quat[:, p], rotations.axis_angle_to_quat(axis / np.linalg.norm(axis), 2.0))
-            angles = closedloop.target_angles(motion.channels[:, idx], axes, np.ones(k, bool), plan.axis_quat[j],
-                                              plan.has_axis[j], wrong, quat[:, j])
+            angles = closedloop.target_angles(
+                motion.channels[:, idx], axes, np.ones(k, bool), plan.axis_quat[j], plan.has_axis[j], wrong, quat[:, j]
+            )
             glob = closedloop.compose(angles, axes, plan.axis_quat[j], plan.has_axis[j], wrong)
             err = np.degrees(rotations.quat_distance(glob, quat[:, j]))
-            before = np.degrees(rotations.quat_distance(
-                closedloop.compose(motion.channels[:, idx], axes, plan.axis_quat[j], plan.has_axis[j], wrong),
-                quat[:, j]))
-            if k == 3:     # one Gauss-Newton step: what is left is second order in the 2 degrees
+            before = np.degrees(
+                rotations.quat_distance(
+                    closedloop.compose(motion.channels[:, idx], axes, plan.axis_quat[j], plan.has_axis[j], wrong),
+                    quat[:, j],
+                )
+            )
+            if k == 3:  # one Gauss-Newton step: what is left is second order in the 2 degrees
                 assert err.max() < 0.05 and (err < before / 40).all(), sk.names[j]
-            else:      # fewer DOFs: the best reachable rotation, never worse than doing nothing
+            else:  # fewer DOFs: the best reachable rotation, never worse than doing nothing
                 assert (err <= before + 1e-9).all(), sk.names[j]
 
 
@@ -150,8 +161,13 @@ def test_compose_matches_forward_kinematics(walk_amc):
     for j in range(1, len(sk)):
         k = int((plan.rot_index[j] >= 0).sum())
         if k:
-            q = closedloop.compose(walk_amc.channels[:, plan.rot_index[j, :k]], plan.rot_axis[j, :k],
-                                   plan.axis_quat[j], plan.has_axis[j], quat[:, sk.parents[j]])
+            q = closedloop.compose(
+                walk_amc.channels[:, plan.rot_index[j, :k]],
+                plan.rot_axis[j, :k],
+                plan.axis_quat[j],
+                plan.has_axis[j],
+                quat[:, sk.parents[j]],
+            )
             assert np.degrees(rotations.quat_distance(q, quat[:, j])).max() < 1e-4
 
 
@@ -165,7 +181,7 @@ def test_allocation_meets_its_model_bound_and_favours_long_levers(walk_amc, mode
     # modelled error of every point (or the mean of its norm) is at most 1
     lev2 = kinalloc._points(sk, True, mode)
     u = np.where(coded, np.array(angles) * np.radians(np.nan_to_num(rot)) ** 2, 0.0)
-    err2 = u @ lev2 + 3 * trans ** 2
+    err2 = u @ lev2 + 3 * trans**2
     worst = np.sqrt(err2).mean() if mode == "mean" else err2.max()
     assert worst == pytest.approx(1.0, rel=1e-3)
     # a femur (long bones below) gets a finer step than a toe
@@ -182,18 +198,25 @@ def test_compact_skeleton_is_exact_and_small(which, walk_bvh, walk_amc):
     back = unpack_skeleton(data)
     assert container.skeleton_id(back) == container.skeleton_id(sk)
     import zlib
-    assert len(zlib.compress(data, 9)) < 0.75 * len(zlib.compress(
-        str(container.skeleton_to_dict(sk)).encode(), 9))
+
+    assert len(zlib.compress(data, 9)) < 0.75 * len(zlib.compress(str(container.skeleton_to_dict(sk)).encode(), 9))
 
 
 def test_compact_skeleton_keeps_mirrored_and_signed_zero_offsets_exact():
     from mocodec.skeleton import Joint, Skeleton
-    joints = (Joint("root", -1, (0.0, 0.0, 0.0)), Joint("a", 0, (1.25, -0.0, 2.0)), Joint("b", 0, (-1.25, 0.0, 2.0)),
-              Joint("c", 0, (-1.25, -0.0, 2.0)), Joint("d", 0, (0.6 * 2.68184, 0.1 * 2.68184, 0.3 * 2.68184)))
+
+    joints = (
+        Joint("root", -1, (0.0, 0.0, 0.0)),
+        Joint("a", 0, (1.25, -0.0, 2.0)),
+        Joint("b", 0, (-1.25, 0.0, 2.0)),
+        Joint("c", 0, (-1.25, -0.0, 2.0)),
+        Joint("d", 0, (0.6 * 2.68184, 0.1 * 2.68184, 0.3 * 2.68184)),
+    )
     sk = Skeleton(joints, 100.0, "mirrors")
     back = unpack_skeleton(pack_skeleton(sk))
-    assert [np.copysign(1.0, j.offset) .tolist() for j in back.joints] == \
-        [np.copysign(1.0, j.offset).tolist() for j in joints]
+    assert [np.copysign(1.0, j.offset).tolist() for j in back.joints] == [
+        np.copysign(1.0, j.offset).tolist() for j in joints
+    ]
     assert container.skeleton_id(back) == container.skeleton_id(sk)
 
 
@@ -203,6 +226,7 @@ def test_rounded_offsets_are_written_in_fixed_point(walk_bvh, walk_amc):
     import zlib
 
     from mocodec.formats.skeleton_bin import round_offsets
+
     for motion in (walk_bvh, walk_amc):
         rounded = round_offsets(motion.skeleton, 0.001)
         data = pack_skeleton(rounded)
@@ -221,6 +245,7 @@ def test_every_coding_form_round_trips_continuously(walk_bvh, form):
     principal range), in the file's order or a proper one."""
     from mocodec.codecs.shared import rotvec
     from mocodec.reexpress import with_euler_orders
+
     for motion in (walk_bvh, with_euler_orders(walk_bvh, "YXY")):
         sk = motion.skeleton
         rows, orders = [], []
@@ -239,8 +264,8 @@ def test_every_coding_form_round_trips_continuously(walk_bvh, form):
         forms = np.full(len(orders), form)
         back = rotvec.from_forms(rotvec.to_forms(euler, orders, forms, means, pre=pre), orders, forms, means, pre)
         turn = rotations.quat_distance(quats, rotvec.euler_quats(back, orders))
-        assert turn.max() < 1e-6                                        # arccos: 3e-8 rad of noise
-        if orders[0][0] != orders[0][2]:       # at a proper order's lock the split of its angles is free
+        assert turn.max() < 1e-6  # arccos: 3e-8 rad of noise
+        if orders[0][0] != orders[0][2]:  # at a proper order's lock the split of its angles is free
             assert np.abs(back - euler).max() < 1e-9
 
 

@@ -1,7 +1,7 @@
-"""kinwave's payload format 3 pinned: a checked-in file (a CMU walk re-expressed as another
-pipeline writes it: a MotionBuilder dummy root at (0, -90, 0), a bind pose in frame 0, a
-proper Euler order on the legs) must decode to the same channels, and encoding its input with
-the same settings must give the very same bytes.
+"""A whole .moc file pinned (container version 1, kinwave payload format 1): a checked-in
+file (a CMU walk re-expressed as another pipeline writes it: a MotionBuilder dummy root at
+(0, -90, 0), a bind pose in frame 0, a proper Euler order on the legs) must decode to the
+same channels, and encoding its input with the same settings must give the very same bytes.
 
 Regenerate, after a deliberate format change only: ``python tests/test_kinwave_golden.py``.
 """
@@ -21,7 +21,7 @@ from mocodec.kinematics import forward_kinematics
 from mocodec.metrics.pose import shell_errors
 
 DATA = Path(__file__).parent / "data"
-GOLDEN = DATA / "kinwave_format3.moc"
+GOLDEN = DATA / "kinwave_reexpressed.moc"
 KNOBS = {"max_error_cm": 0.5, "error_measure": "shell"}
 DECODED_SHA256 = "62fb5c5d2de67706a5946b613599737c2e792804c9487099a7d948a57e0e99b7"
 
@@ -29,8 +29,9 @@ DECODED_SHA256 = "62fb5c5d2de67706a5946b613599737c2e792804c9487099a7d948a57e0e99
 def _input():
     walk = load(DATA / "07_03.bvh")[:200]
     legs = {name: "XYX" for name in ("lThigh", "lShin", "rThigh", "rShin")}
-    return reexpress.with_bind_frame(reexpress.with_dummy_root(reexpress.with_euler_orders(walk, legs),
-                                                               (0.0, -90.0, 0.0), position_channels=True))
+    return reexpress.with_bind_frame(
+        reexpress.with_dummy_root(reexpress.with_euler_orders(walk, legs), (0.0, -90.0, 0.0), position_channels=True)
+    )
 
 
 def _decoded_digest(data: bytes) -> str:
@@ -47,8 +48,8 @@ def test_the_golden_file_decodes_to_the_same_channels_within_its_bound():
     p0, q0 = forward_kinematics(sk, original.channels)
     p1, q1 = forward_kinematics(decoded.skeleton, decoded.channels)
     assert shell_errors(sk, p0 * cm, q0, p1 * cm, q1).max <= KNOBS["max_error_cm"]
-    assert data[4] == 4                                                     # .moc version 4
-    assert container.open_container(io.BytesIO(data), len(data), "golden").read_chunk(0)[0] == 3   # payload format 3
+    assert data[4] == 1  # .moc version 1
+    assert container.open_container(io.BytesIO(data), len(data), "golden").read_chunk(0)[0] == 1  # payload format 1
 
 
 def test_encoding_the_golden_input_gives_the_same_bytes():

@@ -34,14 +34,14 @@ def _psnr_pair(x, y, fps=FPS):
 def test_waveform_measures_known_answers():
     n = 1200
     t = np.arange(n) / FPS
-    x = 40.0 * np.sin(2 * np.pi * 0.5 * t)          # range 80, energy per sample 800
+    x = 40.0 * np.sin(2 * np.pi * 0.5 * t)  # range 80, energy per sample 800
     c = 2.0
     dof = dof_errors(x[:, None], x[:, None] + c)
     assert dof.mse[0] == pytest.approx(c * c)
     assert dof.rmse[0] == pytest.approx(c)
     assert dof.nmse[0] == pytest.approx(c * c / 800.0, rel=1e-3)
     assert dof.range[0] == pytest.approx(80.0, rel=1e-4)
-    assert dof.pmse[0] == pytest.approx(c * c / 80.0 ** 2, rel=1e-3)
+    assert dof.pmse[0] == pytest.approx(c * c / 80.0**2, rel=1e-3)
     assert dof.psnr[0] == pytest.approx(20 * np.log10(80.0 / c), abs=1e-3)
     assert dof.nsnr[0] == pytest.approx(-10 * np.log10(c * c / 800.0), abs=1e-2)
     assert dof.max_abs[0] == pytest.approx(c) and dof.mean_abs[0] == pytest.approx(c)
@@ -60,10 +60,10 @@ def test_constant_and_exact_dofs_are_reported_apart():
     orig = np.stack([np.sin(t), np.full_like(t, 5.0), np.cos(t) * 10, t * 1e-9], axis=1)
     dec = orig + np.array([0.01, 0.5, 0.0, 0.0])
     dof = dof_errors(orig, dec)
-    assert dof.constant.tolist() == [False, True, False, True]      # 1e-9 range is float noise
+    assert dof.constant.tolist() == [False, True, False, True]  # 1e-9 range is float noise
     assert dof.exact.tolist() == [False, False, True, False]
     assert np.isnan(dof.pmse[1]) and np.isinf(dof.psnr[2])
-    assert dof.body_psnr == pytest.approx(dof.psnr[0])              # only the varying, inexact DOF
+    assert dof.body_psnr == pytest.approx(dof.psnr[0])  # only the varying, inexact DOF
     assert np.isfinite(dof.pooled_psnr)
     assert dof_errors(orig, orig).body_psnr == np.inf
 
@@ -88,7 +88,7 @@ def test_bands_separate_frequencies():
 
 def test_edges_above_nyquist_leave_empty_bands():
     e = np.random.default_rng(2).normal(size=(100, 2))
-    bands = band_split(e, 10.0)                # Nyquist 5 Hz: the 7 Hz edge is dropped
+    bands = band_split(e, 10.0)  # Nyquist 5 Hz: the 7 Hz edge is dropped
     assert not bands[3].any()
     assert np.allclose(sum(bands), e)
 
@@ -155,9 +155,9 @@ def test_root_translation_moves_positions_but_not_configurations(human):
     torso group, which holds the root translation DOFs, sees it."""
     sk = human.skeleton
     moved = human.channels.copy()
-    moved[:, sk.channel_index(sk.names[0] + ".Xposition")] += 0.05         # metres
+    moved[:, sk.channel_index(sk.names[0] + ".Xposition")] += 0.05  # metres
     result = compare(human, human.with_channels(moved))
-    assert result.position.mean == pytest.approx(np.full(len(result.position.groups), 0.05 ** 2))
+    assert result.position.mean == pytest.approx(np.full(len(result.position.groups), 0.05**2))
     conf = dict(zip(result.configuration.groups, result.configuration.mean))
     assert conf["torso"] > 0
     assert max(v for g, v in conf.items() if g != "torso") < 1e-20
@@ -167,26 +167,32 @@ def test_root_translation_moves_positions_but_not_configurations(human):
 
 def test_configuration_error_sees_twist_that_positions_miss():
     """The upper-arm twist of §6.1.4: the elbow stays put, the joint angles do not."""
-    sk = Skeleton([Joint("root", -1, (0, 0, 0), ("Xrotation",), "X"),
-                   Joint("arm", 0, (0, 1, 0), ("Yrotation",), "Y", body_part="left_arm"),
-                   Joint("elbow", 1, (0, 1, 0), (), "", body_part="left_arm")], units_per_metre=1.0)
+    sk = Skeleton(
+        [
+            Joint("root", -1, (0, 0, 0), ("Xrotation",), "X"),
+            Joint("arm", 0, (0, 1, 0), ("Yrotation",), "Y", body_part="left_arm"),
+            Joint("elbow", 1, (0, 1, 0), (), "", body_part="left_arm"),
+        ],
+        units_per_metre=1.0,
+    )
     orig = Motion(sk, 30.0, np.zeros((10, 2)))
     twisted = orig.with_channels(np.column_stack([np.zeros(10), np.full(10, 30.0)]))
     result = compare(orig, twisted)
     g = result.position.groups.index("left_arm")
     assert result.position.mean[g] == pytest.approx(0.0, abs=1e-24)
     assert result.configuration.mean[list(result.configuration.groups).index("left_arm")] > 0
-    assert result.shell.max > 1.0                        # 3 cm points off the arm turn by 30 degrees
+    assert result.shell.max > 1.0  # 3 cm points off the arm turn by 30 degrees
 
 
 # ----- pose measures ---------------------------------------------------------------------------
 def test_shell_error_of_a_quarter_turn():
-    sk = Skeleton([Joint("a", -1, (0, 0, 0), ("Zrotation",), "Z"), Joint("b", 0, (0, 10, 0), (), "")],
-                  units_per_metre=100.0)
+    sk = Skeleton(
+        [Joint("a", -1, (0, 0, 0), ("Zrotation",), "Z"), Joint("b", 0, (0, 10, 0), (), "")], units_per_metre=100.0
+    )
     pos = np.zeros((1, 2, 3))
     q = np.tile([1.0, 0, 0, 0], (1, 2, 1))
     turned = q.copy()
-    turned[0, 0] = [np.cos(np.pi / 4), 0, 0, np.sin(np.pi / 4)]       # 90 degrees about z
+    turned[0, 0] = [np.cos(np.pi / 4), 0, 0, np.sin(np.pi / 4)]  # 90 degrees about z
     shell = pose.shell_errors(sk, pos, q, pos, turned, shell_cm=3.0)
     assert shell.max == pytest.approx(3.0 * np.sqrt(2))
 
@@ -202,7 +208,7 @@ def test_pose_measures_on_a_real_walk(walk_amc):
     units_per_cm = sk.units_per_metre / 100.0
     drift[:, sk.channel_index("root.Xposition")] += np.arange(len(drift)) / walk_amc.fps * 50 * units_per_cm
     slid = compare(walk_amc, walk_amc.with_channels(drift))
-    assert slid.feet.decoded_cm_s > same.feet.original_cm_s + 35          # 50 cm/s added drift
+    assert slid.feet.decoded_cm_s > same.feet.original_cm_s + 35  # 50 cm/s added drift
     noisy = walk_amc.with_channels(walk_amc.channels + np.random.default_rng(5).normal(0, 0.3, drift.shape))
     assert compare(walk_amc, noisy).jerk.ratio > 2
 
@@ -217,7 +223,7 @@ def test_up_axis_and_feet():
 def test_rms_jerk_of_a_cubic():
     t = np.arange(50) / FPS
     p = np.zeros((50, 1, 3))
-    p[:, 0, 0] = 100 * t ** 3                          # 100 cm * t^3: jerk 6 m/s^3
+    p[:, 0, 0] = 100 * t**3  # 100 cm * t^3: jerk 6 m/s^3
     assert pose.rms_jerk(p, FPS) == pytest.approx(6.0, rel=1e-6)
 
 
@@ -254,7 +260,7 @@ def test_compare_reports_serialise(walk_bvh):
     assert data["summary"]["constant_dofs"] > 0
     assert len(data["joints"]) == len(walk_bvh.skeleton) and len(data["dofs"]) == walk_bvh.num_channels
     assert 10 < data["summary"]["psnr_db"] < 60
-    assert data["summary"]["vpsnr_db"] < data["summary"]["psnr_db"]       # white noise: VPSNR is harsher
+    assert data["summary"]["vpsnr_db"] < data["summary"]["psnr_db"]  # white noise: VPSNR is harsher
     text = result.table()
     assert "VPSNR" in text and "left_arm" in text
     assert "rShldr" in result.per_joint_table()

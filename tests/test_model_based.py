@@ -42,7 +42,7 @@ def _rests_and_moves(fps: float, rest: float, move: float, count: int) -> tuple[
 
 # ----- segmentation (8.2) ------------------------------------------------------------------
 def test_posture_samples_every_d_of_the_distance():
-    x = np.stack([np.arange(100.0), np.zeros(100)], axis=1)          # 1 degree per frame
+    x = np.stack([np.arange(100.0), np.zeros(100)], axis=1)  # 1 degree per frame
     s = segmentation.posture_samples(x, 10.0)
     assert list(s.frames) == list(range(0, 100, 10)) + [99] and np.array_equal(s.known, s.frames)
     still = segmentation.posture_samples(np.zeros((100, 2)), 10.0, max_lag=30)
@@ -56,8 +56,8 @@ def test_gesture_samples_fall_where_the_motion_rests():
     s = segmentation.gesture_samples(x, fps)
     speed = np.abs(np.gradient(x[:, 0]))
     inner = s.frames[1:-1]
-    assert (speed[inner] < 0.2 * speed.max()).all()                  # samples where the motion rests
-    for rest in rests[1:-1]:                                         # every rest between moves has one
+    assert (speed[inner] < 0.2 * speed.max()).all()  # samples where the motion rests
+    for rest in rests[1:-1]:  # every rest between moves has one
         assert any(rest.start - 3 <= f < rest.stop for f in inner), rest
     assert (s.known >= s.frames).all()
     assert np.diff(s.frames).min() >= round(segmentation.GestureParams().min_length * fps)
@@ -65,7 +65,7 @@ def test_gesture_samples_fall_where_the_motion_rests():
 
 def test_gesture_segments_never_exceed_the_longest():
     fps = 30.0
-    x = np.stack([np.arange(300.0) * 2, np.zeros(300)], axis=1)      # steady motion: no rest at all
+    x = np.stack([np.arange(300.0) * 2, np.zeros(300)], axis=1)  # steady motion: no rest at all
     params = segmentation.GestureParams(max_length=1.0)
     s = segmentation.gesture_samples(x, fps, params)
     assert np.diff(s.frames).max() <= 30 and s.frames[0] == 0 and s.frames[-1] == 299
@@ -87,7 +87,7 @@ def test_hermite_keeps_lines_and_samples_and_is_smooth_at_unequal_lags():
     y = animate.hermite(times, values, 21)[:, 0]
     assert np.allclose(y[times], values[:, 0])
     fine = animate.hermite(times * 100, values, 2001)[:, 0]
-    for t in (400, 1400):                                            # one-sided derivatives agree
+    for t in (400, 1400):  # one-sided derivatives agree
         assert abs((fine[t] - fine[t - 1]) - (fine[t + 1] - fine[t])) < 1e-3
 
 
@@ -95,7 +95,7 @@ def test_hermite_slope_is_the_thesis_estimate_at_equal_lags():
     times = np.array([0, 1000, 2000])
     values = np.array([[0.0], [10.0], [40.0]])
     y = animate.hermite(times, values, 2001)[:, 0]
-    delta = 0.5 * (10.0 - 0.0) + 0.5 * (40.0 - 10.0)                 # (8-7) with s = 1/2 (8-8)
+    delta = 0.5 * (10.0 - 0.0) + 0.5 * (40.0 - 10.0)  # (8-7) with s = 1/2 (8-8)
     assert abs((y[1001] - y[999]) / 2 * 1000 - delta) < 0.01
 
 
@@ -120,7 +120,7 @@ def test_posture_table_entries_are_spaced_and_tables_are_deterministic(martial_a
     for k, g in enumerate(groups.parts):
         v = tables.posture_vectors(sk, groups, k)
         d = np.linalg.norm(v[:, None] - v[None], axis=2) + np.eye(len(v)) * 1e9
-        assert d.min() >= 0.03 - 2e-3, g.name                        # angle steps move entries a little
+        assert d.min() >= 0.03 - 2e-3, g.name  # angle steps move entries a little
         assert len(tables.gestures[k]) >= 1 and tables.gestures[k].shape[1] == motiontables.NORM
     assert all(len(p) >= 1 for p in tables.postures) and sum(len(p) for p in tables.postures) > len(groups.parts)
 
@@ -148,7 +148,7 @@ def test_codec_round_trips_and_is_deterministic(cid, walk30, walk_bvh):
         codec = get_codec(cid)
         data = codec.encode(clip)
         assert data == get_codec(cid).encode(clip)
-        out = codec.decode(data, clip.skeleton)
+        out = codec.decode(data, clip.skeleton, clip.num_frames, clip.fps)
         assert out.channels.shape == clip.channels.shape and np.isfinite(out.channels).all()
         s = compare(clip, out).summary()
         assert s["mean_joint_error_cm"] < 15 and s["vpsnr_db"] > 5, (cid, s)
@@ -159,23 +159,29 @@ def test_trained_tables_beat_nothing_and_reach_low_rates(walk30, martial_tables)
         external = get_codec(cid, tables=str(martial_tables))
         data = external.encode(walk30)
         bits_per_second = len(data) * 8 / (walk30.num_frames / walk30.fps)
-        assert bits_per_second < 2000, (cid, bits_per_second)        # the thesis: hundreds of bit/s
+        assert bits_per_second < 2000, (cid, bits_per_second)  # the thesis: hundreds of bit/s
         carried = get_codec(cid).encode(walk30)
-        assert len(carried) > 3 * len(data)                          # the carried tables cost their size
-        out = external.decode(data, walk30.skeleton)
+        assert len(carried) > 3 * len(data)  # the carried tables cost their size
+        out = external.decode(data, walk30.skeleton, walk30.num_frames, walk30.fps)
         held = walk30.with_channels(np.repeat(walk30.channels[:1], walk30.num_frames, axis=0))
-        assert compare(walk30, out).summary()["mean_joint_error_cm"] < \
-            0.5 * compare(walk30, held).summary()["mean_joint_error_cm"]
+        assert (
+            compare(walk30, out).summary()["mean_joint_error_cm"]
+            < 0.5 * compare(walk30, held).summary()["mean_joint_error_cm"]
+        )
         with pytest.raises(CodecError, match="none is given"):
-            get_codec(cid).decode(data, walk30.skeleton)
+            get_codec(cid).decode(data, walk30.skeleton, walk30.num_frames, walk30.fps)
 
 
 def test_quality_knobs_trade_rate_for_error(walk30, martial_tables):
     coarse, fine = get_codec("posture", d=60.0), get_codec("posture", d=8.0)
     assert len(fine.encode(walk30)) > len(coarse.encode(walk30))
     low, high = get_codec("hybrid", level=0), get_codec("hybrid", level=7)
-    e = [compare(walk30, c.decode(c.encode(walk30), walk30.skeleton)).summary()["mean_joint_error_cm"]
-         for c in (low, high)]
+    e = [
+        compare(walk30, c.decode(c.encode(walk30), walk30.skeleton, walk30.num_frames, walk30.fps)).summary()[
+            "mean_joint_error_cm"
+        ]
+        for c in (low, high)
+    ]
     assert e[1] < 0.7 * e[0] and len(high.encode(walk30)) > len(low.encode(walk30))
     rate = ratecontrol.measure(get_codec("hybrid", level=4), walk30).bitrate
     assert ratecontrol.tune(get_codec("hybrid"), walk30, "bitrate", rate).codec.config["level"] == 4
@@ -186,7 +192,9 @@ def test_gesture_falls_back_to_postures_when_no_gesture_fits(walk30, martial_tab
     none = get_codec("gesture", tables=str(martial_tables), e=0.0).encode(walk30)
     assert every != none
     for data in (every, none):
-        out = get_codec("gesture", tables=str(martial_tables)).decode(data, walk30.skeleton)
+        out = get_codec("gesture", tables=str(martial_tables)).decode(
+            data, walk30.skeleton, walk30.num_frames, walk30.fps
+        )
         assert np.isfinite(out.channels).all()
 
 
@@ -202,7 +210,9 @@ def test_payload_damage_is_caught(walk30, martial_tables):
     body = bytearray(data)
     body[30] ^= 0xFF
     with pytest.raises(CorruptStreamError):
-        get_codec("posture", tables=str(martial_tables)).decode(bytes(body), walk30.skeleton)
+        get_codec("posture", tables=str(martial_tables)).decode(
+            bytes(body), walk30.skeleton, walk30.num_frames, walk30.fps
+        )
 
 
 def test_cli_trains_tables_and_codes_with_them(tmp_path, capsys):
@@ -211,12 +221,11 @@ def test_cli_trains_tables_and_codes_with_them(tmp_path, capsys):
     assert main(["model", "info", str(tables)]) == 0
     assert "fingerprint" in capsys.readouterr().out
     moc = tmp_path / "w.moc"
-    assert main(["encode", str(DATA / "07_03.amc"), "--codec", "gesture", "--tables", str(tables),
-                 "-o", str(moc)]) == 0
+    assert main(["encode", str(DATA / "07_03.amc"), "--codec", "gesture", "--tables", str(tables), "-o", str(moc)]) == 0
     moved = tmp_path / "moved.moctb"
     tables.rename(moved)
     assert main(["decode", str(moc), "-o", str(tmp_path / "w.amc"), "--tables", str(moved)]) == 0
-    with pytest.raises(SystemExit) as missing:          # no -o FILE
+    with pytest.raises(SystemExit) as missing:  # no -o FILE
         main(["model", "train", "tables", str(DATA / "135_08.amc")])
     assert missing.value.code == 2
     capsys.readouterr()

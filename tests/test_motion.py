@@ -5,8 +5,13 @@ from mocodec import Joint, Motion, Skeleton, rotations as r
 
 
 def spinner():
-    return Skeleton((Joint("root", -1, (0, 0, 0), ("Xposition", "Zrotation", "Xrotation", "Yrotation"), "ZXY"),
-                     Joint("knee", 0, (0, -1, 0), ("Xrotation",), "X"), Joint("foot", 1, (0, -1, 0))))
+    return Skeleton(
+        (
+            Joint("root", -1, (0, 0, 0), ("Xposition", "Zrotation", "Xrotation", "Yrotation"), "ZXY"),
+            Joint("knee", 0, (0, -1, 0), ("Xrotation",), "X"),
+            Joint("foot", 1, (0, -1, 0)),
+        )
+    )
 
 
 def test_slicing_selection_and_sizes(walk_bvh):

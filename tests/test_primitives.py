@@ -26,7 +26,9 @@ def martial_db(martial_amc, tmp_path_factory):
 def _rotation_error(a: Motion, b: Motion) -> np.ndarray:
     """(frames, joints) angle (5.3) between the joint rotations of two motions."""
     lay = quatseg.layout(a.skeleton)
-    return rotations.quat_distance(quatseg.joint_quaternions(lay, a.channels), quatseg.joint_quaternions(lay, b.channels))
+    return rotations.quat_distance(
+        quatseg.joint_quaternions(lay, a.channels), quatseg.joint_quaternions(lay, b.channels)
+    )
 
 
 def test_partial_euler_angles_come_back():
@@ -59,7 +61,7 @@ def test_joint_quaternions_give_the_same_poses(walk_amc, walk_bvh):
 def test_segments_end_at_speed_extremes_within_bounds():
     fps, frames = 120.0, 600
     t = np.arange(frames) / fps
-    angle = 5 * np.sin(2 * np.pi * 1.5 * t) + 60 * t       # speed 60 + 47 cos: extremes every 40 frames
+    angle = 5 * np.sin(2 * np.pi * 1.5 * t) + 60 * t  # speed 60 + 47 cos: extremes every 40 frames
     q = rotations.euler_to_quat(np.stack([angle, 0 * t, 0 * t], 1), "ZYX")[:, None]
     g = quatseg.speed_change(q, fps)
     for max_len in (64, 32):
@@ -74,7 +76,7 @@ def test_segments_end_at_speed_extremes_within_bounds():
 
 
 def test_a_jump_gets_its_own_segment(walk_bvh):
-    lay = quatseg.layout(walk_bvh.skeleton)                       # frame 0 of the BVH is a T-pose
+    lay = quatseg.layout(walk_bvh.skeleton)  # frame 0 of the BVH is a T-pose
     q = quatseg.joint_quaternions(lay, walk_bvh.channels)
     segs = quatseg.chop(quatseg.speed_change(q, walk_bvh.fps), np.zeros(lay.count, dtype=np.int64), 32, True)
     first = [e for r, s, e in segs if s == 0 and r == lay.names.index("lShldr")]
@@ -88,7 +90,7 @@ def test_normalising_keeps_ends_and_linear_motion():
     normal = quatseg.normalise(q, segs)
     assert np.allclose(normal[0, 0], q[0, 0]) and np.allclose(normal[1, -1], q[39, 0])
     back = quatseg.denormalise(normal, segs[:, 2] - segs[:, 1])
-    assert rotations.quat_distance(back, q[:, 0]).max() < 1e-9        # constant speed: slerp is exact
+    assert rotations.quat_distance(back, q[:, 0]).max() < 1e-9  # constant speed: slerp is exact
 
 
 def test_clustering_finds_well_separated_primitives():
@@ -128,14 +130,14 @@ def test_residuals_bring_segments_within_the_bound():
     exps, q, recon = primresidual.fit(target, ref, bound, 10)
     assert np.all(quatseg.segment_distance(target, recon) <= bound)
     assert np.allclose(rotations.quat_multiply(ref, primresidual.differences(exps, q)), recon)
-    assert (q != 0).sum(axis=1).mean() < primresidual.COEFFS          # thresholding kept fewer than all
+    assert (q != 0).sum(axis=1).mean() < primresidual.COEFFS  # thresholding kept fewer than all
     same = primresidual.fit(ref, ref, bound, 10)
     assert np.all(same[0] == primresidual.NO_RESIDUAL) and not same[1].any()
 
 
 def test_codec_keeps_joints_within_their_thresholds(walk_amc, martial_db):
     codec = get_codec("primitives", db=str(martial_db), history=0)
-    decoded = codec.decode(codec.encode(walk_amc), walk_amc.skeleton)
+    decoded = codec.decode(codec.encode(walk_amc), walk_amc.skeleton, walk_amc.num_frames, walk_amc.fps)
     err = _rotation_error(walk_amc, decoded)
     lay = quatseg.layout(walk_amc.skeleton)
     bound = np.where(lay.lower, 0.01, 0.02)
@@ -143,7 +145,7 @@ def test_codec_keeps_joints_within_their_thresholds(walk_amc, martial_db):
     # frames adds the slerp's error between them (most on the toes, which snap at contact)
     assert np.mean(err <= bound) > 0.95 and np.mean(err <= 1.5 * bound) > 0.99 and (err / bound).max() < 10
     tr = lay.translation
-    assert np.abs(decoded.channels[:, tr] - walk_amc.channels[:, tr]).max() < 0.05      # 0.3 cm
+    assert np.abs(decoded.channels[:, tr] - walk_amc.channels[:, tr]).max() < 0.05  # 0.3 cm
 
 
 def test_threshold_trades_size_for_error(walk_amc, martial_db):
@@ -152,7 +154,9 @@ def test_threshold_trades_size_for_error(walk_amc, martial_db):
         codec = get_codec("primitives", db=str(martial_db), t_lower=t)
         payload = codec.encode(walk_amc)
         sizes.append(len(payload))
-        errors.append(compare(walk_amc, codec.decode(payload, walk_amc.skeleton)).joints.mean)
+        errors.append(
+            compare(walk_amc, codec.decode(payload, walk_amc.skeleton, walk_amc.num_frames, walk_amc.fps)).joints.mean
+        )
     assert sizes[0] > sizes[1] > sizes[2] and errors[0] < errors[1] < errors[2]
 
 
@@ -166,11 +170,11 @@ def test_history_candidates_help_a_repetitive_motion(walk_amc, martial_db):
 @pytest.mark.parametrize("smooth", [0, 3])
 def test_streaming_decodes_like_the_whole_clip_within_the_delay(walk_bvh, smooth):
     codec = get_codec("primitives", max_segment=16, smooth=smooth)
-    whole = codec.decode(codec.encode(walk_bvh), walk_bvh.skeleton).channels
+    whole = codec.decode(codec.encode(walk_bvh), walk_bvh.skeleton, walk_bvh.num_frames, walk_bvh.fps).channels
     enc, dec = codec.encoder(walk_bvh.skeleton, walk_bvh.fps), codec.decoder(walk_bvh.skeleton, walk_bvh.fps)
     out, pushed = [], 0
     for k in range(0, walk_bvh.num_frames, 7):
-        out += [dec.push(p) for p in enc.push(walk_bvh.channels[k:k + 7])]
+        out += [dec.push(p) for p in enc.push(walk_bvh.channels[k : k + 7])]
         pushed = min(k + 7, walk_bvh.num_frames)
         assert pushed - sum(len(o) for o in out) <= codec.delay_frames == 16 + smooth
     last = enc.flush()
@@ -180,13 +184,13 @@ def test_streaming_decodes_like_the_whole_clip_within_the_delay(walk_bvh, smooth
         dec.push(last[-1])
     fresh = codec.decoder(walk_bvh.skeleton, walk_bvh.fps)
     second = get_codec("primitives", max_segment=16).encoder(walk_bvh.skeleton, walk_bvh.fps)
-    packets = [p for k in range(0, 100, 20) for p in second.push(walk_bvh.channels[k:k + 20])]
+    packets = [p for k in range(0, 100, 20) for p in second.push(walk_bvh.channels[k : k + 20])]
     with pytest.raises(CorruptStreamError, match="start is missing"):
         fresh.push(packets[1])
 
 
 def test_smoothing_joins_the_closest_frames_across_a_seam():
-    angle = np.radians(np.concatenate((np.arange(20), np.arange(15, 35)))).astype(float)   # steps back at 20
+    angle = np.radians(np.concatenate((np.arange(20), np.arange(15, 35)))).astype(float)  # steps back at 20
     q = rotations.euler_to_quat(np.degrees(angle)[:, None], "Z")
     before = q.copy()
     quatseg.smooth_seams(q, np.array([20]), np.array([0]), np.array([40]), 4, fps=120.0)
@@ -196,19 +200,23 @@ def test_smoothing_joins_the_closest_frames_across_a_seam():
     smooth = rotations.euler_to_quat(np.arange(40.0)[:, None], "Z")
     kept = smooth.copy()
     quatseg.smooth_seams(smooth, np.array([20]), np.array([0]), np.array([40]), 4, fps=120.0)
-    assert np.allclose(smooth, kept)          # adjacent frames are the closest pair: nothing to do
+    assert np.allclose(smooth, kept)  # adjacent frames are the closest pair: nothing to do
     step = rotations.euler_to_quat(np.where(np.arange(40) < 20, 0.0, 90.0)[:, None], "Z")
     held = step.copy()
     quatseg.smooth_seams(step, np.array([20]), np.array([0]), np.array([40]), 4, fps=120.0)
-    assert np.array_equal(step, held)         # a jump is not smoothed
+    assert np.array_equal(step, held)  # a jump is not smoothed
 
 
 def test_smoothing_lowers_jerk_without_losing_accuracy(martial_amc):
     plain, smooth = (get_codec("primitives", smooth=m) for m in (0, 2))
     payload = plain.encode(martial_amc)
-    assert smooth.encode(martial_amc) == payload                  # a decoder-side filter
-    a = compare(martial_amc, plain.decode(payload, martial_amc.skeleton)).summary()
-    b = compare(martial_amc, smooth.decode(payload, martial_amc.skeleton)).summary()
+    assert smooth.encode(martial_amc) == payload  # a decoder-side filter
+    a = compare(
+        martial_amc, plain.decode(payload, martial_amc.skeleton, martial_amc.num_frames, martial_amc.fps)
+    ).summary()
+    b = compare(
+        martial_amc, smooth.decode(payload, martial_amc.skeleton, martial_amc.num_frames, martial_amc.fps)
+    ).summary()
     assert b["jerk_ratio"] < 0.95 * a["jerk_ratio"]
     assert b["mean_joint_error_cm"] < 1.05 * a["mean_joint_error_cm"]
 
@@ -220,9 +228,9 @@ def test_database_mismatches_are_clear_errors(walk_amc, walk_bvh, martial_db, ma
     other = tmp_path / "other.mocdb"
     primdb.train([martial_amc], seed=9).save(other)
     with pytest.raises(CodecError, match="coded with primitive database"):
-        get_codec("primitives", db=str(other)).decode(payload, walk_amc.skeleton)
+        get_codec("primitives", db=str(other)).decode(payload, walk_amc.skeleton, walk_amc.num_frames, walk_amc.fps)
     with pytest.raises(CodecError, match="--db FILE"):
-        get_codec("primitives").decode(payload, walk_amc.skeleton)
+        get_codec("primitives").decode(payload, walk_amc.skeleton, walk_amc.num_frames, walk_amc.fps)
     with pytest.raises(CodecError, match="30 Hz"):
         get_codec("primitives", db=str(martial_db)).encode(walk_amc.resample(30))
 
@@ -238,11 +246,13 @@ def test_primitives_on_the_command_line(tmp_path, capsys):
     moved = tmp_path / "moved.mocdb"
     db.rename(moved)
     assert main(["decode", str(moc), "-o", str(tmp_path / "w.amc")]) == 2
-    err = capsys.readouterr().err          # the file's path for the database is never opened nor named
+    err = capsys.readouterr().err  # the file's path for the database is never opened nor named
     assert "none is given (--db FILE)" in err and "db.mocdb" not in err
     assert main(["decode", str(moc), "-o", str(tmp_path / "w.amc"), "--db", str(moved)]) == 0
-    assert main(["eval", str(DATA / "07_03.amc"), "--codec", "primitives", "--db", str(moved), "--t-lower", "0.02"]) == 0
+    assert (
+        main(["eval", str(DATA / "07_03.amc"), "--codec", "primitives", "--db", str(moved), "--t-lower", "0.02"]) == 0
+    )
     assert "joint error mean / max" in capsys.readouterr().out
-    with pytest.raises(SystemExit) as missing:          # no -o FILE
+    with pytest.raises(SystemExit) as missing:  # no -o FILE
         main(["model", "train", "primitives", str(DATA / "135_08.amc")])
     assert missing.value.code == 2

@@ -24,9 +24,9 @@ def test_variation_and_importance_follow_3_1_and_3_2():
 def test_coefficient_counts_follow_step_6():
     a = np.array([1.0, 3.0, 0.0, 0.0])
     k = pw.coefficient_counts(a, alpha=0.25, frames=64, coefficients=64, minimum=2)
-    assert k.tolist() == [16, 48, 2, 2]                          # alpha A_i N W / sum A, at least C
+    assert k.tolist() == [16, 48, 2, 2]  # alpha A_i N W / sum A, at least C
     capped = pw.coefficient_counts(np.array([1.0, 9.0]), alpha=1.0, frames=10, coefficients=12, minimum=0)
-    assert capped.tolist() == [8, 12]                            # the excess of the capped one moves
+    assert capped.tolist() == [8, 12]  # the excess of the capped one moves
 
 
 def test_keep_largest_keeps_the_coarse_band_and_the_k_largest():
@@ -44,7 +44,7 @@ def test_round_trip_error_shrinks_with_alpha(walk_amc, allocation):
     errors = []
     for alpha in (0.02, 0.1, 1.0):
         codec = get_codec("pwavelet", alpha=alpha, allocation=allocation, qp=14)
-        decoded = codec.decode(codec.encode(walk_amc), walk_amc.skeleton)
+        decoded = codec.decode(codec.encode(walk_amc), walk_amc.skeleton, walk_amc.num_frames, walk_amc.fps)
         errors.append(compare(walk_amc, decoded).joints.mean)
     assert errors[0] > errors[1] > errors[2] and errors[2] < 0.1
 
@@ -53,7 +53,7 @@ def test_slices_and_short_clips(walk_bvh):
     for frames, window in ((1, 256), (7, 4), (300, 64)):
         clip = walk_bvh[:frames]
         codec = get_codec("pwavelet", window=window, alpha=1.0, qp=16)
-        decoded = codec.decode(codec.encode(clip), clip.skeleton)
+        decoded = codec.decode(codec.encode(clip), clip.skeleton, clip.num_frames, clip.fps)
         assert compare(clip, decoded).joints.max < 0.5
     assert get_codec("pwavelet", window=128).delay_frames == 128
 

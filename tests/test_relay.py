@@ -24,7 +24,7 @@ from mocodec.stream.live import receive_clip, stream_clip
 from mocodec.stream.packets import pack_batch
 from mocodec.stream.relay import BAD_MESSAGE, RATE_LIMIT, Limits, Relay, Viewer, on_ladder, start
 
-pytestmark = pytest.mark.network        # a relay (and NATS) on loopback sockets
+pytestmark = pytest.mark.network  # a relay (and NATS) on loopback sockets
 
 SECRET = "test-secret"
 
@@ -57,6 +57,7 @@ def test_a_recorded_stream_decodes_as_offline_at_the_viewers_budget(walk_bvh):
     """spiht sent at 8 kbit/s, cut by the relay to the viewer's 3 kbit/s (rounded down to the
     relay's ladder of rates): the same motion as the clip streamed at that rate and decoded
     offline."""
+
     async def go():
         async with serving() as url:
             return await publish_and_record(url, walk_bvh, get_codec("spiht", bits_per_second=8000), budget=3000)
@@ -92,24 +93,27 @@ def test_late_joiner_gets_the_header_and_the_last_keyframe(walk_bvh):
     clean = receive_clip(packets).channels
     starts = [p.first_frame for p in packets[1:] if p.keyframe]
     start = walk_bvh.num_frames - got.num_frames
-    assert start in starts[1:]                      # joined at a keyframe after the first
+    assert start in starts[1:]  # joined at a keyframe after the first
     np.testing.assert_array_equal(got.channels, clean[start:])
 
 
 def test_the_nearer_avatar_gets_the_larger_share(walk_bvh):
     far = walk_bvh.with_channels(walk_bvh.channels.copy())
     x = walk_bvh.skeleton.channel_index("hip.Xposition")
-    far.channels[:, x] += 20 * walk_bvh.skeleton.units_per_metre          # 20 m further along x
+    far.channels[:, x] += 20 * walk_bvh.skeleton.units_per_metre  # 20 m further along x
     codec = get_codec("spiht", bits_per_second=8000)
 
     async def go():
         async with serving() as url:
             camera = tuple(walk_bvh.positions_m()[0, 0])
-            viewer = asyncio.create_task(record(url, "lobby", token(), budget=4000, camera=camera, timeout_s=30,
-                                                stream=1))
+            viewer = asyncio.create_task(
+                record(url, "lobby", token(), budget=4000, camera=camera, timeout_s=30, stream=1)
+            )
             await asyncio.sleep(0.2)
-            await asyncio.gather(publish_clip(url, "lobby", token(), walk_bvh, codec, speed=8, stream=0),
-                                 publish_clip(url, "lobby", token(), far, codec, speed=8, stream=1))
+            await asyncio.gather(
+                publish_clip(url, "lobby", token(), walk_bvh, codec, speed=8, stream=0),
+                publish_clip(url, "lobby", token(), far, codec, speed=8, stream=1),
+            )
             return await viewer
 
     got = asyncio.run(go())
@@ -118,15 +122,21 @@ def test_the_nearer_avatar_gets_the_larger_share(walk_bvh):
     assert near_err < far_err
 
 
-@pytest.mark.parametrize("bad, why", [(tokens.issue("other-secret", "lobby"), "signature"),
-                                      (tokens.issue(SECRET, "lobby", ttl_s=1, now=time.time() - 10), "expired"),
-                                      (tokens.issue(SECRET, "hall"), "room"),
-                                      (tokens.issue(SECRET, "lobby", "subscribe"), "allows")])
+@pytest.mark.parametrize(
+    "bad, why",
+    [
+        (tokens.issue("other-secret", "lobby"), "signature"),
+        (tokens.issue(SECRET, "lobby", ttl_s=1, now=time.time() - 10), "expired"),
+        (tokens.issue(SECRET, "hall"), "room"),
+        (tokens.issue(SECRET, "lobby", "subscribe"), "allows"),
+    ],
+)
 def test_bad_tokens_are_refused_with_the_reason(walk_bvh, bad, why):
     async def go():
         async with serving() as url:
             with pytest.raises(RelayRefused, match=why):
                 await publish_clip(url, "lobby", bad, walk_bvh, get_codec("dpcm"))
+
     asyncio.run(go())
 
 
@@ -166,6 +176,7 @@ def test_message_size_and_rate_limits_close_the_connection(walk_bvh):
                 await ws.send_str("{not json")
                 await ws.receive()
                 assert ws.close_code == BAD_MESSAGE
+
     asyncio.run(go())
 
 
@@ -183,11 +194,12 @@ def test_a_slow_viewer_misses_ticks_keeps_headers_and_is_dropped():
         header = type("F", (), {"packet": type("P", (), {"kind": 0})()})()
         data = type("F", (), {"packet": type("P", (), {"kind": 1})()})()
         relay._offer(viewer, b"next", [header, data])
-        assert viewer.missed == 1 and viewer.pending == [header]        # memory stays one batch
+        assert viewer.missed == 1 and viewer.pending == [header]  # memory stays one batch
         await asyncio.sleep(0.1)
         relay._offer(viewer, b"next", [data])
         relay._offer(viewer, b"next", [data])
         assert viewer.transport.aborted and viewer.dropped and relay.counters["dropped_slow"] == 1
+
     asyncio.run(go())
 
 
@@ -197,8 +209,9 @@ def nats_server():
     if binary is None:
         pytest.skip("nats-server is not installed (.ci/run installs Debian's nats-server)")
     port = free_port()
-    proc = subprocess.Popen([binary, "-a", "127.0.0.1", "-p", str(port)], stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        [binary, "-a", "127.0.0.1", "-p", str(port)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+    )
     for _ in range(100):
         with contextlib.suppress(OSError), socket.create_connection(("127.0.0.1", port), timeout=0.1):
             break
@@ -210,9 +223,12 @@ def nats_server():
 
 def test_two_relays_share_a_room_over_nats(walk_bvh, nats_server):
     """A sender on relay A reaches a viewer on relay B."""
+
     async def go():
-        async with serving(Relay(SECRET, bus=NatsBus(nats_server))) as a, \
-                serving(Relay(SECRET, bus=NatsBus(nats_server))) as b:
+        async with (
+            serving(Relay(SECRET, bus=NatsBus(nats_server))) as a,
+            serving(Relay(SECRET, bus=NatsBus(nats_server))) as b,
+        ):
             viewer = asyncio.create_task(record(b, "lobby", token(), timeout_s=30))
             await asyncio.sleep(0.3)
             await publish_clip(a, "lobby", token(), walk_bvh, get_codec("dpcm"), speed=8)
@@ -227,8 +243,21 @@ def test_cli_token_and_refusal(capsys):
     issued = capsys.readouterr().out.strip()
     assert tokens.verify(SECRET, issued, "lobby", "subscribe")
     port = free_port()
-    code = main(["subscribe", "--url", f"ws://127.0.0.1:{port}", "--room", "lobby", "--token", issued,
-                 "-o", "out.bvh", "--timeout", "1"])
+    code = main(
+        [
+            "subscribe",
+            "--url",
+            f"ws://127.0.0.1:{port}",
+            "--room",
+            "lobby",
+            "--token",
+            issued,
+            "-o",
+            "out.bvh",
+            "--timeout",
+            "1",
+        ]
+    )
     assert code == 2 and "cannot reach the relay" in capsys.readouterr().err
 
 
@@ -242,8 +271,12 @@ def raw_viewer(url: str, tok: str) -> socket.socket:
     s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
     s.connect((host, int(port)))
     key = base64.b64encode(os.urandom(16)).decode()
-    s.sendall((f"GET /ws?room=lobby&role=subscribe&token={tok} HTTP/1.1\r\nHost: {host}\r\nUpgrade: websocket\r\n"
-               f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n\r\n").encode())
+    s.sendall(
+        (
+            f"GET /ws?room=lobby&role=subscribe&token={tok} HTTP/1.1\r\nHost: {host}\r\nUpgrade: websocket\r\n"
+            f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n\r\n"
+        ).encode()
+    )
     reply = b""
     while b"\r\n\r\n" not in reply:
         reply += s.recv(1)
@@ -259,36 +292,76 @@ def test_a_stalled_viewer_is_dropped_and_the_others_go_on(walk_bvh):
             stalled = await asyncio.to_thread(raw_viewer, url, token())
             watcher = asyncio.create_task(record(url, "lobby", token(), stream=300, timeout_s=60))
             await asyncio.sleep(0.2)
-            for r in range(4):              # 16 raw streams a round: about 14 MB in 2 s
-                await asyncio.gather(*(publish_clip(url, "lobby", token(), walk_bvh, get_codec("raw"), speed=8.0,
-                                                   stream=100 * r + s) for s in range(16)))
+            for r in range(4):  # 16 raw streams a round: about 14 MB in 2 s
+                await asyncio.gather(
+                    *(
+                        publish_clip(url, "lobby", token(), walk_bvh, get_codec("raw"), speed=8.0, stream=100 * r + s)
+                        for s in range(16)
+                    )
+                )
             got = await watcher
             stalled.close()
             return got
 
     got = asyncio.run(go())
     assert relay.counters["missed_ticks"] > 0 and relay.counters["dropped_slow"] == 1
-    assert got[300].num_frames == walk_bvh.num_frames    # the viewer that reads gets the last round whole
+    assert got[300].num_frames == walk_bvh.num_frames  # the viewer that reads gets the last round whole
 
 
 def test_the_commands_end_to_end(tmp_path):
     """serve, token, publish and subscribe as a user types them: an AMC clip recorded as BVH."""
     port = free_port()
     mocodec = [sys.executable, "-m", "mocodec"]
-    server = subprocess.Popen(mocodec + ["serve", "--port", str(port), "--secret", SECRET], stdout=subprocess.PIPE,
-                              text=True)
+    server = subprocess.Popen(
+        mocodec + ["serve", "--port", str(port), "--secret", SECRET], stdout=subprocess.PIPE, text=True
+    )
     try:
         assert "relay on" in server.stdout.readline()
-        tok = subprocess.run(mocodec + ["token", "--secret", SECRET, "--room", "r"], capture_output=True, text=True,
-                             check=True).stdout.strip()
+        tok = subprocess.run(
+            mocodec + ["token", "--secret", SECRET, "--room", "r"], capture_output=True, text=True, check=True
+        ).stdout.strip()
         url = f"ws://127.0.0.1:{port}"
-        sub = subprocess.Popen(mocodec + ["subscribe", "--url", url, "--room", "r", "--token", tok,
-                                          "-o", str(tmp_path / "got.bvh"), "--frames", "200", "--timeout", "60"],
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        sub = subprocess.Popen(
+            mocodec
+            + [
+                "subscribe",
+                "--url",
+                url,
+                "--room",
+                "r",
+                "--token",
+                tok,
+                "-o",
+                str(tmp_path / "got.bvh"),
+                "--frames",
+                "200",
+                "--timeout",
+                "60",
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         time.sleep(2.0)
-        pub = subprocess.run(mocodec + ["publish", str(DATA / "07_03.amc"), "--url", url, "--room", "r",
-                                        "--token", tok, "--speed", "8", "--codec", "dpcm"],
-                             capture_output=True, text=True)
+        pub = subprocess.run(
+            mocodec
+            + [
+                "publish",
+                str(DATA / "07_03.amc"),
+                "--url",
+                url,
+                "--room",
+                "r",
+                "--token",
+                tok,
+                "--speed",
+                "8",
+                "--codec",
+                "dpcm",
+            ],
+            capture_output=True,
+            text=True,
+        )
         assert pub.returncode == 0, pub.stderr
         out, err = sub.communicate(timeout=60)
         assert sub.returncode == 0, err
@@ -297,8 +370,11 @@ def test_the_commands_end_to_end(tmp_path):
 
         got = load(tmp_path / "got.bvh")
         assert got.num_frames == 200
-        bad = subprocess.run(mocodec + ["publish", str(DATA / "07_03.amc"), "--url", url, "--room", "r",
-                                        "--token", tok + "x"], capture_output=True, text=True)
+        bad = subprocess.run(
+            mocodec + ["publish", str(DATA / "07_03.amc"), "--url", url, "--room", "r", "--token", tok + "x"],
+            capture_output=True,
+            text=True,
+        )
         assert bad.returncode == 2 and "signature" in bad.stderr and "Traceback" not in bad.stderr
     finally:
         server.terminate()
@@ -312,8 +388,8 @@ def test_a_sender_that_vanishes_ends_its_stream_for_viewers(walk_bvh):
         async with serving() as url:
             viewer = asyncio.create_task(record(url, "lobby", token(), timeout_s=30))
             await asyncio.sleep(0.2)
-            async with connect(url, "lobby", token(), "publish") as ws:      # half the clip, then gone
-                for p in packets[:len(packets) // 2]:
+            async with connect(url, "lobby", token(), "publish") as ws:  # half the clip, then gone
+                for p in packets[: len(packets) // 2]:
                     await ws.send_bytes(pack_batch([p.to_bytes()]))
             started = time.monotonic()
             got = await viewer
@@ -321,4 +397,4 @@ def test_a_sender_that_vanishes_ends_its_stream_for_viewers(walk_bvh):
 
     (got, waited) = asyncio.run(go())
     half = packets[len(packets) // 2 - 1]
-    assert got[0].num_frames == half.first_frame + half.frames and waited < 5      # ended, not timed out
+    assert got[0].num_frames == half.first_frame + half.frames and waited < 5  # ended, not timed out

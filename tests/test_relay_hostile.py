@@ -11,8 +11,8 @@ import socket
 import zlib
 
 import aiohttp
-import pytest
 import numpy as np
+import pytest
 
 from mocodec.codecs import get_codec
 from mocodec.codecs.perceptual.spiht import _PACKET
@@ -24,7 +24,7 @@ from mocodec.stream.packets import CUTS, END, HEADER, Packet, pack_batch, with_c
 from mocodec.stream.relay import BAD_MESSAGE, BAD_TOKEN, Limits, Relay, on_ladder
 from test_relay import SECRET, serving, token
 
-pytestmark = pytest.mark.network        # a relay (and NATS) on loopback sockets
+pytestmark = pytest.mark.network  # a relay (and NATS) on loopback sockets
 
 
 def header_bytes(doc_change, walk, stream: int = 7) -> bytes:
@@ -47,7 +47,7 @@ async def refused_with(url: str, message: bytes) -> tuple[int, str]:
 def hostile_messages(walk) -> list[bytes]:
     bomb = Packet(8, 0, 0, "dpcm", 0, 0, zlib.compress(b"\0" * (64 << 20), 9), kind=HEADER).to_bytes()
     return [
-        bomb,                                                               # 64 MiB of header from 64 KB
+        bomb,  # 64 MiB of header from 64 KB
         header_bytes(lambda d: d.update(codec={}), walk),
         header_bytes(lambda d: d.update(codec={"codec": "dpcm", "knobs": [1, 2]}), walk),
         header_bytes(lambda d: d.update(codec={"codec": "dpcm", "knobs": "levels=3"}), walk),
@@ -78,7 +78,7 @@ def test_a_publisher_that_waits_before_its_first_packet_keeps_its_room(walk_bvh)
                 viewer = asyncio.create_task(record(url, "lobby", token(), timeout_s=20))
                 await asyncio.sleep(0.2)
                 for k in range(0, len(packets), 4):
-                    await ws.send_bytes(pack_batch([p.to_bytes() for p in packets[k:k + 4]]))
+                    await ws.send_bytes(pack_batch([p.to_bytes() for p in packets[k : k + 4]]))
                     await asyncio.sleep(1 / 30)
                 return await viewer
 
@@ -128,11 +128,11 @@ def test_slow_openers_are_cut_and_cannot_exhaust_the_relay(walk_bvh):
             await asyncio.sleep(0.2)
             held = relay.guard.per_host.get("127.0.0.1", 0)
             refused_early = relay.guard.refused
-            await asyncio.sleep(0.8)                         # past the request timeout: all cut
+            await asyncio.sleep(0.8)  # past the request timeout: all cut
             after = relay.guard.per_host.get("127.0.0.1", 0)
             for s in idle:
                 s.close()
-            got = await record(url, "lobby", token(), timeout_s=0.5)    # a real viewer still gets in
+            got = await record(url, "lobby", token(), timeout_s=0.5)  # a real viewer still gets in
             return held, refused_early, after, got
 
     held, refused_early, after, got = asyncio.run(go())
@@ -148,12 +148,14 @@ def test_a_hostile_publisher_does_not_disturb_a_viewer(walk_bvh, caplog):
     spiht = stream_clip(walk_bvh[:360], codec)
     cut = next(p for p in spiht[1:] if p.flags & CUTS)
     parts = split_parts(cut.codec_payload, None, "spiht packet", start=_PACKET.size)
-    short = cut.codec_payload[:_PACKET.size] + join_parts([*parts[:-1], b"\1\2"])
+    short = cut.codec_payload[: _PACKET.size] + join_parts([*parts[:-1], b"\1\2"])
     bad_cut = cut.with_payload(with_cuts(short, cut.cuts))
     header = spiht[0]
-    rogue_stream = [Packet(99, 0, 0, "spiht", 0, 0, header.payload, kind=HEADER).to_bytes(),
-                    Packet(99, 1, 0, "spiht", 0, bad_cut.frames, bad_cut.payload, flags=bad_cut.flags | 1).to_bytes(),
-                    Packet(99, 2, 0, "spiht", 2 ** 32 - 200, cut.frames, cut.payload, flags=cut.flags | END).to_bytes()]
+    rogue_stream = [
+        Packet(99, 0, 0, "spiht", 0, 0, header.payload, kind=HEADER).to_bytes(),
+        Packet(99, 1, 0, "spiht", 0, bad_cut.frames, bad_cut.payload, flags=bad_cut.flags | 1).to_bytes(),
+        Packet(99, 2, 0, "spiht", 2**32 - 200, cut.frames, cut.payload, flags=cut.flags | END).to_bytes(),
+    ]
 
     async def attack(url):
         for message in hostile_messages(walk_bvh):
@@ -164,15 +166,15 @@ def test_a_hostile_publisher_does_not_disturb_a_viewer(walk_bvh, caplog):
         async with serving(relay) as url:
             viewer = asyncio.create_task(record(url, "lobby", token(), timeout_s=30, stream=0, budget=3000))
             await asyncio.sleep(0.2)
-            async with connect(url, "lobby", token(), "publish") as ws:    # a stream that ends at once (it
-                await ws.send_bytes(pack_batch(rogue_stream))              # would take a share of the budget)
+            async with connect(url, "lobby", token(), "publish") as ws:  # a stream that ends at once (it
+                await ws.send_bytes(pack_batch(rogue_stream))  # would take a share of the budget)
                 await asyncio.sleep(0.3)
             await asyncio.gather(attack(url), publish_clip(url, "lobby", token(), walk_bvh[:360], codec, speed=2.0))
             return await viewer, relay.counters
 
     with caplog.at_level(logging.WARNING, logger="mocodec.relay"):
         got, counters = asyncio.run(go())
-    assert "stream 99: packet 1 not cut" in caplog.text          # passed whole, the tick went on
+    assert "stream 99: packet 1 not cut" in caplog.text  # passed whole, the tick went on
     offline = receive_clip(stream_clip(walk_bvh[:360], get_codec("spiht", bits_per_second=on_ladder(3000))))
     np.testing.assert_array_equal(got[0].channels, offline.channels)
     assert counters["closed_bad"] >= 5

@@ -28,7 +28,7 @@ def test_a_scene_shares_one_budget(walk_amc):
     budgets = scene.allocate(motions, bps, [1.0, 2.0, 4.0])
     total = int(bps * 128 / walk_amc.fps)
     assert np.all(budgets.sum(axis=0) <= total) and np.all(budgets.sum(axis=0) >= total - 3)
-    assert budgets[2, 2:].sum() == 0                      # the short clip is gone after 200 frames
+    assert budgets[2, 2:].sum() == 0  # the short clip is gone after 200 frames
     data = scene.encode_scene(motions, bps, [1.0, 2.0, 4.0])
     decoded = scene.decode_scene(data)
     errors = [compare(m, d).joints.mean for m, d in zip(motions, decoded)]

@@ -28,10 +28,16 @@ def test_clip_loads_round_trips_and_keeps_bone_lengths(path, tmp_path):
 
 
 # ASF bone (pivot) -> BVH joint at the same anatomical point
-_SEGMENTS = [(("lfemur", "ltibia"), ("lThigh", "lShin")), (("ltibia", "lfoot"), ("lShin", "lFoot")),
-             (("lhumerus", "lradius"), ("lShldr", "lForeArm")), (("lradius", "lwrist"), ("lForeArm", "lHand")),
-             (("rfemur", "rtibia"), ("rThigh", "rShin")), (("rtibia", "rfoot"), ("rShin", "rFoot")),
-             (("rhumerus", "rradius"), ("rShldr", "rForeArm")), (("rradius", "rwrist"), ("rForeArm", "rHand"))]
+_SEGMENTS = [
+    (("lfemur", "ltibia"), ("lThigh", "lShin")),
+    (("ltibia", "lfoot"), ("lShin", "lFoot")),
+    (("lhumerus", "lradius"), ("lShldr", "lForeArm")),
+    (("lradius", "lwrist"), ("lForeArm", "lHand")),
+    (("rfemur", "rtibia"), ("rThigh", "rShin")),
+    (("rtibia", "rfoot"), ("rShin", "rFoot")),
+    (("rhumerus", "rradius"), ("rShldr", "rForeArm")),
+    (("rradius", "rwrist"), ("rForeArm", "rHand")),
+]
 
 
 def _segment_directions(motion, pairs):
@@ -41,8 +47,15 @@ def _segment_directions(motion, pairs):
     return d / np.linalg.norm(d, axis=2, keepdims=True)
 
 
-DUAL = sorted(p.stem for p in (SHARED / "cmu" / "asf_amc").glob("*.amc")
-              if (SHARED / "cmu" / "bvh" / f"{p.stem}.bvh").exists()) if SHARED else []
+DUAL = (
+    sorted(
+        p.stem
+        for p in (SHARED / "cmu" / "asf_amc").glob("*.amc")
+        if (SHARED / "cmu" / "bvh" / f"{p.stem}.bvh").exists()
+    )
+    if SHARED
+    else []
+)
 
 
 @pytest.mark.parametrize("clip", DUAL)
@@ -102,7 +115,10 @@ def test_seam_smoothing_leaves_finely_coded_motion_alone():
 
     motion = load(SHARED / "cmu" / "bvh" / "02_03.bvh")
     codec = get_codec("spiht", bits_per_second=1e8)
-    assert compare(motion, codec.decode(codec.encode(motion), motion.skeleton)).joints.max < 0.05
+    assert (
+        compare(motion, codec.decode(codec.encode(motion), motion.skeleton, motion.num_frames, motion.fps)).joints.max
+        < 0.05
+    )
 
 
 @pytest.mark.parametrize("path", CLIPS, ids=lambda p: p.name)
@@ -112,8 +128,14 @@ def test_kinwave_holds_its_bound_on_every_clip(path):
 
     motion = load(path)
     codec = get_codec("kinwave", max_error_cm=0.5)
-    decoded = codec.decode(codec.encode(motion), motion.skeleton)
+    decoded = codec.decode(codec.encode(motion), motion.skeleton, motion.num_frames, motion.fps)
     cm = 100.0 / motion.skeleton.units_per_metre
-    err = np.linalg.norm(forward_kinematics(motion.skeleton, decoded.channels)[0]
-                         - forward_kinematics(motion.skeleton, motion.channels)[0], axis=2) * cm
+    err = (
+        np.linalg.norm(
+            forward_kinematics(motion.skeleton, decoded.channels)[0]
+            - forward_kinematics(motion.skeleton, motion.channels)[0],
+            axis=2,
+        )
+        * cm
+    )
     assert err.max() <= 0.5

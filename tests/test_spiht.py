@@ -88,8 +88,11 @@ def reference_encode(c: np.ndarray, approx: int, budget: int) -> list[int]:
     return bits
 
 
-signals = st.tuples(st.sampled_from([(8, 1), (16, 2), (32, 4), (64, 8), (16, 16), (32, 2)]),
-                    st.integers(0, 2 ** 32 - 1), st.integers(1, 3000))
+signals = st.tuples(
+    st.sampled_from([(8, 1), (16, 2), (32, 4), (64, 8), (16, 16), (32, 2)]),
+    st.integers(0, 2**32 - 1),
+    st.integers(1, 3000),
+)
 
 
 @given(signals)
@@ -114,10 +117,10 @@ def test_decoding_a_whole_stream_is_exact_and_prefixes_decode(case):
     for cut in np.linspace(0, len(bits), 6).astype(int):
         prefix, used, plane = spiht.decode(bits, 0, cut, n, approx, n0)
         assert used <= cut
-        assert np.abs(prefix - c).max() <= 2.0 ** (plane + 1)       # the promised uncertainty
+        assert np.abs(prefix - c).max() <= 2.0 ** (plane + 1)  # the promised uncertainty
         errors.append(np.square(prefix - c).sum())
         again, _, _ = spiht.decode(spiht.encode(c, approx, cut)[0], 0, cut, n, approx, n0)
-        assert np.array_equal(prefix, again)                # a budget-limited encoding is the prefix
+        assert np.array_equal(prefix, again)  # a budget-limited encoding is the prefix
     assert errors[-1] == 0 and errors[0] >= errors[-1]
     assert all(a >= b for a, b in zip(errors, errors[1:]))
 
@@ -136,8 +139,8 @@ def test_streams_concatenate(approx):
     rng = np.random.default_rng(3)
     a, b = (np.round(rng.normal(0, 50, 32)).astype(np.int64) for _ in range(2))
     bits_a, n0a = spiht.encode(a, approx, 90)
-    bits_b, n0b = spiht.encode(b, approx, 10 ** 6)
+    bits_b, n0b = spiht.encode(b, approx, 10**6)
     joined = np.concatenate([bits_a, bits_b])
     da, used, _ = spiht.decode(joined, 0, 90, 32, approx, n0a)
-    db, _, _ = spiht.decode(joined, used, 10 ** 6, 32, approx, n0b)
+    db, _, _ = spiht.decode(joined, used, 10**6, 32, approx, n0b)
     assert used == len(bits_a) and np.array_equal(db, b)

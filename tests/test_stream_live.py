@@ -36,7 +36,7 @@ def test_packet_round_trip_and_damage():
     p = Packet(7, 42, 1_700_000_000_123_456, "spiht", 128, 64, b"payload bytes", DATA, 1, (1.5, 0.0, -2.25))
     data = p.to_bytes()
     assert parse(data) == p and len(data) == len(p.payload) + 48
-    for k in (0, 3, 12, len(data) - 10, len(data) - 1):           # magic, kind, sequence, payload, CRC
+    for k in (0, 3, 12, len(data) - 10, len(data) - 1):  # magic, kind, sequence, payload, CRC
         bad = bytearray(data)
         bad[k] ^= 0x40
         with pytest.raises(CorruptStreamError):
@@ -75,10 +75,12 @@ def test_every_realtime_codec_streams_through_packets(walk_bvh, codec_id):
     assert packets[0].kind == HEADER and packets[-1].end
     assert sum(p.keyframe for p in packets) >= walk_bvh.num_frames // refresh_frames(get_codec(codec_id), 120, 1.0)
     frames = [(p.first_frame, p.frames) for p in packets[1:]]
-    assert all(a + n == b for (a, n), (b, _) in zip(frames, frames[1:]))      # ranges tile the clip
+    assert all(a + n == b for (a, n), (b, _) in zip(frames, frames[1:]))  # ranges tile the clip
     got = receive_clip(packets)
     assert got.num_frames == walk_bvh.num_frames
-    batch = get_codec(codec_id).decode(get_codec(codec_id).encode(walk_bvh), walk_bvh.skeleton)
+    batch = get_codec(codec_id).decode(
+        get_codec(codec_id).encode(walk_bvh), walk_bvh.skeleton, walk_bvh.num_frames, walk_bvh.fps
+    )
     # intra refresh costs some quality against one uninterrupted stream, within a small factor
     assert wrapped_error(got.channels, walk_bvh.channels) < 3 * wrapped_error(batch.channels, walk_bvh.channels) + 1
 
@@ -87,37 +89,47 @@ def test_a_lost_packet_is_concealed_and_the_receiver_resyncs_at_the_next_keyfram
     packets = stream_clip(walk_bvh, get_codec("dpcm"), keyframe_s=0.5)
     clean = receive_clip(packets).channels
     keys = [k for k, p in enumerate(packets) if p.keyframe]
-    lost = keys[1] + 2                                   # inside the second refresh period
-    got = receive_clip(packets[:lost] + packets[lost + 1:]).channels
+    lost = keys[1] + 2  # inside the second refresh period
+    got = receive_clip(packets[:lost] + packets[lost + 1 :]).channels
     assert got.shape == clean.shape
     first_lost = packets[lost].first_frame
     resync = packets[keys[2]].first_frame
     np.testing.assert_array_equal(got[:first_lost], clean[:first_lost])
     held = got[first_lost:resync]
-    assert np.all(held == got[first_lost - 1])            # held, not garbage
-    np.testing.assert_array_equal(got[resync:], clean[resync:])   # exact again after the keyframe
+    assert np.all(held == got[first_lost - 1])  # held, not garbage
+    np.testing.assert_array_equal(got[resync:], clean[resync:])  # exact again after the keyframe
     assert resync - first_lost <= refresh_frames(get_codec("dpcm"), 120, 0.5)
 
 
 def test_late_joiner_starts_at_a_keyframe(walk_bvh):
-    packets = stream_clip(walk_bvh, get_codec("spiht"), keyframe_s=2.0)      # two segments per refresh
+    packets = stream_clip(walk_bvh, get_codec("spiht"), keyframe_s=2.0)  # two segments per refresh
     clean = receive_clip(packets).channels
     k = next(k for k, p in enumerate(packets) if p.keyframe and p.first_frame > 0)
     dec = LiveDecoder(StreamInfo.from_payload(packets[0].payload))
-    out = np.vstack([dec.push(p) for p in packets[k - 1:]])   # one packet before the keyframe: dropped
+    out = np.vstack([dec.push(p) for p in packets[k - 1 :]])  # one packet before the keyframe: dropped
     start = packets[k].first_frame
     assert dec.stats.dropped == 1
     assert len(out) == walk_bvh.num_frames - start
     # the joiner's first segment is not smoothed against the one it never saw; the rest is exact
     tail = packets[k].frames
-    np.testing.assert_array_equal(out[tail:], clean[start + tail:])
+    np.testing.assert_array_equal(out[tail:], clean[start + tail :])
 
 
 def test_damaged_payload_never_crashes_the_receiver(walk_bvh):
     packets = stream_clip(walk_bvh, get_codec("adpcm"))
     victim = packets[5]
-    garbage = Packet(victim.stream, victim.sequence, victim.timestamp_us, victim.codec, victim.first_frame,
-                     victim.frames, bytes(len(victim.payload)), DATA, victim.flags, victim.position)
+    garbage = Packet(
+        victim.stream,
+        victim.sequence,
+        victim.timestamp_us,
+        victim.codec,
+        victim.first_frame,
+        victim.frames,
+        bytes(len(victim.payload)),
+        DATA,
+        victim.flags,
+        victim.position,
+    )
     got = receive_clip(packets[:5] + [garbage] + packets[6:])
     assert got.num_frames == walk_bvh.num_frames and np.isfinite(got.channels).all()
 
@@ -130,7 +142,7 @@ def test_extrapolation_continues_the_motion(walk_bvh):
         if not packets[lost].keyframe:
             span = slice(packets[lost].first_frame, packets[lost].first_frame + 8)
             for mode, found in errors.items():
-                got = receive_clip(packets[:lost] + packets[lost + 1:], mode).channels
+                got = receive_clip(packets[:lost] + packets[lost + 1 :], mode).channels
                 found.append(np.abs(got[span] - clean[span]).mean())
     assert np.mean(errors["extrapolate"]) < 0.9 * np.mean(errors["hold"])
 
@@ -154,12 +166,14 @@ def test_spiht_packets_cut_to_a_rate_are_the_packets_coded_at_that_rate(walk_bvh
 def test_tokens():
     t = tokens.issue("secret", "lobby", "subscribe", ttl_s=60, now=1000.0)
     assert tokens.verify("secret", t, "lobby", "subscribe", now=1030.0)["room"] == "lobby"
-    cases = [("other", t, "lobby", "subscribe", 1030.0, "signature"),
-             ("secret", t, "lobby", "subscribe", 1061.0, "expired"),
-             ("secret", t, "hall", "subscribe", 1030.0, "room"),
-             ("secret", t, "lobby", "publish", 1030.0, "allows"),
-             ("secret", "garbage", "lobby", "subscribe", 1030.0, "malformed"),
-             ("secret", t[:-2] + "AA", "lobby", "subscribe", 1030.0, "signature")]
+    cases = [
+        ("other", t, "lobby", "subscribe", 1030.0, "signature"),
+        ("secret", t, "lobby", "subscribe", 1061.0, "expired"),
+        ("secret", t, "hall", "subscribe", 1030.0, "room"),
+        ("secret", t, "lobby", "publish", 1030.0, "allows"),
+        ("secret", "garbage", "lobby", "subscribe", 1030.0, "malformed"),
+        ("secret", t[:-2] + "AA", "lobby", "subscribe", 1030.0, "signature"),
+    ]
     for secret, token, room, role, now, why in cases:
         with pytest.raises(tokens.TokenError, match=why):
             tokens.verify(secret, token, room, role, now=now)
@@ -173,13 +187,14 @@ def test_tokens():
 def test_random_payloads_are_concealed_for_every_codec(walk_bvh, codec_id):
     packets = stream_clip(walk_bvh[:200], get_codec(codec_id))
     rng = np.random.default_rng(7)
+
     def noise(p):
         return p.with_payload(rng.integers(0, 256, len(p.payload), dtype=np.uint8).tobytes())
 
-    shown = next(k for k, p in enumerate(packets) if p.frames)          # from here there is a frame to hold
+    shown = next(k for k, p in enumerate(packets) if p.frames)  # from here there is a frame to hold
     later = [p if k <= shown or p.keyframe or k % 3 else noise(p) for k, p in enumerate(packets)]
     got = receive_clip(later)
-    assert got.num_frames == 200 and np.isfinite(got.channels).all()      # concealed, in time
+    assert got.num_frames == 200 and np.isfinite(got.channels).all()  # concealed, in time
     every_third = [packets[0]] + [noise(p) if k % 3 == 1 else p for k, p in enumerate(packets[1:])]
-    got = receive_clip(every_third)                                        # no frames before the first good key
+    got = receive_clip(every_third)  # no frames before the first good key
     assert got.num_frames <= 200 and np.isfinite(got.channels).all()

@@ -23,18 +23,35 @@ def write(tmp_path, doc: dict, name: str = "study.json"):
 
 
 def test_config_errors_name_the_file_and_the_problem(tmp_path):
-    for doc, why in [({"kind": "abx"}, "kind"), ({"kind": "dscqs"}, "cases"),
-                     ({"kind": "dscqs", "cases": [{"clip": 3, "codec": "dpcm"}]}, "case 0"),
-                     ({"kind": "dscqs", "cases": [{"clip": 0, "codec": "dpcm", "levels": 8}]}, "unknown key 'levels'"),
-                     ({"kind": "2afc", "step": 0}, "positive"), ({"kind": "2afc", "colour": 1}, "unknown setting")]:
+    for doc, why in [
+        ({"kind": "abx"}, "kind"),
+        ({"kind": "dscqs"}, "cases"),
+        ({"kind": "dscqs", "cases": [{"clip": 3, "codec": "dpcm"}]}, "case 0"),
+        ({"kind": "dscqs", "cases": [{"clip": 0, "codec": "dpcm", "levels": 8}]}, "unknown key 'levels'"),
+        ({"kind": "2afc", "step": 0}, "positive"),
+        ({"kind": "2afc", "colour": 1}, "unknown setting"),
+    ]:
         with pytest.raises(FormatError, match=why) as e:
             study.load_config(write(tmp_path, doc))
         assert "study.json" in str(e.value)
 
 
 def test_staircase_two_up_one_down_and_threshold(tmp_path):
-    cfg = study.load_config(write(tmp_path, {"kind": "2afc", "reversals": 4, "average_last": 3, "codec": "dpcm",
-                                             "knob": "levels", "start": 40, "step": 4, "floor": 4}))
+    cfg = study.load_config(
+        write(
+            tmp_path,
+            {
+                "kind": "2afc",
+                "reversals": 4,
+                "average_last": 3,
+                "codec": "dpcm",
+                "knob": "levels",
+                "start": 40,
+                "step": 4,
+                "floor": 4,
+            },
+        )
+    )
     s = study.start(cfg, "p1")
     answers = [True, True, True, True, False, True, True, False, False, True, True]
     values = []
@@ -43,8 +60,9 @@ def test_staircase_two_up_one_down_and_threshold(tmp_path):
             break
         s.trial()
         values.append(s.value)
-        s.answer({"choice": s.current["original"] if correct else ("left" if s.current["original"] == "right" else
-                                                                  "right")})
+        s.answer(
+            {"choice": s.current["original"] if correct else ("left" if s.current["original"] == "right" else "right")}
+        )
     # 40 -> two right: 36 -> two right: 32 -> wrong: 36 (reversal at 32) -> two right: 32 (reversal at 36)
     # -> wrong: 36 (reversal at 32) -> wrong: 40 -> two right: 36 (reversal at 40)
     assert values == [40, 40, 36, 36, 32, 36, 36, 32, 36, 40, 40]
@@ -55,9 +73,16 @@ def test_staircase_two_up_one_down_and_threshold(tmp_path):
 
 
 def test_dscqs_maps_a_and_b_back_to_reference_and_coded(tmp_path):
-    cfg = study.load_config(write(tmp_path, {"kind": "dscqs", "seed": 3,
-                                             "cases": [{"clip": 0, "codec": "spiht", "ratio": 20},
-                                                       {"clip": 0, "codec": "spiht", "ratio": 40}]}))
+    cfg = study.load_config(
+        write(
+            tmp_path,
+            {
+                "kind": "dscqs",
+                "seed": 3,
+                "cases": [{"clip": 0, "codec": "spiht", "ratio": 20}, {"clip": 0, "codec": "spiht", "ratio": 40}],
+            },
+        )
+    )
     s = study.start(cfg, "p1")
     refs = []
     while not s.done:
@@ -70,7 +95,7 @@ def test_dscqs_maps_a_and_b_back_to_reference_and_coded(tmp_path):
     assert all(abs(t["ratio"] - r) < 0.02 * r for t, r in zip(s.trials, (20, 40)))
     path = s.save(tmp_path / "out")
     again = study.start(cfg, "p2")
-    assert [bool(x) for x in again.reference_first] == [r == "A" for r in refs]     # seeded order
+    assert [bool(x) for x in again.reference_first] == [r == "A" for r in refs]  # seeded order
     with pytest.raises(MocodecError):
         s.answer({"scores": {"A": 9, "B": 1}})
     assert json.loads(path.read_text())["trials"][0]["score_reference"] == 5
@@ -80,15 +105,21 @@ def test_report_dmos_and_thresholds_with_confidence_intervals(tmp_path):
     files = []
     for k, (d, t) in enumerate([(1, 0.010), (2, 0.014), (0, 0.012)]):
         f = tmp_path / f"d{k}.json"
-        f.write_text(json.dumps({"kind": "dscqs", "trials": [{"clip": "walk.bvh", "codec": {"codec": "spiht"},
-                                                              "ratio": 60.0, "difference": d}]}))
+        f.write_text(
+            json.dumps(
+                {
+                    "kind": "dscqs",
+                    "trials": [{"clip": "walk.bvh", "codec": {"codec": "spiht"}, "ratio": 60.0, "difference": d}],
+                }
+            )
+        )
         g = tmp_path / f"t{k}.json"
         g.write_text(json.dumps({"kind": "2afc", "threshold": t, "trials": []}))
         files += [f, g]
     r = study.report(files)
     dmos = r["dmos"]["walk.bvh spiht 60.0:1"]
     assert dmos["n"] == 3 and dmos["mean"] == pytest.approx(1.0)
-    half = 4.302652729911275 * 1.0 / np.sqrt(3)           # t(0.975, 2) * sd / sqrt(n)
+    half = 4.302652729911275 * 1.0 / np.sqrt(3)  # t(0.975, 2) * sd / sqrt(n)
     assert dmos["ci95"] == pytest.approx([1 - half, 1 + half])
     assert r["threshold_t_lower"]["mean"] == pytest.approx(0.012)
     bad = tmp_path / "bad.json"
@@ -99,9 +130,26 @@ def test_report_dmos_and_thresholds_with_confidence_intervals(tmp_path):
 
 def run_session(config, out, browser, clicks):
     port = free_port()
-    proc = subprocess.Popen([sys.executable, "-m", "mocodec", "study", "run", str(config), "--out", str(out),
-                             "--participant", "p7", "--port", str(port), "--no-browser"], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "mocodec",
+            "study",
+            "run",
+            str(config),
+            "--out",
+            str(out),
+            "--participant",
+            "p7",
+            "--port",
+            str(port),
+            "--no-browser",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert "viewer on" in proc.stdout.readline(), proc.stderr.read()
         page = browser.new_page(viewport={"width": 1100, "height": 800})
@@ -120,8 +168,17 @@ def run_session(config, out, browser, clicks):
 
 
 def test_a_dscqs_session_is_completed_by_clicks_and_saved(tmp_path, browser):
-    config = write(tmp_path, {"kind": "dscqs", "speed": 4, "cases": [{"clip": 0, "codec": "spiht", "ratio": 40},
-                                                                     {"clip": 0, "codec": "dpcm", "knobs": {"levels": 16}}]})
+    config = write(
+        tmp_path,
+        {
+            "kind": "dscqs",
+            "speed": 4,
+            "cases": [
+                {"clip": 0, "codec": "spiht", "ratio": 40},
+                {"clip": 0, "codec": "dpcm", "knobs": {"levels": 16}},
+            ],
+        },
+    )
 
     def clicks(page):
         for _ in range(2):

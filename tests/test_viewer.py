@@ -52,7 +52,9 @@ def test_encode_api_re_encodes_and_reports_bad_requests(session):
         try:
             async with aiohttp.ClientSession() as http:
                 url = f"http://127.0.0.1:{port}"
-                ok = await (await http.post(f"{url}/api/encode", json={"codec": "spiht", "target": ["ratio", 40]})).json()
+                ok = await (
+                    await http.post(f"{url}/api/encode", json={"codec": "spiht", "target": ["ratio", 40]})
+                ).json()
                 bad = await http.post(f"{url}/api/encode", json={"codec": "dpcm", "knobs": {"levels": "many"}})
                 junk = await http.post(f"{url}/api/encode", data=b"not json")
                 menu = await (await http.get(f"{url}/api/codecs")).json()
@@ -69,8 +71,12 @@ def test_encode_api_re_encodes_and_reports_bad_requests(session):
 @contextlib.contextmanager
 def viewer_process(*args):
     port = free_port()
-    proc = subprocess.Popen([sys.executable, "-m", "mocodec", "view", *args, "--port", str(port), "--no-browser"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "mocodec", "view", *args, "--port", str(port), "--no-browser"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         line = proc.stdout.readline()
         assert "viewer on" in line, proc.stderr.read()
@@ -87,7 +93,7 @@ def figure_pixels(png: bytes) -> tuple[int, int]:
     from matplotlib import image
 
     img = image.imread(BytesIO(png), format="png")[:, :, :3]
-    dark = img.sum(axis=2) < 1.6            # bones and joints on the light background and grid
+    dark = img.sum(axis=2) < 1.6  # bones and joints on the light background and grid
     half = img.shape[1] // 2
     return int(dark[:, :half].sum()), int(dark[:, half:].sum())
 
@@ -110,11 +116,11 @@ def test_the_page_plays_both_figures_and_shows_the_servers_numbers(browser, tmp_
         shot = page.locator("#view canvas").screenshot()
         (tmp_path / "viewer.png").write_bytes(shot)
         left, right = figure_pixels(shot)
-        assert left > 200 and right > 200, (left, right)     # the original and the decoded figure
+        assert left > 200 and right > 200, (left, right)  # the original and the decoded figure
         page.click("#play")
         frame = page.evaluate("window.viewerState.frame")
         page.wait_for_timeout(300)
-        assert page.evaluate("window.viewerState.frame") == frame          # paused
+        assert page.evaluate("window.viewerState.frame") == frame  # paused
         page.fill("#scrub", "100")
         page.dispatch_event("#scrub", "input")
         assert page.evaluate("window.viewerState.frame") == 100
@@ -123,8 +129,9 @@ def test_the_page_plays_both_figures_and_shows_the_servers_numbers(browser, tmp_
         page.select_option("#target-kind", "ratio")
         page.fill("#target-value", "40")
         page.click("#apply")
-        page.wait_for_function("window.viewerState.ready && window.viewerState.numbers.codec.startsWith('spiht')",
-                               timeout=60_000)
+        page.wait_for_function(
+            "window.viewerState.ready && window.viewerState.numbers.codec.startsWith('spiht')", timeout=60_000
+        )
         ratio = float(page.inner_text("#n-ratio").split()[0])
         assert abs(ratio - 40) < 0.8
         assert not errors, errors
@@ -134,8 +141,9 @@ def test_the_page_plays_both_figures_and_shows_the_servers_numbers(browser, tmp_
 def test_view_refuses_a_bad_file_with_one_line(tmp_path):
     bad = tmp_path / "bad.bvh"
     bad.write_text("HIERARCHY\nROOT hip\n{\n")
-    out = subprocess.run([sys.executable, "-m", "mocodec", "view", str(bad), "--no-browser"], capture_output=True,
-                         text=True, timeout=60)
+    out = subprocess.run(
+        [sys.executable, "-m", "mocodec", "view", str(bad), "--no-browser"], capture_output=True, text=True, timeout=60
+    )
     assert out.returncode == 2 and "bad.bvh" in out.stderr and "Traceback" not in out.stderr
 
 
@@ -146,8 +154,11 @@ def test_the_page_watches_a_relay_room_live(browser):
     from mocodec.stream.client import publish_clip
 
     relay_port = free_port()
-    relay = subprocess.Popen([sys.executable, "-m", "mocodec", "serve", "--port", str(relay_port),
-                              "--secret", "s"], stdout=subprocess.PIPE, text=True)
+    relay = subprocess.Popen(
+        [sys.executable, "-m", "mocodec", "serve", "--port", str(relay_port), "--secret", "s"],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert "relay on" in relay.stdout.readline()
         relay_url = f"ws://127.0.0.1:{relay_port}"
@@ -157,18 +168,24 @@ def test_the_page_watches_a_relay_room_live(browser):
             page.goto(f"{url}?room=lobby&token={tok}&budget=20000")
             page.wait_for_function("window.viewerState && window.viewerState.ready", timeout=30_000)
             clip = load(DATA / "07_03.bvh")
-            walk = Motion(clip.skeleton, clip.fps, np.vstack([clip.channels] * 3))     # 10 s: still live when checked
+            walk = Motion(clip.skeleton, clip.fps, np.vstack([clip.channels] * 3))  # 10 s: still live when checked
 
             async def publish():
-                await asyncio.gather(*(publish_clip(relay_url, "lobby", tok, walk, get_codec(c), speed=1.0, stream=s,
-                                                    name=f"walker {s}") for s, c in ((0, "spiht"), (1, "dpcm"))))
+                await asyncio.gather(
+                    *(
+                        publish_clip(
+                            relay_url, "lobby", tok, walk, get_codec(c), speed=1.0, stream=s, name=f"walker {s}"
+                        )
+                        for s, c in ((0, "spiht"), (1, "dpcm"))
+                    )
+                )
 
             import threading
 
             sender = threading.Thread(target=asyncio.run, args=(publish(),))
             sender.start()
             page.wait_for_function("window.viewerState.live.streams === 2", timeout=30_000)
-            page.wait_for_timeout(2500)              # a spiht packet comes once a segment (1.07 s)
+            page.wait_for_timeout(2500)  # a spiht packet comes once a segment (1.07 s)
             bits = page.evaluate("window.viewerState.live.bits")
             assert all(b > 0 for b in bits.values()), bits
             assert "walker 0" in page.inner_text("#avatars") and "spiht" in page.inner_text("#avatars")
@@ -176,8 +193,9 @@ def test_the_page_watches_a_relay_room_live(browser):
             assert sum(figure_pixels(shot)) > 300
             sender.join()
             page.close()
-        bad = subprocess.run([sys.executable, "-m", "mocodec", "view", "--no-browser"], capture_output=True,
-                             text=True, timeout=60)
+        bad = subprocess.run(
+            [sys.executable, "-m", "mocodec", "view", "--no-browser"], capture_output=True, text=True, timeout=60
+        )
         assert bad.returncode == 2 and "needs a FILE" in bad.stderr
     finally:
         relay.terminate()

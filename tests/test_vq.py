@@ -25,7 +25,7 @@ def test_lbg_finds_separated_clusters_and_keeps_every_size():
     # most used entries first
     use = np.bincount(vq.nearest(data, books[2]), minlength=2)
     assert use[0] >= use[1]
-    assert len(vq.lbg(np.ones((10, 2)), [4])[4]) == 1          # one distinct point: one entry
+    assert len(vq.lbg(np.ones((10, 2)), [4])[4]) == 1  # one distinct point: one entry
 
 
 def test_lbg_distortion_falls_with_size():
@@ -71,27 +71,29 @@ def test_codebook_file_round_trip_and_damage(tmp_path, martial_amc):
 
 @pytest.mark.parametrize("cid", ("svq", "tvq"))
 def test_trained_codebooks_code_held_out_clips(cid, walk_amc, codebooks):
-    clip = walk_amc.resample(30.0)           # the codebooks were trained on another subject's clip
+    clip = walk_amc.resample(30.0)  # the codebooks were trained on another subject's clip
     results = {}
     for predictive in (False, True):
         for size in (16, 256):
             codec = get_codec(cid, size=size, predictive=predictive, codebook=codebooks[cid, predictive])
             payload = codec.encode(clip)
-            results[predictive, size] = (len(payload), compare(clip, codec.decode(payload, clip.skeleton))
-                                         .summary()["psnr_db"])
+            results[predictive, size] = (
+                len(payload),
+                compare(clip, codec.decode(payload, clip.skeleton, clip.num_frames, clip.fps)).summary()["psnr_db"],
+            )
     for predictive in (False, True):
         assert results[predictive, 16][0] < results[predictive, 256][0]
         assert results[predictive, 16][1] < results[predictive, 256][1]
-    assert results[True, 256][1] > results[False, 256][1] + 3        # the closed loop's gain
+    assert results[True, 256][1] > results[False, 256][1] + 3  # the closed loop's gain
     inband = get_codec(cid, size=256).encode(clip)
-    assert len(inband) > results[True, 256][0]                       # a shared codebook costs nothing
+    assert len(inband) > results[True, 256][0]  # a shared codebook costs nothing
 
 
 def test_payload_names_its_codebook(walk_amc, codebooks):
     clip = walk_amc.resample(30.0)
     payload = get_codec("tvq", codebook=codebooks["tvq", True]).encode(clip)
     with pytest.raises(CodecError, match="give the file with --codebook"):
-        get_codec("tvq").decode(payload, clip.skeleton)
+        get_codec("tvq").decode(payload, clip.skeleton, clip.num_frames, clip.fps)
     with pytest.raises(CodecError, match="was trained with predictive=True"):
         get_codec("tvq", predictive=False, codebook=codebooks["tvq", True]).encode(clip)
     with pytest.raises(CodecError, match="is a temporal codebook"):
@@ -108,7 +110,7 @@ def test_hand_groups_on_a_skeleton_with_fingers(walk_bvh):
     assert len(groups["left_hand"]) == 30 and len(groups["root_position"]) == 3
     clip = walk_bvh.resample(30.0)
     codec = get_codec("svq", size=16)
-    decoded = codec.decode(codec.encode(clip), clip.skeleton)
+    decoded = codec.decode(codec.encode(clip), clip.skeleton, clip.num_frames, clip.fps)
     assert compare(clip, decoded).summary()["psnr_db"] > 15
 
 
@@ -116,17 +118,47 @@ def test_cli_trains_encodes_and_decodes_with_a_codebook(tmp_path, capsys):
     from tests.conftest import DATA
 
     book = tmp_path / "t.mocvq"
-    assert cli.main(["model", "train", "codebook", "--vectors", "temporal", "--max-size", "64", str(DATA / "135_08.amc"),
-                     "-o", str(book)]) == 0
+    assert (
+        cli.main(
+            [
+                "model",
+                "train",
+                "codebook",
+                "--vectors",
+                "temporal",
+                "--max-size",
+                "64",
+                str(DATA / "135_08.amc"),
+                "-o",
+                str(book),
+            ]
+        )
+        == 0
+    )
     assert cli.main(["model", "info", str(book)]) == 0
     assert "sizes [16, 32, 64]" in capsys.readouterr().out
     moc = tmp_path / "w.moc"
-    assert cli.main(["encode", str(DATA / "07_03.amc"), "-o", str(moc), "--codec", "tvq", "--size", "64",
-                     "--codebook", str(book)]) == 0
+    assert (
+        cli.main(
+            [
+                "encode",
+                str(DATA / "07_03.amc"),
+                "-o",
+                str(moc),
+                "--codec",
+                "tvq",
+                "--size",
+                "64",
+                "--codebook",
+                str(book),
+            ]
+        )
+        == 0
+    )
     moved = tmp_path / "elsewhere.mocvq"
     book.rename(moved)
     out = tmp_path / "w.bvh"
-    assert cli.main(["decode", str(moc), "-o", str(out)]) == 2                  # the file has moved
+    assert cli.main(["decode", str(moc), "-o", str(out)]) == 2  # the file has moved
     assert "codebook" in capsys.readouterr().err
     assert cli.main(["decode", str(moc), "-o", str(out), "--codebook", str(moved)]) == 0
     assert out.exists()

@@ -7,15 +7,32 @@ first used, so ``import mocodec`` is quick.
 """
 
 from importlib import import_module
+from typing import TYPE_CHECKING
 
 from mocodec.version import __version__
 
+if TYPE_CHECKING:  # what the names below resolve to, for type checkers
+    from mocodec import moc
+    from mocodec.codecs import codec_ids, get_codec
+    from mocodec.errors import CodecError, ConversionError, CorruptStreamError, FormatError, MocodecError
+    from mocodec.formats import load, save
+    from mocodec.human import human_model
+    from mocodec.motion import Motion
+    from mocodec.skeleton import BODY_PARTS, Joint, Skeleton
+
 _WHERE = {
-    "Skeleton": "mocodec.skeleton", "Joint": "mocodec.skeleton", "BODY_PARTS": "mocodec.skeleton",
-    "Motion": "mocodec.motion", "load": "mocodec.formats", "save": "mocodec.formats",
-    "human_model": "mocodec.human", "get_codec": "mocodec.codecs", "codec_ids": "mocodec.codecs",
-    **dict.fromkeys(("MocodecError", "FormatError", "ConversionError", "CodecError", "CorruptStreamError"),
-                    "mocodec.errors"),
+    "Skeleton": "mocodec.skeleton",
+    "Joint": "mocodec.skeleton",
+    "BODY_PARTS": "mocodec.skeleton",
+    "Motion": "mocodec.motion",
+    "load": "mocodec.formats",
+    "save": "mocodec.formats",
+    "human_model": "mocodec.human",
+    "get_codec": "mocodec.codecs",
+    "codec_ids": "mocodec.codecs",
+    **dict.fromkeys(
+        ("MocodecError", "FormatError", "ConversionError", "CodecError", "CorruptStreamError"), "mocodec.errors"
+    ),
 }
 
 
@@ -27,6 +44,21 @@ def __getattr__(name: str):
     raise AttributeError(f"module 'mocodec' has no attribute {name!r}")
 
 
-__all__ = ["Skeleton", "Joint", "Motion", "load", "save", "human_model", "BODY_PARTS", "get_codec", "codec_ids",
-           "moc", "MocodecError", "FormatError", "ConversionError", "CodecError", "CorruptStreamError",
-           "__version__"]
+__all__ = [
+    "Skeleton",
+    "Joint",
+    "Motion",
+    "load",
+    "save",
+    "human_model",
+    "BODY_PARTS",
+    "get_codec",
+    "codec_ids",
+    "moc",
+    "MocodecError",
+    "FormatError",
+    "ConversionError",
+    "CodecError",
+    "CorruptStreamError",
+    "__version__",
+]

@@ -21,15 +21,65 @@ import re
 import numpy as np
 
 _LIMB_WORDS = (
-    "hip", "femur", "tibia", "foot", "toe", "clavicle", "humerus", "radius", "ulna", "wrist",
-    "hand", "finger", "thumb", "index", "mid", "ring", "pinky", "little", "shldr", "shoulder",
-    "collar", "forearm", "arm", "leg", "upleg", "thigh", "shin", "knee", "ankle", "elbow",
-    "buttock", "eye", "ear", "heel", "ball", "palm", "calf", "up", "low", "fore",
+    "hip",
+    "femur",
+    "tibia",
+    "foot",
+    "toe",
+    "clavicle",
+    "humerus",
+    "radius",
+    "ulna",
+    "wrist",
+    "hand",
+    "finger",
+    "thumb",
+    "index",
+    "mid",
+    "ring",
+    "pinky",
+    "little",
+    "shldr",
+    "shoulder",
+    "collar",
+    "forearm",
+    "arm",
+    "leg",
+    "upleg",
+    "thigh",
+    "shin",
+    "knee",
+    "ankle",
+    "elbow",
+    "buttock",
+    "eye",
+    "ear",
+    "heel",
+    "ball",
+    "palm",
+    "calf",
+    "up",
+    "low",
+    "fore",
 )
 _HAND_WORDS = ("thumb", "index", "middle", "mid", "ring", "pinky", "little", "finger", "palm", "carpal", "hand")
 _ARM_WORDS = ("clavicle", "collar", "shoulder", "shldr", "humerus", "arm", "radius", "ulna", "elbow", "wrist")
-_LEG_WORDS = ("buttock", "hip", "femur", "thigh", "upleg", "leg", "knee", "shin", "tibia", "calf",
-              "foot", "ankle", "toe", "heel")
+_LEG_WORDS = (
+    "buttock",
+    "hip",
+    "femur",
+    "thigh",
+    "upleg",
+    "leg",
+    "knee",
+    "shin",
+    "tibia",
+    "calf",
+    "foot",
+    "ankle",
+    "toe",
+    "heel",
+)
 _HEAD_WORDS = ("neck", "head", "eye", "jaw", "skull", "nose", "ear")
 _TORSO_WORDS = ("pelvis", "hips", "hip", "root", "spine", "back", "abdomen", "chest", "thorax", "torso", "waist")
 
@@ -131,7 +181,7 @@ def label_body_parts(skeleton) -> tuple[tuple[str, ...], np.ndarray]:
     depth = np.zeros(n, dtype=np.int64)
     for i, j in enumerate(skeleton.joints[1:], start=1):
         depth[i] = depth[j.parent] + 1 if parts[j.parent] == parts[i] else 0
-    return parts, depth
+    return tuple(str(p) for p in parts), depth
 
 
 def _split_wrists(skeleton, chain: list, explicit: list) -> None:
@@ -149,8 +199,11 @@ def _split_wrists(skeleton, chain: list, explicit: list) -> None:
             low = _strip_namespace(j.name).lower()
             if "hand" in low and not any(w in low for w in _HAND_WORDS[:-1]):
                 chain[i] = "arm"
-    arm_starts = [i for i in range(1, len(chain)) if chain[i] == "arm" and chain[skeleton.joints[i].parent] != "arm"
-                  and not explicit[i]]
+    arm_starts = [
+        i
+        for i in range(1, len(chain))
+        if chain[i] == "arm" and chain[skeleton.joints[i].parent] != "arm" and not explicit[i]
+    ]
     for start in arm_starts:
         sub = _subtree(skeleton, start)
         if any(chain[j] == "hand" for j in sub):
@@ -165,8 +218,9 @@ def _head_above_arms(skeleton, chain: list, explicit: list) -> None:
     """Without a head-named joint, the spine joints above the last arm branch form the head."""
     if "head" in chain or not any(c == "arm" for c in chain):
         return
-    branch = max(i for i in range(len(chain)) if chain[i] == "torso"
-                 and any(chain[k] == "arm" for k in skeleton.children[i]))
+    branch = max(
+        i for i in range(len(chain)) if chain[i] == "torso" and any(chain[k] == "arm" for k in skeleton.children[i])
+    )
     for k in skeleton.children[branch]:
         if chain[k] == "torso" and not explicit[k]:
             for j in _subtree(skeleton, k):

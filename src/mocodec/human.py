@@ -62,8 +62,14 @@ SEGMENTS: dict[str, tuple[tuple[float, float, float], float, str]] = {
 
 # Table 5-1 as printed: group -> (reference number, joints, segments, DOFs).
 TABLE_5_1 = {
-    "torso": (0, 2, 2, 7), "head": (1, 2, 2, 5), "left_arm": (2, 3, 3, 8), "left_hand": (3, 14, 14, 19),
-    "right_arm": (4, 3, 3, 8), "right_hand": (5, 14, 14, 19), "left_leg": (6, 3, 3, 7), "right_leg": (7, 3, 3, 7),
+    "torso": (0, 2, 2, 7),
+    "head": (1, 2, 2, 5),
+    "left_arm": (2, 3, 3, 8),
+    "left_hand": (3, 14, 14, 19),
+    "right_arm": (4, 3, 3, 8),
+    "right_hand": (5, 14, 14, 19),
+    "left_leg": (6, 3, 3, 7),
+    "right_leg": (7, 3, 3, 7),
 }
 
 _FINGERS = (("index", 0.5), ("middle", 0.15), ("ring", -0.2), ("little", -0.5))
@@ -82,7 +88,8 @@ def _thumb_axis(mirror: float) -> tuple[float, float, float]:
     frame = np.stack((x, y, z), axis=1)
     if np.linalg.det(frame) < 0:  # mirrored hand: keep a proper rotation
         frame[:, 1] *= -1
-    return tuple(float(a) for a in rotations.matrix_to_euler(frame, "ZYX"))
+    about_z, about_y, about_x = (float(a) for a in rotations.matrix_to_euler(frame, "ZYX"))
+    return about_z, about_y, about_x
 
 
 class _ModelBuilder:
@@ -91,13 +98,24 @@ class _ModelBuilder:
         self.segment: dict[str, str] = {}
         self.thesis_index: dict[str, int] = {}
 
-    def add(self, name, parent, norm_offset, parent_segment, channels=(), order="", limits=(), part=None,
-            segment=None, index=None, axis=(0.0, 0.0, 0.0)) -> str:
+    def add(
+        self,
+        name,
+        parent,
+        norm_offset,
+        parent_segment,
+        channels=(),
+        order="",
+        limits=(),
+        part=None,
+        segment=None,
+        index=None,
+        axis=(0.0, 0.0, 0.0),
+    ) -> str:
         size = np.array(SEGMENTS[parent_segment][0]) if parent_segment else np.zeros(3)
         offset = tuple(float(v) for v in np.asarray(norm_offset) * size)
         p = self.names().index(parent) if parent else -1
-        self.joints.append(Joint(name, p, offset, tuple(channels), order, axis, "ZYX",
-                                 tuple(limits), part))
+        self.joints.append(Joint(name, p, offset, tuple(channels), order, axis, "ZYX", tuple(limits), part))
         if segment:
             self.segment[name] = segment
         if index is not None:
@@ -110,35 +128,99 @@ class _ModelBuilder:
 
 def _arm(b: _ModelBuilder, side: str, sign: float, base: int) -> None:
     arm, hand = f"{side}_arm", f"{side}_hand"
-    shoulder = b.add(f"{side}_shoulder", "torso", (sign * 0.6, 0.9, 0.0), "torso", _rot("YZY"), "YZY",
-                     ((-180, 180), (-160, 0), (-180, 180)), arm, "upper_arm", base)
-    elbow = b.add(f"{side}_elbow", shoulder, (0, -1, 0), "upper_arm", _rot("XY"), "XY",
-                  ((-180, 0), (-90, 90)), arm, "lower_arm", base + 1)
-    wrist = b.add(f"{side}_wrist", elbow, (0, -1, 0), "lower_arm", _rot("ZX"), "ZX",
-                  ((-60, 70), (-30, 30)), arm, "palm", base + 2)
+    shoulder = b.add(
+        f"{side}_shoulder",
+        "torso",
+        (sign * 0.6, 0.9, 0.0),
+        "torso",
+        _rot("YZY"),
+        "YZY",
+        ((-180, 180), (-160, 0), (-180, 180)),
+        arm,
+        "upper_arm",
+        base,
+    )
+    elbow = b.add(
+        f"{side}_elbow",
+        shoulder,
+        (0, -1, 0),
+        "upper_arm",
+        _rot("XY"),
+        "XY",
+        ((-180, 0), (-90, 90)),
+        arm,
+        "lower_arm",
+        base + 1,
+    )
+    wrist = b.add(
+        f"{side}_wrist", elbow, (0, -1, 0), "lower_arm", _rot("ZX"), "ZX", ((-60, 70), (-30, 30)), arm, "palm", base + 2
+    )
     axis = _thumb_axis(sign)
-    t1 = b.add(f"{side}_thumb1", wrist, (0, -0.35, 0.8), "palm", _rot("XZ"), "XZ",
-               ((0, 60), (-20, 60)), hand, "thumb1", base + 3, axis)
+    t1 = b.add(
+        f"{side}_thumb1",
+        wrist,
+        (0, -0.35, 0.8),
+        "palm",
+        _rot("XZ"),
+        "XZ",
+        ((0, 60), (-20, 60)),
+        hand,
+        "thumb1",
+        base + 3,
+        axis,
+    )
     t2 = b.add(f"{side}_thumb2", t1, (0, -1, 0), "thumb1", _rot("X"), "X", ((0, 60),), hand, "thumb2", base + 4, axis)
     b.add(f"{side}_thumb_tip", t2, (0, -1, 0), "thumb2", part=hand)
     for k, (finger, spread) in enumerate(_FINGERS):
         idx = base + 5 + 3 * k
-        f1 = b.add(f"{side}_{finger}1", wrist, (0, -1, spread), "palm", _rot("XZ"), "XZ",
-                   ((-5, 5), (0, 60)), hand, f"{finger}1", idx)
-        f2 = b.add(f"{side}_{finger}2", f1, (0, -1, 0), f"{finger}1", _rot("Z"), "Z", ((0, 75),), hand,
-                   f"{finger}2", idx + 1)
-        f3 = b.add(f"{side}_{finger}3", f2, (0, -1, 0), f"{finger}2", _rot("Z"), "Z", ((0, 45),), hand,
-                   f"{finger}3", idx + 2)
+        f1 = b.add(
+            f"{side}_{finger}1",
+            wrist,
+            (0, -1, spread),
+            "palm",
+            _rot("XZ"),
+            "XZ",
+            ((-5, 5), (0, 60)),
+            hand,
+            f"{finger}1",
+            idx,
+        )
+        f2 = b.add(
+            f"{side}_{finger}2", f1, (0, -1, 0), f"{finger}1", _rot("Z"), "Z", ((0, 75),), hand, f"{finger}2", idx + 1
+        )
+        f3 = b.add(
+            f"{side}_{finger}3", f2, (0, -1, 0), f"{finger}2", _rot("Z"), "Z", ((0, 45),), hand, f"{finger}3", idx + 2
+        )
         b.add(f"{side}_{finger}_tip", f3, (0, -1, 0), f"{finger}3", part=hand)
 
 
 def _leg(b: _ModelBuilder, side: str, sign: float, base: int) -> None:
     leg = f"{side}_leg"
-    hip = b.add(f"{side}_hip", "root", (sign * 1.0, -1.0, 0.0), "hips", _rot("XYZ"), "XYZ",
-                ((-90, 90), (-15, 15), (-30, 15)), leg, "upper_leg", base)
+    hip = b.add(
+        f"{side}_hip",
+        "root",
+        (sign * 1.0, -1.0, 0.0),
+        "hips",
+        _rot("XYZ"),
+        "XYZ",
+        ((-90, 90), (-15, 15), (-30, 15)),
+        leg,
+        "upper_leg",
+        base,
+    )
     knee = b.add(f"{side}_knee", hip, (0, -1, 0), "upper_leg", _rot("X"), "X", ((0, 180),), leg, "lower_leg", base + 1)
-    ankle = b.add(f"{side}_ankle", knee, (0, -1, 0), "lower_leg", _rot("XYZ"), "XYZ",
-                  ((-30, 30), (-30, 30), (-15, 15)), leg, "foot", base + 2)
+    ankle = b.add(
+        f"{side}_ankle",
+        knee,
+        (0, -1, 0),
+        "lower_leg",
+        _rot("XYZ"),
+        "XYZ",
+        ((-30, 30), (-30, 30), (-15, 15)),
+        leg,
+        "foot",
+        base + 2,
+    )
     b.add(f"{side}_toe", ankle, (0, -1, 1), "foot", part=leg)
 
 
@@ -148,19 +230,28 @@ def human_model(name: str = "male") -> Skeleton:
     At zero channels it stands upright on the floor (y = 0), facing +Z.
     """
     if name != "male":
-        raise ValueError(f"unknown human model {name!r}; available: 'male' (Table 3-2 gives only the male "
-                         "segment parameters)")
+        raise ValueError(
+            f"unknown human model {name!r}; available: 'male' (Table 3-2 gives only the male segment parameters)"
+        )
     b = _ModelBuilder()
     pos = ("Xposition", "Yposition", "Zposition")
-    b.joints.append(Joint("root", -1, (0.0, 1.06, 0.0), _rot("YXZ") + pos, "YXZ",
-                          limits=((-180, 180), (-40, 40), (-30, 30), (-INF, INF), (-INF, INF), (-INF, INF)),
-                          body_part="torso"))
+    b.joints.append(
+        Joint(
+            "root",
+            -1,
+            (0.0, 1.06, 0.0),
+            _rot("YXZ") + pos,
+            "YXZ",
+            limits=((-180, 180), (-40, 40), (-30, 30), (-INF, INF), (-INF, INF), (-INF, INF)),
+            body_part="torso",
+        )
+    )
     b.segment["root"], b.thesis_index["root"] = "hips", 0
-    b.add("torso", "root", (0, 0, 0), "hips", _rot("YXZ"), "YXZ", ((-30, 30), (-40, 40), (-30, 30)),
-          "torso", "torso", 1)
+    b.add(
+        "torso", "root", (0, 0, 0), "hips", _rot("YXZ"), "YXZ", ((-30, 30), (-40, 40), (-30, 30)), "torso", "torso", 1
+    )
     b.add("neck", "torso", (0, 1, 0), "torso", _rot("XZ"), "XZ", ((-30, 30), (-15, 15)), "head", "neck", 2)
-    b.add("head", "neck", (0, 1, 0), "neck", _rot("YXZ"), "YXZ", ((-90, 90), (-50, 50), (-15, 15)),
-          "head", "head", 3)
+    b.add("head", "neck", (0, 1, 0), "neck", _rot("YXZ"), "YXZ", ((-90, 90), (-50, 50), (-15, 15)), "head", "head", 3)
     b.add("head_top", "head", (0, 1, 0), "head", part="head")
     _arm(b, "left", 1.0, 5)
     _arm(b, "right", -1.0, 22)
@@ -173,4 +264,3 @@ def human_model(name: str = "male") -> Skeleton:
 def segment_masses(skeleton: Skeleton) -> dict[str, float]:
     """Mass (kg) of the segment each joint drives, for the built-in model."""
     return {joint: SEGMENTS[seg][1] for joint, seg in skeleton.metadata["segments"].items()}
-

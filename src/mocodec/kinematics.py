@@ -60,13 +60,34 @@ def channel_plan(skeleton: Skeleton) -> ChannelPlan:
                 pos_index[i, k] = first + j.channels.index(f"{axis}position")
     axis_quat = np.ascontiguousarray(rotations.matrix_to_quat(skeleton.axis_matrices))
     has_axis = np.array([j.has_axis for j in skeleton.joints])
-    return ChannelPlan(rot_index, rot_axis, pos_index, axis_quat, has_axis,
-                 np.ascontiguousarray(skeleton.offsets, dtype=np.float64), skeleton.parents.astype(np.int64))
+    return ChannelPlan(
+        rot_index,
+        rot_axis,
+        pos_index,
+        axis_quat,
+        has_axis,
+        np.ascontiguousarray(skeleton.offsets, dtype=np.float64),
+        skeleton.parents.astype(np.int64),
+    )
 
 
 @numba.njit(cache=True)
-def _fk_kernel(channels, cos_half, sin_half, rot_index, rot_axis, pos_index, axis_quat, has_axis, offsets, parents,
-               pos, quat, local, want_local):
+def _fk_kernel(
+    channels,
+    cos_half,
+    sin_half,
+    rot_index,
+    rot_axis,
+    pos_index,
+    axis_quat,
+    has_axis,
+    offsets,
+    parents,
+    pos,
+    quat,
+    local,
+    want_local,
+):
     """Global positions and rotations; with ``want_local`` also each joint's C M C^-1.
 
     Each Euler step multiplies by (cos, sin * unit axis), written out per axis. Everything is
@@ -88,10 +109,18 @@ def _fk_kernel(channels, cos_half, sin_half, rot_index, rot_axis, pos_index, axi
                     w, x, y, z = w * cs - z * sn, x * cs + y * sn, y * cs - x * sn, w * sn + z * cs
             if has_axis[j]:
                 cw, cx, cy, cz = axis_quat[j, 0], axis_quat[j, 1], axis_quat[j, 2], axis_quat[j, 3]
-                w, x, y, z = (cw * w - cx * x - cy * y - cz * z, cw * x + cx * w + cy * z - cz * y,
-                              cw * y - cx * z + cy * w + cz * x, cw * z + cx * y - cy * x + cz * w)
-                w, x, y, z = (w * cw + x * cx + y * cy + z * cz, -w * cx + x * cw - y * cz + z * cy,
-                              -w * cy + x * cz + y * cw - z * cx, -w * cz - x * cy + y * cx + z * cw)
+                w, x, y, z = (
+                    cw * w - cx * x - cy * y - cz * z,
+                    cw * x + cx * w + cy * z - cz * y,
+                    cw * y - cx * z + cy * w + cz * x,
+                    cw * z + cx * y - cy * x + cz * w,
+                )
+                w, x, y, z = (
+                    w * cw + x * cx + y * cy + z * cz,
+                    -w * cx + x * cw - y * cz + z * cy,
+                    -w * cy + x * cz + y * cw - z * cx,
+                    -w * cz - x * cy + y * cx + z * cw,
+                )
             if want_local:
                 local[f, j, 0] = w
                 local[f, j, 1] = x
@@ -146,8 +175,21 @@ def _run(skeleton: Skeleton, channels: np.ndarray, want_local: bool) -> tuple[np
     frames, joints = len(channels), len(skeleton)
     pos, quat = np.empty((frames, joints, 3)), np.empty((frames, joints, 4))
     local = np.empty((frames, joints, 4) if want_local else (0, 0, 4))
-    _fk_kernel(channels, *_half_angles(channels), plan.rot_index, plan.rot_axis, plan.pos_index, plan.axis_quat,
-               plan.has_axis, plan.offsets, plan.parents, pos, quat, local, want_local)
+    _fk_kernel(
+        channels,
+        *_half_angles(channels),
+        plan.rot_index,
+        plan.rot_axis,
+        plan.pos_index,
+        plan.axis_quat,
+        plan.has_axis,
+        plan.offsets,
+        plan.parents,
+        pos,
+        quat,
+        local,
+        want_local,
+    )
     return pos, quat, local
 
 

@@ -20,7 +20,6 @@ import numpy as np
 
 from mocodec import limits
 from mocodec.codecs import DEFAULT_CODEC, Codec, codec_from_untrusted, get_codec
-from mocodec.codecs.base import read_envelope
 from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.formats import container
 from mocodec.formats.fileio import atomic_write_bytes
@@ -29,11 +28,12 @@ from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
 CHUNK_FRAMES = 1024
-SKELETON_PRECISION_CM = 0.001   # offsets of a lossy file: joints move by 0.003 cm at most on the shared clips
+SKELETON_PRECISION_CM = 0.001  # offsets of a lossy file: joints move by 0.003 cm at most on the shared clips
 
 
-def stored_skeleton(motion: Motion, codec: Codec, embed_skeleton: bool = True,
-                    exact_skeleton: bool = False) -> Skeleton:
+def stored_skeleton(
+    motion: Motion, codec: Codec, embed_skeleton: bool = True, exact_skeleton: bool = False
+) -> Skeleton:
     """The skeleton a file of ``motion`` coded by ``codec`` holds, and decodes on: a lossy
     codec's file rounds the offsets to :data:`SKELETON_PRECISION_CM` (the CMU BVH skeleton takes
     30% fewer bytes, CMU ASF ones 40%); a lossless codec's, a file that holds only the skeleton's id, or
@@ -43,8 +43,13 @@ def stored_skeleton(motion: Motion, codec: Codec, embed_skeleton: bool = True,
     return round_offsets(motion.skeleton, SKELETON_PRECISION_CM)
 
 
-def pack(motion: Motion, codec: Codec | None = None, chunk_frames: int = CHUNK_FRAMES,
-         embed_skeleton: bool = True, exact_skeleton: bool = False) -> bytes:
+def pack(
+    motion: Motion,
+    codec: Codec | None = None,
+    chunk_frames: int = CHUNK_FRAMES,
+    embed_skeleton: bool = True,
+    exact_skeleton: bool = False,
+) -> bytes:
     """The .moc bytes of ``motion`` coded by ``codec`` (default: the default codec); with
     ``embed_skeleton=False`` the file holds only the skeleton's id. The codec is told the
     :func:`stored_skeleton`, so an error bound it verifies holds on what the file decodes to."""
@@ -53,51 +58,60 @@ def pack(motion: Motion, codec: Codec | None = None, chunk_frames: int = CHUNK_F
         raise CodecError(f"chunk_frames must be at least 1, got {chunk_frames}")
     skeleton = stored_skeleton(motion, codec, embed_skeleton, exact_skeleton)
     output = None if skeleton is motion.skeleton else skeleton
-    chunks = [container.Chunk(a, min(chunk_frames, motion.num_frames - a),
-                              chunk_body(codec.encode(motion[a:a + chunk_frames], output)))
-              for a in range(0, motion.num_frames, chunk_frames)]
-    header = {"codec": codec.get_config(), "fps": float(motion.fps), "frames": motion.num_frames,
-              "chunk_frames": chunk_frames, "skeleton": skeleton}
+    chunks = [
+        container.Chunk(a, min(chunk_frames, motion.num_frames - a), codec.encode(motion[a : a + chunk_frames], output))
+        for a in range(0, motion.num_frames, chunk_frames)
+    ]
+    header = {
+        "codec": codec.get_config(),
+        "fps": float(motion.fps),
+        "frames": motion.num_frames,
+        "chunk_frames": chunk_frames,
+        "skeleton": skeleton,
+    }
     return container.pack(header, chunks, embed_skeleton)
 
 
-def chunk_body(payload: bytes) -> bytes:
-    """What a chunk stores of a codec's payload: its body (the container knows the frames and
-    the rate, and its CRC covers the body)."""
-    return read_envelope(payload)[2]
-
-
-def chunk_payload(c: container.Container, k: int) -> bytes:
-    """Chunk ``k`` of an open file as the payload its codec decodes (envelope and body)."""
-    stored = c.read_chunk(k)
-    return Codec.wrap(stored, c.index[k].count, c.fps) if c.version >= 3 else stored
-
-
-def encode(motion: Motion, path: str | os.PathLike, codec: Codec | None = None,
-           chunk_frames: int = CHUNK_FRAMES, embed_skeleton: bool = True, exact_skeleton: bool = False) -> int:
+def encode(
+    motion: Motion,
+    path: str | os.PathLike,
+    codec: Codec | None = None,
+    chunk_frames: int = CHUNK_FRAMES,
+    embed_skeleton: bool = True,
+    exact_skeleton: bool = False,
+) -> int:
     """Write ``motion`` to ``path`` (atomically); return the file size in bytes."""
     data = pack(motion, codec, chunk_frames, embed_skeleton, exact_skeleton)
     atomic_write_bytes(path, data)
     return len(data)
 
 
-def unpack(data: bytes, frames: tuple[int, int] | None = None, name: str = "<bytes>",
-           skeleton: Skeleton | None = None, max_values: int = limits.MAX_DECODED_VALUES,
-           codec: Codec | None = None) -> Motion:
+def unpack(
+    data: bytes,
+    frames: tuple[int, int] | None = None,
+    name: str = "<bytes>",
+    skeleton: Skeleton | None = None,
+    max_values: int = limits.MAX_DECODED_VALUES,
+    codec: Codec | None = None,
+) -> Motion:
     """Decode .moc bytes (all frames, or ``frames=(first, stop)``); ``skeleton`` for a file
     that holds only its skeleton's id; ``max_values`` caps frames x channels
     (:mod:`mocodec.limits`). ``codec``: the codec that wrote ``data`` in this process (a round
     trip), which then decodes it as trusted (:meth:`Codec.decode`), its model files included."""
-    return _decode(container.open_container(io.BytesIO(data), len(data), name, skeleton), frames,
-                   max_values=max_values, codec=codec)
+    return _decode(
+        container.open_container(io.BytesIO(data), len(data), name, skeleton),
+        frames,
+        max_values=max_values,
+        codec=codec,
+    )
 
 
 @dataclass(frozen=True)
 class RoundTrip:
-    data: bytes             # the .moc bytes
+    data: bytes  # the .moc bytes
     decoded: Motion
-    encode_s: float         # wall time of pack, seconds
-    decode_s: float         # wall time of unpack
+    encode_s: float  # wall time of pack, seconds
+    decode_s: float  # wall time of unpack
 
 
 def round_trip(motion: Motion, codec: Codec) -> RoundTrip:
@@ -109,16 +123,22 @@ def round_trip(motion: Motion, codec: Codec) -> RoundTrip:
     return RoundTrip(data, decoded, t1 - t0, time.perf_counter() - t1)
 
 
-def decode(path: str | os.PathLike, frames: tuple[int, int] | None = None, skeleton: Skeleton | None = None,
-           local_files: dict | None = None, max_values: int = limits.MAX_DECODED_VALUES) -> Motion:
+def decode(
+    path: str | os.PathLike,
+    frames: tuple[int, int] | None = None,
+    skeleton: Skeleton | None = None,
+    local_files: dict | None = None,
+    max_values: int = limits.MAX_DECODED_VALUES,
+) -> Motion:
     """Decode a .moc file, reading only the chunks that ``frames=(first, stop)`` needs.
     ``local_files``: the model files the caller allows (``{"db": path}``); a file never
     chooses what is opened (:func:`codec_from_untrusted`). ``max_values`` caps frames x
     channels (:mod:`mocodec.limits`)."""
     path = Path(path)
     with open(path, "rb") as f:
-        return _decode(container.open_container(f, path.stat().st_size, str(path), skeleton), frames, local_files,
-                       max_values)
+        return _decode(
+            container.open_container(f, path.stat().st_size, str(path), skeleton), frames, local_files, max_values
+        )
 
 
 def info(path: str | os.PathLike, skeleton: Skeleton | None = None) -> container.Container:
@@ -128,35 +148,50 @@ def info(path: str | os.PathLike, skeleton: Skeleton | None = None) -> container
         return container.open_container(f, path.stat().st_size, str(path), skeleton)
 
 
-def _decode(c: container.Container, frames: tuple[int, int] | None, local_files: dict | None = None,
-            max_values: int = limits.MAX_DECODED_VALUES, codec: Codec | None = None) -> Motion:
+def _decode(
+    c: container.Container,
+    frames: tuple[int, int] | None,
+    local_files: dict | None = None,
+    max_values: int = limits.MAX_DECODED_VALUES,
+    codec: Codec | None = None,
+) -> Motion:
     first, stop = (0, c.frames) if frames is None else frames
     if not 0 <= first <= stop <= c.frames:
         raise CodecError(f"{c.name}: frames {first}:{stop} are outside 0:{c.frames}")
     wanted = c.chunks_for(first, stop)
     values = sum(c.index[k].count for k in wanted) * c.skeleton.num_channels
     if values > max_values:
-        raise CorruptStreamError(f"{c.name}: decoding frames {first}:{stop} makes {values:,} values, over the limit of "
-                                 f"{max_values:,} (raise it with --max-values, or decode a frame range)")
+        raise CorruptStreamError(
+            f"{c.name}: decoding frames {first}:{stop} makes {values:,} values, over the limit of "
+            f"{max_values:,} (raise it with --max-values, or decode a frame range)"
+        )
     trusted = codec is not None
     codec = codec or codec_from_untrusted(c.header["codec"], f"{c.name}: header", local_files)
     parts = []
     for k in wanted:
         e = c.index[k]
         try:
-            motion = codec.decode(chunk_payload(c, k), c.skeleton, max_values, trusted)
+            motion = codec.decode(c.read_chunk(k), c.skeleton, e.count, c.fps, max_values, trusted)
         except CorruptStreamError as err:
             raise CorruptStreamError(f"{c.name}: chunk {k} at byte {e.offset}: {err}") from None
         if motion.num_frames != e.count:
-            raise CorruptStreamError(f"{c.name}: chunk {k} at byte {e.offset} decodes to {motion.num_frames} "
-                                     f"frames, the index says {e.count}")
-        parts.append(motion.channels[max(first - e.first, 0):stop - e.first])
+            raise CorruptStreamError(
+                f"{c.name}: chunk {k} at byte {e.offset} decodes to {motion.num_frames} "
+                f"frames, the index says {e.count}"
+            )
+        parts.append(motion.channels[max(first - e.first, 0) : stop - e.first])
     channels = np.concatenate(parts) if parts else np.zeros((0, c.skeleton.num_channels))
     return Motion(c.skeleton, c.fps, channels)
 
 
-def truncate(data: bytes, ratio: float | None = None, bitrate: float | None = None, name: str = "<bytes>",
-             tolerance: float = 0.02, skeleton: Skeleton | None = None) -> bytes:
+def truncate(
+    data: bytes,
+    ratio: float | None = None,
+    bitrate: float | None = None,
+    name: str = "<bytes>",
+    tolerance: float = 0.02,
+    skeleton: Skeleton | None = None,
+) -> bytes:
     """A smaller .moc from an embedded one (``spiht``) without re-encoding: every chunk's
     streams are cut to the rate that makes the file ``ratio`` : 1 (vs 32-bit floats) or
     ``bitrate`` bits per second, within ``tolerance`` below the target size."""
@@ -167,16 +202,16 @@ def truncate(data: bytes, ratio: float | None = None, bitrate: float | None = No
     codec = codec_from_untrusted(c.header["codec"], f"{name}: header")
     if not hasattr(codec, "truncator"):
         raise CodecError(f"{name}: codec {codec.id} is not embedded; encode again with a smaller target")
-    cutters = [codec.truncator(chunk_payload(c, k), c.skeleton) for k in range(len(c.index))]
+    cutters = [codec.truncator(c.read_chunk(k), c.skeleton, e.count, c.fps) for k, e in enumerate(c.index)]
     duration = c.frames / c.fps
     raw = c.frames * c.skeleton.num_channels * 4
-    target = raw / ratio if ratio is not None else bitrate * duration / 8
+    target = raw / ratio if ratio is not None else float(bitrate or 0.0) * duration / 8
     if not target > 0:
         raise CodecError(f"truncate target must be positive, got {ratio if ratio is not None else bitrate}")
 
     def at(bps: float) -> bytes:
         cut = [cutter(bps) for cutter in cutters]
-        chunks = [container.Chunk(e.first, e.count, chunk_body(payload)) for e, (_, payload) in zip(c.index, cut)]
+        chunks = [container.Chunk(e.first, e.count, body) for e, (_, body) in zip(c.index, cut)]
         new_codec = cut[0][0] if cut else codec
         header = {k: v for k, v in c.header.items() if k != "skeleton_id"}
         return container.pack(dict(header, codec=new_codec.get_config(), skeleton=c.skeleton), chunks, embedded)

@@ -136,8 +136,10 @@ class Motion:
         bad = diff > tol
         if bad.any():
             f, c = np.argwhere(bad)[0]
-            return (f"frame {f}, channel {self.skeleton.channel_names[c]}: "
-                    f"{self.channels[f, c]!r} vs {other.channels[f, c]!r}")
+            return (
+                f"frame {f}, channel {self.skeleton.channel_names[c]}: "
+                f"{self.channels[f, c]!r} vs {other.channels[f, c]!r}"
+            )
         return None
 
     def isclose(self, other: Motion, atol_degrees: float = 1e-6, atol_units: float = 1e-6) -> bool:
@@ -156,12 +158,14 @@ class Motion:
         out = self.channels.copy()
         if self.num_frames < 2:
             return replace(self, channels=out)
-        followed = {j: sk.channel_offsets[j] + np.array(joint.rotation_channel_indices())
-                    for j, joint in enumerate(sk.joints)
-                    if len(joint.rotation_order) == 3 and len(set(joint.rotation_order)) >= 2}
+        followed = {
+            j: sk.channel_offsets[j] + np.array(joint.rotation_channel_indices())
+            for j, joint in enumerate(sk.joints)
+            if len(joint.rotation_order) == 3 and len(set(joint.rotation_order)) >= 2
+        }
         unwrapped = sk.rotation_mask.copy()
         for idx in followed.values():
-            unwrapped[idx] = False                # follow_nearest sets these below
+            unwrapped[idx] = False  # follow_nearest sets these below
         out[:, unwrapped] = np.unwrap(out[:, unwrapped], period=360.0, axis=0)
         for j, idx in followed.items():
             out[:, idx] = continuous_triples(self.channels[:, idx], sk.joints[j].rotation_order)
@@ -214,8 +218,9 @@ class Motion:
             idx = first + np.array(joint.rotation_channel_indices())
             q = rotations.euler_to_quat(self.channels[:, idx], joint.rotation_order)
             qs = rotations.quat_slerp(q[i0], q[i0 + 1], frac)
-            out[:, idx] = _nearest_euler(rotations.quat_to_euler(qs, joint.rotation_order),
-                                         joint.rotation_order, linear[:, idx])
+            out[:, idx] = _nearest_euler(
+                rotations.quat_to_euler(qs, joint.rotation_order), joint.rotation_order, linear[:, idx]
+            )
         return Motion(sk, float(fps), out)
 
 
@@ -261,15 +266,8 @@ def _nearest_euler(angles: np.ndarray, order: str, reference: np.ndarray) -> np.
     alt[:, 0] += 180.0
     alt[:, 2] += 180.0
     alt[:, 1] = (-angles[:, 1]) if order[0] == order[2] else (180.0 - angles[:, 1])
-    best = None
-    best_cost = None
-    for cand in (angles, alt):
-        cand = reference + wrap_degrees(cand - reference)
-        cost = np.abs(cand - reference).sum(axis=1)
-        if best is None:
-            best, best_cost = cand, cost
-        else:
-            take = cost < best_cost
-            best[take] = cand[take]
+    best = reference + wrap_degrees(angles - reference)
+    other = reference + wrap_degrees(alt - reference)
+    take = np.abs(other - reference).sum(axis=1) < np.abs(best - reference).sum(axis=1)
+    best[take] = other[take]
     return best
-

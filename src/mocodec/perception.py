@@ -25,8 +25,16 @@ import numpy as np
 
 from mocodec.skeleton import Skeleton
 
-DEFAULT_SCORES = {"left_leg": 1.0, "right_leg": 1.0, "torso": 0.5, "head": 0.5, "left_arm": 0.5,
-                  "right_arm": 0.5, "left_hand": 0.5, "right_hand": 0.5}
+DEFAULT_SCORES = {
+    "left_leg": 1.0,
+    "right_leg": 1.0,
+    "torso": 0.5,
+    "head": 0.5,
+    "left_arm": 0.5,
+    "right_arm": 0.5,
+    "left_hand": 0.5,
+    "right_hand": 0.5,
+}
 ALLOCATIONS = ("perceptual", "energy", "uniform", "impact")
 SHELL_M = 0.03
 IMPACT_UNIT_M = 0.001
@@ -82,20 +90,25 @@ def channel_energy(segment: np.ndarray) -> np.ndarray:
 def static_factors(skeleton: Skeleton, scores: dict[str, float] | None = None) -> np.ndarray:
     """S_k P(j) l(j) per channel: the part of F that does not depend on the motion."""
     scores = {**DEFAULT_SCORES, **(scores or {})}
-    per_joint = np.array([scores.get(p, 0.5) for p in skeleton.body_parts]) * depth_factors(skeleton) \
-        * bone_factors(skeleton)
+    per_joint = (
+        np.array([scores.get(p, 0.5) for p in skeleton.body_parts]) * depth_factors(skeleton) * bone_factors(skeleton)
+    )
     return per_joint[skeleton.channel_joints]
 
 
-def channel_importance(skeleton: Skeleton, segment: np.ndarray, mode: str = "perceptual",
-                       scores: dict[str, float] | None = None) -> np.ndarray:
+def channel_importance(
+    skeleton: Skeleton, segment: np.ndarray, mode: str = "perceptual", scores: dict[str, float] | None = None
+) -> np.ndarray:
     """F_c for one segment: ``perceptual`` (all four factors), ``energy`` (E only),
     ``uniform`` (1 for every channel) or ``impact`` (ours, see the module doc)."""
     if mode == "uniform":
         return np.ones(segment.shape[1])
     if mode == "impact":
-        metres = np.where(skeleton.rotation_mask, np.deg2rad(1.0) * lever_arms(skeleton)[skeleton.channel_joints],
-                          1.0 / skeleton.units_per_metre)
+        metres = np.where(
+            skeleton.rotation_mask,
+            np.deg2rad(1.0) * lever_arms(skeleton)[skeleton.channel_joints],
+            1.0 / skeleton.units_per_metre,
+        )
         return np.log2(1.0 + segment.std(axis=0) * metres / IMPACT_UNIT_M)
     energy = channel_energy(segment)
     if mode == "energy":

@@ -27,15 +27,15 @@ from mocodec.motion import Motion
 
 TARGETS = ("ratio", "bitrate", "psnr", "mean_error_cm", "max_error_cm")
 MAX_STEPS = 40
-KNOB_RESOLUTION = 1e-3          # relative: finer knob steps change a file by less than this
+KNOB_RESOLUTION = 1e-3  # relative: finer knob steps change a file by less than this
 
 
 @dataclass(frozen=True)
 class Measurement:
     codec: Codec
-    data: bytes                 # the .moc bytes
-    ratio: float                # vs 32-bit floats
-    bitrate: float              # bits per second
+    data: bytes  # the .moc bytes
+    ratio: float  # vs 32-bit floats
+    bitrate: float  # bits per second
     psnr: float
     mean_error_cm: float
     max_error_cm: float
@@ -50,7 +50,9 @@ def coded_size(data: bytes, whole_file: bool = True) -> int:
     return sum(len(c.read_chunk(k)) for k in range(len(c.index)))
 
 
-def measure(codec: Codec, motion: Motion, positions_cm: np.ndarray | None = None, whole_file: bool = True) -> Measurement:
+def measure(
+    codec: Codec, motion: Motion, positions_cm: np.ndarray | None = None, whole_file: bool = True
+) -> Measurement:
     """Encode into a container, decode it back and measure everything rate control needs;
     sizes count the whole file, or with ``whole_file=False`` the coded motion only."""
     data = moc.pack(motion, codec)
@@ -60,25 +62,44 @@ def measure(codec: Codec, motion: Motion, positions_cm: np.ndarray | None = None
     if positions_cm is None:
         positions_cm = forward_kinematics(sk, motion.channels)[0] * (100.0 / sk.units_per_metre)
     decoded_cm = forward_kinematics(decoded.skeleton, decoded.channels)[0] * (100.0 / sk.units_per_metre)
-    err = np.linalg.norm(decoded_cm - positions_cm, axis=2)     # on the file's skeleton (offsets rounded)
-    aligned = decoded.aligned_to(motion).channels          # equivalent Euler triples are not errors
+    err = np.linalg.norm(decoded_cm - positions_cm, axis=2)  # on the file's skeleton (offsets rounded)
+    aligned = decoded.aligned_to(motion).channels  # equivalent Euler triples are not errors
     psnr = dof_errors(motion.channels, aligned, sk.rotation_mask).body_psnr
-    return Measurement(codec, data, motion.raw_bits / 8 / size, size * 8 / max(motion.duration, 1e-12),
-                       psnr, float(err.mean()) if err.size else 0.0, float(err.max()) if err.size else 0.0)
+    return Measurement(
+        codec,
+        data,
+        motion.raw_bits / 8 / size,
+        size * 8 / max(motion.duration, 1e-12),
+        psnr,
+        float(err.mean()) if err.size else 0.0,
+        float(err.max()) if err.size else 0.0,
+    )
 
 
 def _meets(m: Measurement, target: str, value: float) -> bool:
-    return {"ratio": m.ratio >= value, "bitrate": m.bitrate <= value, "psnr": m.psnr >= value,
-            "mean_error_cm": m.mean_error_cm <= value, "max_error_cm": m.max_error_cm <= value}[target]
+    return {
+        "ratio": m.ratio >= value,
+        "bitrate": m.bitrate <= value,
+        "psnr": m.psnr >= value,
+        "mean_error_cm": m.mean_error_cm <= value,
+        "max_error_cm": m.max_error_cm <= value,
+    }[target]
 
 
 def _achieved(m: Measurement, target: str) -> float:
     return getattr(m, target)
 
 
-def tune(codec: Codec, motion: Motion, target: str, value: float, tolerance: float = 0.02,
-         whole_file: bool = True, knob_range: tuple[float, float] | None = None,
-         resolution: float = KNOB_RESOLUTION) -> Measurement:
+def tune(
+    codec: Codec,
+    motion: Motion,
+    target: str,
+    value: float,
+    tolerance: float = 0.02,
+    whole_file: bool = True,
+    knob_range: tuple[float, float] | None = None,
+    resolution: float = KNOB_RESOLUTION,
+) -> Measurement:
     """The measured setting of ``codec``'s quality knob for the target (see the module doc).
     Ratio and bit-rate targets count the whole file unless ``whole_file`` is False. The knob is
     searched over its whole range, or over ``knob_range``, down to steps of ``resolution``
@@ -97,8 +118,9 @@ def tune(codec: Codec, motion: Motion, target: str, value: float, tolerance: flo
         m = measure(codec, motion, positions, whole_file)
         if _meets(m, target, value):
             return m
-        raise CodecError(f"codec {codec.id} has no quality knob and gives {target} {_achieved(m, target):.4g}, "
-                         f"not {value:g}")
+        raise CodecError(
+            f"codec {codec.id} has no quality knob and gives {target} {_achieved(m, target):.4g}, not {value:g}"
+        )
     knob = next(k for k in codec.knobs if k.name == q.name)
     lo, hi = map(float, knob_range or (knob.low, knob.high))
     integer = knob.kind is int
@@ -116,16 +138,19 @@ def tune(codec: Codec, motion: Motion, target: str, value: float, tolerance: flo
     size_target = target in ("ratio", "bitrate")
     if size_target:
         if _meets(best, target, value):
-            return best                       # even full quality is small enough
+            return best  # even full quality is small enough
         if not _meets(worst, target, value):
-            raise CodecError(f"codec {codec.id} cannot reach {target} {value:g}: at its smallest it gives "
-                             f"{_achieved(worst, target):.4g}")
+            raise CodecError(
+                f"codec {codec.id} cannot reach {target} {value:g}: at its smallest it gives "
+                f"{_achieved(worst, target):.4g}"
+            )
     else:
         if _meets(worst, target, value):
-            return worst                      # even the lowest quality is good enough
+            return worst  # even the lowest quality is good enough
         if not _meets(best, target, value):
-            raise CodecError(f"codec {codec.id} cannot reach {target} {value:g}: at its best it gives "
-                             f"{_achieved(best, target):.4g}")
+            raise CodecError(
+                f"codec {codec.id} cannot reach {target} {value:g}: at its best it gives {_achieved(best, target):.4g}"
+            )
     # invariant: `good` meets the target, `bad` does not; error targets want the smallest good
     # file, size targets the largest good file, i.e. both move `good` towards `bad`.
     good_x, good, bad_x = (worst_x, worst, best_x) if size_target else (best_x, best, worst_x)
@@ -146,12 +171,13 @@ def tune(codec: Codec, motion: Motion, target: str, value: float, tolerance: flo
 DIRECT_PASSES = 5
 
 
-def _direct(codec: Codec, motion: Motion, target: str, value: float, tolerance: float, whole_file: bool,
-            positions: np.ndarray) -> Measurement | None:
+def _direct(
+    codec: Codec, motion: Motion, target: str, value: float, tolerance: float, whole_file: bool, positions: np.ndarray
+) -> Measurement | None:
     """For a codec that meets targets itself (``target_knobs``: kinwave's error bound and
     bit-rate knobs), one encoding for an error bound, or a few corrected ones for a size, instead
     of a bisection; None if it does not get there (the caller bisects)."""
-    overhead = 0
+    overhead = 0.0
     best = None
     for _ in range(DIRECT_PASSES):
         knobs = codec.target_knobs(target, value, motion, overhead)

@@ -36,8 +36,13 @@ def _write_rotation(channels: np.ndarray, joint: Joint, first: int, angles: np.n
         channels[:, first + c] = angles[:, step]
 
 
-def with_dummy_root(motion: Motion, rotation: tuple[float, float, float] = (0.0, 0.0, 0.0), order: str = "ZXY",
-                    name: str = "dummy_root", position_channels: bool = False) -> Motion:
+def with_dummy_root(
+    motion: Motion,
+    rotation: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    order: str = "ZXY",
+    name: str = "dummy_root",
+    position_channels: bool = False,
+) -> Motion:
     """A new root joint at the origin with a constant rotation (intrinsic ``order``, degrees)
     above the old root, which keeps its offset, translation channels and rotation order: its
     channels are re-expressed in the dummy's frame. With ``position_channels`` the dummy also
@@ -84,13 +89,12 @@ def with_euler_orders(motion: Motion, order: str | dict[str, str]) -> Motion:
         first = sk.channel_offsets[j]
         if len(joint.rotation_order) != 3 or new is None or joint.has_axis:
             joints.append(joint)
-            columns.append(motion.channels[:, first:first + len(joint.channels)])
+            columns.append(motion.channels[:, first : first + len(joint.channels)])
             continue
         if new not in EULER_ORDERS:
             raise ValueError(f"unknown Euler order {new!r}")
         positions = tuple(c for c in joint.channels if c in POSITION_CHANNELS)
-        moved = replace(joint, channels=positions + _rotation_channels(new), rotation_order=new,
-                        limits=())
+        moved = replace(joint, channels=positions + _rotation_channels(new), rotation_order=new, limits=())
         block = np.empty((motion.num_frames, len(moved.channels)))
         for k, c in enumerate(positions):
             block[:, k] = motion.channels[:, first + joint.channels.index(c)]
@@ -109,13 +113,19 @@ def with_position_channels(motion: Motion) -> Motion:
     joints, columns = [], []
     for j, joint in enumerate(sk.joints):
         first = sk.channel_offsets[j]
-        block = motion.channels[:, first:first + len(joint.channels)]
+        block = motion.channels[:, first : first + len(joint.channels)]
         if j == 0 or not joint.rotation_order or any(c in POSITION_CHANNELS for c in joint.channels):
             joints.append(joint)
             columns.append(block)
             continue
-        joints.append(replace(joint, offset=(0.0, 0.0, 0.0), channels=POSITION_CHANNELS + joint.channels,
-                              limits=((-np.inf, np.inf),) * 3 + joint.limits))
+        joints.append(
+            replace(
+                joint,
+                offset=(0.0, 0.0, 0.0),
+                channels=POSITION_CHANNELS + joint.channels,
+                limits=((-np.inf, np.inf),) * 3 + joint.limits,
+            )
+        )
         columns.append(np.hstack([np.tile(np.asarray(joint.offset, dtype=float), (motion.num_frames, 1)), block]))
     new_sk = Skeleton(tuple(joints), sk.units_per_metre, sk.name, dict(sk.metadata))
     return Motion(new_sk, motion.fps, np.hstack(columns))

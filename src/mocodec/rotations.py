@@ -69,10 +69,12 @@ def quat_multiply_components(p: tuple, q: tuple) -> tuple:
     The component form lets callers keep each component contiguous (forward kinematics)."""
     pw, px, py, pz = p
     qw, qx, qy, qz = q
-    return (pw * qw - px * qx - py * qy - pz * qz,
-            pw * qx + px * qw + py * qz - pz * qy,
-            pw * qy - px * qz + py * qw + pz * qx,
-            pw * qz + px * qy - py * qx + pz * qw)
+    return (
+        pw * qw - px * qx - py * qy - pz * qz,
+        pw * qx + px * qw + py * qz - pz * qy,
+        pw * qy - px * qz + py * qw + pz * qx,
+        pw * qz + px * qy - py * qx + pz * qw,
+    )
 
 
 def quat_multiply(p: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -111,6 +113,7 @@ def euler_to_quat(angles: np.ndarray, order: str, degrees: bool = True) -> np.nd
         e[_AXIS[axis]] = 1.0
         qn = axis_angle_to_quat(e, angles[..., n], degrees)
         q = qn if q is None else quat_multiply(q, qn)
+    assert q is not None, "an Euler order has at least one axis"
     return q
 
 
@@ -143,17 +146,45 @@ def matrix_to_quat(m: np.ndarray) -> np.ndarray:
     q = np.empty(m.shape[:-2] + (4,))
     # w largest
     s = np.sqrt(np.maximum(1.0 + trace, 1e-300)) * 2
-    qw = np.stack((0.25 * s, (m[..., 2, 1] - m[..., 1, 2]) / s,
-                   (m[..., 0, 2] - m[..., 2, 0]) / s, (m[..., 1, 0] - m[..., 0, 1]) / s), -1)
+    qw = np.stack(
+        (
+            0.25 * s,
+            (m[..., 2, 1] - m[..., 1, 2]) / s,
+            (m[..., 0, 2] - m[..., 2, 0]) / s,
+            (m[..., 1, 0] - m[..., 0, 1]) / s,
+        ),
+        -1,
+    )
     s = np.sqrt(np.maximum(1.0 + m[..., 0, 0] - m[..., 1, 1] - m[..., 2, 2], 1e-300)) * 2
-    qx = np.stack(((m[..., 2, 1] - m[..., 1, 2]) / s, 0.25 * s,
-                   (m[..., 0, 1] + m[..., 1, 0]) / s, (m[..., 0, 2] + m[..., 2, 0]) / s), -1)
+    qx = np.stack(
+        (
+            (m[..., 2, 1] - m[..., 1, 2]) / s,
+            0.25 * s,
+            (m[..., 0, 1] + m[..., 1, 0]) / s,
+            (m[..., 0, 2] + m[..., 2, 0]) / s,
+        ),
+        -1,
+    )
     s = np.sqrt(np.maximum(1.0 + m[..., 1, 1] - m[..., 0, 0] - m[..., 2, 2], 1e-300)) * 2
-    qy = np.stack(((m[..., 0, 2] - m[..., 2, 0]) / s, (m[..., 0, 1] + m[..., 1, 0]) / s,
-                   0.25 * s, (m[..., 1, 2] + m[..., 2, 1]) / s), -1)
+    qy = np.stack(
+        (
+            (m[..., 0, 2] - m[..., 2, 0]) / s,
+            (m[..., 0, 1] + m[..., 1, 0]) / s,
+            0.25 * s,
+            (m[..., 1, 2] + m[..., 2, 1]) / s,
+        ),
+        -1,
+    )
     s = np.sqrt(np.maximum(1.0 + m[..., 2, 2] - m[..., 0, 0] - m[..., 1, 1], 1e-300)) * 2
-    qz = np.stack(((m[..., 1, 0] - m[..., 0, 1]) / s, (m[..., 0, 2] + m[..., 2, 0]) / s,
-                   (m[..., 1, 2] + m[..., 2, 1]) / s, 0.25 * s), -1)
+    qz = np.stack(
+        (
+            (m[..., 1, 0] - m[..., 0, 1]) / s,
+            (m[..., 0, 2] + m[..., 2, 0]) / s,
+            (m[..., 1, 2] + m[..., 2, 1]) / s,
+            0.25 * s,
+        ),
+        -1,
+    )
     for idx, cand_q in enumerate((qw, qx, qy, qz)):
         sel = best == idx
         q[sel] = cand_q[sel]

@@ -14,6 +14,7 @@ import multiprocessing
 import os
 import resource
 import signal
+from typing import Any
 
 from mocodec.errors import CodecError, CorruptStreamError
 
@@ -32,7 +33,7 @@ def _mapped_bytes() -> int:
 
 
 def _child(conn, func, args, memory_bytes: int) -> None:
-    faulthandler.disable()          # a crash here is expected and reported by the parent
+    faulthandler.disable()  # a crash here is expected and reported by the parent
     limit = _mapped_bytes() + memory_bytes
     _, hard = resource.getrlimit(resource.RLIMIT_AS)
     if hard != resource.RLIM_INFINITY:
@@ -42,7 +43,7 @@ def _child(conn, func, args, memory_bytes: int) -> None:
         result = ("ok", func(*args))
     except MemoryError:
         result = ("error", f"it asks for more than the child's {memory_bytes:,}-byte memory limit")
-    except BaseException as e:      # noqa: BLE001 - every failure goes back to the parent as text
+    except BaseException as e:  # noqa: BLE001 - every failure goes back to the parent as text
         result = ("codec" if isinstance(e, CodecError) else "error", f"{type(e).__name__}: {e}")
     try:
         conn.send(result)
@@ -60,12 +61,11 @@ def _exit_reason(code: int | None) -> str:
         return f"signal {-code}"
 
 
-def call_isolated(func, *args, what: str, memory_bytes: int = CHILD_MEMORY_BYTES,
-                  timeout_s: float = CHILD_TIMEOUT_S):
+def call_isolated(func, *args, what: str, memory_bytes: int = CHILD_MEMORY_BYTES, timeout_s: float = CHILD_TIMEOUT_S):
     """``func(*args)`` in a child process; its result, or CorruptStreamError naming ``what``
     and how the child failed (a CodecError it raised is raised as such)."""
     method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
-    ctx = multiprocessing.get_context(method)
+    ctx: Any = multiprocessing.get_context(method)
     receive, send = ctx.Pipe(duplex=False)
     proc = ctx.Process(target=_child, args=(send, func, args, memory_bytes), daemon=True)
     proc.start()

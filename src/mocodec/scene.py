@@ -18,7 +18,7 @@ import zlib
 import numpy as np
 
 from mocodec import moc
-from mocodec.codecs import get_codec
+from mocodec.codecs.perceptual.spiht import SpihtCodec
 from mocodec.coding.entropy.parts import join_parts, split_parts
 from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.formats import container
@@ -70,14 +70,20 @@ def allocate(motions: list[Motion], bits_per_second: float, distances, weights=N
     return out
 
 
-def encode_scene(motions: list[Motion], bits_per_second: float, distances, weights=None,
-                 chunk_frames: int = moc.CHUNK_FRAMES, **spiht_knobs) -> bytes:
+def encode_scene(
+    motions: list[Motion],
+    bits_per_second: float,
+    distances,
+    weights=None,
+    chunk_frames: int = moc.CHUNK_FRAMES,
+    **spiht_knobs,
+) -> bytes:
     """One file for all characters under ``bits_per_second`` of SPIHT bits in total."""
     if not motions:
         raise CodecError("a scene needs at least one character")
     if len({m.fps for m in motions}) != 1:
         raise CodecError("every character of a scene needs the same frame rate")
-    codec = get_codec("spiht", bits_per_second=bits_per_second, **spiht_knobs)
+    codec = SpihtCodec(bits_per_second=bits_per_second, **spiht_knobs)
     window = codec.config["window"]
     if chunk_frames % window:
         raise CodecError(f"chunk_frames ({chunk_frames}) must be a multiple of the window ({window})")
@@ -86,11 +92,16 @@ def encode_scene(motions: list[Motion], bits_per_second: float, distances, weigh
     for motion, row in zip(motions, budgets):
         chunks = []
         for first in range(0, motion.num_frames, chunk_frames):
-            part = motion[first:first + chunk_frames]
-            seg = row[first // window:first // window + -(-part.num_frames // window)]
-            chunks.append(container.Chunk(first, part.num_frames, moc.chunk_body(codec.encode_with_budgets(part, seg))))
-        header = {"codec": codec.get_config(), "fps": float(motion.fps), "frames": motion.num_frames,
-                  "chunk_frames": chunk_frames, "skeleton": motion.skeleton}
+            part = motion[first : first + chunk_frames]
+            seg = row[first // window : first // window + -(-part.num_frames // window)]
+            chunks.append(container.Chunk(first, part.num_frames, codec.encode_with_budgets(part, seg)))
+        header = {
+            "codec": codec.get_config(),
+            "fps": float(motion.fps),
+            "frames": motion.num_frames,
+            "chunk_frames": chunk_frames,
+            "skeleton": motion.skeleton,
+        }
         parts.append(container.pack(header, chunks))
     body = _HEAD.pack(MAGIC, VERSION, len(parts)) + join_parts(parts)
     return body + _U32.pack(zlib.crc32(body))

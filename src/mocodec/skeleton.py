@@ -41,10 +41,10 @@ class Joint:
 
     name: str
     parent: int
-    offset: tuple[float, float, float]
+    offset: tuple[float, ...]  # x, y, z
     channels: tuple[str, ...] = ()
     rotation_order: str = ""
-    axis: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    axis: tuple[float, ...] = (0.0, 0.0, 0.0)
     axis_order: str = "ZYX"
     limits: tuple[tuple[float, float], ...] = ()
     body_part: str | None = None
@@ -58,7 +58,9 @@ class Joint:
             raise ValueError(f"joint {self.name!r}: repeated channel in {self.channels}")
         rot_axes = "".join(c[0] for c in self.channels if c in ROTATION_CHANNELS)
         if any(a == b for a, b in zip(self.rotation_order, self.rotation_order[1:])):
-            raise ValueError(f"joint {self.name!r}: rotation order {self.rotation_order!r} repeats an axis twice in a row")
+            raise ValueError(
+                f"joint {self.name!r}: rotation order {self.rotation_order!r} repeats an axis twice in a row"
+            )
         if sorted(rot_axes) != sorted(self.rotation_order):
             raise ValueError(
                 f"joint {self.name!r}: rotation order {self.rotation_order!r} does not use the "

@@ -11,8 +11,8 @@ import numpy as np
 
 @dataclass(frozen=True)
 class Density:
-    edges: np.ndarray     # bin edges
-    density: np.ndarray   # integrates to 1 over the bins
+    edges: np.ndarray  # bin edges
+    density: np.ndarray  # integrates to 1 over the bins
 
     @property
     def centres(self) -> np.ndarray:
@@ -31,8 +31,9 @@ def first_difference(channels: np.ndarray) -> np.ndarray:
     return np.diff(np.asarray(channels, dtype=np.float64), axis=0)
 
 
-def joint_pdf(x: np.ndarray, y: np.ndarray, bins: int = 64,
-              value_range=((-180.0, 180.0), (-180.0, 180.0))) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def joint_pdf(
+    x: np.ndarray, y: np.ndarray, bins: int = 64, value_range=((-180.0, 180.0), (-180.0, 180.0))
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """2-D histogram density of a DOF pair (fig. 5-9): ``(density, x_edges, y_edges)``."""
     density, xe, ye = np.histogram2d(np.ravel(x), np.ravel(y), bins=bins, range=value_range, density=True)
     return density, xe, ye
@@ -44,7 +45,7 @@ class ShapeFit:
 
     laplace_loglik: float
     gauss_loglik: float
-    excess_kurtosis: float   # 0 for a Gaussian, 3 for a Laplace density
+    excess_kurtosis: float  # 0 for a Gaussian, 3 for a Laplace density
 
     @property
     def best(self) -> str:
@@ -59,7 +60,7 @@ def laplace_or_gauss(values: np.ndarray) -> ShapeFit:
     b = np.mean(np.abs(v - np.median(v)))
     if v.size < 2 or sigma == 0 or b == 0:
         return ShapeFit(float("nan"), float("nan"), float("nan"))
-    gauss = -0.5 * np.log(2 * np.pi * sigma ** 2) - 0.5
+    gauss = -0.5 * np.log(2 * np.pi * sigma**2) - 0.5
     laplace = -np.log(2 * b) - 1.0
-    kurt = np.mean((v - v.mean()) ** 4) / sigma ** 4 - 3.0
+    kurt = np.mean((v - v.mean()) ** 4) / sigma**4 - 3.0
     return ShapeFit(float(laplace), float(gauss), float(kurt))

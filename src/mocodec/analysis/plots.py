@@ -56,7 +56,9 @@ def write_plots(motion: Motion, out_dir: str | Path) -> list[Path]:
         diff = density.pdf(density.first_difference(motion.channels[:, idx]), bins=80)
         axes[1].semilogy(diff.centres, np.where(diff.density > 0, diff.density, np.nan), label=part)
     axes[0].set(xlabel="angle [deg]", ylabel="density", title="PDF of each group's most varied DOF (fig. 5-6)")
-    axes[1].set(xlabel="first difference [deg/frame]", ylabel="density", title="First-difference PDF per group (fig. 5-7)")
+    axes[1].set(
+        xlabel="first difference [deg/frame]", ylabel="density", title="First-difference PDF per group (fig. 5-7)"
+    )
     for ax in axes:
         ax.legend(fontsize=7)
     fig.tight_layout()

@@ -10,7 +10,7 @@ from mocodec.jsonable import jsonable
 from mocodec.motion import Motion
 from mocodec.skeleton import BODY_PARTS
 
-DEFAULT_NOISE_DEG = 0.1    # assumed sensor noise (standard deviation) for table 5-4
+DEFAULT_NOISE_DEG = 0.1  # assumed sensor noise (standard deviation) for table 5-4
 DEFAULT_NOISE_CM = 0.1
 CONSTANT = 1e-6
 
@@ -70,24 +70,33 @@ def analyze(motion: Motion, noise_deg: float = DEFAULT_NOISE_DEG, noise_cm: floa
             "difference_excess_kurtosis": shape.excess_kurtosis,
             "difference_std_deg": float(density.first_difference(x).std()),
         }
-    return jsonable({
-        "frames": motion.num_frames,
-        "fps": fps,
-        "duration_s": motion.duration,
-        "channels": sk.num_channels,
-        "varying_channels": int(varying.sum()),
-        "raw_bitrate_32bit": motion.raw_bitrate,
-        "noise_deg": noise_deg,
-        "noise_cm": noise_cm,
-        "usable_bits_per_frame": int(bits[varying].sum()),
-        "usable_bitrate": stats.raw_bit_rate(bits[varying], fps),
-        "groups": groups,
-        "dofs": [
-            {"dof": name, "min": float(st.minimum[c]), "max": float(st.maximum[c]), "range": float(st.range[c]),
-             "mean": float(st.mean[c]), "std": float(st.std[c]), "usable_bits": int(bits[c]) if varying[c] else 0}
-            for c, name in enumerate(st.names)
-        ],
-    })
+    return jsonable(
+        {
+            "frames": motion.num_frames,
+            "fps": fps,
+            "duration_s": motion.duration,
+            "channels": sk.num_channels,
+            "varying_channels": int(varying.sum()),
+            "raw_bitrate_32bit": motion.raw_bitrate,
+            "noise_deg": noise_deg,
+            "noise_cm": noise_cm,
+            "usable_bits_per_frame": int(bits[varying].sum()),
+            "usable_bitrate": stats.raw_bit_rate(bits[varying], fps),
+            "groups": groups,
+            "dofs": [
+                {
+                    "dof": name,
+                    "min": float(st.minimum[c]),
+                    "max": float(st.maximum[c]),
+                    "range": float(st.range[c]),
+                    "mean": float(st.mean[c]),
+                    "std": float(st.std[c]),
+                    "usable_bits": int(bits[c]) if varying[c] else 0,
+                }
+                for c, name in enumerate(st.names)
+            ],
+        }
+    )
 
 
 def summary_text(result: dict, path: str) -> str:
@@ -108,10 +117,12 @@ def summary_text(result: dict, path: str) -> str:
         lines.append(
             f"{part:<12}{g['dofs']:>5}{g['power_99_hz']:>9.2f}Hz{g['cutoff_40db_hz']:>7.2f}Hz{g['cutoff_50db_hz']:>7.2f}Hz"
             f"{g['cutoff_50db_hz_blackman_tukey']:>8.2f}Hz{g['cutoff_50db_hz_ar']:>8.2f}Hz"
-            f"{'-' if a is None else f'{a:.2g}':>11}{g['mean_drift_median']:>7.2f}{g['difference_shape']:>10}")
+            f"{'-' if a is None else f'{a:.2g}':>11}{g['mean_drift_median']:>7.2f}{g['difference_shape']:>10}"
+        )
     lines.append("")
-    lines.append("Markov a is the decay of phi(m) = A exp(-a m^2) at 30 Hz lags (thesis: 2.5e-4 conversation, "
-                 "0.015 dance);")
+    lines.append(
+        "Markov a is the decay of phi(m) = A exp(-a m^2) at 30 Hz lags (thesis: 2.5e-4 conversation, 0.015 dance);"
+    )
     lines.append("drift is the spread of the means of 10 s windows (a third of a shorter clip) over the DOF's")
     lines.append("standard deviation (small = stationary).")
     return "\n".join(lines)

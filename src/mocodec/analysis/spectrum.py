@@ -20,8 +20,8 @@ from mocodec.analysis.temporal import autocorrelation
 
 @dataclass(frozen=True)
 class Spectrum:
-    freqs: np.ndarray   # Hz
-    power: np.ndarray   # PSD, units^2 / Hz, averaged over the columns given
+    freqs: np.ndarray  # Hz
+    power: np.ndarray  # PSD, units^2 / Hz, averaged over the columns given
 
     def db(self) -> np.ndarray:
         """The PSD in dB relative to its peak."""

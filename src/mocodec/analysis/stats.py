@@ -18,7 +18,7 @@ import numpy as np
 
 from mocodec.motion import Motion
 
-POSITION_FULL_SCALE_CM = 600.0   # +-3 m tracker range
+POSITION_FULL_SCALE_CM = 600.0  # +-3 m tracker range
 ANGLE_FULL_SCALE_DEG = 360.0
 HARDWARE_BITS = 16
 
@@ -28,8 +28,8 @@ class DofStatistics:
     names: tuple[str, ...]
     minimum: np.ndarray
     maximum: np.ndarray
-    mean: np.ndarray     # (5-4)
-    std: np.ndarray      # square root of (5-5)
+    mean: np.ndarray  # (5-4)
+    std: np.ndarray  # square root of (5-5)
 
     @property
     def range(self) -> np.ndarray:
@@ -43,12 +43,13 @@ def dof_statistics(motion: Motion) -> DofStatistics:
     return DofStatistics(motion.skeleton.channel_names, ch.min(axis=0), ch.max(axis=0), ch.mean(axis=0), ch.std(axis=0))
 
 
-def usable_bits(value_range: np.ndarray, noise_std: float | np.ndarray, full_scale: float,
-                hardware_bits: int = HARDWARE_BITS) -> np.ndarray:
+def usable_bits(
+    value_range: np.ndarray, noise_std: float | np.ndarray, full_scale: float, hardware_bits: int = HARDWARE_BITS
+) -> np.ndarray:
     """(5-1) to (5-3): B - log2(2^B sigma / FS) - log2(FS / R), rounded down, never below 0.
     Noise below one hardware step costs nothing (N_h >= 0)."""
     value_range = np.asarray(value_range, dtype=np.float64)
-    noise_bits = np.maximum(0.0, np.log2(2.0 ** hardware_bits * np.asarray(noise_std, dtype=np.float64) / full_scale))
+    noise_bits = np.maximum(0.0, np.log2(2.0**hardware_bits * np.asarray(noise_std, dtype=np.float64) / full_scale))
     with np.errstate(divide="ignore"):
         range_bits = np.log2(full_scale / value_range)
     bits = hardware_bits - noise_bits - np.maximum(range_bits, 0.0)

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-THESIS_MARKOV_A = {"conversation": 2.5e-4, "dance": 0.015}   # at 30 Hz
+THESIS_MARKOV_A = {"conversation": 2.5e-4, "dance": 0.015}  # at 30 Hz
 
 
 def autocorrelation(x: np.ndarray, max_lag: int) -> np.ndarray:
@@ -35,14 +35,16 @@ def autocorrelation(x: np.ndarray, max_lag: int) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Stationarity:
-    origins_s: np.ndarray        # window start times
-    means: np.ndarray            # (origins, columns): fig. 5-3
-    acfs: np.ndarray             # (origins, lags, columns): fig. 5-4
-    mean_drift: np.ndarray       # per column: std of the window means / overall std
-    acf_spread: np.ndarray       # per column: largest spread of the window ACFs at any lag
+    origins_s: np.ndarray  # window start times
+    means: np.ndarray  # (origins, columns): fig. 5-3
+    acfs: np.ndarray  # (origins, lags, columns): fig. 5-4
+    mean_drift: np.ndarray  # per column: std of the window means / overall std
+    acf_spread: np.ndarray  # per column: largest spread of the window ACFs at any lag
 
 
-def stationarity(x: np.ndarray, fps: float, window_s: float = 10.0, count: int = 6, max_lag_s: float = 1.0) -> Stationarity:
+def stationarity(
+    x: np.ndarray, fps: float, window_s: float = 10.0, count: int = 6, max_lag_s: float = 1.0
+) -> Stationarity:
     """Mean and autocorrelation over ``count`` windows at evenly spaced time origins. Small
     drift and spread support the wide-sense-stationary assumption of §5.2.3. Windows are
     shortened to a third of a short clip so there are always several."""
@@ -53,12 +55,12 @@ def stationarity(x: np.ndarray, fps: float, window_s: float = 10.0, count: int =
     w = max(2, min(n // 3, int(round(window_s * fps))))
     starts = np.unique(np.linspace(0, n - w, count).astype(int))
     lag = max(1, min(w - 1, int(round(max_lag_s * fps))))
-    means = np.stack([x[s:s + w].mean(axis=0) for s in starts])
-    acfs = np.stack([autocorrelation(x[s:s + w], lag) for s in starts])
+    means = np.stack([x[s : s + w].mean(axis=0) for s in starts])
+    acfs = np.stack([autocorrelation(x[s : s + w], lag) for s in starts])
     std = x.std(axis=0)
     with np.errstate(invalid="ignore", divide="ignore"):
         drift = means.std(axis=0) / std
-    finite = np.isfinite(acfs)              # a window where a DOF is constant has no ACF
+    finite = np.isfinite(acfs)  # a window where a DOF is constant has no ACF
     per_lag = np.where(finite, acfs, -np.inf).max(axis=0) - np.where(finite, acfs, np.inf).min(axis=0)
     spread = np.fmax.reduce(np.where(np.isfinite(per_lag), per_lag, np.nan), axis=0)
     return Stationarity(starts / fps, means, acfs, drift, spread)
@@ -66,9 +68,9 @@ def stationarity(x: np.ndarray, fps: float, window_s: float = 10.0, count: int =
 
 @dataclass(frozen=True)
 class MarkovFit:
-    amplitude: float     # A
-    decay: float         # a, per squared sample of lag
-    rms_error: float     # over the fitted lags
+    amplitude: float  # A
+    decay: float  # a, per squared sample of lag
+    rms_error: float  # over the fitted lags
 
     def model(self, lags: np.ndarray) -> np.ndarray:
         return self.amplitude * np.exp(-self.decay * np.square(lags))

@@ -24,14 +24,14 @@ class FileTask:
     target: str
     codec: str
     knobs: tuple[tuple[str, str], ...] = ()
-    goal: tuple[str, float] | None = None       # a rate-control target, e.g. ("max_error_cm", 1.0)
+    goal: tuple[str, float] | None = None  # a rate-control target, e.g. ("max_error_cm", 1.0)
 
 
 @dataclass
 class Outcome:
     written: list[dict] = field(default_factory=list)
     skipped: list[str] = field(default_factory=list)
-    failed: list[tuple[str, str]] = field(default_factory=list)     # (source, message)
+    failed: list[tuple[str, str]] = field(default_factory=list)  # (source, message)
     wall_s: float = 0.0
 
 
@@ -43,16 +43,23 @@ def compress_file(task: FileTask) -> dict:
     data = ratecontrol.tune(codec, motion, *task.goal).data if task.goal else moc.pack(motion, codec)
     Path(task.target).parent.mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(task.target, data)
-    return {"source": task.source, "target": task.target, "frames": motion.num_frames, "bytes": len(data),
-            "raw_bytes": motion.raw_bits // 8, "seconds": time.perf_counter() - t0}
+    return {
+        "source": task.source,
+        "target": task.target,
+        "frames": motion.num_frames,
+        "bytes": len(data),
+        "raw_bytes": motion.raw_bits // 8,
+        "seconds": time.perf_counter() - t0,
+    }
 
 
 def plan(in_dir, out_dir, codec: str, knobs: dict | None = None, goal=None) -> list[FileTask]:
     """A task for every clip under ``in_dir``: the same relative path under ``out_dir``, as .moc."""
-    get_codec(codec, **(knobs or {}))          # a bad codec or knob fails here, not in every worker
+    get_codec(codec, **(knobs or {}))  # a bad codec or knob fails here, not in every worker
     if not Path(in_dir).is_dir():
         raise MocodecError(f"{in_dir}: not a folder")
-    tasks, seen = [], {}
+    tasks: list[FileTask] = []
+    seen: dict[str, str] = {}
     for source, name in find_clips([in_dir]):
         target = str(Path(out_dir) / Path(name).with_suffix(".moc"))
         if target in seen:
@@ -64,8 +71,17 @@ def plan(in_dir, out_dir, codec: str, knobs: dict | None = None, goal=None) -> l
     return tasks
 
 
-def compress_dir(in_dir, out_dir, codec: str, knobs: dict | None = None, goal=None, jobs: int | None = None,
-                 scheduler: str | None = None, dask: bool = False, progress: bool = False) -> Outcome:
+def compress_dir(
+    in_dir,
+    out_dir,
+    codec: str,
+    knobs: dict | None = None,
+    goal=None,
+    jobs: int | None = None,
+    scheduler: str | None = None,
+    dask: bool = False,
+    progress: bool = False,
+) -> Outcome:
     tasks = plan(in_dir, out_dir, codec, knobs, goal)
     done = {t.target for t in tasks if Path(t.target).exists()}
     out = Outcome(skipped=[t.target for t in tasks if t.target in done])

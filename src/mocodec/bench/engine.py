@@ -28,13 +28,42 @@ from mocodec.motion import Motion
 from mocodec.ratecontrol import tune
 
 TARGET_OF = {"error": "max_error_cm", "ratio": "ratio", "bitrate": "bitrate"}
-MEASURES = ("psnr_db", "vpsnr_db", "mean_joint_error_cm", "max_joint_error_cm", "mean_shell_error_cm",
-            "max_shell_error_cm", "foot_slide_original_cm_s", "foot_slide_decoded_cm_s", "jerk_ratio")
-COLUMNS = ("clip", "source", "format", "frames", "fps", "channels", "codec", "baseline", "point", "target",
-           "knob", "knob_value", "status", "bytes", "ratio", "bitrate", "bits_per_dof_sample", *MEASURES,
-           "encode_us_per_frame", "decode_us_per_frame", "message")
+MEASURES = (
+    "psnr_db",
+    "vpsnr_db",
+    "mean_joint_error_cm",
+    "max_joint_error_cm",
+    "mean_shell_error_cm",
+    "max_shell_error_cm",
+    "foot_slide_original_cm_s",
+    "foot_slide_decoded_cm_s",
+    "jerk_ratio",
+)
+COLUMNS = (
+    "clip",
+    "source",
+    "format",
+    "frames",
+    "fps",
+    "channels",
+    "codec",
+    "baseline",
+    "point",
+    "target",
+    "knob",
+    "knob_value",
+    "status",
+    "bytes",
+    "ratio",
+    "bitrate",
+    "bits_per_dof_sample",
+    *MEASURES,
+    "encode_us_per_frame",
+    "decode_us_per_frame",
+    "message",
+)
 WARM_FRAMES = 64
-SEARCH_RESOLUTION = 0.01      # rate control stops at knob steps of 1%: finer changes sizes by less
+SEARCH_RESOLUTION = 0.01  # rate control stops at knob steps of 1%: finer changes sizes by less
 _warmed: set[str] = set()
 
 
@@ -92,13 +121,20 @@ def _warm(codec_id: str, motion: Motion) -> None:
 def _base_row(task: Task, motion: Motion | None, point: Point) -> dict:
     cls = codec_class(task.codec)
     knob = cls.quality.name if cls.quality else ""
-    return {"clip": task.name, "source": clip_source(task.name),
-            "format": Path(task.path).suffix.lstrip(".").lower(),
-            "frames": motion.num_frames if motion else None, "fps": motion.fps if motion else None,
-            "channels": motion.skeleton.num_channels if motion else None, "codec": task.codec,
-            "baseline": cls.baseline,
-            "point": point.kind, "target": None if point.kind == "knob" else point.value, "knob": knob,
-            "knob_value": point.value if point.kind == "knob" and knob else None}
+    return {
+        "clip": task.name,
+        "source": clip_source(task.name),
+        "format": Path(task.path).suffix.lstrip(".").lower(),
+        "frames": motion.num_frames if motion else None,
+        "fps": motion.fps if motion else None,
+        "channels": motion.skeleton.num_channels if motion else None,
+        "codec": task.codec,
+        "baseline": cls.baseline,
+        "point": point.kind,
+        "target": None if point.kind == "knob" else point.value,
+        "knob": knob,
+        "knob_value": point.value if point.kind == "knob" and knob else None,
+    }
 
 
 def _measured(task: Task, motion: Motion, point: Point) -> dict:
@@ -110,18 +146,24 @@ def _measured(task: Task, motion: Motion, point: Point) -> dict:
         # error targets are searched in the sweep's range (the knob's far ends can be slow: VQ
         # codebooks of 4096 entries); size targets over the whole knob
         span = sweep_range(type(codec)) if point.kind == "error" else None
-        codec = tune(codec, motion, TARGET_OF[point.kind], point.value, knob_range=span,
-                     resolution=SEARCH_RESOLUTION).codec
+        codec = tune(
+            codec, motion, TARGET_OF[point.kind], point.value, knob_range=span, resolution=SEARCH_RESOLUTION
+        ).codec
         row["knob_value"] = codec.config[row["knob"]] if row["knob"] else None
     trip = moc.round_trip(motion, codec)
     size = len(trip.data)
     summary = compare(motion, trip.decoded).summary()
     samples = motion.num_frames * motion.skeleton.num_channels
-    row.update(status="ok", bytes=size, ratio=motion.raw_bits / 8 / size,
-               bitrate=size * 8 / motion.duration, bits_per_dof_sample=size * 8 / samples,
-               encode_us_per_frame=trip.encode_s * 1e6 / motion.num_frames,
-               decode_us_per_frame=trip.decode_s * 1e6 / motion.num_frames,
-               **{k: summary[k] for k in MEASURES})
+    row.update(
+        status="ok",
+        bytes=size,
+        ratio=motion.raw_bits / 8 / size,
+        bitrate=size * 8 / motion.duration,
+        bits_per_dof_sample=size * 8 / samples,
+        encode_us_per_frame=trip.encode_s * 1e6 / motion.num_frames,
+        decode_us_per_frame=trip.decode_s * 1e6 / motion.num_frames,
+        **{k: summary[k] for k in MEASURES},
+    )
     return row
 
 
@@ -142,7 +184,7 @@ def run_task(task: Task) -> list[dict]:
     """Every row of a task (in a worker). Never raises."""
     try:
         motion = load(task.path)
-    except Exception as e:   # noqa: BLE001 - the clip is reported and the run goes on
+    except Exception as e:  # noqa: BLE001 - the clip is reported and the run goes on
         return [failed_row(task, None, Point("knob", math.nan), "failed", e)]
     _warm(task.codec, motion)
     rows = []
@@ -152,7 +194,7 @@ def run_task(task: Task) -> list[dict]:
         except MocodecError as e:
             status = "unreachable" if point.kind != "knob" else "failed"
             rows.append(failed_row(task, motion, point, status, e))
-        except Exception as e:   # noqa: BLE001
+        except Exception as e:  # noqa: BLE001
             rows.append(failed_row(task, motion, point, "failed", e))
     return rows
 
@@ -174,7 +216,7 @@ class Store:
                 try:
                     entry = json.loads(line)
                 except json.JSONDecodeError:
-                    continue        # a line cut short by an interrupted run
+                    continue  # a line cut short by an interrupted run
                 if not task_failed(entry["rows"]):
                     self.done[entry["task"]] = entry["rows"]
 

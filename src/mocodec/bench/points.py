@@ -20,18 +20,32 @@ from mocodec.errors import CodecError
 
 KINDS = ("knob", "error", "ratio", "bitrate")
 DEFAULT_KINDS = ("knob", "error")
-DEFAULT_ERRORS_CM = (0.1, 1.0)             # max joint error targets: the headline levels
+DEFAULT_ERRORS_CM = (0.1, 1.0)  # max joint error targets: the headline levels
 DEFAULT_RATIOS = (10.0, 20.0, 40.0, 60.0, 80.0, 100.0)
 DEFAULT_BITRATES = (2000.0, 8000.0, 32000.0)
 SWEEP_POINTS = 5
 
 # codec id -> (low, high) of its quality knob in a sweep
 SWEEPS: dict[str, tuple[float, float]] = {
-    "adpcm": (4, 256), "dct": (0.125, 8.0), "deadreckoning": (0.0125, 1.6), "dpcm": (4, 256),
-    "gesture": (1.0, 20.0), "hybrid": (0, 7), "kinwave": (0.05, 5.0), "posture": (10.0, 80.0),
-    "primitives": (0.0025, 0.04), "pwavelet": (0.01, 0.5), "quant": (8, 1024), "rhythmic": (5, 80),
-    "spiht": (2000.0, 512000.0), "subband": (0.01, 0.32), "svq": (16, 256), "tvq": (16, 256),
-    "sz3": (0.001, 1.0), "zfp": (0.001, 1.0), "fpzip": (12, 28),
+    "adpcm": (4, 256),
+    "dct": (0.125, 8.0),
+    "deadreckoning": (0.0125, 1.6),
+    "dpcm": (4, 256),
+    "gesture": (1.0, 20.0),
+    "hybrid": (0, 7),
+    "kinwave": (0.05, 5.0),
+    "posture": (10.0, 80.0),
+    "primitives": (0.0025, 0.04),
+    "pwavelet": (0.01, 0.5),
+    "quant": (8, 1024),
+    "rhythmic": (5, 80),
+    "spiht": (2000.0, 512000.0),
+    "subband": (0.01, 0.32),
+    "svq": (16, 256),
+    "tvq": (16, 256),
+    "sz3": (0.001, 1.0),
+    "zfp": (0.001, 1.0),
+    "fpzip": (12, 28),
 }
 
 
@@ -64,7 +78,7 @@ def knob_sweep(cls: type[Codec], points: int = SWEEP_POINTS) -> list[float]:
     if q is None:
         return []
     knob = next(k for k in cls.knobs if k.name == q.name)
-    low, high = sweep_range(cls)
+    low, high = SWEEPS.get(cls.id, (knob.low, knob.high))
     log = q.log_scale or (low > 0 and high / low >= 16)
     values = np.geomspace(low, high, points) if log else np.linspace(low, high, points)
     if knob.kind is int:
@@ -74,8 +88,9 @@ def knob_sweep(cls: type[Codec], points: int = SWEEP_POINTS) -> list[float]:
     return [v.item() for v in (values if q.higher_is_better else values[::-1])]
 
 
-def points_for(codec_id: str, kinds=DEFAULT_KINDS, errors=DEFAULT_ERRORS_CM, ratios=DEFAULT_RATIOS,
-               bitrates=DEFAULT_BITRATES) -> list[Point]:
+def points_for(
+    codec_id: str, kinds=DEFAULT_KINDS, errors=DEFAULT_ERRORS_CM, ratios=DEFAULT_RATIOS, bitrates=DEFAULT_BITRATES
+) -> list[Point]:
     """The points a codec is measured at. A codec without a quality knob (lossless ones) is
     measured once, as it is."""
     for kind in kinds:

@@ -13,6 +13,7 @@ import os
 import sys
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from typing import Any, TypeVar
 
 from mocodec.errors import MocodecError
 from mocodec.extras import require
@@ -22,7 +23,7 @@ def default_jobs() -> int:
     """All the cores this process may use."""
     try:
         return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:      # pragma: no cover - not Linux
+    except AttributeError:  # pragma: no cover - not Linux
         return max(1, os.cpu_count() or 1)
 
 
@@ -31,8 +32,18 @@ def _progress(total: int, show: bool, what: str):
     return tqdm(total=total, disable=not show, file=sys.stderr, unit=what, dynamic_ncols=True)
 
 
-def execute(fn: Callable, tasks: Sequence, jobs: int | None = None, scheduler: str | None = None,
-            dask: bool = False, progress: bool = False, what: str = "task") -> Iterator[tuple[object, object]]:
+Task = TypeVar("Task")
+
+
+def execute(
+    fn: Callable[[Task], Any],
+    tasks: Sequence[Task],
+    jobs: int | None = None,
+    scheduler: str | None = None,
+    dask: bool = False,
+    progress: bool = False,
+    what: str = "task",
+) -> Iterator[tuple[Task, Any]]:
     """``(task, fn(task) or the exception it raised)`` for every task, as they finish."""
     if jobs is not None and jobs < 1:
         raise MocodecError(f"jobs must be at least 1, got {jobs}")
@@ -52,7 +63,7 @@ def execute(fn: Callable, tasks: Sequence, jobs: int | None = None, scheduler: s
 def _called(fn: Callable, task):
     try:
         return fn(task)
-    except Exception as e:   # noqa: BLE001 - reported per task by the caller
+    except Exception as e:  # noqa: BLE001 - reported per task by the caller
         return e
 
 
@@ -79,7 +90,7 @@ def _on_dask(fn: Callable, tasks: Sequence, jobs: int, scheduler: str | None) ->
             for future in dask_completed(futures):
                 try:
                     result = future.result()
-                except Exception as e:   # noqa: BLE001 - reported per task by the caller
+                except Exception as e:  # noqa: BLE001 - reported per task by the caller
                     result = e
                 yield owner[future.key], result
     finally:

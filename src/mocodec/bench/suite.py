@@ -23,9 +23,22 @@ from mocodec.codecs import codec_class, codec_ids
 from mocodec.errors import MocodecError
 from mocodec.formats.fileio import atomic_write
 
-SKIPPED_BY_DEFAULT = ("raw",)      # the reference itself: ratio 1 by definition
-PACKAGES = ("mocodec", "numpy", "scipy", "PyWavelets", "numba", "constriction", "zstandard", "pysz", "zfpy",
-            "fpzip", "matplotlib", "dask", "distributed")
+SKIPPED_BY_DEFAULT = ("raw",)  # the reference itself: ratio 1 by definition
+PACKAGES = (
+    "mocodec",
+    "numpy",
+    "scipy",
+    "PyWavelets",
+    "numba",
+    "constriction",
+    "zstandard",
+    "pysz",
+    "zfpy",
+    "fpzip",
+    "matplotlib",
+    "dask",
+    "distributed",
+)
 
 
 @dataclass
@@ -46,7 +59,7 @@ def _installed(cls) -> bool:
 
 
 def versions() -> dict[str, str | None]:
-    out = {}
+    out: dict[str, str | None] = {}
     for name in PACKAGES:
         try:
             out[name] = metadata.version(name)
@@ -55,9 +68,21 @@ def versions() -> dict[str, str | None]:
     return out
 
 
-def run(paths, out_dir, codecs=None, kinds=DEFAULT_KINDS, errors=DEFAULT_ERRORS_CM, ratios=DEFAULT_RATIOS,
-        bitrates=DEFAULT_BITRATES, jobs: int | None = None, scheduler: str | None = None, dask: bool = False,
-        progress: bool = False, report: bool = True, command: str | None = None) -> BenchResult:
+def run(
+    paths,
+    out_dir,
+    codecs=None,
+    kinds=DEFAULT_KINDS,
+    errors=DEFAULT_ERRORS_CM,
+    ratios=DEFAULT_RATIOS,
+    bitrates=DEFAULT_BITRATES,
+    jobs: int | None = None,
+    scheduler: str | None = None,
+    dask: bool = False,
+    progress: bool = False,
+    report: bool = True,
+    command: str | None = None,
+) -> BenchResult:
     """Benchmark ``codecs`` (default: all but ``raw``) on every clip under ``paths``; skip the
     tasks ``out_dir`` already holds from an earlier run with the same points."""
     codecs = list(codecs or default_codecs())
@@ -74,7 +99,7 @@ def run(paths, out_dir, codecs=None, kinds=DEFAULT_KINDS, errors=DEFAULT_ERRORS_
     t0 = time.perf_counter()
     fresh: dict[str, list[dict]] = {}
     for task, result in execute(engine.run_task, todo, jobs, scheduler, dask, progress, "task"):
-        if isinstance(result, BaseException):       # the worker itself died
+        if isinstance(result, BaseException):  # the worker itself died
             result = [engine.failed_row(task, None, task.points[0], "failed", result)]
         store.add(task, result)
         fresh[task.key] = result
@@ -84,12 +109,22 @@ def run(paths, out_dir, codecs=None, kinds=DEFAULT_KINDS, errors=DEFAULT_ERRORS_
     meta = {
         "command": command or " ".join(sys.argv),
         "started": time.strftime("%Y-%m-%dT%H:%M:%S", time.localtime(started)),
-        "wall_s": round(wall, 1), "wall_s_total": round(earlier + wall, 1), "jobs": jobs or default_jobs(),
+        "wall_s": round(wall, 1),
+        "wall_s_total": round(earlier + wall, 1),
+        "jobs": jobs or default_jobs(),
         "scheduler": scheduler or ("dask local" if dask else "local"),
-        "clips": len(clips), "codecs": codecs, "tasks": len(tasks), "tasks_run": len(todo),
-        "tasks_resumed": len(tasks) - len(todo), "points": {c: [p.label for p in ps] for c, ps in plan.items()},
-        "machine": {"platform": platform.platform(), "processor": platform.processor() or platform.machine(),
-                    "cores": default_jobs(), "python": platform.python_version()},
+        "clips": len(clips),
+        "codecs": codecs,
+        "tasks": len(tasks),
+        "tasks_run": len(todo),
+        "tasks_resumed": len(tasks) - len(todo),
+        "points": {c: [p.label for p in ps] for c, ps in plan.items()},
+        "machine": {
+            "platform": platform.platform(),
+            "processor": platform.processor() or platform.machine(),
+            "cores": default_jobs(),
+            "python": platform.python_version(),
+        },
         "versions": versions(),
     }
     result = BenchResult(rows, meta, [r for r in rows if r["status"] == "failed"])
@@ -97,6 +132,7 @@ def run(paths, out_dir, codecs=None, kinds=DEFAULT_KINDS, errors=DEFAULT_ERRORS_
     atomic_write(out / "meta.json", json.dumps(meta, indent=2) + "\n")
     if report:
         from mocodec.bench.report import write_report
+
         write_report(rows, meta, out)
     return result
 

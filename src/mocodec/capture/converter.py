@@ -44,11 +44,15 @@ from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
 #: The segment frame each tracker is strapped to, and where on it (a joint's position).
-MOUNTS = {"hips": ("root", "root"), "head": ("head", "head_top"), "left_wrist": ("left_elbow", "left_wrist"),
-          "right_wrist": ("right_elbow", "right_wrist")}
-ANGLE_MARGIN_DEG = 5.0          # soft-clip margin at joint limits
-ACOS_MARGIN = 0.02              # soft-clip margin of acos arguments at +-1
-SPINE_PASSES = 4                # the spine solved again with the neck's lean (the thesis: one pass)
+MOUNTS = {
+    "hips": ("root", "root"),
+    "head": ("head", "head_top"),
+    "left_wrist": ("left_elbow", "left_wrist"),
+    "right_wrist": ("right_elbow", "right_wrist"),
+}
+ANGLE_MARGIN_DEG = 5.0  # soft-clip margin at joint limits
+ACOS_MARGIN = 0.02  # soft-clip margin of acos arguments at +-1
+SPINE_PASSES = 4  # the spine solved again with the neck's lean (the thesis: one pass)
 
 
 def rot_x(a):
@@ -92,9 +96,9 @@ class Calibration:
     """What the calibration posture tells (4-3): the transmitter's frame against the model's
     world, each tracker's mounting, and where the feet stand."""
 
-    world: np.ndarray                      # (4, 4): sensor world -> model world
-    mounts: dict[str, np.ndarray]          # tracker -> O (4, 4)
-    ankles: dict[str, np.ndarray]          # side -> (3,) fixed ankle position
+    world: np.ndarray  # (4, 4): sensor world -> model world
+    mounts: dict[str, np.ndarray]  # tracker -> O (4, 4)
+    ankles: dict[str, np.ndarray]  # side -> (3,) fixed ankle position
 
     @classmethod
     def from_reference(cls, readings: dict[str, np.ndarray], skeleton: Skeleton) -> Calibration:
@@ -119,7 +123,7 @@ class Converter:
         self.wrist_correction = wrist_correction
         off = {j.name: np.array(j.offset) for j in self.sk.joints}
         self.off = off
-        self.spine = float(off["torso"][1] + off["neck"][1] + off["head"][1])   # t + n + h
+        self.spine = float(off["torso"][1] + off["neck"][1] + off["head"][1])  # t + n + h
         self.head_len = float(off["head_top"][1])
         self.channel = {name: k for k, name in enumerate(self.sk.channel_names)}
         self.limits = self.sk.limits
@@ -146,19 +150,19 @@ class Converter:
     def _spine(self, frames, ch):
         hips, head = frames["hips"], frames["head"]
         p_root = hips[:, :3, 3]
-        yaw = np.arctan2(hips[:, 0, 2], hips[:, 2, 2])                                 # (4-8)
+        yaw = np.arctan2(hips[:, 0, 2], hips[:, 2, 2])  # (4-8)
         r_head = head[:, :3, :3]
-        head_base = head[:, :3, 3] - _apply(r_head, (0.0, self.head_len, 0.0))           # (4-10)
-        neck_top = head_base                     # first as the thesis: a straight root-to-head chain
+        head_base = head[:, :3, 3] - _apply(r_head, (0.0, self.head_len, 0.0))  # (4-10)
+        neck_top = head_base  # first as the thesis: a straight root-to-head chain
         length = self.spine
         for _ in range(SPINE_PASSES):
-            v = _apply(_t(rot_y(yaw)), neck_top - p_root)                                  # (4-11)
-            roll = np.arcsin(soft_clip(-v[:, 0] / length, -1.0, 1.0, ACOS_MARGIN))       # (4-12)
+            v = _apply(_t(rot_y(yaw)), neck_top - p_root)  # (4-11)
+            roll = np.arcsin(soft_clip(-v[:, 0] / length, -1.0, 1.0, ACOS_MARGIN))  # (4-12)
             pitch = np.arctan2(v[:, 2], v[:, 1])
-            r_root = rot_y(yaw) @ rot_x(pitch / 2) @ rot_z(roll / 2)                           # (4-15)
+            r_root = rot_y(yaw) @ rot_x(pitch / 2) @ rot_z(roll / 2)  # (4-15)
             r_torso = r_root @ rot_x(pitch / 2) @ rot_z(roll / 2)
-            residual = _t(r_torso) @ r_head                                              # (4-13)
-            hy, hx, hz = np.radians(rotations.matrix_to_euler(residual, "YXZ")).T        # (4-14)
+            residual = _t(r_torso) @ r_head  # (4-13)
+            hy, hx, hz = np.radians(rotations.matrix_to_euler(residual, "YXZ")).T  # (4-14)
             r_neck = r_torso @ rot_x(hx / 2) @ rot_z(hz / 2)
             # then again with the neck as it now leans: the chain ends where the neck does
             neck_top = head_base - _apply(r_neck, self.off["head"])
@@ -179,23 +183,23 @@ class Converter:
         r_fore, w = wrist[:, :3, :3], wrist[:, :3, 3]
         w_loc = _apply(_t(r_torso), w - shoulder)
         d2 = np.einsum("ij,ij->i", w_loc, w_loc)
-        elbow = -(np.pi - _acos((u * u + lo * lo - d2) / (2 * u * lo)))                  # (4-19)
-        e_loc = _apply(_t(r_torso), w - _apply(r_fore, (0.0, -lo, 0.0)) - shoulder)      # (4-20)
+        elbow = -(np.pi - _acos((u * u + lo * lo - d2) / (2 * u * lo)))  # (4-19)
+        e_loc = _apply(_t(r_torso), w - _apply(r_fore, (0.0, -lo, 0.0)) - shoulder)  # (4-20)
         rho = np.hypot(e_loc[:, 0], e_loc[:, 2])
-        a2 = -np.arctan2(rho, -e_loc[:, 1])                                              # (4-22), (4-23)
+        a2 = -np.arctan2(rho, -e_loc[:, 1])  # (4-22), (4-23)
         a1 = np.arctan2(e_loc[:, 2], -e_loc[:, 0])
-        r = _apply(_t(rot_z(a2)) @ _t(rot_y(a1)), w_loc)                                     # (4-24)
+        r = _apply(_t(rot_z(a2)) @ _t(rot_y(a1)), w_loc)  # (4-24)
         sign = np.where(-lo * np.sin(elbow) >= 0, 1.0, -1.0)
-        a3 = np.arctan2(sign * r[:, 0], sign * r[:, 2])                                  # (4-25)
+        a3 = np.arctan2(sign * r[:, 0], sign * r[:, 2])  # (4-25)
         r_sh = rot_y(a1) @ rot_z(a2) @ rot_y(a3)
-        if self.wrist_correction:                                                        # (4-29)-(4-32)
+        if self.wrist_correction:  # (4-29)-(4-32)
             reach = _apply(r_sh, (0.0, -u, 0.0)) + _apply(r_sh @ rot_x(elbow), (0.0, -lo, 0.0))
             r_sh = _rotation_between(reach, w_loc) @ r_sh
             a1, a2, a3 = _shoulder_angles(r_sh)
-        m = _t(r_torso @ r_sh @ rot_x(elbow)) @ r_fore                                      # (4-26), (4-27)
-        twist = np.arctan2(m[:, 0, 2], m[:, 0, 0])                                       # (4-28)
-        first = self.sk.channel_offsets[self.sk.index(f"{side}_shoulder")]             # Y, Z, Y: by position
-        ch[:, first:first + 3] = np.degrees(np.stack([a1, a2, a3], 1))
+        m = _t(r_torso @ r_sh @ rot_x(elbow)) @ r_fore  # (4-26), (4-27)
+        twist = np.arctan2(m[:, 0, 2], m[:, 0, 0])  # (4-28)
+        first = self.sk.channel_offsets[self.sk.index(f"{side}_shoulder")]  # Y, Z, Y: by position
+        ch[:, first : first + 3] = np.degrees(np.stack([a1, a2, a3], 1))
         self._set(ch, f"{side}_elbow", {"X": elbow, "Y": twist})
 
     # ----- legs (4-33 to 4-37) ---------------------------------------------------------------------
@@ -204,14 +208,14 @@ class Converter:
         u = -float(self.off[f"{side}_knee"][1])
         lo = -float(self.off[f"{side}_ankle"][1])
         hip = p_root + _apply(r_root, self.off[f"{side}_hip"])
-        h = _apply(_t(r_root), ankle - hip)                          # hip to ankle, in the root's frame
+        h = _apply(_t(r_root), ankle - hip)  # hip to ankle, in the root's frame
         d2 = np.einsum("ij,ij->i", h, h)
-        knee = np.pi - _acos((u * u + lo * lo - d2) / (2 * u * lo))                      # (4-33), (4-35)
+        knee = np.pi - _acos((u * u + lo * lo - d2) / (2 * u * lo))  # (4-33), (4-35)
         y0, z0 = -u - lo * np.cos(knee), -lo * np.sin(knee)
-        roll = np.arcsin(soft_clip(-h[:, 0] / y0, -1.0, 1.0, ACOS_MARGIN))               # (4-36)
+        roll = np.arcsin(soft_clip(-h[:, 0] / y0, -1.0, 1.0, ACOS_MARGIN))  # (4-36)
         pitch = _wrap(np.arctan2(h[:, 2], h[:, 1]) - np.arctan2(z0, y0 * np.cos(roll)))  # (4-34), (4-35)
         r_leg = r_root @ rot_x(pitch) @ rot_z(roll) @ rot_x(knee)
-        ax, ay, az = np.radians(rotations.matrix_to_euler(_t(r_leg), "XYZ")).T           # foot flat, (4-37)
+        ax, ay, az = np.radians(rotations.matrix_to_euler(_t(r_leg), "XYZ")).T  # foot flat, (4-37)
         self._set(ch, f"{side}_hip", {"X": pitch, "Z": roll})
         self._set(ch, f"{side}_knee", {"X": knee})
         self._set(ch, f"{side}_ankle", {"X": ax, "Y": ay, "Z": az})

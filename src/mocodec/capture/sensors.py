@@ -46,10 +46,10 @@ def to_thesis(m: np.ndarray) -> np.ndarray:
 class SensorLog:
     """Tracker frames and glove values over time, right-handed, metres."""
 
-    time: np.ndarray                          # (n,)
-    trackers: dict[str, np.ndarray]           # name -> (n, 4, 4)
-    gloves: dict[str, np.ndarray]             # name -> (n, 5)
-    calibration: dict[str, np.ndarray]        # name -> (4, 4)
+    time: np.ndarray  # (n,)
+    trackers: dict[str, np.ndarray]  # name -> (n, 4, 4)
+    gloves: dict[str, np.ndarray]  # name -> (n, 5)
+    calibration: dict[str, np.ndarray]  # name -> (4, 4)
 
     @property
     def num_frames(self) -> int:
@@ -65,7 +65,7 @@ class SensorLog:
         arrays.update(self.gloves)
         arrays.update({f"calibration_{k}": to_thesis(v) for k, v in self.calibration.items()})
         out = io.BytesIO()
-        np.savez_compressed(out, **arrays)
+        np.savez_compressed(out, **arrays)  # type: ignore[arg-type]  # numpy's stub types allow_pickle as **kwds
         return out.getvalue()
 
 
@@ -92,8 +92,11 @@ def read_log(path: str | Path) -> SensorLog:
     _finite(path, "time", time)
     bad = np.flatnonzero(np.diff(time) <= 0)
     if bad.size:
-        raise FormatError(path, None, f"array 'time': frame {bad[0] + 1} is not after frame {bad[0]} "
-                                      f"({time[bad[0] + 1]} <= {time[bad[0]]})")
+        raise FormatError(
+            path,
+            None,
+            f"array 'time': frame {bad[0] + 1} is not after frame {bad[0]} ({time[bad[0] + 1]} <= {time[bad[0]]})",
+        )
     trackers = {t: _frames(path, t, data[t], (n, 4, 4)) for t in TRACKERS}
     calibration = {t: _frames(path, f"calibration_{t}", data[f"calibration_{t}"], (4, 4)) for t in TRACKERS}
     gloves = {}
@@ -104,8 +107,11 @@ def read_log(path: str | Path) -> SensorLog:
         _finite(path, g, values)
         out = np.flatnonzero(((values < 0) | (values > 1)).any(axis=1))
         if out.size:
-            raise FormatError(path, None, f"array {g!r}: frame {out[0]}: glove values must be in [0, 1], "
-                                          f"got {values[out[0]].tolist()}")
+            raise FormatError(
+                path,
+                None,
+                f"array {g!r}: frame {out[0]}: glove values must be in [0, 1], got {values[out[0]].tolist()}",
+            )
         gloves[g] = values
     return SensorLog(time, trackers, gloves, calibration)
 
@@ -129,6 +135,10 @@ def _frames(path, name: str, values: np.ndarray, shape: tuple) -> np.ndarray:
     bottom = np.abs(frames[:, 3] - [0, 0, 0, 1]).max(axis=1)
     bad = np.flatnonzero((error > ORTHONORMAL_TOLERANCE) | (bottom > 1e-9) | (np.linalg.det(rot) < 0))
     if bad.size:
-        raise FormatError(path, None, f"array {name!r}: frame {bad[0]}: not a rigid 4x4 pose (rotation part "
-                                      "orthonormal with determinant +1, last column 0 0 0 1)")
+        raise FormatError(
+            path,
+            None,
+            f"array {name!r}: frame {bad[0]}: not a rigid 4x4 pose (rotation part "
+            "orthonormal with determinant +1, last column 0 0 0 1)",
+        )
     return values

@@ -11,6 +11,8 @@ all of it seeded, so the same call gives the same log.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from mocodec import rotations
@@ -21,15 +23,25 @@ from mocodec.human import human_model
 from mocodec.kinematics import forward_kinematics
 from mocodec.motion import Motion
 
-GLOVE_NOISE = 0.016            # sigma of a normalised glove value (1.1 deg of 70, 003 §4.2.2)
+GLOVE_NOISE = 0.016  # sigma of a normalised glove value (1.1 deg of 70, 003 §4.2.2)
 
 #: Joints of other skeletons a tracker frame is made from: hips (left, right), neck, head,
 #: (elbow, wrist) per side. CMU BVH names first, then CMU ASF names.
-SOURCES = (
-    {"hips": ("lThigh", "rThigh"), "neck": "neck", "head": "head", "left": ("lForeArm", "lHand"),
-     "right": ("rForeArm", "rHand")},
-    {"hips": ("lfemur", "rfemur"), "neck": "lowerneck", "head": "head", "left": ("lradius", "lwrist"),
-     "right": ("rradius", "rwrist")},
+SOURCES: tuple[dict[str, Any], ...] = (
+    {
+        "hips": ("lThigh", "rThigh"),
+        "neck": "neck",
+        "head": "head",
+        "left": ("lForeArm", "lHand"),
+        "right": ("rForeArm", "rHand"),
+    },
+    {
+        "hips": ("lfemur", "rfemur"),
+        "neck": "lowerneck",
+        "head": "head",
+        "left": ("lradius", "lwrist"),
+        "right": ("rradius", "rwrist"),
+    },
 )
 
 
@@ -63,8 +75,10 @@ def retargeted_frames(motion: Motion) -> dict[str, np.ndarray]:
     sk = motion.skeleton
     names = next((m for m in SOURCES if all(n in sk.names for n in _joint_names(m))), None)
     if names is None:
-        raise MocodecError(f"cannot simulate sensors on skeleton {sk.name or '(unnamed)'}: it lacks the joints of "
-                           "a CMU BVH or ASF skeleton (hips, neck, head, forearms, wrists)")
+        raise MocodecError(
+            f"cannot simulate sensors on skeleton {sk.name or '(unnamed)'}: it lacks the joints of "
+            "a CMU BVH or ASF skeleton (hips, neck, head, forearms, wrists)"
+        )
     pos = motion.positions_m()
     at = {n: pos[:, sk.index(n)] for n in _joint_names(names)}
     model = human_model()
@@ -79,7 +93,7 @@ def retargeted_frames(motion: Motion) -> dict[str, np.ndarray]:
     def place(p):
         return scale * (p - [0.0, floor, 0.0]) + offset
 
-    across = lhip - rhip                                   # toward the figure's left: +X of the model
+    across = lhip - rhip  # toward the figure's left: +X of the model
     up = np.tile([0.0, 1.0, 0.0], (len(root), 1))
     frames = {"hips": pose(_frame(up, across), place(root))}
     head_dir = at[names["head"]] - at[names["neck"]]
@@ -95,19 +109,21 @@ def _joint_names(names: dict) -> list[str]:
     return [*names["hips"], names["neck"], names["head"], *names["left"], *names["right"]]
 
 
-def simulate(motion: Motion, noise_deg: float = 0.5, noise_cm: float = 0.3, seed: int = 0,
-             glove_noise: float = GLOVE_NOISE) -> SensorLog:
+def simulate(
+    motion: Motion, noise_deg: float = 0.5, noise_cm: float = 0.3, seed: int = 0, glove_noise: float = GLOVE_NOISE
+) -> SensorLog:
     """The sensor log the minimal configuration would record of ``motion``."""
     rng = np.random.default_rng(seed)
     sk = motion.skeleton
     model = human_model()
     on_model = sk.isclose(model)
     frames = model_frames(motion) if on_model else retargeted_frames(motion)
-    transmitter = pose(_random_rotation(rng, 30.0), rng.uniform(-1.0, 1.0, 3))   # sensor world in model world
+    transmitter = pose(_random_rotation(rng, 30.0), rng.uniform(-1.0, 1.0, 3))  # sensor world in model world
     # strapped on askew, but for the hip tracker: its reading also fixes the transmitter's frame
     # in calibration, and the two cannot both be told from it (003 §4.3.3)
-    mounts = {t: np.eye(4) if t == "hips" else pose(_random_rotation(rng, 5.0), rng.normal(0.0, 0.01, 3))
-              for t in TRACKERS}
+    mounts = {
+        t: np.eye(4) if t == "hips" else pose(_random_rotation(rng, 5.0), rng.normal(0.0, 0.01, 3)) for t in TRACKERS
+    }
     rest = model_frames(Motion(model, motion.fps, np.zeros((1, model.num_channels))))
     to_sensor = np.linalg.inv(transmitter)
     n = motion.num_frames
@@ -118,9 +134,14 @@ def simulate(motion: Motion, noise_deg: float = 0.5, noise_cm: float = 0.3, seed
         reading[:, :3, :3] = reading[:, :3, :3] @ _random_rotation(rng, noise_deg, n)
         reading[:, :3, 3] += rng.normal(0.0, noise_cm / 100.0, (n, 3))
         trackers[t] = reading
-    gloves = {f"{side}_glove": np.clip(_glove(motion, side) + rng.normal(0.0, glove_noise, (n, len(FINGERS))), 0, 1)
-              for side in ("left", "right")} if on_model else \
-        {f"{side}_glove": np.full((n, len(FINGERS)), 0.2) for side in ("left", "right")}
+    gloves = (
+        {
+            f"{side}_glove": np.clip(_glove(motion, side) + rng.normal(0.0, glove_noise, (n, len(FINGERS))), 0, 1)
+            for side in ("left", "right")
+        }
+        if on_model
+        else {f"{side}_glove": np.full((n, len(FINGERS)), 0.2) for side in ("left", "right")}
+    )
     return SensorLog(np.arange(n) / motion.fps, trackers, gloves, calibration)
 
 
@@ -154,7 +175,7 @@ def random_poses(frames: int, seed: int = 0) -> Motion:
         put(f"{joint}.Xrotation", pitch / 2)
         put(f"{joint}.Zrotation", roll / 2)
     put("root.Yrotation", yaw)
-    put("root.Yposition", -rng.uniform(0.0, 0.15, frames))               # a slight crouch
+    put("root.Yposition", -rng.uniform(0.0, 0.15, frames))  # a slight crouch
     hx, hz = rng.uniform(-40, 40, frames), rng.uniform(-20, 20, frames)
     for joint in ("neck", "head"):
         put(f"{joint}.Xrotation", hx / 2)
@@ -162,8 +183,9 @@ def random_poses(frames: int, seed: int = 0) -> Motion:
     put("head.Yrotation", rng.uniform(-60, 60, frames))
     for side in ("left", "right"):
         first = sk.channel_offsets[sk.index(f"{side}_shoulder")]
-        ch[:, first:first + 3] = np.stack([rng.uniform(-180, 180, frames), rng.uniform(-120, -10, frames),
-                                           rng.uniform(-90, 90, frames)], 1)
+        ch[:, first : first + 3] = np.stack(
+            [rng.uniform(-180, 180, frames), rng.uniform(-120, -10, frames), rng.uniform(-90, 90, frames)], 1
+        )
         put(f"{side}_elbow.Xrotation", rng.uniform(-140, -20, frames))
         put(f"{side}_elbow.Yrotation", rng.uniform(-60, 60, frames))
         for finger in FINGERS:

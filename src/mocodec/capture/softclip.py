@@ -18,7 +18,7 @@ def soft_clip_upper(x: np.ndarray, clip: float | np.ndarray, margin: float | np.
     x1 = clip - margin
     d = 4.0 * margin
     safe_d = np.where(d > 0, d, 1.0)
-    curve = -(x ** 2) / safe_d + (1.0 + 2.0 * x1 / safe_d) * x - x1 ** 2 / safe_d     # (4-40)
+    curve = -(x**2) / safe_d + (1.0 + 2.0 * x1 / safe_d) * x - x1**2 / safe_d  # (4-40)
     return np.where(x <= x1, x, np.where(x >= clip + margin, clip, np.where(d > 0, curve, clip)))
 
 

@@ -73,7 +73,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         from mocodec.cli.options import knobs_from
 
-        parser = build_parser(command)          # a command's module may need an extra (MocodecError)
+        parser = build_parser(command)  # a command's module may need an extra (MocodecError)
         args, extra = parser.parse_known_args(argv)
         if extra and not getattr(args, "takes_knobs", False):
             parser.error(f"unrecognized arguments: {' '.join(extra)}")
@@ -85,4 +85,3 @@ def main(argv: list[str] | None = None) -> int:
     except (OSError, ValueError) as e:
         print(f"mocodec: error: {e}", file=sys.stderr)
         return 2
-

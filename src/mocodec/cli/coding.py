@@ -18,6 +18,7 @@ from mocodec.errors import CodecError
 from mocodec.formats import load, save
 from mocodec.formats.fileio import atomic_write_bytes
 from mocodec.metrics import compare
+from mocodec.metrics.compare import db_text
 from mocodec.motion import Motion
 
 
@@ -47,11 +48,19 @@ def cmd_encode(args) -> int:
         codec, _ = configured(args, motion)
         target = out / f"{src.stem}.moc" if out.is_dir() else out
         t0 = time.perf_counter()
-        size = moc.encode(motion, target, codec, chunk_frames=args.chunk_frames, embed_skeleton=not args.skeleton_ref,
-                          exact_skeleton=args.exact_skeleton)
-        line = (f"{target}: {motion.num_frames} frames, {size:,} bytes, ratio {motion.raw_bits / 8 / size:.2f} "
-                f"vs 32-bit floats, {size * 8 / motion.duration / 1000:.2f} kbit/s, {codec!r}, "
-                f"{time.perf_counter() - t0:.2f} s")
+        size = moc.encode(
+            motion,
+            target,
+            codec,
+            chunk_frames=args.chunk_frames,
+            embed_skeleton=not args.skeleton_ref,
+            exact_skeleton=args.exact_skeleton,
+        )
+        line = (
+            f"{target}: {motion.num_frames} frames, {size:,} bytes, ratio {motion.raw_bits / 8 / size:.2f} "
+            f"vs 32-bit floats, {size * 8 / motion.duration / 1000:.2f} kbit/s, {codec!r}, "
+            f"{time.perf_counter() - t0:.2f} s"
+        )
         _progress(k, len(inputs), src.name)
         print(line)
     return 0
@@ -85,8 +94,9 @@ def cmd_decode(args) -> int:
     frames = parse_frames(args.frames)
     if frames and frames[1] == -1:
         frames = (frames[0], moc.info(args.input, skeleton).frames)
-    files = {name: path for name, path in (("codebook", args.codebook), ("db", args.db), ("tables", args.tables))
-             if path}
+    files = {
+        name: path for name, path in (("codebook", args.codebook), ("db", args.db), ("tables", args.tables)) if path
+    }
     motion = moc.decode(args.input, frames=frames, skeleton=skeleton, local_files=files, max_values=args.max_values)
     written = save(motion, args.output, asf=args.out_asf)
     print(f"wrote {', '.join(str(p) for p in written)} ({motion.num_frames} frames)")
@@ -100,19 +110,21 @@ def cmd_truncate(args) -> int:
     atomic_write_bytes(args.output, out)
     info = moc.info(args.output, skeleton)
     raw = info.frames * info.skeleton.num_channels * 4
-    print(f"{args.output}: {len(out):,} bytes (was {len(data):,}), ratio {raw / len(out):.2f} vs 32-bit floats, "
-          f"{len(out) * 8 * info.fps / max(info.frames, 1) / 1000:.2f} kbit/s")
+    print(
+        f"{args.output}: {len(out):,} bytes (was {len(data):,}), ratio {raw / len(out):.2f} vs 32-bit floats, "
+        f"{len(out) * 8 * info.fps / max(info.frames, 1) / 1000:.2f} kbit/s"
+    )
     return 0
 
 
-FIRST_USE_FRAMES = 32        # the excerpt that compiles a codec's kernels before it is timed
+FIRST_USE_FRAMES = 32  # the excerpt that compiles a codec's kernels before it is timed
 
 
 def evaluate(motion: Motion, args) -> str:
     """Encode and decode in memory; the table of ``eval``."""
     codec, _ = configured(args, motion)
     t0 = time.perf_counter()
-    moc.round_trip(motion[:FIRST_USE_FRAMES], codec)       # compiles (or loads) the codec's kernels
+    moc.round_trip(motion[:FIRST_USE_FRAMES], codec)  # compiles (or loads) the codec's kernels
     first_use = time.perf_counter() - t0
     trip = moc.round_trip(motion, codec)
     data = trip.data
@@ -122,23 +134,25 @@ def evaluate(motion: Motion, args) -> str:
         ("codec", repr(codec)),
         ("size", f"{len(data):,} bytes for {motion.num_frames} frames ({motion.duration:.2f} s)"),
         ("ratio", f"{motion.raw_bits / 8 / len(data):.2f} : 1 vs 32-bit floats"),
-        ("bit rate", f"{len(data) * 8 / motion.duration / 1000:.2f} kbit/s "
-                     f"({len(data) * 8 / motion.channels.size:.3f} bits per DOF sample)"),
-        ("PSNR / VPSNR", f"{_db(s['psnr_db'])} / {_db(s['vpsnr_db'])} (mean over DOFs)"),
+        (
+            "bit rate",
+            f"{len(data) * 8 / motion.duration / 1000:.2f} kbit/s "
+            f"({len(data) * 8 / motion.channels.size:.3f} bits per DOF sample)",
+        ),
+        ("PSNR / VPSNR", f"{db_text(s['psnr_db'])} / {db_text(s['vpsnr_db'])} (mean over DOFs)"),
         ("joint error mean / max", f"{s['mean_joint_error_cm']:.4g} / {s['max_joint_error_cm']:.4g} cm"),
         ("shell error max", f"{s['max_shell_error_cm']:.4g} cm"),
         ("encode / decode", f"{trip.encode_s * us:.1f} / {trip.decode_s * us:.1f} us per frame"),
-        ("first use", f"{first_use:.2f} s (compiling the kernels, or loading them from the cache; "
-                      "`mocodec warmup` does it once per install)"),
+        (
+            "first use",
+            f"{first_use:.2f} s (compiling the kernels, or loading them from the cache; "
+            "`mocodec warmup` does it once per install)",
+        ),
     ]
     if codec.variable_delay:
         wait = codec.delays(motion) / motion.fps
         rows.append(("coding delay mean / max", f"{wait.mean():.2f} / {wait.max():.2f} s"))
     return "\n".join(f"{k:<24}{v}" for k, v in rows)
-
-
-def _db(x: float) -> str:
-    return f"{x:.2f} dB" if x != float("inf") else "lossless"
 
 
 def cmd_eval(args) -> int:
@@ -156,8 +170,15 @@ def cmd_eval(args) -> int:
 def cmd_codecs(args) -> int:
     for cid in codec_ids():
         cls = codec_class(cid)
-        flags = ", ".join(f for f, on in (("lossless", cls.lossless), ("streaming", cls.streaming),
-                                               ("baseline for comparison", cls.baseline)) if on)
+        flags = ", ".join(
+            f
+            for f, on in (
+                ("lossless", cls.lossless),
+                ("streaming", cls.streaming),
+                ("baseline for comparison", cls.baseline),
+            )
+            if on
+        )
         knobs = " ".join(k.describe() for k in cls.knobs) or "-"
         quality = f"; quality knob {cls.quality.name}" if cls.quality else ""
         print(f"{cid:<12}{cls.description}")
@@ -167,18 +188,31 @@ def cmd_codecs(args) -> int:
 
 
 def add_commands(sub) -> None:
-    p = sub.add_parser("encode", description="Code each input into a .moc container. Codec knobs are options named "
-                                   "after them (--name value); a target (--ratio, --bitrate, --psnr, "
-                                   "--mean-error-cm, --max-error-cm) makes rate control choose the knob.")
+    p = sub.add_parser(
+        "encode",
+        description="Code each input into a .moc container. Codec knobs are options named "
+        "after them (--name value); a target (--ratio, --bitrate, --psnr, "
+        "--mean-error-cm, --max-error-cm) makes rate control choose the knob.",
+    )
     p.add_argument("inputs", nargs="+", metavar="IN", help=".bvh or .amc file(s)")
     p.add_argument("-o", "--output", required=True, help="output .moc file, or a directory for several inputs")
-    p.add_argument("--chunk-frames", type=int, default=moc.CHUNK_FRAMES,
-                   help=f"frames per independently decodable chunk (default {moc.CHUNK_FRAMES})")
-    p.add_argument("--skeleton-ref", action="store_true",
-                   help="store only the skeleton's id (1-2 KB smaller); decoding then needs --skeleton")
-    p.add_argument("--exact-skeleton", action="store_true",
-                   help="keep the skeleton's offsets bit for bit (a lossy codec's file rounds them to "
-                        f"{moc.SKELETON_PRECISION_CM:g} cm, which saves 130-360 bytes on CMU skeletons)")
+    p.add_argument(
+        "--chunk-frames",
+        type=int,
+        default=moc.CHUNK_FRAMES,
+        help=f"frames per independently decodable chunk (default {moc.CHUNK_FRAMES})",
+    )
+    p.add_argument(
+        "--skeleton-ref",
+        action="store_true",
+        help="store only the skeleton's id (1-2 KB smaller); decoding then needs --skeleton",
+    )
+    p.add_argument(
+        "--exact-skeleton",
+        action="store_true",
+        help="keep the skeleton's offsets bit for bit (a lossy codec's file rounds them to "
+        f"{moc.SKELETON_PRECISION_CM:g} cm, which saves 130-360 bytes on CMU skeletons)",
+    )
     add_codec_options(p)
     add_input_options(p)
     p.set_defaults(func=cmd_encode, takes_knobs=True)
@@ -189,24 +223,37 @@ def add_commands(sub) -> None:
     p.add_argument("--frames", help="FIRST:STOP, a frame range (e.g. 120:240)")
     p.add_argument("--skeleton", help="the skeleton (.asf, .bvh or .amc) of a file encoded with --skeleton-ref")
     p.add_argument("--out-asf", help="where to write the ASF when the output is .amc")
-    p.add_argument("--codebook", help="the VQ codebook file (svq, tvq) the file was coded with; a file never "
-                                      "names what is opened, the payload's fingerprint is checked against it")
+    p.add_argument(
+        "--codebook",
+        help="the VQ codebook file (svq, tvq) the file was coded with; a file never "
+        "names what is opened, the payload's fingerprint is checked against it",
+    )
     p.add_argument("--db", help="the primitive or rhythm database (primitives, rhythmic) the file was coded with")
     p.add_argument("--tables", help="the motion tables (posture, gesture) the file was coded with")
-    p.add_argument("--max-values", type=int, default=limits.MAX_DECODED_VALUES,
-                   help=f"refuse to decode more than this many values, frames x channels (default "
-                        f"{limits.MAX_DECODED_VALUES:,}: a damaged file cannot exhaust memory)")
+    p.add_argument(
+        "--max-values",
+        type=int,
+        default=limits.MAX_DECODED_VALUES,
+        help=f"refuse to decode more than this many values, frames x channels (default "
+        f"{limits.MAX_DECODED_VALUES:,}: a damaged file cannot exhaust memory)",
+    )
     p.set_defaults(func=cmd_decode)
 
-    p = sub.add_parser("eval", description="Ratio vs 32-bit floats, bits per second, PSNR, VPSNR, mean/max joint "
-                                   "error (cm), encode and decode time per frame.")
+    p = sub.add_parser(
+        "eval",
+        description="Ratio vs 32-bit floats, bits per second, PSNR, VPSNR, mean/max joint "
+        "error (cm), encode and decode time per frame.",
+    )
     p.add_argument("inputs", nargs="+", metavar="IN", help=".bvh or .amc file(s)")
     add_codec_options(p)
     add_input_options(p)
     p.set_defaults(func=cmd_eval, takes_knobs=True)
 
-    p = sub.add_parser("truncate", description="Every channel stream of an embedded file is cut to the prefix a smaller "
-                                   "budget allows; the result decodes to a coarser motion.")
+    p = sub.add_parser(
+        "truncate",
+        description="Every channel stream of an embedded file is cut to the prefix a smaller "
+        "budget allows; the result decodes to a coarser motion.",
+    )
     p.add_argument("input", metavar="IN", help=".moc file coded by an embedded codec (spiht)")
     p.add_argument("-o", "--output", required=True, help=".moc file to write")
     target = p.add_mutually_exclusive_group(required=True)

@@ -34,8 +34,7 @@ def describe(motion: Motion, path: str) -> str:
         f"({int(sk.rotation_mask.sum())} rotation, {int((~sk.rotation_mask).sum())} translation)",
         f"units       {sk.units_per_metre:.6g} per metre; rest-pose height {height:.2f} m",
         f"frames      {motion.num_frames} at {motion.fps:g} fps = {motion.duration:.2f} s",
-        f"raw size    {_human_bytes(motion.raw_bits / 8)} at 32-bit floats, "
-        f"{motion.raw_bitrate / 1000:.1f} kbit/s",
+        f"raw size    {_human_bytes(motion.raw_bits / 8)} at 32-bit floats, {motion.raw_bitrate / 1000:.1f} kbit/s",
         f"root path   {np.linalg.norm(np.diff(root[:, [0, 2]], axis=0), axis=1).sum():.2f} m horizontal",
         "body parts  " + ", ".join(f"{p} {n}" for p, n in parts.items() if n),
     ]
@@ -51,8 +50,10 @@ def cmd_info(args) -> int:
             print(f"{'joint':<22}{'parent':<18}{'part':<12}{'depth':>5}{'bone m':>9}  channels")
             for i, j in enumerate(sk.joints):
                 parent = sk.names[j.parent] if j.parent >= 0 else "-"
-                print(f"{j.name:<22}{parent:<18}{sk.body_parts[i]:<12}{sk.chain_depths[i]:>5}"
-                      f"{sk.bone_lengths[i] / sk.units_per_metre:>9.3f}  {' '.join(j.channels)}")
+                print(
+                    f"{j.name:<22}{parent:<18}{sk.body_parts[i]:<12}{sk.chain_depths[i]:>5}"
+                    f"{sk.bone_lengths[i] / sk.units_per_metre:>9.3f}  {' '.join(j.channels)}"
+                )
         if len(args.files) > 1:
             print()
     return 0
@@ -133,7 +134,7 @@ def cmd_warmup(args) -> int:
     sample = resources.files("mocodec") / "data" / "sample_walk_02_02.bvh"
     with resources.as_file(sample) as path:
         motion = load(path)
-    clip = motion[:int(motion.fps)]
+    clip = motion[: int(motion.fps)]
     t0 = time.perf_counter()
     warmed, skipped = [], []
     for cid in codec_ids():
@@ -145,31 +146,40 @@ def cmd_warmup(args) -> int:
         except CodecError:
             skipped.append(cid)
     motion.positions_m()
-    print(f"compiled or loaded the kernels of {len(warmed)} codecs in {time.perf_counter() - t0:.1f} s"
-          + (f" (skipped: {', '.join(skipped)})" if skipped else ""))
+    print(
+        f"compiled or loaded the kernels of {len(warmed)} codecs in {time.perf_counter() - t0:.1f} s"
+        + (f" (skipped: {', '.join(skipped)})" if skipped else "")
+    )
     return 0
 
 
 def add_commands(sub) -> None:
-    p = sub.add_parser("info", description="Skeleton, frames, rate, duration, "
-                       "channels, raw size and bit rate at 32-bit floats.")
+    p = sub.add_parser(
+        "info", description="Skeleton, frames, rate, duration, channels, raw size and bit rate at 32-bit floats."
+    )
     p.add_argument("files", nargs="+", metavar="FILE", help=".bvh or .amc file")
     p.add_argument("--joints", action="store_true", help="also list every joint")
     add_input_options(p)
     p.set_defaults(func=cmd_info)
 
-    p = sub.add_parser("convert", description="Convert a motion file; the pose of every frame is kept exactly. "
-                                   "Writing .amc also writes its .asf (same stem unless --out-asf).")
+    p = sub.add_parser(
+        "convert",
+        description="Convert a motion file; the pose of every frame is kept exactly. "
+        "Writing .amc also writes its .asf (same stem unless --out-asf).",
+    )
     p.add_argument("input", metavar="IN", help=".bvh or .amc file")
     p.add_argument("output", metavar="OUT", help=".bvh or .amc file to write")
     p.add_argument("--out-asf", help="where to write the ASF when OUT is .amc")
     add_input_options(p)
     p.set_defaults(func=cmd_convert)
 
-    p = sub.add_parser("compare", description="PSNR, NSNR, VPSNR (000 ch. 6), group measures (6-9 to 6-14), joint and "
-                                   "shell position errors in cm, foot sliding, jerk, joint-limit violations "
-                                   "and derivative outliers. Both files need the same skeleton, rate and "
-                                   "frame count.")
+    p = sub.add_parser(
+        "compare",
+        description="PSNR, NSNR, visual PSNR (VPSNR), the group measures of the body-part vectors, joint and "
+        "shell position errors in cm, foot sliding, jerk, joint-limit violations "
+        "and derivative outliers. Both files need the same skeleton, rate and "
+        "frame count.",
+    )
     p.add_argument("original", metavar="ORIGINAL", help=".bvh or .amc file")
     p.add_argument("decoded", metavar="DECODED", help=".bvh or .amc file")
     p.add_argument("--decoded-asf", help="ASF skeleton of an .amc DECODED (default: as for ORIGINAL)")
@@ -179,10 +189,13 @@ def add_commands(sub) -> None:
     add_input_options(p)
     p.set_defaults(func=cmd_compare)
 
-    p = sub.add_parser("analyze", description="Per-DOF ranges, usable resolution in bits and the raw bit rate; per body "
-                                   "part the spectra (Welch, Blackman-Tukey, AR) with their 99%% power "
-                                   "frequency and 40/50 dB cut-offs, the Markov fit of the autocorrelation, "
-                                   "a stationarity check and the shape of the first-difference PDF.")
+    p = sub.add_parser(
+        "analyze",
+        description="Per-DOF ranges, usable resolution in bits and the raw bit rate; per body "
+        "part the spectra (Welch, Blackman-Tukey, AR) with their 99%% power "
+        "frequency and 40/50 dB cut-offs, the Markov fit of the autocorrelation, "
+        "a stationarity check and the shape of the first-difference PDF.",
+    )
     p.add_argument("file", metavar="FILE", help=".bvh or .amc file")
     p.add_argument("--out", metavar="DIR", help="write analysis.json and PNG plots here")
     p.add_argument("--no-plots", action="store_true", help="with --out, write only the JSON")
@@ -191,12 +204,18 @@ def add_commands(sub) -> None:
     add_input_options(p)
     p.set_defaults(func=cmd_analyze)
 
-    p = sub.add_parser("demo", description="Encode and decode the bundled CMU walk with the default codec and "
-                                   "report ratio, bit rate, error and speed (the `eval` table).")
+    p = sub.add_parser(
+        "demo",
+        description="Encode and decode the bundled CMU walk with the default codec and "
+        "report ratio, bit rate, error and speed (the `eval` table).",
+    )
     add_codec_options(p)
     p.set_defaults(func=cmd_demo, takes_knobs=True)
 
-    p = sub.add_parser("warmup", description="Compile and cache the numerical kernels of every codec that needs "
-                                             "no trained model (a minute once after install; `make demo` and "
-                                             "`make test` run it), so no later command pays for it.")
+    p = sub.add_parser(
+        "warmup",
+        description="Compile and cache the numerical kernels of every codec that needs "
+        "no trained model (a minute once after install; `make demo` and "
+        "`make test` run it), so no later command pays for it.",
+    )
     p.set_defaults(func=cmd_warmup)

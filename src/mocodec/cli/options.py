@@ -12,11 +12,13 @@ def add_input_options(p) -> None:
     p.add_argument("--fps", type=float, help="frame rate of an .amc input (default 120, the CMU rate)")
 
 
-TARGET_OPTIONS = (("ratio", "ratio", "compression ratio vs 32-bit floats, e.g. 50"),
-                  ("bitrate", "bitrate", "bits per second"),
-                  ("psnr", "psnr", "whole-body PSNR in dB (mean over DOFs)"),
-                  ("mean-error-cm", "mean_error_cm", "mean joint position error bound in cm"),
-                  ("max-error-cm", "max_error_cm", "max joint position error bound in cm (guaranteed)"))
+TARGET_OPTIONS = (
+    ("ratio", "ratio", "compression ratio vs 32-bit floats, e.g. 50"),
+    ("bitrate", "bitrate", "bits per second"),
+    ("psnr", "psnr", "whole-body PSNR in dB (mean over DOFs)"),
+    ("mean-error-cm", "mean_error_cm", "mean joint position error bound in cm"),
+    ("max-error-cm", "max_error_cm", "max joint position error bound in cm (guaranteed)"),
+)
 
 
 def add_codec_options(p, default: str = DEFAULT_CODEC) -> None:
@@ -43,7 +45,4 @@ def knobs_from(extra: list[str]) -> dict[str, str]:
 
 def target_of(args) -> tuple[str, float] | None:
     """The rate-control target given on the command line, as (name, value), or None."""
-    return next(((dest, getattr(args, dest)) for _, dest, _ in TARGET_OPTIONS if getattr(args, dest) is not None),
-                None)
-
-
+    return next(((dest, getattr(args, dest)) for _, dest, _ in TARGET_OPTIONS if getattr(args, dest) is not None), None)

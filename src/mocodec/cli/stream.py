@@ -44,8 +44,9 @@ def secret_of(args) -> str:
 
 def add_secret_options(p) -> None:
     p.add_argument("--secret-file", metavar="FILE", help="a file holding the secret room tokens are signed with")
-    p.add_argument("--secret", help=f"the secret itself (visible to every user in `ps`; prefer --secret-file or "
-                                    f"{SECRET_ENV})")
+    p.add_argument(
+        "--secret", help=f"the secret itself (visible to every user in `ps`; prefer --secret-file or {SECRET_ENV})"
+    )
 
 
 def cmd_serve(args) -> int:
@@ -54,12 +55,19 @@ def cmd_serve(args) -> int:
         from mocodec.stream.bus import NatsBus
 
         bus = NatsBus(args.bus)
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
-                        format="%(asctime)s %(name)s %(levelname)s %(message)s")
-    limits = Limits(max_message_bytes=args.max_message_bytes, publish_messages_per_s=args.max_messages_per_s,
-                    publish_bytes_per_s=args.max_bytes_per_s)
-    print(f"mocodec relay on http://{args.host}:{args.port} (WebSocket /ws, status /status)"
-          + (f", bus {args.bus}" if bus else ""), flush=True)
+    logging.basicConfig(
+        level=logging.INFO if args.verbose else logging.WARNING, format="%(asctime)s %(name)s %(levelname)s %(message)s"
+    )
+    limits = Limits(
+        max_message_bytes=args.max_message_bytes,
+        publish_messages_per_s=args.max_messages_per_s,
+        publish_bytes_per_s=args.max_bytes_per_s,
+    )
+    print(
+        f"mocodec relay on http://{args.host}:{args.port} (WebSocket /ws, status /status)"
+        + (f", bus {args.bus}" if bus else ""),
+        flush=True,
+    )
     run(args.host, args.port, secret_of(args), limits, bus, args.tick_hz)
     return 0
 
@@ -72,11 +80,24 @@ def cmd_token(args) -> int:
 def cmd_publish(args) -> int:
     motion = load(args.file, asf=args.asf, fps=args.fps)
     codec, _ = configured(args, motion)
-    stats = asyncio.run(client.publish_clip(args.url, args.room, args.token, motion, codec, args.speed,
-                                            args.stream, args.keyframe_s, Path(args.file).name))
+    stats = asyncio.run(
+        client.publish_clip(
+            args.url,
+            args.room,
+            args.token,
+            motion,
+            codec,
+            args.speed,
+            args.stream,
+            args.keyframe_s,
+            Path(args.file).name,
+        )
+    )
     rate = stats.bytes * 8 / max(motion.duration, 1e-9)
-    print(f"published {stats.frames} frames in {stats.seconds:.1f} s to room {args.room!r}: {stats.packets} packets, "
-          f"{stats.bytes:,} bytes ({rate / 1000:.2f} kbit/s), {codec!r}")
+    print(
+        f"published {stats.frames} frames in {stats.seconds:.1f} s to room {args.room!r}: {stats.packets} packets, "
+        f"{stats.bytes:,} bytes ({rate / 1000:.2f} kbit/s), {codec!r}"
+    )
     return 0
 
 
@@ -84,19 +105,23 @@ def cmd_subscribe(args) -> int:
     if args.frames is not None and args.frames < 1:
         raise MocodecError(f"--frames must be at least 1, got {args.frames}")
     camera = _camera(args.camera)
-    motions = asyncio.run(client.record(args.url, args.room, args.token, args.frames, args.stream, args.budget,
-                                        camera, args.timeout))
+    motions = asyncio.run(
+        client.record(args.url, args.room, args.token, args.frames, args.stream, args.budget, camera, args.timeout)
+    )
     if not motions:
-        raise MocodecError(f"no stream arrived in room {args.room!r}"
-                           + (f" within {args.timeout:g} s" if args.timeout else ""))
+        raise MocodecError(
+            f"no stream arrived in room {args.room!r}" + (f" within {args.timeout:g} s" if args.timeout else "")
+        )
     stream = args.stream if args.stream is not None else next(iter(motions))
     if stream not in motions:
         raise MocodecError(f"stream {stream} did not arrive (streams seen: {', '.join(map(str, motions))})")
     motion = motions[stream]
     written = save(motion, args.output)
     others = sorted(set(motions) - {stream})
-    print(f"{', '.join(map(str, written))}: stream {stream}, {motion.num_frames} frames at {motion.fps:g} Hz"
-          + (f" (also in the room: streams {', '.join(map(str, others))})" if others else ""))
+    print(
+        f"{', '.join(map(str, written))}: stream {stream}, {motion.num_frames} frames at {motion.fps:g} Hz"
+        + (f" (also in the room: streams {', '.join(map(str, others))})" if others else "")
+    )
     return 0
 
 
@@ -109,19 +134,30 @@ def _camera(text: str) -> tuple[float, float, float]:
 
 
 def add_commands(sub) -> None:
-    p = sub.add_parser("serve", description="Senders publish avatar streams into rooms, viewers subscribe; every tick each "
-                                   "viewer gets one batch, the embedded streams cut to its bandwidth by the crowd "
-                                   "rule of 001 (6.4, 6.5). Publish and subscribe need a token from `mocodec token`.")
+    p = sub.add_parser(
+        "serve",
+        description="Senders publish avatar streams into rooms, viewers subscribe; every tick each "
+        "viewer gets one batch, the embedded streams cut to its bandwidth by the crowd "
+        "allocation (nearer and larger avatars get more). Publish and subscribe need a token from `mocodec token`.",
+    )
     p.add_argument("--port", type=int, default=8765)
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1; 0.0.0.0: all)")
     add_secret_options(p)
     p.add_argument("--bus", metavar="nats://HOST:4222", help="share rooms with other relays through NATS")
     p.add_argument("--tick-hz", type=float, default=30.0, help="batches per second to each viewer (default 30)")
     p.add_argument("--max-message-bytes", type=int, default=Limits.max_message_bytes)
-    p.add_argument("--max-messages-per-s", type=float, default=Limits.publish_messages_per_s,
-                   help="per sending connection (over it: closed)")
-    p.add_argument("--max-bytes-per-s", type=float, default=Limits.publish_bytes_per_s,
-                   help="per sending connection (over it: closed)")
+    p.add_argument(
+        "--max-messages-per-s",
+        type=float,
+        default=Limits.publish_messages_per_s,
+        help="per sending connection (over it: closed)",
+    )
+    p.add_argument(
+        "--max-bytes-per-s",
+        type=float,
+        default=Limits.publish_bytes_per_s,
+        help="per sending connection (over it: closed)",
+    )
     p.add_argument("--verbose", action="store_true", help="log connections and refusals")
     p.set_defaults(func=cmd_serve)
 
@@ -132,9 +168,12 @@ def add_commands(sub) -> None:
     p.add_argument("--ttl", type=float, default=24 * 3600.0, help="lifetime in seconds (default a day)")
     p.set_defaults(func=cmd_token)
 
-    p = sub.add_parser("publish", description="Streams the clip at its frame rate (--speed X: X times faster) with keyframes "
-                                   f"every --keyframe-s seconds. Codec (default {PUBLISH_CODEC}) and knobs as for "
-                                   "encode (--name value), or a target.")
+    p = sub.add_parser(
+        "publish",
+        description="Streams the clip at its frame rate (--speed X: X times faster) with keyframes "
+        f"every --keyframe-s seconds. Codec (default {PUBLISH_CODEC}) and knobs as for "
+        "encode (--name value), or a target.",
+    )
     p.add_argument("file", metavar="FILE")
     _connection(p)
     p.add_argument("--speed", type=float, default=1.0)
@@ -145,8 +184,11 @@ def add_commands(sub) -> None:
     p.add_argument("--fps", type=float, help="frame rate of an .amc input (default 120)")
     p.set_defaults(func=cmd_publish, takes_knobs=True)
 
-    p = sub.add_parser("subscribe", description="Records what a viewer receives (decoded, lost packets concealed) until "
-                                   "--frames frames, the stream's end, or --timeout.")
+    p = sub.add_parser(
+        "subscribe",
+        description="Records what a viewer receives (decoded, lost packets concealed) until "
+        "--frames frames, the stream's end, or --timeout.",
+    )
     _connection(p)
     p.add_argument("-o", "--output", required=True, help="motion file to write (.bvh or .amc)")
     p.add_argument("--frames", type=int, help="stop after this many frames")

@@ -57,12 +57,15 @@ def cmd_study_report(args) -> int:
 
 
 def add_commands(sub) -> None:
-    p = sub.add_parser("view", description="Serves a page (three.js, no network needed) that plays the clip and its decoded "
-                                   "version in sync, colours each decoded joint by its error, charts the error over "
-                                   "time and shows ratio, bit rate, joint errors, PSNR and VPSNR; codec and knobs "
-                                   "can be changed in the page. Opens .bvh, .amc and .moc (a .moc file's motion is "
-                                   "the reference). With --relay, the page also watches a relay room live (every "
-                                   "avatar and the bit rate it gets). Codec knobs as --name value.")
+    p = sub.add_parser(
+        "view",
+        description="Serves a page (three.js, no network needed) that plays the clip and its decoded "
+        "version in sync, colours each decoded joint by its error, charts the error over "
+        "time and shows ratio, bit rate, joint errors, PSNR and VPSNR; codec and knobs "
+        "can be changed in the page. Opens .bvh, .amc and .moc (a .moc file's motion is "
+        "the reference). With --relay, the page also watches a relay room live (every "
+        "avatar and the bit rate it gets). Codec knobs as --name value.",
+    )
     p.add_argument("file", metavar="FILE", nargs="?", help=".bvh, .amc or .moc (optional with --relay)")
     add_codec_options(p)
     p.add_argument("--port", type=int, default=8770, help="port (default 8770; 0: any free port)")
@@ -76,9 +79,12 @@ def add_commands(sub) -> None:
 
     p = sub.add_parser("study")
     steps = p.add_subparsers(dest="step", required=True)
-    q = steps.add_parser("run", help="run one participant's session of a study configured by a JSON file",
-                         description="Serves the study page; the results are saved as JSON in --out when the "
-                                     "session ends. See docs/viewer.md for the configuration.")
+    q = steps.add_parser(
+        "run",
+        help="run one participant's session of a study configured by a JSON file",
+        description="Serves the study page; the results are saved as JSON in --out when the "
+        "session ends. See docs/viewer.md for the configuration.",
+    )
     q.add_argument("config", metavar="STUDY.json")
     q.add_argument("--out", required=True, metavar="DIR", help="folder for the results files")
     q.add_argument("--participant", default="anonymous", help="a name or code for the results file")

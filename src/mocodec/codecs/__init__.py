@@ -15,12 +15,20 @@ _BASE = ("Codec", "Knob", "QualityKnob", "StreamDecoder", "StreamEncoder")
 
 
 def __getattr__(name: str):
-    if name in _BASE:            # the interface, loaded with the first codec that needs it
+    if name in _BASE:  # the interface, loaded with the first codec that needs it
         from mocodec.codecs import base
 
         return getattr(base, name)
     raise AttributeError(f"module 'mocodec.codecs' has no attribute {name!r}")
 
 
-__all__ = [*_BASE, "DEFAULT_CODEC", "codec_class", "codec_from_config", "codec_from_untrusted", "codec_ids",
-           "get_codec", "register"]
+__all__ = [
+    *_BASE,
+    "DEFAULT_CODEC",
+    "codec_class",
+    "codec_from_config",
+    "codec_from_untrusted",
+    "codec_ids",
+    "get_codec",
+    "register",
+]

@@ -1,18 +1,16 @@
-"""The codec interface (design.md): knobs, payload envelope, streaming pair.
+"""The codec interface (design.md): knobs, bodies, streaming pair.
 
 Every codec subclasses :class:`Codec`, names its ``id``, ``description`` and ``knobs`` and
-implements ``_encode(motion) -> bytes`` and ``_decode(body, skeleton, frames, fps) ->
-channels``. The base class wraps the body in a small envelope (version, frame count, frame
-rate, and a CRC32 over them and the body), so a payload decodes on its own given the skeleton and damage is
-caught before the codec parses anything; any failure inside a decoder on a payload that passed
-its CRC is reported as :class:`~mocodec.errors.CorruptStreamError` too, never as another
+implements ``_encode(motion) -> body`` and ``_decode(body, skeleton, frames, fps) ->
+channels``. A body holds the coded motion only: the frame count, the frame rate and the
+integrity check are the framing's, which the .moc container (:mod:`mocodec.moc`) and the
+stream packets (:mod:`mocodec.stream.packets`) carry once, with a CRC. Any failure inside a
+decoder is reported as :class:`~mocodec.errors.CorruptStreamError`, never as another
 exception. Encoding refuses NaN and infinite channels.
 """
 
 from __future__ import annotations
 
-import struct
-import zlib
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -23,8 +21,6 @@ from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
-ENVELOPE_VERSION = 1
-_ENVELOPE = struct.Struct("<BIdI")     # version, frames, fps, CRC32 of those fields and the body
 MAX_FRAMES = limits.MAX_PAYLOAD_FRAMES
 
 
@@ -39,7 +35,7 @@ class Knob:
     low: float | None = None
     high: float | None = None
     choices: tuple | None = None
-    path: bool = False          # names a local file: never taken from a file or a stream (docs/security.md)
+    path: bool = False  # names a local file: never taken from a file or a stream (docs/security.md)
 
     def parse(self, value: Any) -> Any:
         try:
@@ -96,8 +92,9 @@ def checked_frames(codec_id: str, skeleton: Skeleton, frames: np.ndarray) -> np.
     return frames
 
 
-def continuous_frames(codec_id: str, skeleton: Skeleton, fps: float, frames: np.ndarray,
-                      previous: np.ndarray | None) -> np.ndarray:
+def continuous_frames(
+    codec_id: str, skeleton: Skeleton, fps: float, frames: np.ndarray, previous: np.ndarray | None
+) -> np.ndarray:
     """Pushed ``frames`` checked (:func:`checked_frames`) and made continuous
     (:meth:`Motion.continuous`) carrying on from ``previous``, the last continuous frame of the
     earlier pushes (None at the start): what stream encoders of predictive and transform
@@ -127,9 +124,9 @@ class Codec:
     lossless: ClassVar[bool] = False
     streaming: ClassVar[bool] = False
     delay_frames: ClassVar[int] = 0
-    variable_delay: ClassVar[bool] = False     # the delay depends on the motion (000 ch. 8)
-    baseline: ClassVar[bool] = False           # a generic float compressor, for comparison
-    native_decoder: ClassVar[bool] = False     # hands the body to a C library: untrusted bodies decode in a child
+    variable_delay: ClassVar[bool] = False  # the delay depends on the motion (000 ch. 8)
+    baseline: ClassVar[bool] = False  # a generic float compressor, for comparison
+    native_decoder: ClassVar[bool] = False  # hands the body to a C library: untrusted bodies decode in a child
 
     def __init__(self, **knobs):
         specs = {k.name: k for k in self.knobs}
@@ -157,56 +154,65 @@ class Codec:
 
     # ----- whole clips ------------------------------------------------------------------
     def encode(self, motion: Motion, output_skeleton: Skeleton | None = None) -> bytes:
-        """The payload of ``motion``: envelope + codec body. ``output_skeleton``: the skeleton
-        the decoder will be given when it is not quite ``motion``'s own (a lossy .moc file
-        stores offsets rounded, :func:`mocodec.moc.pack`); a codec that verifies an error bound
-        verifies it on the joints that skeleton gives."""
+        """The body of ``motion`` (its frame count and rate are the framing's: the container's
+        or the stream's). ``output_skeleton``: the skeleton the decoder will be given when it
+        is not quite ``motion``'s own (a lossy .moc file stores offsets rounded,
+        :func:`mocodec.moc.pack`); a codec that verifies an error bound verifies it on the
+        joints that skeleton gives."""
         if not np.isfinite(motion.channels).all():
             f, c = np.argwhere(~np.isfinite(motion.channels))[0]
-            raise CodecError(f"cannot encode: frame {f}, channel {motion.skeleton.channel_names[c]} is "
-                             f"{motion.channels[f, c]}")
+            raise CodecError(
+                f"cannot encode: frame {f}, channel {motion.skeleton.channel_names[c]} is {motion.channels[f, c]}"
+            )
         if motion.num_frames > MAX_FRAMES:
-            raise CodecError(f"cannot encode {motion.num_frames} frames in one payload (limit {MAX_FRAMES}); "
-                             "use the container, which splits clips into chunks")
-        body = self._encode(motion) if output_skeleton is None else self._encode_for(motion, output_skeleton)
-        return self.wrap(body, motion.num_frames, motion.fps)
+            raise CodecError(
+                f"cannot encode {motion.num_frames} frames in one body (limit {MAX_FRAMES}); "
+                "use the container, which splits clips into chunks"
+            )
+        return self._encode(motion) if output_skeleton is None else self._encode_for(motion, output_skeleton)
 
-    @staticmethod
-    def wrap(body: bytes, frames: int, fps: float) -> bytes:
-        """Envelope + body: version, frames, fps and the CRC over them and the body."""
-        if not 0 <= frames <= MAX_FRAMES:
-            raise CorruptStreamError(f"{frames} frames in one payload: the limit is {MAX_FRAMES}")
-        fields = _ENVELOPE.pack(ENVELOPE_VERSION, frames, float(fps), 0)[:-4]
-        return fields + struct.pack("<I", zlib.crc32(body, zlib.crc32(fields))) + body
-
-    def decode(self, payload: bytes, skeleton: Skeleton, max_values: int = limits.MAX_DECODED_VALUES,
-               trusted: bool = False) -> Motion:
-        """The motion in ``payload`` (from :meth:`encode`), on ``skeleton``. A payload that
-        declares more than ``max_values`` values (frames x channels) is refused before anything
-        is allocated; decoded values are finite or the payload is refused. ``trusted``: the
-        payload was encoded by this process, so a native decoder may run here rather than in a
-        child (:mod:`mocodec.sandbox`)."""
-        frames, fps, body = read_envelope(payload)
+    def decode(
+        self,
+        body: bytes,
+        skeleton: Skeleton,
+        frames: int,
+        fps: float,
+        max_values: int = limits.MAX_DECODED_VALUES,
+        trusted: bool = False,
+    ) -> Motion:
+        """The motion of ``frames`` frames at ``fps`` in ``body`` (from :meth:`encode`), on
+        ``skeleton``. More than ``max_values`` values (frames x channels) are refused before
+        anything is allocated; decoded values are finite or the body is refused. ``trusted``:
+        the body was encoded by this process, so a native decoder may run here rather than in
+        a child (:mod:`mocodec.sandbox`)."""
+        if not 0 <= frames <= MAX_FRAMES or not (np.isfinite(fps) and 0 < fps <= limits.MAX_FPS):
+            raise CorruptStreamError(f"{self.id} body: {frames} frames at {fps} fps is not plausible")
         if frames * skeleton.num_channels > max_values:
-            raise CorruptStreamError(f"{self.id} payload declares {frames} frames of {skeleton.num_channels} channels, "
-                                     f"over the limit of {max_values:,} values (raise it with --max-values)")
+            raise CorruptStreamError(
+                f"{self.id} body of {frames} frames of {skeleton.num_channels} channels is "
+                f"over the limit of {max_values:,} values (raise it with --max-values)"
+            )
         try:
             if self.native_decoder and not trusted:
-                channels = sandbox.call_isolated(self._decode, body, skeleton, frames, fps, what=f"{self.id} payload")
+                channels = sandbox.call_isolated(self._decode, body, skeleton, frames, fps, what=f"{self.id} body")
             else:
                 channels = self._decode(body, skeleton, frames, fps)
         except (CorruptStreamError, CodecError):
             raise
-        except Exception as e:   # noqa: BLE001 - a payload that passed its CRC but does not parse
-            raise CorruptStreamError(f"{self.id} payload does not decode ({type(e).__name__}: {e})") from None
+        except Exception as e:  # noqa: BLE001 - a body that does not parse
+            raise CorruptStreamError(f"{self.id} body does not decode ({type(e).__name__}: {e})") from None
         channels = np.asarray(channels, dtype=np.float64)
         if channels.shape != (frames, skeleton.num_channels):
-            raise CorruptStreamError(f"{self.id} payload decodes to {channels.shape}, expected "
-                                     f"({frames}, {skeleton.num_channels}): wrong skeleton?")
+            raise CorruptStreamError(
+                f"{self.id} body decodes to {channels.shape}, expected "
+                f"({frames}, {skeleton.num_channels}): wrong skeleton?"
+            )
         if not np.isfinite(channels).all():
             f, c = np.argwhere(~np.isfinite(channels))[0]
-            raise CorruptStreamError(f"{self.id} payload decodes to {channels[f, c]} at frame {f}, channel "
-                                     f"{skeleton.channel_names[c]}: the data is damaged")
+            raise CorruptStreamError(
+                f"{self.id} body decodes to {channels[f, c]} at frame {f}, channel "
+                f"{skeleton.channel_names[c]}: the data is damaged"
+            )
         return Motion(skeleton, fps, channels)
 
     def _encode(self, motion: Motion) -> bytes:
@@ -226,18 +232,3 @@ class Codec:
 
     def decoder(self, skeleton: Skeleton, fps: float) -> StreamDecoder:
         raise CodecError(f"codec {self.id} does not stream")
-
-
-def read_envelope(payload: bytes) -> tuple[int, float, bytes]:
-    """(frames, fps, body) of a payload, with its CRC checked."""
-    if len(payload) < _ENVELOPE.size:
-        raise CorruptStreamError(f"payload of {len(payload)} bytes is shorter than its {_ENVELOPE.size}-byte header")
-    version, frames, fps, crc = _ENVELOPE.unpack_from(payload)
-    if version != ENVELOPE_VERSION:
-        raise CorruptStreamError(f"payload version {version}, this mocodec reads {ENVELOPE_VERSION}")
-    body = payload[_ENVELOPE.size:]
-    if zlib.crc32(body, zlib.crc32(payload[:_ENVELOPE.size - 4])) != crc:
-        raise CorruptStreamError(f"payload CRC mismatch ({len(body)}-byte body): the data is damaged")
-    if frames > MAX_FRAMES or not (np.isfinite(fps) and 0 < fps <= limits.MAX_FPS):
-        raise CorruptStreamError(f"payload header: {frames} frames at {fps} fps is not plausible")
-    return frames, fps, body

@@ -22,11 +22,12 @@ BUILT_IN = {
     **dict.fromkeys(("gesture", "hybrid", "posture"), "model"),
     **dict.fromkeys(("primitives", "rhythmic"), "motionprimitives"),
     **dict.fromkeys(("pwavelet", "spiht"), "perceptual"),
-    "kinwave": "kinwave.codec", "raw": "reference", "lossless": "reference",
+    "kinwave": "kinwave.codec",
+    "raw": "reference",
+    "lossless": "reference",
     **dict.fromkeys(("zstd", "sz3", "zfp", "fpzip"), "reference"),
 }
-_MODULE = {"raw": "raw", "lossless": "lossless", "zstd": "floats", "sz3": "floats", "zfp": "floats",
-           "fpzip": "floats"}
+_MODULE = {"raw": "raw", "lossless": "lossless", "zstd": "floats", "sz3": "floats", "zfp": "floats", "fpzip": "floats"}
 
 
 def built_in_module(codec_id: str) -> str:
@@ -72,8 +73,9 @@ def codec_from_untrusted(config: object, where: str, local_files: dict[str, str]
     if not isinstance(config, dict) or not isinstance(config.get("codec"), str):
         raise CorruptStreamError(f"{where}: the codec config must be an object naming a codec")
     knobs = config.get("knobs", {})
-    if not isinstance(knobs, dict) or not all(isinstance(k, str) and isinstance(v, (str, int, float, bool))
-                                              for k, v in knobs.items()):
+    if not isinstance(knobs, dict) or not all(
+        isinstance(k, str) and isinstance(v, (str, int, float, bool)) for k, v in knobs.items()
+    ):
         raise CorruptStreamError(f"{where}: the codec's knobs must be an object of strings, numbers and booleans")
     try:
         cls = codec_class(config["codec"])

@@ -15,8 +15,13 @@ from mocodec.motion import Motion
 READABLE = (".bvh", ".amc")
 
 
-def load(path: str | os.PathLike, *, asf: str | os.PathLike | None = None, fps: float | None = None,
-         units_per_metre: float | None = None) -> Motion:
+def load(
+    path: str | os.PathLike,
+    *,
+    asf: str | os.PathLike | None = None,
+    fps: float | None = None,
+    units_per_metre: float | None = None,
+) -> Motion:
     """Read a ``.bvh`` or ``.amc`` file (the ASF is found beside an AMC unless given).
 
     ``fps`` sets the rate of an AMC (default 120, the CMU rate) or overrides a BVH's
@@ -55,5 +60,18 @@ def save(motion: Motion, path: str | os.PathLike, *, asf: str | os.PathLike | No
     raise ConversionError(f"{path}: cannot write {path.suffix or 'files without extension'}, expected .bvh or .amc")
 
 
-__all__ = ["load", "save", "read_bvh", "write_bvh", "read_asf", "write_asf", "read_amc", "write_amc",
-           "find_asf", "to_asf_form", "to_bvh_form", "with_units", "READABLE"]
+__all__ = [
+    "load",
+    "save",
+    "read_bvh",
+    "write_bvh",
+    "read_asf",
+    "write_asf",
+    "read_amc",
+    "write_amc",
+    "find_asf",
+    "to_asf_form",
+    "to_bvh_form",
+    "with_units",
+    "READABLE",
+]

@@ -21,8 +21,9 @@ CMU_FPS = 120.0
 
 
 # ----------------------------------------------------------------------------- AMC reading
-def read_amc(path: str | os.PathLike, skeleton: Skeleton | str | os.PathLike | None = None,
-             fps: float = CMU_FPS) -> Motion:
+def read_amc(
+    path: str | os.PathLike, skeleton: Skeleton | str | os.PathLike | None = None, fps: float = CMU_FPS
+) -> Motion:
     """Read an AMC motion against its ASF skeleton.
 
     ``skeleton`` is a Skeleton or an ASF path; by default the ASF named by the subject part of
@@ -47,8 +48,11 @@ def read_amc(path: str | os.PathLike, skeleton: Skeleton | str | os.PathLike | N
             if key == ":RADIANS":
                 angle_scale = float(np.rad2deg(1.0))
             elif key not in (":FULLY-SPECIFIED", ":DEGREES"):
-                raise FormatError(path, n + 1, f"unknown AMC keyword {s.split()[0]!r}, "
-                                               "expected :FULLY-SPECIFIED, :DEGREES or :RADIANS")
+                raise FormatError(
+                    path,
+                    n + 1,
+                    f"unknown AMC keyword {s.split()[0]!r}, expected :FULLY-SPECIFIED, :DEGREES or :RADIANS",
+                )
             n += 1
             continue
         break
@@ -69,8 +73,9 @@ def _frame_number(token: str) -> int | None:
 
 def _frame_layout(skeleton: Skeleton) -> dict[str, tuple[int, int]]:
     """Bone name -> (first channel, channel count) for every joint with channels."""
-    return {j.name: (int(skeleton.channel_offsets[i]), len(j.channels))
-            for i, j in enumerate(skeleton.joints) if j.channels}
+    return {
+        j.name: (int(skeleton.channel_offsets[i]), len(j.channels)) for i, j in enumerate(skeleton.joints) if j.channels
+    }
 
 
 def _fast_frames(lines: list[str], start: int, layout: dict, path) -> np.ndarray | None:
@@ -104,7 +109,7 @@ def _fast_frames(lines: list[str], start: int, layout: dict, path) -> np.ndarray
     width = sum(c for _, c in layout.values())
     out = np.empty((frames, width))
     for b, name in enumerate(order):
-        rows = lines[start + 1 + b:end:block]
+        rows = lines[start + 1 + b : end : block]
         prefix = len(name)
         if not all(r.startswith(name) and (len(r) == prefix or r[prefix] in " \t") for r in rows):
             return None
@@ -116,7 +121,7 @@ def _fast_frames(lines: list[str], start: int, layout: dict, path) -> np.ndarray
             return None
         if values.shape[0] != frames:
             return None
-        out[:, first_channel:first_channel + count] = values
+        out[:, first_channel : first_channel + count] = values
     return out
 
 
@@ -159,7 +164,7 @@ def _slow_frames(lines: list[str], start: int, layout: dict, skeleton: Skeleton,
         first_channel, count = layout[name]
         if len(toks) - 1 != count:
             raise FormatError(path, n + 1, f"bone {name!r} has {len(toks) - 1} values, expected {count}")
-        current[first_channel:first_channel + count] = [parse_number(t, path, n + 1) for t in toks[1:]]
+        current[first_channel : first_channel + count] = [parse_number(t, path, n + 1) for t in toks[1:]]
         seen.add(name)
     close()
     if not rows:
@@ -180,8 +185,11 @@ def find_asf(amc_path: str | os.PathLike) -> Path:
         return found[0]
     if not found:
         raise FormatError(amc_path, None, f"no ASF skeleton found (looked for {candidate.name}); pass it explicitly")
-    raise FormatError(amc_path, None, f"{len(found)} ASF files beside it and none named {candidate.name}; "
-                                      "pass the skeleton explicitly")
+    raise FormatError(
+        amc_path,
+        None,
+        f"{len(found)} ASF files beside it and none named {candidate.name}; pass the skeleton explicitly",
+    )
 
 
 def amc_text(motion: Motion, asf_name: str = "") -> str:

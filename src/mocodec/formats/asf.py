@@ -23,8 +23,14 @@ from mocodec.formats.fileio import atomic_write, parse_number, read_text
 from mocodec.skeleton import Joint, Skeleton
 
 INCH = 0.0254
-_DOF_CHANNEL = {"rx": "Xrotation", "ry": "Yrotation", "rz": "Zrotation",
-                "tx": "Xposition", "ty": "Yposition", "tz": "Zposition"}
+_DOF_CHANNEL = {
+    "rx": "Xrotation",
+    "ry": "Yrotation",
+    "rz": "Zrotation",
+    "tx": "Xposition",
+    "ty": "Yposition",
+    "tz": "Zposition",
+}
 _CHANNEL_DOF = {v: k for k, v in _DOF_CHANNEL.items()}
 _SECTIONS = (":version", ":name", ":units", ":documentation", ":root", ":bonedata", ":hierarchy", ":skin")
 
@@ -36,8 +42,12 @@ class _AsfParser:
         self.lines = read_text(path).split("\n")
         self.units = {"mass": 1.0, "length": 1.0, "angle": "deg"}
         self.meta: dict = {"documentation": []}
-        self.root = {"order": ["TX", "TY", "TZ", "RX", "RY", "RZ"], "axis": "XYZ",
-                     "position": (0.0, 0.0, 0.0), "orientation": (0.0, 0.0, 0.0)}
+        self.root = {
+            "order": ["TX", "TY", "TZ", "RX", "RY", "RZ"],
+            "axis": "XYZ",
+            "position": (0.0, 0.0, 0.0),
+            "orientation": (0.0, 0.0, 0.0),
+        }
         self.bones: dict[str, dict] = {}
         self.hierarchy: dict[str, list[str]] = {}
         self.hierarchy_line: dict[str, int] = {}
@@ -115,7 +125,11 @@ class _AsfParser:
         key = toks[0].lower()
         if key == "order":
             order = [t.upper() for t in toks[1:]]
-            if not order or any(t not in ("TX", "TY", "TZ", "RX", "RY", "RZ") for t in order) or len(set(order)) != len(order):
+            if (
+                not order
+                or any(t not in ("TX", "TY", "TZ", "RX", "RY", "RZ") for t in order)
+                or len(set(order)) != len(order)
+            ):
                 raise self.error(n, f"root order {' '.join(toks[1:])!r}, expected distinct TX TY TZ RX RY RZ")
             self.root["order"] = order
         elif key == "axis":
@@ -146,8 +160,14 @@ class _AsfParser:
             if key == "begin":
                 if bone is not None:
                     raise self.error(n, "'begin' inside a bone block (missing 'end')")
-                bone = {"line": n, "dof": [], "limits": [], "axis": (0.0, 0.0, 0.0), "axis_order": "XYZ",
-                        "in_limits": False}
+                bone = {
+                    "line": n,
+                    "dof": [],
+                    "limits": [],
+                    "axis": (0.0, 0.0, 0.0),
+                    "axis_order": "XYZ",
+                    "in_limits": False,
+                }
             elif bone is None:
                 raise self.error(n, f"{toks[0]!r} outside a begin/end bone block")
             elif key == "end":
@@ -155,8 +175,9 @@ class _AsfParser:
                     if required not in bone:
                         raise self.error(bone["line"], f"bone block without '{required}'")
                 if len(bone["limits"]) not in (0, len(bone["dof"])):
-                    raise self.error(n, f"bone {bone['name']!r}: {len(bone['limits'])} limits for "
-                                        f"{len(bone['dof'])} dofs")
+                    raise self.error(
+                        n, f"bone {bone['name']!r}: {len(bone['limits'])} limits for {len(bone['dof'])} dofs"
+                    )
                 if bone["name"] in self.bones or bone["name"] == "root":
                     raise self.error(bone["line"], f"bone name {bone['name']!r} is defined twice")
                 self.bones[bone["name"]] = bone
@@ -187,7 +208,7 @@ class _AsfParser:
                 bone["dof"] = dofs
             elif key == "limits" or continues_limits:
                 bone["in_limits"] = True
-                text = line[len("limits"):] if key == "limits" else line
+                text = line[len("limits") :] if key == "limits" else line
                 pairs = re.findall(r"\(\s*(\S+)\s+(\S+?)\s*\)", text)
                 if not pairs:
                     raise self.error(n, "expected limits as (lower upper)")
@@ -196,8 +217,10 @@ class _AsfParser:
             elif key in ("bodymass", "cofmass"):
                 pass
             else:
-                raise self.error(n, f"unknown bone keyword {toks[0]!r}, expected id, name, direction, length, "
-                                    "axis, dof, limits or end")
+                raise self.error(
+                    n,
+                    f"unknown bone keyword {toks[0]!r}, expected id, name, direction, length, axis, dof, limits or end",
+                )
             n += 1
         if bone is not None:
             raise self.error(n - 1, f"file ends inside bone {bone.get('name')!r}")
@@ -252,44 +275,63 @@ class _AsfParser:
     def _skeleton(self) -> Skeleton:
         root_order = self.root["order"]
         root_rot = [t[1] for t in root_order if t.startswith("R")]
-        joints = [Joint(
-            name="root", parent=-1, offset=tuple(self.root["position"]),
-            channels=tuple(_DOF_CHANNEL[t.lower()] for t in root_order),
-            rotation_order="".join(reversed(root_rot)),
-            axis=tuple(reversed([self.angle(v) for v in self.root["orientation"]])),
-            axis_order=self.root["axis"][::-1],
-        )]
+        joints = [
+            Joint(
+                name="root",
+                parent=-1,
+                offset=tuple(self.root["position"]),
+                channels=tuple(_DOF_CHANNEL[t.lower()] for t in root_order),
+                rotation_order="".join(reversed(root_rot)),
+                axis=tuple(reversed([self.angle(v) for v in self.root["orientation"]])),
+                axis_order=self.root["axis"][::-1],
+            )
+        ]
         index = {"root": 0}
         bone_vec = {"root": np.zeros(3)}
 
         todo = [(child, "root") for child in reversed(self.hierarchy.get("root", []))]
-        while todo:                 # depth first, children in file order (a chain may be thousands deep)
+        while todo:  # depth first, children in file order (a chain may be thousands deep)
             name, parent = todo.pop()
             b = self.bones[name]
             rot = [d[1].upper() for d in b["dof"] if d.startswith("r")]
-            joints.append(Joint(
-                name=name, parent=index[parent], offset=tuple(bone_vec[parent]),
-                channels=tuple(_DOF_CHANNEL[d] for d in b["dof"]), rotation_order="".join(reversed(rot)),
-                axis=tuple(reversed(b["axis"])), axis_order=b["axis_order"][::-1], limits=tuple(b["limits"]),
-            ))
+            joints.append(
+                Joint(
+                    name=name,
+                    parent=index[parent],
+                    offset=tuple(bone_vec[parent]),
+                    channels=tuple(_DOF_CHANNEL[d] for d in b["dof"]),
+                    rotation_order="".join(reversed(rot)),
+                    axis=tuple(reversed(b["axis"])),
+                    axis_order=b["axis_order"][::-1],
+                    limits=tuple(b["limits"]),
+                )
+            )
             index[name] = len(joints) - 1
             bone_vec[name] = np.asarray(b["direction"]) * b["length"]
             kids = self.hierarchy.get(name, [])
             if not kids:
                 if f"{name}_end" in self.bones:
-                    raise self.error(self.bones[f"{name}_end"]["line"], f"bone name {name}_end is the name of "
-                                     f"the end site of leaf bone {name!r}")
+                    raise self.error(
+                        self.bones[f"{name}_end"]["line"],
+                        f"bone name {name}_end is the name of the end site of leaf bone {name!r}",
+                    )
                 joints.append(Joint(name=f"{name}_end", parent=index[name], offset=tuple(bone_vec[name])))
             todo.extend((child, name) for child in reversed(kids))
-        missing = [b for b in self.bones if b not in index]
+        missing = [name for name in self.bones if name not in index]
         if missing:
-            b = missing[0]
-            raise self.error(self.hierarchy_line.get(b, self.bones[b]["line"]),
-                             f"bone {b!r} is not connected to the root in :hierarchy")
-        meta = {"asf_name": self.meta.get("name", ""), "asf_version": self.meta.get("version", "1.10"),
-                "mass": self.units["mass"], "documentation": self.meta["documentation"]}
-        return Skeleton(tuple(joints), units_per_metre=self.units["length"] / INCH,
-                        name=meta["asf_name"], metadata=meta)
+            raise self.error(
+                self.hierarchy_line.get(missing[0], self.bones[missing[0]]["line"]),
+                f"bone {missing[0]!r} is not connected to the root in :hierarchy",
+            )
+        meta = {
+            "asf_name": self.meta.get("name", ""),
+            "asf_version": self.meta.get("version", "1.10"),
+            "mass": self.units["mass"],
+            "documentation": self.meta["documentation"],
+        }
+        return Skeleton(
+            tuple(joints), units_per_metre=self.units["length"] / INCH, name=meta["asf_name"], metadata=meta
+        )
 
 
 def read_asf(path: str | os.PathLike) -> Skeleton:
@@ -310,17 +352,21 @@ def asf_bone_vectors(skeleton: Skeleton) -> dict[int, np.ndarray]:
         if i > 0 and skeleton.end_sites[i]:
             continue
         if j.rotation_order != "".join(reversed([c[0] for c in j.channels if c.endswith("rotation")])):
-            raise ConversionError(f"joint {j.name!r}: rotation order {j.rotation_order!r} is not its dof list "
-                                  "reversed; use mocodec.convert.to_asf_form first")
+            raise ConversionError(
+                f"joint {j.name!r}: rotation order {j.rotation_order!r} is not its dof list "
+                "reversed; use mocodec.convert.to_asf_form first"
+            )
         offs = skeleton.offsets[list(kids)] if kids else np.zeros((1, 3))
         if i == 0:
             if np.abs(offs).max() > 1e-9:
-                raise ConversionError("bones attached to the ASF root must start at the root; "
-                                      "use mocodec.convert.to_asf_form first")
+                raise ConversionError(
+                    "bones attached to the ASF root must start at the root; use mocodec.convert.to_asf_form first"
+                )
             continue
         if np.abs(offs - offs[0]).max() > 1e-9:
-            raise ConversionError(f"joint {j.name!r}: its children start at different points; "
-                                  "use mocodec.convert.to_asf_form first")
+            raise ConversionError(
+                f"joint {j.name!r}: its children start at different points; use mocodec.convert.to_asf_form first"
+            )
         vectors[i] = offs[0]
     return vectors
 
@@ -356,10 +402,14 @@ def asf_text(skeleton: Skeleton) -> str:
         j = skeleton.joints[i]
         length = float(np.linalg.norm(vec))
         direction = vec / length if length > 0 else np.array([0.0, 0.0, 1.0])
-        out += ["  begin", f"     id {bone_id}", f"     name {j.name}",
-                f"     direction {' '.join(f'{v:.9g}' for v in direction)}",
-                f"     length {length:.9g}",
-                f"     axis {' '.join(_fmt(v) for v in reversed(j.axis))} {j.axis_order[::-1]}"]
+        out += [
+            "  begin",
+            f"     id {bone_id}",
+            f"     name {j.name}",
+            f"     direction {' '.join(f'{v:.9g}' for v in direction)}",
+            f"     length {length:.9g}",
+            f"     axis {' '.join(_fmt(v) for v in reversed(j.axis))} {j.axis_order[::-1]}",
+        ]
         if j.channels:
             out.append(f"    dof {' '.join(_CHANNEL_DOF[c] for c in j.channels)}")
             lims = [f"({_fmt(lo)} {_fmt(hi)})" for lo, hi in j.limits]

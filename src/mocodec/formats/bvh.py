@@ -51,7 +51,7 @@ class _HierarchyParser:
             raise self.error(n if n < len(self.lines) else 0, "expected 'HIERARCHY' at the start of a BVH file")
         n += 1
         stack: list[int] = []  # open joint indices; -2 marks an End Site block
-        pending: tuple[str, int, bool] | None = None  # (name, parent, is_end) awaiting '{'
+        pending: tuple[str | None, int, bool] | None = None  # (name, parent, is_end) awaiting '{'
         root_seen = False
         while n < len(self.lines):
             toks = self.tokens(n)
@@ -62,8 +62,9 @@ class _HierarchyParser:
                     if word != "{":
                         raise self.error(n, f"expected '{{' after the joint name, found {word!r}")
                     name, parent, is_end = pending
-                    self.joints.append({"name": name, "parent": parent, "end": is_end, "line": n,
-                                        "offset": None, "channels": ()})
+                    self.joints.append(
+                        {"name": name, "parent": parent, "end": is_end, "line": n, "offset": None, "channels": ()}
+                    )
                     stack.append(len(self.joints) - 1)
                     pending = None
                     toks = toks[1:]
@@ -75,12 +76,12 @@ class _HierarchyParser:
                     if stack and self.joints[stack[-1]]["end"]:
                         raise self.error(n, "End Site blocks cannot contain joints")
                     rest = toks[1:]
-                    name_toks = rest[:rest.index("{")] if "{" in rest else rest
+                    name_toks = rest[: rest.index("{")] if "{" in rest else rest
                     if not name_toks:
                         raise self.error(n, f"{word} needs a name")
                     root_seen = True
                     pending = (" ".join(name_toks), stack[-1] if stack else -1, False)
-                    toks = rest[len(name_toks):]
+                    toks = rest[len(name_toks) :]
                 elif key == "END":
                     if len(toks) < 2 or toks[1].upper() != "SITE":
                         raise self.error(n, f"expected 'End Site', found {' '.join(toks[:2])!r}")
@@ -127,7 +128,7 @@ class _HierarchyParser:
             count = int(toks[1])
         except ValueError:
             raise self.error(n, f"{toks[1]!r} is not a channel count") from None
-        names = toks[2:2 + count]
+        names = toks[2 : 2 + count]
         if len(names) != count or count < 0:
             raise self.error(n, f"CHANNELS {count} lists {len(names)} channel names")
         channels = []
@@ -139,11 +140,11 @@ class _HierarchyParser:
         if len(set(channels)) != len(channels):
             raise self.error(n, f"repeated channel in {' '.join(names)}")
         joint["channels"] = tuple(channels)
-        return toks[2 + count:]
+        return toks[2 + count :]
 
     def skeleton(self, units_per_metre: float) -> Skeleton:
         names: set[str] = {j["name"] for j in self.joints if j["name"]}
-        suffix: dict[str, int] = {}             # the last number given to each end site base name
+        suffix: dict[str, int] = {}  # the last number given to each end site base name
         joints = []
         for j in self.joints:
             name = j["name"]
@@ -157,15 +158,16 @@ class _HierarchyParser:
                 names.add(name)
                 j["name"] = name
             order = "".join(c[0] for c in j["channels"] if c.endswith("rotation"))
-            joints.append(Joint(name=name, parent=j["parent"], offset=j["offset"],
-                                channels=j["channels"], rotation_order=order))
+            joints.append(
+                Joint(name=name, parent=j["parent"], offset=j["offset"], channels=j["channels"], rotation_order=order)
+            )
         dup = len({j.name for j in joints}) != len(joints)
         if dup:
             seen = set()
-            for j, raw in zip(joints, self.joints):
-                if j.name in seen:
-                    raise self.error(raw["line"], f"joint name {j.name!r} is used twice")
-                seen.add(j.name)
+            for joint, raw in zip(joints, self.joints):
+                if joint.name in seen:
+                    raise self.error(raw["line"], f"joint name {joint.name!r} is used twice")
+                seen.add(joint.name)
         return Skeleton(tuple(joints), units_per_metre=units_per_metre)
 
 
@@ -216,8 +218,7 @@ def read_bvh(path: str | os.PathLike, units_per_metre: float | None = None) -> M
     if width == 0:
         values = np.zeros((frames, 0))
     if values.shape[0] != frames:
-        raise FormatError(path, header["frames"][1],
-                          f"'Frames: {frames}' but {values.shape[0]} frame lines follow")
+        raise FormatError(path, header["frames"][1], f"'Frames: {frames}' but {values.shape[0]} frame lines follow")
     return Motion(skeleton, _snap_fps(frame_time), values)
 
 
@@ -267,8 +268,10 @@ def bvh_text(motion: Motion, decimals: int = 6) -> str:
 
     for j in sk.joints:
         if j.rotation_order != "".join(c[0] for c in j.channels if c.endswith("rotation")):
-            raise ValueError(f"joint {j.name!r}: BVH applies rotations in channel order; "
-                             f"rotation order {j.rotation_order!r} differs (convert the motion first)")
+            raise ValueError(
+                f"joint {j.name!r}: BVH applies rotations in channel order; "
+                f"rotation order {j.rotation_order!r} differs (convert the motion first)"
+            )
         if j.has_axis:
             raise ValueError(f"joint {j.name!r} has an ASF axis; convert the motion to BVH form first")
     emit(0, "")

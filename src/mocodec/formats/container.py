@@ -1,17 +1,16 @@
 """The .moc container: a coded motion that decodes on its own, with random access.
 
-Layout (little-endian, versions 3 and 4, which differ in the header's preset dictionary only)::
+Layout (little-endian; version 1, docs/formats.md gives it byte by byte)::
 
     "MOC1"  u16 version  u16 flags (bit 0: the header holds a compact skeleton)
     u32 header length, header (zlib, deflated with the preset dictionary of
-        :mod:`mocodec.formats.header_dict` for this version), holding JSON with the codec
+        :mod:`mocodec.formats.header_dict`), holding JSON with the codec
         config, fps, frame count, chunk size and, without flag 0, the skeleton's id; with
         flag 0, a zero byte and the compact skeleton of :mod:`mocodec.formats.skeleton_bin`
         follow the JSON;
         u32 CRC32 of the header bytes
-    chunks: varint body length, the codec's body (its payload without the envelope of
-            :mod:`mocodec.codecs.base`, whose frame count, rate and CRC the index, the header
-            and the chunk's CRC give), u32 CRC32 of the length and the body
+    chunks: varint body length, the codec's body (:meth:`Codec.encode`: its frame count and
+            rate are the index's and the header's), u32 CRC32 of the length and the body
     index:  varint chunk count, per chunk (varint frame count, varint bytes of the chunk),
             u32 CRC32 of the index
     footer: u32 index length, "MOCX"
@@ -21,13 +20,6 @@ frame counts every chunk's first frame. The index at the end lets a reader fetch
 chunks that cover a frame range. Every part is length-checked and CRC-checked before it is
 used, and a failure raises :class:`~mocodec.errors.CorruptStreamError` naming the part (chunk
 number) and byte offset.
-
-Versions 1 and 2 are still read. They store whole payloads (envelope and body), frame each
-chunk with u32 first frame, frame count and payload length, and give the index u32 count and
-u32 entries (u64 offset, u32 first frame, u32 frame count) and the footer a u64 index offset:
-47 bytes more for a one-chunk file. Version 1
-deflates the header without a dictionary, version 2 with the dictionary before the current
-codec settings were added to it.
 
 A file can hold its skeleton (self-contained: about 310 bytes for the 57 joints of the CMU BVH
 skeletons in a lossy file, 530 for CMU ASF ones) or only the skeleton's id, a hash of its
@@ -51,22 +43,18 @@ from typing import BinaryIO
 from mocodec import limits
 from mocodec.errors import CorruptStreamError, SkeletonMismatchError
 from mocodec.formats import varint
-from mocodec.formats.header_dict import dictionary
+from mocodec.formats.header_dict import DICTIONARY
 from mocodec.formats.skeleton_bin import pack_skeleton, unpack_skeleton
 from mocodec.skeleton import Joint, Skeleton
 
 MAGIC = b"MOC1"
 FOOTER_MAGIC = b"MOCX"
-VERSION = 4
-VERSIONS = (1, 2, 3, 4)         # the versions this module reads
+VERSION = 1
 MAX_HEADER = 1 << 24
 MAX_CHUNKS = 1 << 20
 FLAG_SKELETON = 1
 _START = struct.Struct("<4sHHI")
-_CHUNK = struct.Struct("<III")
-_ENTRY = struct.Struct("<QII")
-_FOOTER = struct.Struct("<Q4s")        # versions 1 and 2
-_FOOTER_3 = struct.Struct("<I4s")
+_FOOTER = struct.Struct("<I4s")
 _U32 = struct.Struct("<I")
 
 
@@ -86,9 +74,17 @@ def skeleton_to_dict(skeleton: Skeleton) -> dict:
         "name": skeleton.name,
         "units_per_metre": float(skeleton.units_per_metre),
         "joints": [
-            {"name": j.name, "parent": j.parent, "offset": [_number(x) for x in j.offset],
-             "channels": list(j.channels), "rotation_order": j.rotation_order, "axis": [_number(x) for x in j.axis], "axis_order": j.axis_order,
-             "limits": [[_number(a), _number(b)] for a, b in j.limits], "body_part": j.body_part}
+            {
+                "name": j.name,
+                "parent": j.parent,
+                "offset": [_number(x) for x in j.offset],
+                "channels": list(j.channels),
+                "rotation_order": j.rotation_order,
+                "axis": [_number(x) for x in j.axis],
+                "axis_order": j.axis_order,
+                "limits": [[_number(a), _number(b)] for a, b in j.limits],
+                "body_part": j.body_part,
+            }
             for j in skeleton.joints
         ],
     }
@@ -101,11 +97,21 @@ def skeleton_id(skeleton: Skeleton) -> str:
 
 
 def skeleton_from_dict(data: dict) -> Skeleton:
-    joints = [Joint(j["name"], int(j["parent"]), tuple(map(float, j["offset"])), tuple(j["channels"]),
-                    j["rotation_order"], tuple(map(float, j["axis"])), j["axis_order"],
-                    tuple((_from_number(a), _from_number(b)) for a, b in j["limits"]), j["body_part"])
-              for j in data["joints"]]
-    return Skeleton(joints, float(data["units_per_metre"]), data.get("name", ""))
+    joints = [
+        Joint(
+            j["name"],
+            int(j["parent"]),
+            tuple(map(float, j["offset"])),
+            tuple(j["channels"]),
+            j["rotation_order"],
+            tuple(map(float, j["axis"])),
+            j["axis_order"],
+            tuple((_from_number(a), _from_number(b)) for a, b in j["limits"]),
+            j["body_part"],
+        )
+        for j in data["joints"]
+    ]
+    return Skeleton(tuple(joints), float(data["units_per_metre"]), data.get("name", ""))
 
 
 # ----- writing --------------------------------------------------------------------------------
@@ -127,7 +133,7 @@ def pack(header: dict, chunks: list[Chunk], embed_skeleton: bool = True) -> byte
     text = json.dumps(meta, separators=(",", ":"), allow_nan=False).encode()
     if embed_skeleton:
         text += b"\0" + pack_skeleton(skeleton)
-    deflate = zlib.compressobj(9, zdict=dictionary(VERSION))
+    deflate = zlib.compressobj(9, zdict=DICTIONARY)
     head = deflate.compress(text) + deflate.flush()
     flags = FLAG_SKELETON if embed_skeleton else 0
     out = bytearray(_START.pack(MAGIC, VERSION, flags, len(head)) + head + _U32.pack(zlib.crc32(head)))
@@ -141,7 +147,7 @@ def pack(header: dict, chunks: list[Chunk], embed_skeleton: bool = True) -> byte
         index += varint.pack(chunk.count) + varint.pack(len(body) + 4)
         out += body + _U32.pack(zlib.crc32(body))
     index += _U32.pack(zlib.crc32(index))
-    out += index + _FOOTER_3.pack(len(index), FOOTER_MAGIC)
+    out += index + _FOOTER.pack(len(index), FOOTER_MAGIC)
     return bytes(out)
 
 
@@ -174,7 +180,7 @@ class IndexEntry:
     offset: int
     first: int
     count: int
-    size: int = 0               # bytes of the chunk with its framing (0: versions 1 and 2, which frame it themselves)
+    size: int  # bytes of the chunk with its framing
 
 
 @dataclass(frozen=True)
@@ -187,7 +193,6 @@ class Container:
     header: dict
     skeleton: Skeleton
     index: tuple[IndexEntry, ...]
-    version: int = VERSION      # 3 on: chunks hold codec bodies, without the payload envelope
 
     @property
     def frames(self) -> int:
@@ -202,30 +207,18 @@ class Container:
         return [k for k, e in enumerate(self.index) if e.first < stop and e.first + e.count > first]
 
     def read_chunk(self, k: int) -> bytes:
-        """Payload of chunk ``k``, length- and CRC-checked."""
+        """The codec body of chunk ``k``, length- and CRC-checked."""
         e = self.index[k]
         where = f"{self.name}: chunk {k} at byte {e.offset}"
-        if e.size:
-            body = _read_at(self.source, e.offset, e.size, self.size, where)
-            length, start = _read_varint(body, 0, where)
-            if start + length + 4 != e.size:
-                raise CorruptStreamError(f"{where}: a {length}-byte payload does not fill the {e.size} bytes the "
-                                         "index gives the chunk")
-            if zlib.crc32(body[:-4]) != _U32.unpack(body[-4:])[0]:
-                raise CorruptStreamError(f"{where}: CRC mismatch, the chunk is damaged")
-            return body[start:-4]
-        raw = _read_at(self.source, e.offset, _CHUNK.size, self.size, where)
-        first, count, length = _CHUNK.unpack(raw)
-        if (first, count) != (e.first, e.count):
-            raise CorruptStreamError(f"{where}: holds frames {first}+{count}, the index says {e.first}+{e.count}")
-        if e.offset + _CHUNK.size + length + 4 > self.size:
-            raise CorruptStreamError(f"{where}: a {length}-byte payload runs past the end of the file "
-                                     f"({self.size} bytes)")
-        body = raw + _read_at(self.source, e.offset + _CHUNK.size, length + 4, self.size, where)
-        (crc,) = _U32.unpack(body[-4:])
-        if zlib.crc32(body[:-4]) != crc:
+        body = _read_at(self.source, e.offset, e.size, self.size, where)
+        length, start = _read_varint(body, 0, where)
+        if start + length + 4 != e.size:
+            raise CorruptStreamError(
+                f"{where}: a {length}-byte body does not fill the {e.size} bytes the index gives the chunk"
+            )
+        if zlib.crc32(body[:-4]) != _U32.unpack(body[-4:])[0]:
             raise CorruptStreamError(f"{where}: CRC mismatch, the chunk is damaged")
-        return body[_CHUNK.size:-4]
+        return body[start:-4]
 
 
 def _read_at(source: BinaryIO, offset: int, length: int, size: int, where: str) -> bytes:
@@ -245,18 +238,21 @@ def open_container(source: BinaryIO, size: int, name: str, skeleton: Skeleton | 
     magic, version, flags, head_len = _START.unpack(start)
     if magic != MAGIC:
         raise CorruptStreamError(f"{name}: not a .moc file (starts with {magic!r}, expected {MAGIC!r})")
-    if version not in VERSIONS:
-        raise CorruptStreamError(f"{name}: .moc version {version}; this mocodec reads versions {VERSIONS}")
+    if version != VERSION:
+        raise CorruptStreamError(f"{name}: .moc version {version}; this mocodec reads version {VERSION}")
+    if flags & ~FLAG_SKELETON:
+        raise CorruptStreamError(f"{name}: flags {flags:#06x} at byte 6 set bits this version does not define")
     if head_len > MAX_HEADER:
         raise CorruptStreamError(f"{name}: header length {head_len} at byte 8 is implausible")
     head = _read_at(source, _START.size, head_len + 4, size, f"{name}: header")
     if zlib.crc32(head[:-4]) != _U32.unpack(head[-4:])[0]:
         raise CorruptStreamError(f"{name}: header CRC mismatch at byte {_START.size}, the header is damaged")
     try:
-        text = inflate_capped(head[:-4], dictionary(version) if version >= 2 else b"", limits.MAX_HEADER_TEXT)
+        text = inflate_capped(head[:-4], DICTIONARY, limits.MAX_HEADER_TEXT)
         if flags & FLAG_SKELETON:
             text, _, compact = text.partition(b"\0")
         header = json.loads(text)
+        embedded: Skeleton | None
         if flags & FLAG_SKELETON:
             embedded = unpack_skeleton(compact)
         else:
@@ -269,27 +265,31 @@ def open_container(source: BinaryIO, size: int, name: str, skeleton: Skeleton | 
         raise CorruptStreamError(f"{name}: header at byte {_START.size} does not parse ({e})") from None
     if embedded is None:
         if skeleton is None:
-            raise SkeletonMismatchError(f"{name}: the file refers to skeleton {wanted} without holding it; "
-                                        "give the skeleton it was coded with (decode --skeleton FILE)")
+            raise SkeletonMismatchError(
+                f"{name}: the file refers to skeleton {wanted} without holding it; "
+                "give the skeleton it was coded with (decode --skeleton FILE)"
+            )
         if skeleton_id(skeleton) != wanted:
-            raise SkeletonMismatchError(f"{name}: the file was coded for skeleton {wanted}, the one given is "
-                                        f"{skeleton_id(skeleton)}")
+            raise SkeletonMismatchError(
+                f"{name}: the file was coded for skeleton {wanted}, the one given is {skeleton_id(skeleton)}"
+            )
     skeleton = embedded or skeleton
+    assert skeleton is not None  # a file without its skeleton was given one above
     if frames < 0 or not (math.isfinite(fps) and 0 < fps <= limits.MAX_FPS):
         raise CorruptStreamError(f"{name}: header says {frames} frames at {fps} fps")
     chunks_at = _START.size + head_len + 4
-    index = (_index(source, size, name, chunks_at) if version >= 3 else
-             _index_v2(source, size, name, chunks_at))
+    index = _index(source, size, name, chunks_at)
     if sum(e.count for e in index) != frames:
-        raise CorruptStreamError(f"{name}: the index's chunks cover {sum(e.count for e in index)} frames, the header "
-                                 f"says {frames}")
-    return Container(source, size, name, header, skeleton, index, version)
+        raise CorruptStreamError(
+            f"{name}: the index's chunks cover {sum(e.count for e in index)} frames, the header says {frames}"
+        )
+    return Container(source, size, name, header, skeleton, index)
 
 
 def _index(source: BinaryIO, size: int, name: str, chunks_at: int) -> tuple[IndexEntry, ...]:
-    """The index of a version 3 file, checked against the file's layout."""
-    foot_at = size - _FOOTER_3.size
-    length, foot_magic = _FOOTER_3.unpack(_read_at(source, foot_at, _FOOTER_3.size, size, f"{name}: footer"))
+    """The index, checked against the file's layout."""
+    foot_at = size - _FOOTER.size
+    length, foot_magic = _FOOTER.unpack(_read_at(source, foot_at, _FOOTER.size, size, f"{name}: footer"))
     if foot_magic != FOOTER_MAGIC:
         raise CorruptStreamError(f"{name}: footer at byte {foot_at} is damaged or the file is truncated")
     index_at = foot_at - length
@@ -313,25 +313,3 @@ def _index(source: BinaryIO, size: int, name: str, chunks_at: int) -> tuple[Inde
     if pos != length - 4 or offset != index_at:
         raise CorruptStreamError(f"{where}: the entries do not match the file's layout")
     return tuple(entries)
-
-
-def _index_v2(source: BinaryIO, size: int, name: str, chunks_at: int) -> tuple[IndexEntry, ...]:
-    """The index of a version 1 or 2 file (explicit offsets and first frames)."""
-    foot_at = size - _FOOTER.size
-    index_offset, foot_magic = _FOOTER.unpack(_read_at(source, foot_at, _FOOTER.size, size, f"{name}: footer"))
-    if foot_magic != FOOTER_MAGIC:
-        raise CorruptStreamError(f"{name}: footer at byte {foot_at} is damaged or the file is truncated")
-    where = f"{name}: index at byte {index_offset}"
-    (n,) = _U32.unpack(_read_at(source, index_offset, 4, size, where))
-    if n > MAX_CHUNKS or index_offset + 4 + n * _ENTRY.size + 4 != foot_at:
-        raise CorruptStreamError(f"{where}: {n} entries do not fit before the footer")
-    raw = _read_at(source, index_offset, 4 + n * _ENTRY.size + 4, size, where)
-    if zlib.crc32(raw[:-4]) != _U32.unpack(raw[-4:])[0]:
-        raise CorruptStreamError(f"{where}: CRC mismatch, the index is damaged")
-    index = tuple(IndexEntry(*_ENTRY.unpack_from(raw, 4 + k * _ENTRY.size)) for k in range(n))
-    expected = 0
-    for k, e in enumerate(index):
-        if e.first != expected or not 0 < e.count <= limits.MAX_PAYLOAD_FRAMES or not chunks_at <= e.offset < index_offset:
-            raise CorruptStreamError(f"{where}: entry {k} (frames {e.first}+{e.count} at byte {e.offset}) is invalid")
-        expected += e.count
-    return index

@@ -89,8 +89,15 @@ def to_bvh_form(motion: Motion) -> Motion:
         else:
             channels = tuple(positions) + tuple(f"{a}rotation" for a in j.rotation_order)
             values = b.old_columns(i, channels)
-            new = Joint(j.name, parent, j.offset, channels, j.rotation_order,
-                        limits=_limits_for(j, channels), body_part=j.body_part)
+            new = Joint(
+                j.name,
+                parent,
+                j.offset,
+                channels,
+                j.rotation_order,
+                limits=_limits_for(j, channels),
+                body_part=j.body_part,
+            )
         b.index[i] = b.add(new, values)
     return b.motion_out()
 
@@ -126,8 +133,7 @@ def to_asf_form(motion: Motion) -> Motion:
             rot = [f"{a}rotation" for a in reversed(order)]
             values = np.concatenate((b.old_columns(i, positions), euler), axis=1)
             limits = _limits_for(j, positions) + tuple((-np.inf, np.inf) for _ in rot)
-        new = Joint(j.name, parent, offset, tuple(positions + rot), order, j.axis, j.axis_order,
-                    limits, j.body_part)
+        new = Joint(j.name, parent, offset, tuple(positions + rot), order, j.axis, j.axis_order, limits, j.body_part)
         b.index[i] = b.add(new, values)
     return b.motion_out()
 
@@ -147,8 +153,10 @@ def with_units(motion: Motion, units_per_metre: float) -> Motion:
     scale = units_per_metre / sk.units_per_metre
     joints = []
     for j in sk.joints:
-        limits = tuple((lo * scale, hi * scale) if c in POSITION_CHANNELS else (lo, hi)
-                       for c, (lo, hi) in zip(j.channels, j.limits))
+        limits = tuple(
+            (lo * scale, hi * scale) if c in POSITION_CHANNELS else (lo, hi)
+            for c, (lo, hi) in zip(j.channels, j.limits)
+        )
         joints.append(replace(j, offset=tuple(v * scale for v in j.offset), limits=limits))
     channels = motion.channels.copy()
     channels[:, ~sk.rotation_mask] *= scale

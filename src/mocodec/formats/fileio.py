@@ -59,7 +59,7 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
     in that directory are removed."""
     path = Path(path)
     try:
-        existing = os.stat(path)                # through links, /proc's magic ones too
+        existing = os.stat(path)  # through links, /proc's magic ones too
     except FileNotFoundError:
         existing = None
     except OSError as e:
@@ -182,14 +182,17 @@ def parse_number_block(text: str, first_line: int, path, expected_per_line: int 
     wrong = np.flatnonzero(counts != expected_per_line)
     if wrong.size:
         k = wrong[0]
-        raise FormatError(path, first_line + int(lines_with_tokens[k]),
-                          f"{counts[k]} values on the frame line, expected {expected_per_line}")
+        raise FormatError(
+            path,
+            first_line + int(lines_with_tokens[k]),
+            f"{counts[k]} values on the frame line, expected {expected_per_line}",
+        )
     return values.reshape(-1, expected_per_line)
 
 
 def format_rows(values: np.ndarray, decimals: int) -> str:
     """Rows of numbers, space separated, fixed decimals, ``-0`` written as ``0``."""
-    values = np.where(np.abs(values) < 0.5 * 10.0 ** -decimals, 0.0, values)
+    values = np.where(np.abs(values) < 0.5 * 10.0**-decimals, 0.0, values)
     if values.size == 0:
         return "\n" * values.shape[0]
     fmt = " ".join([f"%.{decimals}f"] * values.shape[1])

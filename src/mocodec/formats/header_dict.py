@@ -1,4 +1,4 @@
-"""The preset dictionaries that .moc headers (versions 2 and 3) are deflated with.
+"""The preset dictionary that .moc headers are deflated with.
 
 A short clip's header is mostly joint names and codec settings that every file on the same
 kind of skeleton repeats; deflate with a preset dictionary (zlib's ``zdict``) codes such
@@ -7,8 +7,8 @@ dictionary holds the name columns of the skeletons users have most (CMU ASF, the
 conversions of CMU, Mixamo-style names, mocodec's built-in human model) laid out as
 :func:`~mocodec.formats.skeleton_bin.pack_skeleton` writes them, and typical codec settings.
 
-Both ends must hold the very same bytes: a dictionary is part of the file format and must
-never change (a new one needs a new container version); a test checks their hashes.
+Both ends must hold the very same bytes: the dictionary is part of the file format and must
+never change (a new one needs a new container version); a test checks its hash.
 """
 
 from __future__ import annotations
@@ -30,94 +30,181 @@ def _end_sites(names: str, ends: str) -> str:
 _CMU_ASF = _end_sites(
     "root lhipjoint lfemur ltibia lfoot ltoes rhipjoint rfemur rtibia rfoot rtoes lowerback upperback thorax "
     "lowerneck upperneck head lclavicle lhumerus lradius lwrist lhand lfingers lthumb rclavicle rhumerus rradius "
-    "rwrist rhand rfingers rthumb", "ltoes rtoes head lfingers lthumb rfingers rthumb")
+    "rwrist rhand rfingers rthumb",
+    "ltoes rtoes head lfingers lthumb rfingers rthumb",
+)
 _DAZ_HANDS = " ".join(f"{s}{f}1 {s}{f}2 {s}{f}2_end" for s in "rl" for f in ("Thumb", "Index", "Mid", "Ring", "Pinky"))
-_CMU_DAZ = ("hip abdomen chest neck head leftEye leftEye_end rightEye rightEye_end rCollar rShldr rForeArm rHand "
-            + " ".join(_DAZ_HANDS.split()[:15]) + " lCollar lShldr lForeArm lHand " + " ".join(_DAZ_HANDS.split()[15:])
-            + " rButtock rThigh rShin rFoot rFoot_end lButtock lThigh lShin lFoot lFoot_end")
+_CMU_DAZ = (
+    "hip abdomen chest neck head leftEye leftEye_end rightEye rightEye_end rCollar rShldr rForeArm rHand "
+    + " ".join(_DAZ_HANDS.split()[:15])
+    + " lCollar lShldr lForeArm lHand "
+    + " ".join(_DAZ_HANDS.split()[15:])
+    + " rButtock rThigh rShin rFoot rFoot_end lButtock lThigh lShin lFoot lFoot_end"
+)
 _CMU_MOTIONBUILDER = _end_sites(
     "Hips LHipJoint LeftUpLeg LeftLeg LeftFoot LeftToeBase RHipJoint RightUpLeg RightLeg RightFoot RightToeBase "
     "LowerBack Spine Spine1 Neck Neck1 Head LeftShoulder LeftArm LeftForeArm LeftHand LeftFingerBase "
     "LeftHandIndex1 LThumb RightShoulder RightArm RightForeArm RightHand RightFingerBase RightHandIndex1 RThumb",
-    "LeftToeBase RightToeBase Head LeftHandIndex1 LThumb RightHandIndex1 RThumb")
-_MIXAMO = " ".join(f"mixamorig:{n}" for n in (
-    "Hips Spine Spine1 Spine2 Neck Head HeadTop_End LeftShoulder LeftArm LeftForeArm LeftHand RightShoulder "
-    "RightArm RightForeArm RightHand LeftUpLeg LeftLeg LeftFoot LeftToeBase LeftToe_End RightUpLeg RightLeg "
-    "RightFoot RightToeBase RightToe_End").split())
-_FINGERS = ("thumb1 thumb2 thumb_tip index1 index2 index3 index_tip middle1 middle2 middle3 middle_tip ring1 ring2 "
-            "ring3 ring_tip little1 little2 little3 little_tip")
+    "LeftToeBase RightToeBase Head LeftHandIndex1 LThumb RightHandIndex1 RThumb",
+)
+_MIXAMO = " ".join(
+    f"mixamorig:{n}"
+    for n in (
+        "Hips Spine Spine1 Spine2 Neck Head HeadTop_End LeftShoulder LeftArm LeftForeArm LeftHand RightShoulder "
+        "RightArm RightForeArm RightHand LeftUpLeg LeftLeg LeftFoot LeftToeBase LeftToe_End RightUpLeg RightLeg "
+        "RightFoot RightToeBase RightToe_End"
+    ).split()
+)
+_FINGERS = (
+    "thumb1 thumb2 thumb_tip index1 index2 index3 index_tip middle1 middle2 middle3 middle_tip ring1 ring2 "
+    "ring3 ring_tip little1 little2 little3 little_tip"
+)
 _HUMAN = " ".join(
     ["root torso neck head head_top"]
     + [f"{s}_shoulder {s}_elbow {s}_wrist " + " ".join(f"{s}_{f}" for f in _FINGERS.split()) for s in ("left", "right")]
-    + [f"{s}_hip {s}_knee {s}_ankle {s}_toe" for s in ("left", "right")])
+    + [f"{s}_hip {s}_knee {s}_ankle {s}_toe" for s in ("left", "right")]
+)
 
 _SETTINGS = [
-    {"codec": {"codec": "kinwave", "knobs": {"max_error_cm": 0.5, "error_measure": "joint", "bits_per_second": 0.0,
-                                             "window": 128, "levels": 5, "wavelet": "cdf97", "deadzone": 0.4,
-                                             "closed_loop": True, "allocation": "convex", "keyframes": False}},
-     "fps": 120.0, "frames": 1000, "chunk_frames": 1024},
+    {
+        "codec": {
+            "codec": "kinwave",
+            "knobs": {
+                "max_error_cm": 0.5,
+                "error_measure": "joint",
+                "bits_per_second": 0.0,
+                "window": 128,
+                "levels": 5,
+                "wavelet": "cdf97",
+                "deadzone": 0.4,
+                "closed_loop": True,
+                "allocation": "convex",
+                "keyframes": False,
+            },
+        },
+        "fps": 120.0,
+        "frames": 1000,
+        "chunk_frames": 1024,
+    },
     {"codec": {"codec": "lossless", "knobs": {}}, "fps": 30.0, "frames": 1000, "chunk_frames": 1024},
 ]
 
-# the defaults when .moc version 3 came, closest to the end: what most files' headers hold
-_SETTINGS_3 = [
-    {"codec": {"codec": "spiht", "knobs": {"bits_per_second": 8000.0, "window": 128, "wavelet": "cdf97", "levels": 0,
-                                           "allocation": "perceptual", "leg_score": 1.0, "upper_score": 0.5,
-                                           "smooth_seams": True, "closed_loop": False}},
-     "fps": 120.0, "frames": 1000, "chunk_frames": 1024},
-    {"codec": {"codec": "kinwave", "knobs": {"max_error_cm": 0.5, "error_measure": "joint", "bits_per_second": 0.0,
-                                             "window": 256, "levels": 5, "wavelet": "cdf97", "deadzone": 0.4,
-                                             "closed_loop": True, "allocation": "convex", "joint_feedback": True,
-                                             "segment_steps": True, "rotation_vectors": True, "keyframes": False}},
-     "fps": 120.0, "frames": 1000, "chunk_frames": 1024},
+# the defaults of the codecs most files use
+_SETTINGS_DEFAULTS = [
+    {
+        "codec": {
+            "codec": "spiht",
+            "knobs": {
+                "bits_per_second": 8000.0,
+                "window": 128,
+                "wavelet": "cdf97",
+                "levels": 0,
+                "allocation": "perceptual",
+                "leg_score": 1.0,
+                "upper_score": 0.5,
+                "smooth_seams": True,
+                "closed_loop": False,
+            },
+        },
+        "fps": 120.0,
+        "frames": 1000,
+        "chunk_frames": 1024,
+    },
+    {
+        "codec": {
+            "codec": "kinwave",
+            "knobs": {
+                "max_error_cm": 0.5,
+                "error_measure": "joint",
+                "bits_per_second": 0.0,
+                "window": 256,
+                "levels": 5,
+                "wavelet": "cdf97",
+                "deadzone": 0.4,
+                "closed_loop": True,
+                "allocation": "convex",
+                "joint_feedback": True,
+                "segment_steps": True,
+                "rotation_vectors": True,
+                "keyframes": False,
+            },
+        },
+        "fps": 120.0,
+        "frames": 1000,
+        "chunk_frames": 1024,
+    },
 ]
 
-# least likely first: deflate finds the end of a dictionary with the shortest distances
-DICTIONARY = b"".join([
-    *(json.dumps(s, separators=(",", ":")).encode() for s in _SETTINGS),
-    _name_column(_MIXAMO),
-    _name_column(_HUMAN),
-    _name_column(_CMU_MOTIONBUILDER),
-    _name_column(_CMU_ASF),
-    _name_column(_CMU_DAZ),
-])
-DICTIONARY_3 = DICTIONARY + b"".join(json.dumps(s, separators=(",", ":")).encode() for s in _SETTINGS_3)
-
-
-# version 4: the naming conventions of more pipelines (Unity's humanoid bones, also with _L/_R
-# suffixes; Unreal's mannequin; SMPL), and kinwave's settings of its day
+# the naming conventions of more pipelines: Unity's humanoid bones (also with _L/_R suffixes),
+# Unreal's mannequin, SMPL
 _UNITY = _end_sites(
     "Hips Spine Chest UpperChest Neck Head LeftShoulder LeftUpperArm LeftLowerArm LeftHand RightShoulder "
     "RightUpperArm RightLowerArm RightHand LeftUpperLeg LeftLowerLeg LeftFoot LeftToes RightUpperLeg RightLowerLeg "
-    "RightFoot RightToes", "Head LeftHand RightHand LeftToes RightToes")
+    "RightFoot RightToes",
+    "Head LeftHand RightHand LeftToes RightToes",
+)
 _UNITY_SUFFIXED = _end_sites(
     "Hips Spine Chest Neck Head Shoulder_L UpperArm_L LowerArm_L Hand_L Shoulder_R UpperArm_R LowerArm_R Hand_R "
     "UpperLeg_L LowerLeg_L Foot_L Toes_L UpperLeg_R LowerLeg_R Foot_R Toes_R",
-    "Head Hand_L Hand_R Toes_L Toes_R")
-_UNREAL = ("root pelvis spine_01 spine_02 spine_03 neck_01 head clavicle_l upperarm_l lowerarm_l hand_l clavicle_r "
-           "upperarm_r lowerarm_r hand_r thigh_l calf_l foot_l ball_l thigh_r calf_r foot_r ball_r")
-_SMPL = ("pelvis left_hip right_hip spine1 left_knee right_knee spine2 left_ankle right_ankle spine3 left_foot "
-         "right_foot neck left_collar right_collar head left_shoulder right_shoulder left_elbow right_elbow "
-         "left_wrist right_wrist left_hand right_hand")
-_SETTINGS_4 = [
-    {"codec": {"codec": "kinwave", "knobs": {"max_error_cm": 0.5, "error_measure": "joint", "bits_per_second": 0.0,
-                                             "window": 256, "levels": 0, "wavelet": "cdf97", "deadzone": 0.4,
-                                             "closed_loop": True, "allocation": "convex", "joint_feedback": True,
-                                             "segment_steps": True, "rotation_vectors": True, "keyframes": True}},
-     "fps": 30.0, "frames": 1000, "chunk_frames": 1024},
+    "Head Hand_L Hand_R Toes_L Toes_R",
+)
+_UNREAL = (
+    "root pelvis spine_01 spine_02 spine_03 neck_01 head clavicle_l upperarm_l lowerarm_l hand_l clavicle_r "
+    "upperarm_r lowerarm_r hand_r thigh_l calf_l foot_l ball_l thigh_r calf_r foot_r ball_r"
+)
+_SMPL = (
+    "pelvis left_hip right_hip spine1 left_knee right_knee spine2 left_ankle right_ankle spine3 left_foot "
+    "right_foot neck left_collar right_collar head left_shoulder right_shoulder left_elbow right_elbow "
+    "left_wrist right_wrist left_hand right_hand"
+)
+_SETTINGS_KEYFRAMES = [
+    {
+        "codec": {
+            "codec": "kinwave",
+            "knobs": {
+                "max_error_cm": 0.5,
+                "error_measure": "joint",
+                "bits_per_second": 0.0,
+                "window": 256,
+                "levels": 0,
+                "wavelet": "cdf97",
+                "deadzone": 0.4,
+                "closed_loop": True,
+                "allocation": "convex",
+                "joint_feedback": True,
+                "segment_steps": True,
+                "rotation_vectors": True,
+                "keyframes": True,
+            },
+        },
+        "fps": 30.0,
+        "frames": 1000,
+        "chunk_frames": 1024,
+    },
 ]
-DICTIONARY_4 = DICTIONARY_3 + b"".join([
-    _name_column(_SMPL),
-    _name_column(_UNREAL),
-    _name_column(_UNITY),
-    _name_column(_UNITY_SUFFIXED),
-    *(json.dumps(s, separators=(",", ":")).encode() for s in _SETTINGS_4),
-])
 
 
-def dictionary(version: int) -> bytes:
-    """The preset dictionary of .moc ``version`` (2 to 4): version 3 adds the codec settings
-    of its day, so a kinwave file's header JSON costs 26-31 bytes instead of 64-70; version 4
-    more pipelines' joint names (a 22-joint Unity-style skeleton's names cost a few bytes
-    instead of about 100) and kinwave's settings of its day."""
-    return DICTIONARY_4 if version >= 4 else DICTIONARY_3 if version == 3 else DICTIONARY
+def _settings(settings: list[dict]) -> bytes:
+    return b"".join(json.dumps(s, separators=(",", ":")).encode() for s in settings)
+
+
+# least likely first: deflate finds the end of a dictionary with the shortest distances. The
+# codec settings make a kinwave file's header JSON cost 26-31 bytes instead of 64-70; the
+# pipelines' joint names make a 22-joint Unity-style skeleton's names cost a few bytes
+# instead of about 100.
+DICTIONARY = b"".join(
+    [
+        _settings(_SETTINGS),
+        _name_column(_MIXAMO),
+        _name_column(_HUMAN),
+        _name_column(_CMU_MOTIONBUILDER),
+        _name_column(_CMU_ASF),
+        _name_column(_CMU_DAZ),
+        _settings(_SETTINGS_DEFAULTS),
+        _name_column(_SMPL),
+        _name_column(_UNREAL),
+        _name_column(_UNITY),
+        _name_column(_UNITY_SUFFIXED),
+        _settings(_SETTINGS_KEYFRAMES),
+    ]
+)

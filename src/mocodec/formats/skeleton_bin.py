@@ -7,12 +7,11 @@ eight raw bytes; 0 and the infinities of unlimited joints have one-byte tags. Na
 the distance back to the parent), channel layouts, rotation and axis orders, limits and body
 parts follow as small integers. A joint whose offset is an earlier joint's with some signs
 flipped (the other side of a symmetric skeleton) refers to it instead, and one that is a
-decimal length times a decimal direction (as ASF files give bones) is written as those
-(version 2). When every offset has at most k decimals (a lossy file's, rounded by
-:func:`round_offsets`), version 3 writes them as untagged integers / 10^k if that is shorter:
-the CMU BVH skeleton at 0.001 cm then costs 310 bytes deflated instead of 362. Versions 1 and
-2 are still read. The result is not compressed here:
-the container compresses its whole header at once. The round trip is exact, so :func:`~mocodec.formats.container.skeleton_id`
+decimal length times a decimal direction (as ASF files give bones) is written as those. When
+every offset has at most k decimals (a lossy file's, rounded by :func:`round_offsets`), they
+are written as untagged integers / 10^k if that is shorter. The result is not compressed
+here: the container compresses its whole header at once. docs/formats.md gives the layout
+byte by byte. The round trip is exact, so :func:`~mocodec.formats.container.skeleton_id`
 is unchanged.
 """
 
@@ -26,13 +25,12 @@ from mocodec.errors import CorruptStreamError
 from mocodec.formats import varint
 from mocodec.skeleton import BODY_PARTS, CHANNEL_NAMES, Joint, Skeleton
 
-VERSION = 3
-VERSIONS = (1, 2, 3)             # the versions this module reads
+VERSION = 1  # the compact skeleton's format (docs/formats.md)
 _AXES = "XYZ"
 _ZERO, _POS_INF, _NEG_INF, _RAW = 0, 1, 2, 3
-_DECIMAL = 4                    # tags 4..16: decimal with k = tag - 4 places
+_DECIMAL = 4  # tags 4..16: decimal with k = tag - 4 places
 _MAX_PLACES = 12
-_PLAIN, _PRODUCT = 0, 1         # an offset's form; >= 8: a mirror reference (back << 3 | signs)
+_PLAIN, _PRODUCT = 0, 1  # an offset's form; >= 8: a mirror reference (back << 3 | signs)
 
 
 class _Writer:
@@ -58,10 +56,10 @@ class _Writer:
         if math.isinf(x):
             self.out.append(_POS_INF if x > 0 else _NEG_INF)
             return
-        if math.isfinite(x) and x != 0.0:               # -0.0 goes raw, keeping its sign
+        if math.isfinite(x) and x != 0.0:  # -0.0 goes raw, keeping its sign
             for k in range(_MAX_PLACES + 1):
-                n = round(x * 10 ** k)
-                if abs(n) < 1 << 62 and n / 10 ** k == x:
+                n = round(x * 10**k)
+                if abs(n) < 1 << 62 and n / 10**k == x:
                     self.out.append(_DECIMAL + k)
                     self.sint(n)
                     return
@@ -95,7 +93,7 @@ class _Reader:
         if self.pos + n > len(self.data):
             raise CorruptStreamError(f"compact skeleton: a {n}-byte name runs past the end at byte {self.pos}")
         self.pos += n
-        return self.data[self.pos - n:self.pos].decode()
+        return self.data[self.pos - n : self.pos].decode()
 
     def number(self) -> float:
         tag = self.byte()
@@ -107,7 +105,7 @@ class _Reader:
             if self.pos + 8 > len(self.data):
                 raise CorruptStreamError(f"compact skeleton ends early at byte {self.pos}")
             self.pos += 8
-            return struct.unpack("<d", self.data[self.pos - 8:self.pos])[0]
+            return struct.unpack("<d", self.data[self.pos - 8 : self.pos])[0]
         if _DECIMAL <= tag <= _DECIMAL + _MAX_PLACES:
             return self.sint() / 10 ** (tag - _DECIMAL)
         raise CorruptStreamError(f"compact skeleton: unknown number tag {tag} at byte {self.pos - 1}")
@@ -135,7 +133,7 @@ def _as_product(offset: tuple[float, ...]) -> bytes | None:
         length = round(size, places)
         if length == 0.0:
             continue
-        direction = []
+        direction: list[float] = []
         for x in offset:
             d = next((d for k in range(_MAX_PLACES + 1) if (d := round(x / length, k)) * length == x), None)
             if d is None:
@@ -153,12 +151,12 @@ def _mirrors(offsets: list[tuple[float, ...]]) -> list[int]:
     coordinates in ``signs`` (bit a for axis a) negated, bit for bit, the nearest such joint
     and then the fewest signs; 0 if no earlier joint's is (or the offset is zero). One pass with
     a table of the offsets seen, so a skeleton of thousands of joints packs in linear time."""
-    last: dict[bytes, int] = {}                 # an offset's exact bytes -> the last joint with it
+    last: dict[bytes, int] = {}  # an offset's exact bytes -> the last joint with it
     out = []
     for i, offset in enumerate(offsets):
         best = 0
         if any(offset):
-            for signs in range(8):              # joint k's offset flipped by signs is mine: k's is mine flipped
+            for signs in range(8):  # joint k's offset flipped by signs is mine: k's is mine flipped
                 k = last.get(struct.pack("<3d", *(-x if signs >> a & 1 else x for a, x in enumerate(offset))))
                 if k is not None and (not best or i - k < best >> 3):
                     best = (i - k) << 3 | signs
@@ -177,8 +175,9 @@ def round_offsets(skeleton: Skeleton, precision_cm: float) -> Skeleton:
     if not precision_cm > 0:
         raise ValueError(f"offset precision must be positive, got {precision_cm}")
     places = max(0, math.ceil(-math.log10(precision_cm * skeleton.units_per_metre / 100.0) - 1e-9))
-    joints = [dataclasses.replace(j, offset=tuple(round(float(x), places) + 0.0 for x in j.offset))
-              for j in skeleton.joints]
+    joints = [
+        dataclasses.replace(j, offset=tuple(round(float(x), places) + 0.0 for x in j.offset)) for j in skeleton.joints
+    ]
     return dataclasses.replace(skeleton, joints=tuple(joints))
 
 
@@ -187,14 +186,20 @@ def _fixed_places(offsets: list[tuple[float, ...]]) -> int | None:
     values = [x for o in offsets for x in o]
     if not all(math.isfinite(x) for x in values):
         return None
-    exact = struct.pack(f"<{len(values)}d", *values)          # bit for bit: -0.0 is not 0.0
-    return next((k for k in range(_MAX_PLACES + 1)
-                 if struct.pack(f"<{len(values)}d", *(round(x * 10 ** k) / 10 ** k for x in values)) == exact), None)
+    exact = struct.pack(f"<{len(values)}d", *values)  # bit for bit: -0.0 is not 0.0
+    return next(
+        (
+            k
+            for k in range(_MAX_PLACES + 1)
+            if struct.pack(f"<{len(values)}d", *(round(x * 10**k) / 10**k for x in values)) == exact
+        ),
+        None,
+    )
 
 
 def _offset_column(offsets: list[tuple[float, ...]], places: int | None) -> bytes:
     """The offsets, each as a reference to a mirrored earlier one or as its numbers: tagged
-    decimals (or an ASF length times direction), or with ``places`` (version 3) untagged
+    decimals (or an ASF length times direction), or with ``places`` untagged
     integers / 10^places. The column opens with places + 1 (0: tagged)."""
     w = _Writer()
     w.uint(0 if places is None else places + 1)
@@ -205,7 +210,7 @@ def _offset_column(offsets: list[tuple[float, ...]], places: int | None) -> byte
         w.uint(_PLAIN)
         if places is not None:
             for x in offset:
-                w.sint(round(x * 10 ** places))
+                w.sint(round(x * 10**places))
             continue
         plain, product = _numbers(offset), _as_product(offset)
         if product is not None and len(product) < len(plain):
@@ -260,8 +265,8 @@ def pack_skeleton(skeleton: Skeleton) -> bytes:
 def unpack_skeleton(data: bytes) -> Skeleton:
     r = _Reader(data)
     try:
-        if (version := r.uint()) not in VERSIONS:
-            raise CorruptStreamError(f"compact skeleton version {version}, this mocodec reads {VERSIONS}")
+        if (version := r.uint()) != VERSION:
+            raise CorruptStreamError(f"compact skeleton version {version}, this mocodec reads {VERSION}")
         name, units = r.text(), r.number()
         n = r.uint()
         if n > len(data):
@@ -273,14 +278,14 @@ def unpack_skeleton(data: bytes) -> Skeleton:
         axis_orders = [r.text() or "ZYX" for _ in range(n)]
         parts = [BODY_PARTS[p - 1] if (p := r.uint()) else None for _ in range(n)]
         offsets = []
-        places = r.uint() - 1 if version >= 3 else -1
+        places = r.uint() - 1
         if places > _MAX_PLACES:
             raise CorruptStreamError(f"compact skeleton: {places} decimal places at byte {r.pos}")
         for i in range(n):
-            form = r.uint() if version >= 2 else _PLAIN
+            form = r.uint()
             back, signs = form >> 3, form & 7
             if form == _PLAIN and places >= 0:
-                offsets.append(tuple(r.sint() / 10 ** places for _ in range(3)))
+                offsets.append(tuple(r.sint() / 10**places for _ in range(3)))
             elif form == _PLAIN:
                 offsets.append(tuple(r.number() for _ in range(3)))
             elif form == _PRODUCT:
@@ -294,8 +299,12 @@ def unpack_skeleton(data: bytes) -> Skeleton:
         limits = [tuple((r.number(), r.number()) for _ in channels[i]) if r.uint() else () for i in range(n)]
         if r.pos != len(data):
             raise CorruptStreamError(f"compact skeleton: {len(data) - r.pos} bytes left over")
-        joints = [Joint(names[i], parents[i], offsets[i], channels[i], orders[i], axes[i], axis_orders[i], limits[i],
-                        parts[i]) for i in range(n)]
-        return Skeleton(joints, units, name)
+        joints = [
+            Joint(
+                names[i], parents[i], offsets[i], channels[i], orders[i], axes[i], axis_orders[i], limits[i], parts[i]
+            )
+            for i in range(n)
+        ]
+        return Skeleton(tuple(joints), units, name)
     except (IndexError, ValueError, UnicodeDecodeError) as e:
         raise CorruptStreamError(f"compact skeleton does not parse at byte {r.pos} ({e})") from None

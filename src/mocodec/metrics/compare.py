@@ -37,7 +37,7 @@ from mocodec.metrics.visual import VisualErrors, visual_errors
 from mocodec.metrics.waveform import DofErrors, channel_error, errors_of
 from mocodec.motion import Motion
 
-SKELETON_TOLERANCE_CM = 0.001     # offsets closer than this are the same skeleton (a lossy file rounds them)
+SKELETON_TOLERANCE_CM = 0.001  # offsets closer than this are the same skeleton (a lossy file rounds them)
 
 
 class MismatchError(MocodecError):
@@ -68,15 +68,15 @@ class Comparison:
     decoded: Motion
     dof: DofErrors
     visual: VisualErrors
-    joints: JointErrors          # cm, every pivot
-    shell: JointErrors           # cm, bone joints (see pose.bone_joints)
+    joints: JointErrors  # cm, every pivot
+    shell: JointErrors  # cm, bone joints (see pose.bone_joints)
     feet: FootSliding | None
     jerk: Jerk
     natural: Naturalness
-    vector: grp.GroupSeries          # (6-9)
-    vector_max: grp.GroupSeries      # (6-10)
-    position: grp.GroupSeries        # (6-12), m^2
-    configuration: grp.GroupSeries   # (6-14)
+    vector: grp.GroupSeries  # (6-9)
+    vector_max: grp.GroupSeries  # (6-10)
+    position: grp.GroupSeries  # (6-12), m^2
+    configuration: grp.GroupSeries  # (6-14)
     shell_cm: float = SHELL_CM
 
     def summary(self) -> dict[str, float | int | None]:
@@ -96,7 +96,9 @@ class Comparison:
             "vmse": self.visual.body_vmse,
             "rotation_rmse_deg": float(np.sqrt(self.dof.mse[rot].mean())) if rot.any() else 0.0,
             "rotation_max_deg": float(self.dof.max_abs[rot].max()) if rot.any() else 0.0,
-            "translation_rmse_cm": float(np.sqrt(self.dof.mse[~rot].mean())) * 100 / sk.units_per_metre if (~rot).any() else 0.0,
+            "translation_rmse_cm": float(np.sqrt(self.dof.mse[~rot].mean())) * 100 / sk.units_per_metre
+            if (~rot).any()
+            else 0.0,
             "mean_joint_error_cm": self.joints.mean,
             "max_joint_error_cm": self.joints.max,
             "mean_shell_error_cm": self.shell.mean,
@@ -136,49 +138,79 @@ class Comparison:
         rows = []
         for i, name in enumerate(sk.names):
             s = shell.get(i, (None, None))
-            rows.append({"joint": name, "part": sk.body_parts[i],
-                         "mean_cm": float(self.joints.joint_mean[i]), "max_cm": float(self.joints.joint_max[i]),
-                         "shell_mean_cm": None if s[0] is None else float(s[0]),
-                         "shell_max_cm": None if s[1] is None else float(s[1])})
+            rows.append(
+                {
+                    "joint": name,
+                    "part": sk.body_parts[i],
+                    "mean_cm": float(self.joints.joint_mean[i]),
+                    "max_cm": float(self.joints.joint_max[i]),
+                    "shell_mean_cm": None if s[0] is None else float(s[0]),
+                    "shell_max_cm": None if s[1] is None else float(s[1]),
+                }
+            )
         return rows
 
     def per_dof(self) -> list[dict]:
         sk = self.original.skeleton
-        return [{"dof": name, "range": float(self.dof.range[c]), "rmse": float(self.dof.rmse[c]),
-                 "max_abs": float(self.dof.max_abs[c]), "psnr_db": float(self.dof.psnr[c]),
-                 "vpsnr_db": float(self.visual.vpsnr[c])} for c, name in enumerate(sk.channel_names)]
+        return [
+            {
+                "dof": name,
+                "range": float(self.dof.range[c]),
+                "rmse": float(self.dof.rmse[c]),
+                "max_abs": float(self.dof.max_abs[c]),
+                "psnr_db": float(self.dof.psnr[c]),
+                "vpsnr_db": float(self.visual.vpsnr[c]),
+            }
+            for c, name in enumerate(sk.channel_names)
+        ]
 
     def table(self) -> str:
         """The summary as an aligned two-column table."""
         s = self.summary()
         rows = [
-            ("frames", f"{s['frames']} at {s['fps']:g} fps, {s['channels']} channels "
-                       f"({s['constant_dofs']} constant, {s['exact_dofs']} exact)"),
-            ("PSNR (mean over DOFs)", _db(s["psnr_db"])),
-            ("PSNR (pooled)", _db(s["pooled_psnr_db"])),
-            ("NSNR (mean over DOFs)", _db(s["nsnr_db"])),
-            ("VPSNR (mean over DOFs)", _db(s["vpsnr_db"])),
+            (
+                "frames",
+                f"{s['frames']} at {s['fps']:g} fps, {s['channels']} channels "
+                f"({s['constant_dofs']} constant, {s['exact_dofs']} exact)",
+            ),
+            ("PSNR (mean over DOFs)", db_text(s["psnr_db"])),
+            ("PSNR (pooled)", db_text(s["pooled_psnr_db"])),
+            ("NSNR (mean over DOFs)", db_text(s["nsnr_db"])),
+            ("VPSNR (mean over DOFs)", db_text(s["vpsnr_db"])),
             ("rotation RMSE / max", f"{s['rotation_rmse_deg']:.4g} / {s['rotation_max_deg']:.4g} deg"),
             ("root translation RMSE", f"{s['translation_rmse_cm']:.4g} cm"),
             ("joint error mean / max", f"{s['mean_joint_error_cm']:.4g} / {s['max_joint_error_cm']:.4g} cm"),
-            (f"shell error ({self.shell_cm:g} cm) mean / max",
-             f"{s['mean_shell_error_cm']:.4g} / {s['max_shell_error_cm']:.4g} cm"),
+            (
+                f"shell error ({self.shell_cm:g} cm) mean / max",
+                f"{s['mean_shell_error_cm']:.4g} / {s['max_shell_error_cm']:.4g} cm",
+            ),
         ]
         if self.feet is not None:
-            rows.append(("foot sliding orig / decoded",
-                         f"{s['foot_slide_original_cm_s']:.3g} / {s['foot_slide_decoded_cm_s']:.3g} cm/s "
-                         f"({100 * s['foot_contact_fraction']:.0f}% of foot samples planted)"))
+            rows.append(
+                (
+                    "foot sliding orig / decoded",
+                    f"{s['foot_slide_original_cm_s']:.3g} / {s['foot_slide_decoded_cm_s']:.3g} cm/s "
+                    f"({100 * float(s['foot_contact_fraction'] or 0.0):.0f}% of foot samples planted)",
+                )
+            )
         rows += [
-            ("RMS jerk orig / decoded", f"{s['jerk_original_m_s3']:.4g} / {s['jerk_decoded_m_s3']:.4g} m/s^3 "
-                                        f"(x{s['jerk_ratio']:.3g})"),
+            (
+                "RMS jerk orig / decoded",
+                f"{s['jerk_original_m_s3']:.4g} / {s['jerk_decoded_m_s3']:.4g} m/s^3 (x{s['jerk_ratio']:.3g})",
+            ),
             ("joint-limit violations", f"{s['limit_violations']} (original {s['original_limit_violations']})"),
             ("derivative outliers", f"{s['velocity_outliers']} velocity, {s['acceleration_outliers']} acceleration"),
         ]
         lines = [f"{k:<32}{v}" for k, v in rows]
         lines.append("")
         lines.append(f"{'group':<12}{'w (6-9)':>11}{'m max (6-10)':>14}{'p (6-12) m2':>14}{'c (6-14)':>11}")
-        for g, w, m, p, c in zip(self.vector.groups, self.vector.mean, self.vector_max.max,
-                                 _by_group(self.position, self.vector.groups), _by_group(self.configuration, self.vector.groups)):
+        for g, w, m, p, c in zip(
+            self.vector.groups,
+            self.vector.mean,
+            self.vector_max.max,
+            _by_group(self.position, self.vector.groups),
+            _by_group(self.configuration, self.vector.groups),
+        ):
             lines.append(f"{g:<12}{w:>11.3g}{m:>14.3g}{_fmt(p):>14}{_fmt(c):>11}")
         return "\n".join(lines)
 
@@ -199,7 +231,10 @@ def _fmt(x) -> str:
     return "-" if x is None else f"{x:.3g}"
 
 
-def _db(x: float) -> str:
+def db_text(x: float | int | None) -> str:
+    """A decibel figure for tables: "lossless" for +inf, "n/a" for none."""
+    if x is None:
+        return "n/a"
     return f"{x:.2f} dB" if np.isfinite(x) else ("lossless" if x > 0 else "n/a")
 
 
@@ -207,19 +242,21 @@ def compare(original: Motion, decoded: Motion, weights=None, ranges=None, shell_
     """Every measure of ``decoded`` against ``original``. ``weights`` and ``ranges`` are the
     a and b of the group measures (6-9), (6-10), (6-14) (see :mod:`mocodec.metrics.groups`)."""
     check_pair(original, decoded)
-    decoded = decoded.aligned_to(original)        # equivalent Euler triples are not errors
+    decoded = decoded.aligned_to(original)  # equivalent Euler triples are not errors
     sk = original.skeleton
     err = channel_error(original.channels, decoded.channels, sk.rotation_mask)
     dof = errors_of(original.channels, err)
     to_cm = 100.0 / sk.units_per_metre
     pos, quat = forward_kinematics(sk, original.channels)
-    dpos, dquat = forward_kinematics(decoded.skeleton, decoded.channels)     # its offsets may be rounded
+    dpos, dquat = forward_kinematics(decoded.skeleton, decoded.channels)  # its offsets may be rounded
     pos *= to_cm
     dpos *= to_cm
     rel = grp.relative_positions(sk, pos / 100.0, quat)
     drel = grp.relative_positions(sk, dpos / 100.0, dquat)
     return Comparison(
-        original=original, decoded=decoded, dof=dof,
+        original=original,
+        decoded=decoded,
+        dof=dof,
         visual=visual_errors(err, dof.range, original.fps),
         joints=joint_errors(pos, dpos),
         shell=shell_errors(sk, pos, quat, dpos, dquat, shell_cm),

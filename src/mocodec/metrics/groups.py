@@ -52,8 +52,11 @@ def per_item(values, names: tuple[str, ...], default: np.ndarray, what: str) -> 
                 raise KeyError(f"no {what} named {name!r}")
             out[index[name]] = v
         return out
-    arr = np.broadcast_to(np.asarray(values, dtype=np.float64), out.shape) if np.ndim(values) == 0 \
+    arr = (
+        np.broadcast_to(np.asarray(values, dtype=np.float64), out.shape)
+        if np.ndim(values) == 0
         else np.asarray(values, dtype=np.float64)
+    )
     if arr.shape != out.shape:
         raise ValueError(f"expected {out.shape[0]} {what} values, got {arr.shape}")
     return arr.copy()
@@ -101,7 +104,9 @@ def vector_error(skeleton: Skeleton, original: np.ndarray, error: np.ndarray, we
     return GroupSeries(tuple(groups), _weighted_mean_square(error, a, b, groups))
 
 
-def max_vector_error(skeleton: Skeleton, original: np.ndarray, error: np.ndarray, weights=None, ranges=None) -> GroupSeries:
+def max_vector_error(
+    skeleton: Skeleton, original: np.ndarray, error: np.ndarray, weights=None, ranges=None
+) -> GroupSeries:
     """m_i(n) (6-10) per group: max_j a_ij |error_ij(n)| / b_ij."""
     groups = group_channels(skeleton)
     names = skeleton.channel_names
@@ -111,8 +116,9 @@ def max_vector_error(skeleton: Skeleton, original: np.ndarray, error: np.ndarray
     return GroupSeries(tuple(groups), np.stack([norm[:, idx].max(axis=1) for idx in groups.values()], axis=1))
 
 
-def joint_position_error(skeleton: Skeleton, positions_m: np.ndarray, decoded_positions_m: np.ndarray,
-                         weights=None, ranges=None) -> GroupSeries:
+def joint_position_error(
+    skeleton: Skeleton, positions_m: np.ndarray, decoded_positions_m: np.ndarray, weights=None, ranges=None
+) -> GroupSeries:
     """p_i(n) (6-12) per group from global positions in metres ``(frames, joints, 3)``."""
     groups = group_joints(skeleton)
     a = per_item(weights, skeleton.names, np.ones(len(skeleton)), "joint")
@@ -127,18 +133,24 @@ def relative_positions(skeleton: Skeleton, positions: np.ndarray, quats: np.ndar
     out = {}
     for part, idx in group_joints(skeleton).items():
         base = idx[0]
-        rel = positions[:, idx[1:]] - positions[:, base:base + 1]
+        rel = positions[:, idx[1:]] - positions[:, base : base + 1]
         parent = skeleton.parents[base]
         if parent >= 0:
-            inv = rotations.quat_conjugate(quats[:, parent:parent + 1])
+            inv = rotations.quat_conjugate(quats[:, parent : parent + 1])
             rel = rotations.quat_rotate(inv, rel)
         out[part] = rel
     return out
 
 
-def configuration_error(skeleton: Skeleton, original: np.ndarray, error: np.ndarray,
-                        rel_original_m: dict[str, np.ndarray], rel_decoded_m: dict[str, np.ndarray],
-                        weights=None, ranges=None) -> GroupSeries:
+def configuration_error(
+    skeleton: Skeleton,
+    original: np.ndarray,
+    error: np.ndarray,
+    rel_original_m: dict[str, np.ndarray],
+    rel_decoded_m: dict[str, np.ndarray],
+    weights=None,
+    ranges=None,
+) -> GroupSeries:
     """c_i(n) (6-14) per group. The DOF part uses the channel ``weights`` and ``ranges`` of
     (6-9); each relative position component has a = 1 and b = the group's reach (the largest
     rest-pose distance of its joints from its first joint, metres; 1 m for a one-joint group)."""

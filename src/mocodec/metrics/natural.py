@@ -23,10 +23,10 @@ LIMIT_TOLERANCE_DEG = 1e-6
 
 @dataclass(frozen=True)
 class Naturalness:
-    limit_violations: int            # decoded samples outside the joint limits
+    limit_violations: int  # decoded samples outside the joint limits
     original_limit_violations: int
-    velocity_outliers: int           # decoded first differences beyond the original's maximum
-    acceleration_outliers: int       # decoded second differences beyond the original's maximum
+    velocity_outliers: int  # decoded first differences beyond the original's maximum
+    acceleration_outliers: int  # decoded second differences beyond the original's maximum
 
 
 def limit_violations(skeleton: Skeleton, channels: np.ndarray, tolerance: float = LIMIT_TOLERANCE_DEG) -> int:
@@ -43,8 +43,9 @@ def _differences(channels: np.ndarray, rotation_mask: np.ndarray, order: int) ->
     return np.diff(d, n=order - 1, axis=0) if order > 1 else d
 
 
-def derivative_outliers(original: np.ndarray, decoded: np.ndarray, rotation_mask: np.ndarray, order: int,
-                        margin: float = DERIVATIVE_MARGIN) -> int:
+def derivative_outliers(
+    original: np.ndarray, decoded: np.ndarray, rotation_mask: np.ndarray, order: int, margin: float = DERIVATIVE_MARGIN
+) -> int:
     """Decoded ``order``-th differences larger than (1 + margin) x the original's largest."""
     if original.shape[0] <= order:
         return 0
@@ -52,9 +53,13 @@ def derivative_outliers(original: np.ndarray, decoded: np.ndarray, rotation_mask
     return int((np.abs(_differences(decoded, rotation_mask, order)) > bound + 1e-9).sum())
 
 
-def naturalness(skeleton: Skeleton, original: np.ndarray, decoded: np.ndarray,
-                margin: float = DERIVATIVE_MARGIN) -> Naturalness:
+def naturalness(
+    skeleton: Skeleton, original: np.ndarray, decoded: np.ndarray, margin: float = DERIVATIVE_MARGIN
+) -> Naturalness:
     rot = skeleton.rotation_mask
-    return Naturalness(limit_violations(skeleton, decoded), limit_violations(skeleton, original),
-                       derivative_outliers(original, decoded, rot, 1, margin),
-                       derivative_outliers(original, decoded, rot, 2, margin))
+    return Naturalness(
+        limit_violations(skeleton, decoded),
+        limit_violations(skeleton, original),
+        derivative_outliers(original, decoded, rot, 1, margin),
+        derivative_outliers(original, decoded, rot, 2, margin),
+    )

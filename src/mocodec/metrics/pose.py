@@ -58,15 +58,27 @@ def bone_joints(skeleton: Skeleton) -> np.ndarray:
     return np.flatnonzero(~skeleton.end_sites & (np.array([len(c) for c in skeleton.children]) > 0))
 
 
-def shell_errors(skeleton: Skeleton, positions_cm: np.ndarray, quats: np.ndarray, decoded_positions_cm: np.ndarray,
-                 decoded_quats: np.ndarray, shell_cm: float = SHELL_CM) -> JointErrors:
+def shell_errors(
+    skeleton: Skeleton,
+    positions_cm: np.ndarray,
+    quats: np.ndarray,
+    decoded_positions_cm: np.ndarray,
+    decoded_quats: np.ndarray,
+    shell_cm: float = SHELL_CM,
+) -> JointErrors:
     """Worst error (cm) of the three points ``shell_cm`` along each global axis of every bone
     joint, ``per_frame (frames, bones)`` in the order of :func:`bone_joints`."""
     idx = bone_joints(skeleton)
     out = np.empty((positions_cm.shape[0], idx.size))
-    _shell_kernel(np.ascontiguousarray(positions_cm), np.ascontiguousarray(quats),
-                  np.ascontiguousarray(decoded_positions_cm), np.ascontiguousarray(decoded_quats), idx,
-                  float(shell_cm), out)
+    _shell_kernel(
+        np.ascontiguousarray(positions_cm),
+        np.ascontiguousarray(quats),
+        np.ascontiguousarray(decoded_positions_cm),
+        np.ascontiguousarray(decoded_quats),
+        idx,
+        float(shell_cm),
+        out,
+    )
     return JointErrors(out)
 
 
@@ -118,17 +130,23 @@ def foot_points(skeleton: Skeleton) -> np.ndarray:
 
 @dataclass(frozen=True)
 class FootSliding:
-    contact_fraction: float     # share of foot-point samples planted in the original
-    original_cm_s: float        # mean horizontal speed of the original foot while planted
-    decoded_cm_s: float         # the same for the decoded foot
+    contact_fraction: float  # share of foot-point samples planted in the original
+    original_cm_s: float  # mean horizontal speed of the original foot while planted
+    decoded_cm_s: float  # the same for the decoded foot
 
     @property
     def excess_cm_s(self) -> float:
         return self.decoded_cm_s - self.original_cm_s
 
 
-def foot_sliding(skeleton: Skeleton, positions_cm: np.ndarray, decoded_positions_cm: np.ndarray, fps: float,
-                 contact_height_cm: float = CONTACT_HEIGHT_CM, contact_speed_cm_s: float = CONTACT_SPEED_CM_S) -> FootSliding | None:
+def foot_sliding(
+    skeleton: Skeleton,
+    positions_cm: np.ndarray,
+    decoded_positions_cm: np.ndarray,
+    fps: float,
+    contact_height_cm: float = CONTACT_HEIGHT_CM,
+    contact_speed_cm_s: float = CONTACT_SPEED_CM_S,
+) -> FootSliding | None:
     """Foot sliding over the frames where the original foot is planted; None without feet.
 
     A foot point is planted when it is within ``contact_height_cm`` of the ground (the lowest
@@ -151,13 +169,14 @@ def foot_sliding(skeleton: Skeleton, positions_cm: np.ndarray, decoded_positions
     planted = (height - ground <= lift + contact_height_cm) & (orig_speed <= contact_speed_cm_s)
     if not planted.any():
         return FootSliding(0.0, float("nan"), float("nan"))
-    return FootSliding(float(planted.mean()), float(orig_speed[planted].mean()),
-                       float(speed(decoded_positions_cm)[planted].mean()))
+    return FootSliding(
+        float(planted.mean()), float(orig_speed[planted].mean()), float(speed(decoded_positions_cm)[planted].mean())
+    )
 
 
 @dataclass(frozen=True)
 class Jerk:
-    original_m_s3: float    # RMS jerk of the original pivots
+    original_m_s3: float  # RMS jerk of the original pivots
     decoded_m_s3: float
 
     @property
@@ -169,7 +188,7 @@ def rms_jerk(positions_cm: np.ndarray, fps: float) -> float:
     """RMS over frames and pivots of |d^3 u / dt^3| in m/s^3 (third differences)."""
     if positions_cm.shape[0] < 4:
         return float("nan")
-    third = np.diff(positions_cm, n=3, axis=0) * (fps ** 3 / 100.0)
+    third = np.diff(positions_cm, n=3, axis=0) * (fps**3 / 100.0)
     return float(np.sqrt(np.square(third).sum(axis=2).mean()))
 
 

@@ -61,8 +61,9 @@ def band_split(error: np.ndarray, fps: float, edges_hz=BAND_EDGES_HZ, order: int
     return bands
 
 
-def weighted_error(error: np.ndarray, fps: float, weights=BAND_WEIGHTS, edges_hz=BAND_EDGES_HZ,
-                   order: int = FILTER_ORDER) -> np.ndarray:
+def weighted_error(
+    error: np.ndarray, fps: float, weights=BAND_WEIGHTS, edges_hz=BAND_EDGES_HZ, order: int = FILTER_ORDER
+) -> np.ndarray:
     """sum_m a_m e_m(n), the inner sum of (6-15), ``(frames, channels)``."""
     if len(weights) != len(edges_hz) + 1:
         raise ValueError(f"{len(edges_hz) + 1} bands need as many weights, got {len(weights)}")
@@ -75,9 +76,9 @@ def weighted_error(error: np.ndarray, fps: float, weights=BAND_WEIGHTS, edges_hz
 
 @dataclass(frozen=True)
 class VisualErrors:
-    vmse: np.ndarray    # (6-15) per DOF
-    vpmse: np.ndarray   # (6-16), NaN where R = 0
-    vpsnr: np.ndarray   # (6-17)
+    vmse: np.ndarray  # (6-15) per DOF
+    vpmse: np.ndarray  # (6-16), NaN where R = 0
+    vpsnr: np.ndarray  # (6-17)
 
     @property
     def body_vmse(self) -> float:
@@ -90,8 +91,9 @@ class VisualErrors:
         return mean_db(self.vpsnr)
 
 
-def visual_errors(error: np.ndarray, value_range: np.ndarray, fps: float, weights=BAND_WEIGHTS,
-                  edges_hz=BAND_EDGES_HZ) -> VisualErrors:
+def visual_errors(
+    error: np.ndarray, value_range: np.ndarray, fps: float, weights=BAND_WEIGHTS, edges_hz=BAND_EDGES_HZ
+) -> VisualErrors:
     """VMSE, VPMSE, VPSNR per DOF of an error array ``(frames, channels)``; ``value_range`` is R
     of the original per DOF."""
     vmse = np.square(weighted_error(error, fps, weights, edges_hz)).mean(axis=0)

@@ -8,8 +8,9 @@ Whole-body figures. The thesis reports "the average PSNR for the whole body" (00
 arithmetic mean of the per-DOF PSNR in dB. We do the same, over the DOFs whose original range
 R is positive; constant DOFs (R = 0) have no PMSE, are left out of every peak measure and are
 counted in ``constant``. A range below ``CONSTANT_RANGE`` (1e-6 degrees or skeleton units, the
-printed precision of BVH and AMC files) is float noise in the source file and counts as 0. A DOF reproduced exactly has an infinite PSNR; it is left out of the
-mean and counted in ``exact`` (the mean is infinite only when every varying DOF is exact).
+printed precision of BVH and AMC files) is float noise in the source file and counts as 0.
+A DOF reproduced exactly has an infinite PSNR; it is left out of the mean and counted in
+``exact`` (the mean is infinite only when every varying DOF is exact).
 ``pooled_psnr`` is the alternative that weights every DOF's error alike:
 ``-10 log10(mean_i PMSE_i)``, dominated by the worst DOFs.
 """
@@ -71,15 +72,15 @@ def mean_db(values_db: np.ndarray) -> float:
 class DofErrors:
     """Per-DOF measures (arrays of length ``channels``) and their whole-body summaries."""
 
-    mse: np.ndarray        # (6-1)
-    rmse: np.ndarray       # (6-2)
-    nmse: np.ndarray       # (6-3), NaN where the original is all zeros
-    pmse: np.ndarray       # (6-4), NaN where R = 0
-    nsnr: np.ndarray       # (6-5)
-    psnr: np.ndarray       # (6-6)
-    max_abs: np.ndarray    # max over n of (6-7)
-    mean_abs: np.ndarray   # mean over n of (6-7)
-    range: np.ndarray      # R, the range of the original
+    mse: np.ndarray  # (6-1)
+    rmse: np.ndarray  # (6-2)
+    nmse: np.ndarray  # (6-3), NaN where the original is all zeros
+    pmse: np.ndarray  # (6-4), NaN where R = 0
+    nsnr: np.ndarray  # (6-5)
+    psnr: np.ndarray  # (6-6)
+    max_abs: np.ndarray  # max over n of (6-7)
+    mean_abs: np.ndarray  # mean over n of (6-7)
+    range: np.ndarray  # R, the range of the original
 
     @property
     def constant(self) -> np.ndarray:
@@ -127,5 +128,14 @@ def errors_of(original: np.ndarray, err: np.ndarray) -> DofErrors:
         nmse = np.where(energy > 0, sq.sum(axis=0) / energy, np.nan)
         pmse = np.where(rng > 0, mse / np.square(rng), np.nan)
     absolute = distance(err)
-    return DofErrors(mse=mse, rmse=np.sqrt(mse), nmse=nmse, pmse=pmse, nsnr=to_db(nmse), psnr=to_db(pmse),
-                     max_abs=absolute.max(axis=0), mean_abs=absolute.mean(axis=0), range=rng)
+    return DofErrors(
+        mse=mse,
+        rmse=np.sqrt(mse),
+        nmse=nmse,
+        pmse=pmse,
+        nsnr=to_db(nmse),
+        psnr=to_db(pmse),
+        max_abs=absolute.max(axis=0),
+        mean_abs=absolute.mean(axis=0),
+        range=rng,
+    )

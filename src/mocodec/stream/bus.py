@@ -11,6 +11,7 @@ from __future__ import annotations
 import base64
 import logging
 from collections.abc import Awaitable, Callable
+from typing import Any
 
 from mocodec.errors import MocodecError
 from mocodec.extras import require
@@ -24,7 +25,7 @@ def subject(room: str) -> str:
 
 
 def room_of(subject_name: str) -> str:
-    token = subject_name[len(PREFIX):]
+    token = subject_name[len(PREFIX) :]
     return base64.urlsafe_b64decode(token + "=" * (-len(token) % 4)).decode()
 
 
@@ -33,7 +34,7 @@ class NatsBus:
         if not url.startswith(("nats://", "tls://")):
             raise MocodecError(f"--bus must be a nats:// address, got {url!r}")
         self.url = url
-        self.nc = None
+        self.nc: Any = None
         self.stopping = False
 
     async def start(self, deliver: Callable[[str, bytes], Awaitable[None]]) -> None:
@@ -56,9 +57,15 @@ class NatsBus:
                 log.warning("NATS %s: disconnected, reconnecting", self.url)
 
         try:
-            self.nc = await nats.connect(servers=[self.url], no_echo=True, connect_timeout=5,
-                                         max_reconnect_attempts=-1, allow_reconnect=True, error_cb=on_error,
-                                         disconnected_cb=on_disconnect)
+            self.nc = await nats.connect(
+                servers=[self.url],
+                no_echo=True,
+                connect_timeout=5,
+                max_reconnect_attempts=-1,
+                allow_reconnect=True,
+                error_cb=on_error,
+                disconnected_cb=on_disconnect,
+            )
         except (NoServersError, OSError) as e:
             raise MocodecError(f"cannot reach the NATS server at {self.url}: {e}") from None
         await self.nc.subscribe(PREFIX + "*", cb=on_message)
@@ -72,5 +79,5 @@ class NatsBus:
         self.stopping = True
         try:
             await self.nc.drain()
-        except Exception:   # noqa: BLE001 - the server is gone or reconnecting: just close
+        except Exception:  # noqa: BLE001 - the server is gone or reconnecting: just close
             await self.nc.close()

@@ -43,8 +43,12 @@ async def connect(url: str, room: str, token: str, role: str, max_msg_size: int 
     """An open WebSocket to the relay, past its welcome."""
     async with aiohttp.ClientSession() as session:
         try:
-            ws = await session.ws_connect(ws_url(url, room, role), headers={"Authorization": f"Bearer {token}"},
-                                          max_msg_size=max_msg_size, heartbeat=20.0)
+            ws = await session.ws_connect(
+                ws_url(url, room, role),
+                headers={"Authorization": f"Bearer {token}"},
+                max_msg_size=max_msg_size,
+                heartbeat=20.0,
+            )
         except (aiohttp.ClientError, OSError) as e:
             raise RelayRefused(f"cannot reach the relay at {url}: {e}") from None
         async with ws:
@@ -67,8 +71,17 @@ class PublishStats:
     seconds: float = 0.0
 
 
-async def publish_clip(url: str, room: str, token: str, motion: Motion, codec: Codec, speed: float = 1.0,
-                       stream: int = 0, keyframe_s: float = 1.0, name: str = "") -> PublishStats:
+async def publish_clip(
+    url: str,
+    room: str,
+    token: str,
+    motion: Motion,
+    codec: Codec,
+    speed: float = 1.0,
+    stream: int = 0,
+    keyframe_s: float = 1.0,
+    name: str = "",
+) -> PublishStats:
     """Play ``motion`` into ``room`` as a live stream at its frame rate (``speed`` times faster):
     the frames of one tick (1/30 s of the clip) are pushed when their time comes, and their
     packets sent as one batch; the last packet ends the stream. ``name`` labels the avatar. The packets are those of
@@ -161,9 +174,17 @@ class Watcher:
         return Motion(info.skeleton, info.fps, channels)
 
 
-async def record(url: str, room: str, token: str, frames: int | None = None, stream: int | None = None,
-                 budget: float = 0.0, camera=(0.0, 0.0, 0.0), timeout_s: float | None = None,
-                 conceal: str = "hold") -> dict[int, Motion]:
+async def record(
+    url: str,
+    room: str,
+    token: str,
+    frames: int | None = None,
+    stream: int | None = None,
+    budget: float = 0.0,
+    camera=(0.0, 0.0, 0.0),
+    timeout_s: float | None = None,
+    conceal: str = "hold",
+) -> dict[int, Motion]:
     """Watch ``room`` and return what each stream delivered: until ``stream`` (or, without it,
     the first stream seen) has ``frames`` frames or ends, or ``timeout_s`` passes."""
     watcher = Watcher(conceal)

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mocodec.codecs import codec_from_untrusted
-from mocodec.codecs.base import Codec, checked_frames
+from mocodec.codecs.base import Codec, StreamDecoder, StreamEncoder, checked_frames
 from mocodec.coding.entropy.rangecoder import encode_ints
 from mocodec.errors import CodecError
 from mocodec.motion import Motion
@@ -78,23 +78,37 @@ class LiveEncoder:
     parameters may look at; without it a frame-recursive coder fits its first stream to the
     first push alone, and is coarse until the first refresh."""
 
-    def __init__(self, codec: Codec, skeleton: Skeleton, fps: float, stream: int, keyframe_s: float = 1.0,
-                 name: str = "", primer: np.ndarray | None = None):
+    def __init__(
+        self,
+        codec: Codec,
+        skeleton: Skeleton,
+        fps: float,
+        stream: int,
+        keyframe_s: float = 1.0,
+        name: str = "",
+        primer: np.ndarray | None = None,
+    ):
         if not codec.streaming:
-            raise CodecError(f"codec {codec.id} does not stream (streaming codecs: dpcm, adpcm, deadreckoning, "
-                             "dct, spiht, primitives, ...)")
+            raise CodecError(
+                f"codec {codec.id} does not stream (streaming codecs: dpcm, adpcm, deadreckoning, "
+                "dct, spiht, primitives, ...)"
+            )
         if not keyframe_s > 0:
             raise CodecError(f"keyframe interval must be positive, got {keyframe_s}")
         self.codec, self.skeleton, self.fps, self.stream = codec, skeleton, fps, stream
         self.info = StreamInfo(skeleton, fps, codec.get_config(), name)
         self.refresh = refresh_frames(codec, fps, keyframe_s)
         self.primer_frames = max(int(round(PRIMER_S * fps)), 1)
-        self.recent = np.zeros((0, skeleton.num_channels)) if primer is None else \
-            checked_frames(codec.id, skeleton, primer)[-self.primer_frames:]
+        self.recent = (
+            np.zeros((0, skeleton.num_channels))
+            if primer is None
+            else checked_frames(codec.id, skeleton, primer)[-self.primer_frames :]
+        )
         self.sequence = 0
-        self.out_frames = 0            # frames the receiver has been told about
-        self.in_group = 0              # input frames in the current codec stream
-        self.encoder = self.decoder = None
+        self.out_frames = 0  # frames the receiver has been told about
+        self.in_group = 0  # input frames in the current codec stream
+        self.encoder: StreamEncoder | None = None
+        self.decoder: StreamDecoder | None = None
         self.keyframe_due = True
         self.position = (0.0, 0.0, 0.0)
 
@@ -106,16 +120,15 @@ class LiveEncoder:
         ts = now_us() if timestamp_us is None else timestamp_us
         out: list[Packet] = []
         while len(frames):
-            if self.encoder is None:
-                self._start()
+            encoder = self.encoder or self._start()
             take = min(len(frames), self.refresh - self.in_group)
             chunk, frames = frames[:take], frames[take:]
             self.position = root_position(self.skeleton, chunk[-1])
-            out += self._wrap(self.encoder.push(chunk), ts)
+            out += self._wrap(encoder.push(chunk), ts)
             self.in_group += take
-            self.recent = np.vstack((self.recent, chunk))[-self.primer_frames:]
+            self.recent = np.vstack((self.recent, chunk))[-self.primer_frames :]
             if self.in_group == self.refresh:
-                out += self._wrap(self.encoder.flush(), ts)
+                out += self._wrap(encoder.flush(), ts)
                 self.encoder = None
         return out
 
@@ -130,19 +143,23 @@ class LiveEncoder:
             out = [self._packet(b"", 0, ts, END)]
         return out
 
-    def _start(self) -> None:
-        self.encoder = self.codec.encoder(self.skeleton, self.fps)
+    def _start(self) -> StreamEncoder:
+        """A new codec stream (intra refresh): its encoder, primed with the recent frames."""
+        encoder = self.encoder = self.codec.encoder(self.skeleton, self.fps)
         self.decoder = self.codec.decoder(self.skeleton, self.fps)
         if len(self.recent):
-            self.encoder.prime(self.recent)
+            encoder.prime(self.recent)
         self.in_group = 0
         self.keyframe_due = True
+        return encoder
 
     def _wrap(self, payloads: list[bytes], ts: int) -> list[Packet]:
         out = []
-        cut_table = getattr(self.codec, "packet_cuts", None)     # an embedded codec's packets can be cut
+        cut_table = getattr(self.codec, "packet_cuts", None)  # an embedded codec's packets can be cut
+        decoder = self.decoder
+        assert decoder is not None, "a codec stream was started"
         for payload in payloads:
-            n = len(self.decoder.push(payload))
+            n = len(decoder.push(payload))
             flags = KEYFRAME if self.keyframe_due else 0
             if cut_table is not None:
                 payload, flags = with_cuts(payload, encode_ints(cut_table(payload, self.skeleton))), flags | CUTS
@@ -151,8 +168,9 @@ class LiveEncoder:
         return out
 
     def _packet(self, payload: bytes, frames: int, ts: int, flags: int) -> Packet:
-        p = Packet(self.stream, self.sequence, ts, self.codec.id, self.out_frames, frames, payload, DATA, flags,
-                   self.position)
+        p = Packet(
+            self.stream, self.sequence, ts, self.codec.id, self.out_frames, frames, payload, DATA, flags, self.position
+        )
         self.sequence = (self.sequence + 1) & 0xFFFFFFFF
         self.out_frames += frames
         return p
@@ -161,8 +179,8 @@ class LiveEncoder:
 @dataclass
 class ReceiverStats:
     packets: int = 0
-    lost: int = 0              # packets missing from the sequence
-    dropped: int = 0           # received but not decodable (waiting for a keyframe, damaged)
+    lost: int = 0  # packets missing from the sequence
+    dropped: int = 0  # received but not decodable (waiting for a keyframe, damaged)
     concealed_frames: int = 0
     resyncs: int = 0
 
@@ -181,10 +199,10 @@ class LiveDecoder:
         self.codec = codec_from_untrusted(info.codec, "stream header", local_files)
         self.max_gap = max(min(int(MAX_CONCEAL_S * info.fps), MAX_CONCEAL_VALUES // info.skeleton.num_channels), 1)
         self.conceal = conceal
-        self.decoder = None
-        self.expected: int | None = None      # next sequence number
-        self.next_frame: int | None = None    # next frame number to output
-        self.tail = np.zeros((0, info.skeleton.num_channels))   # the last frames out
+        self.decoder: StreamDecoder | None = None
+        self.expected: int | None = None  # next sequence number
+        self.next_frame: int | None = None  # next frame number to output
+        self.tail = np.zeros((0, info.skeleton.num_channels))  # the last frames out
         self.stats = ReceiverStats()
         self.ended = False
 
@@ -197,7 +215,7 @@ class LiveDecoder:
         a gap over :data:`MAX_CONCEAL_S`)."""
         try:
             return self._push(packet)
-        except Exception:   # noqa: BLE001 - a hostile packet must not take the receiver down
+        except Exception:  # noqa: BLE001 - a hostile packet must not take the receiver down
             self.decoder = None
             self.stats.dropped += 1
             return np.zeros((0, self.info.skeleton.num_channels))
@@ -209,7 +227,7 @@ class LiveDecoder:
             return empty
         if self.expected is not None:
             ahead = (packet.sequence - self.expected) & 0xFFFFFFFF
-            if ahead >= 1 << 31:             # old or repeated
+            if ahead >= 1 << 31:  # old or repeated
                 return empty
             if ahead:
                 self.stats.lost += ahead
@@ -217,7 +235,7 @@ class LiveDecoder:
         self.expected = (packet.sequence + 1) & 0xFFFFFFFF
         self.stats.packets += 1
         self.ended = self.ended or packet.end
-        if packet.keyframe:                   # a new codec stream starts here
+        if packet.keyframe:  # a new codec stream starts here
             self.stats.resyncs += self.decoder is None and self.next_frame is not None
             self.decoder = self.codec.decoder(self.info.skeleton, self.info.fps)
         elif self.decoder is None:
@@ -228,11 +246,12 @@ class LiveDecoder:
             payload = packet.codec_payload
             frames = np.asarray(self.decoder.push(payload), dtype=np.float64) if payload else empty
             if len(frames) != packet.frames:
-                raise CodecError(f"packet {packet.sequence} decodes to {len(frames)} frames, its header says "
-                                 f"{packet.frames}")
+                raise CodecError(
+                    f"packet {packet.sequence} decodes to {len(frames)} frames, its header says {packet.frames}"
+                )
             if not np.isfinite(frames).all():
                 raise CodecError(f"packet {packet.sequence} decodes to values that are not finite")
-        except Exception:   # noqa: BLE001 - whatever a damaged payload does to a codec, conceal
+        except Exception:  # noqa: BLE001 - whatever a damaged payload does to a codec, conceal
             self.decoder = None
             self.stats.dropped += 1
             return np.vstack((head, self._concealed(packet.first_frame + packet.frames)))
@@ -254,31 +273,38 @@ class LiveDecoder:
         n_ch = self.info.skeleton.num_channels
         if self.next_frame is None or not len(self.tail) or upto <= self.next_frame:
             if self.next_frame is None and upto > 0 and self.decoder is not None:
-                self.next_frame = upto        # joined mid-stream: start at the keyframe
+                self.next_frame = upto  # joined mid-stream: start at the keyframe
             return np.zeros((0, n_ch))
         n = upto - self.next_frame
-        if n > self.max_gap:                  # too far ahead to fill: count on from there
+        if n > self.max_gap:  # too far ahead to fill: count on from there
             self.next_frame = upto
             return np.zeros((0, n_ch))
         last = self.tail[-1]
         out = np.repeat(last[None], n, axis=0)
         if self.conceal == "extrapolate" and len(self.tail) == VELOCITY_FRAMES:
             steps = np.minimum(np.arange(1, n + 1), int(EXTRAPOLATE_S * self.info.fps))
-            velocity = (self.tail[-1] - self.tail[0]) / (VELOCITY_FRAMES - 1)   # smooths coding noise
+            velocity = (self.tail[-1] - self.tail[0]) / (VELOCITY_FRAMES - 1)  # smooths coding noise
             out = last + steps[:, None] * velocity
         self.stats.concealed_frames += n
         return self._emit(out)
 
 
-def clip_encoder(motion: Motion, codec: Codec, stream: int = 0, keyframe_s: float = 1.0,
-                 name: str = "") -> LiveEncoder:
+def clip_encoder(motion: Motion, codec: Codec, stream: int = 0, keyframe_s: float = 1.0, name: str = "") -> LiveEncoder:
     """The live encoder of a clip played as a stream, primed with the clip's first second."""
-    return LiveEncoder(codec, motion.skeleton, motion.fps, stream, keyframe_s, name,
-                       primer=motion.channels[:int(round(PRIMER_S * motion.fps))])
+    return LiveEncoder(
+        codec,
+        motion.skeleton,
+        motion.fps,
+        stream,
+        keyframe_s,
+        name,
+        primer=motion.channels[: int(round(PRIMER_S * motion.fps))],
+    )
 
 
-def stream_clip(motion: Motion, codec: Codec, stream: int = 0, keyframe_s: float = 1.0,
-                frames_per_packet: int | None = None) -> list[Packet]:
+def stream_clip(
+    motion: Motion, codec: Codec, stream: int = 0, keyframe_s: float = 1.0, frames_per_packet: int | None = None
+) -> list[Packet]:
     """A clip as the live packets a sender would send (header first), pushing
     ``frames_per_packet`` frames at a time (default: a 30 Hz tick), primed with its first
     second."""
@@ -286,7 +312,7 @@ def stream_clip(motion: Motion, codec: Codec, stream: int = 0, keyframe_s: float
     step = frames_per_packet or tick_frames(motion.fps)
     packets = [enc.header(0)]
     for a in range(0, motion.num_frames, step):
-        packets += enc.push(motion.channels[a:a + step], timestamp_us=int(a * 1e6 / motion.fps))
+        packets += enc.push(motion.channels[a : a + step], timestamp_us=int(a * 1e6 / motion.fps))
     return packets + enc.close(timestamp_us=int(motion.num_frames * 1e6 / motion.fps))
 
 

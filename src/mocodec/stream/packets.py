@@ -42,8 +42,7 @@ HEADER, DATA = 0, 1
 KEYFRAME, END, CUTS = 1, 2, 4
 
 #: The codecs a packet can name, by number (the numbering is part of the format: append only).
-CODEC_NUMBERS = ("raw", "quant", "dpcm", "adpcm", "deadreckoning", "dct", "subband", "spiht", "primitives",
-                 "kinwave")
+CODEC_NUMBERS = ("raw", "quant", "dpcm", "adpcm", "deadreckoning", "dct", "subband", "spiht", "primitives", "kinwave")
 
 _FIELDS = struct.Struct("<2sBBBBIIQIH3fI")
 _CRC = struct.Struct("<I")
@@ -78,11 +77,11 @@ class Packet:
     @property
     def codec_payload(self) -> bytes:
         """The codec's packet, without the cut table."""
-        return self.payload[_U16.size + self._cuts_size():] if self.flags & CUTS else self.payload
+        return self.payload[_U16.size + self._cuts_size() :] if self.flags & CUTS else self.payload
 
     @property
     def cuts(self) -> bytes:
-        return self.payload[_U16.size:_U16.size + self._cuts_size()] if self.flags & CUTS else b""
+        return self.payload[_U16.size : _U16.size + self._cuts_size()] if self.flags & CUTS else b""
 
     def _cuts_size(self) -> int:
         if len(self.payload) < _U16.size or _U16.unpack_from(self.payload)[0] > len(self.payload) - _U16.size:
@@ -96,9 +95,20 @@ class Packet:
         return self.with_payload(self.codec_payload, self.flags & ~CUTS) if self.flags & CUTS else self
 
     def to_bytes(self) -> bytes:
-        head = _FIELDS.pack(MAGIC, VERSION, self.kind, self.flags, codec_number(self.codec), self.stream,
-                            self.sequence, self.timestamp_us, self.first_frame, self.frames, *self.position,
-                            len(self.payload))
+        head = _FIELDS.pack(
+            MAGIC,
+            VERSION,
+            self.kind,
+            self.flags,
+            codec_number(self.codec),
+            self.stream,
+            self.sequence,
+            self.timestamp_us,
+            self.first_frame,
+            self.frames,
+            *self.position,
+            len(self.payload),
+        )
         return head + self.payload + _CRC.pack(zlib.crc32(self.payload, zlib.crc32(head)))
 
 
@@ -111,8 +121,9 @@ def codec_number(codec_id: str) -> int:
     try:
         return CODEC_NUMBERS.index(codec_id)
     except ValueError:
-        raise CorruptStreamError(f"codec {codec_id!r} has no packet number (streaming codecs: "
-                                 f"{', '.join(CODEC_NUMBERS)})") from None
+        raise CorruptStreamError(
+            f"codec {codec_id!r} has no packet number (streaming codecs: {', '.join(CODEC_NUMBERS)})"
+        ) from None
 
 
 def parse(data: bytes | memoryview, where: str = "packet") -> Packet:
@@ -120,8 +131,7 @@ def parse(data: bytes | memoryview, where: str = "packet") -> Packet:
     data = bytes(data)
     if len(data) < OVERHEAD:
         raise CorruptStreamError(f"{where}: {len(data)} bytes, shorter than the {OVERHEAD}-byte packet frame")
-    (magic, version, kind, flags, number, stream, seq, ts, first, frames, x, y, z,
-     length) = _FIELDS.unpack_from(data)
+    (magic, version, kind, flags, number, stream, seq, ts, first, frames, x, y, z, length) = _FIELDS.unpack_from(data)
     if magic != MAGIC:
         raise CorruptStreamError(f"{where}: byte 0: expected the packet magic {MAGIC!r}, got {magic!r}")
     if version != VERSION:
@@ -129,14 +139,16 @@ def parse(data: bytes | memoryview, where: str = "packet") -> Packet:
     if kind not in (HEADER, DATA) or number >= len(CODEC_NUMBERS):
         raise CorruptStreamError(f"{where}: bytes 3-5: unknown packet kind {kind} or codec number {number}")
     if len(data) != OVERHEAD + length:
-        raise CorruptStreamError(f"{where}: byte {_FIELDS.size - 4}: payload of {length} bytes announced, "
-                                 f"{len(data) - OVERHEAD} present")
+        raise CorruptStreamError(
+            f"{where}: byte {_FIELDS.size - 4}: payload of {length} bytes announced, {len(data) - OVERHEAD} present"
+        )
     end = _FIELDS.size + length
     (crc,) = _CRC.unpack_from(data, end)
     if crc != zlib.crc32(data[:end]):
         raise CorruptStreamError(f"{where}: byte {end}: CRC mismatch (damaged packet)")
-    return Packet(stream, seq, ts, CODEC_NUMBERS[number], first, frames, data[_FIELDS.size:end], kind, flags,
-                  (x, y, z))
+    return Packet(
+        stream, seq, ts, CODEC_NUMBERS[number], first, frames, data[_FIELDS.size : end], kind, flags, (x, y, z)
+    )
 
 
 # ----- stream headers ---------------------------------------------------------------------------
@@ -146,13 +158,18 @@ class StreamInfo:
 
     skeleton: Skeleton
     fps: float
-    codec: dict                      # Codec.get_config()
+    codec: dict  # Codec.get_config()
     name: str = ""
     extra: dict = field(default_factory=dict)
 
     def to_payload(self) -> bytes:
-        doc = {"skeleton": skeleton_to_dict(self.skeleton), "fps": float(self.fps), "codec": self.codec,
-               "name": self.name, "extra": self.extra}
+        doc = {
+            "skeleton": skeleton_to_dict(self.skeleton),
+            "fps": float(self.fps),
+            "codec": self.codec,
+            "name": self.name,
+            "extra": self.extra,
+        }
         return zlib.compress(json.dumps(doc, sort_keys=True, separators=(",", ":")).encode(), 9)
 
     @classmethod
@@ -164,8 +181,11 @@ class StreamInfo:
         a codec is made of it: :func:`~mocodec.codecs.codec_from_untrusted`)."""
         try:
             doc = json.loads(inflate_capped(payload, b"", limits.MAX_HEADER_TEXT))
-            if not isinstance(doc, dict) or not isinstance(doc.get("codec"), dict) \
-                    or not isinstance(doc["codec"].get("codec"), str):
+            if (
+                not isinstance(doc, dict)
+                or not isinstance(doc.get("codec"), dict)
+                or not isinstance(doc["codec"].get("codec"), str)
+            ):
                 raise ValueError("expected an object with a codec config naming a codec")
             if not isinstance(doc.get("skeleton"), dict) or len(doc["skeleton"].get("joints", ())) > limits.MAX_JOINTS:
                 raise ValueError(f"expected a skeleton of at most {limits.MAX_JOINTS} joints")
@@ -173,9 +193,14 @@ class StreamInfo:
             if not 0 < fps <= limits.MAX_FPS:
                 raise ValueError(f"frame rate {fps} is outside (0, {limits.MAX_FPS:g}]")
             extra = doc.get("extra", {})
-            return cls(skeleton_from_dict(doc["skeleton"]), fps, doc["codec"], str(doc.get("name", "")),
-                       extra if isinstance(extra, dict) else {})
-        except Exception as e:   # noqa: BLE001 - anything malformed in a header
+            return cls(
+                skeleton_from_dict(doc["skeleton"]),
+                fps,
+                doc["codec"],
+                str(doc.get("name", "")),
+                extra if isinstance(extra, dict) else {},
+            )
+        except Exception as e:  # noqa: BLE001 - anything malformed in a header
             raise CorruptStreamError(f"{where}: does not parse ({type(e).__name__}: {e})") from None
 
 

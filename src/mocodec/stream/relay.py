@@ -39,8 +39,10 @@ import logging
 import math
 import resource
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from aiohttp import WSMsgType, web
@@ -68,7 +70,7 @@ class Limits:
     publish_messages_per_s: float = 400.0
     publish_bytes_per_s: float = 8e6
     control_messages_per_s: float = 20.0
-    burst_s: float = 2.0                 # a bucket holds this many seconds of its rate
+    burst_s: float = 2.0  # a bucket holds this many seconds of its rate
     slow_viewer_s: float = 5.0
     max_gop_packets: int = 512
     max_streams_per_room: int = 5000
@@ -108,17 +110,17 @@ class Forward:
     """A packet on its way to viewers: the bytes as forwarded, and what cutting needs."""
 
     packet: Packet
-    data: bytes                          # without the cut table
+    data: bytes  # without the cut table
     cuts: np.ndarray | None = None
-    cutter: object = None                # the codec's packet cutter, made at the first cut
+    cutter: Callable[[float], bytes] | None = None  # the codec's packet cutter, made at the first cut
 
 
 @dataclass
 class StreamState:
-    owner: object                        # the sending connection, or the bus
+    owner: object  # the sending connection, or the bus
     header: Forward
     info: StreamInfo
-    codec: object
+    codec: Any  # the stream's codec (an embedded one offers packet_cutter)
     gop: list[Forward] = field(default_factory=list)
     position: tuple[float, float, float] = (0.0, 0.0, 0.0)
     next_sequence: int = 0
@@ -127,15 +129,24 @@ class StreamState:
 
     def end_packet(self, stream: int) -> Packet:
         """The packet that ends this stream for its receivers when its sender vanishes."""
-        return Packet(stream, self.next_sequence, time.time_ns() // 1000, self.header.packet.codec,
-                      self.next_frame, 0, b"", flags=END, position=self.position)
+        return Packet(
+            stream,
+            self.next_sequence,
+            time.time_ns() // 1000,
+            self.header.packet.codec,
+            self.next_frame,
+            0,
+            b"",
+            flags=END,
+            position=self.position,
+        )
 
 
 @dataclass
 class Viewer:
     ws: web.WebSocketResponse
-    transport: object                    # the connection, aborted if the viewer stalls
-    budget: float = 0.0                  # bit/s for the embedded streams; 0: everything whole
+    transport: Any  # the connection (asyncio transport), aborted if the viewer stalls
+    budget: float = 0.0  # bit/s for the embedded streams; 0: everything whole
     camera: tuple[float, float, float] = (0.0, 0.0, 0.0)
     pending: list[Forward] = field(default_factory=list)
     queue: asyncio.Queue = field(default_factory=lambda: asyncio.Queue(maxsize=1))
@@ -150,7 +161,7 @@ class Room:
     streams: dict[int, StreamState] = field(default_factory=dict)
     viewers: list[Viewer] = field(default_factory=list)
     fresh: list[Forward] = field(default_factory=list)
-    publishers: int = 0                  # connected senders (a room with one is kept, streams or not)
+    publishers: int = 0  # connected senders (a room with one is kept, streams or not)
 
     @property
     def idle(self) -> bool:
@@ -183,10 +194,17 @@ class Relay:
         self.secret, self.limits, self.tick_s = secret, limits or Limits(), 1.0 / tick_hz
         self.rooms: dict[str, Room] = {}
         self.bus = bus
-        self.guard: ConnectionGuard | None = None       # set by start()
+        self.guard: ConnectionGuard | None = None  # set by start()
         self.started = time.monotonic()
-        self.counters = {"packets_in": 0, "batches_out": 0, "missed_ticks": 0, "closed_bad": 0,
-                         "closed_rate": 0, "closed_expired": 0, "dropped_slow": 0}
+        self.counters = {
+            "packets_in": 0,
+            "batches_out": 0,
+            "missed_ticks": 0,
+            "closed_bad": 0,
+            "closed_rate": 0,
+            "closed_expired": 0,
+            "dropped_slow": 0,
+        }
 
     # ----- the application -------------------------------------------------------------------
     def app(self) -> web.Application:
@@ -223,9 +241,15 @@ class Relay:
     async def handle_status(self, request: web.Request) -> web.Response:
         """Totals only: a room's name is what its tokens are issued for."""
         rooms = self.rooms.values()
-        return web.json_response({"rooms": len(self.rooms), "streams": sum(len(r.streams) for r in rooms),
-                                  "viewers": sum(len(r.viewers) for r in rooms),
-                                  "uptime_s": round(time.monotonic() - self.started, 1), **self.counters})
+        return web.json_response(
+            {
+                "rooms": len(self.rooms),
+                "streams": sum(len(r.streams) for r in rooms),
+                "viewers": sum(len(r.viewers) for r in rooms),
+                "uptime_s": round(time.monotonic() - self.started, 1),
+                **self.counters,
+            }
+        )
 
     async def handle_ws(self, request: web.Request) -> web.WebSocketResponse:
         room_name = request.query.get("room", "")
@@ -242,8 +266,9 @@ class Relay:
             except tokens.TokenError as e:
                 raise Closing(BAD_TOKEN, str(e)) from None
             room = self.rooms.setdefault(room_name, Room())
-            expiry = asyncio.get_running_loop().call_later(max(float(claims["exp"]) - time.time(), 0.0),
-                                                           self._expire, ws)
+            expiry = asyncio.get_running_loop().call_later(
+                max(float(claims["exp"]) - time.time(), 0.0), self._expire, ws
+            )
             await ws.send_json({"welcome": room_name, "role": role})
             try:
                 if role == "publish":
@@ -273,12 +298,15 @@ class Relay:
         try:
             async for data in messages_of(ws, WSMsgType.BINARY, "a sender sends binary packet batches only"):
                 if not messages.take() or not volume.take(len(data)):
-                    raise Closing(RATE_LIMIT, f"rate limit: over {self.limits.publish_messages_per_s:g} messages "
-                                              f"or {self.limits.publish_bytes_per_s:g} bytes per second")
+                    raise Closing(
+                        RATE_LIMIT,
+                        f"rate limit: over {self.limits.publish_messages_per_s:g} messages "
+                        f"or {self.limits.publish_bytes_per_s:g} bytes per second",
+                    )
                 self._ingest(room, data, owner=ws)
                 if self.bus is not None:
                     await self.bus.publish(room_name, data)
-        finally:                            # streams left without their end: end them for everyone
+        finally:  # streams left without their end: end them for everyone
             room.publishers -= 1
             ends = [s.end_packet(k).to_bytes() for k, s in room.streams.items() if s.owner is ws and not s.ended]
             if ends:
@@ -319,7 +347,7 @@ class Relay:
             if len(state.gop) > self.limits.max_gop_packets:
                 del state.gop[0]
             room.fresh.append(forward)
-            state.ended = state.ended or p.end      # removed after this tick's dispatch
+            state.ended = state.ended or p.end  # removed after this tick's dispatch
 
     @staticmethod
     def _forward(p: Packet, raw: memoryview) -> Forward:
@@ -327,7 +355,7 @@ class Relay:
             return Forward(p, bytes(raw))
         try:
             cuts = decode_ints(p.cuts)
-        except Exception:   # noqa: BLE001 - a cut table that does not parse
+        except Exception:  # noqa: BLE001 - a cut table that does not parse
             raise Closing(BAD_MESSAGE, f"stream {p.stream}: packet {p.sequence}: bad cut table") from None
         plain = p.without_cuts()
         return Forward(plain, plain.to_bytes(), cuts)
@@ -341,7 +369,7 @@ class Relay:
     # ----- viewers -----------------------------------------------------------------------------
     async def _viewer(self, ws: web.WebSocketResponse, room: Room, transport) -> None:
         viewer = Viewer(ws, transport)
-        for state in room.streams.values():            # a late joiner starts at the last keyframes
+        for state in room.streams.values():  # a late joiner starts at the last keyframes
             if not state.ended:
                 viewer.pending += [state.header, *state.gop]
         room.viewers.append(viewer)
@@ -350,8 +378,9 @@ class Relay:
         try:
             async for text in messages_of(ws, WSMsgType.TEXT, "a viewer sends JSON settings only"):
                 if not control.take():
-                    raise Closing(RATE_LIMIT, f"rate limit: over {self.limits.control_messages_per_s:g} settings "
-                                              "per second")
+                    raise Closing(
+                        RATE_LIMIT, f"rate limit: over {self.limits.control_messages_per_s:g} settings per second"
+                    )
                 self._settings(viewer, text)
         finally:
             room.viewers.remove(viewer)
@@ -364,8 +393,7 @@ class Relay:
             budget = float(doc.get("budget", viewer.budget))
             camera = tuple(float(x) for x in doc.get("camera", viewer.camera))
         except (ValueError, TypeError, AttributeError):
-            raise Closing(BAD_MESSAGE, 'settings must be JSON like {"budget": 8000, "camera": [0, 1.6, 5]}') \
-                from None
+            raise Closing(BAD_MESSAGE, 'settings must be JSON like {"budget": 8000, "camera": [0, 1.6, 5]}') from None
         if not (math.isfinite(budget) and budget >= 0) or len(camera) != 3 or not all(map(math.isfinite, camera)):
             raise Closing(BAD_MESSAGE, "budget must be >= 0 bit/s and camera three finite numbers")
         viewer.budget, viewer.camera = budget, camera
@@ -387,16 +415,16 @@ class Relay:
             for name, room in list(self.rooms.items()):
                 try:
                     self._dispatch(room)
-                except Exception:   # noqa: BLE001 - one room's fault must not stop the others
+                except Exception:  # noqa: BLE001 - one room's fault must not stop the others
                     log.exception("dispatching room %s failed", name)
             for name in [n for n, r in self.rooms.items() if r.idle]:
                 del self.rooms[name]
 
     def _dispatch(self, room: Room) -> None:
         fresh, room.fresh = room.fresh, []
-        shared: bytes | None = None                 # the batch of every viewer with nothing of its own
+        shared: bytes | None = None  # the batch of every viewer with nothing of its own
         cut_cache: dict[tuple[int, float], bytes] = {}
-        crowd = None                                # the embedded streams and where they are, this tick
+        crowd = None  # the embedded streams and where they are, this tick
         for viewer in [v for v in room.viewers if not v.dropped]:
             items, viewer.pending = viewer.pending + fresh, []
             if not items:
@@ -411,7 +439,7 @@ class Relay:
                 batch = pack_batch([f.data for f in items])
             self._offer(viewer, batch, items)
         for key in [k for k, state in room.streams.items() if state.ended]:
-            del room.streams[key]                   # over: late joiners will not see it
+            del room.streams[key]  # over: late joiners will not see it
 
     def _offer(self, viewer: Viewer, batch: bytes, items: list[Forward]) -> None:
         """Queue a viewer's batch, or miss the tick if the last is still on its way: it keeps
@@ -454,6 +482,7 @@ class Relay:
             if f.cuts is None or state is None or f.packet.stream not in row:
                 out.append(f.data)
                 continue
+            assert shares is not None  # the stream is in the row
             rate = on_ladder(float(shares[row[f.packet.stream]]))
             key = (id(f), rate)
             if key not in cache:
@@ -467,7 +496,7 @@ class Relay:
             if f.cutter is None:
                 f.cutter = state.codec.packet_cutter(f.packet.payload, state.info.skeleton, f.cuts, state.info.fps)
             payload = f.cutter(rate)
-        except Exception as e:   # noqa: BLE001 - a cut table that does not fit the payload: pass it whole
+        except Exception as e:  # noqa: BLE001 - a cut table that does not fit the payload: pass it whole
             log.warning("stream %d: packet %d not cut: %s", f.packet.stream, f.packet.sequence, e)
             f.cuts = None
             return f.data
@@ -491,9 +520,9 @@ class ConnectionGuard:
 
     def __init__(self, factory, limits: Limits):
         self.factory, self.limits = factory, limits
-        self.open: dict[object, str] = {}           # transport -> peer host
+        self.open: dict[object, str] = {}  # transport -> peer host
         self.per_host: dict[str, int] = {}
-        self._served: set = set()                   # the open transports whose request reached a handler
+        self._served: set = set()  # the open transports whose request reached a handler
         self.refused = 0
 
     def __call__(self) -> asyncio.Protocol:
@@ -503,8 +532,10 @@ class ConnectionGuard:
         """Count a new connection, or refuse it (abort it) over a limit."""
         peer = transport.get_extra_info("peername")
         host = str(peer[0]) if isinstance(peer, tuple) and peer else "?"
-        if len(self.open) >= self.limits.max_connections or \
-                self.per_host.get(host, 0) >= self.limits.max_connections_per_host:
+        if (
+            len(self.open) >= self.limits.max_connections
+            or self.per_host.get(host, 0) >= self.limits.max_connections_per_host
+        ):
             self.refused += 1
             transport.abort()
             return
@@ -580,8 +611,7 @@ def raise_descriptor_limit() -> None:
     """Raise the soft limit on open files to the hard one: every viewer holds a descriptor."""
     soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
     if hard == resource.RLIM_INFINITY or soft < hard:
-        resource.setrlimit(resource.RLIMIT_NOFILE, (hard if hard != resource.RLIM_INFINITY else max(soft, 65536),
-                                                    hard))
+        resource.setrlimit(resource.RLIMIT_NOFILE, (hard if hard != resource.RLIM_INFINITY else max(soft, 65536), hard))
 
 
 def run(host: str, port: int, secret: str, limits: Limits | None = None, bus=None, tick_hz: float = 30.0) -> None:

@@ -77,9 +77,13 @@ def _update(watcher: Watcher, history: list[tuple[float, dict[int, int]]]) -> di
         if not watcher.frames[k] or dec.ended:
             continue
         pose = watcher.motion(k).positions_m()[-1]
-        streams[str(k)] = {"name": dec.info.name or f"stream {k}", "codec": dec.info.codec["codec"],
-                           "parents": [int(p) for p in dec.info.skeleton.parents],
-                           "positions": [round(float(v), 4) for v in pose.ravel()],
-                           "bits_per_second": 8 * (last.get(k, 0) - first.get(k, 0)) / span,
-                           "frames": watcher.counts[k], "in_sync": dec.in_sync}
+        streams[str(k)] = {
+            "name": dec.info.name or f"stream {k}",
+            "codec": dec.info.codec["codec"],
+            "parents": [int(p) for p in dec.info.skeleton.parents],
+            "positions": [round(float(v), 4) for v in pose.ravel()],
+            "bits_per_second": 8 * (last.get(k, 0) - first.get(k, 0)) / span,
+            "frames": watcher.counts[k],
+            "in_sync": dec.in_sync,
+        }
     return {"streams": streams}

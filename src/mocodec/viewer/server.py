@@ -59,9 +59,10 @@ def make_app(session: ViewSession | None, relay_url: str | None = None) -> web.A
             target = body.get("target")
             target = (str(target[0]), float(target[1])) if target else None
         except (ValueError, KeyError, TypeError, IndexError, json.JSONDecodeError):
-            return web.json_response({"error": 'expected {"codec": id, "knobs": {...}, "target": [kind, value]}'},
-                                     status=400)
-        async with lock:                 # one encode at a time; the session holds one result
+            return web.json_response(
+                {"error": 'expected {"codec": id, "knobs": {...}, "target": [kind, value]}'}, status=400
+            )
+        async with lock:  # one encode at a time; the session holds one result
             try:
                 await asyncio.to_thread(session.code, codec_id, knobs, target)
             except MocodecError as e:
@@ -87,7 +88,7 @@ def serve(app: web.Application, host: str, port: int, open_browser: bool, page: 
         await runner.setup()
         site = web.TCPSite(runner, host, port)
         await site.start()
-        url = f"http://{host}:{site._server.sockets[0].getsockname()[1]}/{page}"
+        url = f"http://{host}:{runner.addresses[0][1]}/{page}"
         print(f"viewer on {url} (Ctrl-C to stop)", flush=True)
         if open_browser:
             import webbrowser

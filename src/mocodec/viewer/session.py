@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from mocodec import moc, ratecontrol
-from mocodec.codecs import codec_class, codec_ids, get_codec
+from mocodec.codecs import Codec, codec_class, codec_ids, get_codec
 from mocodec.errors import CodecError
 from mocodec.formats import load
 from mocodec.metrics import compare
@@ -40,10 +40,10 @@ def load_reference(path: str | Path, asf: str | None = None) -> Motion:
 
 @dataclass
 class Coded:
-    codec: object
+    codec: Codec
     decoded: Motion
     numbers: dict
-    positions: np.ndarray                  # the decoded motion's joint positions, metres
+    positions: np.ndarray  # the decoded motion's joint positions, metres
 
 
 class ViewSession:
@@ -63,24 +63,42 @@ class ViewSession:
         trip = moc.round_trip(self.motion, codec)
         s = compare(self.motion, trip.decoded).summary()
         m = self.motion
-        numbers = {"codec": repr(codec), "bytes": len(trip.data), "ratio": m.raw_bits / 8 / len(trip.data),
-                   "bits_per_second": len(trip.data) * 8 / m.duration, "psnr_db": s["psnr_db"],
-                   "vpsnr_db": s["vpsnr_db"], "mean_joint_error_cm": s["mean_joint_error_cm"],
-                   "max_joint_error_cm": s["max_joint_error_cm"]}
-        self.coded = Coded(codec, trip.decoded, {k: _finite(v) for k, v in numbers.items()},
-                           trip.decoded.positions_m())
+        numbers = {
+            "codec": repr(codec),
+            "bytes": len(trip.data),
+            "ratio": m.raw_bits / 8 / len(trip.data),
+            "bits_per_second": len(trip.data) * 8 / m.duration,
+            "psnr_db": s["psnr_db"],
+            "vpsnr_db": s["vpsnr_db"],
+            "mean_joint_error_cm": s["mean_joint_error_cm"],
+            "max_joint_error_cm": s["max_joint_error_cm"],
+        }
+        self.coded = Coded(codec, trip.decoded, {k: _finite(v) for k, v in numbers.items()}, trip.decoded.positions_m())
         return self.coded
 
     def state(self) -> dict:
         sk, m = self.motion.skeleton, self.motion
-        out = {"name": self.name, "fps": m.fps, "frames": m.num_frames, "joints": list(sk.names),
-               "parents": [int(p) for p in sk.parents], "original": base64_f32(self.positions), "decoded": None,
-               "error_cm": None, "numbers": None, "config": None}
+        out = {
+            "name": self.name,
+            "fps": m.fps,
+            "frames": m.num_frames,
+            "joints": list(sk.names),
+            "parents": [int(p) for p in sk.parents],
+            "original": base64_f32(self.positions),
+            "decoded": None,
+            "error_cm": None,
+            "numbers": None,
+            "config": None,
+        }
         if self.coded is not None:
             decoded = self.coded.positions
             error_cm = np.linalg.norm(decoded - self.positions, axis=2) * 100
-            out.update(decoded=base64_f32(decoded), error_cm=base64_f32(error_cm),
-                       numbers=self.coded.numbers, config=self.coded.codec.get_config())
+            out.update(
+                decoded=base64_f32(decoded),
+                error_cm=base64_f32(error_cm),
+                numbers=self.coded.numbers,
+                config=self.coded.codec.get_config(),
+            )
         return out
 
 
@@ -93,9 +111,24 @@ def codec_menu() -> list[dict]:
     out = []
     for cid in codec_ids():
         cls = codec_class(cid)
-        out.append({"id": cid, "description": cls.description, "baseline": bool(cls.baseline),
-                    "quality": cls.quality.name if cls.quality else None,
-                    "knobs": [{"name": k.name, "type": k.kind.__name__, "default": k.default, "help": k.help,
-                               "low": k.low, "high": k.high, "choices": list(k.choices) if k.choices else None}
-                              for k in cls.knobs]})
+        out.append(
+            {
+                "id": cid,
+                "description": cls.description,
+                "baseline": bool(cls.baseline),
+                "quality": cls.quality.name if cls.quality else None,
+                "knobs": [
+                    {
+                        "name": k.name,
+                        "type": k.kind.__name__,
+                        "default": k.default,
+                        "help": k.help,
+                        "low": k.low,
+                        "high": k.high,
+                        "choices": list(k.choices) if k.choices else None,
+                    }
+                    for k in cls.knobs
+                ],
+            }
+        )
     return out

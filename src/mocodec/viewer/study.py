@@ -42,10 +42,10 @@ class StudyConfig:
     kind: str
     clips: list[Path]
     seed: int = 1
-    speed: float = 1.0                       # playback speed of the page
-    max_frames: int = 0                      # clips cut to this many frames (0: whole)
-    cases: list[dict] = field(default_factory=list)          # dscqs
-    codec: str = "primitives"                                 # 2afc
+    speed: float = 1.0  # playback speed of the page
+    max_frames: int = 0  # clips cut to this many frames (0: whole)
+    cases: list[dict] = field(default_factory=list)  # dscqs
+    codec: str = "primitives"  # 2afc
     knob: str = "t_lower"
     start: float = 0.024
     step: float = 0.002
@@ -80,8 +80,12 @@ def load_config(path: str | Path) -> StudyConfig:
             if not isinstance(case, dict) or not 0 <= int(case.get("clip", -1)) < len(clips) or "codec" not in case:
                 raise FormatError(path, None, f"case {k}: needs a clip index below {len(clips)} and a codec")
             if set(case) - allowed:
-                raise FormatError(path, None, f"case {k}: unknown key {sorted(set(case) - allowed)[0]!r} (keys: "
-                                              f"{', '.join(sorted(allowed))}; knobs go in \"knobs\")")
+                raise FormatError(
+                    path,
+                    None,
+                    f"case {k}: unknown key {sorted(set(case) - allowed)[0]!r} (keys: "
+                    f'{", ".join(sorted(allowed))}; knobs go in "knobs")',
+                )
     elif not (cfg.step > 0 and cfg.start > 0 and cfg.average_last >= 1 and cfg.reversals >= cfg.average_last):
         raise FormatError(path, None, "2afc: start and step must be positive, reversals >= average_last >= 1")
     return cfg
@@ -91,8 +95,6 @@ def _positions(motion: Motion) -> str:
     return base64_f32(motion.positions_m())
 
 
-
-
 class Study:
     """One participant's session: trials out, answers in, results at the end."""
 
@@ -100,7 +102,7 @@ class Study:
         self.cfg, self.participant = cfg, participant
         self.motions = [load(p) for p in cfg.clips]
         if cfg.max_frames:
-            self.motions = [m[:cfg.max_frames] for m in self.motions]
+            self.motions = [m[: cfg.max_frames] for m in self.motions]
         self.rng = np.random.default_rng(cfg.seed)
         self.trials: list[dict] = []
         self.started = _now()
@@ -110,14 +112,34 @@ class Study:
     def done(self) -> bool:
         raise NotImplementedError
 
+    def trial(self) -> dict:
+        """The next trial, as the page shows it."""
+        raise NotImplementedError
+
+    def answer(self, reply: dict) -> None:
+        """Record the participant's answer to the current trial (MocodecError if it is malformed)."""
+        raise NotImplementedError
+
     def _frame(self, motion: Motion, index: int, total: int | None) -> dict:
-        return {"kind": self.cfg.kind, "index": index, "total": total, "fps": motion.fps, "frames": motion.num_frames,
-                "parents": [int(p) for p in motion.skeleton.parents], "speed": self.cfg.speed}
+        return {
+            "kind": self.cfg.kind,
+            "index": index,
+            "total": total,
+            "fps": motion.fps,
+            "frames": motion.num_frames,
+            "parents": [int(p) for p in motion.skeleton.parents],
+            "speed": self.cfg.speed,
+        }
 
     def results(self) -> dict:
-        return {"kind": self.cfg.kind, "participant": self.participant, "started": self.started,
-                "finished": _now(), "config": {**self.cfg.__dict__, "clips": [str(p) for p in self.cfg.clips]},
-                "trials": self.trials}
+        return {
+            "kind": self.cfg.kind,
+            "participant": self.participant,
+            "started": self.started,
+            "finished": _now(),
+            "config": {**self.cfg.__dict__, "clips": [str(p) for p in self.cfg.clips]},
+            "trials": self.trials,
+        }
 
     def save(self, folder: str | Path) -> Path:
         folder = Path(folder)
@@ -131,7 +153,7 @@ class Study:
 class Dscqs(Study):
     def __init__(self, cfg: StudyConfig, participant: str):
         super().__init__(cfg, participant)
-        self.reference_first = self.rng.random(len(cfg.cases)) < 0.5     # is the reference A?
+        self.reference_first = self.rng.random(len(cfg.cases)) < 0.5  # is the reference A?
 
     @property
     def done(self) -> bool:
@@ -148,10 +170,20 @@ class Dscqs(Study):
         trip = moc.round_trip(motion, codec)
         ref, cod = _positions(motion), _positions(trip.decoded)
         a_is_ref = bool(self.reference_first[k])
-        self.current = {"case": k, "clip": self.cfg.clips[int(case["clip"])].name, "codec": codec.get_config(),
-                        "ratio": motion.raw_bits / 8 / len(trip.data), "reference": "A" if a_is_ref else "B"}
-        return {**self._frame(motion, k, len(self.cfg.cases)), "A": ref if a_is_ref else cod,
-                "B": cod if a_is_ref else ref, "sequence": ["A", "B", "A", "B"], "scores": SCORES}
+        self.current = {
+            "case": k,
+            "clip": self.cfg.clips[int(case["clip"])].name,
+            "codec": codec.get_config(),
+            "ratio": motion.raw_bits / 8 / len(trip.data),
+            "reference": "A" if a_is_ref else "B",
+        }
+        return {
+            **self._frame(motion, k, len(self.cfg.cases)),
+            "A": ref if a_is_ref else cod,
+            "B": cod if a_is_ref else ref,
+            "sequence": ["A", "B", "A", "B"],
+            "scores": SCORES,
+        }
 
     def answer(self, reply: dict) -> None:
         try:
@@ -180,20 +212,27 @@ class Staircase(Study):
 
     @property
     def threshold(self) -> float | None:
-        last = self.reversals[-self.cfg.average_last:]
+        last = self.reversals[-self.cfg.average_last :]
         return float(np.mean(last)) if len(last) == self.cfg.average_last else None
 
     def trial(self) -> dict:
         k = len(self.trials)
-        motion = self.motions[k % len(self.motions)]          # the clips take turns
+        motion = self.motions[k % len(self.motions)]  # the clips take turns
         codec = get_codec(self.cfg.codec, **{self.cfg.knob: self.value})
         distorted = _positions(moc.round_trip(motion, codec).decoded)
         original_left = bool(self.rng.random() < 0.5)
-        self.current = {"trial": k, "clip": self.cfg.clips[k % len(self.motions)].name, "value": self.value,
-                        "original": "left" if original_left else "right"}
+        self.current = {
+            "trial": k,
+            "clip": self.cfg.clips[k % len(self.motions)].name,
+            "value": self.value,
+            "original": "left" if original_left else "right",
+        }
         ref = _positions(motion)
-        return {**self._frame(motion, k, None), "left": ref if original_left else distorted,
-                "right": distorted if original_left else ref}
+        return {
+            **self._frame(motion, k, None),
+            "left": ref if original_left else distorted,
+            "right": distorted if original_left else ref,
+        }
 
     def answer(self, reply: dict) -> None:
         choice = reply.get("choice") if isinstance(reply, dict) else None
@@ -204,10 +243,10 @@ class Staircase(Study):
         self.current = None
         if correct:
             self.streak += 1
-            if self.streak == 2:                 # two up: harder
+            if self.streak == 2:  # two up: harder
                 self.streak = 0
                 self._move(-1)
-        else:                                    # one down: easier
+        else:  # one down: easier
             self.streak = 0
             self._move(+1)
 
@@ -259,5 +298,7 @@ def report(paths: list[str | Path]) -> dict:
                 raise KeyError("kind")
         except (OSError, ValueError, KeyError, TypeError) as e:
             raise FormatError(p, None, f"not a study result file ({type(e).__name__}: {e})") from None
-    return {"dmos": {label: mean_ci(d) for label, d in sorted(cases.items())},
-            "threshold_t_lower": mean_ci(thresholds) if thresholds else None}
+    return {
+        "dmos": {label: mean_ci(d) for label, d in sorted(cases.items())},
+        "threshold_t_lower": mean_ci(thresholds) if thresholds else None,
+    }

@@ -33,7 +33,7 @@ def make_study_app(study: Study, out_dir: str | Path) -> web.Application:
         async with lock:
             if study.done:
                 return web.json_response({"done": True, "saved": str(saved[0]) if saved else None})
-            if "trial" not in shown:                          # prepare each trial once
+            if "trial" not in shown:  # prepare each trial once
                 shown["trial"] = await asyncio.to_thread(study.trial)
             return web.json_response(shown["trial"])
 

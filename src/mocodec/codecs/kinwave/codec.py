@@ -35,7 +35,7 @@ Per payload of T frames:
    own (1/8 octave), searched on its own worst error, so quiet stretches are not coded as
    finely as the busiest one needs.
 
-Payload body: u8 format (3), u8 flags (bits 0 and 5: one or two leading keyframes, bits 1-2
+Payload body: u8 format (1), u8 flags (bits 0 and 5: one or two leading keyframes, bits 1-2
 wavelet, bit 3 segment offsets, bit 4 coding forms, bit 6 mean rotations, bit 7 isolated
 frames), u8 log2 window, u8 levels, u16 channels (a payload for another skeleton is refused),
 with bit 7 a u8 count of isolated frames (glitches coded apart: their positions and one patch
@@ -44,9 +44,7 @@ stream (:mod:`mocodec.coding.entropy.coefcoder`, revision 2), which opens with o
 with rotation channels and one for translations (step = 2^(code/8 - 20) degrees or cm), with
 bit 3 one step offset per segment, with bit 4 a coding form per three-angle joint
 (:mod:`mocodec.codecs.shared.rotvec`) and with bit 6 three mean-rotation integers per such joint.
-Format 2, still read, coded constants at the plain step and had a 0/1 rotation-vector flag per
-joint; format 1 wrote the codes and offsets as bytes (u8, i8) before the stream, and coded the
-approximation bands as they are.
+docs/formats.md gives the layout byte by byte.
 """
 
 from __future__ import annotations
@@ -66,47 +64,48 @@ from mocodec.codecs.shared import closedloop, rotvec
 from mocodec.coding.entropy import coefcoder
 from mocodec.coding.transforms import seams, trendwave
 from mocodec.errors import CodecError, CorruptStreamError
+from mocodec.formats import varint
 from mocodec.kinematics import channel_plan, forward_kinematics
 from mocodec.metrics.pose import bone_joints, shell_errors
 from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
-FORMAT = 3                      # 3: constant channels at 1/8 of their step; 2 and 1 are still read
-FORMATS = (1, 2, 3)
-_HEAD = struct.Struct("<BBBBH")     # format, flags, log2 window, levels, channels
-FLAG_OFFSETS = 8                # flags bit 3: a signed step offset per segment follows the step codes
-FLAG_FORMS = 16                 # flags bit 4: per 3-angle joint its coding form (rotvec: 0 the file's Euler angles,
-                                # 1 a rotation vector, 2-7 Euler angles in a Tait-Bryan order, 8-15 those forms of
-                                # the rotation turned by the constant joints above, rotvec.WORLD; formats 1-2: 0, 1)
-FLAG_MEANS = 64                 # flags bit 6: three integers per 3-angle joint, a vector joint's mean rotation
-MEAN_QUANTUM = 2.0              # degrees: a vector joint's mean rotation, as a rotation vector in these steps
-MEAN_LEAST = 20.0               # degrees: a mean rotation smaller than this is left at the identity
-FLAG_ISOLATED = 128             # flags bit 7: a byte n after the header; n isolated frames coded apart (format 3)
-MAX_ISOLATED = 32               # isolated frames a payload codes apart at most
-FLAG_KEYFRAME = 1               # flags bit 0: frame 0 is a keyframe (a one-frame segment)
-FLAG_SECOND_KEYFRAME = 32       # flags bit 5 (with bit 0): frame 1 is one too
+FORMAT = 1  # the payload format (docs/formats.md), pinned by the golden fixtures
+CODER_REVISION = 2  # the coefficient coder's revision (coefcoder: differences in the approximation band)
+_HEAD = struct.Struct("<BBBBH")  # format, flags, log2 window, levels, channels
+FLAG_OFFSETS = 8  # flags bit 3: a signed step offset per segment follows the step codes
+FLAG_FORMS = 16  # flags bit 4: per 3-angle joint its coding form (rotvec: 0 the file's Euler angles,
+# 1 a rotation vector, 2-7 Euler angles in a Tait-Bryan order, 8-15 those forms of
+# the rotation turned by the constant joints above, rotvec.WORLD; formats 1-2: 0, 1)
+FLAG_MEANS = 64  # flags bit 6: three integers per 3-angle joint, a vector joint's mean rotation
+MEAN_QUANTUM = 2.0  # degrees: a vector joint's mean rotation, as a rotation vector in these steps
+MEAN_LEAST = 20.0  # degrees: a mean rotation smaller than this is left at the identity
+FLAG_ISOLATED = 128  # flags bit 7: a byte n after the header; n isolated frames coded apart (format 3)
+MAX_ISOLATED = 32  # isolated frames a payload codes apart at most
+FLAG_KEYFRAME = 1  # flags bit 0: frame 0 is a keyframe (a one-frame segment)
+FLAG_SECOND_KEYFRAME = 32  # flags bit 5 (with bit 0): frame 1 is one too
 WAVELET_IDS = ("cdf97", "d4", "haar")
-CONSTANT = 1e-6                 # a channel whose range is below this is one knot
-CONST_FRACTION = 1.0 / 8.0      # format 3: a constant channel's quantum, in steps of its joint
-MAX_PASSES = 8                  # secant passes before falling back to halving
-JOINT_FEEDBACK = 1.0            # share of a joint's measured slack (in octaves) its steps take on
-SLACK_PASSES = 2                # rounds in which a max bound's final pass gives its slack away (_use_slack)
-SEGMENT_SLACK_BELOW = 0.9       # ... with time-adaptive steps only when its worst error is under this share
-ACCEPT = 0.95                   # a max-error bound is met well enough at 95-100% of it (0.9: 1-1.6% larger files)
-MEAN_ACCEPT = 0.97              # a mean-error bound (smooth in the scale: 1.9% fewer bytes than at 0.9 for
-                                # 1.3 more passes)
-SEGMENT_PASSES = 2              # passes of the per-segment search before the combination is fixed
-MARGIN = 0.95            # a segment whose error was this close to the bound goes a code finer when combined
-SEGMENT_ACCEPT = 0.8            # a segment's worst error is near enough to the bound at this share of it
-ADAPTIVE_SEGMENTS = 4           # time-adaptive steps from this many segments on (at W = 128 on fewer they
-                                # measured 1.6% larger than one scale, from 4 on 3% smaller, from 8 on 9%)
+CONSTANT = 1e-6  # a channel whose range is below this is one knot
+CONST_FRACTION = 1.0 / 8.0  # format 3: a constant channel's quantum, in steps of its joint
+MAX_PASSES = 8  # secant passes before falling back to halving
+JOINT_FEEDBACK = 1.0  # share of a joint's measured slack (in octaves) its steps take on
+SLACK_PASSES = 2  # rounds in which a max bound's final pass gives its slack away (_use_slack)
+SEGMENT_SLACK_BELOW = 0.9  # ... with time-adaptive steps only when its worst error is under this share
+ACCEPT = 0.95  # a max-error bound is met well enough at 95-100% of it (0.9: 1-1.6% larger files)
+MEAN_ACCEPT = 0.97  # a mean-error bound (smooth in the scale: 1.9% fewer bytes than at 0.9 for
+# 1.3 more passes)
+SEGMENT_PASSES = 2  # passes of the per-segment search before the combination is fixed
+MARGIN = 0.95  # a segment whose error was this close to the bound goes a code finer when combined
+SEGMENT_ACCEPT = 0.8  # a segment's worst error is near enough to the bound at this share of it
+ADAPTIVE_SEGMENTS = 4  # time-adaptive steps from this many segments on (at W = 128 on fewer they
+# measured 1.6% larger than one scale, from 4 on 3% smaller, from 8 on 9%)
 RATE_TOLERANCE = 0.02
-JUMP_CM = 10.0                  # a leading frame jumping less than this is not tried as a keyframe
-TRIAL_FRAMES = 1024             # frames the choice of forms codes each form of every joint on
-GIMBAL_MARGIN = 15.0            # degrees from an Euler order's lock within which a joint goes as a vector
-COARSEST_BAND_S = 0.25          # seconds between the coarsest band's samples (the automatic levels)
-SEAM_HALF_WIDTH = 8             # frames each side of a seam over which its step is spread
-SEAM_LIMIT = 1.0                # the largest step removed, in quantiser steps of the channel
+JUMP_CM = 10.0  # a leading frame jumping less than this is not tried as a keyframe
+TRIAL_FRAMES = 1024  # frames the choice of forms codes each form of every joint on
+GIMBAL_MARGIN = 15.0  # degrees from an Euler order's lock within which a joint goes as a vector
+COARSEST_BAND_S = 0.25  # seconds between the coarsest band's samples (the automatic levels)
+SEAM_HALF_WIDTH = 8  # frames each side of a seam over which its step is spread
+SEAM_LIMIT = 1.0  # the largest step removed, in quantiser steps of the channel
 
 
 def _code(step: float) -> int:
@@ -123,8 +122,8 @@ class _Group:
 
     joint: int
     rotation: bool
-    channels: np.ndarray        # channel indices (rotation: in rotation-order steps)
-    axes: np.ndarray            # rotation axes of the steps
+    channels: np.ndarray  # channel indices (rotation: in rotation-order steps)
+    axes: np.ndarray  # rotation axes of the steps
 
 
 @lru_cache(maxsize=64)
@@ -182,8 +181,11 @@ def _has_translation(skeleton: Skeleton) -> bool:
 def _three_angle_groups(skeleton: Skeleton) -> tuple[tuple[np.ndarray, str], ...]:
     """``(channels, order)`` of every joint with three rotation channels (in rotation order):
     the joints that may be coded as rotation vectors."""
-    return tuple((g.channels, "".join("XYZ"[a] for a in g.axes)) for g in _groups(skeleton)
-                 if g.rotation and g.channels.size == 3)
+    return tuple(
+        (g.channels, "".join("XYZ"[a] for a in g.axes))
+        for g in _groups(skeleton)
+        if g.rotation and g.channels.size == 3
+    )
 
 
 def _parent_orientations(skeleton: Skeleton, frame: np.ndarray) -> np.ndarray:
@@ -265,10 +267,8 @@ class _Constants:
     base: np.ndarray
 
 
-def _constants(skeleton: Skeleton, version: int) -> _Constants:
+def _constants(skeleton: Skeleton) -> _Constants:
     base = np.zeros(skeleton.num_channels)
-    if version < 3:
-        return _Constants(1.0, base)
     plan = channel_plan(skeleton)
     for j in range(len(skeleton)):
         for axis, c in enumerate(plan.pos_index[j]):
@@ -277,9 +277,15 @@ def _constants(skeleton: Skeleton, version: int) -> _Constants:
     return _Constants(CONST_FRACTION, base)
 
 
-def _reconstruct(knots: np.ndarray, coeffs: np.ndarray, const: np.ndarray, step: np.ndarray,
-                 lay: trendwave.Layout, factors: tuple[np.ndarray, np.ndarray, np.ndarray],
-                 constants: _Constants) -> np.ndarray:
+def _reconstruct(
+    knots: np.ndarray,
+    coeffs: np.ndarray,
+    const: np.ndarray,
+    step: np.ndarray,
+    lay: trendwave.Layout,
+    factors: tuple[np.ndarray, np.ndarray, np.ndarray],
+    constants: _Constants,
+) -> np.ndarray:
     """Decoded channels ``(k, T)`` from their integers, steps ``(k, 1)`` and the segments'
     step :func:`_factors`: the same arithmetic on both ends (the encoder calls it a tree depth
     at a time, the decoder for all channels at once; each row's floats are the same either
@@ -317,43 +323,90 @@ def _jumps_at_start(positions_cm: np.ndarray) -> bool:
 
 @dataclass
 class _Pass:
-    steps: np.ndarray           # u8 codes: rotation joints, then translation
+    steps: np.ndarray  # u8 codes: rotation joints, then translation
     const: np.ndarray
     knots: np.ndarray
     coeffs: np.ndarray
-    decoded: np.ndarray         # (C, T)
-    offsets: np.ndarray         # i8 per segment: its steps are 2^(offset/8) times the joints'
-    patches: np.ndarray         # (C, isolated frames): each isolated frame's correction (_patch)
+    decoded: np.ndarray  # (C, T)
+    offsets: np.ndarray  # i8 per segment: its steps are 2^(offset/8) times the joints'
+    patches: np.ndarray  # (C, isolated frames): each isolated frame's correction (_patch)
 
 
 @register
 class KinwaveCodec(Codec):
     id = "kinwave"
-    description = ("project codec: closed-loop wavelet coding down the kinematic tree, convex step allocation, "
-                   "context-adaptive arithmetic coding, guaranteed error bound (kinwave.md)")
+    description = (
+        "project codec: closed-loop wavelet coding down the kinematic tree, convex step allocation, "
+        "context-adaptive arithmetic coding, guaranteed error bound (kinwave.md)"
+    )
     knobs = (
         Knob("max_error_cm", float, 0.5, "error bound in cm, held on the decoded output", 1e-4, 1000.0),
-        Knob("error_measure", str, "joint", "what the bound limits: shell = points 3 cm off every bone (worst), "
-             "joint = max joint position error, mean = mean joint position error", choices=kinalloc.MODES),
+        Knob(
+            "error_measure",
+            str,
+            "joint",
+            "what the bound limits: shell = points 3 cm off every bone (worst), "
+            "joint = max joint position error, mean = mean joint position error",
+            choices=kinalloc.MODES,
+        ),
         Knob("bits_per_second", float, 0.0, "code to this bit rate instead of an error bound (0: off)", 0.0, 1e9),
-        Knob("window", int, 256, "segment length in frames (a power of two): the streaming delay (128 halves it, "
-             "for 2-6% more bytes at a mean-error bound)", 8, 4096),
-        Knob("levels", int, 0, "wavelet levels per segment (0: by the frame rate, the coarsest band about 1/4 s "
-             "apart: 5 at 120 fps, 4 at 60, 3 at 30 and 24)", 0, 10),
+        Knob(
+            "window",
+            int,
+            256,
+            "segment length in frames (a power of two): the streaming delay (128 halves it, "
+            "for 2-6% more bytes at a mean-error bound)",
+            8,
+            4096,
+        ),
+        Knob(
+            "levels",
+            int,
+            0,
+            "wavelet levels per segment (0: by the frame rate, the coarsest band about 1/4 s "
+            "apart: 5 at 120 fps, 4 at 60, 3 at 30 and 24)",
+            0,
+            10,
+        ),
         Knob("wavelet", str, "cdf97", "segment transform", choices=WAVELET_IDS),
         Knob("deadzone", float, 0.4, "rounding offset of the dead-zone quantiser (0.5: plain rounding)", 0.0, 0.5),
         Knob("closed_loop", bool, True, "code each joint against its parent's decoded orientation"),
-        Knob("allocation", str, "convex", "per-joint steps: convex program, or one step for every angle",
-             choices=("convex", "uniform")),
-        Knob("joint_feedback", bool, True, "under a max-error bound, correct each joint's step by the slack a first "
-             "pass measured at the points it moves"),
-        Knob("segment_steps", bool, True, "under a max-error bound, give each segment its own step offset (time-"
-             "adaptive steps, from 4 segments on): quiet stretches get coarser steps"),
-        Knob("rotation_vectors", bool, True, "code each 3-angle joint in the form that costs least: its Euler "
-             "angles, a rotation vector about its mean rotation, or Euler angles in another order (off: the file's "
-             "Euler angles always; ASF skeletons under a max bound: the root and joints near gimbal lock only)"),
-        Knob("keyframes", bool, True, "code the first one or two frames on their own where they jump far from the "
-             "rest (a bind pose or T-pose in frame 0), so they do not cost the wavelet"),
+        Knob(
+            "allocation",
+            str,
+            "convex",
+            "per-joint steps: convex program, or one step for every angle",
+            choices=("convex", "uniform"),
+        ),
+        Knob(
+            "joint_feedback",
+            bool,
+            True,
+            "under a max-error bound, correct each joint's step by the slack a first "
+            "pass measured at the points it moves",
+        ),
+        Knob(
+            "segment_steps",
+            bool,
+            True,
+            "under a max-error bound, give each segment its own step offset (time-"
+            "adaptive steps, from 4 segments on): quiet stretches get coarser steps",
+        ),
+        Knob(
+            "rotation_vectors",
+            bool,
+            True,
+            "code each 3-angle joint in the form that costs least: its Euler "
+            "angles, a rotation vector about its mean rotation, or Euler angles in another order (off: the file's "
+            "Euler angles always; ASF skeletons under a max bound: the root and joints near gimbal lock only)",
+        ),
+        Knob(
+            "keyframes",
+            bool,
+            True,
+            "code the first one or two frames on their own where they jump far from the "
+            "rest (a bind pose or T-pose in frame 0), so they do not cost the wavelet",
+        ),
     )
     quality = QualityKnob("max_error_cm", higher_is_better=False, log_scale=True)
     streaming = True
@@ -365,15 +418,18 @@ class KinwaveCodec(Codec):
             raise CodecError(f"codec kinwave: window must be a power of two, got {w}")
 
     @property
-    def delay_frames(self) -> int:          # type: ignore[override]
+    def delay_frames(self) -> int:  # type: ignore[override]
         return self.config["window"]
 
     def target_knobs(self, target: str, value: float, motion: Motion, overhead_bytes: int = 0) -> dict | None:
         """Knobs that make the encoder itself meet a rate-control target (:mod:`ratecontrol`)."""
         if target == "max_error_cm":
             measure = self.config["error_measure"]
-            return {"max_error_cm": value, "bits_per_second": 0.0,
-                    "error_measure": "joint" if measure == "mean" else measure}
+            return {
+                "max_error_cm": value,
+                "bits_per_second": 0.0,
+                "error_measure": "joint" if measure == "mean" else measure,
+            }
         if target == "mean_error_cm":
             return {"max_error_cm": value, "bits_per_second": 0.0, "error_measure": "mean"}
         if target in ("ratio", "bitrate"):
@@ -394,67 +450,88 @@ class KinwaveCodec(Codec):
         trans = _has_translation(skeleton)
         num_codes = len(rot_joints) + trans
         if len(body) < _HEAD.size:
-            raise CorruptStreamError(f"kinwave payload of {len(body)} bytes is shorter than its {_HEAD.size}-byte "
-                                     "header")
+            raise CorruptStreamError(
+                f"kinwave payload of {len(body)} bytes is shorter than its {_HEAD.size}-byte header"
+            )
         version, flags, log_w, levels, channels = _HEAD.unpack_from(body)
-        if version not in FORMATS:
-            raise CorruptStreamError(f"kinwave payload format {version}, this mocodec reads {FORMATS}")
+        if version != FORMAT:
+            raise CorruptStreamError(f"kinwave payload format {version}, this mocodec reads {FORMAT}")
         if channels != skeleton.num_channels:
-            raise CorruptStreamError(f"kinwave payload has {channels} channels, the skeleton {skeleton.num_channels}: "
-                                     "wrong skeleton?")
+            raise CorruptStreamError(
+                f"kinwave payload has {channels} channels, the skeleton {skeleton.num_channels}: wrong skeleton?"
+            )
         if log_w > 16 or not 1 <= levels <= 10 or (flags >> 1) & 3 >= len(WAVELET_IDS):
             raise CorruptStreamError(f"kinwave payload header is damaged (window 2^{log_w}, levels {levels})")
         keyframes = int(bool(flags & FLAG_KEYFRAME)) * (2 if flags & FLAG_SECOND_KEYFRAME else 1)
         lay = trendwave.layout(frames, 1 << log_w, levels, keyframes, WAVELET_IDS[(flags >> 1) & 3])
         num_offsets = lay.starts.size if flags & FLAG_OFFSETS else 0
         num_vectors = len(_three_angle_groups(skeleton)) if flags & FLAG_FORMS else 0
-        forms = means = isolated = np.zeros(0, dtype=np.int64)
-        patches = np.zeros((skeleton.num_channels, 0), dtype=np.int64)
-        if version == 1:            # step codes and offsets as bytes before the coded stream
-            head = _HEAD.size + num_codes + num_offsets
-            if len(body) < head:
-                raise CorruptStreamError(f"kinwave payload of {len(body)} bytes is shorter than its {head}-byte header")
-            codes = np.frombuffer(body, dtype=np.uint8, count=num_codes, offset=_HEAD.size)
-            offsets = np.frombuffer(body, dtype=np.int8, count=num_offsets, offset=_HEAD.size + num_codes)
-            coded = coefcoder.decode(body[head:], skeleton.num_channels, lay.num_knots, lay.padded, lay.levels)
-        else:                       # ... inside it
-            num_means = 3 * num_vectors if flags & FLAG_MEANS else 0
-            start, num_isolated = _HEAD.size, 0
-            if flags & FLAG_ISOLATED and version >= 3:
-                if len(body) <= start or not 1 <= body[start] <= MAX_ISOLATED:
-                    raise CorruptStreamError(f"kinwave payload's isolated frame count at byte {start} is damaged")
-                start, num_isolated = start + 1, body[start]
-            coded = coefcoder.decode(body[start:], skeleton.num_channels, lay.num_knots, lay.padded, lay.levels, 2,
-                                     (num_codes, num_offsets, num_vectors, num_means, num_isolated,
-                                      num_isolated * skeleton.num_channels))
-            codes, offsets, forms, running, isolated, patched = coded.side
-            means = np.diff(running, prepend=0).reshape(-1, 3)
-            patches = np.diff(patched, prepend=0).reshape(skeleton.num_channels, num_isolated)
-            if num_isolated and not (1 <= isolated[0] and (np.diff(isolated) > 1).all() and isolated[-1] < frames - 1):
-                raise CorruptStreamError("kinwave payload's isolated frames are damaged")
-            forms_ok = rotvec.valid_forms(forms) if version >= 3 else ((forms >= 0) & (forms < 2)).all()
-            if ((codes.size and not 0 <= codes.min() <= codes.max() <= 255)
-                    or np.abs(offsets).max(initial=0) > 128 or not forms_ok
-                    or np.abs(means).max(initial=0) * MEAN_QUANTUM > 360.0):
-                raise CorruptStreamError("kinwave payload's step codes are damaged")
+        num_means = 3 * num_vectors if flags & FLAG_MEANS else 0
+        start, num_isolated = _HEAD.size, 0
+        if flags & FLAG_ISOLATED:
+            if len(body) <= start or not 1 <= body[start] <= MAX_ISOLATED:
+                raise CorruptStreamError(f"kinwave payload's isolated frame count at byte {start} is damaged")
+            start, num_isolated = start + 1, body[start]
+        coded = coefcoder.decode(
+            body[start:],
+            skeleton.num_channels,
+            lay.num_knots,
+            lay.padded,
+            lay.levels,
+            CODER_REVISION,
+            (num_codes, num_offsets, num_vectors, num_means, num_isolated, num_isolated * skeleton.num_channels),
+        )
+        codes, offsets, forms, running, isolated, patched = coded.side
+        means = np.diff(running, prepend=0).reshape(-1, 3)
+        patches = np.diff(patched, prepend=0).reshape(skeleton.num_channels, num_isolated)
+        if num_isolated and not (1 <= isolated[0] and (np.diff(isolated) > 1).all() and isolated[-1] < frames - 1):
+            raise CorruptStreamError("kinwave payload's isolated frames are damaged")
+        if (
+            (codes.size and not 0 <= codes.min() <= codes.max() <= 255)
+            or np.abs(offsets).max(initial=0) > 128
+            or not rotvec.valid_forms(forms)
+            or np.abs(means).max(initial=0) * MEAN_QUANTUM > 360.0
+        ):
+            raise CorruptStreamError("kinwave payload's step codes are damaged")
         if not num_offsets:
             offsets = np.zeros(lay.starts.size, dtype=np.int8)
         if not frames:
             return np.zeros((0, skeleton.num_channels))
-        return _decoded(skeleton, codes, offsets, coded.const, coded.knots, coded.coeffs, lay, forms,
-                        _constants(skeleton, version), means, (isolated, patches), version).T
+        return _decoded(
+            skeleton,
+            codes,
+            offsets,
+            coded.const,
+            coded.knots,
+            coded.coeffs,
+            lay,
+            forms,
+            _constants(skeleton),
+            means,
+            (isolated, patches),
+        ).T
 
     # ----- streaming ------------------------------------------------------------------------
     def encoder(self, skeleton: Skeleton, fps: float) -> StreamEncoder:
         return _SegmentEncoder(self, skeleton, fps)
 
     def decoder(self, skeleton: Skeleton, fps: float) -> StreamDecoder:
-        return _SegmentDecoder(self, skeleton)
+        return _SegmentDecoder(self, skeleton, fps)
 
 
-def _decoded(skeleton: Skeleton, codes: np.ndarray, offsets: np.ndarray, const: np.ndarray, knots: np.ndarray,
-             coeffs: np.ndarray, lay: trendwave.Layout, forms: np.ndarray, constants: _Constants,
-             means: np.ndarray, isolated: tuple[np.ndarray, np.ndarray], version: int) -> np.ndarray:
+def _decoded(
+    skeleton: Skeleton,
+    codes: np.ndarray,
+    offsets: np.ndarray,
+    const: np.ndarray,
+    knots: np.ndarray,
+    coeffs: np.ndarray,
+    lay: trendwave.Layout,
+    forms: np.ndarray,
+    constants: _Constants,
+    means: np.ndarray,
+    isolated: tuple[np.ndarray, np.ndarray],
+) -> np.ndarray:
     """Channels ``(C, T)`` from the integers, in one reconstruction of all channels; the
     joints coded in another form (``forms``, one per three-angle joint, :mod:`rotvec`; ``means``
     a row of integers per such joint, or none; a WORLD form's turn from the decoded constants
@@ -464,9 +541,11 @@ def _decoded(skeleton: Skeleton, codes: np.ndarray, offsets: np.ndarray, const: 
     steps = _channel_steps(skeleton, codes)
     out = _reconstruct(knots, coeffs, const == 1, steps, lay, _factors(offsets, lay), constants)
     _patch(out, steps, *isolated)
-    moved = _world_translations(skeleton, const == 1) if version >= 3 else []
+    moved = _world_translations(skeleton, const == 1)
     world = bool(len(forms)) and bool((forms >= rotvec.WORLD).any())
-    parents = _parent_orientations(skeleton, out[:, 0]) if moved or world else None    # (the caller has frames)
+    parents = (
+        _parent_orientations(skeleton, out[:, 0]) if moved or world else np.zeros((0, 4))
+    )  # (the caller has frames)
     for j, pos in moved:
         out[pos] = _on_axes(out[pos], parents[j], inverse=True)
     groups = _three_angle_groups(skeleton)
@@ -499,8 +578,8 @@ def _isolated_frames(positions_cm: np.ndarray, skip: int) -> np.ndarray:
     far = 4.0 * usual + 1.0
     t = np.arange(1, frames - 1)
     found = t[(moves[:-1] > far) & (moves[1:] > far) & (across <= 2.0 * usual + 1.0) & (t >= max(skip, 1))]
-    keep = []
-    for f in found:                         # neither neighbour of an isolated frame is one
+    keep: list[int] = []
+    for f in found:  # neither neighbour of an isolated frame is one
         if not keep or f > keep[-1] + 1:
             keep.append(int(f))
     return np.array(keep[:MAX_ISOLATED], dtype=np.int64)
@@ -538,10 +617,10 @@ class _Encoder:
     def __init__(self, codec: KinwaveCodec, motion: Motion, output_skeleton: Skeleton | None = None):
         self.cfg = codec.config
         self.skeleton = sk = motion.skeleton
-        self.output_skeleton = output_skeleton or sk        # the decoder's: errors are measured on its joints
-        self.constants = _constants(self.output_skeleton, FORMAT)
+        self.output_skeleton = output_skeleton or sk  # the decoder's: errors are measured on its joints
+        self.constants = _constants(self.output_skeleton)
         self.motion = motion.continuous() if motion.num_frames else motion
-        self.values = self.motion.channels.T.copy()                         # (C, T)
+        self.values = self.motion.channels.T.copy()  # (C, T)
         self.frames = motion.num_frames
         pos, quat = forward_kinematics(sk, self.motion.channels)
         self.cm = 100.0 / sk.units_per_metre
@@ -583,8 +662,13 @@ class _Encoder:
         levels = self.cfg["levels"] or _levels_for(self.motion.fps)
         self.lay = trendwave.layout(self.frames, self.cfg["window"], levels, keyframes, self.cfg["wavelet"])
         flags = (FLAG_KEYFRAME if keyframes else 0) | (FLAG_SECOND_KEYFRAME if keyframes == 2 else 0)
-        self.header = _HEAD.pack(FORMAT, flags | WAVELET_IDS.index(self.cfg["wavelet"]) << 1,
-                                 int(math.log2(self.cfg["window"])), levels, self.skeleton.num_channels)
+        self.header = _HEAD.pack(
+            FORMAT,
+            flags | WAVELET_IDS.index(self.cfg["wavelet"]) << 1,
+            int(math.log2(self.cfg["window"])),
+            levels,
+            self.skeleton.num_channels,
+        )
 
     def _choose_keyframes(self) -> None:
         """Leading frames that jump away (a bind pose, a T-pose) cost the wavelet a jump, but
@@ -598,7 +682,7 @@ class _Encoder:
             passes.append(self.run_pass(self.codes(self._first_scale())))
         best = int(np.argmin([len(self.body(ps)) for ps in passes]))
         self._set_layout(best)
-        self.first_pass = passes[best]          # the search starts from it
+        self.first_pass = passes[best]  # the search starts from it
 
     def _starting_pass(self) -> _Pass:
         """The pass at the starting scale (the keyframes' trial may have run it already)."""
@@ -652,17 +736,25 @@ class _Encoder:
         moving = [k for k, (channels, _) in enumerate(groups) if not self.const[channels].all()]
         if self.cfg["error_measure"] == "mean" or not any(j.has_axis for j in self.skeleton.joints):
             live = moving
-        else:       # ASF: the body's root (under a dummy root too) and joints near their gimbal lock
-            locked = rotvec.near_lock(self.values[np.concatenate([groups[k][0] for k in moving])],
-                                      tuple(groups[k][1] for k in moving), GIMBAL_MARGIN) if moving else []
+        else:  # ASF: the body's root (under a dummy root too) and joints near their gimbal lock
+            locked = (
+                rotvec.near_lock(
+                    self.values[np.concatenate([groups[k][0] for k in moving])],
+                    tuple(groups[k][1] for k in moving),
+                    GIMBAL_MARGIN,
+                )
+                if moving
+                else np.zeros(0, bool)
+            )
             live = [k for i, k in enumerate(moving) if i == 0 or locked[i]]
         if not live or not self.frames:
             return choice
         channels = np.concatenate([groups[k][0] for k in live])
         orders = tuple(groups[k][1] for k in live)
         euler = self.values[channels, :TRIAL_FRAMES]
-        lay = trendwave.layout(euler.shape[1], self.cfg["window"], int(self.lay.levels.max(initial=1)), 0,
-                               self.cfg["wavelet"])
+        lay = trendwave.layout(
+            euler.shape[1], self.cfg["window"], int(self.lay.levels.max(initial=1)), 0, self.cfg["wavelet"]
+        )
         step = _channel_steps(self.skeleton, self.codes(self._first_scale()))[channels]
         factors = _factors(np.zeros(lay.starts.size), lay)
         original = rotvec.euler_quats(euler, orders)
@@ -670,7 +762,7 @@ class _Encoder:
         whole = rotvec.euler_quats(self.values[channels], orders)
         turned = np.flatnonzero(self.turned[live])
         whole[:, turned] = rotations.quat_multiply(pre[turned][None], whole[:, turned])
-        means = rotvec.mean_codes(whole, MEAN_QUANTUM, MEAN_LEAST)      # of pre q for the joints that may turn
+        means = rotvec.mean_codes(whole, MEAN_QUANTUM, MEAN_LEAST)  # of pre q for the joints that may turn
         self.means[live] = means
         turns = rotvec.mean_quats(means, MEAN_QUANTUM)
 
@@ -682,17 +774,35 @@ class _Encoder:
             forms = np.full(idx.size, form)
             values = sub if form == 0 else rotvec.to_forms(sub, kept, forms, turns[idx], pre=pre[idx])
             base = form % rotvec.WORLD
-            locked = rotvec.near_lock(values, kept if base == 0 else (rotvec.CODING_ORDERS[base - 2],) * idx.size,
-                                      GIMBAL_MARGIN) if base != rotvec.VECTOR else np.zeros(idx.size, bool)
+            locked = (
+                rotvec.near_lock(
+                    values, kept if base == 0 else (rotvec.CODING_ORDERS[base - 2],) * idx.size, GIMBAL_MARGIN
+                )
+                if base != rotvec.VECTOR
+                else np.zeros(idx.size, bool)
+            )
             flat, none = np.zeros(rows.size, dtype=bool), _Constants(1.0, np.zeros(rows.size))
             k_int, c_int = self._quantise(values, flat, step[rows], factors, none, lay)
-            sizes = np.array([len(coefcoder.encode(np.zeros(3, np.int64), k_int[3 * i:3 * i + 3],
-                                                   c_int[3 * i:3 * i + 3], lay.padded, lay.levels,
-                                                   revision=FORMAT)) for i in range(idx.size)])
+            sizes = np.array(
+                [
+                    len(
+                        coefcoder.encode(
+                            np.zeros(3, np.int64),
+                            k_int[3 * i : 3 * i + 3],
+                            c_int[3 * i : 3 * i + 3],
+                            lay.padded,
+                            lay.levels,
+                            revision=CODER_REVISION,
+                        )
+                    )
+                    for i in range(idx.size)
+                ]
+            )
             rec = _reconstruct(k_int, c_int, flat, step[rows], lay, factors, none)
             back = rotvec.from_forms(rec, kept, forms, turns[idx], pre[idx]) if form else rec
-            err = np.maximum(rotations.quat_distance(original[:, idx], rotvec.euler_quats(back, kept)).mean(axis=0),
-                             1e-12)
+            err = np.maximum(
+                rotations.quat_distance(original[:, idx], rotvec.euler_quats(back, kept)).mean(axis=0), 1e-12
+            )
             nonzero = (c_int != 0).reshape(idx.size, -1).sum(axis=1)
             return np.where(locked, np.inf, sizes), nonzero, err
 
@@ -700,13 +810,14 @@ class _Encoder:
         candidates = [(form, local) for form in range(rotvec.FORMS)]
         candidates += [(rotvec.WORLD + form, turned) for form in range(rotvec.FORMS)]
         costs = np.full((len(candidates), len(live)), np.inf)
-        reference = np.ones(len(live))         # the error of the file's own angles (forms 0 and WORLD)
-        results = []
+        reference = np.ones(len(live))  # the error of the file's own angles (forms 0 and WORLD)
+        results: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] = []
         for form, idx in candidates:
-            results.append(trial(form, idx) if idx.size else None)
-            if form % rotvec.WORLD == 0 and idx.size:
-                reference[idx] = results[-1][2]
-        for row, ((form, idx), result) in enumerate(zip(candidates, results)):
+            result = trial(form, idx) if idx.size else None
+            results.append(result)
+            if form % rotvec.WORLD == 0 and result is not None:
+                reference[idx] = result[2]
+        for row, ((_, idx), result) in enumerate(zip(candidates, results)):
             if result is not None:
                 sizes, nonzero, err = result
                 costs[row, idx] = sizes + nonzero / 8.0 * np.log2(err / reference[idx])
@@ -722,8 +833,13 @@ class _Encoder:
             return
         groups = _three_angle_groups(self.skeleton)
         rows = np.concatenate([groups[k][0] for k in coded])
-        values = rotvec.to_forms(self.values[rows], tuple(groups[k][1] for k in coded), self.forms[coded],
-                                 rotvec.mean_quats(self.means[coded], MEAN_QUANTUM), pre=self.turns[coded])
+        values = rotvec.to_forms(
+            self.values[rows],
+            tuple(groups[k][1] for k in coded),
+            self.forms[coded],
+            rotvec.mean_quats(self.means[coded], MEAN_QUANTUM),
+            pre=self.turns[coded],
+        )
         const = np.ptp(values, axis=1) <= CONSTANT
         if (const != self.const[rows]).any():
             self.const[rows] = const
@@ -758,7 +874,7 @@ class _Encoder:
         and with ``shell`` its own bone's shell; the translations: all)."""
         moved = _influence(self.skeleton, self.cfg["error_measure"])
         own = np.array([errors[row].max() if row.any() else errors.max() for row in moved])
-        return np.floor(8.0 * share * np.log2(reference / np.maximum(own, reference * 2.0 ** -8)))
+        return np.floor(8.0 * share * np.log2(reference / np.maximum(own, reference * 2.0**-8)))
 
     def run_pass(self, codes: np.ndarray, offsets: np.ndarray | None = None) -> _Pass:
         """Quantise and reconstruct every channel down the tree (:func:`closedloop.code_down_tree`):
@@ -770,7 +886,7 @@ class _Encoder:
         C = sk.num_channels
         knots = np.zeros((C, lay.num_knots), dtype=np.int64)
         coeffs = np.zeros((C, lay.num_coeffs), dtype=np.int64)
-        decoded = np.zeros((C, self.frames))            # zeros: a WORLD form's turn reads the rows above it
+        decoded = np.zeros((C, self.frames))  # zeros: a WORLD form's turn reads the rows above it
         patches = np.zeros((C, self.isolated.size), dtype=np.int64)
         steps = _channel_steps(sk, codes)
         factors = _factors(offsets, lay)
@@ -779,11 +895,16 @@ class _Encoder:
         def code(channels: np.ndarray, targets: np.ndarray, exact: dict) -> np.ndarray:
             step, const = steps[channels], self.const[channels]
             column = {c: i for i, c in enumerate(channels)}
-            vectors = [k for k, (g, _) in enumerate(rotvec_groups) if self.forms[k] and g[0] in column] \
-                if len(self.forms) else []
+            vectors = (
+                [k for k, (g, _) in enumerate(rotvec_groups) if self.forms[k] and g[0] in column]
+                if len(self.forms)
+                else []
+            )
             moved = [(j, [column[c] for c in pos]) for j, pos in self.world_translations if pos[0] in column]
             turned = moved or any(self.forms[k] >= rotvec.WORLD for k in vectors)
-            parents = _parent_orientations(sk, decoded[:, 0]) if turned else None     # of the decoded rows above
+            parents = (
+                _parent_orientations(sk, decoded[:, 0]) if turned else np.zeros((0, 4))
+            )  # of the decoded rows above
             values = targets.T.copy()
             if vectors:
                 cols = [column[c] for k in vectors for c in rotvec_groups[k][0]]
@@ -791,17 +912,22 @@ class _Encoder:
                 forms = self.forms[vectors]
                 turns = rotvec.mean_quats(self.means[vectors], MEAN_QUANTUM)
                 pre = _parent_turns(sk, parents)[vectors] if (forms >= rotvec.WORLD).any() else None
-                quats = np.stack([exact[j] if j in exact else
-                                  rotvec.euler_quats(values[[column[c] for c in g]], (o,))[:, 0]
-                                  for j, (g, o) in ((sk.channel_joints[rotvec_groups[k][0][0]], rotvec_groups[k])
-                                                    for k in vectors)], axis=1)
+                quats = np.stack(
+                    [
+                        exact[j] if j in exact else rotvec.euler_quats(values[[column[c] for c in g]], (o,))[:, 0]
+                        for j, (g, o) in (
+                            (sk.channel_joints[rotvec_groups[k][0][0]], rotvec_groups[k]) for k in vectors
+                        )
+                    ],
+                    axis=1,
+                )
                 values[cols] = rotvec.to_forms(values[cols], orders, forms, turns, quats, pre)
             for j, rows in moved:
                 values[rows] = _on_axes(values[rows], parents[j])
             constants = _Constants(self.constants.fraction, self.constants.base[channels])
             iso = self.isolated
             wanted = values[:, iso]
-            if iso.size:                    # the wavelet sees the neighbours' mean there
+            if iso.size:  # the wavelet sees the neighbours' mean there
                 values[:, iso] = (values[:, iso - 1] + values[:, iso + 1]) / 2.0
             k_int, c_int = self._quantise(values, const, step, factors, constants)
             knots[channels], coeffs[channels] = k_int, c_int
@@ -820,13 +946,20 @@ class _Encoder:
 
         exact = np.zeros(len(sk), dtype=bool)
         exact[sk.channel_joints[[g[0] for form, (g, _) in zip(self.forms, rotvec_groups) if form]]] = True
-        closedloop.code_down_tree(sk, self.values.T, ~self.const, self.quats, code, self.cfg["closed_loop"],
-                                  self.positions / self.cm, exact)
+        closedloop.code_down_tree(
+            sk, self.values.T, ~self.const, self.quats, code, self.cfg["closed_loop"], self.positions / self.cm, exact
+        )
         return _Pass(codes, self.const.astype(np.int64), knots, coeffs, decoded, offsets, patches)
 
-    def _quantise(self, target: np.ndarray, const: np.ndarray, step: np.ndarray,
-                  factors: tuple[np.ndarray, np.ndarray, np.ndarray], constants: _Constants,
-                  lay: trendwave.Layout | None = None):
+    def _quantise(
+        self,
+        target: np.ndarray,
+        const: np.ndarray,
+        step: np.ndarray,
+        factors: tuple[np.ndarray, np.ndarray, np.ndarray],
+        constants: _Constants,
+        lay: trendwave.Layout | None = None,
+    ):
         """Knots and dead-zone quantised coefficients of ``target (k, T)`` with steps ``(k, 1)``,
         the segments' step :func:`_factors` and the rows' :class:`_Constants`, laid out as
         ``lay`` (default: the payload's)."""
@@ -834,8 +967,9 @@ class _Encoder:
         knot_f, coeff_f, _ = factors
         quantum = step * lay.knot_quantum * knot_f
         k_int = np.round(target[:, lay.knot_frames] / quantum).astype(np.int64)
-        k_int[const] = np.round((target[const, :1] - constants.base[const, None])
-                                / (step[const] * constants.fraction)).astype(np.int64)
+        k_int[const] = np.round(
+            (target[const, :1] - constants.base[const, None]) / (step[const] * constants.fraction)
+        ).astype(np.int64)
         residual = target - trendwave.trend(k_int * quantum, lay)
         residual[const] = 0.0
         c = trendwave.analyse(residual, lay) / (step * coeff_f)
@@ -858,28 +992,33 @@ class _Encoder:
         return float(err.mean() if self.cfg["error_measure"] == "mean" else err.max())
 
     def body(self, ps: _Pass) -> bytes:
-        flags, side = self.header[1], (ps.steps,)
+        flags = self.header[1]
+        side: tuple[np.ndarray, ...] = (ps.steps,)
         if ps.offsets.any():
             flags, side = flags | FLAG_OFFSETS, side + (ps.offsets,)
         if self.forms.any():
             flags, side = flags | FLAG_FORMS, side + (self.forms,)
-        if self.means.any():        # side sequences go as differences: a running sum sends the values
+        if self.means.any():  # side sequences go as differences: a running sum sends the values
             flags, side = flags | FLAG_MEANS, side + (np.cumsum(self.means.ravel()),)
         count = b""
         if self.isolated.size:
             flags, count = flags | FLAG_ISOLATED, bytes([self.isolated.size])
             side = side + (self.isolated, np.cumsum(ps.patches.ravel()))
         head = self.header[:1] + bytes([flags]) + self.header[2:] + count
-        return head + coefcoder.encode(ps.const, ps.knots, ps.coeffs, self.lay.padded, self.lay.levels,
-                                       revision=FORMAT, side=side)
+        return head + coefcoder.encode(
+            ps.const, ps.knots, ps.coeffs, self.lay.padded, self.lay.levels, revision=CODER_REVISION, side=side
+        )
 
     def run(self) -> bytes:
         if self.frames == 0:
             return self.body(self.run_pass(self.codes(1.0)))
         if self.cfg["bits_per_second"] > 0:
             return self._to_rate(self.cfg["bits_per_second"] * self.frames / self.motion.fps / 8.0)
-        if (self.cfg["segment_steps"] and self.cfg["error_measure"] != "mean"
-                and np.count_nonzero(self.lay.padded) >= ADAPTIVE_SEGMENTS):
+        if (
+            self.cfg["segment_steps"]
+            and self.cfg["error_measure"] != "mean"
+            and np.count_nonzero(self.lay.padded) >= ADAPTIVE_SEGMENTS
+        ):
             return self._to_bound_by_segment(self.cfg["max_error_cm"])
         return self._to_bound(self.cfg["max_error_cm"])
 
@@ -888,8 +1027,8 @@ class _Encoder:
         extrapolate until the target is bracketed (first with ``exponent``, the model's
         d log measure / dx, then with the slope the last two passes measured), then secant steps
         inside the bracket. Returns (best pass meeting the goal or None, last x)."""
-        lo = hi = None                                  # (x, log value, pass)
-        previous = None                                 # the last (x, log value) before bracketing
+        lo = hi = None  # (x, log value, pass)
+        previous = None  # the last (x, log value) before bracketing
         seen: dict[bytes, tuple[float, _Pass]] = {}
         x = math.log(scale) / sign
         aim = math.log(goal * (1.0 + accept) / 2.0)
@@ -936,7 +1075,7 @@ class _Encoder:
         the encoding speed for 0.2% of the bytes)."""
         if self.cfg["error_measure"] == "mean":
             return best
-        errors = self._joint_errors(best.decoded).max(axis=0)           # per point, over the frames
+        errors = self._joint_errors(best.decoded).max(axis=0)  # per point, over the frames
         for _ in range(SLACK_PASSES):
             if errors.max() >= below * bound:
                 return best
@@ -960,7 +1099,7 @@ class _Encoder:
         takes every code coarser together by the 1/8 octaves between its worst error and the
         bound, halved while that breaks the bound."""
         while worst < ACCEPT * bound:
-            shift = int(np.floor(8.0 * math.log2(bound / max(worst, bound * 2.0 ** -8))))
+            shift = int(np.floor(8.0 * math.log2(bound / max(worst, bound * 2.0**-8))))
             while shift > 0:
                 ps = self.run_pass(np.clip(best.steps.astype(np.int64) + shift, 0, 255).astype(np.uint8), best.offsets)
                 trial = self._joint_errors(ps.decoded).max()
@@ -981,7 +1120,7 @@ class _Encoder:
         for _ in range(60):
             if best is not None:
                 body = self.body(self._use_slack(best, bound))
-                if self.error(self._decode_body(body)) <= bound:        # the guarantee, on the real decoder
+                if self.error(self._decode_body(body)) <= bound:  # the guarantee, on the real decoder
                     return body
             x -= math.log(2.0)
             ps = self.run_pass(self.codes(math.exp(x)))
@@ -1019,12 +1158,13 @@ class _Encoder:
             return passes[key]
 
         offsets = np.zeros(starts.size, dtype=np.int64)
-        if first is not None:           # segments quieter in the first pass start coarser (half their slack)
-            offsets = np.clip(np.round(4.0 * np.log2(first.max() / np.maximum(first, 1e-12))), 0,
-                              highest).astype(np.int64)
-        feasible = np.full(starts.size, lowest - 1)         # the largest offset seen within the bound
-        closest = np.zeros(starts.size)                     # the error seen there
-        failed = np.full(starts.size, highest + 1)          # the smallest offset seen over it
+        if first is not None:  # segments quieter in the first pass start coarser (half their slack)
+            offsets = np.clip(np.round(4.0 * np.log2(first.max() / np.maximum(first, 1e-12))), 0, highest).astype(
+                np.int64
+            )
+        feasible = np.full(starts.size, lowest - 1)  # the largest offset seen within the bound
+        closest = np.zeros(starts.size)  # the error seen there
+        failed = np.full(starts.size, highest + 1)  # the smallest offset seen over it
         for _ in range(SEGMENT_PASSES):
             _, seg = run(offsets)
             ok = seg <= bound
@@ -1039,20 +1179,20 @@ class _Encoder:
             target = np.where((target <= feasible) | (target >= failed), (feasible + failed) // 2, target)
             offsets = np.where(settled, offsets, target).astype(np.int64)
         offsets = np.where(feasible >= lowest, feasible, np.minimum(offsets, failed - 1))
-        offsets = np.maximum(offsets - (closest > MARGIN * bound), lowest)   # neighbours move the errors too
+        offsets = np.maximum(offsets - (closest > MARGIN * bound), lowest)  # neighbours move the errors too
         for _ in range(SEGMENT_PASSES + 3):
             ps, seg = run(offsets)
             over = seg > bound
             if not over.any():
                 body = self.body(self._use_slack(ps, bound, SEGMENT_SLACK_BELOW))
-                if self.error(self._decode_body(body)) <= bound:        # the guarantee, on the real decoder
+                if self.error(self._decode_body(body)) <= bound:  # the guarantee, on the real decoder
                     return body
                 over[:] = True
             if (offsets[over] == lowest).all():
                 break
             finer = np.maximum(np.ceil(8.0 * np.log2(np.maximum(seg, bound) / bound)), 1)
             offsets = np.where(over, np.maximum(offsets - finer, lowest), offsets).astype(np.int64)
-        return self._to_bound(bound)            # what the segments cannot fix (constant channels): one scale
+        return self._to_bound(bound)  # what the segments cannot fix (constant channels): one scale
 
     def _decode_body(self, body: bytes) -> np.ndarray:
         """What the decoder makes of ``body`` on the skeleton it will be given (a constant
@@ -1061,38 +1201,47 @@ class _Encoder:
 
     def _to_rate(self, budget_bytes: float) -> bytes:
         # size / budget falls as the scale rises: search on x = -log(scale)
-        best, _ = self._search(lambda ps: len(self.body(ps)) / budget_bytes, 1.0, 1 - RATE_TOLERANCE, 1.0, 0.8,
-                               sign=-1.0)
-        return self.body(best if best is not None else self.run_pass(self.codes(2.0 ** 40)))
+        best, _ = self._search(
+            lambda ps: len(self.body(ps)) / budget_bytes, 1.0, 1 - RATE_TOLERANCE, 1.0, 0.8, sign=-1.0
+        )
+        return self.body(best if best is not None else self.run_pass(self.codes(2.0**40)))
 
 
 class _SegmentEncoder(StreamEncoder):
-    """One payload per ``window`` frames (each decodes on its own)."""
+    """One packet per ``window`` frames, each decoding on its own: a varint frame count, then
+    the body."""
 
     def __init__(self, codec: KinwaveCodec, skeleton: Skeleton, fps: float):
         self.codec, self.skeleton, self.fps = codec, skeleton, fps
         self.pending = np.zeros((0, skeleton.num_channels))
+
+    def _packet(self, frames: np.ndarray) -> bytes:
+        return varint.pack(len(frames)) + self.codec.encode(Motion(self.skeleton, self.fps, frames))
 
     def push(self, frames: np.ndarray) -> list[bytes]:
         self.pending = np.vstack([self.pending, np.atleast_2d(frames)])
         w = self.codec.config["window"]
         out = []
         while len(self.pending) >= w:
-            out.append(self.codec.encode(Motion(self.skeleton, self.fps, self.pending[:w])))
+            out.append(self._packet(self.pending[:w]))
             self.pending = self.pending[w:]
         return out
 
     def flush(self) -> list[bytes]:
         if not len(self.pending):
             return []
-        out = [self.codec.encode(Motion(self.skeleton, self.fps, self.pending))]
+        out = [self._packet(self.pending)]
         self.pending = self.pending[:0]
         return out
 
 
 class _SegmentDecoder(StreamDecoder):
-    def __init__(self, codec: KinwaveCodec, skeleton: Skeleton):
-        self.codec, self.skeleton = codec, skeleton
+    def __init__(self, codec: KinwaveCodec, skeleton: Skeleton, fps: float):
+        self.codec, self.skeleton, self.fps = codec, skeleton, fps
 
     def push(self, packet: bytes) -> np.ndarray:
-        return self.codec.decode(packet, self.skeleton).channels
+        try:
+            frames, start = varint.unpack(packet, 0, 4)
+        except ValueError as e:
+            raise CorruptStreamError(f"kinwave packet: its frame count: {e}") from None
+        return self.codec.decode(packet[start:], self.skeleton, frames, self.fps).channels

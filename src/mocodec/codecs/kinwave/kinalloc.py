@@ -57,24 +57,25 @@ def _points(skeleton: Skeleton, closed_loop: bool, mode: str) -> np.ndarray:
     """Squared levers ``(joints, points)`` of the points the mode bounds."""
     lev = levers(skeleton, closed_loop)
     if mode != "shell":
-        return lev ** 2
+        return lev**2
     has_bone = np.array([len(c) > 0 for c in skeleton.children])
     shell = lev[:, has_bone] ** 2
     own = np.flatnonzero(has_bone)
     # the shell of joint b turns with b and with every ancestor (open loop) / b alone (closed)
     for k, b in enumerate(own):
-        shell[b, k] += SHELL_CM ** 2
+        shell[b, k] += SHELL_CM**2
         if not closed_loop:
             j = skeleton.parents[b]
             while j >= 0:
-                shell[j, k] += SHELL_CM ** 2 + 2 * SHELL_CM * lev[j, b]
+                shell[j, k] += SHELL_CM**2 + 2 * SHELL_CM * lev[j, b]
                 j = skeleton.parents[j]
     return shell
 
 
 @lru_cache(maxsize=64)
-def steps(skeleton: Skeleton, angles: tuple[int, ...], translations: int, mode: str, closed_loop: bool
-          ) -> tuple[np.ndarray, float]:
+def steps(
+    skeleton: Skeleton, angles: tuple[int, ...], translations: int, mode: str, closed_loop: bool
+) -> tuple[np.ndarray, float]:
     """Rotation steps per joint (degrees; NaN for joints without coded angles) and the
     translation step (cm) whose modelled error bound is 1 cm. ``angles[j]`` is the number of
     coded angles of joint ``j``; ``translations`` the number of coded translation channels."""
@@ -85,7 +86,7 @@ def steps(skeleton: Skeleton, angles: tuple[int, ...], translations: int, mode: 
     sq = _points(skeleton, closed_loop, mode)
     # per variable (coded joints, then the translation): rate weight and squared lever per point
     weight = np.append(m[coded], translations) if translations else m[coded]
-    lever2 = sq[coded] * (m[coded, None] * _DEG ** 2)
+    lever2 = sq[coded] * (m[coded, None] * _DEG**2)
     if translations:
         lever2 = np.vstack([lever2, np.full(sq.shape[1], float(translations))])
     lever2 = lever2[:, lever2.max(axis=0) > 0] if lever2.size else lever2
@@ -99,16 +100,21 @@ def steps(skeleton: Skeleton, angles: tuple[int, ...], translations: int, mode: 
         u[useful] = program(weight[useful], lever2[useful], u[useful])
     s = np.sqrt(u)
     rot = np.full(len(m), np.nan)
-    rot[coded] = s[:coded.size]
+    rot[coded] = s[: coded.size]
     return rot, float(s[-1]) if translations else 1.0
 
 
 def _most_rate_saved(weight: np.ndarray, x0: np.ndarray, slack, slack_jac, maxiter: int) -> np.ndarray | None:
     """x = log u maximising sum w x subject to ``slack(x) >= 0`` (SLSQP from ``x0``), or None if
     the solver returned non-finite values."""
-    res = minimize(lambda x: (-weight @ x, -weight), x0, jac=True, method="SLSQP",
-                   constraints=[{"type": "ineq", "fun": slack, "jac": slack_jac}],
-                   options={"maxiter": maxiter, "ftol": 1e-10})
+    res = minimize(
+        lambda x: (-weight @ x, -weight),
+        x0,
+        jac=True,
+        method="SLSQP",
+        constraints=[{"type": "ineq", "fun": slack, "jac": slack_jac}],
+        options={"maxiter": maxiter, "ftol": 1e-10},
+    )
     return res.x if np.isfinite(res.x).all() else None
 
 
@@ -124,7 +130,7 @@ def _mean_program(weight: np.ndarray, lever2: np.ndarray, start: np.ndarray) -> 
 
     x = _most_rate_saved(weight, np.log(start), slack, slack_jac, 300)
     u = start if x is None else np.exp(x)
-    return u / np.sqrt(lever2.T @ u).mean() ** 2     # the bound met whatever SLSQP returned
+    return u / np.sqrt(lever2.T @ u).mean() ** 2  # the bound met whatever SLSQP returned
 
 
 def _max_program(weight: np.ndarray, lever2: np.ndarray, start: np.ndarray) -> np.ndarray:
@@ -139,4 +145,4 @@ def _max_program(weight: np.ndarray, lever2: np.ndarray, start: np.ndarray) -> n
 
     x = _most_rate_saved(weight, x0, slack, slack_jac, 200)
     u = np.exp(x0 if x is None else x)
-    return u / max((lever2.T @ u).max(), 1e-300)     # feasible whatever SLSQP returned
+    return u / max((lever2.T @ u).max(), 1e-300)  # feasible whatever SLSQP returned

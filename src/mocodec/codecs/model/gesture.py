@@ -33,14 +33,33 @@ from mocodec.skeleton import Skeleton
 @register
 class GestureCodec(TabledCodec):
     id = "gesture"
-    description = "000 8.4.4: gesture segmentation, gesture-table codes with posture fallback, blending"
+    description = "gesture-based coding: gesture segmentation, gesture-table codes with posture fallback, blending"
     knobs = (
-        Knob("e", float, 5.0, "largest similarity error (8-12) of a gesture, degrees; beyond it: posture",
-             low=0.0, high=1e4),
-    ) + TABLE_KNOBS + (
-        Knob("discard", float, motiontables.DISCARD_DEG, "gesture table discard distance D in degrees (tables "
-             "trained on the clip)", low=0.0, high=1e4),
-    ) + GESTURE_KNOBS + (BLEND_KNOB, MAX_LAG_KNOB) + ROOT_KNOBS
+        (
+            Knob(
+                "e",
+                float,
+                5.0,
+                "largest similarity error (8-12) of a gesture, degrees; beyond it: posture",
+                low=0.0,
+                high=1e4,
+            ),
+        )
+        + TABLE_KNOBS
+        + (
+            Knob(
+                "discard",
+                float,
+                motiontables.DISCARD_DEG,
+                "gesture table discard distance D in degrees (tables trained on the clip)",
+                low=0.0,
+                high=1e4,
+            ),
+        )
+        + GESTURE_KNOBS
+        + (BLEND_KNOB, MAX_LAG_KNOB)
+        + ROOT_KNOBS
+    )
     quality = QualityKnob("e", higher_is_better=False, log_scale=True)
 
     def _segmentations(self, x, groups, fps):
@@ -62,8 +81,9 @@ class GestureCodec(TabledCodec):
                 best, error = motiontables.nearest(segs, moves.reshape(len(moves), -1), tables.weights(k))
             else:
                 best, error = np.zeros(len(segs), np.int64), np.full(len(segs), np.inf)
-            codes.append(np.concatenate([[-1 - postures[0]], np.where(error <= self.config["e"], best,
-                                                                      -1 - postures[1:])]))
+            codes.append(
+                np.concatenate([[-1 - postures[0]], np.where(error <= self.config["e"], best, -1 - postures[1:])])
+            )
             frames.append(at)
         return self._payload(named, x, groups, motion.fps, frames, codes)
 
@@ -72,13 +92,21 @@ class GestureCodec(TabledCodec):
         groups, tables, samples, codes, out = self._read(body, skeleton, frames, where)
         blend = round(self.config["blend"] * fps)
         for k, g in enumerate(groups.parts):
-            out[:, g.channels] = self._animate(samples[k], codes[k], tables.postures[k], tables.gestures[k], blend,
-                                               frames, f"{where}, group {g.name}")
+            out[:, g.channels] = self._animate(
+                samples[k], codes[k], tables.postures[k], tables.gestures[k], blend, frames, f"{where}, group {g.name}"
+            )
         return continuous_frames(self.id, skeleton, fps, out / channel_units(skeleton), None)
 
     @staticmethod
-    def _animate(at: np.ndarray, codes: np.ndarray, postures: np.ndarray, gestures: np.ndarray, blend: int,
-                 frames: int, where: str) -> np.ndarray:
+    def _animate(
+        at: np.ndarray,
+        codes: np.ndarray,
+        postures: np.ndarray,
+        gestures: np.ndarray,
+        blend: int,
+        frames: int,
+        where: str,
+    ) -> np.ndarray:
         """One group's frames from its sample frames and codes (8.3)."""
         posture = -1 - codes
         if (codes >= len(gestures)).any() or (posture >= len(postures)).any() or codes[0] >= 0:
@@ -89,8 +117,8 @@ class GestureCodec(TabledCodec):
             if code >= 0:
                 seq = animate.stretch(gestures[code], b - a + 1)[1:]
                 seq = animate.turned_to(seq, out[a])
-                out[a + 1:b + 1] = animate.blend_start(seq, out[a], min(blend, (b - a) // 2))
+                out[a + 1 : b + 1] = animate.blend_start(seq, out[a], min(blend, (b - a) // 2))
             else:
                 end = animate.turned_to(postures[-1 - code], out[a])
-                out[a + 1:b + 1] = animate.raised_cosine(np.array([0, b - a]), np.stack([out[a], end]), b - a + 1)[1:]
+                out[a + 1 : b + 1] = animate.raised_cosine(np.array([0, b - a]), np.stack([out[a], end]), b - a + 1)[1:]
         return out

@@ -33,7 +33,7 @@ from mocodec.skeleton import Skeleton
 
 BITS = ((4, 3, 2), (4, 4, 2), (5, 4, 3), (5, 5, 3), (6, 5, 4), (6, 6, 4), (7, 6, 5), (7, 7, 5))  # Appendix III
 LOW_STEP = 0.01
-RANGE_FLOOR = 0.01          # the smallest range (units) a channel is given
+RANGE_FLOOR = 0.01  # the smallest range (units) a channel is given
 
 
 def _columns(groups) -> list[np.ndarray]:
@@ -57,21 +57,22 @@ def _steps(span: np.ndarray, bits: tuple[int, int, int]) -> np.ndarray:
 def _segment_scale(n: int) -> np.ndarray:
     """Orthonormal DCT coefficient k of an n-frame segment over the value it stands for: the
     mean for k = 0, a cosine's amplitude for k > 0."""
-    return np.array([np.sqrt(n)] + [np.sqrt(n / 2)] * 2)[:min(3, n)]
+    return np.array([np.sqrt(n)] + [np.sqrt(n / 2)] * 2)[: min(3, n)]
 
 
 @register
 class HybridCodec(SegmentedCodec):
     id = "hybrid"
-    description = "000 8.5: gesture segmentation, three DCT coefficients per segment and DOF, blending"
+    description = "hybrid coding: gesture segmentation, three DCT coefficients per segment and DOF, blending"
     knobs = (
-        Knob("level", int, 3, "coefficient bits, Appendix III index: 0 = (4,3,2) ... 7 = (7,7,5)", low=0, high=7),
-    ) + GESTURE_KNOBS + (BLEND_KNOB,)
+        (Knob("level", int, 3, "coefficient bits of the three DCT terms: 0 = (4,3,2) ... 7 = (7,7,5)", low=0, high=7),)
+        + GESTURE_KNOBS
+        + (BLEND_KNOB,)
+    )
     quality = QualityKnob("level", higher_is_better=True)
 
     def _segmentations(self, x, groups, fps):
-        return [(segmentation.gesture_samples(x[:, cols], fps, self.gesture_params()), 0)
-                for cols in _columns(groups)]
+        return [(segmentation.gesture_samples(x[:, cols], fps, self.gesture_params()), 0) for cols in _columns(groups)]
 
     def _encode(self, motion) -> bytes:
         sk = motion.skeleton
@@ -85,13 +86,25 @@ class HybridCodec(SegmentedCodec):
             m, c = [], []
             for a, b in _bounds(at):
                 coef = fft.dct(x[a:b, cols], norm="ortho", axis=0)[:3] / _segment_scale(b - a)[:, None]
-                m.append(np.clip(np.round((coef[0] - low[cols] * LOW_STEP) / steps[0, cols]), 0,
-                                 2 ** BITS[self.config["level"]][0] - 1))
-                c.append(np.round(coef[1:] / steps[1:1 + len(coef) - 1, cols]).ravel())
+                m.append(
+                    np.clip(
+                        np.round((coef[0] - low[cols] * LOW_STEP) / steps[0, cols]),
+                        0,
+                        2 ** BITS[self.config["level"]][0] - 1,
+                    )
+                )
+                c.append(np.round(coef[1:] / steps[1 : 1 + len(coef) - 1, cols]).ravel())
             means.append(np.diff(np.array(m, dtype=np.int64), axis=0, prepend=0).T.ravel())
             cosines.append(np.concatenate(c).astype(np.int64))
-        return join_parts([encode_ints(low), encode_ints(np.diff(code, prepend=0)), modelcoding.encode_lags(frames),
-                           encode_ints(np.concatenate(means)), encode_ints(np.concatenate(cosines))])
+        return join_parts(
+            [
+                encode_ints(low),
+                encode_ints(np.diff(code, prepend=0)),
+                modelcoding.encode_lags(frames),
+                encode_ints(np.concatenate(means)),
+                encode_ints(np.concatenate(cosines)),
+            ]
+        )
 
     def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:
         where = "hybrid payload"
@@ -109,20 +122,21 @@ class HybridCodec(SegmentedCodec):
         want = sum(len(b) * cols.size for b, cols in zip(bounds, columns))
         want_cos = sum(sum(min(3, e - s) - 1 for s, e in b) * cols.size for b, cols in zip(bounds, columns))
         if means.size != want or cosines.size != want_cos:
-            raise CorruptStreamError(f"{where}: {means.size} means and {cosines.size} cosines for {want} and "
-                                     f"{want_cos} expected")
+            raise CorruptStreamError(
+                f"{where}: {means.size} means and {cosines.size} cosines for {want} and {want_cos} expected"
+            )
         out = np.zeros((frames, width))
         blend = round(self.config["blend"] * fps)
         m_at = c_at = 0
         for cols, segs in zip(columns, bounds):
-            level = np.cumsum(means[m_at:m_at + len(segs) * cols.size].reshape(cols.size, len(segs)), axis=1).T
+            level = np.cumsum(means[m_at : m_at + len(segs) * cols.size].reshape(cols.size, len(segs)), axis=1).T
             m_at += level.size
             for k, (a, b) in enumerate(segs):
                 n = b - a
                 kept = min(3, n)
                 coef = np.zeros((n, cols.size))
                 coef[0] = low[cols] * LOW_STEP + level[k] * steps[0, cols]
-                amp = cosines[c_at:c_at + (kept - 1) * cols.size].reshape(kept - 1, cols.size)
+                amp = cosines[c_at : c_at + (kept - 1) * cols.size].reshape(kept - 1, cols.size)
                 c_at += amp.size
                 coef[1:kept] = amp * steps[1:kept, cols]
                 seg = fft.idct(coef * np.pad(_segment_scale(n), (0, n - kept))[:, None], norm="ortho", axis=0)

@@ -25,7 +25,7 @@ from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
-CARRIED, EXTERNAL = b"c", b"x"      # first byte of the tables part
+CARRIED, EXTERNAL = b"c", b"x"  # first byte of the tables part
 
 
 def encode_lags(samples: list[np.ndarray]) -> bytes:
@@ -69,15 +69,22 @@ def decode_root(data: bytes, frames: np.ndarray, n: int, width: int, step: float
     return animate.hermite(frames, np.cumsum(q.reshape(-1, width), axis=0) * step, n)
 
 
-def tables_for(motion: Motion, groups: Groups, path: str, spacing_cm: float, discard_deg: float,
-               params: segmentation.GestureParams | None) -> tuple[motiontables.Tables, bytes]:
+def tables_for(
+    motion: Motion,
+    groups: Groups,
+    path: str,
+    spacing_cm: float,
+    discard_deg: float,
+    params: segmentation.GestureParams | None,
+) -> tuple[motiontables.Tables, bytes]:
     """(the tables, the payload part naming or carrying them) for coding ``motion``; tables
     trained on the clip hold gestures only if ``params`` (the gesture segmentation) is given."""
     if path:
         tables = load_tables(path, motion.skeleton, groups)
         return tables, EXTERNAL + struct.pack("<I", tables.fingerprint)
-    tables = motiontables.train([motion], spacing_cm, discard_deg, params=params or segmentation.GestureParams(),
-                                gestures=params is not None)
+    tables = motiontables.train(
+        [motion], spacing_cm, discard_deg, params=params or segmentation.GestureParams(), gestures=params is not None
+    )
     return tables, CARRIED + tables.compact()
 
 
@@ -109,12 +116,14 @@ def read_tables(part: bytes, path: str, skeleton: Skeleton, groups: Groups, wher
         raise CorruptStreamError(f"{where}: the tables part is neither tables nor a fingerprint")
     (fingerprint,) = struct.unpack("<I", rest)
     if not path:
-        raise CodecError(f"{where}: the motion was coded with motion tables {fingerprint:08x}; none is given "
-                         f"(--tables FILE)")
+        raise CodecError(
+            f"{where}: the motion was coded with motion tables {fingerprint:08x}; none is given (--tables FILE)"
+        )
     tables = load_tables(path, skeleton, groups)
     if tables.fingerprint != fingerprint:
-        raise CodecError(f"{where}: the motion was coded with motion tables {fingerprint:08x}; {path} is "
-                         f"{tables.fingerprint:08x}")
+        raise CodecError(
+            f"{where}: the motion was coded with motion tables {fingerprint:08x}; {path} is {tables.fingerprint:08x}"
+        )
     return tables
 
 

@@ -29,14 +29,14 @@ from mocodec.skeleton import Skeleton
 @dataclass(frozen=True, eq=False)
 class Group:
     name: str
-    channels: np.ndarray        # channel columns of the group's angles
-    base: int                   # the joint the group hangs from
-    points: np.ndarray          # joints whose positions the group's angles set
+    channels: np.ndarray  # channel columns of the group's angles
+    base: int  # the joint the group hangs from
+    points: np.ndarray  # joints whose positions the group's angles set
 
 
 @dataclass(frozen=True, eq=False)
 class Groups:
-    root: np.ndarray            # the root joint's channel columns
+    root: np.ndarray  # the root joint's channel columns
     parts: tuple[Group, ...]
 
     def channel_names(self, skeleton: Skeleton) -> list[list[str]]:
@@ -54,8 +54,9 @@ def model_groups(skeleton: Skeleton) -> Groups:
             continue
         owners = np.unique(joints[cols])
         base = int(skeleton.parents[owners.min()])
-        points = np.array([j for j in range(len(skeleton)) if skeleton.parents[j] in set(owners.tolist())],
-                          dtype=np.int64)
+        points = np.array(
+            [j for j in range(len(skeleton)) if skeleton.parents[j] in set(owners.tolist())], dtype=np.int64
+        )
         parts.append(Group(name, cols, base, points))
     return Groups(root, tuple(parts))
 
@@ -65,8 +66,8 @@ def posture_vectors(skeleton: Skeleton, channels: np.ndarray, groups: Groups) ->
     pos, quat = forward_kinematics(skeleton, channels)
     out = []
     for g in groups.parts:
-        rel = pos[:, g.points] - pos[:, g.base:g.base + 1]
-        rel = rotations.quat_rotate(rotations.quat_conjugate(quat[:, g.base:g.base + 1]), rel)
+        rel = pos[:, g.points] - pos[:, g.base : g.base + 1]
+        rel = rotations.quat_rotate(rotations.quat_conjugate(quat[:, g.base : g.base + 1]), rel)
         out.append(rel.reshape(len(channels), -1) / skeleton.units_per_metre)
     return out
 

@@ -42,11 +42,11 @@ from mocodec.skeleton import Skeleton
 
 MAGIC = b"MOCTB"
 VERSION = 1
-ANGLE_STEP = 0.05               # degrees
-NORM = 30                       # frames of a normalised gesture
+ANGLE_STEP = 0.05  # degrees
+NORM = 30  # frames of a normalised gesture
 SPACING_CM = 5.0
 DISCARD_DEG = 5.0
-INTERIOR_WEIGHT = 0.5           # b of (8-13), the Appendix III value for most groups
+INTERIOR_WEIGHT = 0.5  # b of (8-13), the Appendix III value for most groups
 TRAINING_RATE = 30.0
 
 
@@ -85,8 +85,9 @@ def _spaced(vectors, weights, limit):
     return kept[:m]
 
 
-def nearest(vectors: np.ndarray, entries: np.ndarray, weights: np.ndarray | None = None
-            ) -> tuple[np.ndarray, np.ndarray]:
+def nearest(
+    vectors: np.ndarray, entries: np.ndarray, weights: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """(index of the closest entry, its weighted distance) for every row of ``vectors``."""
     w = np.ones(vectors.shape[1]) if weights is None else weights
     d2 = ((vectors * vectors) @ w)[:, None] + ((entries * entries) @ w)[None, :] - 2 * (vectors * w) @ entries.T
@@ -97,8 +98,11 @@ def nearest(vectors: np.ndarray, entries: np.ndarray, weights: np.ndarray | None
 def gesture_segments(x: np.ndarray, frames: np.ndarray, norm: int) -> np.ndarray:
     """Every segment of ``x (frames, K)`` between consecutive sample ``frames`` (both ends
     included), stretched to ``norm`` frames: ``(S - 1, norm, K)``."""
-    return np.stack([stretch(x[a:b + 1], norm) for a, b in zip(frames[:-1], frames[1:])]) if len(frames) > 1 \
+    return (
+        np.stack([stretch(x[a : b + 1], norm) for a, b in zip(frames[:-1], frames[1:])])
+        if len(frames) > 1
         else np.zeros((0, norm, x.shape[1]))
+    )
 
 
 @dataclass
@@ -107,9 +111,9 @@ class Tables(modelfile.Model):
 
     WHAT = "motion tables"
 
-    groups: list[tuple[str, list[str]]]             # (group, its channel names)
-    postures: list[np.ndarray]                      # per group (M, K) degrees
-    gestures: list[np.ndarray]                      # per group (G, norm, K) degrees
+    groups: list[tuple[str, list[str]]]  # (group, its channel names)
+    postures: list[np.ndarray]  # per group (M, K) degrees
+    gestures: list[np.ndarray]  # per group (G, norm, K) degrees
     norm: int = NORM
     interior: float = INTERIOR_WEIGHT
     spacing_cm: float = SPACING_CM
@@ -135,16 +139,19 @@ class Tables(modelfile.Model):
         return similarity_weights(self.norm, self.interior, self.postures[k].shape[1])
 
     def describe(self) -> str:
-        sizes = ", ".join(f"{name} {len(p)}/{len(g)}" for (name, _), p, g in zip(self.groups, self.postures,
-                                                                                self.gestures))
+        sizes = ", ".join(
+            f"{name} {len(p)}/{len(g)}" for (name, _), p, g in zip(self.groups, self.postures, self.gestures)
+        )
         return f"postures/gestures per group: {sizes}"
 
     def check(self, skeleton: Skeleton, groups: Groups, where: str) -> None:
         names = groups.channel_names(skeleton)
         if [c for _, c in self.groups] != names:
-            raise CodecError(f"{where} was trained on another channel layout ({len(self.groups)} groups, "
-                             f"first {self.groups[0][1][:2] if self.groups else []}; this skeleton has "
-                             f"{len(names)} groups, first {names[0][:2] if names else []})")
+            raise CodecError(
+                f"{where} was trained on another channel layout ({len(self.groups)} groups, "
+                f"first {self.groups[0][1][:2] if self.groups else []}; this skeleton has "
+                f"{len(names)} groups, first {names[0][:2] if names else []})"
+            )
 
     # ----- the compact form (the file's numbers, or what a payload carries) -------------
     def compact(self) -> bytes:
@@ -177,13 +184,24 @@ class Tables(modelfile.Model):
 
     def quantised(self) -> Tables:
         """The tables as their compact form decodes (what both ends use)."""
-        return Tables.from_compact(self.compact(), self.groups, "", interior=self.interior,
-                                   spacing_cm=self.spacing_cm, discard_deg=self.discard_deg,
-                                   trained_on=self.trained_on)
+        return Tables.from_compact(
+            self.compact(),
+            self.groups,
+            "",
+            interior=self.interior,
+            spacing_cm=self.spacing_cm,
+            discard_deg=self.discard_deg,
+            trained_on=self.trained_on,
+        )
 
     def to_bytes(self) -> bytes:
-        meta = {"groups": [[name, names] for name, names in self.groups], "interior": self.interior,
-                "spacing_cm": self.spacing_cm, "discard_deg": self.discard_deg, "trained_on": self.trained_on}
+        meta = {
+            "groups": [[name, names] for name, names in self.groups],
+            "interior": self.interior,
+            "spacing_cm": self.spacing_cm,
+            "discard_deg": self.discard_deg,
+            "trained_on": self.trained_on,
+        }
         return modelfile.pack(MAGIC, VERSION, meta, self.compact())
 
     @classmethod
@@ -191,8 +209,12 @@ class Tables(modelfile.Model):
         meta, offset = modelfile.unpack(data, MAGIC, VERSION, cls.WHAT, where)
         try:
             groups = [(str(name), [str(c) for c in names]) for name, names in meta["groups"]]
-            extra = {"interior": float(meta["interior"]), "spacing_cm": float(meta["spacing_cm"]),
-                     "discard_deg": float(meta["discard_deg"]), "trained_on": list(meta["trained_on"])}
+            extra = {
+                "interior": float(meta["interior"]),
+                "spacing_cm": float(meta["spacing_cm"]),
+                "discard_deg": float(meta["discard_deg"]),
+                "trained_on": list(meta["trained_on"]),
+            }
         except (KeyError, TypeError, ValueError) as e:
             raise CodecError(f"{where}: motion tables description does not parse ({e})") from None
         try:
@@ -201,9 +223,16 @@ class Tables(modelfile.Model):
             raise CodecError(str(e)) from None
 
 
-def train(clips: list[Motion], spacing_cm: float = SPACING_CM, discard_deg: float = DISCARD_DEG,
-          norm: int = NORM, interior: float = INTERIOR_WEIGHT, params: GestureParams = GestureParams(),
-          names: list[str] | None = None, gestures: bool = True) -> Tables:
+def train(
+    clips: list[Motion],
+    spacing_cm: float = SPACING_CM,
+    discard_deg: float = DISCARD_DEG,
+    norm: int = NORM,
+    interior: float = INTERIOR_WEIGHT,
+    params: GestureParams = GestureParams(),
+    names: list[str] | None = None,
+    gestures: bool = True,
+) -> Tables:
     """Posture and gesture tables (none without ``gestures``) of every group from ``clips``
     (one channel layout)."""
     if not clips:
@@ -235,6 +264,14 @@ def train(clips: list[Motion], spacing_cm: float = SPACING_CM, discard_deg: floa
         s = np.concatenate(segments[k]) if segments[k] else np.zeros((0, norm, g.channels.size))
         flat = s.reshape(len(s), norm * g.channels.size)
         moves.append(s[_spaced(flat, similarity_weights(norm, interior, g.channels.size), discard_deg)])
-    tables = Tables([(g.name, names_) for g, names_ in zip(groups.parts, layout)], postures, moves, norm,
-                    interior, spacing_cm, discard_deg, list(names or []))
+    tables = Tables(
+        [(g.name, names_) for g, names_ in zip(groups.parts, layout)],
+        postures,
+        moves,
+        norm,
+        interior,
+        spacing_cm,
+        discard_deg,
+        list(names or []),
+    )
     return tables.quantised()

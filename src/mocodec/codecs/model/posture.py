@@ -32,10 +32,13 @@ from mocodec.skeleton import Skeleton
 @register
 class PostureCodec(TabledCodec):
     id = "posture"
-    description = "000 8.4.3: posture segmentation, posture-table codes, Hermite interpolation"
+    description = "posture-based coding: posture segmentation, posture-table codes, Hermite interpolation"
     knobs = (
-        Knob("d", float, 20.0, "posture segmentation distance (8-1), degrees", low=0.1, high=1e4),
-    ) + TABLE_KNOBS + (MAX_LAG_KNOB,) + ROOT_KNOBS
+        (Knob("d", float, 20.0, "posture segmentation distance, degrees", low=0.1, high=1e4),)
+        + TABLE_KNOBS
+        + (MAX_LAG_KNOB,)
+        + ROOT_KNOBS
+    )
     quality = QualityKnob("d", higher_is_better=False, log_scale=True)
 
     def _segmentations(self, x, groups, fps):
@@ -48,8 +51,9 @@ class PostureCodec(TabledCodec):
         frames, codes = [], []
         for k, g in enumerate(groups.parts):
             samples = segmentation.posture_samples(x[:, g.channels], self.config["d"], self.max_lag(motion.fps))
-            best, _ = motiontables.nearest(vectors[k][samples.frames],
-                                           tables.posture_vectors(motion.skeleton, groups, k))
+            best, _ = motiontables.nearest(
+                vectors[k][samples.frames], tables.posture_vectors(motion.skeleton, groups, k)
+            )
             frames.append(samples.frames)
             codes.append(best)
         return self._payload(named, x, groups, motion.fps, frames, codes)
@@ -59,7 +63,8 @@ class PostureCodec(TabledCodec):
         groups, tables, samples, codes, out = self._read(body, skeleton, frames, where)
         for g, at, mine, table in zip(groups.parts, samples, codes, tables.postures):
             if mine.size and (mine.min() < 0 or mine.max() >= len(table)):
-                raise CorruptStreamError(f"{where}: a posture code of group {g.name} is outside its "
-                                         f"{len(table)}-entry table")
+                raise CorruptStreamError(
+                    f"{where}: a posture code of group {g.name} is outside its {len(table)}-entry table"
+                )
             out[:, g.channels] = animate.hermite(at, animate.unwrap_degrees(table[mine]), frames)
         return continuous_frames(self.id, skeleton, fps, out / channel_units(skeleton), None)

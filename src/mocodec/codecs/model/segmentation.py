@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import signal
 
-FIT_SECONDS = 7 / 30            # the seven-sample, third-order fit at 30 Hz
+FIT_SECONDS = 7 / 30  # the seven-sample, third-order fit at 30 Hz
 BETA_STEP = 0.25
 BETA_LIMIT = 3.0
 
@@ -57,8 +57,8 @@ class GestureParams:
 
 @dataclass(frozen=True)
 class Samples:
-    frames: np.ndarray          # (S,) increasing sample frames, first 0 and last n - 1
-    known: np.ndarray           # (S,) the frame at which the encoder has decided each sample
+    frames: np.ndarray  # (S,) increasing sample frames, first 0 and last n - 1
+    known: np.ndarray  # (S,) the frame at which the encoder has decided each sample
 
 
 def posture_samples(x: np.ndarray, d: float, max_lag: int = 0) -> Samples:
@@ -73,8 +73,11 @@ def posture_samples(x: np.ndarray, d: float, max_lag: int = 0) -> Samples:
     frames = np.concatenate([[0], inner, [n - 1]]).astype(np.int64)
     if max_lag > 0:
         gaps = np.diff(frames)
-        extra = [np.arange(a + max_lag, b, max_lag) for a, b in zip(frames[:-1], frames[1:]) if b - a > max_lag] \
-            if (gaps > max_lag).any() else []
+        extra = (
+            [np.arange(a + max_lag, b, max_lag) for a, b in zip(frames[:-1], frames[1:]) if b - a > max_lag]
+            if (gaps > max_lag).any()
+            else []
+        )
         frames = np.sort(np.concatenate([frames, *extra])).astype(np.int64)
     return Samples(frames, frames.copy())
 

@@ -25,24 +25,39 @@ from mocodec.skeleton import Skeleton
 
 _G = segmentation.GestureParams()
 GESTURE_KNOBS = (
-    Knob("beta", float, _G.beta, "gesture threshold scale beta (8-4)", low=0.05, high=segmentation.BETA_LIMIT),
-    Knob("window", float, round(_G.window, 4), "threshold low-pass length, seconds (8-4)", low=0.01, high=10),
+    Knob("beta", float, _G.beta, "gesture threshold scale beta", low=0.05, high=segmentation.BETA_LIMIT),
+    Knob("window", float, round(_G.window, 4), "gesture threshold low-pass length, seconds", low=0.01, high=10),
     Knob("min_length", float, round(_G.min_length, 4), "shortest gesture segment, seconds", low=0.0, high=10),
     Knob("max_length", float, _G.max_length, "longest gesture segment, seconds", low=0.05, high=60),
 )
-MAX_LAG_KNOB = Knob("max_lag", float, 2.0, "longest time between posture samples, seconds (0: none, as the thesis)",
-                   low=0.0, high=3600)
+MAX_LAG_KNOB = Knob(
+    "max_lag", float, 2.0, "longest time between posture samples, seconds (0: none, as the thesis)", low=0.0, high=3600
+)
 ROOT_KNOBS = (
-    Knob("root_d", float, 20.0, "posture distance between root samples (cm + degrees, (8-1))", low=0.1, high=1e4),
+    Knob("root_d", float, 20.0, "posture distance between root samples (cm + degrees)", low=0.1, high=1e4),
     Knob("root_step", float, 1.0, "quantiser step of the root samples (cm, degrees)", low=0.001, high=100),
 )
 TABLE_KNOBS = (
-    Knob("tables", str, "", "a motion tables file (mocodec tables train); empty: trained on the clip, carried", path=True),
-    Knob("spacing", float, motiontables.SPACING_CM, "posture table spacing in cm (tables trained on the clip)",
-         low=0.01, high=1000),
+    Knob(
+        "tables", str, "", "a motion tables file (mocodec tables train); empty: trained on the clip, carried", path=True
+    ),
+    Knob(
+        "spacing",
+        float,
+        motiontables.SPACING_CM,
+        "posture table spacing in cm (tables trained on the clip)",
+        low=0.01,
+        high=1000,
+    ),
 )
-BLEND_KNOB = Knob("blend", float, round(10 / 30, 4), "seconds over which a segment eases in from the last (fig. 8-5)",
-                  low=0.0, high=10)
+BLEND_KNOB = Knob(
+    "blend",
+    float,
+    round(10 / 30, 4),
+    "seconds over which a segment eases in from the last (fig. 8-5)",
+    low=0.0,
+    high=10,
+)
 
 
 class SegmentedCodec(Codec):
@@ -66,8 +81,9 @@ class SegmentedCodec(Codec):
     def delays(self, motion: Motion) -> np.ndarray:
         """Per frame, the frames a causal coder waits before it can decode it (8.1)."""
         x = self.prepared(motion)
-        return modelcoding.worst_delays(motion.num_frames, self._segmentations(x, model_groups(motion.skeleton),
-                                                                              motion.fps))
+        return modelcoding.worst_delays(
+            motion.num_frames, self._segmentations(x, model_groups(motion.skeleton), motion.fps)
+        )
 
     def _segmentations(self, x, groups, fps) -> list[tuple[segmentation.Samples, int]]:
         """Every group's (samples, lookahead) for :meth:`delays`."""
@@ -84,18 +100,32 @@ class TabledCodec(SegmentedCodec):
         (made with ``params``, pruned at ``discard``) only if ``params`` is given."""
         cont = motion.continuous()
         groups = model_groups(motion.skeleton)
-        tables, named = modelcoding.tables_for(cont, groups, self.config["tables"], self.config["spacing"], discard,
-                                               params)
-        return (cont.channels * channel_units(motion.skeleton), groups, tables, named,
-                posture_vectors(motion.skeleton, cont.channels, groups))
+        tables, named = modelcoding.tables_for(
+            cont, groups, self.config["tables"], self.config["spacing"], discard, params
+        )
+        return (
+            cont.channels * channel_units(motion.skeleton),
+            groups,
+            tables,
+            named,
+            posture_vectors(motion.skeleton, cont.channels, groups),
+        )
 
-    def _payload(self, named: bytes, x: np.ndarray, groups: Groups, fps: float, frames: list[np.ndarray],
-                 codes: list[np.ndarray]) -> bytes:
+    def _payload(
+        self, named: bytes, x: np.ndarray, groups: Groups, fps: float, frames: list[np.ndarray], codes: list[np.ndarray]
+    ) -> bytes:
         """The body: tables part, lags (root first), codes, the root's samples."""
-        root, samples = modelcoding.encode_root(x[:, groups.root], self.config["root_d"], self.config["root_step"],
-                                                self.max_lag(fps))
-        return join_parts([named, modelcoding.encode_lags([samples.frames] + frames),
-                           encode_ints(np.concatenate(codes) if codes else np.zeros(0, np.int64)), root])
+        root, samples = modelcoding.encode_root(
+            x[:, groups.root], self.config["root_d"], self.config["root_step"], self.max_lag(fps)
+        )
+        return join_parts(
+            [
+                named,
+                modelcoding.encode_lags([samples.frames] + frames),
+                encode_ints(np.concatenate(codes) if codes else np.zeros(0, np.int64)),
+                root,
+            ]
+        )
 
     def _read(self, body: bytes, skeleton: Skeleton, frames: int, where: str):
         """(groups, tables, every group's sample frames, its codes, the output with the root
@@ -109,6 +139,7 @@ class TabledCodec(SegmentedCodec):
         if codes.size != sum(sizes):
             raise CorruptStreamError(f"{where}: {codes.size} codes for {sum(sizes)} samples")
         out = np.zeros((frames, skeleton.num_channels))
-        out[:, groups.root] = modelcoding.decode_root(root, samples[0], frames, groups.root.size,
-                                                      self.config["root_step"], where)
+        out[:, groups.root] = modelcoding.decode_root(
+            root, samples[0], frames, groups.root.size, self.config["root_step"], where
+        )
         return groups, tables, samples[1:], np.split(codes, np.cumsum(sizes)[:-1]), out

@@ -28,11 +28,12 @@ def play(normal: np.ndarray, lengths: np.ndarray) -> np.ndarray:
     """Joint quaternions ``(F, R, 4)`` of normalised segments ``(n, 16, R, 4)`` resampled to
     ``lengths`` frames each and laid end to end, unblended."""
     n, _, count, _ = normal.shape
-    flat = quatseg.denormalise(normal.transpose(0, 2, 1, 3).reshape(-1, quatseg.NORMAL_FRAMES, 4),
-                               np.repeat(lengths, count))
+    flat = quatseg.denormalise(
+        normal.transpose(0, 2, 1, 3).reshape(-1, quatseg.NORMAL_FRAMES, 4), np.repeat(lengths, count)
+    )
     seg = np.repeat(np.arange(n), lengths)
     frame = np.arange(len(seg)) - np.repeat(np.cumsum(lengths) - lengths, lengths)
-    offset = np.repeat(count * (np.cumsum(lengths) - lengths), lengths)      # segment start in flat
+    offset = np.repeat(count * (np.cumsum(lengths) - lengths), lengths)  # segment start in flat
     rows = offset[:, None] + np.arange(count)[None, :] * lengths[seg][:, None] + frame[:, None]
     return flat[rows]
 
@@ -43,8 +44,11 @@ def paths(root: np.ndarray, lengths: np.ndarray) -> np.ndarray:
     out = []
     for k, length in enumerate(lengths):
         at = np.linspace(0, quatseg.NORMAL_FRAMES - 1, length)
-        out.append(np.column_stack([np.interp(at, np.arange(quatseg.NORMAL_FRAMES), root[k, :, c])
-                                    for c in range(root.shape[2])]).reshape(length, root.shape[2]))
+        out.append(
+            np.column_stack(
+                [np.interp(at, np.arange(quatseg.NORMAL_FRAMES), root[k, :, c]) for c in range(root.shape[2])]
+            ).reshape(length, root.shape[2])
+        )
     return np.concatenate(out) if out else np.zeros((0, root.shape[2]))
 
 
@@ -60,7 +64,7 @@ def transitions(skeleton: Skeleton, lay: quatseg.Layout, q: np.ndarray, lengths:
     out = np.empty((len(cuts), 3), dtype=np.int64)
     for s, cut in enumerate(cuts):
         a, b = -(-lengths[s] // 4), -(-lengths[s + 1] // 4)
-        dist = np.sum((positions[cut - a:cut, None] - positions[None, cut:cut + b]) ** 2, axis=(2, 3))
+        dist = np.sum((positions[cut - a : cut, None] - positions[None, cut : cut + b]) ** 2, axis=(2, 3))
         i, j = np.unravel_index(np.argmin(dist), dist.shape)
         out[s] = cut, cut - a + i, cut + j
     return out
@@ -78,18 +82,19 @@ def _spans(seams: np.ndarray):
 def blend_rotations(q: np.ndarray, seams: np.ndarray) -> np.ndarray:
     out = q.copy()
     for frames, t, before, after in _spans(seams):
-        out[frames] = rotations.quat_slerp(q[before], q[after], t[:, None])          # (4.2)
+        out[frames] = rotations.quat_slerp(q[before], q[after], t[:, None])  # (4.2)
     return out
 
 
-def velocity_root(path: np.ndarray, lengths: np.ndarray, up: np.ndarray, start: np.ndarray,
-                  seams: np.ndarray) -> np.ndarray:
+def velocity_root(
+    path: np.ndarray, lengths: np.ndarray, up: np.ndarray, start: np.ndarray, seams: np.ndarray
+) -> np.ndarray:
     """(4.1): the root from the primitives' horizontal velocities and heights (``path``
     horizontal axes relative to each segment's start), blended over the transitions and summed
     from ``start``."""
     vel = np.diff(path, axis=0, prepend=path[:1])
     firsts = np.cumsum(lengths) - lengths
-    vel[firsts] = vel[np.minimum(firsts + 1, len(vel) - 1)]     # a segment's first step: its second
+    vel[firsts] = vel[np.minimum(firsts + 1, len(vel) - 1)]  # a segment's first step: its second
     vel[0] = 0.0
     both = np.where(up, path, vel)
     blended = both.copy()

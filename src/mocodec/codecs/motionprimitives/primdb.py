@@ -34,7 +34,7 @@ VERSION = 1
 START_CLUSTERS = 5
 MAX_CLUSTERS = 25
 ERROR_THRESHOLD = 0.01
-MAX_SEGMENTS = 3000          # training segments per joint, evenly taken
+MAX_SEGMENTS = 3000  # training segments per joint, evenly taken
 MAX_ITERATIONS = 30
 
 
@@ -98,8 +98,9 @@ def _converge(segs: np.ndarray, centres: np.ndarray) -> tuple[np.ndarray, np.nda
     return labels, best
 
 
-def cluster(segs: np.ndarray, rng: np.random.Generator, threshold: float = ERROR_THRESHOLD,
-            max_clusters: int = MAX_CLUSTERS) -> tuple[np.ndarray, float]:
+def cluster(
+    segs: np.ndarray, rng: np.random.Generator, threshold: float = ERROR_THRESHOLD, max_clusters: int = MAX_CLUSTERS
+) -> tuple[np.ndarray, float]:
     """Primitives ``(K, 16, 4)`` of segments ``(n, 16, 4)`` and their clustering error (5.6)."""
     segs = np.ascontiguousarray(segs, dtype=np.float64)
     k_max = min(max_clusters, len(segs))
@@ -120,9 +121,9 @@ def cluster(segs: np.ndarray, rng: np.random.Generator, threshold: float = ERROR
 class PrimitiveDB(modelfile.Model):
     WHAT = "primitive database"
 
-    primitives: dict[str, np.ndarray]          # joint name -> (K, 16, 4)
-    errors: dict[str, float]                   # clustering error (5.6) per joint
-    segments: dict[str, int]                   # training segments per joint
+    primitives: dict[str, np.ndarray]  # joint name -> (K, 16, 4)
+    errors: dict[str, float]  # clustering error (5.6) per joint
+    segments: dict[str, int]  # training segments per joint
     max_segment: int
     seed: int
     threshold: float
@@ -132,13 +133,22 @@ class PrimitiveDB(modelfile.Model):
 
     def to_bytes(self) -> bytes:
         names = list(self.primitives)
-        meta = {"frames": quatseg.NORMAL_FRAMES, "max_segment": self.max_segment, "seed": self.seed,
-                "threshold": self.threshold, "max_clusters": self.max_clusters, "fps": self.fps,
-                "trained_on": self.trained_on,
-                "joints": [{"name": n, "count": len(self.primitives[n]), "error": self.errors[n],
-                            "segments": self.segments[n]} for n in names]}
-        return modelfile.pack(MAGIC, VERSION, meta, b"".join(
-            np.asarray(self.primitives[n], dtype="<f4").tobytes() for n in names))
+        meta = {
+            "frames": quatseg.NORMAL_FRAMES,
+            "max_segment": self.max_segment,
+            "seed": self.seed,
+            "threshold": self.threshold,
+            "max_clusters": self.max_clusters,
+            "fps": self.fps,
+            "trained_on": self.trained_on,
+            "joints": [
+                {"name": n, "count": len(self.primitives[n]), "error": self.errors[n], "segments": self.segments[n]}
+                for n in names
+            ],
+        }
+        return modelfile.pack(
+            MAGIC, VERSION, meta, b"".join(np.asarray(self.primitives[n], dtype="<f4").tobytes() for n in names)
+        )
 
     @property
     def count(self) -> int:
@@ -153,15 +163,25 @@ class PrimitiveDB(modelfile.Model):
             prims, errors, segments = {}, {}, {}
             for j in meta["joints"]:
                 n = int(j["count"]) * quatseg.NORMAL_FRAMES * 4
-                prims[str(j["name"])] = np.frombuffer(data, "<f4", n, offset).reshape(
-                    -1, quatseg.NORMAL_FRAMES, 4).astype(np.float64)
+                prims[str(j["name"])] = (
+                    np.frombuffer(data, "<f4", n, offset).reshape(-1, quatseg.NORMAL_FRAMES, 4).astype(np.float64)
+                )
                 errors[str(j["name"])] = float(j["error"])
                 segments[str(j["name"])] = int(j["segments"])
                 offset += 4 * n
             if offset != len(data) - 4:
                 raise ValueError(f"{len(data) - 4 - offset} bytes left after the primitives")
-            return cls(prims, errors, segments, int(meta["max_segment"]), int(meta["seed"]), float(meta["threshold"]),
-                       int(meta["max_clusters"]), float(meta["fps"]), list(meta.get("trained_on", [])))
+            return cls(
+                prims,
+                errors,
+                segments,
+                int(meta["max_segment"]),
+                int(meta["seed"]),
+                float(meta["threshold"]),
+                int(meta["max_clusters"]),
+                float(meta["fps"]),
+                list(meta.get("trained_on", [])),
+            )
         except (ValueError, KeyError, TypeError) as e:
             raise CodecError(f"{where}: primitive database description does not parse ({e})") from None
 
@@ -171,8 +191,10 @@ class PrimitiveDB(modelfile.Model):
         empty = np.zeros((0, quatseg.NORMAL_FRAMES, 4))
         known = [n for n in lay.names if n in self.primitives]
         if 2 * len(known) < lay.count:
-            raise CodecError(f"{where} knows {len(known)} of the {lay.count} joints of this skeleton "
-                             f"({', '.join(lay.names[:3])}, ...): it was trained on another skeleton")
+            raise CodecError(
+                f"{where} knows {len(known)} of the {lay.count} joints of this skeleton "
+                f"({', '.join(lay.names[:3])}, ...): it was trained on another skeleton"
+            )
         return [self.primitives.get(n, empty) for n in lay.names]
 
 
@@ -186,8 +208,14 @@ def training_segments(motion: Motion, max_segment: int) -> tuple[quatseg.Layout,
     return lay, quatseg.normalise(q, segs), segs[:, 0]
 
 
-def train(clips: list[Motion], max_segment: int = 32, seed: int = 0, threshold: float = ERROR_THRESHOLD,
-          max_clusters: int = MAX_CLUSTERS, names: list[str] | None = None) -> PrimitiveDB:
+def train(
+    clips: list[Motion],
+    max_segment: int = 32,
+    seed: int = 0,
+    threshold: float = ERROR_THRESHOLD,
+    max_clusters: int = MAX_CLUSTERS,
+    names: list[str] | None = None,
+) -> PrimitiveDB:
     """A database from ``clips`` (one frame rate; skeletons may differ, joints go by name)."""
     if not clips:
         raise CodecError("no clips to train a primitive database on")
@@ -207,6 +235,15 @@ def train(clips: list[Motion], max_segment: int = 32, seed: int = 0, threshold: 
             continue
         segs = segs[np.linspace(0, len(segs) - 1, min(len(segs), MAX_SEGMENTS)).astype(np.int64)]
         centres, errors[name] = cluster(segs, np.random.default_rng([seed, r]), threshold, max_clusters)
-        prims[name] = centres.astype("<f4").astype(np.float64)      # as the file holds them
-    return PrimitiveDB(prims, errors, {n: counts[n] for n in prims}, max_segment, seed, threshold, max_clusters,
-                       float(fps), list(names or []))
+        prims[name] = centres.astype("<f4").astype(np.float64)  # as the file holds them
+    return PrimitiveDB(
+        prims,
+        errors,
+        {n: counts[n] for n in prims},
+        max_segment,
+        seed,
+        threshold,
+        max_clusters,
+        float(fps),
+        list(names or []),
+    )

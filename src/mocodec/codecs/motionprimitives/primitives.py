@@ -63,25 +63,49 @@ _PARTS = 12
 @register
 class PrimitivesCodec(Codec):
     id = "primitives"
-    description = "001 ch. 5: quaternion segments replaced by primitives, CDF 9/7 residuals above t_L"
+    description = "motion primitives: quaternion segments replaced by database primitives, CDF 9/7 residuals"
     knobs = (
-        Knob("t_lower", float, 0.01, "t_L: largest rotation error (rad, (5.3)) of a lower-body joint's segment",
-             low=1e-5, high=1.0),
+        Knob(
+            "t_lower",
+            float,
+            0.01,
+            "t_L: largest rotation error (rad, (5.3)) of a lower-body joint's segment",
+            low=1e-5,
+            high=1.0,
+        ),
         Knob("upper_factor", float, 2.0, "t_U / t_L (the thesis: 2)", low=0.1, high=100.0),
-        Knob("max_segment", int, 32, "S_M: longest segment in frames, the coding delay (the thesis: 16, 32, 64)",
-             low=quatseg.MIN_SEGMENT, high=256),
+        Knob(
+            "max_segment",
+            int,
+            32,
+            "S_M: longest segment in frames, the coding delay (the thesis: 16, 32, 64)",
+            low=quatseg.MIN_SEGMENT,
+            high=256,
+        ),
         Knob("bits", int, 10, "quantisation bits of the wavelet coefficients", low=4, high=20),
         Knob("db", str, "", "a primitive database file (mocodec primitives train); empty: none", path=True),
-        Knob("history", int, 16, "earlier decoded segments of the joint offered as candidates (0: the thesis)",
-             low=0, high=256),
-        Knob("smooth", int, 0, "M: frames each side of a seam searched by the smoothing of 5.3.4 (0: none)",
-             low=0, high=quatseg.MIN_SEGMENT // 2),
+        Knob(
+            "history",
+            int,
+            16,
+            "earlier decoded segments of the joint offered as candidates (0: the thesis)",
+            low=0,
+            high=256,
+        ),
+        Knob(
+            "smooth",
+            int,
+            0,
+            "M: frames each side of a seam searched by the smoothing of 5.3.4 (0: none)",
+            low=0,
+            high=quatseg.MIN_SEGMENT // 2,
+        ),
     )
     quality = QualityKnob("t_lower", higher_is_better=False, log_scale=True)
     streaming = True
 
     @property
-    def delay_frames(self) -> int:
+    def delay_frames(self) -> int:  # type: ignore[override]
         return self.config["max_segment"] + self.config["smooth"]
 
     def encoder(self, skeleton: Skeleton, fps: float) -> StreamEncoder:
@@ -118,8 +142,8 @@ class _Candidates:
         self.valid = np.zeros((lay.count, width), dtype=bool)
         self.valid[:, 0] = True
         for r, b in enumerate(books):
-            self.cand[r, 1 + history:1 + history + len(b)] = b
-            self.valid[r, 1 + history:1 + history + len(b)] = True
+            self.cand[r, 1 + history : 1 + history + len(b)] = b
+            self.valid[r, 1 + history : 1 + history + len(b)] = True
         self.filled = np.zeros(lay.count, dtype=np.int64)
 
     def nearest(self, joints: np.ndarray, segs: np.ndarray) -> np.ndarray:
@@ -127,8 +151,14 @@ class _Candidates:
         return np.argmax(np.where(self.valid[joints], dots, -1.0), axis=1)
 
     def update(self, joints: np.ndarray, decoded: np.ndarray) -> None:
-        _remember_all(np.asarray(joints, dtype=np.int64), np.ascontiguousarray(decoded), self.cand, self.valid,
-                      self.filled, self.history)
+        _remember_all(
+            np.asarray(joints, dtype=np.int64),
+            np.ascontiguousarray(decoded),
+            self.cand,
+            self.valid,
+            self.filled,
+            self.history,
+        )
 
 
 @numba.njit(cache=True)
@@ -197,21 +227,21 @@ class _Shared:
         self.candidates = _Candidates(self.lay, books, cfg["history"])
         self.bound = np.where(self.lay.lower, 1.0, cfg["upper_factor"]) * cfg["t_lower"]
         self.window = min(TRANSLATION_WINDOW, cfg["max_segment"])
-        self.before = None          # last decoded translation; the first frame's, sent as float32
+        self.before: np.ndarray | None = None  # last decoded translation; the first frame's, sent as float32
 
 
 class _Encoder(StreamEncoder, _Shared):
     def __init__(self, codec: PrimitivesCodec, skeleton: Skeleton, fps: float):
         _Shared.__init__(self, codec, skeleton, fps)
-        self.q = np.zeros((0, self.lay.count, 4))     # joint quaternions from frame `base` on
+        self.q = np.zeros((0, self.lay.count, 4))  # joint quaternions from frame `base` on
         self.t = np.zeros((0, len(self.lay.translation)))  # translations from `t_base` on
         self.base = self.t_base = 0
-        self.starts = np.zeros(self.lay.count, dtype=np.int64)   # open segment start, absolute
+        self.starts = np.zeros(self.lay.count, dtype=np.int64)  # open segment start, absolute
 
     def append(self, frames: np.ndarray) -> None:
         frames = checked_frames(PrimitivesCodec.id, self.skeleton, frames)
         q = quatseg.joint_quaternions(self.lay, frames)
-        if len(self.q):     # carry on in the hemisphere of the last frame
+        if len(self.q):  # carry on in the hemisphere of the last frame
             q *= np.where(np.sum(q[:1] * self.q[-1:], axis=-1, keepdims=True) < 0, -1.0, 1.0)
         self.q = np.concatenate((self.q, q))
         self.t = np.concatenate((self.t, frames[:, self.lay.translation]))
@@ -233,7 +263,7 @@ class _Encoder(StreamEncoder, _Shared):
         parts = self._segments(segs) + self._windows(final)
         keep = max(int(self.starts.min()) - self.base - 2, 0)
         self.q, self.base = self.q[keep:], self.base + keep
-        if not final and not len(segs) and not parts[-1] and not parts[5]:   # nothing decided, no start
+        if not final and not len(segs) and not parts[-1] and not parts[5]:  # nothing decided, no start
             return b""
         return join_parts([*parts[:-1], encode_ints(parts[-1]), b"\x01" if final else b""])
 
@@ -250,18 +280,24 @@ class _Encoder(StreamEncoder, _Shared):
             exps[rows], coeffs[rows], decoded = primresidual.fit(normal[rows], ref, self.bound[r], self.cfg["bits"])
             self.candidates.update(r, decoded)
         counts = np.bincount(joints, minlength=self.lay.count)
-        return [encode_ints(counts), encode_ints(segs[:, 2] - segs[:, 1]), encode_ints(index), encode_ints(exps),
-                primresidual.pack(coeffs[exps != primresidual.NO_RESIDUAL])]
+        return [
+            encode_ints(counts),
+            encode_ints(segs[:, 2] - segs[:, 1]),
+            encode_ints(index),
+            encode_ints(exps),
+            primresidual.pack(coeffs[exps != primresidual.NO_RESIDUAL]),
+        ]
 
     def _windows(self, final: bool) -> list:
         w = self.window
         lengths, exps, ints = [], [], []
         first = b""
-        if self.before is None and len(self.t):   # the first frame: database fingerprint, translation
+        if self.before is None and len(self.t):  # the first frame: database fingerprint, translation
             first = struct.pack("<I", self.fingerprint) + self.t[0].astype("<f4").tobytes()
             self.before = np.frombuffer(first, "<f4", offset=4).astype(np.float64)
         while len(self.t) >= w or (final and len(self.t)):
             n = min(w, len(self.t))
+            assert self.before is not None  # set with the first frame above
             e, q, decoded = primresidual.fit_window(self.t[:n], self.before, self.cfg["bits"])
             self.before = decoded[-1]
             lengths.append(n)
@@ -270,8 +306,14 @@ class _Encoder(StreamEncoder, _Shared):
             self.t = self.t[n:]
         flat = np.concatenate(ints) if ints else np.zeros(0, dtype=np.int64)
         runs = encode_zero_runs(flat)
-        return [first, encode_ints(np.concatenate(exps) if exps else np.zeros(0, np.int64)), encode_ints(runs.runs),
-                encode_ints(runs.values), encode_ints([runs.tail]), lengths]
+        return [
+            first,
+            encode_ints(np.concatenate(exps) if exps else np.zeros(0, np.int64)),
+            encode_ints(runs.runs),
+            encode_ints(runs.values),
+            encode_ints(np.array([runs.tail])),
+            lengths,
+        ]
 
 
 class _Decoder(StreamDecoder, _Shared):
@@ -279,10 +321,10 @@ class _Decoder(StreamDecoder, _Shared):
         _Shared.__init__(self, codec, skeleton, fps)
         self.pending = [np.zeros((0, 4)) for _ in range(self.lay.count)]
         self.pending_t = np.zeros((0, len(self.lay.translation)))
-        self.last_start = np.zeros(self.lay.count, dtype=np.int64)   # of each joint's last segment, in pending
-        self.started = np.zeros(self.lay.count, dtype=bool)          # the joint has had a segment
+        self.last_start = np.zeros(self.lay.count, dtype=np.int64)  # of each joint's last segment, in pending
+        self.started = np.zeros(self.lay.count, dtype=bool)  # the joint has had a segment
         self.final = False
-        self.previous = None
+        self.previous: np.ndarray | None = None
 
     def push(self, packet: bytes) -> np.ndarray:
         where = "primitives packet"
@@ -330,11 +372,11 @@ class _Decoder(StreamDecoder, _Shared):
         bad = _rebuild(joints, index, decoded, cands.cand, cands.valid, cands.filled, cands.history)
         if bad >= 0:
             raise CorruptStreamError(f"{where}: segment {bad} refers to a candidate not yet sent")
-        frames = quatseg.denormalise(decoded, lengths)           # joint-major, like the segments
+        frames = quatseg.denormalise(decoded, lengths)  # joint-major, like the segments
         bounds = np.concatenate(([0], np.cumsum(np.bincount(joints, lengths, self.lay.count)))).astype(np.int64)
         first = np.concatenate(([0], np.cumsum(counts)))
         for r in np.flatnonzero(counts):
-            self._append(r, frames[bounds[r]:bounds[r + 1]], np.cumsum(lengths[first[r]:first[r + 1]]))
+            self._append(int(r), frames[bounds[r] : bounds[r + 1]], np.cumsum(lengths[first[r] : first[r + 1]]))
 
     def _append(self, r: int, frames: np.ndarray, ends: np.ndarray) -> None:
         """Joint ``r``'s next segments (ending at ``ends`` in ``frames``) after its pending
@@ -358,9 +400,11 @@ class _Decoder(StreamDecoder, _Shared):
             raise CorruptStreamError(f"{where}: translation windows do not match their coefficients")
         pos, out = 0, [self.pending_t]
         for k, (n, m) in enumerate(zip(lengths, sizes)):
-            ints = flat[pos:pos + channels * m].reshape(channels, m)
+            ints = flat[pos : pos + channels * m].reshape(channels, m)
             pos += channels * m
-            decoded = primresidual.rebuild_window(self.before, exps[k * channels:(k + 1) * channels], ints, int(n))
+            if self.before is None:
+                raise CorruptStreamError(f"{where}: translation windows before the first frame")
+            decoded = primresidual.rebuild_window(self.before, exps[k * channels : (k + 1) * channels], ints, int(n))
             self.before = decoded[-1]
             out.append(decoded)
         self.pending_t = np.concatenate(out)

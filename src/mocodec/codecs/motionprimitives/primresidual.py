@@ -31,7 +31,7 @@ from mocodec.coding.transforms import wavelets
 LEVELS = 4
 WAVELET = "cdf97"
 MODE = "periodization"
-NO_RESIDUAL = 1                 # exponent sent for a segment coded by its primitive alone
+NO_RESIDUAL = 1  # exponent sent for a segment coded by its primitive alone
 COEFFS = 3 * quatseg.NORMAL_FRAMES
 MAX_REFINEMENTS = 6
 
@@ -42,8 +42,9 @@ def pack(coeffs: np.ndarray) -> bytes:
     of 16 coefficients (4 levels, coarsest first) per segment."""
     n = len(coeffs)
     blocks = np.asarray(coeffs, dtype=np.int64).reshape(n, 3, quatseg.NORMAL_FRAMES).transpose(1, 0, 2).reshape(3, -1)
-    return coefcoder.encode(np.zeros(3, np.int64), np.zeros((3, 0), np.int64), blocks,
-                            np.full(n, quatseg.NORMAL_FRAMES), np.full(n, LEVELS))
+    return coefcoder.encode(
+        np.zeros(3, np.int64), np.zeros((3, 0), np.int64), blocks, np.full(n, quatseg.NORMAL_FRAMES), np.full(n, LEVELS)
+    )
 
 
 def unpack(data: bytes, n: int) -> np.ndarray:
@@ -57,7 +58,7 @@ def _segment_matrices() -> tuple[np.ndarray, np.ndarray]:
 
 
 def _logs(target: np.ndarray, ref: np.ndarray) -> np.ndarray:
-    d = rotations.quat_multiply(rotations.quat_conjugate(ref), target)                       # (5.7)
+    d = rotations.quat_multiply(rotations.quat_conjugate(ref), target)  # (5.7)
     d = np.where(d[..., :1] < 0, -d, d)
     return rotations.quat_log(d)
 
@@ -65,7 +66,7 @@ def _logs(target: np.ndarray, ref: np.ndarray) -> np.ndarray:
 def _differences(coeffs: np.ndarray) -> np.ndarray:
     """The differences ``exp(S c)`` (5.7) that coefficients ``(n, 48)`` give, ``(n, 16, 4)``."""
     _, synthesis = _segment_matrices()
-    v = coeffs.reshape(len(coeffs), 3, -1) @ synthesis.T                                      # (n, 3, 16)
+    v = coeffs.reshape(len(coeffs), 3, -1) @ synthesis.T  # (n, 3, 16)
     return rotations.quat_exp(v.transpose(0, 2, 1))
 
 
@@ -90,8 +91,12 @@ def fit(target: np.ndarray, ref: np.ndarray, bound: np.ndarray, bits: int) -> tu
     for _ in range(MAX_REFINEMENTS):
         full = np.round(c / steps(e)[:, None]).astype(np.int64)
         rank = np.empty_like(full)
-        np.put_along_axis(rank, np.argsort(-np.abs(full), axis=1, kind="stable"),
-                          np.broadcast_to(np.arange(COEFFS), full.shape).copy(), axis=1)
+        np.put_along_axis(
+            rank,
+            np.argsort(-np.abs(full), axis=1, kind="stable"),
+            np.broadcast_to(np.arange(COEFFS), full.shape).copy(),
+            axis=1,
+        )
         t, r, b = target[need], ref[need], bound[need]
 
         def within(k):
@@ -141,7 +146,9 @@ def _ramp(end: np.ndarray, frames: int) -> np.ndarray:
     return np.outer(np.arange(1, frames + 1) / frames, end)
 
 
-def fit_window(x: np.ndarray, before: np.ndarray, bits: int, keep: float = 0.5) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def fit_window(
+    x: np.ndarray, before: np.ndarray, bits: int, keep: float = 0.5
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(exponents ``(C,)``, integers ``(C, 1 + m)`` = ramp end then coefficients, decoded
     window ``(frames, C)``) of a translation window ``x`` following the decoded ``before``."""
     frames = len(x)

@@ -12,8 +12,9 @@ where the joint's speed peaks or bottoms out (the beats of a rhythmic motion). A
 at the first crossing at least :data:`MIN_SEGMENT` frames after its start, or after at most
 ``max_len`` frames (S_M). Beyond the thesis, a segment also ends before a jump, a frame
 that turns a joint faster than :data:`JUMP_SPEED` (the T-pose that starts many BVH clips):
-a 16-frame resampling cannot hold a step, and would smear it over the frames after it. Every segment is resampled by slerp to :data:`NORMAL_FRAMES`
-frames (its first and last frame kept exactly) for comparison with primitives, and back.
+a 16-frame resampling cannot hold a step, and would smear it over the frames after it.
+Every segment is resampled by slerp to :data:`NORMAL_FRAMES` frames (its first and last frame
+kept exactly) for comparison with primitives, and back.
 
 Whether frame ``e`` ends a segment depends on frames up to ``e`` only, so a segment is known
 ``max_len`` frames after its start at the latest: the coding delay of a streaming coder.
@@ -33,19 +34,19 @@ from mocodec.skeleton import Skeleton
 NORMAL_FRAMES = 16
 MIN_SEGMENT = 15
 LOWER_BODY = ("left_leg", "right_leg")
-JUMP_SPEED = 30.0               # rad/s: about four times a fast kick's peak joint speed
+JUMP_SPEED = 30.0  # rad/s: about four times a fast kick's peak joint speed
 
 
 @dataclass(frozen=True, eq=False)
 class Layout:
     """Which channels of a skeleton are which joint's rotation, and which are translations."""
 
-    joints: np.ndarray              # (R,) skeleton index of every joint with rotation channels
+    joints: np.ndarray  # (R,) skeleton index of every joint with rotation channels
     names: tuple[str, ...]
     orders: tuple[str, ...]
     columns: tuple[np.ndarray, ...]  # channel columns of each joint's angles, in rotation order
-    translation: np.ndarray         # translation channel columns
-    lower: np.ndarray               # (R,) bool: the joint is the root or in a leg (threshold t_L)
+    translation: np.ndarray  # translation channel columns
+    lower: np.ndarray  # (R,) bool: the joint is the root or in a leg (threshold t_L)
 
     @property
     def count(self) -> int:
@@ -54,17 +55,22 @@ class Layout:
 
 @lru_cache(maxsize=32)
 def layout(skeleton: Skeleton) -> Layout:
-    joints, columns = [], []
-    for j, joint in enumerate(skeleton.joints):
-        if joint.rotation_order:
-            joints.append(j)
-            columns.append(skeleton.channel_offsets[j] + np.array(joint.rotation_channel_indices(), dtype=np.int64))
-    joints = np.array(joints, dtype=np.int64)
+    rotating = [j for j, joint in enumerate(skeleton.joints) if joint.rotation_order]
+    columns = [
+        skeleton.channel_offsets[j] + np.array(skeleton.joints[j].rotation_channel_indices(), dtype=np.int64)
+        for j in rotating
+    ]
+    joints = np.array(rotating, dtype=np.int64)
     parts = skeleton.body_parts
     lower = np.array([j == 0 or parts[j] in LOWER_BODY for j in joints], dtype=bool)
-    return Layout(joints, tuple(skeleton.joints[j].name for j in joints),
-                  tuple(skeleton.joints[j].rotation_order for j in joints), tuple(columns),
-                  np.flatnonzero(~skeleton.rotation_mask), lower)
+    return Layout(
+        joints,
+        tuple(skeleton.joints[j].name for j in joints),
+        tuple(skeleton.joints[j].rotation_order for j in joints),
+        tuple(columns),
+        np.flatnonzero(~skeleton.rotation_mask),
+        lower,
+    )
 
 
 def joint_quaternions(lay: Layout, channels: np.ndarray) -> np.ndarray:
@@ -82,7 +88,7 @@ def quaternions_to_channels(lay: Layout, q: np.ndarray, translation: np.ndarray,
     angles are each rotation's principal Euler angles (the caller makes them continuous)."""
     out = np.zeros((len(q), num_channels))
     out[:, lay.translation] = translation
-    for order in dict.fromkeys(lay.orders):          # joints of one order in one call
+    for order in dict.fromkeys(lay.orders):  # joints of one order in one call
         rs = [r for r, o in enumerate(lay.orders) if o == order]
         angles = rotations.quat_to_partial_euler(q[:, rs], order)
         out[:, np.concatenate([lay.columns[r] for r in rs])] = angles.reshape(len(q), len(rs) * angles.shape[-1])
@@ -96,8 +102,8 @@ def speed_change(q: np.ndarray, fps: float) -> np.ndarray:
     out = np.zeros(q.shape[:2])
     if len(q) < 2:
         return out
-    w = 2.0 * fps * rotations.quat_log(rotations.quat_multiply(rotations.quat_conjugate(q[:-1]), q[1:]))   # (5.1)
-    a = np.diff(w, axis=0) * fps                                                                             # (5.2)
+    w = 2.0 * fps * rotations.quat_log(rotations.quat_multiply(rotations.quat_conjugate(q[:-1]), q[1:]))  # (5.1)
+    a = np.diff(w, axis=0) * fps  # (5.2)
     out[2:] = np.sum(a * w[1:], axis=-1)
     out[1:][np.linalg.norm(w, axis=-1) > JUMP_SPEED] = np.inf
     return out
@@ -229,8 +235,12 @@ def segment_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def _smooth_seams(q, lefts, cuts, rights, m, jump):
     for s in range(len(cuts)):
         cut = cuts[s]
-        across = abs(q[cut - 1, 0] * q[cut, 0] + q[cut - 1, 1] * q[cut, 1] + q[cut - 1, 2] * q[cut, 2]
-                     + q[cut - 1, 3] * q[cut, 3])
+        across = abs(
+            q[cut - 1, 0] * q[cut, 0]
+            + q[cut - 1, 1] * q[cut, 1]
+            + q[cut - 1, 2] * q[cut, 2]
+            + q[cut - 1, 3] * q[cut, 3]
+        )
         if 2.0 * np.arccos(min(across, 1.0)) > jump:
             continue
         best, x, y = -1.0, cut - 1, cut
@@ -244,8 +254,7 @@ def _smooth_seams(q, lefts, cuts, rights, m, jump):
             slerp_into(q[k], a, b, (k - x) / (y - x))
 
 
-def smooth_seams(q: np.ndarray, cuts: np.ndarray, lefts: np.ndarray, rights: np.ndarray, m: int,
-                 fps: float) -> None:
+def smooth_seams(q: np.ndarray, cuts: np.ndarray, lefts: np.ndarray, rights: np.ndarray, m: int, fps: float) -> None:
     """The smoothing of consecutive segments of 5.3.4, in place on one joint's frames ``q (n, 4)``.
 
     At each seam ``cuts[s]`` (the first frame of a segment; the one before it starts at
@@ -258,5 +267,4 @@ def smooth_seams(q: np.ndarray, cuts: np.ndarray, lefts: np.ndarray, rights: np.
     joint crosses faster than :data:`JUMP_SPEED` (a step such as a T-pose frame 0 is not
     motion to smooth)."""
     if len(cuts) and m > 0:
-        _smooth_seams(q, lefts.astype(np.int64), cuts.astype(np.int64), rights.astype(np.int64), m,
-                      JUMP_SPEED / fps)
+        _smooth_seams(q, lefts.astype(np.int64), cuts.astype(np.int64), rights.astype(np.int64), m, JUMP_SPEED / fps)

@@ -39,8 +39,8 @@ MAGIC = b"MOCRD"
 VERSION = 1
 COUNT = 20
 MAX_ITERATIONS = 30
-QUAT_STEP = 1.0 / 4096          # compact form: quaternion components, about 0.03 degrees
-ROOT_STEP = 0.01                # compact form: root trajectory, skeleton units
+QUAT_STEP = 1.0 / 4096  # compact form: quaternion components, about 0.03 degrees
+ROOT_STEP = 0.01  # compact form: root trajectory, skeleton units
 _CHUNK = 64
 
 
@@ -55,7 +55,7 @@ def body_cuts(q: np.ndarray, fps: float, max_segment: int) -> np.ndarray:
     g = quatseg.speed_change(q, fps)
     jump = np.isinf(g)
     g = np.where(jump, 0.0, g).sum(axis=1)
-    g[jump.mean(axis=1) > 0.5] = np.inf          # the whole body jumps (a T-pose frame 0), not one joint
+    g[jump.mean(axis=1) > 0.5] = np.inf  # the whole body jumps (a T-pose frame 0), not one joint
     segs = quatseg.chop(g[:, None], np.zeros(1, dtype=np.int64), max_segment, final=True)
     return np.array(segs, dtype=np.int64).reshape(-1, 3)[:, 1:]
 
@@ -83,8 +83,8 @@ def body_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     ``b (K, 16, R, 4)``: the sum over joints of (5.4)."""
     out = np.empty((len(a), len(b)))
     for s in range(0, len(a), _CHUNK):
-        dots = np.abs(np.einsum("nfrc,kfrc->nkfr", a[s:s + _CHUNK], b)).min(axis=2)
-        out[s:s + _CHUNK] = quatseg.distance_of_dot(dots).sum(axis=2)
+        dots = np.abs(np.einsum("nfrc,kfrc->nkfr", a[s : s + _CHUNK], b)).min(axis=2)
+        out[s : s + _CHUNK] = quatseg.distance_of_dot(dots).sum(axis=2)
     return out
 
 
@@ -92,13 +92,13 @@ def medoids(dist: np.ndarray, count: int, rng: np.random.Generator) -> np.ndarra
     """Indices of ``count`` k-medoids of a distance matrix: k-means++ seeding, then assignment
     and medoid updates until nothing changes."""
     n = len(dist)
-    chosen = [int(rng.integers(n))]
-    while len(chosen) < min(count, n):
-        near = dist[:, chosen].min(axis=1) ** 2
+    seeds = [int(rng.integers(n))]
+    while len(seeds) < min(count, n):
+        near = dist[:, seeds].min(axis=1) ** 2
         if near.sum() <= 0.0:
             break
-        chosen.append(int(rng.choice(n, p=near / near.sum())))
-    chosen = np.array(chosen)
+        seeds.append(int(rng.choice(n, p=near / near.sum())))
+    chosen = np.array(seeds)
     for _ in range(MAX_ITERATIONS):
         labels = np.argmin(dist[:, chosen], axis=1)
         moved = chosen.copy()
@@ -109,7 +109,7 @@ def medoids(dist: np.ndarray, count: int, rng: np.random.Generator) -> np.ndarra
         if np.array_equal(moved, chosen):
             break
         chosen = moved
-    _, first = np.unique(chosen, return_index=True)     # two clusters can settle on one medoid
+    _, first = np.unique(chosen, return_index=True)  # two clusters can settle on one medoid
     return chosen[np.sort(first)]
 
 
@@ -120,13 +120,13 @@ class RhythmDB(modelfile.Model):
     WHAT = "rhythm database"
 
     names: tuple[str, ...]
-    rotations: np.ndarray          # (K, 16, R, 4)
-    root: np.ndarray               # (K, 16, T)
-    lengths: np.ndarray            # (K,) frames
+    rotations: np.ndarray  # (K, 16, R, 4)
+    root: np.ndarray  # (K, 16, T)
+    lengths: np.ndarray  # (K,) frames
     fps: float
     max_segment: int
     seed: int
-    error: float                   # mean whole-body distance of a training segment to its primitive
+    error: float  # mean whole-body distance of a training segment to its primitive
     trained_on: list[str] = field(default_factory=list)
 
     @property
@@ -134,11 +134,20 @@ class RhythmDB(modelfile.Model):
         return len(self.lengths)
 
     def to_bytes(self) -> bytes:
-        meta = {"frames": quatseg.NORMAL_FRAMES, "joints": list(self.names), "translations": self.root.shape[2],
-                "lengths": [int(n) for n in self.lengths], "fps": self.fps, "max_segment": self.max_segment,
-                "seed": self.seed, "error": self.error, "trained_on": self.trained_on}
-        return modelfile.pack(MAGIC, VERSION, meta, np.asarray(self.rotations, "<f4").tobytes()
-                              + np.asarray(self.root, "<f4").tobytes())
+        meta = {
+            "frames": quatseg.NORMAL_FRAMES,
+            "joints": list(self.names),
+            "translations": self.root.shape[2],
+            "lengths": [int(n) for n in self.lengths],
+            "fps": self.fps,
+            "max_segment": self.max_segment,
+            "seed": self.seed,
+            "error": self.error,
+            "trained_on": self.trained_on,
+        }
+        return modelfile.pack(
+            MAGIC, VERSION, meta, np.asarray(self.rotations, "<f4").tobytes() + np.asarray(self.root, "<f4").tobytes()
+        )
 
     @classmethod
     def from_bytes(cls, data: bytes, where: str) -> RhythmDB:
@@ -150,16 +159,26 @@ class RhythmDB(modelfile.Model):
                 raise ValueError("the primitives do not fill the file")
             rot = np.frombuffer(data, "<f4", k * f * len(names) * 4, offset).reshape(k, f, len(names), 4)
             root = np.frombuffer(data, "<f4", k * f * t, offset + rot.nbytes).reshape(k, f, t)
-            return cls(names, rot.astype(np.float64), root.astype(np.float64), lengths, float(meta["fps"]),
-                       int(meta["max_segment"]), int(meta["seed"]), float(meta["error"]), list(meta["trained_on"]))
+            return cls(
+                names,
+                rot.astype(np.float64),
+                root.astype(np.float64),
+                lengths,
+                float(meta["fps"]),
+                int(meta["max_segment"]),
+                int(meta["seed"]),
+                float(meta["error"]),
+                list(meta["trained_on"]),
+            )
         except (ValueError, KeyError, TypeError) as e:
             raise CodecError(f"{where}: rhythm database description does not parse ({e})") from None
 
-
     def check(self, lay: quatseg.Layout, translations: int, fps: float, where: str) -> None:
         if tuple(lay.names) != self.names or translations != self.root.shape[2]:
-            raise CodecError(f"{where} was trained on another skeleton ({len(self.names)} joints "
-                             f"{', '.join(self.names[:3])}, ...; this one has {lay.count})")
+            raise CodecError(
+                f"{where} was trained on another skeleton ({len(self.names)} joints "
+                f"{', '.join(self.names[:3])}, ...; this one has {lay.count})"
+            )
         if abs(self.fps - fps) > 1e-6 * fps:
             raise CodecError(f"{where} was trained at {self.fps:g} Hz, the motion is {fps:g} Hz")
 
@@ -167,12 +186,18 @@ class RhythmDB(modelfile.Model):
     def compact(self) -> bytes:
         rot = np.round(self.rotations / QUAT_STEP).astype(np.int64)
         root = np.round(self.root / ROOT_STEP).astype(np.int64)
-        return join_parts([encode_ints(self.lengths), encode_ints(np.diff(rot, axis=1, prepend=0)),
-                           encode_ints(np.diff(root, axis=1, prepend=0))])
+        return join_parts(
+            [
+                encode_ints(self.lengths),
+                encode_ints(np.diff(rot, axis=1, prepend=0)),
+                encode_ints(np.diff(root, axis=1, prepend=0)),
+            ]
+        )
 
     @classmethod
-    def from_compact(cls, data: bytes, lay: quatseg.Layout, translations: int, fps: float, max_segment: int,
-                     where: str) -> RhythmDB:
+    def from_compact(
+        cls, data: bytes, lay: quatseg.Layout, translations: int, fps: float, max_segment: int, where: str
+    ) -> RhythmDB:
         lengths, rot, root = (decode_ints(p) for p in split_parts(data, 3, where))
         k, f = len(lengths), quatseg.NORMAL_FRAMES
         if rot.size != k * f * lay.count * 4 or root.size != k * f * translations or lengths.min(initial=1) < 1:
@@ -193,26 +218,48 @@ def segments(clip: Motion, max_segment: int) -> tuple[np.ndarray, np.ndarray, np
     lay = quatseg.layout(clip.skeleton)
     q = quatseg.joint_quaternions(lay, clip.channels)
     cuts = body_cuts(q, clip.fps, max_segment)
-    return cuts, normal_rotations(q, cuts), normal_root(clip.channels[:, lay.translation], cuts, vertical(clip.skeleton))
+    return (
+        cuts,
+        normal_rotations(q, cuts),
+        normal_root(clip.channels[:, lay.translation], cuts, vertical(clip.skeleton)),
+    )
 
 
-def from_segments(names: tuple[str, ...], rot: np.ndarray, root: np.ndarray, lengths: np.ndarray, fps: float,
-                  count: int, max_segment: int, seed: int, trained_on: list[str]) -> RhythmDB:
+def from_segments(
+    names: tuple[str, ...],
+    rot: np.ndarray,
+    root: np.ndarray,
+    lengths: np.ndarray,
+    fps: float,
+    count: int,
+    max_segment: int,
+    seed: int,
+    trained_on: list[str],
+) -> RhythmDB:
     """``count`` k-medoids of whole-body segments (:func:`segments`) as a database."""
     if count < 1:
         raise CodecError(f"a rhythm database needs at least one primitive, not {count}")
     dist = body_distance(rot, rot)
     chosen = medoids(dist, count, np.random.default_rng(seed))
     labels = np.argmin(dist[:, chosen], axis=1)
-    labels[chosen] = np.arange(len(chosen))     # a medoid at zero distance from another keeps its own
+    labels[chosen] = np.arange(len(chosen))  # a medoid at zero distance from another keeps its own
     mean_length = np.array([np.round(lengths[labels == k].mean()) for k in range(len(chosen))], dtype=np.int64)
-    return RhythmDB(names, rot[chosen].astype("<f4").astype(np.float64), root[chosen].astype("<f4").astype(np.float64),
-                    mean_length, float(fps), max_segment, seed, float(dist[np.arange(len(dist)), chosen[labels]].mean()),
-                    trained_on)
+    return RhythmDB(
+        names,
+        rot[chosen].astype("<f4").astype(np.float64),
+        root[chosen].astype("<f4").astype(np.float64),
+        mean_length,
+        float(fps),
+        max_segment,
+        seed,
+        float(dist[np.arange(len(dist)), chosen[labels]].mean()),
+        trained_on,
+    )
 
 
-def train(clips: list[Motion], count: int = COUNT, max_segment: int = 32, seed: int = 0,
-          names: list[str] | None = None) -> RhythmDB:
+def train(
+    clips: list[Motion], count: int = COUNT, max_segment: int = 32, seed: int = 0, names: list[str] | None = None
+) -> RhythmDB:
     """``count`` whole-body primitives of ``clips`` (one skeleton and frame rate)."""
     if not clips:
         raise CodecError("no clips to train a rhythm database on")
@@ -225,5 +272,14 @@ def train(clips: list[Motion], count: int = COUNT, max_segment: int = 32, seed: 
         rot.append(r)
         root.append(t)
         lengths.append(cuts[:, 1] - cuts[:, 0])
-    return from_segments(lay.names, np.concatenate(rot), np.concatenate(root), np.concatenate(lengths), fps,
-                         count, max_segment, seed, list(names or []))
+    return from_segments(
+        lay.names,
+        np.concatenate(rot),
+        np.concatenate(root),
+        np.concatenate(lengths),
+        fps,
+        count,
+        max_segment,
+        seed,
+        list(names or []),
+    )

@@ -33,7 +33,7 @@ from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.skeleton import Skeleton
 
 _PARTS = 4
-CARRIED, EXTERNAL = b"c", b"x"      # first byte of the database part
+CARRIED, EXTERNAL = b"c", b"x"  # first byte of the database part
 
 
 def _key_step(skeleton: Skeleton) -> float:
@@ -44,15 +44,21 @@ def _key_step(skeleton: Skeleton) -> float:
 @register
 class RhythmicCodec(Codec):
     id = "rhythmic"
-    description = "001 ch. 4: whole-body segments replaced by primitive references, blended on decode"
+    description = "rhythmic motion: whole-body segments replaced by primitive references, blended on decode"
     knobs = (
-        Knob("primitives", int, rhythmdb.COUNT, "primitives made from the clip and carried (db empty)",
-             low=1, high=4096),
+        Knob(
+            "primitives", int, rhythmdb.COUNT, "primitives made from the clip and carried (db empty)", low=1, high=4096
+        ),
         Knob("max_segment", int, 32, "longest segment in frames", low=quatseg.MIN_SEGMENT, high=256),
         Knob("db", str, "", "a rhythm database file (mocodec rhythm train); empty: made from the clip", path=True),
         Knob("blend", bool, True, "blend consecutive segments (4.2.2); false: butt them together"),
-        Knob("root", str, "keys", "keys: root position sent at every seam; velocity: from the primitives (4.2.2)",
-             choices=("keys", "velocity")),
+        Knob(
+            "root",
+            str,
+            "keys",
+            "keys: root position sent at every seam; velocity: from the primitives (4.2.2)",
+            choices=("keys", "velocity"),
+        ),
     )
     quality = QualityKnob("primitives", higher_is_better=True, log_scale=True)
 
@@ -63,9 +69,17 @@ class RhythmicCodec(Codec):
             db = self._external(lay, sk, motion.fps)
             carried = EXTERNAL + struct.pack("<I", db.fingerprint)
         else:
-            db = rhythmdb.from_segments(lay.names, rot, root, cuts[:, 1] - cuts[:, 0], motion.fps,
-                                        self.config["primitives"], self.config["max_segment"], 0, []
-                                        ).as_compact(lay, motion.fps)
+            db = rhythmdb.from_segments(
+                lay.names,
+                rot,
+                root,
+                cuts[:, 1] - cuts[:, 0],
+                motion.fps,
+                self.config["primitives"],
+                self.config["max_segment"],
+                0,
+                [],
+            ).as_compact(lay, motion.fps)
             carried = CARRIED + db.compact()
         index = np.argmin(rhythmdb.body_distance(rot, db.rotations), axis=1)
         if self.config["root"] == "keys":
@@ -100,8 +114,9 @@ class RhythmicCodec(Codec):
         else:
             if len(parts[2]) != 4 * width:
                 raise CorruptStreamError(f"{where}: a {len(parts[2])}-byte start does not match the skeleton")
-            translation = blend.velocity_root(path, lengths, rhythmdb.vertical(skeleton),
-                                              np.frombuffer(parts[2], "<f4").astype(np.float64), seams)
+            translation = blend.velocity_root(
+                path, lengths, rhythmdb.vertical(skeleton), np.frombuffer(parts[2], "<f4").astype(np.float64), seams
+            )
         channels = quatseg.quaternions_to_channels(lay, q, translation, skeleton.num_channels)
         return continuous_frames(self.id, skeleton, fps, channels, None)
 
@@ -115,16 +130,20 @@ class RhythmicCodec(Codec):
         if kind == CARRIED:
             if self.config["db"]:
                 raise CodecError(f"{where}: the motion carries its own primitives; drop --db")
-            return rhythmdb.RhythmDB.from_compact(rest, lay, len(lay.translation), fps, self.config["max_segment"],
-                                                  where)
+            return rhythmdb.RhythmDB.from_compact(
+                rest, lay, len(lay.translation), fps, self.config["max_segment"], where
+            )
         if kind != EXTERNAL or len(rest) != 4:
             raise CorruptStreamError(f"{where}: the database part is neither primitives nor a fingerprint")
         (fingerprint,) = struct.unpack("<I", rest)
         if not self.config["db"]:
-            raise CodecError(f"{where}: the motion was coded with rhythm database {fingerprint:08x}; "
-                             f"none is given (--db FILE)")
+            raise CodecError(
+                f"{where}: the motion was coded with rhythm database {fingerprint:08x}; none is given (--db FILE)"
+            )
         db = self._external(lay, skeleton, fps)
         if db.fingerprint != fingerprint:
-            raise CodecError(f"{where}: the motion was coded with rhythm database {fingerprint:08x}; "
-                             f"{self.config['db']} is {db.fingerprint:08x}")
+            raise CodecError(
+                f"{where}: the motion was coded with rhythm database {fingerprint:08x}; "
+                f"{self.config['db']} is {db.fingerprint:08x}"
+            )
         return db

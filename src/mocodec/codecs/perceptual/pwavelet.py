@@ -43,7 +43,7 @@ from mocodec.errors import CorruptStreamError
 from mocodec.skeleton import Skeleton
 
 WAVELET = "d4"
-MODE = "symmetric"                # mirrored ends: no jump where a slice ends elsewhere than it began
+MODE = "symmetric"  # mirrored ends: no jump where a slice ends elsewhere than it began
 
 
 def channel_bone_lengths(skeleton: Skeleton) -> np.ndarray:
@@ -61,7 +61,7 @@ def importance(slice_channels: np.ndarray, bone: np.ndarray, allocation: str) ->
         return np.ones(slice_channels.shape[1])
     if allocation == "bone":
         return bone.copy()
-    variation = np.abs(np.diff(slice_channels, axis=0)).sum(axis=0) / max(len(slice_channels), 1)   # (3.1)
+    variation = np.abs(np.diff(slice_channels, axis=0)).sum(axis=0) / max(len(slice_channels), 1)  # (3.1)
     return bone * variation
 
 
@@ -98,7 +98,7 @@ def keep_largest(coeffs: np.ndarray, counts: np.ndarray, always: int = 0) -> np.
 @register
 class PWaveletCodec(Codec):
     id = "pwavelet"
-    description = "001 ch. 3: D4 wavelets per slice, coefficients kept by bone length x variation, QP bits"
+    description = "perceptually guided wavelets: D4 per slice, coefficients kept by bone length x variation"
     knobs = (
         Knob("alpha", float, 0.05, "share of all wavelet coefficients kept", low=1e-4, high=1.0),
         Knob("qp", int, 9, "quantisation bits (the thesis: 7-11)", low=2, high=24),
@@ -109,7 +109,7 @@ class PWaveletCodec(Codec):
     quality = QualityKnob("alpha", higher_is_better=True, log_scale=True)
 
     @property
-    def delay_frames(self) -> int:
+    def delay_frames(self) -> int:  # type: ignore[override]
         return self.config["window"]
 
     def _slices(self, frames: int):
@@ -125,8 +125,9 @@ class PWaveletCodec(Codec):
             n = b - a
             levels = wavelets.max_levels(n, WAVELET)
             coeffs = wavelets.forward(ch[a:b].T, WAVELET, levels, MODE)
-            counts = coefficient_counts(importance(ch[a:b], bone, cfg["allocation"]), cfg["alpha"], n,
-                                        coeffs.shape[1], cfg["min_coeffs"])
+            counts = coefficient_counts(
+                importance(ch[a:b], bone, cfg["allocation"]), cfg["alpha"], n, coeffs.shape[1], cfg["min_coeffs"]
+            )
             kept = keep_largest(coeffs, counts, wavelets.band_lengths(n, WAVELET, levels, MODE)[0] if levels else 0)
             e = step_exponents(kept, cfg["qp"])
             st = steps(e)
@@ -136,8 +137,12 @@ class PWaveletCodec(Codec):
             qs.append(q.ravel())
             exps.append(e)
         runs = encode_zero_runs(np.concatenate(qs) if qs else np.zeros(0, dtype=np.int64))
-        parts = [encode_ints(np.concatenate(exps) if exps else np.zeros(0, np.int64)), encode_ints(runs.runs),
-                 encode_ints(runs.values), encode_ints([runs.tail])]
+        parts = [
+            encode_ints(np.concatenate(exps) if exps else np.zeros(0, np.int64)),
+            encode_ints(runs.runs),
+            encode_ints(runs.values),
+            encode_ints(np.array([runs.tail])),
+        ]
         return join_parts(parts)
 
     def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:
@@ -155,7 +160,7 @@ class PWaveletCodec(Codec):
         out = np.empty((frames, n_ch))
         pos = 0
         for k, ((a, b), m, lv) in enumerate(zip(slices, sizes, levels)):
-            coeffs = q[pos:pos + n_ch * m].reshape(n_ch, m) * steps(exps[k * n_ch:(k + 1) * n_ch])[:, None]
+            coeffs = q[pos : pos + n_ch * m].reshape(n_ch, m) * steps(exps[k * n_ch : (k + 1) * n_ch])[:, None]
             out[a:b] = wavelets.inverse(coeffs, b - a, WAVELET, lv, MODE).T
             pos += n_ch * m
         return out

@@ -63,11 +63,11 @@ from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.kinematics import forward_kinematics
 from mocodec.skeleton import Skeleton
 
-QUANTUM = 1.0 / 256          # degrees, or cm for translations: the finest SPIHT plane
-ANCHOR_QUANTUM = 0.1         # degrees, or cm: the root is pinned to within 0.05 cm
-N0_BITS = 6                  # each channel stream starts with its top plane + 1 (0: all zero)
-SEAM_LIMIT = 2.0             # a seam step is removed up to twice the two sides' coding uncertainty
-F_LEVELS = 16                # importance sent as half-octave levels 1..15 below the segment's top; 0 = none
+QUANTUM = 1.0 / 256  # degrees, or cm for translations: the finest SPIHT plane
+ANCHOR_QUANTUM = 0.1  # degrees, or cm: the root is pinned to within 0.05 cm
+N0_BITS = 6  # each channel stream starts with its top plane + 1 (0: all zero)
+SEAM_LIMIT = 2.0  # a seam step is removed up to twice the two sides' coding uncertainty
+F_LEVELS = 16  # importance sent as half-octave levels 1..15 below the segment's top; 0 = none
 _U32 = struct.Struct("<I")
 
 
@@ -98,18 +98,23 @@ def anchor_frames(frames: int, window: int) -> np.ndarray:
 @register
 class SpihtCodec(Codec):
     id = "spiht"
-    description = "001 ch. 6: wavelet + 1-D SPIHT per channel, perceptual bit allocation, embedded streams"
+    description = "embedded wavelet coding: 1-D SPIHT per channel, perceptual bit allocation, truncatable streams"
     knobs = (
         Knob("bits_per_second", float, 8000.0, "SPIHT bits per second for the whole figure", low=1.0, high=1e8),
         Knob("window", int, 128, "frames per segment W (a power of two)", low=4, high=1 << 14),
         Knob("wavelet", str, "cdf97", "wavelet", choices=("cdf97", "d4")),
         Knob("levels", int, 0, "decomposition levels (0: log2(W) - 1)", low=0, high=14),
-        Knob("allocation", str, "perceptual", "bit allocation (6.1)", choices=perception.ALLOCATIONS),
+        Knob("allocation", str, "perceptual", "bit allocation across channels", choices=perception.ALLOCATIONS),
         Knob("leg_score", float, 1.0, "body-part score of the legs", low=0.0, high=1.0),
         Knob("upper_score", float, 0.5, "body-part score of arms, torso and head", low=0.0, high=1.0),
         Knob("smooth_seams", bool, True, "smooth the steps where segments meet (decoder side)"),
-        Knob("closed_loop", bool, False, "beyond the thesis: code each joint against its parent's decoded "
-             "orientation, so errors do not add up along chains"),
+        Knob(
+            "closed_loop",
+            bool,
+            False,
+            "beyond the thesis: code each joint against its parent's decoded "
+            "orientation, so errors do not add up along chains",
+        ),
     )
     quality = QualityKnob("bits_per_second", higher_is_better=True, log_scale=True)
     streaming = True
@@ -130,7 +135,7 @@ class SpihtCodec(Codec):
         return max(self.config["window"] // 16, 1) if self.config["smooth_seams"] else 0
 
     @property
-    def delay_frames(self) -> int:
+    def delay_frames(self) -> int:  # type: ignore[override]
         """A segment goes out when the first frame of the next one (its end anchor) is in, and
         its last frames once the next segment has smoothed the seam."""
         return self.config["window"] + 1 + (max(self.seam_frames, seams.CONTEXT) if self.seam_frames else 0)
@@ -157,8 +162,10 @@ class SpihtCodec(Codec):
 
     def segment_budgets(self, frames: int, fps: float) -> np.ndarray:
         """B_T of every segment at the codec's bit rate."""
-        return np.array([int(np.floor(self.config["bits_per_second"] * (b - a) / fps))
-                         for a, b in self._segments(frames)], dtype=np.int64)
+        return np.array(
+            [int(np.floor(self.config["bits_per_second"] * (b - a) / fps)) for a, b in self._segments(frames)],
+            dtype=np.int64,
+        )
 
     def _encode(self, motion) -> bytes:
         return self.encode_body(motion, self.segment_budgets(motion.num_frames, motion.fps))
@@ -169,7 +176,7 @@ class SpihtCodec(Codec):
         segment_bits = np.asarray(segment_bits, dtype=np.int64)
         if segment_bits.shape != (len(self._segments(motion.num_frames)),) or segment_bits.min(initial=0) < 0:
             raise CodecError(f"need {len(self._segments(motion.num_frames))} non-negative segment budgets")
-        return self.wrap(self.encode_body(motion, segment_bits), motion.num_frames, motion.fps)
+        return self.encode_body(motion, segment_bits)
 
     def encode_body(self, motion, segment_bits: np.ndarray) -> bytes:
         sk, cfg = motion.skeleton, self.config
@@ -187,9 +194,13 @@ class SpihtCodec(Codec):
             levels_f.append(lv)
             streams += bits
         bits = np.concatenate(streams) if streams else np.zeros(0, dtype=np.uint8)
-        levels = np.stack(levels_f)                          # (segments, channels), sent per channel as changes
-        parts = [encode_ints(np.diff(a_int, axis=0, prepend=0).T), encode_ints(np.diff(levels, axis=0, prepend=0).T),
-                 encode_ints(np.diff(segment_bits, prepend=0)), _U32.pack(bits.size) + np.packbits(bits).tobytes()]
+        levels = np.stack(levels_f)  # (segments, channels), sent per channel as changes
+        parts = [
+            encode_ints(np.diff(a_int, axis=0, prepend=0).T),
+            encode_ints(np.diff(levels, axis=0, prepend=0).T),
+            encode_ints(np.diff(segment_bits, prepend=0)),
+            _U32.pack(bits.size) + np.packbits(bits).tobytes(),
+        ]
         return join_parts(parts)
 
     def _code_segment(self, sk: Skeleton, values: np.ndarray, residual: np.ndarray, total: int):
@@ -209,15 +220,16 @@ class SpihtCodec(Codec):
             self._code_channels(np.arange(values.shape[1]), residual, budgets, scale, streams)
         return lv, [bits for channel in streams for bits in channel]
 
-    def _code_channels(self, channels: np.ndarray, residual: np.ndarray, budgets: np.ndarray, scale: np.ndarray,
-                       streams: list) -> np.ndarray | None:
+    def _code_channels(
+        self, channels: np.ndarray, residual: np.ndarray, budgets: np.ndarray, scale: np.ndarray, streams: list
+    ) -> np.ndarray | None:
         """Code the residual ``(frames, len(channels))`` of some channels into ``streams`` (one
         list per channel); with ``closed_loop``, returns the residual the decoder will make of
         them."""
         cfg = self.config
         w, approx = cfg["window"], cfg["window"] >> self.n_levels
         seg = np.zeros((w, channels.size))
-        seg[:len(residual)] = residual
+        seg[: len(residual)] = residual
         coeffs = np.round(wavelets.forward(seg.T, cfg["wavelet"], self.n_levels) / (QUANTUM * scale[channels, None]))
         decoded = np.zeros_like(coeffs)
         for i, c in enumerate(channels):
@@ -230,11 +242,13 @@ class SpihtCodec(Codec):
                 decoded[i] = spiht.decode(bits, 0, int(budgets[c]) - N0_BITS, w, approx, n0)[0]
         if not cfg["closed_loop"]:
             return None
-        return wavelets.inverse(decoded * (QUANTUM * scale[channels, None]), w, cfg["wavelet"],
-                                self.n_levels).T[:len(residual)]
+        return wavelets.inverse(decoded * (QUANTUM * scale[channels, None]), w, cfg["wavelet"], self.n_levels).T[
+            : len(residual)
+        ]
 
-    def _code_closed_loop(self, sk: Skeleton, values: np.ndarray, residual: np.ndarray, budgets: np.ndarray,
-                          streams: list) -> None:
+    def _code_closed_loop(
+        self, sk: Skeleton, values: np.ndarray, residual: np.ndarray, budgets: np.ndarray, streams: list
+    ) -> None:
         """Beyond the thesis (kinwave.md, "what mattered" 1): joints coded parents first, each
         joint's angles the closed-loop target that restores its original global orientation on
         top of its parent's decoded one (the stream decoded as the decoder will, before seam
@@ -246,8 +260,9 @@ class SpihtCodec(Codec):
         active = budgets > N0_BITS
 
         def code(channels: np.ndarray, targets: np.ndarray) -> np.ndarray:
-            return line[:, channels] + self._code_channels(channels, targets - line[:, channels], budgets, scale,
-                                                           streams)
+            return line[:, channels] + self._code_channels(
+                channels, targets - line[:, channels], budgets, scale, streams
+            )
 
         closedloop.code_down_tree(sk, np.where(active, values, line), active, forward_kinematics(sk, values)[1], code)
 
@@ -261,7 +276,7 @@ class SpihtCodec(Codec):
                 continue
             if cursor + N0_BITS > bits.size:
                 raise CorruptStreamError(f"spiht payload: bits end in {where}, channel {c}")
-            n0 = int(np.dot(bits[cursor:cursor + N0_BITS], 1 << np.arange(N0_BITS - 1, -1, -1))) - 1
+            n0 = int(np.dot(bits[cursor : cursor + N0_BITS], 1 << np.arange(N0_BITS - 1, -1, -1))) - 1
             coeffs, used, plane = spiht.decode(bits, cursor + N0_BITS, int(budgets[c]) - N0_BITS, w, approx, n0)
             yield c, cursor, N0_BITS + used, coeffs, plane
             cursor += N0_BITS + used
@@ -269,8 +284,9 @@ class SpihtCodec(Codec):
     def _residual(self, coeffs: np.ndarray, skeleton: Skeleton, frames: int) -> np.ndarray:
         """The decoded residual of one segment ``(frames, channels)`` from its coefficients."""
         scale = channel_scale(skeleton)
-        seg = wavelets.inverse(coeffs * (QUANTUM * scale[:, None]), self.config["window"], self.config["wavelet"],
-                               self.n_levels)
+        seg = wavelets.inverse(
+            coeffs * (QUANTUM * scale[:, None]), self.config["window"], self.config["wavelet"], self.n_levels
+        )
         return seg.T[:frames]
 
     def _parse(self, body: bytes, skeleton: Skeleton, frames: int):
@@ -281,11 +297,13 @@ class SpihtCodec(Codec):
         deltas = decode_ints(parts[0])
         level_changes = decode_ints(parts[1])
         n_seg = len(self._segments(frames))
-        if deltas.size != anchor_frames(frames, self.config["window"]).size * n_ch or level_changes.size != n_seg * n_ch:
+        if (
+            deltas.size != anchor_frames(frames, self.config["window"]).size * n_ch
+            or level_changes.size != n_seg * n_ch
+        ):
             raise CorruptStreamError("spiht payload: anchor or allocation streams do not match the frames")
         levels_f = np.cumsum(level_changes.reshape(n_ch, n_seg).T, axis=0).ravel()
-        if levels_f.size != n_seg * n_ch \
-                or levels_f.min(initial=0) < 0 or levels_f.max(initial=0) >= F_LEVELS:
+        if levels_f.size != n_seg * n_ch or levels_f.min(initial=0) < 0 or levels_f.max(initial=0) >= F_LEVELS:
             raise CorruptStreamError("spiht payload: anchor or allocation streams do not match the frames")
         totals = np.cumsum(decode_ints(parts[2]))
         if totals.size != n_seg or totals.min(initial=0) < 0:
@@ -301,8 +319,9 @@ class SpihtCodec(Codec):
         stop plane)."""
         cursor = 0
         for k, total in enumerate(totals):
-            for c, start, used, coeffs, plane in self._segment_streams(levels_f[k * n_ch:(k + 1) * n_ch], total,
-                                                                       bits, cursor, f"segment {k}"):
+            for c, start, used, coeffs, plane in self._segment_streams(
+                levels_f[k * n_ch : (k + 1) * n_ch], total, bits, cursor, f"segment {k}"
+            ):
                 yield k, c, start, used, coeffs, plane
                 cursor = start + used
         if cursor != bits.size:
@@ -320,8 +339,9 @@ class SpihtCodec(Codec):
         out = self._lines(anchors, frames)
         segments = self._segments(frames)
         coeffs = np.zeros((len(segments), n_ch, cfg["window"]))
-        uncertainty = np.stack([self._uncertainty(levels_f[k * n_ch:(k + 1) * n_ch], skeleton)
-                                for k in range(len(segments))])
+        uncertainty = np.stack(
+            [self._uncertainty(levels_f[k * n_ch : (k + 1) * n_ch], skeleton) for k in range(len(segments))]
+        )
         for k, c, _, _, values, plane in self._walk(levels_f, totals, bits, n_ch):
             coeffs[k, c] = values
             uncertainty[k, c] = 2.0 ** (plane + 1) * QUANTUM * scale[c]
@@ -337,20 +357,20 @@ class SpihtCodec(Codec):
         an anchor step for a channel with no budget by choice (level 0), unknown otherwise."""
         return np.where(levels == 0, 0.5 * ANCHOR_QUANTUM * channel_scale(skeleton), np.inf)
 
-    def truncate(self, payload: bytes, skeleton: Skeleton, bits_per_second: float) -> tuple[SpihtCodec, bytes]:
-        """The payload cut to a lower rate without re-encoding: every segment budget shrinks by
-        bits_per_second / the codec's rate, and every channel stream keeps the prefix its new
-        budget allows. Returns the codec for the new rate and its payload."""
-        return self.truncator(payload, skeleton)(bits_per_second)
+    def truncate(
+        self, body: bytes, skeleton: Skeleton, frames: int, fps: float, bits_per_second: float
+    ) -> tuple[SpihtCodec, bytes]:
+        """The body (of ``frames`` frames at ``fps``) cut to a lower rate without re-encoding:
+        every segment budget shrinks by bits_per_second / the codec's rate, and every channel
+        stream keeps the prefix its new budget allows. Returns the codec for the new rate and
+        its body."""
+        return self.truncator(body, skeleton, frames, fps)(bits_per_second)
 
-    def truncator(self, payload: bytes, skeleton: Skeleton):
-        """A function bits_per_second -> (codec, payload) for :meth:`truncate`. The streams are
+    def truncator(self, body: bytes, skeleton: Skeleton, frames: int, fps: float):
+        """A function bits_per_second -> (codec, body) for :meth:`truncate`. The streams are
         decoded once to find where each ends, so a rate search cuts many times cheaply."""
-        from mocodec.codecs.base import read_envelope
-
-        frames, fps, body = read_envelope(payload)
         if frames == 0:
-            return lambda bps: (self._smaller(bps), payload)
+            return lambda bps: (self._smaller(bps), body)
         parts, _, levels_f, totals, bits = self._parse(body, skeleton, frames)
         n_ch = skeleton.num_channels
         streams = [(k, c, start, used) for k, c, start, used, _, _ in self._walk(levels_f, totals, bits, n_ch)]
@@ -359,17 +379,26 @@ class SpihtCodec(Codec):
         def cut(bits_per_second: float) -> tuple[SpihtCodec, bytes]:
             smaller = self._smaller(bits_per_second)
             if rate_coded:
-                new_totals = smaller.segment_budgets(frames, fps)          # as if encoded at the new rate
-            else:                                                           # explicit (crowd) budgets scale
+                new_totals = smaller.segment_budgets(frames, fps)  # as if encoded at the new rate
+            else:  # explicit (crowd) budgets scale
                 new_totals = np.floor(totals * (bits_per_second / self.config["bits_per_second"])).astype(np.int64)
-            budgets = [perception.allocate(level_weights(levels_f[k * n_ch:(k + 1) * n_ch]), int(t))
-                       for k, t in enumerate(new_totals)]
-            keep = [bits[start:start + min(used, int(budgets[k][c]))]
-                    for k, c, start, used in streams if budgets[k][c] > N0_BITS]
+            budgets = [
+                perception.allocate(level_weights(levels_f[k * n_ch : (k + 1) * n_ch]), int(t))
+                for k, t in enumerate(new_totals)
+            ]
+            keep = [
+                bits[start : start + min(used, int(budgets[k][c]))]
+                for k, c, start, used in streams
+                if budgets[k][c] > N0_BITS
+            ]
             new_bits = np.concatenate(keep) if keep else np.zeros(0, dtype=np.uint8)
-            new_parts = [parts[0], parts[1], encode_ints(np.diff(new_totals, prepend=0)),
-                         _U32.pack(new_bits.size) + np.packbits(new_bits).tobytes()]
-            return smaller, smaller.wrap(join_parts(new_parts), frames, fps)
+            new_parts = [
+                parts[0],
+                parts[1],
+                encode_ints(np.diff(new_totals, prepend=0)),
+                _U32.pack(new_bits.size) + np.packbits(new_bits).tobytes(),
+            ]
+            return smaller, join_parts(new_parts)
 
         return cut
 
@@ -378,11 +407,13 @@ class SpihtCodec(Codec):
         :meth:`truncate_packet` needs to cut the packet without decoding it (a sender works it
         out once, a relay then cuts for every viewer)."""
         _, _, levels, total, bits = self._packet_fields(packet, skeleton)
-        return np.array([used for _, _, used, _, _ in self._segment_streams(levels, total, bits, 0, "the packet")],
-                        dtype=np.int64)
+        return np.array(
+            [used for _, _, used, _, _ in self._segment_streams(levels, total, bits, 0, "the packet")], dtype=np.int64
+        )
 
-    def truncate_packet(self, packet: bytes, skeleton: Skeleton, cuts: np.ndarray, bits_per_second: float,
-                        fps: float) -> bytes:
+    def truncate_packet(
+        self, packet: bytes, skeleton: Skeleton, cuts: np.ndarray, bits_per_second: float, fps: float
+    ) -> bytes:
         """A stream packet cut to ``bits_per_second`` (if below its own rate): every channel
         keeps the prefix of its embedded stream its new share allows, so it decodes to a
         coarser segment with no re-encoding, the same bytes as coding at that rate (the
@@ -409,8 +440,9 @@ class SpihtCodec(Codec):
             keep = np.where(new > N0_BITS, np.minimum(cuts, new), 0)
             # the kept prefixes, gathered in one indexing: work in proportion to what is kept
             kept = bits[np.arange(keep.sum()) + np.repeat(starts - (np.cumsum(keep) - keep), keep)]
-            return head + join_parts([*parts[:-2], _U32.pack(total_bits),
-                                      _U32.pack(kept.size) + np.packbits(kept).tobytes()])
+            return head + join_parts(
+                [*parts[:-2], _U32.pack(total_bits), _U32.pack(kept.size) + np.packbits(kept).tobytes()]
+            )
 
         return cut
 
@@ -424,23 +456,29 @@ class SpihtCodec(Codec):
         levels = decode_ints(parts[-3])
         total = _packet_total(parts[-2])
         if len(parts[-1]) < _U32.size:
-            raise CorruptStreamError(f"spiht packet: its bit stream part is {len(parts[-1])} bytes, shorter than "
-                                     "its 4-byte length")
+            raise CorruptStreamError(
+                f"spiht packet: its bit stream part is {len(parts[-1])} bytes, shorter than its 4-byte length"
+            )
         (n_bits,) = _U32.unpack_from(parts[-1])
         bits = np.unpackbits(np.frombuffer(parts[-1], dtype=np.uint8, offset=4))[:n_bits]
-        if levels.size != skeleton.num_channels or bits.size != n_bits \
-                or levels.min(initial=0) < 0 or levels.max(initial=0) >= F_LEVELS:
+        if (
+            levels.size != skeleton.num_channels
+            or bits.size != n_bits
+            or levels.min(initial=0) < 0
+            or levels.max(initial=0) >= F_LEVELS
+        ):
             raise CorruptStreamError("spiht packet: levels or bits do not fit the skeleton")
-        return packet[:_PACKET.size], parts, levels, int(total), bits
+        return packet[: _PACKET.size], parts, levels, int(total), bits
 
     def _smaller(self, bits_per_second: float) -> SpihtCodec:
         if bits_per_second > self.config["bits_per_second"]:
-            raise CodecError(f"cannot truncate to {bits_per_second:g} bit/s, above the coded "
-                             f"{self.config['bits_per_second']:g}")
-        return self.with_knob("bits_per_second", bits_per_second)
+            raise CodecError(
+                f"cannot truncate to {bits_per_second:g} bit/s, above the coded {self.config['bits_per_second']:g}"
+            )
+        return SpihtCodec(**{**self.config, "bits_per_second": bits_per_second})
 
 
-_PACKET = struct.Struct("<BI")      # flags (1: carries the start anchors, 2: last segment), frames
+_PACKET = struct.Struct("<BI")  # flags (1: carries the start anchors, 2: last segment), frames
 
 
 def _packet_total(part: bytes) -> int:
@@ -464,8 +502,8 @@ class _StreamEncoder(StreamEncoder):
         self.window = codec.config["window"]
         self.anchor_q = ANCHOR_QUANTUM * channel_scale(skeleton)
         self.buffer = np.zeros((0, skeleton.num_channels))
-        self.previous: np.ndarray | None = None           # last continuous frame seen
-        self.start: np.ndarray | None = None              # the current segment's start anchor (ints)
+        self.previous: np.ndarray | None = None  # last continuous frame seen
+        self.start: np.ndarray | None = None  # the current segment's start anchor (ints)
 
     def push(self, frames: np.ndarray) -> list[bytes]:
         cont = continuous_frames("spiht", self.skeleton, self.fps, frames, self.previous)
@@ -475,8 +513,8 @@ class _StreamEncoder(StreamEncoder):
         self.buffer = np.vstack((self.buffer, cont))
         packets = []
         while len(self.buffer) > self.window:
-            packets.append(self._packet(self.buffer[:self.window + 1], last=False))
-            self.buffer = self.buffer[self.window:]
+            packets.append(self._packet(self.buffer[: self.window + 1], last=False))
+            self.buffer = self.buffer[self.window :]
         return packets
 
     def flush(self) -> list[bytes]:
@@ -489,16 +527,19 @@ class _StreamEncoder(StreamEncoder):
     def _packet(self, values: np.ndarray, last: bool) -> bytes:
         n = len(values) if last else self.window
         first = self.start is None
-        if first:
-            self.start = np.round(values[0] / self.anchor_q).astype(np.int64)
+        start = np.round(values[0] / self.anchor_q).astype(np.int64) if self.start is None else self.start
+        self.start = start
         end = np.round(values[-1] / self.anchor_q).astype(np.int64)
-        residual = values[:n] - _line(self.start * self.anchor_q, end * self.anchor_q, n, n - 1 if last else n)
+        residual = values[:n] - _line(start * self.anchor_q, end * self.anchor_q, n, n - 1 if last else n)
         total = int(np.floor(self.codec.config["bits_per_second"] * n / self.fps))
         levels, streams = self.codec._code_segment(self.skeleton, values[:n], residual, total)
         bits = np.concatenate(streams) if streams else np.zeros(0, dtype=np.uint8)
-        parts = ([encode_ints(self.start)] if first else []) + [
-            encode_ints(end - self.start), encode_ints(levels), _U32.pack(total),
-            _U32.pack(bits.size) + np.packbits(bits).tobytes()]
+        parts = ([encode_ints(start)] if first else []) + [
+            encode_ints(end - start),
+            encode_ints(levels),
+            _U32.pack(total),
+            _U32.pack(bits.size) + np.packbits(bits).tobytes(),
+        ]
         self.start = end
         return _PACKET.pack(int(first) | 2 * int(last), n) + join_parts(parts)
 
@@ -511,7 +552,7 @@ class _StreamDecoder(StreamDecoder):
         self.codec, self.skeleton, self.fps = codec, skeleton, fps
         self.anchor_q = ANCHOR_QUANTUM * channel_scale(skeleton)
         self.start: np.ndarray | None = None
-        self.held = np.zeros((0, skeleton.num_channels))   # last frames, until their seam is smoothed
+        self.held = np.zeros((0, skeleton.num_channels))  # last frames, until their seam is smoothed
         self.held_uncertainty = np.zeros(skeleton.num_channels)
 
     def push(self, packet: bytes) -> np.ndarray:
@@ -522,7 +563,7 @@ class _StreamDecoder(StreamDecoder):
             frames, last, uncertainty = self._push(packet)
         except CorruptStreamError:
             raise
-        except Exception as e:   # noqa: BLE001 - a packet that does not parse
+        except Exception as e:  # noqa: BLE001 - a packet that does not parse
             raise CorruptStreamError(f"spiht packet does not decode ({type(e).__name__}: {e})") from None
         joined = np.vstack((self.held, frames))
         if len(self.held):
@@ -531,8 +572,8 @@ class _StreamDecoder(StreamDecoder):
         self.held_uncertainty = uncertainty
         hold = max(self.codec.seam_frames, seams.CONTEXT) if self.codec.seam_frames else 0
         keep = 0 if last else min(hold, len(joined))
-        self.held = joined[len(joined) - keep:]
-        return joined[:len(joined) - keep]
+        self.held = joined[len(joined) - keep :]
+        return joined[: len(joined) - keep]
 
     def _push(self, packet: bytes) -> tuple[np.ndarray, bool, np.ndarray]:
         flags, n = _PACKET.unpack_from(packet)
@@ -550,8 +591,14 @@ class _StreamDecoder(StreamDecoder):
         total = _packet_total(parts[2])
         (n_bits,) = _U32.unpack_from(parts[3])
         bits = np.unpackbits(np.frombuffer(parts[3], dtype=np.uint8, offset=4))[:n_bits]
-        if end.size != n_ch or levels.size != n_ch or bits.size != n_bits or n_bits > total \
-                or levels.min(initial=0) < 0 or levels.max(initial=0) >= F_LEVELS:
+        if (
+            end.size != n_ch
+            or levels.size != n_ch
+            or bits.size != n_bits
+            or n_bits > total
+            or levels.min(initial=0) < 0
+            or levels.max(initial=0) >= F_LEVELS
+        ):
             raise CorruptStreamError("spiht packet: anchors, levels or bits do not fit the skeleton")
         coeffs = np.zeros((n_ch, self.codec.config["window"]))
         uncertainty = self.codec._uncertainty(levels, self.skeleton)

@@ -48,8 +48,10 @@ def _channel_bounds(skeleton: Skeleton, bound: float) -> np.ndarray:
 def _frames_from(values: np.ndarray, skeleton: Skeleton, frames: int, what: str) -> np.ndarray:
     values = np.asarray(values, dtype=np.float32).reshape(-1)
     if values.size != frames * skeleton.num_channels:
-        raise CorruptStreamError(f"{what} payload holds {values.size} values, {frames} frames of "
-                                 f"{skeleton.num_channels} channels need {frames * skeleton.num_channels}")
+        raise CorruptStreamError(
+            f"{what} payload holds {values.size} values, {frames} frames of "
+            f"{skeleton.num_channels} channels need {frames * skeleton.num_channels}"
+        )
     return values.reshape(skeleton.num_channels, frames).T.astype(np.float64)
 
 
@@ -58,8 +60,7 @@ class _PerChannel(Codec):
 
     baseline = True
     native_decoder = True
-    knobs = (Knob("bound", float, 0.01, "absolute error bound per sample: degrees, cm for translations",
-                  1e-6, 1000.0),)
+    knobs = (Knob("bound", float, 0.01, "absolute error bound per sample: degrees, cm for translations", 1e-6, 1000.0),)
     quality = QualityKnob("bound", higher_is_better=False, log_scale=True)
     package: ClassVar[str] = ""
 
@@ -72,8 +73,12 @@ class _PerChannel(Codec):
     def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:
         lib = _module(self.package)
         parts = split_parts(body, skeleton.num_channels, f"{self.id} payload")
-        return _frames_from(np.concatenate([self._decompress(lib, p, frames) for p in parts]) if parts
-                            else np.zeros(0), skeleton, frames, self.id)
+        return _frames_from(
+            np.concatenate([self._decompress(lib, p, frames) for p in parts]) if parts else np.zeros(0),
+            skeleton,
+            frames,
+            self.id,
+        )
 
     def _compress(self, lib, row: np.ndarray, bound: float) -> bytes:
         raise NotImplementedError

@@ -31,19 +31,19 @@ from mocodec.coding.entropy.rangecoder import decode_ints, encode_ints
 from mocodec.errors import CorruptStreamError
 from mocodec.skeleton import Skeleton
 
-MAX_DECIMALS = 22                    # 10^22 is the largest exact power of ten in float64
+MAX_DECIMALS = 22  # 10^22 is the largest exact power of ten in float64
 FLOAT_CHANNEL = 0xFF
-EXCEPTION_SHARE = 0.5                # more exceptions than this: float bits for the channel
+EXCEPTION_SHARE = 0.5  # more exceptions than this: float bits for the channel
 ZSTD_LEVEL = 10
 _U32 = struct.Struct("<I")
-_LIMIT = 2.0 ** 53
+_LIMIT = 2.0**53
 
 
 def decimals(x: np.ndarray) -> np.ndarray:
     """Per value the smallest d in 0..22 with round(x 10^d) / 10^d == x, or -1."""
     dec = np.full(x.shape, -1, dtype=np.int64)
     for d in range(MAX_DECIMALS, -1, -1):
-        scale = 10.0 ** d
+        scale = 10.0**d
         v = np.round(x * scale)
         dec[(v / scale == x) & (np.abs(v) < _LIMIT)] = d
     return dec
@@ -101,7 +101,7 @@ def _encode_channel(x: np.ndarray) -> bytes | None:
     top = int(dec[ok].max())
     # v = x 10^top exactly: the short integer x 10^d times its granularity 10^(top - d)
     mantissa = np.where(ok, np.round(x * 10.0 ** np.maximum(dec, 0)), 0.0)
-    exception = ~ok | ~(np.abs(x) * 10.0 ** top < _LIMIT)
+    exception = ~ok | ~(np.abs(x) * 10.0**top < _LIMIT)
     if exception.mean() > EXCEPTION_SHARE:
         return None
     gran = _granularity(np.where(exception, 0, top - dec))
@@ -109,7 +109,7 @@ def _encode_channel(x: np.ndarray) -> bytes | None:
     candidates = [_residuals(v, gran, exception, order) for order in (0, 1, 2)]
     order = int(np.argmin([np.log2(1.0 + np.abs(c)).sum() for c in candidates]))
     r = candidates[order][~exception]
-    classes = np.where(exception, top + 1, top - np.maximum(dec, 0))     # 0 = finest, top+1 = exception
+    classes = np.where(exception, top + 1, top - np.maximum(dec, 0))  # 0 = finest, top+1 = exception
     parts = [encode_ints(classes), encode_ints(r), x[exception].astype("<f8").tobytes()]
     header = struct.pack("<BBI", top, order, int(exception.sum()))
     return header + join_parts(parts)
@@ -119,18 +119,23 @@ def _decode_channel(data: bytes, frames: int) -> np.ndarray:
     top, order, n_exc = struct.unpack_from("<BBI", data)
     if top > MAX_DECIMALS or order not in (0, 1, 2) or n_exc > frames:
         raise CorruptStreamError(f"lossless channel header (scale {top}, order {order}, {n_exc} exceptions) is invalid")
-    classes, r, exc = split_parts(data, 3, "lossless channel", start=6)
-    classes, r = decode_ints(classes), decode_ints(r)
+    class_part, residual_part, exc = split_parts(data, 3, "lossless channel", start=6)
+    classes, r = decode_ints(class_part), decode_ints(residual_part)
     if len(exc) != 8 * n_exc:
         raise CorruptStreamError(f"lossless channel: {len(exc)} bytes of exceptions for {n_exc} values")
     exc_values = np.frombuffer(exc, dtype="<f8")
     exception = classes == top + 1
-    if classes.size != frames or classes.min(initial=0) < 0 or classes.max(initial=0) > top + 1 \
-            or int(exception.sum()) != n_exc or r.size != frames - n_exc:
+    if (
+        classes.size != frames
+        or classes.min(initial=0) < 0
+        or classes.max(initial=0) > top + 1
+        or int(exception.sum()) != n_exc
+        or r.size != frames - n_exc
+    ):
         raise CorruptStreamError("lossless channel: class and residual streams do not match the frame count")
     gran = _granularity(np.where(exception, 0, classes))
     v = _rebuild(r, gran, exception, np.zeros(n_exc, dtype=np.int64), order)
-    x = v / 10.0 ** top
+    x = v / 10.0**top
     x[exception] = exc_values
     return x
 
@@ -176,7 +181,7 @@ class LosslessCodec(Codec):
         (count,) = _U32.unpack_from(body)
         if count != n:
             raise CorruptStreamError(f"lossless payload has {count} channels, the skeleton {n}")
-        modes = body[4:4 + n]
+        modes = body[4 : 4 + n]
         out = np.zeros((frames, n))
         if frames == 0:
             return out

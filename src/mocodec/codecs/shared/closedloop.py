@@ -54,20 +54,25 @@ def _targets(angles, axes, active, cq, has_axis, parent, goal, out):
     theta = np.empty(3)
     steps = np.empty((3, 4))
     jac = np.empty((3, 3))
-    a = np.empty((3, 4))                     # normal equations | right-hand side
+    a = np.empty((3, 4))  # normal equations | right-hand side
     for f in range(angles.shape[0]):
         for i in range(k):
             theta[i] = angles[f, i] * (np.pi / 180.0)
         # wanted local rotation M = conj(parent) * goal
-        mw, mx, my, mz = quat_product(parent[f, 0], -parent[f, 1], -parent[f, 2], -parent[f, 3],
-                                      goal[f, 0], goal[f, 1], goal[f, 2], goal[f, 3])
+        mw, mx, my, mz = quat_product(
+            parent[f, 0], -parent[f, 1], -parent[f, 2], -parent[f, 3], goal[f, 0], goal[f, 1], goal[f, 2], goal[f, 3]
+        )
         for _ in range(_ITERATIONS):
             for i in range(k):
                 steps[i, 0], steps[i, 1], steps[i, 2], steps[i, 3] = _axis_quat(axes[i], theta[i])
             # suffix products S_i = R_{i+1} ... R_k give the body-frame axis of step i
             sw, sx, sy, sz = 1.0, 0.0, 0.0, 0.0
             for i in range(k - 1, -1, -1):
-                ex, ey, ez = (1.0 if axes[i] == 0 else 0.0), (1.0 if axes[i] == 1 else 0.0), (1.0 if axes[i] == 2 else 0.0)
+                ex, ey, ez = (
+                    (1.0 if axes[i] == 0 else 0.0),
+                    (1.0 if axes[i] == 1 else 0.0),
+                    (1.0 if axes[i] == 2 else 0.0),
+                )
                 jx, jy, jz = _rotate(sw, -sx, -sy, -sz, ex, ey, ez)
                 if has_axis:
                     jx, jy, jz = _rotate(cq[0], cq[1], cq[2], cq[3], jx, jy, jz)
@@ -95,7 +100,7 @@ def _targets(angles, axes, active, cq, has_axis, parent, goal, out):
                         a[i, m] = jac[i, 0] * jac[m, 0] + jac[i, 1] * jac[m, 1] + jac[i, 2] * jac[m, 2]
                 a[i, i] += _DAMPING
                 a[i, 3] = jac[i, 0] * rx + jac[i, 1] * ry + jac[i, 2] * rz
-            for i in range(k):                       # Gaussian elimination with partial pivoting
+            for i in range(k):  # Gaussian elimination with partial pivoting
                 piv = i
                 for m in range(i + 1, k):
                     if abs(a[m, i]) > abs(a[piv, i]):
@@ -128,28 +133,50 @@ def _compose(angles, axes, cq, has_axis, parent, out):
         if has_axis:
             w, x, y, z = quat_product(cq[0], cq[1], cq[2], cq[3], w, x, y, z)
             w, x, y, z = quat_product(w, x, y, z, cq[0], -cq[1], -cq[2], -cq[3])
-        out[f, 0], out[f, 1], out[f, 2], out[f, 3] = quat_product(parent[f, 0], parent[f, 1], parent[f, 2],
-                                                                  parent[f, 3], w, x, y, z)
+        out[f, 0], out[f, 1], out[f, 2], out[f, 3] = quat_product(
+            parent[f, 0], parent[f, 1], parent[f, 2], parent[f, 3], w, x, y, z
+        )
 
 
-def target_angles(angles: np.ndarray, axes: np.ndarray, active: np.ndarray, axis_quat: np.ndarray, has_axis: bool,
-                  parent: np.ndarray, goal: np.ndarray) -> np.ndarray:
+def target_angles(
+    angles: np.ndarray,
+    axes: np.ndarray,
+    active: np.ndarray,
+    axis_quat: np.ndarray,
+    has_axis: bool,
+    parent: np.ndarray,
+    goal: np.ndarray,
+) -> np.ndarray:
     """Euler angles ``(T, k)`` (degrees, in rotation-order steps) whose local rotation on top
     of the decoded ``parent (T, 4)`` global orientation comes closest to ``goal (T, 4)``,
     starting from ``angles``; inactive steps keep their value."""
     out = np.empty_like(angles)
-    _targets(np.ascontiguousarray(angles, dtype=np.float64), np.ascontiguousarray(axes, dtype=np.int64),
-             np.ascontiguousarray(active, dtype=np.bool_), np.ascontiguousarray(axis_quat, dtype=np.float64),
-             bool(has_axis), np.ascontiguousarray(parent), np.ascontiguousarray(goal), out)
+    _targets(
+        np.ascontiguousarray(angles, dtype=np.float64),
+        np.ascontiguousarray(axes, dtype=np.int64),
+        np.ascontiguousarray(active, dtype=np.bool_),
+        np.ascontiguousarray(axis_quat, dtype=np.float64),
+        bool(has_axis),
+        np.ascontiguousarray(parent),
+        np.ascontiguousarray(goal),
+        out,
+    )
     return out
 
 
-def compose(angles: np.ndarray, axes: np.ndarray, axis_quat: np.ndarray, has_axis: bool,
-            parent: np.ndarray) -> np.ndarray:
+def compose(
+    angles: np.ndarray, axes: np.ndarray, axis_quat: np.ndarray, has_axis: bool, parent: np.ndarray
+) -> np.ndarray:
     """Global orientation ``(T, 4)`` of a joint with local Euler ``angles`` under ``parent``."""
     out = np.empty((angles.shape[0], 4))
-    _compose(np.ascontiguousarray(angles, dtype=np.float64), np.ascontiguousarray(axes, dtype=np.int64),
-             np.ascontiguousarray(axis_quat, dtype=np.float64), bool(has_axis), np.ascontiguousarray(parent), out)
+    _compose(
+        np.ascontiguousarray(angles, dtype=np.float64),
+        np.ascontiguousarray(axes, dtype=np.int64),
+        np.ascontiguousarray(axis_quat, dtype=np.float64),
+        bool(has_axis),
+        np.ascontiguousarray(parent),
+        out,
+    )
     return out
 
 
@@ -193,9 +220,16 @@ def exact_rotation(axis_quat: np.ndarray, has_axis: bool, parent: np.ndarray, go
     return local
 
 
-def code_down_tree(skeleton: Skeleton, start: np.ndarray, active: np.ndarray, goal: np.ndarray, code,
-                   closed_loop: bool = True, goal_positions: np.ndarray | None = None,
-                   exact: np.ndarray | None = None) -> None:
+def code_down_tree(
+    skeleton: Skeleton,
+    start: np.ndarray,
+    active: np.ndarray,
+    goal: np.ndarray,
+    code,
+    closed_loop: bool = True,
+    goal_positions: np.ndarray | None = None,
+    exact: np.ndarray | None = None,
+) -> None:
     """Drive a coder down the tree, the joints of one depth at a time. ``start (T, C)`` holds
     the values each channel is coded from, ``active (C,)`` the channels the coder will change
     (the others keep their start value), ``goal (T, joints, 4)`` the original global
@@ -227,26 +261,37 @@ def code_down_tree(skeleton: Skeleton, start: np.ndarray, active: np.ndarray, go
             if closed_loop and p >= 0 and exact is not None and exact[j]:
                 exact_targets[j] = exact_rotation(plan.axis_quat[j], plan.has_axis[j], glob[j], goal[:, j])
             elif closed_loop and p >= 0 and active[chans].any():
-                angles = target_angles(angles, plan.rot_axis[j, :k], active[chans], plan.axis_quat[j],
-                                       plan.has_axis[j], glob[j], goal[:, j])
+                angles = target_angles(
+                    angles,
+                    plan.rot_axis[j, :k],
+                    active[chans],
+                    plan.axis_quat[j],
+                    plan.has_axis[j],
+                    glob[j],
+                    goal[:, j],
+                )
             shifts = start[:, moves]
-            if where is not None and p >= 0 and active[moves].any():
+            if where is not None and goal_positions is not None and p >= 0 and active[moves].any():
                 wanted = _rotate_back(glob[p], goal_positions[:, j] - where[p]) - plan.offsets[j]
                 axes = np.flatnonzero(plan.pos_index[j] >= 0)
                 shifts = np.where(active[moves], wanted[:, axes], shifts)
             channels += [moves, chans]
             targets += [shifts, angles]
-        channels = np.concatenate(channels)
-        if not channels.size:
+        coded = np.concatenate(channels)
+        if not coded.size:
             continue
-        decoded = code(channels, np.hstack(targets)) if exact is None else \
-            code(channels, np.hstack(targets), exact_targets)
-        column = {c: i for i, c in enumerate(channels)}
+        decoded = code(coded, np.hstack(targets)) if exact is None else code(coded, np.hstack(targets), exact_targets)
+        column = {c: i for i, c in enumerate(coded)}
         for j in depth:
             k = int((plan.rot_index[j] >= 0).sum())
             if k and skeleton.children[j]:
-                glob[j] = compose(decoded[:, [column[c] for c in plan.rot_index[j, :k]]], plan.rot_axis[j, :k],
-                                  plan.axis_quat[j], plan.has_axis[j], glob[j])
+                glob[j] = compose(
+                    decoded[:, [column[c] for c in plan.rot_index[j, :k]]],
+                    plan.rot_axis[j, :k],
+                    plan.axis_quat[j],
+                    plan.has_axis[j],
+                    glob[j],
+                )
             if where is not None and placing[j]:
                 bone = np.tile(plan.offsets[j], (frames, 1))
                 for axis, c in enumerate(plan.pos_index[j]):

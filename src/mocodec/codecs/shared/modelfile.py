@@ -15,7 +15,7 @@ from typing import ClassVar
 from mocodec.errors import CodecError
 from mocodec.formats.fileio import atomic_write_bytes
 
-_HEAD = struct.Struct("<BI")        # version, JSON length
+_HEAD = struct.Struct("<BI")  # version, JSON length
 
 
 def pack(magic: bytes, version: int, meta: dict, numbers: bytes) -> bytes:
@@ -41,7 +41,7 @@ def unpack(data: bytes, magic: bytes, version: int, what: str, where: str) -> tu
     if zlib.crc32(data[:-4]) != struct.unpack_from("<I", data, len(data) - 4)[0]:
         raise CodecError(f"{where}: checksum mismatch (the file is damaged or truncated)")
     try:
-        return json.loads(data[head:head + size]), head + size
+        return json.loads(data[head : head + size]), head + size
     except ValueError as e:
         raise CodecError(f"{where}: {what} description does not parse ({e})") from None
 
@@ -58,6 +58,13 @@ class Model:
     ``to_bytes()`` and ``from_bytes(data, where)``; ``WHAT`` names the kind of model in errors."""
 
     WHAT: ClassVar[str] = "model"
+
+    def to_bytes(self) -> bytes:
+        raise NotImplementedError
+
+    @classmethod
+    def from_bytes(cls, data: bytes, where: str):
+        raise NotImplementedError
 
     @property
     def fingerprint(self) -> int:

@@ -35,7 +35,7 @@ _DEG = math.pi / 180.0
 VECTOR = 1
 CODING_ORDERS = ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX")
 FORMS = 2 + len(CODING_ORDERS)
-WORLD = 8                       # added to an Euler form: the form of pre q
+WORLD = 8  # added to an Euler form: the form of pre q
 
 
 def valid_forms(forms: np.ndarray) -> bool:
@@ -65,8 +65,12 @@ def _turn(w, x, y, z, axis, angle_deg):
 def quat_product(aw, ax, ay, az, bw, bx, by, bz):
     """The Hamilton product of two quaternions, component by component (for numba kernels;
     :func:`mocodec.rotations.quat_multiply` is the array form)."""
-    return (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
+    return (
+        aw * bw - ax * bx - ay * by - az * bz,
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+    )
 
 
 @numba.njit(cache=True)
@@ -89,10 +93,18 @@ def _vectors_kernel(q):
     frames, joints = q.shape[0], q.shape[1]
     out = np.empty((frames, joints, 3))
     for j in range(joints):
-        sign = 1.0 if frames == 0 or q[0, j, 0] >= 0.0 else -1.0      # frame 0 turns by at most 180 degrees
+        sign = 1.0 if frames == 0 or q[0, j, 0] >= 0.0 else -1.0  # frame 0 turns by at most 180 degrees
         for t in range(frames):
-            if t > 0 and (q[t, j, 0] * q[t - 1, j, 0] + q[t, j, 1] * q[t - 1, j, 1] + q[t, j, 2] * q[t - 1, j, 2]
-                          + q[t, j, 3] * q[t - 1, j, 3]) < 0.0:
+            if (
+                t > 0
+                and (
+                    q[t, j, 0] * q[t - 1, j, 0]
+                    + q[t, j, 1] * q[t - 1, j, 1]
+                    + q[t, j, 2] * q[t - 1, j, 2]
+                    + q[t, j, 3] * q[t - 1, j, 3]
+                )
+                < 0.0
+            ):
                 sign = -sign
             w, x, y, z = q[t, j, 0], q[t, j, 1], q[t, j, 2], q[t, j, 3]
             norm = math.sqrt(w * w + x * x + y * y + z * z)
@@ -150,7 +162,8 @@ def _form_quats_kernel(values, form_axes, vector, means):
                 for m in range(3):
                     rw, rx, ry, rz = _turn(rw, rx, ry, rz, form_axes[j, m], values[t, j, m])
             out[t, j, 0], out[t, j, 1], out[t, j, 2], out[t, j, 3] = quat_product(
-                means[j, 0], means[j, 1], means[j, 2], means[j, 3], rw, rx, ry, rz)
+                means[j, 0], means[j, 1], means[j, 2], means[j, 3], rw, rx, ry, rz
+            )
     return out
 
 
@@ -227,8 +240,14 @@ def _turned(quats: np.ndarray, forms: np.ndarray, pre: np.ndarray | None, invers
     return out
 
 
-def to_forms(rows: np.ndarray, orders: tuple[str, ...], forms: np.ndarray, means: np.ndarray,
-             quats: np.ndarray | None = None, pre: np.ndarray | None = None) -> np.ndarray:
+def to_forms(
+    rows: np.ndarray,
+    orders: tuple[str, ...],
+    forms: np.ndarray,
+    means: np.ndarray,
+    quats: np.ndarray | None = None,
+    pre: np.ndarray | None = None,
+) -> np.ndarray:
     """File-order Euler angle rows in each joint's coding form (``forms`` >= 1), continuous in
     time; ``means (n, 4)`` are the vector joints' mean rotations (ignored for Euler forms),
     ``pre (n, 4)`` the WORLD joints' turns. ``quats (T, n, 4)``, when given, are the rotations
@@ -246,15 +265,17 @@ def to_forms(rows: np.ndarray, orders: tuple[str, ...], forms: np.ndarray, means
     return _rows(out)
 
 
-def from_forms(rows: np.ndarray, orders: tuple[str, ...], forms: np.ndarray, means: np.ndarray,
-               pre: np.ndarray | None = None) -> np.ndarray:
+def from_forms(
+    rows: np.ndarray, orders: tuple[str, ...], forms: np.ndarray, means: np.ndarray, pre: np.ndarray | None = None
+) -> np.ndarray:
     """Inverse of :func:`to_forms`: file-order Euler angle rows, each joint's triples as
     continuous as the Euler form allows (frame 0 in the principal range)."""
     forms = np.asarray(forms)
     vector = forms % WORLD == VECTOR
     means = np.where(vector[:, None], means, _identity_means(len(orders)))
-    quats = _form_quats_kernel(_per_joint(rows), _form_axes(forms, orders), vector,
-                               np.ascontiguousarray(means, dtype=np.float64))
+    quats = _form_quats_kernel(
+        _per_joint(rows), _form_axes(forms, orders), vector, np.ascontiguousarray(means, dtype=np.float64)
+    )
     quats = np.ascontiguousarray(_turned(quats, forms, pre, inverse=True))
     return _rows(_quat_euler_kernel(quats, _axes(orders)))
 

@@ -60,7 +60,7 @@ def temporal_vectors(x: np.ndarray, length: int, predictive: bool) -> np.ndarray
     if m <= 0:
         return np.zeros((0, length))
     start = int(predictive)
-    blocks = x[start:start + m * length].reshape(m, length, -1)
+    blocks = x[start : start + m * length].reshape(m, length, -1)
     if predictive:
         blocks = blocks - x[length * np.arange(m)][:, None, :]
     return blocks.transpose(0, 2, 1).reshape(-1, length)
@@ -76,21 +76,29 @@ def spatial_vectors(x: np.ndarray, cols: np.ndarray, predictive: bool) -> np.nda
 class Codebook(modelfile.Model):
     WHAT = "codebook"
 
-    kind: str                                   # temporal | spatial
+    kind: str  # temporal | spatial
     predictive: bool
-    length: int                                 # temporal vector length (1 for spatial)
-    fps: float                                  # the rate it was trained at
-    groups: list[tuple[str, list[str]]]         # (name, channel names); temporal: one group, no names
-    books: dict[int, list[np.ndarray]]          # size -> one (entries, dim) array per group
+    length: int  # temporal vector length (1 for spatial)
+    fps: float  # the rate it was trained at
+    groups: list[tuple[str, list[str]]]  # (name, channel names); temporal: one group, no names
+    books: dict[int, list[np.ndarray]]  # size -> one (entries, dim) array per group
     trained_on: list[str] = field(default_factory=list)
 
     def to_bytes(self) -> bytes:
         sizes = sorted(self.books)
-        meta = {"kind": self.kind, "predictive": self.predictive, "length": self.length, "fps": self.fps,
-                "sizes": sizes, "groups": [{"name": n, "channels": c} for n, c in self.groups],
-                "entries": {str(s): [len(b) for b in self.books[s]] for s in sizes}, "trained_on": self.trained_on}
-        return modelfile.pack(MAGIC, VERSION, meta, b"".join(
-            np.asarray(b, dtype="<f4").tobytes() for s in sizes for b in self.books[s]))
+        meta = {
+            "kind": self.kind,
+            "predictive": self.predictive,
+            "length": self.length,
+            "fps": self.fps,
+            "sizes": sizes,
+            "groups": [{"name": n, "channels": c} for n, c in self.groups],
+            "entries": {str(s): [len(b) for b in self.books[s]] for s in sizes},
+            "trained_on": self.trained_on,
+        }
+        return modelfile.pack(
+            MAGIC, VERSION, meta, b"".join(np.asarray(b, dtype="<f4").tobytes() for s in sizes for b in self.books[s])
+        )
 
     @classmethod
     def from_bytes(cls, data: bytes, where: str) -> Codebook:
@@ -98,7 +106,7 @@ class Codebook(modelfile.Model):
         try:
             groups = [(g["name"], list(g["channels"])) for g in meta["groups"]]
             dims = [meta["length"]] if meta["kind"] == "temporal" else [len(c) for _, c in groups]
-            books = {}
+            books: dict[int, list[np.ndarray]] = {}
             for s in meta["sizes"]:
                 books[int(s)] = []
                 for entries, dim in zip(meta["entries"][str(s)], dims):
@@ -107,11 +115,17 @@ class Codebook(modelfile.Model):
                     offset += 4 * n
             if offset != len(data) - 4 or meta["kind"] not in KINDS:
                 raise ValueError(f"{len(data) - 4 - offset} bytes left after the code vectors")
-            return cls(meta["kind"], bool(meta["predictive"]), int(meta["length"]), float(meta["fps"]), groups,
-                       books, list(meta.get("trained_on", [])))
+            return cls(
+                meta["kind"],
+                bool(meta["predictive"]),
+                int(meta["length"]),
+                float(meta["fps"]),
+                groups,
+                books,
+                list(meta.get("trained_on", [])),
+            )
         except (ValueError, KeyError, TypeError) as e:
             raise CodecError(f"{where}: codebook description does not parse ({e})") from None
-
 
     def book(self, size: int) -> list[np.ndarray]:
         if size not in self.books:
@@ -125,23 +139,28 @@ class Codebook(modelfile.Model):
         names = list(skeleton.channel_names)
         mine = [(n, [names[c] for c in cols]) for n, cols in spatial_groups(skeleton)]
         if mine != [(n, list(c)) for n, c in self.groups]:
-            raise CodecError(f"the spatial codebook's groups ({', '.join(n for n, _ in self.groups)}) do not match "
-                             f"this skeleton's channels ({', '.join(n for n, _ in mine)})")
+            raise CodecError(
+                f"the spatial codebook's groups ({', '.join(n for n, _ in self.groups)}) do not match "
+                f"this skeleton's channels ({', '.join(n for n, _ in mine)})"
+            )
 
 
-_SOURCE = struct.Struct("<BII")     # 0: the books travel in the header (float16); 1: a file's: fingerprint, size
+_SOURCE = struct.Struct("<BII")  # 0: the books travel in the header (float16); 1: a file's: fingerprint, size
 
 
-def shared_books(path: str, kind: str, predictive: bool, length: int, size: int,
-                 skeleton: Skeleton) -> tuple[list[np.ndarray], bytes]:
+def shared_books(
+    path: str, kind: str, predictive: bool, length: int, size: int, skeleton: Skeleton
+) -> tuple[list[np.ndarray], bytes]:
     """The books of ``size`` in the codebook file at ``path``, checked against the coder's
     settings, and the header part that names them."""
     book = Codebook.load(path)
     if book.kind != kind:
         raise CodecError(f"codebook {path} is a {book.kind} codebook, this coder needs a {kind} one")
     if book.predictive != predictive or (kind == "temporal" and book.length != length):
-        raise CodecError(f"codebook {path} was trained with predictive={book.predictive}, length={book.length}; "
-                         f"the coder has predictive={predictive}, length={length}")
+        raise CodecError(
+            f"codebook {path} was trained with predictive={book.predictive}, length={book.length}; "
+            f"the coder has predictive={predictive}, length={length}"
+        )
     book.check_skeleton(skeleton)
     if size not in book.books:
         raise CodecError(f"codebook {path} has sizes {sorted(book.books)}, not {size} (the codec's size knob)")
@@ -162,12 +181,15 @@ def read_books(part: bytes, dims: list[int], path: str, where: str) -> list[np.n
     mode, fingerprint, size = _SOURCE.unpack_from(part)
     if mode == 1 and len(part) == _SOURCE.size:
         if not path:
-            raise CodecError(f"{where}: the payload was coded with a shared codebook (fingerprint {fingerprint:08x}); "
-                             "give the file with --codebook FILE")
+            raise CodecError(
+                f"{where}: the payload was coded with a shared codebook (fingerprint {fingerprint:08x}); "
+                "give the file with --codebook FILE"
+            )
         book = Codebook.load(path)
         if book.fingerprint != fingerprint:
-            raise CodecError(f"{where}: the payload was coded with codebook {fingerprint:08x}, "
-                             f"{path} is {book.fingerprint:08x}")
+            raise CodecError(
+                f"{where}: the payload was coded with codebook {fingerprint:08x}, {path} is {book.fingerprint:08x}"
+            )
         books = book.book(size)
         if [b.shape[1] for b in books] != dims:
             raise CodecError(f"{where}: codebook {path} does not fit this skeleton's groups")
@@ -193,19 +215,26 @@ def pack_header(source: bytes, x: np.ndarray) -> tuple[bytes, np.ndarray]:
     return join_parts([source, first.tobytes()]), first.astype(np.float64)
 
 
-def read_header(header: bytes, dims: list[int], path: str, skeleton: Skeleton,
-                where: str) -> tuple[list[np.ndarray], np.ndarray]:
+def read_header(
+    header: bytes, dims: list[int], path: str, skeleton: Skeleton, where: str
+) -> tuple[list[np.ndarray], np.ndarray]:
     """The books and first frame of a header made by :func:`pack_header`."""
-    source, first = split_parts(header, 2, where)
+    source, first_bytes = split_parts(header, 2, where)
     books = read_books(source, dims, path, where)
-    first = np.frombuffer(first, "<f4").astype(np.float64)
+    first = np.frombuffer(first_bytes, "<f4").astype(np.float64)
     if first.size != skeleton.num_channels or not np.isfinite(first).all():
         raise CorruptStreamError(f"{where}: the first frame does not match the skeleton")
     return books, first
 
 
-def train(kind: str, clips: list[Motion], sizes: list[int], predictive: bool = True, length: int = 6,
-          names: list[str] | None = None) -> Codebook:
+def train(
+    kind: str,
+    clips: list[Motion],
+    sizes: list[int],
+    predictive: bool = True,
+    length: int = 6,
+    names: list[str] | None = None,
+) -> Codebook:
     """LBG codebooks of every size in ``sizes`` from ``clips`` (same frame rate; for spatial,
     the same channel layout), at most :data:`MAX_TRAINING_VECTORS` vectors per group, evenly
     taken."""
@@ -216,7 +245,7 @@ def train(kind: str, clips: list[Motion], sizes: list[int], predictive: bool = T
     first = clips[0]
     units = [channel_units(c.skeleton) * c.continuous().channels for c in clips]
     if kind == "temporal":
-        layout = [("all", [])]
+        layout: list[tuple[str, list[str]]] = [("all", [])]
         vectors = [np.vstack([temporal_vectors(u, length, predictive) for u in units])]
     else:
         groups = spatial_groups(first.skeleton)
@@ -232,5 +261,6 @@ def train(kind: str, clips: list[Motion], sizes: list[int], predictive: bool = T
         v = v[np.linspace(0, len(v) - 1, min(len(v), MAX_TRAINING_VECTORS)).astype(np.int64)]
         for s, b in vq.lbg(v, sorted(sizes)).items():
             books[s].append(b)
-    return Codebook(kind, predictive, length if kind == "temporal" else 1, float(first.fps), layout, books,
-                    list(names or []))
+    return Codebook(
+        kind, predictive, length if kind == "temporal" else 1, float(first.fps), layout, books, list(names or [])
+    )

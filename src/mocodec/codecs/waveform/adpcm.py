@@ -25,10 +25,9 @@ from mocodec.coding.quantisation.quantizers import even_levels, multipliers
 @register
 class AdpcmCodec(FramewiseCodec):
     id = "adpcm"
-    description = "backward-adaptive order-2 LPC and feedback adaptive quantiser, range coded (000 7.6)"
+    description = "adaptive predictive coding: backward-adaptive order-2 LPC, feedback-adaptive quantiser, range coded"
     knobs = (
-        Knob("levels", int, 8, "adaptive quantiser levels N (the thesis: 4-256; rounded to even)", low=2,
-             high=1 << 16),
+        Knob("levels", int, 8, "adaptive quantiser levels N (the thesis: 4-256; rounded to even)", low=2, high=1 << 16),
         Knob("window_s", float, 1.0, "autocorrelation window in seconds (the thesis: 0.5-4)", low=0.05, high=60.0),
         Knob("order", int, 2, "predictor order", low=1, high=2),
     )

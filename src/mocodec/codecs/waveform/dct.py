@@ -36,8 +36,8 @@ class _State:
         self.ac_range = params.scale[self.active]
         self.dc_range = params.coefficient[self.active]
         self.top_speed = top_speed
-        self.dc = params.centre[self.active] * math.sqrt(self.n)      # the decoded DC of the last block
-        self.smoother = blockcut.EdgeSmoother(self.n)     # decoder side
+        self.dc = params.centre[self.active] * math.sqrt(self.n)  # the decoded DC of the last block
+        self.smoother = blockcut.EdgeSmoother(self.n)  # decoder side
 
     def multipliers(self, classes: np.ndarray) -> np.ndarray:
         return self.scale * blockdct.class_scale(classes)
@@ -60,9 +60,9 @@ class _State:
 @register
 class DctCodec(BlockwiseCodec):
     id = "dct"
-    description = "block DCT (N=16) with Appendix III bit tables, speed-adaptive steps, edge smoothing (000 7.8.1)"
+    description = "block DCT (N=16) with fixed bit tables, speed-adaptive steps, block-edge smoothing"
     knobs = (
-        Knob("table", int, 1, "Appendix III bit table and speed thresholds (0 finest .. 4 coarsest)", low=0, high=4),
+        Knob("table", int, 1, "bit table and speed thresholds (0 finest .. 4 coarsest)", low=0, high=4),
         Knob("scale", float, 1.0, "multiplies every quantiser step", low=1e-3, high=1e3),
         Knob("block", int, 16, "frames per block N (a power of two; the coding delay)", low=2, high=256),
         Knob("adaptive", bool, True, "speed-adaptive steps (the class of each block sent)"),
@@ -97,13 +97,16 @@ class DctCodec(BlockwiseCodec):
             return [np.zeros((0, x.shape[1]), dtype=np.int64)] * 2, frames
         blocks = blockcut.split(x, state.n)
         coeffs = blockdct.forward(blocks)
-        classes = (blockdct.speed_classes(blockdct.block_speed(blocks), state.top_speed, state.thresholds)
-                   if state.adaptive else np.zeros(blocks[:, 0].shape, dtype=np.int64))
+        classes = (
+            blockdct.speed_classes(blockdct.block_speed(blocks), state.top_speed, state.thresholds)
+            if state.adaptive
+            else np.zeros(blocks[:, 0].shape, dtype=np.int64)
+        )
         mult = state.multipliers(classes)
         steps = state.ac_steps(mult)
         codes = np.zeros((len(blocks), 1 + state.sent_ac.size, x.shape[1]), dtype=np.int64)
         codes[:, 1:] = blockdct.mid_tread(coeffs[:, state.sent_ac], steps, state.ac_range)
-        for b in range(len(blocks)):          # the DC in a closed loop, block after block
+        for b in range(len(blocks)):  # the DC in a closed loop, block after block
             step = state.dc_step(mult[b])
             codes[b, 0] = blockdct.mid_tread(coeffs[b, 0] - state.dc, step, state.dc_range)
             state.dc = state.dc + codes[b, 0] * step

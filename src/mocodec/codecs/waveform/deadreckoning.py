@@ -14,6 +14,8 @@ and values are range coded with adaptive models. Delay: 3 frames (the centred 7-
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from mocodec.codecs.base import Knob, QualityKnob
@@ -24,7 +26,7 @@ from mocodec.coding.quantisation.predictive import ChannelParams
 from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
-MAX_INTERVAL = 64              # longer intervals share the histogram's last bin
+MAX_INTERVAL = 64  # longer intervals share the histogram's last bin
 
 
 class _State:
@@ -49,7 +51,7 @@ class _State:
         self.acc = np.zeros(active.size)
         self.age = np.zeros(len(groups), dtype=np.int64)
         self.hist = np.zeros(MAX_INTERVAL + 1, dtype=np.int64)
-        self.past: np.ndarray | None = None           # the last 3 input frames (encoder)
+        self.past: np.ndarray | None = None  # the last 3 input frames (encoder)
 
     @property
     def columns(self) -> int:
@@ -58,9 +60,24 @@ class _State:
     def run(self, x_ext, flags, values, decode):
         out = np.empty((len(flags), self.params.centre.size))
         out[:] = self.params.centre
-        decoded, rows = deadreckon.run(x_ext, flags, values, decode, self.groups, self.group_start, self.thr,
-                                       self.pstep, self.vstep, self.astep, self.use_acc, self.base, self.vel,
-                                       self.acc, self.age, self.hist)
+        decoded, rows = deadreckon.run(
+            x_ext,
+            flags,
+            values,
+            decode,
+            self.groups,
+            self.group_start,
+            self.thr,
+            self.pstep,
+            self.vstep,
+            self.astep,
+            self.use_acc,
+            self.base,
+            self.vel,
+            self.acc,
+            self.age,
+            self.hist,
+        )
         out[:, self.active] = decoded
         return out, rows
 
@@ -85,17 +102,35 @@ def _groups(skeleton: Skeleton, active: np.ndarray, measure: str) -> list[np.nda
 @register
 class DeadReckoningCodec(FramewiseCodec):
     id = "deadreckoning"
-    description = "ghost model with threshold updates: quantised difference and velocity (000 7.7)"
+    description = "dead reckoning: a ghost model with threshold updates of quantised difference and velocity"
     knobs = (
-        Knob("threshold", float, 0.5, "update threshold, degrees (cm for translations) (the thesis: 0.0125-16)",
-             low=1e-4, high=360.0),
-        Knob("measure", str, "dof", "error measure: per channel, or per joint (norm of its channels' errors)",
-             choices=("dof", "group")),
-        Knob("acceleration", bool, False, "also send the acceleration (7-19) in each update"),
-        Knob("position_step", float, 0.5, "quantiser step of the position difference, in thresholds",
-             low=1e-3, high=10.0),
-        Knob("velocity_step", float, 0.125, "quantiser step of the velocity change, thresholds per frame",
-             low=1e-4, high=10.0),
+        Knob(
+            "threshold",
+            float,
+            0.5,
+            "update threshold, degrees (cm for translations) (the thesis: 0.0125-16)",
+            low=1e-4,
+            high=360.0,
+        ),
+        Knob(
+            "measure",
+            str,
+            "dof",
+            "error measure: per channel, or per joint (norm of its channels' errors)",
+            choices=("dof", "group"),
+        ),
+        Knob("acceleration", bool, False, "also send the acceleration in each update"),
+        Knob(
+            "position_step", float, 0.5, "quantiser step of the position difference, in thresholds", low=1e-3, high=10.0
+        ),
+        Knob(
+            "velocity_step",
+            float,
+            0.125,
+            "quantiser step of the velocity change, thresholds per frame",
+            low=1e-4,
+            high=10.0,
+        ),
     )
     quality = QualityKnob("threshold", higher_is_better=False, log_scale=True)
     lookahead = deadreckon.HALF_WINDOW
@@ -116,7 +151,7 @@ class DeadReckoningCodec(FramewiseCodec):
         tail = np.vstack((x, future))
         pad = np.repeat(tail[-1:], deadreckon.HALF_WINDOW - len(future), axis=0)
         x_ext = np.ascontiguousarray(np.vstack((state.past, tail, pad)))
-        state.past = np.vstack((state.past, x))[-deadreckon.HALF_WINDOW:]
+        state.past = np.vstack((state.past, x))[-deadreckon.HALF_WINDOW :]
         flags = np.zeros((len(x), len(state.group_start) - 1), dtype=np.int64)
         values = np.zeros((x.size, state.columns), dtype=np.int64)
         decoded, rows = state.run(x_ext, flags, values, False)
@@ -134,7 +169,7 @@ class DeadReckoningCodec(FramewiseCodec):
 def update_intervals(codec: DeadReckoningCodec, motion: Motion) -> np.ndarray:
     """How many updates came 0, 1, ..., 64 or more frames after the previous one of their group
     (fig. 7-13), from coding ``motion``."""
-    enc = codec.encoder(motion.skeleton, motion.fps)
+    enc: Any = codec.encoder(motion.skeleton, motion.fps)  # a frame encoder, whose state keeps the histogram
     enc.push(motion.channels)
     enc.flush()
     return enc.state.hist.copy()

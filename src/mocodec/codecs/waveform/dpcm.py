@@ -25,10 +25,16 @@ from mocodec.coding.quantisation.quantizers import table
 @register
 class DpcmCodec(FramewiseCodec):
     id = "dpcm"
-    description = "closed-loop first-order predictive coding, quantised difference, range coded (000 7.5)"
+    description = "closed-loop first-order predictive coding (DPCM), quantised difference, range coded"
     knobs = (
-        Knob("levels", int, 8, "difference quantiser levels N (the thesis: 4-256; mu-law rounds to even)",
-             low=2, high=1 << 16),
+        Knob(
+            "levels",
+            int,
+            8,
+            "difference quantiser levels N (the thesis: 4-256; mu-law rounds to even)",
+            low=2,
+            high=1 << 16,
+        ),
         Knob("law", str, "uniform", "difference quantiser", choices=("uniform", "mulaw")),
         Knob("mu", float, 8.0, "mu of the mu-law quantiser", low=1e-3, high=1e6),
     )
@@ -38,8 +44,9 @@ class DpcmCodec(FramewiseCodec):
         constant = np.ptp(values, axis=0) <= 0
         top, a = difference_range(values, fps), first_order(values)
         draft = ChannelParams(constant, values[0], top, a)
-        params = ChannelParams(constant, values[0], best_range(values, top, draft.centre, draft.coefficient,
-                                                               *self._table()), a)
+        params = ChannelParams(
+            constant, values[0], best_range(values, top, draft.centre, draft.coefficient, *self._table()), a
+        )
         return params.pack(), TableCoder(params, *self._table())
 
     def _load(self, header, skeleton, fps):

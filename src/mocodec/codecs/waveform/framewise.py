@@ -35,18 +35,18 @@ from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
-_PACKET = struct.Struct("<BI")          # flags (1: carries the header, 2: ends the stream), frames
+_PACKET = struct.Struct("<BI")  # flags (1: carries the header, 2: ends the stream), frames
 Reader = Callable[[int, int], np.ndarray]
 
 
 class FramewiseCodec(Codec):
     streaming = True
-    lookahead: ClassVar[int] = 0        # frames the encoder must see past the ones it codes
-    bounded_codes: ClassVar[bool] = False   # the sample coder's codes are coded as its N levels
-    holds_frames: ClassVar[bool] = False    # the decoder keeps frames back until the next packet or the end
+    lookahead: ClassVar[int] = 0  # frames the encoder must see past the ones it codes
+    bounded_codes: ClassVar[bool] = False  # the sample coder's codes are coded as its N levels
+    holds_frames: ClassVar[bool] = False  # the decoder keeps frames back until the next packet or the end
 
     @property
-    def delay_frames(self) -> int:      # type: ignore[override]
+    def delay_frames(self) -> int:  # type: ignore[override]
         return self.lookahead
 
     # ----- what a coder provides -----------------------------------------------------------
@@ -111,11 +111,11 @@ class BlockwiseCodec(FramewiseCodec):
             raise CodecError(f"codec {self.id}: block must be a power of two, got {n}")
 
     @property
-    def holds_frames(self) -> bool:       # type: ignore[override]
+    def holds_frames(self) -> bool:  # type: ignore[override]
         return self.config["smooth"]
 
     @property
-    def delay_frames(self) -> int:        # type: ignore[override]
+    def delay_frames(self) -> int:  # type: ignore[override]
         return self.config["block"] - 1 + int(self.config["smooth"])
 
     def _ready(self, pending: int) -> int:
@@ -126,7 +126,7 @@ class _FrameEncoder(StreamEncoder):
     def __init__(self, codec: FramewiseCodec, skeleton: Skeleton, fps: float):
         self.codec, self.skeleton, self.fps = codec, skeleton, fps
         self.pending = np.zeros((0, skeleton.num_channels))
-        self.last: np.ndarray | None = None          # the last continuous frame seen
+        self.last: np.ndarray | None = None  # the last continuous frame seen
         self.state: Any = None
         self.models: list[intcoder.Model] = []
         self.primer = np.zeros((0, skeleton.num_channels))
@@ -186,7 +186,7 @@ class _FrameDecoder(StreamDecoder):
             return self._push(packet)
         except (CorruptStreamError, CodecError):
             raise
-        except Exception as e:   # noqa: BLE001 - a packet that does not parse
+        except Exception as e:  # noqa: BLE001 - a packet that does not parse
             raise CorruptStreamError(f"{self.codec.id} packet does not decode ({type(e).__name__}: {e})") from None
 
     def _push(self, packet: bytes) -> np.ndarray:
@@ -201,8 +201,9 @@ class _FrameDecoder(StreamDecoder):
         elif self.state is None:
             raise CorruptStreamError(f"{self.codec.id} stream: the first packet carries no header")
         if n * self.skeleton.num_channels > limits.MAX_DECODED_VALUES:
-            raise CorruptStreamError(f"{self.codec.id} packet claims {n} frames, over the limit of "
-                                     f"{limits.MAX_DECODED_VALUES:,} values")
+            raise CorruptStreamError(
+                f"{self.codec.id} packet claims {n} frames, over the limit of {limits.MAX_DECODED_VALUES:,} values"
+            )
         counter = itertools.count()
 
         def read(rows: int, cols: int) -> np.ndarray:

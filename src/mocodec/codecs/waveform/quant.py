@@ -31,14 +31,25 @@ LAWS = ("uniform", "mulaw", "adaptive")
 @register
 class QuantCodec(FramewiseCodec):
     id = "quant"
-    description = "direct quantisation per DOF: uniform, mu-law or feedback-adaptive (000 7.2-7.3), range coded"
+    description = "direct quantisation per DOF: uniform, mu-law or feedback-adaptive, range coded"
     knobs = (
-        Knob("levels", int, 64, "quantiser levels N (the thesis: 8-256; mu-law and adaptive round to even)",
-             low=2, high=1 << 16),
+        Knob(
+            "levels",
+            int,
+            64,
+            "quantiser levels N (the thesis: 8-256; mu-law and adaptive round to even)",
+            low=2,
+            high=1 << 16,
+        ),
         Knob("law", str, "uniform", "quantiser", choices=LAWS),
         Knob("mu", float, 8.0, "mu of the mu-law quantiser", low=1e-3, high=1e6),
-        Knob("range", str, "data", "uniform range: the data's, or the joint limits where the skeleton has them",
-             choices=("data", "limits")),
+        Knob(
+            "range",
+            str,
+            "data",
+            "uniform range: the data's, or the joint limits where the skeleton has them",
+            choices=("data", "limits"),
+        ),
     )
     quality = QualityKnob("levels", higher_is_better=True, log_scale=True)
     bounded_codes = True
@@ -50,8 +61,9 @@ class QuantCodec(FramewiseCodec):
             finite = np.isfinite(limits).all(axis=1) & (limits[:, 1] > limits[:, 0])
             low, high = np.where(finite, limits[:, 0], low), np.where(finite, limits[:, 1], high)
         constant = high - low <= 0
-        params = ChannelParams(constant, np.where(constant, values[0], (low + high) / 2), (high - low) / 2,
-                               np.zeros(len(low)))
+        params = ChannelParams(
+            constant, np.where(constant, values[0], (low + high) / 2), (high - low) / 2, np.zeros(len(low))
+        )
         return params.pack(), self._coder(params)
 
     def _load(self, header, skeleton, fps):
@@ -61,6 +73,12 @@ class QuantCodec(FramewiseCodec):
         law = self.config["law"]
         if law == "adaptive":
             n = even_levels(self.config["levels"])
-            return AdaptiveCoder(ChannelParams(params.constant, params.centre, 2.0 * params.scale / n, 0.0),
-                                 n, 0, 3, 1, multipliers(n))
+            return AdaptiveCoder(
+                ChannelParams(params.constant, params.centre, 2.0 * params.scale / n, np.zeros_like(params.scale)),
+                n,
+                0,
+                3,
+                1,
+                multipliers(n),
+            )
         return TableCoder(params, *table(law, self.config["levels"], self.config["mu"]))

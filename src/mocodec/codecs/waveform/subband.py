@@ -39,7 +39,7 @@ from mocodec.coding.transforms import blocks, subbands
 from mocodec.errors import CorruptStreamError
 from mocodec.metrics.visual import BAND_EDGES_HZ, BAND_WEIGHTS
 
-_COEFFICIENT_SCALE = 127.0              # predictor coefficients travel as int8 / 127
+_COEFFICIENT_SCALE = 127.0  # predictor coefficients travel as int8 / 127
 
 
 class _State:
@@ -55,7 +55,7 @@ class _State:
         self.significance = np.concatenate([np.full(b - a, w * g) for (a, b), w, g in zip(self.bounds, weights, gains)])
         rng = params.scale[self.active]
         self.steps = [cfg["step"] * rng / (w * g) for w, g in zip(weights, gains)]
-        self.coefficients = coefficients                    # (bands, K)
+        self.coefficients = coefficients  # (bands, K)
         self.prev = np.zeros((len(self.bounds), self.active.size))
         self.keep = cfg["keep"]
         self.smoother = blocks.EdgeSmoother(self.n) if cfg["smooth"] else None
@@ -66,7 +66,7 @@ class _State:
         coeffs = subbands.forward(blocks.split(x - self.params.centre[self.active], self.n), self.levels)
         if 0 < self.keep < self.n:
             weighted = np.abs(coeffs) * self.significance[None, :, None]
-            floor = -np.partition(-weighted, self.keep - 1, axis=1)[:, self.keep - 1:self.keep]
+            floor = -np.partition(-weighted, self.keep - 1, axis=1)[:, self.keep - 1 : self.keep]
             coeffs = np.where(weighted >= floor, coeffs, 0.0)
         return coeffs
 
@@ -88,15 +88,34 @@ class _State:
 @register
 class SubbandCodec(BlockwiseCodec):
     id = "subband"
-    description = "subband (VMSE bands) or wavelet (M largest) split of 16-frame blocks, a predictive coder per band (000 7.8.2)"
+    description = "subband (VMSE bands) or wavelet (M largest) split of 16-frame blocks, a predictive coder per band"
     knobs = (
-        Knob("step", float, 0.02, "quantiser step of a weight-1 band, as a fraction of the channel's range",
-             low=1e-5, high=10.0),
-        Knob("variant", str, "bands", "bands: the VMSE's four bands (fig. 7-17); wavelet: full decomposition (fig. 7-18)",
-             choices=("bands", "wavelet")),
-        Knob("keep", int, 0, "coefficients kept per block and channel, the most significant (0: all)", low=0, high=4096),
-        Knob("emphasis", float, 0.5, "band steps follow the VMSE weights a_b^emphasis (0: flat, for PSNR; 1: in full)",
-             low=0.0, high=2.0),
+        Knob(
+            "step",
+            float,
+            0.02,
+            "quantiser step of a weight-1 band, as a fraction of the channel's range",
+            low=1e-5,
+            high=10.0,
+        ),
+        Knob(
+            "variant",
+            str,
+            "bands",
+            "bands: the VMSE's four bands (fig. 7-17); wavelet: full decomposition (fig. 7-18)",
+            choices=("bands", "wavelet"),
+        ),
+        Knob(
+            "keep", int, 0, "coefficients kept per block and channel, the most significant (0: all)", low=0, high=4096
+        ),
+        Knob(
+            "emphasis",
+            float,
+            0.5,
+            "band steps follow the VMSE weights a_b^emphasis (0: flat, for PSNR; 1: in full)",
+            low=0.0,
+            high=2.0,
+        ),
         Knob("block", int, 16, "frames per block N (a power of two; the coding delay)", low=2, high=256),
         Knob("smooth", bool, True, "smooth the samples either side of each block edge on decoding"),
     )
@@ -114,7 +133,9 @@ class SubbandCodec(BlockwiseCodec):
         params = ChannelParams(spread <= 0, values[0], spread, np.zeros(values.shape[1]))
         draft = _State(self, params, np.zeros((1, 0)), fps)
         coeffs = draft.split(values[:, params.active])
-        coefficients = np.clip([lag_one(draft.band_signal(coeffs, b), 0.0) for b in range(len(draft.bounds))], -1.0, 1.0)
+        coefficients = np.clip(
+            [lag_one(draft.band_signal(coeffs, b), 0.0) for b in range(len(draft.bounds))], -1.0, 1.0
+        )
         packed = np.round(coefficients * _COEFFICIENT_SCALE).astype(np.int8)
         state = _State(self, params, packed / _COEFFICIENT_SCALE, fps)
         return join_parts([params.pack(), packed.tobytes()]), state
@@ -150,4 +171,3 @@ class SubbandCodec(BlockwiseCodec):
             coeffs[:, lo:hi] = state.run(b, np.zeros((0, k)), codes, True).reshape(m, hi - lo, k)
         frames = state.rebuild(coeffs, n)
         return state.smoother.push(frames, last) if state.smoother else frames
-

@@ -26,8 +26,9 @@ from mocodec.coding.quantisation import vq
 
 
 class _State:
-    def __init__(self, books: list[np.ndarray], groups: list[np.ndarray], first: np.ndarray, units: np.ndarray,
-                 predictive: bool):
+    def __init__(
+        self, books: list[np.ndarray], groups: list[np.ndarray], first: np.ndarray, units: np.ndarray, predictive: bool
+    ):
         self.units, self.predictive = units, predictive
         self.columns = np.concatenate(groups).astype(np.int64)
         self.starts = np.concatenate([[0], np.cumsum([len(g) for g in groups])]).astype(np.int64)
@@ -35,22 +36,29 @@ class _State:
         self.entries = np.array([len(b) for b in books])
         self.books = np.zeros((self.book_starts[-1], max(len(g) for g in groups)))
         for b, a in zip(books, self.book_starts):
-            self.books[a:a + len(b), :b.shape[1]] = b
+            self.books[a : a + len(b), : b.shape[1]] = b
         self.prev = first.copy()
 
     def run(self, x: np.ndarray, codes: np.ndarray, decode: bool) -> np.ndarray:
-        return vq.run_spatial(x, codes, decode, self.predictive, self.prev, self.columns, self.starts,
-                              self.books, self.book_starts)
+        return vq.run_spatial(
+            x, codes, decode, self.predictive, self.prev, self.columns, self.starts, self.books, self.book_starts
+        )
 
 
 @register
 class SvqCodec(FramewiseCodec):
     id = "svq"
-    description = "spatial vector quantisation: one vector per body-part group and frame, LBG codebooks (000 7.9.1)"
+    description = "spatial vector quantisation: one vector per body-part group and frame, LBG codebooks"
     knobs = (
         Knob("size", int, 32, "entries of each group's codebook (the thesis: 16-512)", low=2, high=4096),
         Knob("predictive", bool, True, "code each group's change from its last decoded frame"),
-        Knob("codebook", str, "", "a codebook file (mocodec codebook train); empty: train on the clip, send in-band", path=True),
+        Knob(
+            "codebook",
+            str,
+            "",
+            "a codebook file (mocodec codebook train); empty: train on the clip, send in-band",
+            path=True,
+        ),
     )
     quality = QualityKnob("size", higher_is_better=True, log_scale=True)
 
@@ -73,8 +81,9 @@ class SvqCodec(FramewiseCodec):
 
     def _load(self, header, skeleton, fps):
         groups = [cols for _, cols in vqbook.spatial_groups(skeleton)]
-        books, first = vqbook.read_header(header, [len(g) for g in groups], self.config["codebook"], skeleton,
-                                          "svq header")
+        books, first = vqbook.read_header(
+            header, [len(g) for g in groups], self.config["codebook"], skeleton, "svq header"
+        )
         return _State(books, groups, first, vqbook.channel_units(skeleton), self.config["predictive"])
 
     def _code(self, state, frames, ahead):

@@ -37,17 +37,23 @@ class _State:
 @register
 class TvqCodec(FramewiseCodec):
     id = "tvq"
-    description = "temporal vector quantisation: 6-sample vectors per DOF, LBG codebook (000 7.9.2)"
+    description = "temporal vector quantisation: 6-sample vectors per DOF, LBG codebook"
     knobs = (
         Knob("size", int, 256, "codebook entries (the thesis: 16-512)", low=2, high=4096),
         Knob("length", int, 6, "samples per vector (the coding delay + 1)", low=2, high=64),
         Knob("predictive", bool, True, "code each vector minus the channel's last decoded sample"),
-        Knob("codebook", str, "", "a codebook file (mocodec codebook train); empty: train on the clip, send in-band", path=True),
+        Knob(
+            "codebook",
+            str,
+            "",
+            "a codebook file (mocodec codebook train); empty: train on the clip, send in-band",
+            path=True,
+        ),
     )
     quality = QualityKnob("size", higher_is_better=True, log_scale=True)
 
     @property
-    def delay_frames(self) -> int:        # type: ignore[override]
+    def delay_frames(self) -> int:  # type: ignore[override]
         return self.config["length"] - 1
 
     def _ready(self, pending: int) -> int:
@@ -58,8 +64,9 @@ class TvqCodec(FramewiseCodec):
         units = vqbook.channel_units(skeleton)
         x = values * units
         if cfg["codebook"]:
-            books, source = vqbook.shared_books(cfg["codebook"], "temporal", cfg["predictive"], cfg["length"],
-                                                cfg["size"], skeleton)
+            books, source = vqbook.shared_books(
+                cfg["codebook"], "temporal", cfg["predictive"], cfg["length"], cfg["size"], skeleton
+            )
         else:
             vectors = vqbook.temporal_vectors(x, cfg["length"], cfg["predictive"])
             if not len(vectors):
@@ -69,8 +76,9 @@ class TvqCodec(FramewiseCodec):
         return header, _State(books[0], first, units, cfg["predictive"])
 
     def _load(self, header, skeleton, fps):
-        books, first = vqbook.read_header(header, [self.config["length"]], self.config["codebook"], skeleton,
-                                          "tvq header")
+        books, first = vqbook.read_header(
+            header, [self.config["length"]], self.config["codebook"], skeleton, "tvq header"
+        )
         return _State(books[0], first, vqbook.channel_units(skeleton), self.config["predictive"])
 
     def _code(self, state, frames, ahead):

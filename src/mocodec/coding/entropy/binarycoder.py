@@ -20,8 +20,8 @@ TOP = 1 << 24
 HALF = 1 << 15
 FAST, SLOW = 4, 7
 INIT = 1 << 15
-MAX_CLASS = 62             # |v| < 2^62
-WARM_DONE = 126            # decisions after which a warm context adapts at the fixed rates
+MAX_CLASS = 62  # |v| < 2^62
+WARM_DONE = 126  # decisions after which a warm context adapts at the fixed rates
 _WARM_SHIFT = np.array([min((n + 2).bit_length(), SLOW) for n in range(WARM_DONE + 1)], dtype=np.int64)
 
 
@@ -173,7 +173,7 @@ def get_int(st, data, state, zctx, uctx, ulen, mctx, sctx):
 
 @numba.njit(inline="always")
 def start_decoder(data):
-    st = np.array([0, 0xFFFFFFFF, 0], dtype=np.int64)       # code, range, read position
+    st = np.array([0, 0xFFFFFFFF, 0], dtype=np.int64)  # code, range, read position
     for _ in range(5):
         nxt = data[st[2]] if st[2] < data.size else 0
         st[2] += 1

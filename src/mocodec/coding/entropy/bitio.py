@@ -96,8 +96,9 @@ class BitReader:
             raise ValueError(f"field widths must be 0..{MAX_WIDTH}")
         need = int(widths.sum())
         if need > self.bits_left:
-            raise CorruptStreamError(f"stream ends after {self._data.size} bytes: {need} more bits needed "
-                                     f"at bit {self.pos}")
+            raise CorruptStreamError(
+                f"stream ends after {self._data.size} bytes: {need} more bits needed at bit {self.pos}"
+            )
         out = _unpack(self._data, self.pos, np.ascontiguousarray(widths))
         self.pos += need
         return out

@@ -44,22 +44,22 @@ from mocodec.coding.entropy.binarycoder import (
 )
 
 # context layout
-_BANDS = 6                  # approximation, detail 1 (finest) .. detail 5+ (coarser)
+_BANDS = 6  # approximation, detail 1 (finest) .. detail 5+ (coarser)
 _ACT = 4
 _PAR = 3
 _UNARY = 8
-_Z0 = 0                                         # zero flags: band x activity x parent
-_U0 = _Z0 + _BANDS * _ACT * _PAR                # unary: band x activity x position
-_M0 = _U0 + _BANDS * _ACT * _UNARY              # top mantissa bit: class
-_S0 = _M0 + MAX_CLASS                          # sign: band
-_KZ = _S0 + _BANDS                              # knots: zero flag (first knot, later knots)
-_KU = _KZ + 2                                   # knots: unary position (x2)
-_KM = _KU + 2 * 24                              # knots: top mantissa bit per class
-_KS = _KM + MAX_CLASS                          # knots: sign
-_CONST = _KS + 2                                # channel is constant
-_BLOCK = _CONST + 1                             # block has a nonzero coefficient (prev block: 0/1)
-_S2 = _BLOCK + 2                                # revision 2 signs: band x previous sign x parent sign
-_SIDE = _S2 + _BANDS * 9                        # side integers: zero flag, unary positions, sign
+_Z0 = 0  # zero flags: band x activity x parent
+_U0 = _Z0 + _BANDS * _ACT * _PAR  # unary: band x activity x position
+_M0 = _U0 + _BANDS * _ACT * _UNARY  # top mantissa bit: class
+_S0 = _M0 + MAX_CLASS  # sign: band
+_KZ = _S0 + _BANDS  # knots: zero flag (first knot, later knots)
+_KU = _KZ + 2  # knots: unary position (x2)
+_KM = _KU + 2 * 24  # knots: top mantissa bit per class
+_KS = _KM + MAX_CLASS  # knots: sign
+_CONST = _KS + 2  # channel is constant
+_BLOCK = _CONST + 1  # block has a nonzero coefficient (prev block: 0/1)
+_S2 = _BLOCK + 2  # revision 2 signs: band x previous sign x parent sign
+_SIDE = _S2 + _BANDS * 9  # side integers: zero flag, unary positions, sign
 _SIDE_UNARY = 8
 _CONTEXTS = _SIDE + 2 + _SIDE_UNARY
 
@@ -86,7 +86,7 @@ def _parent_class(v):
 def _encode(side, const, knots, coeffs, seg_pad, seg_lev, rev2, buf):
     st = encoder_state()
     state = np.full((3, _CONTEXTS), INIT, dtype=np.int64)
-    state[2, :] = 0 if rev2 else WARM_DONE              # revision 2: contexts warm up (binarycoder.new_state)
+    state[2, :] = 0 if rev2 else WARM_DONE  # revision 2: contexts warm up (binarycoder.new_state)
     for v in side:
         put_int(st, buf, state, v, _SIDE, _SIDE + 2, _SIDE_UNARY, _KM, _SIDE + 1)
     for c in range(const.size):
@@ -95,8 +95,9 @@ def _encode(side, const, knots, coeffs, seg_pad, seg_lev, rev2, buf):
         nk = 1 if const[c] else knots.shape[1]
         for i in range(nk):
             first = 1 if i == 0 else 0
-            put_int(st, buf, state, knots[c, i] - prev, _KZ + 1 - first, _KU + 24 * (1 - first), 24, _KM,
-                     _KS + 1 - first)
+            put_int(
+                st, buf, state, knots[c, i] - prev, _KZ + 1 - first, _KU + 24 * (1 - first), 24, _KM, _KS + 1 - first
+            )
             prev = knots[c, i]
         if const[c]:
             continue
@@ -127,7 +128,7 @@ def _encode(side, const, knots, coeffs, seg_pad, seg_lev, rev2, buf):
                         pv = 0
                         if b == 0:
                             par = 1 if rev2 and i > 0 else 0
-                            if rev2:                 # the difference from the previous value
+                            if rev2:  # the difference from the previous value
                                 u = v - prev_v
                                 prev_v = v
                                 v = u
@@ -136,8 +137,17 @@ def _encode(side, const, knots, coeffs, seg_pad, seg_lev, rev2, buf):
                             par = _parent_class(pv)
                         act = _activity(p1, p2)
                         sctx = _S2 + (band * 3 + _sign_class(p1)) * 3 + _sign_class(pv) if rev2 else _S0 + band
-                        put_int(st, buf, state, v, _Z0 + (band * _ACT + act) * _PAR + par,
-                                 _U0 + (band * _ACT + act) * _UNARY, _UNARY, _M0, sctx)
+                        put_int(
+                            st,
+                            buf,
+                            state,
+                            v,
+                            _Z0 + (band * _ACT + act) * _PAR + par,
+                            _U0 + (band * _ACT + act) * _UNARY,
+                            _UNARY,
+                            _M0,
+                            sctx,
+                        )
                         p2 = p1
                         p1 = v
                     start += blen
@@ -151,7 +161,7 @@ def _encode(side, const, knots, coeffs, seg_pad, seg_lev, rev2, buf):
 def _decode(data, side, channels, num_knots, num_coeffs, seg_pad, seg_lev, rev2, const, knots, coeffs):
     st = start_decoder(data)
     state = np.full((3, _CONTEXTS), INIT, dtype=np.int64)
-    state[2, :] = 0 if rev2 else WARM_DONE              # revision 2: contexts warm up (binarycoder.new_state)
+    state[2, :] = 0 if rev2 else WARM_DONE  # revision 2: contexts warm up (binarycoder.new_state)
     for i in range(side.size):
         side[i] = get_int(st, data, state, _SIDE, _SIDE + 2, _SIDE_UNARY, _KM, _SIDE + 1)
     for c in range(channels):
@@ -190,8 +200,16 @@ def _decode(data, side, channels, num_knots, num_coeffs, seg_pad, seg_lev, rev2,
                             par = _parent_class(pv)
                         act = _activity(p1, p2)
                         sctx = _S2 + (band * 3 + _sign_class(p1)) * 3 + _sign_class(pv) if rev2 else _S0 + band
-                        v = get_int(st, data, state, _Z0 + (band * _ACT + act) * _PAR + par,
-                                     _U0 + (band * _ACT + act) * _UNARY, _UNARY, _M0, sctx)
+                        v = get_int(
+                            st,
+                            data,
+                            state,
+                            _Z0 + (band * _ACT + act) * _PAR + par,
+                            _U0 + (band * _ACT + act) * _UNARY,
+                            _UNARY,
+                            _M0,
+                            sctx,
+                        )
                         p2 = p1
                         p1 = v
                         if b == 0 and rev2:
@@ -208,7 +226,9 @@ def _decode(data, side, channels, num_knots, num_coeffs, seg_pad, seg_lev, rev2,
 def _approx_differences(coeffs: np.ndarray, seg_pad: np.ndarray, seg_lev: np.ndarray) -> np.ndarray:
     """The values :func:`encode` codes in place of the approximation bands after their first."""
     offsets = np.concatenate([[0], np.cumsum(seg_pad)[:-1]]).astype(np.int64)
-    parts = [np.diff(coeffs[:, o:o + (n >> lev)], axis=1).ravel() for o, n, lev in zip(offsets, seg_pad, seg_lev) if n]
+    parts = [
+        np.diff(coeffs[:, o : o + (n >> lev)], axis=1).ravel() for o, n, lev in zip(offsets, seg_pad, seg_lev) if n
+    ]
     return np.concatenate(parts) if parts else np.zeros(0, dtype=np.int64)
 
 
@@ -218,8 +238,15 @@ def _differences(sequences) -> np.ndarray:
     return np.concatenate(parts) if parts else np.zeros(0, dtype=np.int64)
 
 
-def encode(const: np.ndarray, knots: np.ndarray, coeffs: np.ndarray, seg_pad: np.ndarray,
-           seg_lev: np.ndarray, revision: int = 1, side: tuple = ()) -> bytes:
+def encode(
+    const: np.ndarray,
+    knots: np.ndarray,
+    coeffs: np.ndarray,
+    seg_pad: np.ndarray,
+    seg_lev: np.ndarray,
+    revision: int = 1,
+    side: tuple = (),
+) -> bytes:
     """Bytes for ``const (C,)`` flags, ``knots (C, K)`` and ``coeffs (C, N)`` integers laid out
     as segments of ``seg_pad`` coefficients (0: no block) with ``seg_lev`` wavelet levels,
     after the ``side`` sequences of integers (a caller's parameters, such as kinwave's step
@@ -246,12 +273,19 @@ class Decoded:
     const: np.ndarray
     knots: np.ndarray
     coeffs: np.ndarray
-    side: tuple               # the side sequences
-    used: int                 # bytes read
+    side: tuple  # the side sequences
+    used: int  # bytes read
 
 
-def decode(data: bytes, channels: int, num_knots: int, seg_pad: np.ndarray, seg_lev: np.ndarray,
-           revision: int = 1, side_sizes: tuple = ()) -> Decoded:
+def decode(
+    data: bytes,
+    channels: int,
+    num_knots: int,
+    seg_pad: np.ndarray,
+    seg_lev: np.ndarray,
+    revision: int = 1,
+    side_sizes: tuple = (),
+) -> Decoded:
     """Inverse of :func:`encode`, given the lengths of the side sequences."""
     seg_pad = np.asarray(seg_pad, dtype=np.int64)
     n = int(seg_pad.sum())
@@ -259,7 +293,18 @@ def decode(data: bytes, channels: int, num_knots: int, seg_pad: np.ndarray, seg_
     knots = np.zeros((channels, num_knots), dtype=np.int64)
     coeffs = np.zeros((channels, n), dtype=np.int64)
     side = np.zeros(sum(side_sizes), dtype=np.int64)
-    used = _decode(np.frombuffer(data, dtype=np.uint8), side, channels, num_knots, n, seg_pad,
-                   np.asarray(seg_lev, dtype=np.int64), revision >= 2, const, knots, coeffs)
-    cuts = np.cumsum(side_sizes)[:-1] if side_sizes else []
+    used = _decode(
+        np.frombuffer(data, dtype=np.uint8),
+        side,
+        channels,
+        num_knots,
+        n,
+        seg_pad,
+        np.asarray(seg_lev, dtype=np.int64),
+        revision >= 2,
+        const,
+        knots,
+        coeffs,
+    )
+    cuts = np.cumsum(side_sizes)[:-1] if side_sizes else np.zeros(0, dtype=np.int64)
     return Decoded(const, knots, coeffs, tuple(np.cumsum(q) for q in np.split(side, cuts)), int(used))

@@ -33,7 +33,7 @@ def code_lengths(counts: np.ndarray) -> np.ndarray:
         lengths[used] = 1
     if used.size <= 1:
         return lengths
-    heap = [(int(counts[s]), int(s), (int(s),)) for s in used]
+    heap: list[tuple[int, int, tuple[int, ...]]] = [(int(counts[s]), int(s), (int(s),)) for s in used]
     heapq.heapify(heap)
     while len(heap) > 1:
         c1, k1, s1 = heapq.heappop(heap)
@@ -41,7 +41,7 @@ def code_lengths(counts: np.ndarray) -> np.ndarray:
         for s in s1 + s2:
             lengths[s] += 1
         heapq.heappush(heap, (c1 + c2, min(k1, k2), s1 + s2))
-    if lengths.max() > MAX_CODE_LENGTH:          # only for pathological (Fibonacci-like) counts
+    if lengths.max() > MAX_CODE_LENGTH:  # only for pathological (Fibonacci-like) counts
         return code_lengths(np.where(counts > 0, (counts + 1) // 2, 0))
     return lengths
 
@@ -140,7 +140,7 @@ def decode_static(data: bytes) -> np.ndarray:
     lens = r.read_array(used_n, 6).astype(np.int64)
     if used.size and (used.max() >= alphabet or np.unique(used).size != used.size or lens.min() < 1):
         raise CorruptStreamError("Huffman table: invalid symbols or lengths")
-    if used.size and np.sum(2.0 ** -lens) > 1.0 + 1e-12:
+    if used.size and np.sum(2.0**-lens) > 1.0 + 1e-12:
         raise CorruptStreamError("Huffman table: code lengths violate the Kraft inequality")
     lengths = np.zeros(alphabet, dtype=np.int64)
     lengths[used] = lens
@@ -152,8 +152,9 @@ def decode_static(data: bytes) -> np.ndarray:
     _, first, start, count, order = _canonical(lengths)
     out, _, status = _decode_static(np.frombuffer(data, dtype=np.uint8), r.pos, n, first, start, count, order)
     if status:
-        raise CorruptStreamError(f"Huffman stream: {'truncated' if status == -1 else 'invalid code'} "
-                                 f"at symbol {out.size} of {n}")
+        raise CorruptStreamError(
+            f"Huffman stream: {'truncated' if status == -1 else 'invalid code'} at symbol {out.size} of {n}"
+        )
     return out
 
 
@@ -253,6 +254,7 @@ def decode_adaptive(data: bytes, alphabet_size: int, rebuild_every: int = 1) -> 
         raise CorruptStreamError(f"adaptive Huffman stream: {n} symbols cannot fit in {r.bits_left} bits")
     out, status = _adaptive_decode(np.frombuffer(data, dtype=np.uint8), r.pos, n, alphabet_size, rebuild_every)
     if status:
-        raise CorruptStreamError(f"adaptive Huffman stream: {'truncated' if status == -1 else 'invalid code'} "
-                                 f"at symbol {out.size} of {n}")
+        raise CorruptStreamError(
+            f"adaptive Huffman stream: {'truncated' if status == -1 else 'invalid code'} at symbol {out.size} of {n}"
+        )
     return out

@@ -39,11 +39,11 @@ from mocodec.coding.entropy.binarycoder import (
     start_decoder,
 )
 
-_ACT = 3                    # previous value: zero, |v| <= 2, larger
+_ACT = 3  # previous value: zero, |v| <= 2, larger
 _UNARY = 8
-_PER_CHANNEL = _ACT * (1 + _UNARY) + 2          # zero flags, unary positions, sign (after >= 0 / < 0)
+_PER_CHANNEL = _ACT * (1 + _UNARY) + 2  # zero flags, unary positions, sign (after >= 0 / < 0)
 _TREE_BITS = 8
-_PREV_BITS = 2              # bounded codes: the previous code's quarter of the range
+_PREV_BITS = 2  # bounded codes: the previous code's quarter of the range
 _PREV_SETS = 1 << _PREV_BITS
 
 
@@ -177,9 +177,9 @@ def encode(values: np.ndarray, model: Model | None = None) -> bytes:
         if values.size and (values.min() < -half or values.max() >= m.levels - half):
             raise ValueError(f"values outside the {m.levels} levels the model codes")
         buf = buffer_for(values.size * m.bits)
-        return buf[:_encode_tree(values, buf, m.state, m.prev, half, m.bits, m.tree_bits)].tobytes()
+        return buf[: _encode_tree(values, buf, m.state, m.prev, half, m.bits, m.tree_bits)].tobytes()
     buf = buffer_for(int_decisions(values))
-    return buf[:_encode(values, buf, m.state, m.prev)].tobytes()
+    return buf[: _encode(values, buf, m.state, m.prev)].tobytes()
 
 
 def decode(data: bytes, frames: int, channels: int, model: Model | None = None) -> np.ndarray:

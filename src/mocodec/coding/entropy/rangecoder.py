@@ -31,7 +31,7 @@ FIRST_BLOCK = 16
 LAST_BLOCK = 2048
 COUNT_LIMIT = 1 << 20
 MAX_ALPHABET = 1 << 16
-MAX_VALUES = limits.MAX_DECODED_VALUES       # values one integer stream may declare
+MAX_VALUES = limits.MAX_DECODED_VALUES  # values one integer stream may declare
 
 
 def _blocks(n: int):
@@ -76,9 +76,9 @@ def decode_symbols(words: np.ndarray, count: int, alphabet_size: int) -> np.ndar
     return out
 
 
-_HEADER = struct.Struct("<II")     # count, range-coded words
-DIRECT = 16                          # zigzag values below this are symbols of their own
-ALPHABET = DIRECT + 2 * (64 - 4)     # then two symbols per octave up to 2^64
+_HEADER = struct.Struct("<II")  # count, range-coded words
+DIRECT = 16  # zigzag values below this are symbols of their own
+ALPHABET = DIRECT + 2 * (64 - 4)  # then two symbols per octave up to 2^64
 
 
 def int_symbols(u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -11,9 +11,9 @@ import numpy as np
 
 @dataclass(frozen=True)
 class ZeroRuns:
-    runs: np.ndarray      # zeros before each non-zero value
-    values: np.ndarray    # the non-zero values in order
-    tail: int             # zeros after the last non-zero value
+    runs: np.ndarray  # zeros before each non-zero value
+    values: np.ndarray  # the non-zero values in order
+    tail: int  # zeros after the last non-zero value
 
     @property
     def length(self) -> int:

@@ -182,7 +182,7 @@ def decode(bits, start, budget, n, approx, n0):
     coefficient is then known to within 2^(plane + 1) quanta. Unknown low bits are filled with
     the midpoint of what remains possible."""
     known = np.zeros(n, dtype=np.int64)
-    low = np.full(n, -1, dtype=np.int64)       # lowest known plane of a significant coefficient
+    low = np.full(n, -1, dtype=np.int64)  # lowest known plane of a significant coefficient
     negative = np.zeros(n, dtype=np.bool_)
     out = np.zeros(n)
     end = min(start + max(budget, 0), bits.size)
@@ -220,7 +220,7 @@ def decode(bits, start, budget, n, approx, n0):
             sig = bits[pos]
             pos += 1
             if sig:
-                if pos >= end:          # the sign did not make it: leave the coefficient at 0
+                if pos >= end:  # the sign did not make it: leave the coefficient at 0
                     done = True
                     break
                 known[j] = t

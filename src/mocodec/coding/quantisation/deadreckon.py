@@ -25,8 +25,9 @@ ACCELERATION_TAPS = np.array([5.0, 0.0, -3.0, -4.0, -3.0, 0.0, 5.0]) / 42.0
 
 
 @numba.njit(cache=True)
-def run(x_ext, flags, values, decode, groups, group_start, thr, pstep, vstep, astep, use_acc, base, vel, acc, age,
-        hist):
+def run(
+    x_ext, flags, values, decode, groups, group_start, thr, pstep, vstep, astep, use_acc, base, vel, acc, age, hist
+):
     """Code (or decode) ``n = flags.shape[0]`` frames. ``x_ext (n + 6, K)`` holds the input
     with 3 frames of context either side (encoding only); ``groups`` lists the channels of
     group g at ``groups[group_start[g]:group_start[g + 1]]``. State: ``base, vel, acc (K,)``,

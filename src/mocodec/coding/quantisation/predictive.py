@@ -74,13 +74,12 @@ def _coefficients(hist, filled, pos, c, order):
         return (m, r1 / r0, 0.0) if r0 > 1e-12 else (m, 1.0, 0.0)
     det = r0 * r0 - r1 * r1
     if r0 <= 1e-12 or det <= 1e-9 * r0 * r0:
-        return m, 1.0, 0.0               # (near) constant window: repeat the last sample
+        return m, 1.0, 0.0  # (near) constant window: repeat the last sample
     return m, (r1 * r0 - r1 * r2) / det, (r0 * r2 - r1 * r1) / det
 
 
 @numba.njit(cache=True)
-def run_adaptive(x, codes, decode, hist, counters, coef, step, centre, step_lo, step_hi, beta, levels, order,
-                 update):
+def run_adaptive(x, codes, decode, hist, counters, coef, step, centre, step_lo, step_hi, beta, levels, order, update):
     """Code (or decode) with the adaptive quantiser and predictor. State the caller keeps:
     ``hist (W, K)`` ring of decoded samples, ``counters`` = [write position, samples seen],
     ``coef (K, 3)`` = (mean, a1, a2), ``step (K,)``. Codes are -N/2..N/2-1 (mid-rise)."""
@@ -122,8 +121,8 @@ def run_adaptive(x, codes, decode, hist, counters, coef, step, centre, step_lo, 
     return out
 
 
-_HALF_MAX = 65504.0                     # the largest float16
-FIRST_STEP_DEG_S = 90.0     # range per second when the first frames show no change to go by
+_HALF_MAX = 65504.0  # the largest float16
+FIRST_STEP_DEG_S = 90.0  # range per second when the first frames show no change to go by
 
 
 def lag_one(d: np.ndarray, default: float = 1.0) -> np.ndarray:
@@ -151,8 +150,14 @@ def difference_range(values: np.ndarray, fps: float) -> np.ndarray:
 RANGE_FRACTIONS = 2.0 ** -np.arange(5.0)
 
 
-def best_range(values: np.ndarray, top: np.ndarray, centre: np.ndarray, coefficient: np.ndarray,
-               decisions: np.ndarray, levels_out: np.ndarray) -> np.ndarray:
+def best_range(
+    values: np.ndarray,
+    top: np.ndarray,
+    centre: np.ndarray,
+    coefficient: np.ndarray,
+    decisions: np.ndarray,
+    levels_out: np.ndarray,
+) -> np.ndarray:
     """Per channel the quantiser range, a fraction (1, 1/2, .. 1/16) of the largest
     frame-to-frame change, whose closed loop codes ``values`` with the least squared error:
     the step a fixed quantiser should have for these data, in the spirit of Max's optimum
@@ -182,17 +187,17 @@ class ChannelParams:
     the range), a scale (float16 rounded up: the quantiser's range or first step) and a predictor
     coefficient (float16). Encoder and decoder both work with the rounded values."""
 
-    constant: np.ndarray                # (C,) bool
-    centre: np.ndarray                  # (C,)
-    scale: np.ndarray                   # (C,)
-    coefficient: np.ndarray             # (C,)
+    constant: np.ndarray  # (C,) bool
+    centre: np.ndarray  # (C,)
+    scale: np.ndarray  # (C,)
+    coefficient: np.ndarray  # (C,)
 
     def __post_init__(self):
         self.centre = np.asarray(self.centre, dtype=np.float32).astype(np.float64)
-        scale = np.clip(np.asarray(self.scale, dtype=np.float64), 2.0 ** -24, _HALF_MAX)
+        scale = np.clip(np.asarray(self.scale, dtype=np.float64), 2.0**-24, _HALF_MAX)
         half = scale.astype(np.float16)
         half = np.where(half.astype(np.float64) < scale, np.nextafter(half, np.float16(np.inf)), half)
-        self.scale = half.astype(np.float64)        # rounded up: a range still covers the data
+        self.scale = half.astype(np.float64)  # rounded up: a range still covers the data
         self.coefficient = np.asarray(self.coefficient, dtype=np.float16).astype(np.float64)
         self.constant = np.asarray(self.constant, dtype=bool)
 
@@ -202,9 +207,13 @@ class ChannelParams:
 
     def pack(self) -> bytes:
         a = self.active
-        return (struct.pack("<I", self.constant.size) + np.packbits(self.constant).tobytes()
-                + self.centre.astype("<f4").tobytes() + self.scale[a].astype("<f2").tobytes()
-                + self.coefficient[a].astype("<f2").tobytes())
+        return (
+            struct.pack("<I", self.constant.size)
+            + np.packbits(self.constant).tobytes()
+            + self.centre.astype("<f4").tobytes()
+            + self.scale[a].astype("<f2").tobytes()
+            + self.coefficient[a].astype("<f2").tobytes()
+        )
 
     @classmethod
     def unpack(cls, data: bytes, channels: int) -> ChannelParams:
@@ -261,16 +270,16 @@ class TableCoder(_SampleCoder):
 
     def _kernel(self, x, codes, decode):
         p, a = self.params, self.active
-        return run_table(x, codes, decode, self.prev, p.centre[a], p.scale[a], p.coefficient[a], self.decisions,
-                         self.levels_out)
+        return run_table(
+            x, codes, decode, self.prev, p.centre[a], p.scale[a], p.coefficient[a], self.decisions, self.levels_out
+        )
 
 
 class AdaptiveCoder(_SampleCoder):
     """:func:`run_adaptive`. ``params.scale`` is each channel's first step; the step stays
     within 2^-10..2^6 of it."""
 
-    def __init__(self, params: ChannelParams, levels: int, order: int, window: int, update: int,
-                 beta: np.ndarray):
+    def __init__(self, params: ChannelParams, levels: int, order: int, window: int, update: int, beta: np.ndarray):
         super().__init__(params, levels)
         self.order, self.update, self.beta = order, update, beta
         a = self.active
@@ -278,12 +287,25 @@ class AdaptiveCoder(_SampleCoder):
         self.counters = np.zeros(2, dtype=np.int64)
         self.coef = np.tile([0.0, 1.0, 0.0], (a.size, 1))
         self.step = params.scale[a].copy()
-        self.step_lo, self.step_hi = self.step * 2.0 ** -10, self.step * 2.0 ** 6
+        self.step_lo, self.step_hi = self.step * 2.0**-10, self.step * 2.0**6
 
     def _kernel(self, x, codes, decode):
-        return run_adaptive(x, codes, decode, self.hist, self.counters, self.coef, self.step,
-                            self.params.centre[self.active], self.step_lo, self.step_hi, self.beta, self.levels,
-                            self.order, self.update)
+        return run_adaptive(
+            x,
+            codes,
+            decode,
+            self.hist,
+            self.counters,
+            self.coef,
+            self.step,
+            self.params.centre[self.active],
+            self.step_lo,
+            self.step_hi,
+            self.beta,
+            self.levels,
+            self.order,
+            self.update,
+        )
 
 
 @numba.njit(cache=True)

@@ -22,9 +22,9 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-NO_STEP = -(1 << 20)              # step exponent of a row with nothing to quantise
-FINEST_STEP = -40                 # 2^(-40/4) = 0.001 degree (or unit): rows that vary less
-                                  # than this (float noise in unused channels) quantise to zero
+NO_STEP = -(1 << 20)  # step exponent of a row with nothing to quantise
+FINEST_STEP = -40  # 2^(-40/4) = 0.001 degree (or unit): rows that vary less
+# than this (float noise in unused channels) quantise to zero
 
 JAYANT = {
     4: (0.8, 1.6),
@@ -75,8 +75,8 @@ class UniformQuantizer:
 @dataclass(frozen=True)
 class MuLawQuantizer:
     mu: float
-    limit: float          # theta_MAX: inputs beyond +-limit land in the outer levels
-    levels: int           # N, even: N/2 levels each side of zero
+    limit: float  # theta_MAX: inputs beyond +-limit land in the outer levels
+    levels: int  # N, even: N/2 levels each side of zero
 
     def __post_init__(self):
         _check_levels(self.levels)
@@ -101,8 +101,9 @@ class MuLawQuantizer:
         mid = 0.5 * (d[:-1] + d[1:])
         index = np.asarray(index, dtype=np.int64)
         half = self.levels // 2
-        return np.where(index >= half, mid[np.clip(index - half, 0, half - 1)],
-                        -mid[np.clip(half - 1 - index, 0, half - 1)])
+        return np.where(
+            index >= half, mid[np.clip(index - half, 0, half - 1)], -mid[np.clip(half - 1 - index, 0, half - 1)]
+        )
 
     def table(self) -> tuple[np.ndarray, np.ndarray]:
         """(the N-1 inner decision levels, the N reconstruction levels), mirrored about 0."""
@@ -179,8 +180,15 @@ class AdaptiveQuantizer:
 
     def quantize(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(codes, reconstruction) of a sequence, the step adapting as it goes."""
-        return _adaptive(np.ascontiguousarray(x, dtype=np.float64), self.levels, self.step, self.step_min,
-                         self.step_max, multipliers(self.levels), np.zeros(0, dtype=np.int64))
+        return _adaptive(
+            np.ascontiguousarray(x, dtype=np.float64),
+            self.levels,
+            self.step,
+            self.step_min,
+            self.step_max,
+            multipliers(self.levels),
+            np.zeros(0, dtype=np.int64),
+        )
 
     def reconstruct(self, codes: np.ndarray) -> np.ndarray:
         codes = np.ascontiguousarray(codes, dtype=np.int64)
@@ -188,8 +196,9 @@ class AdaptiveQuantizer:
             raise ValueError(f"adaptive quantiser codes must be in -{self.levels // 2}..{self.levels // 2 - 1}")
         if codes.size == 0:
             return np.zeros(0)
-        return _adaptive(np.zeros(0), self.levels, self.step, self.step_min, self.step_max,
-                         multipliers(self.levels), codes)[1]
+        return _adaptive(
+            np.zeros(0), self.levels, self.step, self.step_min, self.step_max, multipliers(self.levels), codes
+        )[1]
 
 
 def step_exponents(kept: np.ndarray, qp: int) -> np.ndarray:

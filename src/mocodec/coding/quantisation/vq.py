@@ -27,10 +27,10 @@ LLOYD_ITERATIONS = 8
 def nearest(data: np.ndarray, book: np.ndarray) -> np.ndarray:
     """Index of the nearest code vector (7-26) of every row of ``data``."""
     out = np.empty(len(data), dtype=np.int64)
-    norms = (book ** 2).sum(axis=1)
+    norms = (book**2).sum(axis=1)
     for a in range(0, len(data), _CHUNK):
-        chunk = data[a:a + _CHUNK]
-        out[a:a + _CHUNK] = np.argmin(norms[None, :] - 2.0 * chunk @ book.T, axis=1)
+        chunk = data[a : a + _CHUNK]
+        out[a : a + _CHUNK] = np.argmin(norms[None, :] - 2.0 * chunk @ book.T, axis=1)
     return out
 
 
@@ -63,7 +63,7 @@ class _Cells:
         self.data, self.book = data, book
         order = np.argsort(cell, kind="stable")
         bounds = np.concatenate([[0], np.cumsum(np.bincount(cell, minlength=len(book)))])
-        self.rows = [order[bounds[k]:bounds[k + 1]] for k in range(len(book))]
+        self.rows = [order[bounds[k] : bounds[k + 1]] for k in range(len(book))]
         self.splits = [_diameter(data[r], book[k]) for k, r in enumerate(self.rows)]
 
     def split_widest(self) -> bool:
@@ -77,7 +77,7 @@ class _Cells:
         centres = [self.data[h].mean(axis=0) for h in halves]
         self.book = np.vstack([self.book, centres[1]])
         self.book[k] = centres[0]
-        self.rows[k:k + 1] = [halves[0]]
+        self.rows[k : k + 1] = [halves[0]]
         self.rows.append(halves[1])
         self.splits[k] = _diameter(self.data[halves[0]], centres[0])
         self.splits.append(_diameter(self.data[halves[1]], centres[1]))
@@ -154,15 +154,15 @@ def run_spatial(x, codes, decode, predictive, prev, columns, starts, books, book
     v = np.empty(books.shape[1])
     for t in range(n):
         for g in range(groups):
-            cols = columns[starts[g]:starts[g + 1]]
-            book = books[book_starts[g]:book_starts[g + 1], :cols.size]
+            cols = columns[starts[g] : starts[g + 1]]
+            book = books[book_starts[g] : book_starts[g + 1], : cols.size]
             if decode:
                 i = codes[t, g]
             else:
                 for j in range(cols.size):
                     c = cols[j]
                     v[j] = x[t, c] - (prev[c] if predictive else 0.0)
-                i = _closest(v[:cols.size], book, book.shape[0])
+                i = _closest(v[: cols.size], book, book.shape[0])
                 codes[t, g] = i
             for j in range(cols.size):
                 c = cols[j]

@@ -8,11 +8,12 @@ frame-to-frame change over the channel's largest) exceeds ``c`` of the threshold
 multiplied by 2^(c/2), half a bit per class, so fast blocks are coded coarser, where the
 thesis found errors less visible. (The printed rates rise from setting 0 to 4 while the bit
 tables fall; no mapping of classes to steps we tried reproduces that order, so our setting 0
-is the finest, as its bits say; the benchmark prints the thesis's rows beside ours.) Coefficient ``k`` with ``b_k`` bits is quantised on a
-mid-tread grid of step ``2 R / 2^b_k`` over the channel's AC range ``R`` (``b_k = 0``: not
-sent; ``scale`` and the speed class change the step, not the range); the DC coefficient is predicted from the previous block's decoded DC (the thesis's
-"inter-frame prediction for the coefficients") and its difference quantised with ``b_0``
-bits over the largest DC change. Cutting into blocks and the edge smoothing are in
+is the finest, as its bits say; the benchmark prints the thesis's rows beside ours.)
+Coefficient ``k`` with ``b_k`` bits is quantised on a mid-tread grid of step ``2 R / 2^b_k``
+over the channel's AC range ``R`` (``b_k = 0``: not sent; ``scale`` and the speed class change
+the step, not the range); the DC coefficient is predicted from the previous block's decoded DC
+(the thesis's "inter-frame prediction for the coefficients") and its difference quantised with
+``b_0`` bits over the largest DC change. Cutting into blocks and the edge smoothing are in
 :mod:`mocodec.coding.transforms.blocks`.
 """
 
@@ -21,28 +22,34 @@ from __future__ import annotations
 import numpy as np
 import scipy.fft
 
-BITS = np.array([
-    [8, 7, 7, 6, 6, 5, 4, 4, 3, 3, 2, 2, 0, 0, 0, 0],
-    [8, 7, 6, 5, 5, 4, 4, 3, 3, 2, 2, 0, 0, 0, 0, 0],
-    [7, 6, 5, 4, 4, 3, 3, 3, 2, 2, 0, 0, 0, 0, 0, 0],
-    [6, 5, 4, 4, 3, 3, 2, 2, 0, 0, 0, 0, 0, 0, 0, 0],
-    [5, 4, 3, 3, 2, 2, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0],
-])
-SPEED_THRESHOLDS = np.array([
-    [0.9, 0.92, 0.94, 0.98, 1.0],
-    [0.7, 0.75, 0.8, 0.85, 0.9],
-    [0.3, 0.4, 0.5, 0.6, 0.8],
-    [0.1, 0.2, 0.3, 0.4, 0.6],
-    [0.05, 0.1, 0.2, 0.3, 0.4],
-])
+BITS = np.array(
+    [
+        [8, 7, 7, 6, 6, 5, 4, 4, 3, 3, 2, 2, 0, 0, 0, 0],
+        [8, 7, 6, 5, 5, 4, 4, 3, 3, 2, 2, 0, 0, 0, 0, 0],
+        [7, 6, 5, 4, 4, 3, 3, 3, 2, 2, 0, 0, 0, 0, 0, 0],
+        [6, 5, 4, 4, 3, 3, 2, 2, 0, 0, 0, 0, 0, 0, 0, 0],
+        [5, 4, 3, 3, 2, 2, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0],
+    ]
+)
+SPEED_THRESHOLDS = np.array(
+    [
+        [0.9, 0.92, 0.94, 0.98, 1.0],
+        [0.7, 0.75, 0.8, 0.85, 0.9],
+        [0.3, 0.4, 0.5, 0.6, 0.8],
+        [0.1, 0.2, 0.3, 0.4, 0.6],
+        [0.05, 0.1, 0.2, 0.3, 0.4],
+    ]
+)
 # the thesis's rate and PSNR per table (conversation, wave, dance, gestures: bit/s, dB)
-THESIS_RD = np.array([
-    [1669.5, 20.0, 1558.4, 18.1, 1653.9, 15.7, 331.4, 22.0],
-    [2507.8, 24.8, 2353.7, 21.1, 2496.9, 20.4, 486.9, 27.6],
-    [3295.5, 28.3, 3121.4, 24.4, 3293.6, 22.5, 629.4, 31.1],
-    [4019.4, 30.5, 3742.2, 25.8, 4022.3, 23.7, 757.2, 33.5],
-    [4784.7, 31.1, 4475.1, 27.1, 4797.9, 24.1, 920.1, 34.5],
-])
+THESIS_RD = np.array(
+    [
+        [1669.5, 20.0, 1558.4, 18.1, 1653.9, 15.7, 331.4, 22.0],
+        [2507.8, 24.8, 2353.7, 21.1, 2496.9, 20.4, 486.9, 27.6],
+        [3295.5, 28.3, 3121.4, 24.4, 3293.6, 22.5, 629.4, 31.1],
+        [4019.4, 30.5, 3742.2, 25.8, 4022.3, 23.7, 757.2, 33.5],
+        [4784.7, 31.1, 4475.1, 27.1, 4797.9, 24.1, 920.1, 34.5],
+    ]
+)
 
 
 def bits(table: int, n: int) -> np.ndarray:

@@ -37,7 +37,7 @@ class EdgeSmoother:
 
     def __init__(self, n: int):
         self.n = n
-        self.tail: np.ndarray | None = None       # the last two unsmoothed frames (the last one not yet out)
+        self.tail: np.ndarray | None = None  # the last two unsmoothed frames (the last one not yet out)
 
     def push(self, frames: np.ndarray, last: bool) -> np.ndarray:
         held = 0 if self.tail is None else len(self.tail)
@@ -49,4 +49,4 @@ class EdgeSmoother:
             self.tail = None
             return out[start:]
         self.tail = seq[-2:] if len(seq) >= 2 else seq
-        return out[start:len(seq) - 1]
+        return out[start : len(seq) - 1]

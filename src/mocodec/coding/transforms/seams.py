@@ -12,9 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 
-_EXTRAPOLATE = np.array([0.375, -1.25, 1.875])       # quadratic through 3 frames, half a frame on
+_EXTRAPOLATE = np.array([0.375, -1.25, 1.875])  # quadratic through 3 frames, half a frame on
 _PROBES = (-8, -6, -4, 4, 6, 8)
-CONTEXT = 11                                          # frames each side of a seam the estimates read
+CONTEXT = 11  # frames each side of a seam the estimates read
 
 
 def seam_steps(x: np.ndarray, seams) -> np.ndarray:
@@ -36,11 +36,11 @@ def natural_steps(x: np.ndarray, seams) -> np.ndarray:
     probes = np.asarray(seams)[:, None] + np.array(_PROBES)[None, :]
     fits = (probes >= 3) & (probes <= len(x) - 3)
     sizes = np.abs(seam_steps(x, np.where(fits, probes, 3).ravel())).reshape(*probes.shape, -1)
-    sizes[~fits] = np.inf                                   # sorted after every probe that fits
+    sizes[~fits] = np.inf  # sorted after every probe that fits
     sizes.sort(axis=1)
     count = fits.sum(axis=1)
     rows = np.arange(len(count))
-    low = sizes[rows, np.maximum(count - 1, 0) // 2]              # the middle one, or the two middle ones
+    low = sizes[rows, np.maximum(count - 1, 0) // 2]  # the middle one, or the two middle ones
     high = sizes[rows, np.minimum(count // 2, sizes.shape[1] - 1)]
     return np.where((count > 0)[:, None], (low + high) / 2, 0.0)
 
@@ -62,9 +62,9 @@ def smooth_seams(x: np.ndarray, seams, half_width: int, limits: np.ndarray | Non
     size = np.maximum(np.abs(step) - 4.0 * natural_steps(out, where), 0.0)
     if limits is not None:
         size = np.minimum(size, np.asarray(limits)[inside])
-    half = 0.5 * np.sign(step) * size                                     # (seams, channels)
+    half = 0.5 * np.sign(step) * size  # (seams, channels)
     h = max(int(half_width), 1)
-    weight = 0.5 * (1 + np.cos(np.pi * (np.arange(h) + 0.5) / h))        # 1 next to the seam -> 0
+    weight = 0.5 * (1 + np.cos(np.pi * (np.arange(h) + 0.5) / h))  # 1 next to the seam -> 0
     for side, rows in ((1.0, where[:, None] - 1 - np.arange(h)), (-1.0, where[:, None] + np.arange(h))):
         ok = (rows >= 0) & (rows < len(out))
         k, i = np.nonzero(ok)

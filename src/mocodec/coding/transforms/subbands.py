@@ -23,9 +23,9 @@ import numpy as np
 def _lift(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """One 5/3 analysis step along axis 1 of ``(blocks, n, K)``: (low, high), n/2 each."""
     even, odd = x[:, 0::2], x[:, 1::2]
-    even_next = np.concatenate((even[:, 1:], even[:, -1:]), axis=1)     # x[n] mirrored to x[n-2]
+    even_next = np.concatenate((even[:, 1:], even[:, -1:]), axis=1)  # x[n] mirrored to x[n-2]
     high = odd - 0.5 * (even + even_next)
-    high_prev = np.concatenate((high[:, :1], high[:, :-1]), axis=1)     # d[-1] mirrored to d[0]
+    high_prev = np.concatenate((high[:, :1], high[:, :-1]), axis=1)  # d[-1] mirrored to d[0]
     return even + 0.25 * (high_prev + high), high
 
 
@@ -59,7 +59,7 @@ def inverse(coeffs: np.ndarray, levels: int) -> np.ndarray:
     size = n >> levels
     low = coeffs[:, :size]
     for _ in range(levels):
-        low = _unlift(low, coeffs[:, size:2 * size])
+        low = _unlift(low, coeffs[:, size : 2 * size])
         size *= 2
     return low
 
@@ -75,7 +75,7 @@ def synthesis_gains(n: int, levels: int) -> np.ndarray:
     """Per band the RMS norm of the signal a unit coefficient rebuilds: how much an error in
     that band's coefficients weighs in the signal (1 for an orthonormal split; the 5/3 split
     is not quite, and its bands differ)."""
-    eye = np.eye(n)[:, :, None]                              # one block per coefficient
+    eye = np.eye(n)[:, :, None]  # one block per coefficient
     energy = (inverse(eye, levels) ** 2).sum(axis=1)[:, 0]
     return np.array([math.sqrt(energy[a:b].mean()) for a, b in band_bounds(n, levels)])
 
@@ -84,7 +84,7 @@ def band_centres_hz(n: int, levels: int, fps: float) -> np.ndarray:
     """The (geometric) centre frequency of each band; the approximation's is half its top."""
     top = fps / 2.0
     details = [top / 2.0 ** (k + 0.5) for k in range(levels - 1, -1, -1)]
-    return np.array([top / 2.0 ** levels / 2.0, *details])
+    return np.array([top / 2.0**levels / 2.0, *details])
 
 
 def visual_weights(n: int, levels: int, fps: float, edges_hz, weights) -> np.ndarray:

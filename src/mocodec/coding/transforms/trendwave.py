@@ -28,15 +28,15 @@ KEYFRAME_QUANTUM = 0.5
 class Layout:
     frames: int
     wavelet: str
-    starts: np.ndarray          # (S,) first frame of each segment
-    lengths: np.ndarray         # (S,) frames in each segment
-    padded: np.ndarray          # (S,) coefficients of each segment's block (0: no block)
-    levels: np.ndarray          # (S,) wavelet levels of each block
-    knot_frames: np.ndarray     # (K,)
-    left: np.ndarray            # (T,) knot index before each frame
-    frac: np.ndarray            # (T,) position between knot `left` and the next one
-    knot_quantum: np.ndarray    # (K,) knot step relative to the channel's step
-    blocks: tuple               # segments with a block, grouped by (length, levels): (n, levels, segs, offsets)
+    starts: np.ndarray  # (S,) first frame of each segment
+    lengths: np.ndarray  # (S,) frames in each segment
+    padded: np.ndarray  # (S,) coefficients of each segment's block (0: no block)
+    levels: np.ndarray  # (S,) wavelet levels of each block
+    knot_frames: np.ndarray  # (K,)
+    left: np.ndarray  # (T,) knot index before each frame
+    frac: np.ndarray  # (T,) position between knot `left` and the next one
+    knot_quantum: np.ndarray  # (K,) knot step relative to the channel's step
+    blocks: tuple  # segments with a block, grouped by (length, levels): (n, levels, segs, offsets)
 
     @property
     def num_knots(self) -> int:
@@ -66,15 +66,16 @@ def layout(frames: int, window: int, levels: int, keyframes: int, wavelet: str =
     frac = np.zeros(frames)
     for s, (a, n) in enumerate(zip(starts, lengths)):
         end = knots[s + 1] if s + 1 < knots.size else a
-        left[a:a + n] = s
+        left[a : a + n] = s
         if end > a:
-            frac[a:a + n] = (np.arange(n) / (end - a))
+            frac[a : a + n] = np.arange(n) / (end - a)
     # a keyframe has no residual to correct its knot: it gets an twice finer step
     quantum = np.ones(knots.size)
     quantum[:first] = KEYFRAME_QUANTUM
     padded = padded.astype(np.int64)
-    return Layout(frames, wavelet, starts, lengths, padded, seg_levels, knots, left, frac, quantum,
-                  _blocks(padded, seg_levels))
+    return Layout(
+        frames, wavelet, starts, lengths, padded, seg_levels, knots, left, frac, quantum, _blocks(padded, seg_levels)
+    )
 
 
 def trend(knot_values: np.ndarray, lay: Layout) -> np.ndarray:
@@ -103,10 +104,10 @@ def analyse(residual: np.ndarray, lay: Layout) -> np.ndarray:
         block = np.zeros((channels, segs.size, n))
         for k, s in enumerate(segs):
             a, m = lay.starts[s], lay.lengths[s]
-            block[:, k, :m] = residual[:, a:a + m]
+            block[:, k, :m] = residual[:, a : a + m]
         coeffs = wavelets.forward(block.reshape(-1, n), lay.wavelet, lev).reshape(channels, segs.size, n)
         for k, o in enumerate(offs):
-            out[:, o:o + n] = coeffs[:, k]
+            out[:, o : o + n] = coeffs[:, k]
     return out
 
 
@@ -115,9 +116,9 @@ def synthesise(coeffs: np.ndarray, lay: Layout) -> np.ndarray:
     channels = coeffs.shape[0]
     out = np.zeros((channels, lay.frames))
     for n, lev, segs, offs in lay.blocks:
-        block = np.stack([coeffs[:, o:o + n] for o in offs], axis=1).reshape(-1, n)
+        block = np.stack([coeffs[:, o : o + n] for o in offs], axis=1).reshape(-1, n)
         signal = wavelets.inverse(block, n, lay.wavelet, lev).reshape(channels, segs.size, n)
         for k, s in enumerate(segs):
             a, m = lay.starts[s], lay.lengths[s]
-            out[:, a:a + m] = signal[:, k, :m]
+            out[:, a : a + m] = signal[:, k, :m]
     return out

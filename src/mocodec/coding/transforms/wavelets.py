@@ -41,7 +41,7 @@ def forward(x: np.ndarray, wavelet: str, levels: int, mode: str = "periodization
     if levels == 0:
         return x.copy()
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)       # deep levels on short segments
+        warnings.simplefilter("ignore", UserWarning)  # deep levels on short segments
         bands = pywt.wavedec(x, WAVELETS.get(wavelet, wavelet), mode=mode, level=levels, axis=-1)
     return np.concatenate(bands, axis=-1)
 

@@ -84,7 +84,7 @@ class Run:
     def __init__(self, seed: int, seconds: float):
         self.rng = np.random.default_rng(seed)
         self.seconds = seconds
-        self.deadline: float | None = None      # the clock starts at the first case, after the set-up
+        self.deadline: float | None = None  # the clock starts at the first case, after the set-up
         self.cases = 0
         self.failures: list[str] = []
 

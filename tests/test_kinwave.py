@@ -9,7 +9,7 @@ import pytest
 
 from mocodec import moc, ratecontrol
 from mocodec.codecs import get_codec
-from mocodec.codecs.kinwave.codec import _Encoder
+from mocodec.codecs.kinwave.search import BoundSearch
 from mocodec.errors import CodecError
 from mocodec.kinematics import forward_kinematics
 from mocodec.metrics.pose import shell_errors
@@ -42,9 +42,9 @@ def test_looser_bounds_give_smaller_files(walk_amc):
 
 def test_encoder_model_is_the_decoders_output_bit_for_bit(walk_bvh):
     codec = get_codec("kinwave", max_error_cm=0.3)
-    enc = _Encoder(codec, walk_bvh)
+    enc = BoundSearch(codec, walk_bvh)
     ps = enc.run_pass(enc.codes(0.4))
-    decoded = enc._decode_body(enc.body(ps))
+    decoded = enc.decoded_body(enc.body(ps))
     assert np.array_equal(decoded, ps.decoded)
 
 
@@ -91,8 +91,8 @@ def test_keyframes_are_chosen_by_cost_and_keep_the_bound(walk_amc):
 
     bound = with_bind_frame(walk_amc)
     codec = get_codec("kinwave", max_error_cm=0.3)
-    assert _Encoder(codec, bound).lay.starts[:2].tolist() == [0, 1]
-    assert _Encoder(codec, walk_amc).keyframes == 0
+    assert BoundSearch(codec, bound).lay.starts[:2].tolist() == [0, 1]
+    assert BoundSearch(codec, walk_amc).keyframes == 0
     decoded = codec.decode(codec.encode(bound), bound.skeleton, bound.num_frames, bound.fps)
     assert _errors(bound, decoded)["joint"] <= 0.3
 
@@ -166,7 +166,7 @@ def test_time_adaptive_steps_shrink_max_error_files(walk_amc):
     """Each segment gets its own step offset under a max-error bound: quieter stretches take
     coarser steps and the bound still holds; under a shell bound the file is smaller than with
     one scale (2%; over the shared clips 0.1-2.5% at shell and joint bounds, docs/kinwave.md)."""
-    from mocodec.codecs.kinwave.codec import FLAG_OFFSETS
+    from mocodec.codecs.kinwave.payload import FLAG_OFFSETS
 
     for measure in ("shell", "joint"):
         codec = get_codec("kinwave", max_error_cm=0.5, error_measure=measure, window=128)  # 4 segments
@@ -175,7 +175,7 @@ def test_time_adaptive_steps_shrink_max_error_files(walk_amc):
         decoded = codec.decode(payload, walk_amc.skeleton, walk_amc.num_frames, walk_amc.fps)
         assert decoded.num_frames == walk_amc.num_frames
         assert _errors(walk_amc, decoded)[measure] <= 0.5
-    single = _Encoder(
+    single = BoundSearch(
         codec := get_codec("kinwave", max_error_cm=0.5, error_measure="shell", window=128), walk_amc
     )._to_bound(0.5)
     assert len(codec.encode(walk_amc)) < len(single)
@@ -202,11 +202,11 @@ def test_the_final_slack_rounds_coarsen_quiet_joints_within_the_bound(walk_amc, 
     """One scale (no time-adaptive steps): the final pass gives the slack of quiet joints to
     their codes, with or without the joint feedback (17% and 4% smaller at max shell 0.1 cm on
     the AMC walk), and the bound holds."""
-    from mocodec.codecs.kinwave import codec as kinwave
+    from mocodec.codecs.kinwave import search
 
     sizes = {}
-    for rounds in (kinwave.SLACK_PASSES, 0):
-        monkeypatch.setattr(kinwave, "SLACK_PASSES", rounds)
+    for rounds in (search.SLACK_PASSES, 0):
+        monkeypatch.setattr(search, "SLACK_PASSES", rounds)
         for feedback in (True, False):
             codec = get_codec(
                 "kinwave", max_error_cm=0.1, error_measure="shell", joint_feedback=feedback, segment_steps=False
@@ -228,7 +228,7 @@ def test_coding_forms_shrink_files_within_the_bound(walk_amc):
     Euler angles under a max bound, and may change form under a mean bound."""
     from conftest import DATA
     from mocodec import load
-    from mocodec.codecs.kinwave.codec import FLAG_FORMS, _three_angle_groups
+    from mocodec.codecs.kinwave.payload import FLAG_FORMS, three_angle_groups
 
     run = load(DATA / "09_02.bvh")
     for measure in ("mean", "joint"):
@@ -238,14 +238,14 @@ def test_coding_forms_shrink_files_within_the_bound(walk_amc):
         assert forms[1] & FLAG_FORMS and len(forms) < 0.96 * len(euler)
         assert _errors(run, codec.decode(forms, run.skeleton, run.num_frames, run.fps))[measure] <= 0.5
     sk = walk_amc.skeleton
-    chosen = _Encoder(get_codec("kinwave"), walk_amc).forms
+    chosen = BoundSearch(get_codec("kinwave"), walk_amc).forms
     assert all(
-        not sk.joints[sk.channel_joints[g[0]]].has_axis for form, (g, _) in zip(chosen, _three_angle_groups(sk)) if form
+        not sk.joints[sk.channel_joints[g[0]]].has_axis for form, (g, _) in zip(chosen, three_angle_groups(sk)) if form
     )
     mean = get_codec("kinwave", error_measure="mean")
     with_axes = [
         form
-        for form, (g, _) in zip(_Encoder(mean, walk_amc).forms, _three_angle_groups(sk))
+        for form, (g, _) in zip(BoundSearch(mean, walk_amc).forms, three_angle_groups(sk))
         if sk.joints[sk.channel_joints[g[0]]].has_axis
     ]
     assert any(with_axes)
@@ -258,24 +258,24 @@ def test_coding_forms_shrink_files_within_the_bound(walk_amc):
 
 
 def test_segment_offsets_keep_the_encoder_bit_exact(walk_bvh):
-    enc = _Encoder(get_codec("kinwave", max_error_cm=0.3), walk_bvh)
+    enc = BoundSearch(get_codec("kinwave", max_error_cm=0.3), walk_bvh)
     offsets = np.arange(enc.lay.starts.size) * 3 - 4
     ps = enc.run_pass(enc.codes(0.4), offsets)
     body = enc.body(ps)
-    assert body[1] & 8 and np.array_equal(enc._decode_body(body), ps.decoded)
+    assert body[1] & 8 and np.array_equal(enc.decoded_body(body), ps.decoded)
 
 
 def test_an_isolated_glitch_frame_is_coded_apart(walk_bvh):
     """One frame 25 degrees off on every angle (a glitch) is found, coded apart (flag 128),
     and costs a few percent instead of the wavelet's 60%; the bound holds on the glitch too."""
-    from mocodec.codecs.kinwave.codec import FLAG_ISOLATED
+    from mocodec.codecs.kinwave.payload import FLAG_ISOLATED
 
     glitch = walk_bvh.channels.copy()
     glitch[200] += np.where(walk_bvh.skeleton.rotation_mask, 25.0, 5.0)
     spiked = walk_bvh.with_channels(glitch)
     codec = get_codec("kinwave", max_error_cm=1.0, error_measure="shell")
-    assert _Encoder(codec, spiked).isolated.tolist() == [200]
-    assert _Encoder(codec, walk_bvh).isolated.size == 0
+    assert BoundSearch(codec, spiked).isolated.tolist() == [200]
+    assert BoundSearch(codec, walk_bvh).isolated.size == 0
     payload = codec.encode(spiked)
     assert payload[1] & FLAG_ISOLATED
     assert _errors(spiked, codec.decode(payload, spiked.skeleton, spiked.num_frames, spiked.fps))["shell"] <= 1.0
@@ -311,10 +311,10 @@ def test_a_turned_dummy_root_codes_the_body_as_without_it(walk_amc, turn):
     codec = get_codec("kinwave", max_error_cm=1.0, error_measure="shell")
     clip = walk_amc[:400]
     moved = with_dummy_root(clip, turn)
-    base, turned = _Encoder(codec, clip), _Encoder(codec, moved)
+    base, turned = BoundSearch(codec, clip), BoundSearch(codec, moved)
     assert turned.turned[1] and not turned.turned[0] and not base.turned.any()
     assert turned.forms[1] == rotvec.WORLD + base.forms[0] and (turned.means[1] == base.means[0]).all()
-    codes = base.codes(base._first_scale())
+    codes = base.codes(base.first_scale())
     same = base.run_pass(codes), turned.run_pass(np.concatenate([codes[:1], codes]).astype(np.uint8))
     sizes = [len(enc.body(ps)) for enc, ps in zip((base, turned), same)]
     errors = [enc.error(ps.decoded) for enc, ps in zip((base, turned), same)]
@@ -330,10 +330,10 @@ def test_a_final_pass_far_under_its_bound_is_scaled_up(walk_bvh):
     """_scale_up: a pass at a quarter of the bound goes coarser, every code together, until its
     worst error is within the accepted range (or one more code would break the bound): fewer
     bytes, the bound held."""
-    from mocodec.codecs.kinwave.codec import ACCEPT
+    from mocodec.codecs.kinwave.search import ACCEPT
 
-    enc = _Encoder(get_codec("kinwave", max_error_cm=1.0, error_measure="shell"), walk_bvh[:300])
-    fine = enc.run_pass(enc.codes(enc._first_scale() / 4.0))
+    enc = BoundSearch(get_codec("kinwave", max_error_cm=1.0, error_measure="shell"), walk_bvh[:300])
+    fine = enc.run_pass(enc.codes(enc.first_scale() / 4.0))
     worst = enc.error(fine.decoded)
     assert worst < 0.5
     up = enc._scale_up(fine, worst, 1.0)

@@ -1,0 +1,521 @@
+"""One kinwave payload's encoder: the coding form of every joint, the step shape, the
+leading keyframes and isolated frames, one closed-loop pass down the kinematic tree at given
+steps, and the payload bytes of a pass (:mod:`.payload`). :mod:`.search` finds the steps."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from functools import lru_cache
+
+import numpy as np
+
+from mocodec import rotations
+from mocodec.codecs.base import Codec
+from mocodec.codecs.kinwave import kinalloc
+from mocodec.codecs.kinwave.payload import (
+    CODER_REVISION,
+    FLAG_FORMS,
+    FLAG_ISOLATED,
+    FLAG_KEYFRAME,
+    FLAG_MEANS,
+    FLAG_OFFSETS,
+    FLAG_SECOND_KEYFRAME,
+    FORMAT,
+    HEAD,
+    MAX_ISOLATED,
+    MEAN_QUANTUM,
+    WAVELET_IDS,
+    ConstantCoding,
+    apply_patches,
+    channel_steps,
+    constant_coding,
+    has_translation,
+    levels_for,
+    on_axes,
+    parent_orientations,
+    parent_turns,
+    reconstruct,
+    rotation_joints,
+    segment_factors,
+    step_code,
+    step_groups,
+    still_rotations,
+    three_angle_groups,
+    world_translations,
+)
+from mocodec.codecs.shared import closedloop, rotvec
+from mocodec.coding.entropy import coefcoder
+from mocodec.coding.transforms import trendwave
+from mocodec.kinematics import channel_plan, forward_kinematics
+from mocodec.metrics.pose import bone_joints, shell_errors
+from mocodec.motion import Motion
+from mocodec.skeleton import Skeleton
+
+MEAN_LEAST = 20.0  # degrees: a mean rotation smaller than this is left at the identity
+CONSTANT = 1e-6  # a channel whose range is below this is one knot
+JUMP_CM = 10.0  # a leading frame jumping less than this is not tried as a keyframe
+TRIAL_FRAMES = 1024  # frames the choice of forms codes each form of every joint on
+GIMBAL_MARGIN = 15.0  # degrees from an Euler order's lock within which a joint goes as a vector
+
+
+@lru_cache(maxsize=64)
+def influence(skeleton: Skeleton, measure: str) -> np.ndarray:
+    """``(codes, points)``: which of the points a max bound measures each step code moves (a
+    rotation joint: the joints below it, and with ``shell`` its own bone's shell; the
+    translations: all)."""
+    n = len(skeleton)
+    below = np.zeros((n, n), dtype=bool)
+    for p in range(n):
+        j = skeleton.parents[p]
+        while j >= 0:
+            below[j, p] = True
+            j = skeleton.parents[j]
+    if measure == "shell":
+        points = bone_joints(skeleton)
+        below = below[:, points] | (np.arange(n)[:, None] == points[None, :])
+    rows = [below[j] for j in rotation_joints(skeleton)]
+    if has_translation(skeleton):
+        rows.append(np.ones(below.shape[1], dtype=bool))
+    return np.array(rows)
+
+
+def frame_moves(positions_cm: np.ndarray) -> np.ndarray:
+    """``(T - 1,)`` cm: how far the farthest-moving joint goes from each frame to the next."""
+    return np.linalg.norm(np.diff(positions_cm, axis=0), axis=2).max(axis=1)
+
+
+def jumps_at_start(positions_cm: np.ndarray) -> bool:
+    """Whether the first or second frame jumps far from the next one: twice the clip's own
+    largest frame-to-frame motion after them, and at least JUMP_CM (a bind pose, a T-pose, or
+    both, lead the clip; a walk's first step does not)."""
+    if len(positions_cm) < 8:
+        return False
+    moves = frame_moves(positions_cm)
+    return bool(moves[:2].max() > max(2.0 * np.percentile(moves[2:], 99) + 1.0, JUMP_CM))
+
+
+@dataclass
+class Pass:
+    steps: np.ndarray  # u8 codes: rotation joints, then translation
+    const: np.ndarray
+    knots: np.ndarray
+    coeffs: np.ndarray
+    decoded: np.ndarray  # (C, T)
+    offsets: np.ndarray  # i8 per segment: its steps are 2^(offset/8) times the joints'
+    patches: np.ndarray  # (C, isolated frames): each isolated frame's correction (apply_patches)
+
+
+def isolated_frames(positions_cm: np.ndarray, skip: int) -> np.ndarray:
+    """Frames (after the first ``skip``) that jump far from both neighbours while the
+    neighbours are close to each other: a glitch, coded apart so it does not cost the wavelet
+    (one 25-degree spike made a CMU walk 60-68% larger)."""
+    frames = len(positions_cm)
+    if frames < 8:
+        return np.zeros(0, dtype=np.int64)
+    moves = frame_moves(positions_cm)
+    usual = np.percentile(moves, 90)
+    across = np.linalg.norm(positions_cm[2:] - positions_cm[:-2], axis=2).max(axis=1)
+    far = 4.0 * usual + 1.0
+    t = np.arange(1, frames - 1)
+    found = t[(moves[:-1] > far) & (moves[1:] > far) & (across <= 2.0 * usual + 1.0) & (t >= max(skip, 1))]
+    keep: list[int] = []
+    for f in found:  # neither neighbour of an isolated frame is one
+        if not keep or f > keep[-1] + 1:
+            keep.append(int(f))
+    return np.array(keep[:MAX_ISOLATED], dtype=np.int64)
+
+
+def bone_skeleton(skeleton: Skeleton, values: np.ndarray, const: np.ndarray) -> Skeleton:
+    """The skeleton with each non-root joint's constant translation channels (``values (C, T)``)
+    added to its offset: the bones the motion really has, whose lengths are the allocation's
+    levers (a MotionBuilder export keeps every bone in position channels)."""
+    plan = channel_plan(skeleton)
+    joints = list(skeleton.joints)
+    for j in range(1, len(joints)):
+        held = [(k, c) for k, c in enumerate(plan.pos_index[j]) if c >= 0 and const[c]]
+        if held and values.shape[1]:
+            offset = list(joints[j].offset)
+            for k, c in held:
+                offset[k] += float(values[c, 0])
+            joints[j] = replace(joints[j], offset=tuple(offset))
+    if joints == list(skeleton.joints):
+        return skeleton
+    return Skeleton(tuple(joints), skeleton.units_per_metre, skeleton.name)
+
+
+class Encoder:
+    """One payload: the passes of the scale search and the final bytes."""
+
+    def __init__(self, codec: Codec, motion: Motion, output_skeleton: Skeleton | None = None):
+        self.cfg = codec.config
+        self.skeleton = sk = motion.skeleton
+        self.output_skeleton = output_skeleton or sk  # the decoder's: errors are measured on its joints
+        self.constants = constant_coding(self.output_skeleton)
+        self.motion = motion.continuous() if motion.num_frames else motion
+        self.values = self.motion.channels.T.copy()  # (C, T)
+        self.frames = motion.num_frames
+        pos, quat = forward_kinematics(sk, self.motion.channels)
+        self.cm = 100.0 / sk.units_per_metre
+        self.positions = pos * self.cm
+        self.quats = quat
+        self.const = (np.ptp(self.values, axis=1) <= CONSTANT) if self.frames else np.ones(sk.num_channels, bool)
+        self._set_layout(0)
+        self.first_pass: Pass | None = None
+        self.isolated = isolated_frames(self.positions, 2) if self.cfg["keyframes"] else np.zeros(0, np.int64)
+        self.rot_joints = rotation_joints(sk)
+        self.trans = has_translation(sk)
+        self.shape_rot, self.shape_trans = self._shape()
+        self.joint_offsets = np.zeros(len(self.rot_joints) + self.trans, dtype=np.int64)
+        self.means = np.zeros((len(three_angle_groups(sk)), 3), dtype=np.int64)
+        self.turns, self.turned = self._turns()
+        self.forms = self._choose_forms() if self.cfg["rotation_vectors"] else np.zeros(0, dtype=np.int64)
+        self._constant_in_forms()
+        self.world_translations = world_translations(sk, self.const)
+        if self.cfg["keyframes"] and jumps_at_start(self.positions):
+            self._choose_keyframes()
+
+    def _turns(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per three-angle joint, the turn a WORLD form would take off (:func:`parent_turns`,
+        exact) and whether it may: every joint above it holds a constant rotation, and together
+        they turn it (a dummy root's constant rotation)."""
+        groups = three_angle_groups(self.skeleton)
+        if not self.frames or not groups:
+            return np.tile([1.0, 0.0, 0.0, 0.0], (len(groups), 1)), np.zeros(len(groups), dtype=bool)
+        sk = self.skeleton
+        still = still_rotations(sk, self.const)
+        parents = sk.parents[[sk.channel_joints[g[0]] for g, _ in groups]]
+        above = np.where(parents >= 0, still[np.maximum(parents, 0)], False)
+        turns = parent_turns(sk, parent_orientations(sk, self.values[:, 0]))
+        return turns, above & (np.abs(turns[:, 0]) < 1.0 - 1e-12)
+
+    def _set_layout(self, keyframes: int) -> None:
+        """Segments and knots with ``keyframes`` leading one-frame segments, and the header."""
+        self.keyframes = keyframes
+        levels = self.cfg["levels"] or levels_for(self.motion.fps)
+        self.lay = trendwave.layout(self.frames, self.cfg["window"], levels, keyframes, self.cfg["wavelet"])
+        flags = (FLAG_KEYFRAME if keyframes else 0) | (FLAG_SECOND_KEYFRAME if keyframes == 2 else 0)
+        self.header = HEAD.pack(
+            FORMAT,
+            flags | WAVELET_IDS.index(self.cfg["wavelet"]) << 1,
+            int(math.log2(self.cfg["window"])),
+            levels,
+            self.skeleton.num_channels,
+        )
+
+    def _choose_keyframes(self) -> None:
+        """Leading frames that jump away (a bind pose, a T-pose) cost the wavelet a jump, but
+        as keyframes a finely quantised pose each; which is cheaper depends on the pose and the
+        bound (a CMU T-pose at max shell 0.1 cm cost 16% more as a keyframe, a bind pose before
+        it 13% less). One pass at the starting scale with 0, 1 and 2 keyframes decides: at the
+        same steps the errors are about the same."""
+        passes = []
+        for count in range(3):
+            self._set_layout(count)
+            passes.append(self.run_pass(self.codes(self.first_scale())))
+        best = int(np.argmin([len(self.body(ps)) for ps in passes]))
+        self._set_layout(best)
+        self.first_pass = passes[best]  # the search starts from it
+
+    def starting_pass(self) -> Pass:
+        """The pass at the starting scale (the keyframes' trial may have run it already)."""
+        return self.first_pass or self.run_pass(self.codes(self.first_scale()))
+
+    def _shape(self) -> tuple[np.ndarray, float]:
+        """Steps (degrees per rotation joint, cm for translations) whose modelled bound is 1 cm.
+        The levers are those of the motion's own bones (:func:`bone_skeleton`), and a joint
+        whose angles are all constant takes the step the model would give it if they moved:
+        its constants turn everything below it (a dummy root: the whole body)."""
+        sk = bone_skeleton(self.skeleton, self.values, self.const)
+        coded, rotating = [0] * len(sk), [0] * len(sk)
+        translations = 0
+        for g in step_groups(self.skeleton):
+            n = int((~self.const[g.channels]).sum())
+            if g.rotation:
+                coded[g.joint], rotating[g.joint] = n, g.channels.size
+            else:
+                translations += n
+        measure, closed = self.cfg["error_measure"], self.cfg["closed_loop"]
+        if self.cfg["allocation"] == "uniform":
+            rot, trans = kinalloc.steps(sk, tuple(int(c > 0) for c in coded), int(translations > 0), measure, closed)
+            finite = rot[np.isfinite(rot)]
+            rot = np.full(len(sk), finite.min() if finite.size else 1.0)
+        else:
+            rot, trans = kinalloc.steps(sk, tuple(coded), translations, measure, closed)
+        if not np.isfinite(rot).all() and any(rotating):
+            still, _ = kinalloc.steps(sk, tuple(rotating), max(translations, 1), measure, closed)
+            rot = np.where(np.isfinite(rot), rot, still)
+        rot = np.where(np.isfinite(rot), rot, np.nanmin(rot) if np.isfinite(rot).any() else 1.0)
+        return rot[self.rot_joints], trans
+
+    def _choose_forms(self) -> np.ndarray:
+        """Per 3-angle joint (:func:`three_angle_groups`), the form its rotation is coded in
+        (:mod:`mocodec.codecs.shared.rotvec`: the file's Euler angles, a rotation vector about the
+        joint's mean rotation, or Euler angles in one of the six Tait-Bryan orders): each form
+        of every joint is coded once on its own (open loop, the first TRIAL_FRAMES frames) at the
+        step the search starts from,
+        and the fewest bytes win, moved to the file angles' rotation error along the high-rate
+        slope (a nonzero coefficient takes a bit more per halving of the error). A form whose
+        middle angle comes within GIMBAL_MARGIN of its lock is out. The trial weighs the mean
+        rotation error, which is what decides a mean bound; under a max bound it misjudged ASF
+        joints (angles about axes chosen for each bone, small and decoupled), whose files came
+        out 1-14% larger with vectors (and every axis-free bone taking forms was within 1.3%
+        either way, a third slower), so there only the body's root (the first joint that turns,
+        below any dummy root) and joints near their gimbal lock may change form; a joint whose
+        angles are all constant keeps them always. All joints go through each transform
+        together; only the byte counts are per joint."""
+        groups = three_angle_groups(self.skeleton)
+        choice = np.zeros(len(groups), dtype=np.int64)
+        moving = [k for k, (channels, _) in enumerate(groups) if not self.const[channels].all()]
+        if self.cfg["error_measure"] == "mean" or not any(j.has_axis for j in self.skeleton.joints):
+            live = moving
+        else:  # ASF: the body's root (under a dummy root too) and joints near their gimbal lock
+            locked = (
+                rotvec.near_lock(
+                    self.values[np.concatenate([groups[k][0] for k in moving])],
+                    tuple(groups[k][1] for k in moving),
+                    GIMBAL_MARGIN,
+                )
+                if moving
+                else np.zeros(0, bool)
+            )
+            live = [k for i, k in enumerate(moving) if i == 0 or locked[i]]
+        if not live or not self.frames:
+            return choice
+        channels = np.concatenate([groups[k][0] for k in live])
+        orders = tuple(groups[k][1] for k in live)
+        euler = self.values[channels, :TRIAL_FRAMES]
+        lay = trendwave.layout(
+            euler.shape[1], self.cfg["window"], int(self.lay.levels.max(initial=1)), 0, self.cfg["wavelet"]
+        )
+        step = channel_steps(self.skeleton, self.codes(self.first_scale()))[channels]
+        factors = segment_factors(np.zeros(lay.starts.size), lay)
+        original = rotvec.euler_quats(euler, orders)
+        pre = self.turns[live]
+        whole = rotvec.euler_quats(self.values[channels], orders)
+        turned = np.flatnonzero(self.turned[live])
+        whole[:, turned] = rotations.quat_multiply(pre[turned][None], whole[:, turned])
+        means = rotvec.mean_codes(whole, MEAN_QUANTUM, MEAN_LEAST)  # of pre q for the joints that may turn
+        self.means[live] = means
+        turns = rotvec.mean_quats(means, MEAN_QUANTUM)
+
+        def trial(form: int, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            """The joints ``idx`` (of ``live``) coded in ``form``: (bytes, nonzero coefficients,
+            mean rotation error), infinite bytes within GIMBAL_MARGIN of the form's lock."""
+            rows = (3 * idx[:, None] + np.arange(3)).ravel()
+            sub, kept = euler[rows], tuple(orders[i] for i in idx)
+            forms = np.full(idx.size, form)
+            values = sub if form == 0 else rotvec.to_forms(sub, kept, forms, turns[idx], pre=pre[idx])
+            base = form % rotvec.WORLD
+            locked = (
+                rotvec.near_lock(
+                    values, kept if base == 0 else (rotvec.CODING_ORDERS[base - 2],) * idx.size, GIMBAL_MARGIN
+                )
+                if base != rotvec.VECTOR
+                else np.zeros(idx.size, bool)
+            )
+            flat, none = np.zeros(rows.size, dtype=bool), ConstantCoding(1.0, np.zeros(rows.size))
+            k_int, c_int = self._quantise(values, flat, step[rows], factors, none, lay)
+            sizes = np.array(
+                [
+                    len(
+                        coefcoder.encode(
+                            np.zeros(3, np.int64),
+                            k_int[3 * i : 3 * i + 3],
+                            c_int[3 * i : 3 * i + 3],
+                            lay.padded,
+                            lay.levels,
+                            revision=CODER_REVISION,
+                        )
+                    )
+                    for i in range(idx.size)
+                ]
+            )
+            rec = reconstruct(k_int, c_int, flat, step[rows], lay, factors, none)
+            back = rotvec.from_forms(rec, kept, forms, turns[idx], pre[idx]) if form else rec
+            err = np.maximum(
+                rotations.quat_distance(original[:, idx], rotvec.euler_quats(back, kept)).mean(axis=0), 1e-12
+            )
+            nonzero = (c_int != 0).reshape(idx.size, -1).sum(axis=1)
+            return np.where(locked, np.inf, sizes), nonzero, err
+
+        local = np.flatnonzero(~self.turned[live])
+        candidates = [(form, local) for form in range(rotvec.FORMS)]
+        candidates += [(rotvec.WORLD + form, turned) for form in range(rotvec.FORMS)]
+        costs = np.full((len(candidates), len(live)), np.inf)
+        reference = np.ones(len(live))  # the error of the file's own angles (forms 0 and WORLD)
+        results: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] = []
+        for form, idx in candidates:
+            result = trial(form, idx) if idx.size else None
+            results.append(result)
+            if form % rotvec.WORLD == 0 and result is not None:
+                reference[idx] = result[2]
+        for row, ((_, idx), result) in enumerate(zip(candidates, results)):
+            if result is not None:
+                sizes, nonzero, err = result
+                costs[row, idx] = sizes + nonzero / 8.0 * np.log2(err / reference[idx])
+        choice[live] = np.array([form for form, _ in candidates])[np.argmin(costs, axis=0)]
+        self.means[choice % rotvec.WORLD != rotvec.VECTOR] = 0
+        return choice
+
+    def _constant_in_forms(self) -> None:
+        """Which channels of the joints coded in another form are constant in that form (a
+        hinge written in a proper order is one moving angle again); the steps follow."""
+        coded = np.flatnonzero(self.forms)
+        if not coded.size:
+            return
+        groups = three_angle_groups(self.skeleton)
+        rows = np.concatenate([groups[k][0] for k in coded])
+        values = rotvec.to_forms(
+            self.values[rows],
+            tuple(groups[k][1] for k in coded),
+            self.forms[coded],
+            rotvec.mean_quats(self.means[coded], MEAN_QUANTUM),
+            pre=self.turns[coded],
+        )
+        const = np.ptp(values, axis=1) <= CONSTANT
+        if (const != self.const[rows]).any():
+            self.const[rows] = const
+            self.shape_rot, self.shape_trans = self._shape()
+
+    def first_scale(self) -> float:
+        """The scale the bound's search starts from (the model's, before any pass)."""
+        return self.cfg["max_error_cm"] / (0.3 if self.cfg["error_measure"] == "mean" else 0.8)
+
+    # ----- one pass -------------------------------------------------------------------------
+    def codes(self, scale: float) -> np.ndarray:
+        steps = np.append(self.shape_rot * scale, self.shape_trans * scale if self.trans else [])
+        return np.clip(np.array([step_code(s) for s in steps]) + self.joint_offsets, 0, 255).astype(np.uint8)
+
+    def run_pass(self, codes: np.ndarray, offsets: np.ndarray | None = None) -> Pass:
+        """Quantise and reconstruct every channel down the tree (:func:`closedloop.code_down_tree`):
+        a joint's closed-loop target needs its parent's decoded orientation, and the joints of
+        one depth go through the transforms together (rows are independent, so each row's floats
+        are those of coding it alone)."""
+        sk, lay = self.skeleton, self.lay
+        offsets = np.zeros(lay.starts.size, dtype=np.int8) if offsets is None else offsets.astype(np.int8)
+        C = sk.num_channels
+        knots = np.zeros((C, lay.num_knots), dtype=np.int64)
+        coeffs = np.zeros((C, lay.num_coeffs), dtype=np.int64)
+        decoded = np.zeros((C, self.frames))  # zeros: a WORLD form's turn reads the rows above it
+        patches = np.zeros((C, self.isolated.size), dtype=np.int64)
+        steps = channel_steps(sk, codes)
+        factors = segment_factors(offsets, lay)
+        rotvec_groups = three_angle_groups(sk)
+
+        def code(channels: np.ndarray, targets: np.ndarray, exact: dict) -> np.ndarray:
+            step, const = steps[channels], self.const[channels]
+            column = {c: i for i, c in enumerate(channels)}
+            vectors = (
+                [k for k, (g, _) in enumerate(rotvec_groups) if self.forms[k] and g[0] in column]
+                if len(self.forms)
+                else []
+            )
+            moved = [(j, [column[c] for c in pos]) for j, pos in self.world_translations if pos[0] in column]
+            turned = moved or any(self.forms[k] >= rotvec.WORLD for k in vectors)
+            parents = (
+                parent_orientations(sk, decoded[:, 0]) if turned else np.zeros((0, 4))
+            )  # of the decoded rows above
+            values = targets.T.copy()
+            if vectors:
+                cols = [column[c] for k in vectors for c in rotvec_groups[k][0]]
+                orders = tuple(rotvec_groups[k][1] for k in vectors)
+                forms = self.forms[vectors]
+                turns = rotvec.mean_quats(self.means[vectors], MEAN_QUANTUM)
+                pre = parent_turns(sk, parents)[vectors] if (forms >= rotvec.WORLD).any() else None
+                quats = np.stack(
+                    [
+                        exact[j] if j in exact else rotvec.euler_quats(values[[column[c] for c in g]], (o,))[:, 0]
+                        for j, (g, o) in (
+                            (sk.channel_joints[rotvec_groups[k][0][0]], rotvec_groups[k]) for k in vectors
+                        )
+                    ],
+                    axis=1,
+                )
+                values[cols] = rotvec.to_forms(values[cols], orders, forms, turns, quats, pre)
+            for j, rows in moved:
+                values[rows] = on_axes(values[rows], parents[j])
+            constants = ConstantCoding(self.constants.fraction, self.constants.base[channels])
+            iso = self.isolated
+            wanted = values[:, iso]
+            if iso.size:  # the wavelet sees the neighbours' mean there
+                values[:, iso] = (values[:, iso - 1] + values[:, iso + 1]) / 2.0
+            k_int, c_int = self._quantise(values, const, step, factors, constants)
+            knots[channels], coeffs[channels] = k_int, c_int
+            out = reconstruct(k_int, c_int, const, step, lay, factors, constants)
+            if iso.size:
+                patch = np.round((wanted - out[:, iso]) / (step * trendwave.KEYFRAME_QUANTUM)).astype(np.int64)
+                patch[const] = 0
+                apply_patches(out, step, iso, patch)
+                patches[channels] = patch
+            for j, rows in moved:
+                out[rows] = on_axes(out[rows], parents[j], inverse=True)
+            if vectors:
+                out[cols] = rotvec.from_forms(out[cols], orders, forms, turns, pre)
+            decoded[channels] = out
+            return out.T
+
+        exact = np.zeros(len(sk), dtype=bool)
+        exact[sk.channel_joints[[g[0] for form, (g, _) in zip(self.forms, rotvec_groups) if form]]] = True
+        closedloop.code_down_tree(
+            sk, self.values.T, ~self.const, self.quats, code, self.cfg["closed_loop"], self.positions / self.cm, exact
+        )
+        return Pass(codes, self.const.astype(np.int64), knots, coeffs, decoded, offsets, patches)
+
+    def _quantise(
+        self,
+        target: np.ndarray,
+        const: np.ndarray,
+        step: np.ndarray,
+        factors: tuple[np.ndarray, np.ndarray, np.ndarray],
+        constants: ConstantCoding,
+        lay: trendwave.Layout | None = None,
+    ):
+        """Knots and dead-zone quantised coefficients of ``target (k, T)`` with steps ``(k, 1)``,
+        the segments' step :func:`segment_factors` and the rows' :class:`ConstantCoding`, laid out as
+        ``lay`` (default: the payload's)."""
+        lay = lay or self.lay
+        knot_f, coeff_f, _ = factors
+        quantum = step * lay.knot_quantum * knot_f
+        k_int = np.round(target[:, lay.knot_frames] / quantum).astype(np.int64)
+        k_int[const] = np.round(
+            (target[const, :1] - constants.base[const, None]) / (step[const] * constants.fraction)
+        ).astype(np.int64)
+        residual = target - trendwave.trend(k_int * quantum, lay)
+        residual[const] = 0.0
+        c = trendwave.analyse(residual, lay) / (step * coeff_f)
+        c_int = (np.sign(c) * np.floor(np.abs(c) + self.cfg["deadzone"])).astype(np.int64)
+        c_int[const] = 0
+        return k_int, c_int
+
+    # ----- measures and bytes ---------------------------------------------------------------
+    def joint_errors(self, decoded: np.ndarray) -> np.ndarray:
+        """``(frames, points)`` cm: the decoded output's error at every joint, or at the worst
+        shell point of every bone."""
+        pos, quat = forward_kinematics(self.output_skeleton, decoded.T)
+        pos = pos * self.cm
+        if self.cfg["error_measure"] == "shell":
+            return shell_errors(self.skeleton, self.positions, self.quats, pos, quat).per_frame
+        return np.linalg.norm(pos - self.positions, axis=2)
+
+    def error(self, decoded: np.ndarray) -> float:
+        err = self.joint_errors(decoded)
+        return float(err.mean() if self.cfg["error_measure"] == "mean" else err.max())
+
+    def body(self, ps: Pass) -> bytes:
+        flags = self.header[1]
+        side: tuple[np.ndarray, ...] = (ps.steps,)
+        if ps.offsets.any():
+            flags, side = flags | FLAG_OFFSETS, side + (ps.offsets,)
+        if self.forms.any():
+            flags, side = flags | FLAG_FORMS, side + (self.forms,)
+        if self.means.any():  # side sequences go as differences: a running sum sends the values
+            flags, side = flags | FLAG_MEANS, side + (np.cumsum(self.means.ravel()),)
+        count = b""
+        if self.isolated.size:
+            flags, count = flags | FLAG_ISOLATED, bytes([self.isolated.size])
+            side = side + (self.isolated, np.cumsum(ps.patches.ravel()))
+        head = self.header[:1] + bytes([flags]) + self.header[2:] + count
+        return head + coefcoder.encode(
+            ps.const, ps.knots, ps.coeffs, self.lay.padded, self.lay.levels, revision=CODER_REVISION, side=side
+        )

@@ -1,0 +1,348 @@
+"""kinwave's payload, format 1: what encoder and decoder share (the step codes, the
+reconstruction of channels from their integers, the coding forms and world-axis translations)
+and the decoder of a body.
+
+Payload body: u8 format (1), u8 flags (bits 0 and 5: one or two leading keyframes, bits 1-2
+wavelet, bit 3 segment offsets, bit 4 coding forms, bit 6 mean rotations, bit 7 isolated
+frames), u8 log2 window, u8 levels, u16 channels (a payload for another skeleton is refused),
+with bit 7 a u8 count of isolated frames (glitches coded apart: their positions and one patch
+per channel follow in the stream's side sequences), then the arithmetic-coded
+stream (:mod:`mocodec.coding.entropy.coefcoder`, revision 2), which opens with one step code per joint
+with rotation channels and one for translations (step = 2^(code/8 - 20) degrees or cm), with
+bit 3 one step offset per segment, with bit 4 a coding form per three-angle joint
+(:mod:`mocodec.codecs.shared.rotvec`) and with bit 6 three mean-rotation integers per such joint.
+docs/formats.md gives the layout byte by byte.
+"""
+
+from __future__ import annotations
+
+import math
+import struct
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from mocodec import rotations
+from mocodec.codecs.shared import rotvec
+from mocodec.coding.entropy import coefcoder
+from mocodec.coding.transforms import seams, trendwave
+from mocodec.errors import CorruptStreamError
+from mocodec.kinematics import channel_plan, forward_kinematics
+from mocodec.skeleton import Skeleton
+
+FORMAT = 1  # the payload format (docs/formats.md), pinned by the golden fixtures
+CODER_REVISION = 2  # the coefficient coder's revision (coefcoder: differences in the approximation band)
+HEAD = struct.Struct("<BBBBH")  # format, flags, log2 window, levels, channels
+FLAG_OFFSETS = 8  # flags bit 3: a signed step offset per segment follows the step codes
+FLAG_FORMS = 16  # flags bit 4: per 3-angle joint its coding form (rotvec: 0 the file's Euler angles,
+# 1 a rotation vector, 2-7 Euler angles in a Tait-Bryan order, 8-15 those forms of
+# the rotation turned by the constant joints above, rotvec.WORLD; formats 1-2: 0, 1)
+FLAG_MEANS = 64  # flags bit 6: three integers per 3-angle joint, a vector joint's mean rotation
+MEAN_QUANTUM = 2.0  # degrees: a vector joint's mean rotation, as a rotation vector in these steps
+FLAG_ISOLATED = 128  # flags bit 7: a byte n after the header; n isolated frames coded apart (format 3)
+MAX_ISOLATED = 32  # isolated frames a payload codes apart at most
+FLAG_KEYFRAME = 1  # flags bit 0: frame 0 is a keyframe (a one-frame segment)
+FLAG_SECOND_KEYFRAME = 32  # flags bit 5 (with bit 0): frame 1 is one too
+WAVELET_IDS = ("cdf97", "d4", "haar")
+CONST_FRACTION = 1.0 / 8.0  # format 3: a constant channel's quantum, in steps of its joint
+COARSEST_BAND_S = 0.25  # seconds between the coarsest band's samples (the automatic levels)
+SEAM_HALF_WIDTH = 8  # frames each side of a seam over which its step is spread
+SEAM_LIMIT = 1.0  # the largest step removed, in quantiser steps of the channel
+
+
+def step_code(step: float) -> int:
+    return int(np.clip(np.round((math.log2(step) + 20.0) * 8.0), 0, 255))
+
+
+def code_step(code: int) -> float:
+    return 2.0 ** (code / 8.0 - 20.0)
+
+
+@dataclass(frozen=True)
+class StepGroup:
+    """Channels coded together with one step: a joint's rotation steps, or its translations."""
+
+    joint: int
+    rotation: bool
+    channels: np.ndarray  # channel indices (rotation: in rotation-order steps)
+    axes: np.ndarray  # rotation axes of the steps
+
+
+@lru_cache(maxsize=64)
+def step_groups(skeleton: Skeleton) -> tuple[StepGroup, ...]:
+    plan = channel_plan(skeleton)
+    out = []
+    for j in range(len(skeleton)):
+        pos = plan.pos_index[j][plan.pos_index[j] >= 0]
+        if pos.size:
+            out.append(StepGroup(j, False, pos, np.zeros(0, dtype=np.int64)))
+        k = int((plan.rot_index[j] >= 0).sum())
+        if k:
+            out.append(StepGroup(j, True, plan.rot_index[j, :k].copy(), plan.rot_axis[j, :k].copy()))
+    return tuple(out)
+
+
+def group_step(g: StepGroup, codes: np.ndarray, skeleton: Skeleton) -> float:
+    """A group's quantiser step from the payload's step codes (one per rotation joint, then
+    the translation code in cm): degrees, or skeleton units for translations."""
+    if g.rotation:
+        return code_step(codes[rotation_joints(skeleton).index(g.joint)])
+    return code_step(codes[-1]) * skeleton.units_per_metre / 100.0
+
+
+def rotation_joints(skeleton: Skeleton) -> list[int]:
+    return [g.joint for g in step_groups(skeleton) if g.rotation]
+
+
+def has_translation(skeleton: Skeleton) -> bool:
+    return any(not g.rotation for g in step_groups(skeleton))
+
+
+@lru_cache(maxsize=64)
+def three_angle_groups(skeleton: Skeleton) -> tuple[tuple[np.ndarray, str], ...]:
+    """``(channels, order)`` of every joint with three rotation channels (in rotation order):
+    the joints that may be coded as rotation vectors."""
+    return tuple(
+        (g.channels, "".join("XYZ"[a] for a in g.axes))
+        for g in step_groups(skeleton)
+        if g.rotation and g.channels.size == 3
+    )
+
+
+def parent_orientations(skeleton: Skeleton, frame: np.ndarray) -> np.ndarray:
+    """``(joints, 4)``: each joint's parent's orientation ``G_p`` in one frame of channels
+    ``frame (C,)`` (the identity for the root)."""
+    _, quats = forward_kinematics(skeleton, frame[None])
+    parents = skeleton.parents
+    return np.where((parents >= 0)[:, None], quats[0, np.maximum(parents, 0)], np.array([1.0, 0.0, 0.0, 0.0]))
+
+
+def parent_turns(skeleton: Skeleton, parents: np.ndarray) -> np.ndarray:
+    """``(n, 4)``: per three-angle joint, ``conj(C) G_p C``, its parent's orientation
+    (``parents``, :func:`parent_orientations`) seen through the joint's own pre-rotation ``C``:
+    the turn a WORLD form (:mod:`mocodec.codecs.shared.rotvec`) puts on the joint's rotation ``M``,
+    since ``G = G_p C M C^-1 = C (conj(C) G_p C M) C^-1``. Encoder and decoder compute it from
+    the same decoded constants, so it is the same floats on both ends."""
+    joints = np.array([skeleton.channel_joints[g[0]] for g, _ in three_angle_groups(skeleton)], dtype=np.int64)
+    out = parents[joints]
+    axis = np.array([skeleton.joints[j].has_axis for j in joints], dtype=bool)
+    if axis.any():
+        c = rotations.matrix_to_quat(skeleton.axis_matrices)[joints[axis]]
+        out[axis] = rotations.quat_multiply(rotations.quat_conjugate(c), rotations.quat_multiply(out[axis], c))
+    return out
+
+
+def still_rotations(skeleton: Skeleton, const: np.ndarray) -> np.ndarray:
+    """``(joints,)``: whether a joint and every joint above it hold constant rotations
+    (``const (C,)`` per channel)."""
+    plan = channel_plan(skeleton)
+    still = np.ones(len(skeleton), dtype=bool)
+    for j in range(len(skeleton)):
+        p = skeleton.parents[j]
+        still[j] = bool(const[plan.rot_index[j][plan.rot_index[j] >= 0]].all()) and (p < 0 or still[p])
+    return still
+
+
+def world_translations(skeleton: Skeleton, const: np.ndarray) -> list[tuple[int, np.ndarray]]:
+    """``(joint, its X, Y, Z position channels)`` of every non-root joint whose three
+    translations all move and whose ancestors' rotations are all constant (the body's root
+    under a dummy root): they are coded on the world's axes, ``G_p t`` with ``G_p`` from the
+    decoded constants, so a dummy's turn does not tilt their quantisation grid (under no turn
+    ``G_p`` is the identity and nothing changes). Implied by the constant flags: no side data."""
+    if not const.size:
+        return []
+    plan, still, out = channel_plan(skeleton), still_rotations(skeleton, const), []
+    for j in range(1, len(skeleton)):
+        pos = plan.pos_index[j]
+        if still[skeleton.parents[j]] and (pos >= 0).all() and not const[pos].any():
+            out.append((j, pos.copy()))
+    return out
+
+
+def on_axes(rows: np.ndarray, turn: np.ndarray, inverse: bool = False) -> np.ndarray:
+    """Translation rows ``(3, T)`` turned by the unit quaternion ``turn`` (its inverse)."""
+    q = rotations.quat_conjugate(turn) if inverse else turn
+    return rotations.quat_rotate(np.broadcast_to(q, (rows.shape[1], 4)), rows.T).T
+
+
+def segment_factors(offsets: np.ndarray, lay: trendwave.Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Step factors of the segments' offsets (1/8 octave each) at every knot (a knot takes its
+    segment's; the end knot the last segment's), every coefficient, and every seam (the finer
+    of its two sides)."""
+    f = 2.0 ** (np.asarray(offsets, dtype=np.float64) / 8.0)
+    last = max(lay.starts.size - 1, 0)
+    knot = f[np.minimum(np.arange(lay.num_knots), last)] if f.size else np.ones(lay.num_knots)
+    return knot, np.repeat(f, lay.padded), np.minimum(f[:-1], f[1:])
+
+
+@dataclass(frozen=True)
+class ConstantCoding:
+    """How constant channels are coded: one knot, ``fraction`` of the joint's step, about
+    ``base (C,)``. Format 3: a constant's error is the same in every frame and is not noise
+    that the closed loop averages out (a dummy root's rotation turns the whole body), so its
+    quantum is 8 times finer than the step, and a constant translation is coded as its
+    difference from the joint's offset on the decoder's skeleton (a MotionBuilder export
+    repeats every offset in its position channels: these cost one decision each)."""
+
+    fraction: float
+    base: np.ndarray
+
+
+def constant_coding(skeleton: Skeleton) -> ConstantCoding:
+    base = np.zeros(skeleton.num_channels)
+    plan = channel_plan(skeleton)
+    for j in range(len(skeleton)):
+        for axis, c in enumerate(plan.pos_index[j]):
+            if c >= 0:
+                base[c] = plan.offsets[j, axis]
+    return ConstantCoding(CONST_FRACTION, base)
+
+
+def reconstruct(
+    knots: np.ndarray,
+    coeffs: np.ndarray,
+    const: np.ndarray,
+    step: np.ndarray,
+    lay: trendwave.Layout,
+    factors: tuple[np.ndarray, np.ndarray, np.ndarray],
+    constants: ConstantCoding,
+) -> np.ndarray:
+    """Decoded channels ``(k, T)`` from their integers, steps ``(k, 1)`` and the segments'
+    step :func:`segment_factors`: the same arithmetic on both ends (the encoder calls it a tree depth
+    at a time, the decoder for all channels at once; each row's floats are the same either
+    way). A constant channel is its first knot as :class:`ConstantCoding` says (``base`` of these
+    rows)."""
+    knot_f, coeff_f, seam_f = factors
+    values = knots * (step * lay.knot_quantum * knot_f)
+    values[const] = constants.base[const, None] + knots[const, :1] * (step[const] * constants.fraction)
+    out = trendwave.trend(values, lay) + trendwave.synthesise(coeffs * (step * coeff_f), lay)
+    limits = SEAM_LIMIT * seam_f[:, None] * step[:, 0]
+    return seams.smooth_seams(out.T, lay.starts[1:], SEAM_HALF_WIDTH, limits).T
+
+
+def levels_for(fps: float) -> int:
+    """Wavelet levels whose coarsest band samples every ~1/4 s (COARSEST_BAND_S): the depth
+    that was best at 120 fps (5) keeps its meaning at other rates; at 30 fps 3 levels made
+    Bandai Namco files 2-4% smaller than 5."""
+    return int(np.clip(round(math.log2(max(fps, 1.0) * COARSEST_BAND_S)), 1, 10))
+
+
+def decode_channels(
+    skeleton: Skeleton,
+    codes: np.ndarray,
+    offsets: np.ndarray,
+    const: np.ndarray,
+    knots: np.ndarray,
+    coeffs: np.ndarray,
+    lay: trendwave.Layout,
+    forms: np.ndarray,
+    constants: ConstantCoding,
+    means: np.ndarray,
+    isolated: tuple[np.ndarray, np.ndarray],
+) -> np.ndarray:
+    """Channels ``(C, T)`` from the integers, in one reconstruction of all channels; the
+    joints coded in another form (``forms``, one per three-angle joint, :mod:`rotvec`; ``means``
+    a row of integers per such joint, or none; a WORLD form's turn from the decoded constants
+    above it, :func:`parent_turns`) back to the file's Euler angles; translations coded on the
+    world's axes back on their parent's (:func:`world_translations`); ``isolated`` frames and
+    their patches (:func:`apply_patches`)."""
+    steps = channel_steps(skeleton, codes)
+    out = reconstruct(knots, coeffs, const == 1, steps, lay, segment_factors(offsets, lay), constants)
+    apply_patches(out, steps, *isolated)
+    moved = world_translations(skeleton, const == 1)
+    world = bool(len(forms)) and bool((forms >= rotvec.WORLD).any())
+    parents = (
+        parent_orientations(skeleton, out[:, 0]) if moved or world else np.zeros((0, 4))
+    )  # (the caller has frames)
+    for j, pos in moved:
+        out[pos] = on_axes(out[pos], parents[j], inverse=True)
+    groups = three_angle_groups(skeleton)
+    coded = np.flatnonzero(forms) if len(forms) else np.zeros(0, dtype=np.int64)
+    if coded.size:
+        rows = np.concatenate([groups[k][0] for k in coded])
+        turns = rotvec.mean_quats(means[coded] if len(means) else np.zeros((coded.size, 3)), MEAN_QUANTUM)
+        pre = parent_turns(skeleton, parents)[coded] if world else None
+        out[rows] = rotvec.from_forms(out[rows], tuple(groups[k][1] for k in coded), forms[coded], turns, pre)
+    return out
+
+
+def apply_patches(out: np.ndarray, steps: np.ndarray, frames: np.ndarray, patches: np.ndarray) -> None:
+    """Isolated frames coded apart: the decoded rows ``out (k, T)`` at ``frames`` move by their
+    ``patches (k, n)`` in quanta of KEYFRAME_QUANTUM steps (the same arithmetic on both ends)."""
+    if len(frames):
+        out[:, frames] += patches * (steps * trendwave.KEYFRAME_QUANTUM)
+
+
+def channel_steps(skeleton: Skeleton, codes: np.ndarray) -> np.ndarray:
+    """``(C, 1)``: every channel's quantiser step from the payload's step codes."""
+    steps = np.empty((skeleton.num_channels, 1))
+    for g in step_groups(skeleton):
+        steps[g.channels] = group_step(g, codes, skeleton)
+    return steps
+
+
+def decode_body(body: bytes, skeleton: Skeleton, frames: int) -> np.ndarray:
+    """Channels ``(frames, C)`` of a kinwave body (format 1, docs/formats.md), every field checked."""
+    rot_joints = rotation_joints(skeleton)
+    trans = has_translation(skeleton)
+    num_codes = len(rot_joints) + trans
+    if len(body) < HEAD.size:
+        raise CorruptStreamError(f"kinwave payload of {len(body)} bytes is shorter than its {HEAD.size}-byte header")
+    version, flags, log_w, levels, channels = HEAD.unpack_from(body)
+    if version != FORMAT:
+        raise CorruptStreamError(f"kinwave payload format {version}, this mocodec reads {FORMAT}")
+    if channels != skeleton.num_channels:
+        raise CorruptStreamError(
+            f"kinwave payload has {channels} channels, the skeleton {skeleton.num_channels}: wrong skeleton?"
+        )
+    if log_w > 16 or not 1 <= levels <= 10 or (flags >> 1) & 3 >= len(WAVELET_IDS):
+        raise CorruptStreamError(f"kinwave payload header is damaged (window 2^{log_w}, levels {levels})")
+    keyframes = int(bool(flags & FLAG_KEYFRAME)) * (2 if flags & FLAG_SECOND_KEYFRAME else 1)
+    lay = trendwave.layout(frames, 1 << log_w, levels, keyframes, WAVELET_IDS[(flags >> 1) & 3])
+    num_offsets = lay.starts.size if flags & FLAG_OFFSETS else 0
+    num_vectors = len(three_angle_groups(skeleton)) if flags & FLAG_FORMS else 0
+    num_means = 3 * num_vectors if flags & FLAG_MEANS else 0
+    start, num_isolated = HEAD.size, 0
+    if flags & FLAG_ISOLATED:
+        if len(body) <= start or not 1 <= body[start] <= MAX_ISOLATED:
+            raise CorruptStreamError(f"kinwave payload's isolated frame count at byte {start} is damaged")
+        start, num_isolated = start + 1, body[start]
+    coded = coefcoder.decode(
+        body[start:],
+        skeleton.num_channels,
+        lay.num_knots,
+        lay.padded,
+        lay.levels,
+        CODER_REVISION,
+        (num_codes, num_offsets, num_vectors, num_means, num_isolated, num_isolated * skeleton.num_channels),
+    )
+    codes, offsets, forms, running, isolated, patched = coded.side
+    means = np.diff(running, prepend=0).reshape(-1, 3)
+    patches = np.diff(patched, prepend=0).reshape(skeleton.num_channels, num_isolated)
+    if num_isolated and not (1 <= isolated[0] and (np.diff(isolated) > 1).all() and isolated[-1] < frames - 1):
+        raise CorruptStreamError("kinwave payload's isolated frames are damaged")
+    if (
+        (codes.size and not 0 <= codes.min() <= codes.max() <= 255)
+        or np.abs(offsets).max(initial=0) > 128
+        or not rotvec.valid_forms(forms)
+        or np.abs(means).max(initial=0) * MEAN_QUANTUM > 360.0
+    ):
+        raise CorruptStreamError("kinwave payload's step codes are damaged")
+    if not num_offsets:
+        offsets = np.zeros(lay.starts.size, dtype=np.int8)
+    if not frames:
+        return np.zeros((0, skeleton.num_channels))
+    return decode_channels(
+        skeleton,
+        codes,
+        offsets,
+        coded.const,
+        coded.knots,
+        coded.coeffs,
+        lay,
+        forms,
+        constant_coding(skeleton),
+        means,
+        (isolated, patches),
+    ).T

@@ -1,0 +1,257 @@
+"""The search for the steps that meet a bound, or a bit rate, on the decoded output: a scale
+search (secant in log-log space), the joint feedback of a first pass, time-adaptive steps per
+segment, and the slack given away at the end; the final bytes are checked on the real
+decoder (docs/kinwave.md)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from mocodec.codecs.kinwave.encoder import (
+    Encoder,
+    Pass,
+    influence,
+)
+from mocodec.codecs.kinwave.payload import (
+    decode_body,
+)
+from mocodec.errors import CodecError
+
+MAX_PASSES = 8  # secant passes before falling back to halving
+JOINT_FEEDBACK = 1.0  # share of a joint's measured slack (in octaves) its steps take on
+SLACK_PASSES = 2  # rounds in which a max bound's final pass gives its slack away (_use_slack)
+SEGMENT_SLACK_BELOW = 0.9  # ... with time-adaptive steps only when its worst error is under this share
+ACCEPT = 0.95  # a max-error bound is met well enough at 95-100% of it (0.9: 1-1.6% larger files)
+MEAN_ACCEPT = 0.97  # a mean-error bound (smooth in the scale: 1.9% fewer bytes than at 0.9 for
+# 1.3 more passes)
+SEGMENT_PASSES = 2  # passes of the per-segment search before the combination is fixed
+MARGIN = 0.95  # a segment whose error was this close to the bound goes a code finer when combined
+SEGMENT_ACCEPT = 0.8  # a segment's worst error is near enough to the bound at this share of it
+ADAPTIVE_SEGMENTS = 4  # time-adaptive steps from this many segments on (at W = 128 on fewer they
+# measured 1.6% larger than one scale, from 4 on 3% smaller, from 8 on 9%)
+RATE_TOLERANCE = 0.02
+
+
+class BoundSearch(Encoder):
+    """The encoder's search for the steps that meet a bound (or a bit rate) on the decoded output."""
+
+    def _adapt_joints(self, errors: np.ndarray, bound: float) -> float:
+        """Correct the model's step shape by what a pass measured (max bounds): a joint whose
+        points all stayed well below the worst one is coded finer than it needs (the model's
+        uniform-noise error overstates quiet joints, whose coefficients mostly fall in the dead
+        zone), so its steps grow by that slack (the clip's worst error over the worst among the
+        points it moves), from the pass's ``errors (frames, points)``. Returns the scale factor
+        that brings the pass's worst error to the middle of the accepted range."""
+        err = errors.max(axis=0)
+        worst = err.max()
+        if worst <= 0:
+            return 1.0
+        self.joint_offsets = self._slack_codes(err, worst, JOINT_FEEDBACK)
+        return float(np.clip(bound * (1.0 + ACCEPT) / 2.0 / worst, 0.25, 4.0))
+
+    def _slack_codes(self, errors: np.ndarray, reference: float, share: float = 1.0) -> np.ndarray:
+        """Per step code, the 1/8 octaves (times ``share``, floored) between ``reference`` and
+        the worst of ``errors (points,)`` among the points the code moves (the joints below it,
+        and with ``shell`` its own bone's shell; the translations: all)."""
+        moved = influence(self.skeleton, self.cfg["error_measure"])
+        own = np.array([errors[row].max() if row.any() else errors.max() for row in moved])
+        return np.floor(8.0 * share * np.log2(reference / np.maximum(own, reference * 2.0**-8)))
+
+    def run(self) -> bytes:
+        if self.frames == 0:
+            return self.body(self.run_pass(self.codes(1.0)))
+        if self.cfg["bits_per_second"] > 0:
+            return self._to_rate(self.cfg["bits_per_second"] * self.frames / self.motion.fps / 8.0)
+        if (
+            self.cfg["segment_steps"]
+            and self.cfg["error_measure"] != "mean"
+            and np.count_nonzero(self.lay.padded) >= ADAPTIVE_SEGMENTS
+        ):
+            return self._to_bound_by_segment(self.cfg["max_error_cm"])
+        return self._to_bound(self.cfg["max_error_cm"])
+
+    def _search(self, measure, goal: float, accept: float, scale: float, exponent: float, sign: float = 1.0):
+        """Find x = log(scale) / sign with ``measure`` (rising with x) in [accept * goal, goal]:
+        extrapolate until the target is bracketed (first with ``exponent``, the model's
+        d log measure / dx, then with the slope the last two passes measured), then secant steps
+        inside the bracket. Returns (best pass meeting the goal or None, last x)."""
+        lo = hi = None  # (x, log value, pass)
+        previous = None  # the last (x, log value) before bracketing
+        seen: dict[bytes, tuple[float, Pass]] = {}
+        x = math.log(scale) / sign
+        aim = math.log(goal * (1.0 + accept) / 2.0)
+        for _ in range(MAX_PASSES):
+            codes = self.codes(math.exp(sign * x))
+            if codes.tobytes() not in seen:
+                ps = self.run_pass(codes)
+                seen[codes.tobytes()] = (measure(ps), ps)
+            value, ps = seen[codes.tobytes()]
+            y = math.log(max(value, 1e-300))
+            if value <= goal:
+                if lo is None or x > lo[0]:
+                    lo = (x, y, ps)
+                if value >= accept * goal:
+                    break
+            elif hi is None or x < hi[0]:
+                hi = (x, y, ps)
+            if lo is not None and hi is not None:
+                if hi[0] - lo[0] < 1e-3:
+                    break
+                slope = (hi[1] - lo[1]) / (hi[0] - lo[0])
+                x = lo[0] + (aim - lo[1]) / slope if slope > 0 else (lo[0] + hi[0]) / 2
+                if not lo[0] < x < hi[0]:
+                    x = (lo[0] + hi[0]) / 2
+            else:
+                slope = exponent
+                if previous is not None and abs(x - previous[0]) > 1e-9:
+                    measured = (y - previous[1]) / (x - previous[0])
+                    slope = measured if measured > 0.1 * exponent else exponent
+                previous = (x, y)
+                x = x + float(np.clip((aim - y) / slope, -3.0, 3.0))
+        return (lo[2] if lo else None), x
+
+    def _use_slack(self, best: Pass, bound: float, below: float = math.inf) -> Pass:
+        """Under a max bound, the final pass gives the slack to the codes whose points have it:
+        each code coarser by the 1/8 octaves between the bound and the worst error among the
+        points it moves, halved if the pass then breaks the bound (SLACK_PASSES rounds at most;
+        segment offsets kept). The joint feedback set the codes' shape at the starting scale;
+        at the final one, and near the bound, where the worst error jumps with single step
+        codes (on short clips one code more took it from 77% to 110% of the bound), the points'
+        errors differ again: 1-3% smaller files on both sources, and fewer clips far below their
+        bound. A pass whose worst error is already ``below`` x bound or more is kept (the
+        time-adaptive steps' segments take most of the slack; there the rounds cost a third of
+        the encoding speed for 0.2% of the bytes)."""
+        if self.cfg["error_measure"] == "mean":
+            return best
+        errors = self.joint_errors(best.decoded).max(axis=0)  # per point, over the frames
+        for _ in range(SLACK_PASSES):
+            if errors.max() >= below * bound:
+                return best
+            coarser = self._slack_codes(errors, bound)
+            for _ in range(2):
+                if not coarser.any():
+                    break
+                ps = self.run_pass(np.clip(best.steps + coarser, 0, 255).astype(np.uint8), best.offsets)
+                trial = self.joint_errors(ps.decoded).max(axis=0)
+                if trial.max() <= bound:
+                    best, errors = ps, trial
+                    break
+                coarser = np.floor(coarser / 2.0)
+            else:
+                break
+        return self._scale_up(best, errors.max(), bound)
+
+    def _scale_up(self, best: Pass, worst: float, bound: float) -> Pass:
+        """A final pass still under ACCEPT x bound (the time-adaptive search once stopped at 81%
+        of it, after a seam made one segment's error jump and the segment went eight codes finer)
+        takes every code coarser together by the 1/8 octaves between its worst error and the
+        bound, halved while that breaks the bound."""
+        while worst < ACCEPT * bound:
+            shift = int(np.floor(8.0 * math.log2(bound / max(worst, bound * 2.0**-8))))
+            while shift > 0:
+                ps = self.run_pass(np.clip(best.steps.astype(np.int64) + shift, 0, 255).astype(np.uint8), best.offsets)
+                trial = self.joint_errors(ps.decoded).max()
+                if trial <= bound:
+                    best, worst = ps, trial
+                    break
+                shift //= 2
+            else:
+                return best
+        return best
+
+    def _to_bound(self, bound: float) -> bytes:
+        guess = self.first_scale()
+        if self.cfg["error_measure"] != "mean" and self.cfg["joint_feedback"] and not self.joint_offsets.any():
+            guess *= self._adapt_joints(self.joint_errors(self.starting_pass().decoded), bound)
+        accept = MEAN_ACCEPT if self.cfg["error_measure"] == "mean" else ACCEPT
+        best, x = self._search(lambda ps: self.error(ps.decoded), bound, accept, guess, 1.0)
+        for _ in range(60):
+            if best is not None:
+                body = self.body(self._use_slack(best, bound))
+                if self.error(self.decoded_body(body)) <= bound:  # the guarantee, on the real decoder
+                    return body
+            x -= math.log(2.0)
+            ps = self.run_pass(self.codes(math.exp(x)))
+            best = ps if self.error(ps.decoded) <= bound else None
+        raise CodecError(f"kinwave cannot reach {self.cfg['error_measure']} error {bound:g} cm")
+
+    def _to_bound_by_segment(self, bound: float) -> bytes:
+        """A max-error bound with time-adaptive steps: the joints' steps from the model's
+        scale, then every segment's own offset (1/8 octave) searched so that its worst error
+        lies in [SEGMENT_ACCEPT, 1] x bound, so quiet stretches no longer take the steps the busiest
+        one needs. Segments meet at knots and seams, so the combination is checked as a whole
+        and segments over the bound move finer until none is (else the single-scale search of
+        :meth:`_to_bound` takes over); the final bytes are measured on the real decoder."""
+        starts = self.lay.starts
+        aim = bound * (1.0 + SEGMENT_ACCEPT) / 2.0
+
+        def segment_errors(errors):
+            return np.maximum.reduceat(errors.max(axis=1), starts)
+
+        guess = self.first_scale()
+        first = None
+        if self.cfg["joint_feedback"]:
+            errors = self.joint_errors(self.starting_pass().decoded)
+            first = segment_errors(errors)
+            guess *= self._adapt_joints(errors, bound)
+        base = self.codes(guess)
+        lowest, highest = max(-int(base.min()), -128), min(255 - int(base.max()), 127)
+        passes: dict[bytes, tuple[Pass, np.ndarray]] = {}
+
+        def run(offsets):
+            key = offsets.astype(np.int8).tobytes()
+            if key not in passes:
+                ps = self.run_pass(base, offsets)
+                passes[key] = ps, segment_errors(self.joint_errors(ps.decoded))
+            return passes[key]
+
+        offsets = np.zeros(starts.size, dtype=np.int64)
+        if first is not None:  # segments quieter in the first pass start coarser (half their slack)
+            offsets = np.clip(np.round(4.0 * np.log2(first.max() / np.maximum(first, 1e-12))), 0, highest).astype(
+                np.int64
+            )
+        feasible = np.full(starts.size, lowest - 1)  # the largest offset seen within the bound
+        closest = np.zeros(starts.size)  # the error seen there
+        failed = np.full(starts.size, highest + 1)  # the smallest offset seen over it
+        for _ in range(SEGMENT_PASSES):
+            _, seg = run(offsets)
+            ok = seg <= bound
+            closest = np.where(ok & (offsets >= feasible), seg, closest)
+            feasible = np.where(ok, np.maximum(feasible, offsets), feasible)
+            failed = np.where(ok, failed, np.minimum(failed, offsets))
+            settled = (ok & (seg >= SEGMENT_ACCEPT * bound)) | (failed - feasible <= 1)
+            if settled.all():
+                break
+            move = np.round(8.0 * np.log2(aim / np.maximum(seg, 1e-12)))
+            target = np.clip(offsets + np.where(ok, np.maximum(move, 1), np.minimum(move, -1)), lowest, highest)
+            target = np.where((target <= feasible) | (target >= failed), (feasible + failed) // 2, target)
+            offsets = np.where(settled, offsets, target).astype(np.int64)
+        offsets = np.where(feasible >= lowest, feasible, np.minimum(offsets, failed - 1))
+        offsets = np.maximum(offsets - (closest > MARGIN * bound), lowest)  # neighbours move the errors too
+        for _ in range(SEGMENT_PASSES + 3):
+            ps, seg = run(offsets)
+            over = seg > bound
+            if not over.any():
+                body = self.body(self._use_slack(ps, bound, SEGMENT_SLACK_BELOW))
+                if self.error(self.decoded_body(body)) <= bound:  # the guarantee, on the real decoder
+                    return body
+                over[:] = True
+            if (offsets[over] == lowest).all():
+                break
+            finer = np.maximum(np.ceil(8.0 * np.log2(np.maximum(seg, bound) / bound)), 1)
+            offsets = np.where(over, np.maximum(offsets - finer, lowest), offsets).astype(np.int64)
+        return self._to_bound(bound)  # what the segments cannot fix (constant channels): one scale
+
+    def decoded_body(self, body: bytes) -> np.ndarray:
+        """What the decoder makes of ``body`` on the skeleton it will be given (a constant
+        translation is coded about that skeleton's offsets)."""
+        return decode_body(body, self.output_skeleton, self.frames).T
+
+    def _to_rate(self, budget_bytes: float) -> bytes:
+        # size / budget falls as the scale rises: search on x = -log(scale)
+        best, _ = self._search(
+            lambda ps: len(self.body(ps)) / budget_bytes, 1.0, 1 - RATE_TOLERANCE, 1.0, 0.8, sign=-1.0
+        )
+        return self.body(best if best is not None else self.run_pass(self.codes(2.0**40)))

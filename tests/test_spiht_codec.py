@@ -95,10 +95,10 @@ def test_truncation_equals_encoding_at_the_lower_rate(walk_amc):
     codec = get_codec("spiht", bits_per_second=20000)
     payload = codec.encode(walk_amc)
     for bps in (20000, 5000, 700):
-        smaller, cut = codec.truncate(payload, walk_amc.skeleton, walk_amc.num_frames, walk_amc.fps, bps)
+        smaller, cut = codec.truncator(payload, walk_amc.skeleton, walk_amc.num_frames, walk_amc.fps)(bps)
         assert cut == smaller.encode(walk_amc)
     with pytest.raises(CodecError, match="above"):
-        codec.truncate(payload, walk_amc.skeleton, walk_amc.num_frames, walk_amc.fps, 40000)
+        codec.truncator(payload, walk_amc.skeleton, walk_amc.num_frames, walk_amc.fps)(40000)
 
 
 def test_file_truncation_hits_the_ratio(walk_amc):
@@ -212,7 +212,7 @@ def test_closed_loop_lowers_joint_errors_at_the_coded_rate(walk_bvh, walk_amc):
         assert errors[True] < 0.85 * errors[False]
         assert abs(sizes[True] - sizes[False]) <= 0.01 * sizes[False]
         fine = get_codec("spiht", bits_per_second=20000, allocation="impact", closed_loop=True)
-        smaller, cut = fine.truncate(fine.encode(motion), motion.skeleton, motion.num_frames, motion.fps, 4000)
+        smaller, cut = fine.truncator(fine.encode(motion), motion.skeleton, motion.num_frames, motion.fps)(4000)
         assert (
             compare(motion, smaller.decode(cut, motion.skeleton, motion.num_frames, motion.fps)).joints.mean
             < 1.05 * errors[False]

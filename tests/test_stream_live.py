@@ -155,11 +155,11 @@ def test_spiht_packets_cut_to_a_rate_are_the_packets_coded_at_that_rate(walk_bvh
         return enc.push(walk_bvh.channels) + enc.flush()
 
     for a, b in zip(packets(hi), packets(lo), strict=True):
-        cut = hi.truncate_packet(a, walk_bvh.skeleton, hi.packet_cuts(a, walk_bvh.skeleton), 2500, walk_bvh.fps)
+        cut = hi.packet_cutter(a, walk_bvh.skeleton, hi.packet_cuts(a, walk_bvh.skeleton), walk_bvh.fps)(2500)
         assert cut == b and len(cut) < len(a)
     with pytest.raises(CorruptStreamError, match="cut table"):
         p = packets(hi)[0]
-        hi.truncate_packet(p, walk_bvh.skeleton, np.array([1, 2, 3]), 2500, walk_bvh.fps)
+        hi.packet_cutter(p, walk_bvh.skeleton, np.array([1, 2, 3]), walk_bvh.fps)(2500)
 
 
 # ----- tokens ------------------------------------------------------------------------------------

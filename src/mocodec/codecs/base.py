@@ -11,8 +11,9 @@ exception. Encoding refuses NaN and infinite channels.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -81,6 +82,29 @@ class StreamEncoder:
         """Frames from before the stream starts, which are not coded: a coder that picks its
         parameters from the first frames it sees may look at them too (a live stream's intra
         refresh starts a new stream in mid-motion). Call before the first push."""
+
+
+@runtime_checkable
+class Embedded(Protocol):
+    """A codec with an embedded code (``spiht``): its bodies and stream packets cut to a lower
+    rate by dropping bytes, never decoding, so a file is truncated (:func:`mocodec.moc.truncate`)
+    and a relay serves each viewer the rate its budget allows."""
+
+    def truncator(
+        self, body: bytes, skeleton: Skeleton, frames: int, fps: float
+    ) -> Callable[[float], tuple[Codec, bytes]]:
+        """bits_per_second -> (the codec of that rate, the body cut to it)."""
+        ...
+
+    def packet_cuts(self, packet: bytes, skeleton: Skeleton) -> np.ndarray:
+        """Where each channel's stream of a stream packet ends (the sender works it out once)."""
+        ...
+
+    def packet_cutter(
+        self, packet: bytes, skeleton: Skeleton, cuts: np.ndarray, fps: float
+    ) -> Callable[[float], bytes]:
+        """bits_per_second -> the packet cut to that rate (parsed once, cut for many viewers)."""
+        ...
 
 
 def checked_frames(codec_id: str, skeleton: Skeleton, frames: np.ndarray) -> np.ndarray:

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mocodec.codecs import codec_from_untrusted
-from mocodec.codecs.base import Codec, StreamDecoder, StreamEncoder, checked_frames
+from mocodec.codecs.base import Codec, Embedded, StreamDecoder, StreamEncoder, checked_frames
 from mocodec.coding.entropy.rangecoder import encode_ints
 from mocodec.errors import CodecError
 from mocodec.motion import Motion
@@ -155,7 +155,7 @@ class LiveEncoder:
 
     def _wrap(self, payloads: list[bytes], ts: int) -> list[Packet]:
         out = []
-        cut_table = getattr(self.codec, "packet_cuts", None)  # an embedded codec's packets can be cut
+        cut_table = self.codec.packet_cuts if isinstance(self.codec, Embedded) else None  # cut by relays
         decoder = self.decoder
         assert decoder is not None, "a codec stream was started"
         for payload in payloads:

@@ -49,6 +49,7 @@ from aiohttp import WSMsgType, web
 from aiohttp.abc import AbstractAccessLogger
 
 from mocodec.codecs import codec_from_untrusted
+from mocodec.codecs.base import Embedded
 from mocodec.coding.entropy.rangecoder import decode_ints
 from mocodec.errors import MocodecError
 from mocodec.scene import bandwidth_scores, split_budget
@@ -467,7 +468,7 @@ class Relay:
     def _crowd(room: Room) -> tuple[dict[int, int], np.ndarray]:
         """The room's embedded (cuttable) streams, each with its row in ``(streams, 3)``
         positions."""
-        embedded = [k for k, s in room.streams.items() if hasattr(s.codec, "packet_cutter")]
+        embedded = [k for k, s in room.streams.items() if isinstance(s.codec, Embedded)]
         where = np.array([room.streams[k].position for k in embedded], dtype=np.float64).reshape(-1, 3)
         return {k: i for i, k in enumerate(embedded)}, where
 

@@ -357,17 +357,10 @@ class SpihtCodec(Codec):
         an anchor step for a channel with no budget by choice (level 0), unknown otherwise."""
         return np.where(levels == 0, 0.5 * ANCHOR_QUANTUM * channel_scale(skeleton), np.inf)
 
-    def truncate(
-        self, body: bytes, skeleton: Skeleton, frames: int, fps: float, bits_per_second: float
-    ) -> tuple[SpihtCodec, bytes]:
-        """The body (of ``frames`` frames at ``fps``) cut to a lower rate without re-encoding:
-        every segment budget shrinks by bits_per_second / the codec's rate, and every channel
-        stream keeps the prefix its new budget allows. Returns the codec for the new rate and
-        its body."""
-        return self.truncator(body, skeleton, frames, fps)(bits_per_second)
-
     def truncator(self, body: bytes, skeleton: Skeleton, frames: int, fps: float):
-        """A function bits_per_second -> (codec, body) for :meth:`truncate`. The streams are
+        """A function bits_per_second -> (the codec of that rate, the body cut to it, without
+        re-encoding: every segment budget shrinks by bits_per_second / the codec's rate, and
+        every channel stream keeps the prefix its new budget allows). The streams are
         decoded once to find where each ends, so a rate search cuts many times cheaply."""
         if frames == 0:
             return lambda bps: (self._smaller(bps), body)
@@ -404,24 +397,17 @@ class SpihtCodec(Codec):
 
     def packet_cuts(self, packet: bytes, skeleton: Skeleton) -> np.ndarray:
         """The bits each channel stream of a stream packet uses, in stream order: what
-        :meth:`truncate_packet` needs to cut the packet without decoding it (a sender works it
+        :meth:`packet_cutter` needs to cut the packet without decoding it (a sender works it
         out once, a relay then cuts for every viewer)."""
         _, _, levels, total, bits = self._packet_fields(packet, skeleton)
         return np.array(
             [used for _, _, used, _, _ in self._segment_streams(levels, total, bits, 0, "the packet")], dtype=np.int64
         )
 
-    def truncate_packet(
-        self, packet: bytes, skeleton: Skeleton, cuts: np.ndarray, bits_per_second: float, fps: float
-    ) -> bytes:
-        """A stream packet cut to ``bits_per_second`` (if below its own rate): every channel
-        keeps the prefix of its embedded stream its new share allows, so it decodes to a
-        coarser segment with no re-encoding, the same bytes as coding at that rate (the
-        whole-file :meth:`truncate`, per packet)."""
-        return self.packet_cutter(packet, skeleton, cuts, fps)(bits_per_second)
-
     def packet_cutter(self, packet: bytes, skeleton: Skeleton, cuts: np.ndarray, fps: float):
-        """A function bits_per_second -> the packet cut to that rate (:meth:`truncate_packet`):
+        """A function bits_per_second -> the packet cut to that rate (if below its own): every
+        channel keeps the prefix of its embedded stream its new share allows, so it decodes to a
+        coarser segment with no re-encoding, the same bytes as coding at that rate;
         the packet is parsed once, so cutting it for many viewers costs a few array operations
         each."""
         head, parts, levels, total, bits = self._packet_fields(packet, skeleton)

@@ -36,8 +36,8 @@ def stored_skeleton(
     motion: Motion, codec: Codec, embed_skeleton: bool = True, exact_skeleton: bool = False
 ) -> Skeleton:
     """The skeleton a file of ``motion`` coded by ``codec`` holds, and decodes on: a lossy
-    codec's file rounds the offsets to :data:`SKELETON_PRECISION_CM` (the CMU BVH skeleton takes
-    30% fewer bytes, CMU ASF ones 40%); a lossless codec's, a file that holds only the skeleton's id, or
+    codec's file rounds the offsets to :data:`SKELETON_PRECISION_CM` (docs/codecs.md); a
+    lossless codec's, a file that holds only the skeleton's id, or
     ``exact_skeleton`` keep it bit for bit."""
     if codec.lossless or not embed_skeleton or exact_skeleton:
         return motion.skeleton

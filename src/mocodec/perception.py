@@ -15,8 +15,8 @@ channel's standard deviation in the segment times its lever arm (the longest pat
 joint to a point below it, plus the 3 cm shell; cm for root translations), in millimetres,
 on a log scale, log2(1 + moved / 1 mm). Bits buy error reduction exponentially, so shares that
 grow with the logarithm of the amplitude (the reverse water-filling rule of rate-distortion
-theory) beat shares proportional to the amplitude. On CMU clips at 60:1 it gives 25-60% lower
-mean joint errors than uniform allocation and 5-10 times lower than the thesis's rule.
+theory) beat shares proportional to the amplitude (measured against uniform allocation and the
+thesis's rule in docs/codecs.md).
 """
 
 from __future__ import annotations

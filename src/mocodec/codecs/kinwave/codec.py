@@ -22,7 +22,7 @@ Per payload of T frames:
    share their knots but their residuals' errors are independent, so the decoded curve steps
    where they meet; the reconstruction (on both ends) spreads each seam's step over 8 frames
    each side (:func:`mocodec.coding.transforms.seams.smooth_seams`, at most one step of the channel's
-   quantiser): jerk at the seams falls 5-14x and, as the step was error, the files shrink.
+   quantiser): jerk at the seams falls and, as the step was error, the files shrink.
 4. Steps: the shape per joint comes from the convex allocation of
    :mod:`mocodec.codecs.kinwave.kinalloc` for the chosen error measure; one scale multiplies it. With
    ``max_error_cm`` the scale is predicted from the model and corrected by a secant in log-log
@@ -80,7 +80,7 @@ class KinwaveCodec(Codec):
             int,
             256,
             "segment length in frames (a power of two): the streaming delay (128 halves it, "
-            "for 2-6% more bytes at a mean-error bound)",
+            "for a few per cent more bytes)",
             8,
             4096,
         ),

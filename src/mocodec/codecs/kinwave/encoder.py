@@ -109,7 +109,7 @@ class Pass:
 def isolated_frames(positions_cm: np.ndarray, skip: int) -> np.ndarray:
     """Frames (after the first ``skip``) that jump far from both neighbours while the
     neighbours are close to each other: a glitch, coded apart so it does not cost the wavelet
-    (one 25-degree spike made a CMU walk 60-68% larger)."""
+    (what one spike costs otherwise: docs/kinwave.md)."""
     frames = len(positions_cm)
     if frames < 8:
         return np.zeros(0, dtype=np.int64)
@@ -206,8 +206,7 @@ class Encoder:
     def _choose_keyframes(self) -> None:
         """Leading frames that jump away (a bind pose, a T-pose) cost the wavelet a jump, but
         as keyframes a finely quantised pose each; which is cheaper depends on the pose and the
-        bound (a CMU T-pose at max shell 0.1 cm cost 16% more as a keyframe, a bind pose before
-        it 13% less). One pass at the starting scale with 0, 1 and 2 keyframes decides: at the
+        bound (docs/kinwave.md). One pass at the starting scale with 0, 1 and 2 keyframes decides: at the
         same steps the errors are about the same."""
         passes = []
         for count in range(3):
@@ -258,9 +257,8 @@ class Encoder:
         slope (a nonzero coefficient takes a bit more per halving of the error). A form whose
         middle angle comes within GIMBAL_MARGIN of its lock is out. The trial weighs the mean
         rotation error, which is what decides a mean bound; under a max bound it misjudged ASF
-        joints (angles about axes chosen for each bone, small and decoupled), whose files came
-        out 1-14% larger with vectors (and every axis-free bone taking forms was within 1.3%
-        either way, a third slower), so there only the body's root (the first joint that turns,
+        joints (angles about axes chosen for each bone, small and decoupled; docs/kinwave.md),
+        so there only the body's root (the first joint that turns,
         below any dummy root) and joints near their gimbal lock may change form; a joint whose
         angles are all constant keeps them always. All joints go through each transform
         together; only the byte counts are per joint."""

@@ -13,8 +13,8 @@ The rate of a joint falls by ``m log2 s`` bits per frame (high-rate approximatio
 * ``mean`` (mean joint error): minimise rate subject to the mean over points of the error's
   norm, ``sqrt`` of the squared error (convex in ``log u``), starting from the closed form
   that bounds the mean *squared* error instead, ``s_j ~ 1 / sqrt(mean_p lever_jp^2)``: the
-  norm lets points that already move a lot take more error, 1.4% smaller kinwave files at a
-  mean bound of 0.5 cm and 0.7% at 1 cm than the closed form;
+  norm lets points that already move a lot take more error (smaller files than the closed
+  form: docs/kinwave.md);
 * ``joint`` / ``shell`` (max error): subject to every point's (every shell's) squared error
   at most 1 — a convex program in ``u = s^2`` solved by SLSQP.
 

@@ -223,8 +223,7 @@ def reconstruct(
 
 def levels_for(fps: float) -> int:
     """Wavelet levels whose coarsest band samples every ~1/4 s (COARSEST_BAND_S): the depth
-    that was best at 120 fps (5) keeps its meaning at other rates; at 30 fps 3 levels made
-    Bandai Namco files 2-4% smaller than 5."""
+    that was best at 120 fps (5) keeps its meaning at other rates (docs/kinwave.md)."""
     return int(np.clip(round(math.log2(max(fps, 1.0) * COARSEST_BAND_S)), 1, 10))
 
 

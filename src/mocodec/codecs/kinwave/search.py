@@ -23,14 +23,12 @@ MAX_PASSES = 8  # secant passes before falling back to halving
 JOINT_FEEDBACK = 1.0  # share of a joint's measured slack (in octaves) its steps take on
 SLACK_PASSES = 2  # rounds in which a max bound's final pass gives its slack away (_use_slack)
 SEGMENT_SLACK_BELOW = 0.9  # ... with time-adaptive steps only when its worst error is under this share
-ACCEPT = 0.95  # a max-error bound is met well enough at 95-100% of it (0.9: 1-1.6% larger files)
-MEAN_ACCEPT = 0.97  # a mean-error bound (smooth in the scale: 1.9% fewer bytes than at 0.9 for
-# 1.3 more passes)
+ACCEPT = 0.95  # a max-error bound is met well enough at 95-100% of it
+MEAN_ACCEPT = 0.97  # a mean-error bound (smooth in the scale, so the search can aim closer)
 SEGMENT_PASSES = 2  # passes of the per-segment search before the combination is fixed
 MARGIN = 0.95  # a segment whose error was this close to the bound goes a code finer when combined
 SEGMENT_ACCEPT = 0.8  # a segment's worst error is near enough to the bound at this share of it
-ADAPTIVE_SEGMENTS = 4  # time-adaptive steps from this many segments on (at W = 128 on fewer they
-# measured 1.6% larger than one scale, from 4 on 3% smaller, from 8 on 9%)
+ADAPTIVE_SEGMENTS = 4  # time-adaptive steps from this many segments on (on fewer, one scale is smaller)
 RATE_TOLERANCE = 0.02
 
 
@@ -118,11 +116,9 @@ class BoundSearch(Encoder):
         points it moves, halved if the pass then breaks the bound (SLACK_PASSES rounds at most;
         segment offsets kept). The joint feedback set the codes' shape at the starting scale;
         at the final one, and near the bound, where the worst error jumps with single step
-        codes (on short clips one code more took it from 77% to 110% of the bound), the points'
-        errors differ again: 1-3% smaller files on both sources, and fewer clips far below their
-        bound. A pass whose worst error is already ``below`` x bound or more is kept (the
-        time-adaptive steps' segments take most of the slack; there the rounds cost a third of
-        the encoding speed for 0.2% of the bytes)."""
+        codes, the points' errors differ again. A pass whose worst error is already ``below`` x
+        bound or more is kept (the time-adaptive steps' segments take most of the slack). What
+        the rounds buy and cost: docs/kinwave.md."""
         if self.cfg["error_measure"] == "mean":
             return best
         errors = self.joint_errors(best.decoded).max(axis=0)  # per point, over the frames
@@ -144,8 +140,8 @@ class BoundSearch(Encoder):
         return self._scale_up(best, errors.max(), bound)
 
     def _scale_up(self, best: Pass, worst: float, bound: float) -> Pass:
-        """A final pass still under ACCEPT x bound (the time-adaptive search once stopped at 81%
-        of it, after a seam made one segment's error jump and the segment went eight codes finer)
+        """A final pass still under ACCEPT x bound (the time-adaptive search can stop far below
+        it when a seam makes one segment's error jump and the segment goes many codes finer)
         takes every code coarser together by the 1/8 octaves between its worst error and the
         bound, halved while that breaks the bound."""
         while worst < ACCEPT * bound:

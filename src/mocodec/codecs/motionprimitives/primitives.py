@@ -10,7 +10,7 @@ rest: 5.3.5), the difference (5.7) is coded with 4-level CDF 9/7 wavelets, quant
 (:mod:`mocodec.codecs.motionprimitives.primresidual`). The translation channels go in windows of 32 frames (at
 most S_M), CDF 9/7, the smallest half of the coefficients zeroed, ``bits``-bit quantisation.
 The segment coefficients go through the context-adaptive coefficient coder
-(:func:`mocodec.codecs.motionprimitives.primresidual.pack`: about 12% smaller than zero runs); every other
+(:func:`mocodec.codecs.motionprimitives.primresidual.pack`, smaller than zero runs); every other
 integer stream is range coded (:func:`mocodec.coding.entropy.rangecoder.encode_ints`; zero runs for
 the translation coefficients).
 

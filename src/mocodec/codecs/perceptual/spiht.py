@@ -9,9 +9,8 @@ Per segment of W frames (a power of two, 128 by default) and per channel:
    starts and ends near zero, so the periodised wavelet sees no jump where a walk ends away
    from where it began.
 2. The residual, zero-padded to W, goes through a periodised multi-level wavelet (CDF 9/7 by
-   default, D4 available; ``levels`` deep, log2(W) - 1 by default: a coarsest band of two, which
-   measured 16% better than four at 60:1; W = 256 is a further 30% better, at twice the delay),
-   is quantised to a
+   default, D4 available; ``levels`` deep, log2(W) - 1 by default: a coarsest band of two,
+   better than four; W = 256 better still, at twice the delay: docs/codecs.md), is quantised to a
    fine quantum (1/256 degree or cm) and coded by 1-D SPIHT (:mod:`mocodec.coding.entropy.spiht`).
 3. Bit allocation (6.1): B_c = F_c B_T / sum F_i, with B_T = bits_per_second x W / fps and F_c
    the importance of :mod:`mocodec.perception` (``perceptual``: body part, depth, energy, bone

@@ -5,8 +5,8 @@ its *original* global orientation: the target local rotation is ``conj(G'_p) G_j
 encoder therefore needs, per joint, the Euler angles (in the joint's own channels, order and
 ASF pre-rotation ``C``) of that target, near the original angles; :func:`target_angles` finds
 them by one damped Gauss-Newton step from the original angles (for three-DOF joints what is
-left is second order in the parent's error: 1% of it for a 2 degree error, where a second step
-would cost the encoder 15% more time per pass and not a byte less; for one- and two-DOF joints
+left is second order in the parent's error, and a second step costs time for no byte less
+(docs/kinwave.md); for one- and two-DOF joints
 the step heads for the least-squares best rotation). Quantisation errors then stop
 accumulating from the hips to the fingertips, as in a DPCM coder that predicts from the
 decoded signal. :func:`compose` gives the decoded global orientation for the children.

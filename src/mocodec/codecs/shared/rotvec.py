@@ -10,9 +10,9 @@ turn) a coder does better with another form of the same rotation. Forms, per joi
   order: a hinge written in a proper order (at its lock) is one angle again;
 * ``WORLD + f``: the form ``f`` of ``pre q`` instead of ``q``, ``pre`` a constant rotation the
   coder gives per joint: under a dummy root turned by a constant rotation, the joint's
-  rotation as if the dummy were not there, whose angles the file's exporter chose (a body
-  turned 90 degrees about X by its dummy root cost 19% more in any local form; a vector about
-  the mean of ``pre q`` has the same mean, so the same quantised mean, as without the dummy).
+  rotation as if the dummy were not there, whose angles the file's exporter chose (a vector
+  about the mean of ``pre q`` has the same mean, so the same quantised mean, as without the
+  dummy; what a local form costs there: docs/kinwave.md).
 
 Rows come three per joint, ``(3n, T)``, degrees. The way back (:func:`from_forms`) runs in a
 numba kernel, a joint at a time, so a coder converting a few joints (kinwave's encoder, a tree

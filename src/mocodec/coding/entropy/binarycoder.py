@@ -52,8 +52,8 @@ def new_state(contexts: int, warm: bool = False) -> np.ndarray:
     """Adaptive state of ``contexts`` binary contexts: rows fast probability, slow probability
     (of a 0, out of 65536) and decisions seen. ``warm`` contexts start adapting at 1/4 and slow
     down to their rates as decisions come (a context learns its first symbols at once, as a
-    counting estimator would): 1.9% fewer bytes for kinwave at a mean bound of 0.5 cm, 0.7% at
-    max shell 0.1 cm. Without, they adapt at the fixed rates from the start."""
+    counting estimator would; docs/kinwave.md). Without, they adapt at the fixed rates from the
+    start."""
     state = np.full((3, contexts), INIT, dtype=np.int64)
     state[2] = 0 if warm else WARM_DONE
     return state

@@ -10,8 +10,8 @@ The binary range coder and the binarisation of integers are :mod:`mocodec.coding
 * sign: subband (revision 2: and the signs of the previous value and of the parent);
 * revision 2 codes the approximation band of a block as differences from its previous value
   (neighbours 32 frames apart are alike), the first value and the rest in contexts of their own,
-  and its contexts warm up (:func:`~mocodec.coding.entropy.binarycoder.new_state`: 1.1-3.2% smaller
-  kinwave files, most on short clips, which spend a larger share learning);
+  and its contexts warm up (:func:`~mocodec.coding.entropy.binarycoder.new_state`; short clips
+  gain most, as they spend a larger share learning);
 * per channel: a "constant" flag; per segment block: an "all zero" flag, in the context of the
   previous block of the same channel; knots: their own set of the above.
 
@@ -252,9 +252,8 @@ def encode(
     after the ``side`` sequences of integers (a caller's parameters, such as kinwave's step
     codes: each coded as differences, in contexts of their own).
     ``revision`` 2 codes each block's approximation band as differences from the previous value
-    and a sign in the context of the previous value's and the parent's signs: 3.7% fewer bytes
-    than revision 1 (kinwave's payload format 1) at a mean joint bound of 0.5 cm, 4.3% at 1 cm,
-    1.7-2.2% at max bounds (geometric mean over 23 shared clips)."""
+    and a sign in the context of the previous value's and the parent's signs (kinwave's gain:
+    docs/kinwave.md)."""
     const = np.ascontiguousarray(const, dtype=np.int64)
     knots = np.ascontiguousarray(knots, dtype=np.int64)
     coeffs = np.ascontiguousarray(coeffs, dtype=np.int64)

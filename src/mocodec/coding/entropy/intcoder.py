@@ -11,8 +11,8 @@ The codes of a quantiser with N levels are better coded as such (``Model(channel
 levels=N)``): each is a path down a binary tree of its ``ceil(log2 N)`` bits, every node an
 adaptive context of its own per channel and per quarter of the range the channel's previous
 code fell in, so the coder learns each channel's whole distribution at a fixed number of
-decisions per value (on the 30 Hz CMU clips, 12% fewer bits than the first way for ``quant``,
-3-7% for ``adpcm``; ``dpcm``'s differences, peaked at zero, do better the first way).
+decisions per value (better for ``quant`` and ``adpcm``; ``dpcm``'s differences, peaked at
+zero, do better the first way: docs/codecs.md).
 
 Either plays the part of the thesis's statistical coder (7.4) as a "black box" after each
 coder, adaptive like its adaptive Huffman coder but within a fraction of a bit of the entropy.

@@ -31,6 +31,7 @@ CONFIGS: dict[str, dict] = {
     "gesture": {},
     "hybrid": {},
     "kinwave": {"max_error_cm": 0.5, "error_measure": "shell"},
+    "kinwave-live": {"max_error_cm": 1.0},
     "lossless": {},
     "posture": {},
     "primitives": {},

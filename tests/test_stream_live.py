@@ -24,7 +24,7 @@ from mocodec.stream.packets import (
     split_batch,
 )
 
-REALTIME = ("dpcm", "adpcm", "deadreckoning", "dct", "spiht", "primitives")
+REALTIME = ("dpcm", "adpcm", "deadreckoning", "dct", "spiht", "primitives", "kinwave-live")
 
 
 def wrapped_error(a: np.ndarray, b: np.ndarray) -> float:

@@ -23,6 +23,7 @@ BUILT_IN = {
     **dict.fromkeys(("primitives", "rhythmic"), "motionprimitives"),
     **dict.fromkeys(("pwavelet", "spiht"), "perceptual"),
     "kinwave": "kinwave.codec",
+    "kinwave-live": "kinwave.live",
     "raw": "reference",
     "lossless": "reference",
     **dict.fromkeys(("zstd", "sz3", "zfp", "fpzip"), "reference"),

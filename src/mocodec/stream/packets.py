@@ -42,7 +42,19 @@ HEADER, DATA = 0, 1
 KEYFRAME, END, CUTS = 1, 2, 4
 
 #: The codecs a packet can name, by number (the numbering is part of the format: append only).
-CODEC_NUMBERS = ("raw", "quant", "dpcm", "adpcm", "deadreckoning", "dct", "subband", "spiht", "primitives", "kinwave")
+CODEC_NUMBERS = (  # a streaming codec's number in packets: append only
+    "raw",
+    "quant",
+    "dpcm",
+    "adpcm",
+    "deadreckoning",
+    "dct",
+    "subband",
+    "spiht",
+    "primitives",
+    "kinwave",
+    "kinwave-live",
+)
 
 _FIELDS = struct.Struct("<2sBBBBIIQIH3fI")
 _CRC = struct.Struct("<I")

@@ -188,6 +188,28 @@ def finish(st, buf):
     return st[4]
 
 
+@numba.njit(inline="always")
+def finish_short(st, buf):
+    """Like :func:`finish`, for short streams (a live packet): the final value is the one in
+    ``[low, low + range)`` with the most trailing zero bits, and the zero bytes it ends with
+    are not counted, since a decoder reads zeros past the end of its data. The first byte is
+    always 0 (nothing carries into it) and a caller may drop it too (:func:`start_decoder`
+    then needs it back). Returns the bytes written."""
+    low, rng = st[0], st[1]
+    for k in range(32, -1, -1):
+        mask = (np.int64(1) << k) - 1
+        v = (low + mask) & ~mask
+        if v < low + rng:
+            st[0] = v
+            break
+    for _ in range(5):
+        shift_low(st, buf)
+    n = st[4]
+    while n > 1 and buf[n - 1] == 0:
+        n -= 1
+    return n
+
+
 def int_decisions(values: np.ndarray) -> int:
     """An upper bound on the decisions :func:`put_int` makes for ``values``."""
     m = np.abs(np.asarray(values, dtype=np.int64)).ravel()

@@ -1,0 +1,99 @@
+"""Live avatars at a guaranteed max joint error: kinwave-live against offline kinwave and
+deadreckoning, per source (CMU BVH and ASF/AMC at 120 fps, Bandai Namco at 30 fps).
+
+    python benchmarks/bench_live.py [--clips N] [--bound 1.0] [--jobs 2]
+
+Per clip: kbit/s of the codec's packets alone, and with the stream framing of today's packets
+(stream/packets.py, 48 bytes a packet); the coding delay (how long a packet holds its first
+frame back); the measured max and mean joint error of every decoded frame; for deadreckoning
+the threshold rate control finds for the bound (its delay: 3 frames), for offline kinwave the
+whole clip at the bound (its delay: the 256-frame segment). Prints the medians per source.
+"""
+
+from __future__ import annotations
+
+import argparse
+from concurrent.futures import ProcessPoolExecutor
+
+import numpy as np
+
+from common import SHARED
+from mocodec import load, ratecontrol
+from mocodec.codecs import get_codec
+from mocodec.codecs.kinwave import live
+from mocodec.kinematics import forward_kinematics
+from mocodec.stream.packets import OVERHEAD
+
+SOURCES = (
+    ("CMU BVH", "cmu/bvh", "*.bvh"),
+    ("CMU ASF/AMC", "cmu/asf_amc", "*.amc"),
+    ("Bandai Namco", "bandai", "*.bvh"),
+)
+
+
+def joint_errors(motion, channels) -> np.ndarray:
+    sk, cm = motion.skeleton, 100.0 / motion.skeleton.units_per_metre
+    p0, _ = forward_kinematics(sk, motion.channels)
+    p1, _ = forward_kinematics(sk, channels)
+    return np.linalg.norm(p1 - p0, axis=2) * cm
+
+
+def measure(path: str, bound: float) -> dict:
+    motion = load(path)
+    seconds = motion.duration
+    codec = get_codec("kinwave-live", max_error_cm=bound)
+    enc = codec.encoder(motion.skeleton, motion.fps)
+    packets = enc.push(motion.channels) + enc.flush()
+    dec = codec.decoder(motion.skeleton, motion.fps)
+    decoded = np.concatenate([dec.push(p) for p in packets])
+    err = joint_errors(motion, decoded)
+    payload = sum(map(len, packets))
+    offline = get_codec("kinwave", max_error_cm=bound)
+    offline_bytes = len(offline.encode(motion))
+    dr = ratecontrol.tune(get_codec("deadreckoning"), motion, "max_error_cm", bound, whole_file=False)
+    return {
+        "live_kbps": payload * 8 / seconds / 1000,
+        "framed_kbps": (payload + OVERHEAD * len(packets)) * 8 / seconds / 1000,
+        "delay_ms": 1000 * (live.packet_frames(motion.fps) - 1) / motion.fps,
+        "max_cm": float(err.max()),
+        "mean_cm": float(err.mean()),
+        "offline_kbps": offline_bytes * 8 / seconds / 1000,
+        "offline_delay_ms": 1000 * offline.config["window"] / motion.fps,
+        "dr_kbps": dr.bitrate / 1000,
+        "dr_max_cm": dr.max_error_cm,
+    }
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--clips", type=int, default=6, help="clips per source (0: all)")
+    ap.add_argument("--bound", type=float, default=1.0, help="max joint error, cm")
+    ap.add_argument("--jobs", type=int, default=2)
+    args = ap.parse_args()
+    if SHARED is None:
+        raise SystemExit("needs ../shared/data")
+    with ProcessPoolExecutor(args.jobs) as pool:
+        for name, folder, pattern in SOURCES:
+            paths = sorted((SHARED / folder).glob(pattern))
+            paths = paths[:: max(1, len(paths) // args.clips)][: args.clips] if args.clips else paths
+            rows = list(pool.map(measure, map(str, paths), [args.bound] * len(paths)))
+
+            def med(key: str) -> float:
+                return float(np.median([r[key] for r in rows]))
+
+            ratio = np.median([r["live_kbps"] / r["offline_kbps"] for r in rows])
+            vs_dr = np.median([r["live_kbps"] / r["dr_kbps"] for r in rows])
+            print(
+                f"{name} ({len(rows)} clips) at {args.bound:g} cm: kinwave-live {med('live_kbps'):.2f} kbit/s "
+                f"({med('framed_kbps'):.2f} with 48-byte packet frames), delay {med('delay_ms'):.0f} ms, "
+                f"max {max(r['max_cm'] for r in rows):.3f} cm, mean {med('mean_cm'):.3f} cm | offline kinwave "
+                f"{med('offline_kbps'):.2f} kbit/s (delay {med('offline_delay_ms'):.0f} ms), "
+                f"live/offline x{ratio:.2f} | "
+                f"deadreckoning {med('dr_kbps'):.2f} kbit/s (max {max(r['dr_max_cm'] for r in rows):.3f} cm), "
+                f"live/deadreckoning x{vs_dr:.2f}",
+                flush=True,
+            )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,496 @@
+"""``kinwave-live``: kinwave's low-delay mode for live avatars (docs/streaming.md).
+
+A packet codes ``packet_frames`` frames (at most 50 ms: 6 at 120 fps, 1 at 30 fps) as soon as
+they are in, with the pose representation of offline kinwave:
+
+1. Joints are coded parents first, each against its parent's *decoded* orientation
+   (:func:`~mocodec.codecs.shared.closedloop.code_down_tree`), so a joint's orientation error is
+   its own quantisation error and errors do not pile up along the chains.
+2. Each channel is predicted from its last two decoded frames (order 2, a straight line, or
+   order 1, the last value; chosen per joint and packet on the targets) and the difference is
+   quantised with its joint's step: the decoded angle is within half a step of its target on
+   every frame, whatever came before.
+3. The steps' shape per joint is the convex allocation of :mod:`.kinalloc` for the max joint
+   error; one scale offset per packet (1/8 octave) multiplies it. The encoder decodes each
+   packet bit-exactly and checks the max joint (or shell) error of every frame against
+   ``max_error_cm``; a packet over it is coded again finer, and a packet well under it lets the
+   next start coarser.
+4. The integers go through the context-adaptive binary arithmetic coder of
+   :mod:`mocodec.coding.entropy.binarycoder`: per joint a flag "all zero in this packet", per
+   channel and frame an integer whose zero flag is in the context of the channel's previous
+   integer. The contexts carry over from packet to packet (a codec stream's packets depend on
+   each other; the live stream restarts the codec at each keyframe, docs/streaming.md).
+
+Packet: the arithmetic-coded stream alone (:func:`~mocodec.coding.entropy.binarycoder.finish_short`,
+its always-zero first byte left out): whether the packet is full (else its frame count), the
+change of the scale offset, then per joint its predictor order and its "any nonzero" flag and
+its integers.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from mocodec.codecs.base import Codec, Knob, QualityKnob, StreamDecoder, StreamEncoder, continuous_frames
+from mocodec.codecs.kinwave import kinalloc
+from mocodec.codecs.kinwave.payload import channel_steps, rotation_joints, step_code, step_groups
+from mocodec.codecs.registry import register
+from mocodec.codecs.shared import closedloop
+from mocodec.coding.entropy import binarycoder as bc
+from mocodec.errors import CodecError, CorruptStreamError
+from mocodec.formats import varint
+from mocodec.kinematics import channel_plan, forward_kinematics
+from mocodec.metrics.pose import shell_errors
+from mocodec.motion import Motion
+from mocodec.skeleton import Skeleton
+
+DELAY_S = 0.05  # the coding delay a packet may add
+ULEN = 6  # unary contexts of an integer's size class
+MAX_RETRIES = 12  # codings of one packet, each 1/2 octave finer, before it is refused
+SPARSE_RETRIES = 3  # ... at a stride above 1, before that stride is given up
+FINER = 4  # 1/8 octaves a packet over its bound goes finer at each retry
+COARSER_BELOW = 0.9  # a packet under this share of the bound lets the next start a code coarser
+MAX_OFFSET = 127
+ROUNDING = 0.25  # the quantiser's rounding offset (0.5: to the nearest; less: a dead zone)
+
+
+def packet_frames(fps: float) -> int:
+    """Frames per packet: as many as fit in DELAY_S (at least one)."""
+    return max(int(math.floor(fps * DELAY_S + 1e-9)), 1)
+
+
+@numba.njit(cache=True)
+def _predict(targets, history, count, gap, stride, steps, order, out, ints, quantise, rounding):
+    """Closed-loop prediction of the coded frames ``targets (T, k)``, ``stride`` frames apart,
+    from the two last coded frames ``history (2, k)`` (``count`` of them valid, ``gap`` frames
+    apart): order 2 a straight line, order 1 the last value, none at the start. With
+    ``quantise`` the integers of the differences at ``steps`` go to ``ints``; else ``ints`` are
+    given. ``out`` gets the decoded values; the arithmetic is the same on both ends."""
+    T, k = out.shape
+    prev0 = history[0].copy()
+    prev1 = history[1].copy()
+    n = count
+    g = gap
+    for t in range(T):
+        ratio = stride / g
+        for c in range(k):
+            if n >= 2 and order[c] == 2:
+                pred = prev1[c] + (prev1[c] - prev0[c]) * ratio
+            elif n >= 1:
+                pred = prev1[c]
+            else:
+                pred = 0.0
+            if quantise:
+                x = (targets[t, c] - pred) / steps[c]
+                ints[t, c] = np.int64(np.floor(x + rounding)) if x >= 0 else -np.int64(np.floor(-x + rounding))
+            out[t, c] = pred + ints[t, c] * steps[c]
+        for c in range(k):
+            prev0[c] = prev1[c]
+            prev1[c] = out[t, c]
+        n = min(n + 1, 2)
+        g = stride
+
+
+def _fill(previous: np.ndarray, coded: np.ndarray, stride: int) -> np.ndarray:
+    """All frames of a packet from its coded ones (every ``stride``-th, the last included) and
+    the frame before the packet, by straight lines (the same arithmetic on both ends)."""
+    if stride == 1:
+        return coded
+    out = np.empty((coded.shape[0] * stride, coded.shape[1]))
+    starts = np.vstack((previous[None], coded[:-1]))
+    for r in range(stride - 1):
+        out[r::stride] = starts + (coded - starts) * ((r + 1) / stride)
+    out[stride - 1 :: stride] = coded
+    return out
+
+
+def strides(frames: int) -> list[int]:
+    """The strides a full packet of ``frames`` may code its frames at, sparsest first."""
+    return [s for s in range(frames, 0, -1) if frames % s == 0]
+
+
+# per channel: 6 zero flags (the channel's previous integer zero or not x the joint's previous
+# channel in this frame: none, zero, nonzero), the sign, ULEN size classes, the mantissas
+PER_CHANNEL = 7 + ULEN + bc.MAX_CLASS + 1
+_HEAD_CONTEXTS = 2 + 3 * PER_CHANNEL  # full flag, frames, offset change, stride
+
+
+def _contexts(channels: int, joints: int) -> int:
+    return _HEAD_CONTEXTS + 2 * joints + channels * PER_CHANNEL
+
+
+@numba.njit(inline="always")
+def _put_head(st, buf, state, frames, full, offset_change, stride):
+    per = PER_CHANNEL
+    bc.put(st, buf, state, 0, 1 if frames == full else 0)
+    if frames != full:
+        bc.put_int(st, buf, state, frames, 2, 9, ULEN, 9 + ULEN, 8)
+    b = 2 + per
+    bc.put_int(st, buf, state, offset_change, b, b + 7, ULEN, b + 7 + ULEN, b + 6)
+    b = 2 + 2 * per
+    bc.put_int(st, buf, state, stride - 1, b, b + 7, ULEN, b + 7 + ULEN, b + 6)
+
+
+@numba.njit(inline="always")
+def _get_head(st, data, state, full):
+    per = PER_CHANNEL
+    frames = full
+    if bc.get(st, data, state, 0) == 0:
+        frames = bc.get_int(st, data, state, 2, 9, ULEN, 9 + ULEN, 8)
+    b = 2 + per
+    change = bc.get_int(st, data, state, b, b + 7, ULEN, b + 7 + ULEN, b + 6)
+    b = 2 + 2 * per
+    stride = 1 + bc.get_int(st, data, state, b, b + 7, ULEN, b + 7 + ULEN, b + 6)
+    return frames, change, stride
+
+
+@numba.njit(cache=True)
+def _code_packet(ints, frames, full, offset_change, stride, first, count, orders, state, buf, last_nonzero):
+    """Arithmetic-code one packet: its head (:func:`_put_head`), then per joint (channels
+    ``first[j]`` to ``first[j] + count[j]``) its predictor order and an "any nonzero" flag, then
+    the integers ``(T, C)`` of its coded frames. Returns the bytes written."""
+    st = bc.encoder_state()
+    T, C = ints.shape
+    J = first.size
+    per = PER_CHANNEL
+    _put_head(st, buf, state, frames, full, offset_change, stride)
+    H = _HEAD_CONTEXTS
+    for j in range(J):
+        bc.put(st, buf, state, H + j, 1 if orders[j] == 2 else 0)
+        nonzero = 0
+        for t in range(T):
+            for c in range(first[j], first[j] + count[j]):
+                if ints[t, c] != 0:
+                    nonzero = 1
+        bc.put(st, buf, state, H + J + j, nonzero)
+        if nonzero:
+            for t in range(T):
+                neighbour = 0
+                for c in range(first[j], first[j] + count[j]):
+                    base = H + 2 * J + c * per
+                    z = base + 3 * last_nonzero[c] + neighbour
+                    bc.put_int(st, buf, state, ints[t, c], z, base + 7, ULEN, base + 7 + ULEN, base + 6)
+                    last_nonzero[c] = 1 if ints[t, c] != 0 else 0
+                    neighbour = 1 + last_nonzero[c]
+        else:
+            for c in range(first[j], first[j] + count[j]):
+                last_nonzero[c] = 0
+    return bc.finish_short(st, buf)
+
+
+@numba.njit(cache=True)
+def _decode_head(data, full, state):
+    st = bc.start_decoder(data)
+    frames, change, stride = _get_head(st, data, state, full)
+    return st, frames, change, stride
+
+
+@numba.njit(cache=True)
+def _decode_ints(st, data, frames, first, count, state, last_nonzero, ints, orders):
+    J = first.size
+    per = PER_CHANNEL
+    H = _HEAD_CONTEXTS
+    for j in range(J):
+        orders[j] = 2 if bc.get(st, data, state, H + j) == 1 else 1
+        if bc.get(st, data, state, H + J + j) == 1:
+            for t in range(frames):
+                neighbour = 0
+                for c in range(first[j], first[j] + count[j]):
+                    base = H + 2 * J + c * per
+                    z = base + 3 * last_nonzero[c] + neighbour
+                    v = bc.get_int(st, data, state, z, base + 7, ULEN, base + 7 + ULEN, base + 6)
+                    ints[t, c] = v
+                    last_nonzero[c] = 1 if v != 0 else 0
+                    neighbour = 1 + last_nonzero[c]
+        else:
+            for c in range(first[j], first[j] + count[j]):
+                last_nonzero[c] = 0
+    return st[2]
+
+
+class _Tables:
+    """What both ends derive from the skeleton and the bound: the joints with channels (their
+    first channel and count), the base step codes and the arithmetic coder's state."""
+
+    def __init__(self, codec: KinwaveLiveCodec, skeleton: Skeleton):
+        self.skeleton = skeleton
+        joints = [j for j in range(len(skeleton)) if skeleton.joints[j].channels]
+        self.first = np.array([skeleton.channel_offsets[j] for j in joints], dtype=np.int64)
+        self.count = np.array([len(skeleton.joints[j].channels) for j in joints], dtype=np.int64)
+        self.channel_joint = np.repeat(np.arange(len(joints)), self.count)
+        self.base_codes = base_codes(skeleton, codec.config["max_error_cm"], codec.config["error_measure"])
+        self.state = bc.new_state(_contexts(skeleton.num_channels, len(joints)), warm=True)
+        self.last_nonzero = np.zeros(skeleton.num_channels, dtype=np.int64)
+        # the last two coded frames; before the first, one guess: a translation channel of a
+        # joint below the root at its offset (a MotionBuilder export repeats every offset)
+        self.history = np.zeros((2, skeleton.num_channels))
+        plan = channel_plan(skeleton)
+        for j in range(1, len(skeleton)):
+            for axis, c in enumerate(plan.pos_index[j]):
+                if c >= 0:
+                    self.history[1, c] = plan.offsets[j, axis]
+        self.count_history = 1
+        self.started = False  # a frame has been coded (strides above 1 need one before them)
+        self.gap = 1  # frames between them
+        self.offset = 0  # the last packet's scale offset
+
+    def steps(self, offset: int) -> np.ndarray:
+        codes = np.clip(self.base_codes.astype(np.int64) + offset, 0, 255).astype(np.uint8)
+        return channel_steps(self.skeleton, codes)[:, 0]
+
+
+def base_codes(skeleton: Skeleton, bound_cm: float, measure: str) -> np.ndarray:
+    """The step codes (one per rotation joint, then the translations) whose modelled max error
+    is ``bound_cm`` (:func:`.kinalloc.steps`, closed loop): where a stream's scale starts."""
+    counts = [0] * len(skeleton)
+    translations = 0
+    for g in step_groups(skeleton):
+        if g.rotation:
+            counts[g.joint] = g.channels.size
+        else:
+            translations += g.channels.size
+    rot, trans = kinalloc.steps(skeleton, tuple(counts), translations, "shell" if measure == "shell" else "joint", True)
+    rot = np.where(np.isfinite(rot), rot, np.nanmin(rot) if np.isfinite(rot).any() else 1.0)
+    steps = np.append(rot[rotation_joints(skeleton)], trans if translations else [])
+    return np.array([step_code(s * bound_cm) for s in steps], dtype=np.int64)
+
+
+@register
+class KinwaveLiveCodec(Codec):
+    id = "kinwave-live"
+    description = (
+        "kinwave for live avatars: closed-loop prediction down the kinematic tree, packets of at most "
+        "50 ms, context-adaptive arithmetic coding across packets, guaranteed max error on every frame"
+    )
+    knobs = (
+        Knob("max_error_cm", float, 1.0, "error bound in cm, held on every decoded frame", 1e-3, 1000.0),
+        Knob(
+            "error_measure",
+            str,
+            "joint",
+            "joint: max joint position error; shell: points 3 cm off every bone",
+            choices=("joint", "shell"),
+        ),
+    )
+    quality = QualityKnob("max_error_cm", higher_is_better=False, log_scale=True)
+    streaming = True
+
+    @property
+    def delay_frames(self) -> int:  # type: ignore[override]
+        return 0  # plus the packet's own frames: packet_frames(fps) - 1 at most
+
+    def encoder(self, skeleton: Skeleton, fps: float) -> StreamEncoder:
+        return _LiveEncoder(self, skeleton, fps)
+
+    def decoder(self, skeleton: Skeleton, fps: float) -> StreamDecoder:
+        return _LiveDecoder(self, skeleton, fps)
+
+    def _encode(self, motion: Motion) -> bytes:
+        """A clip is its stream: every packet after its length (a varint)."""
+        enc = self.encoder(motion.skeleton, motion.fps)
+        return b"".join(varint.pack(len(p)) + p for p in enc.push(motion.channels) + enc.flush())
+
+    def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:
+        dec = self.decoder(skeleton, fps)
+        out, pos = [], 0
+        while pos < len(body):
+            try:
+                size, pos = varint.unpack(body, pos, 4)
+            except ValueError as e:
+                raise CorruptStreamError(f"kinwave-live body: a packet length: {e}") from None
+            if pos + size > len(body):
+                raise CorruptStreamError(f"kinwave-live body: a {size}-byte packet at byte {pos} runs past the end")
+            out.append(dec.push(body[pos : pos + size]))
+            pos += size
+        return np.concatenate(out) if out else np.zeros((0, skeleton.num_channels))
+
+
+def _reconstruct(tables: _Tables, ints: np.ndarray, orders: np.ndarray, offset: int, stride: int) -> np.ndarray:
+    """The decoded coded frames ``(T', C)`` of one packet from its integers and the previous
+    coded frames (``tables.history``): the arithmetic of the encoder's :func:`_predict`."""
+    out = np.empty_like(ints, dtype=np.float64)
+    _predict(
+        np.zeros((0, 0)),
+        tables.history,
+        tables.count_history,
+        tables.gap,
+        stride,
+        tables.steps(offset),
+        orders[tables.channel_joint],
+        out,
+        ints,
+        False,
+        0.5,
+    )
+    return out
+
+
+def _advance(tables: _Tables, coded: np.ndarray, stride: int, offset: int) -> None:
+    """Both ends after a packet: its last two coded frames are the next one's history."""
+    if len(coded) >= 2:
+        tables.history, tables.gap = coded[-2:].copy(), stride
+    else:
+        tables.history = np.vstack((tables.history[1:], coded))
+        tables.gap = stride
+    tables.count_history = min(tables.count_history + len(coded), 2) if tables.started else min(len(coded), 2)
+    tables.started = True
+    tables.offset = offset
+
+
+class _LiveEncoder(StreamEncoder):
+    def __init__(self, codec: KinwaveLiveCodec, skeleton: Skeleton, fps: float):
+        self.codec, self.skeleton, self.fps = codec, skeleton, fps
+        self.tables = _Tables(codec, skeleton)
+        self.size = packet_frames(fps)
+        self.pending = np.zeros((0, skeleton.num_channels))
+        self.previous: np.ndarray | None = None  # the last continuous frame
+        self.offset = 0
+        self.bound = codec.config["max_error_cm"]
+        self.cm = 100.0 / skeleton.units_per_metre
+
+    def push(self, frames: np.ndarray) -> list[bytes]:
+        cont = continuous_frames(self.codec.id, self.skeleton, self.fps, frames, self.previous)
+        if len(cont):
+            self.previous = cont[-1]
+            self.pending = np.vstack((self.pending, cont))
+        out = []
+        while len(self.pending) >= self.size:
+            out.append(self._packet(self.pending[: self.size]))
+            self.pending = self.pending[self.size :]
+        return out
+
+    def flush(self) -> list[bytes]:
+        if not len(self.pending):
+            return []
+        packet = self._packet(self.pending)
+        self.pending = self.pending[:0]
+        return [packet]
+
+    def _orders(self, values: np.ndarray) -> np.ndarray:
+        """Per joint, the predictor (1 or 2) that misses the packet's original values least."""
+        t = self.tables
+        hist = np.vstack((t.history, values))[max(0, 2 - t.count_history) :]
+        if len(hist) < 3:
+            return np.ones(t.first.size, dtype=np.int64)
+        miss1 = np.abs(hist[2:] - hist[1:-1]).sum(axis=0)
+        miss2 = np.abs(hist[2:] - 2.0 * hist[1:-1] + hist[:-2]).sum(axis=0)
+        better = np.add.reduceat(miss2 - miss1, t.first) < 0
+        return np.where(better, 2, 1).astype(np.int64)
+
+    def _code(self, values: np.ndarray, orders: np.ndarray, offset: int, stride: int):
+        """The integers and decoded coded frames of one packet at ``offset`` and ``stride``
+        (every ``stride``-th frame coded, down the tree), and all its decoded frames."""
+        t = self.tables
+        steps = t.steps(offset)
+        order = orders[t.channel_joint]
+        coded = np.ascontiguousarray(values[stride - 1 :: stride])
+        ints = np.zeros(coded.shape, dtype=np.int64)
+        decoded = np.zeros(coded.shape)
+        pos, quats = forward_kinematics(self.skeleton, coded)
+
+        def code(channels: np.ndarray, targets: np.ndarray) -> np.ndarray:
+            out = np.empty(targets.shape)
+            sub = np.zeros(targets.shape, dtype=np.int64)
+            _predict(
+                np.ascontiguousarray(targets),
+                np.ascontiguousarray(t.history[:, channels]),
+                t.count_history,
+                t.gap,
+                stride,
+                steps[channels],
+                order[channels],
+                out,
+                sub,
+                True,
+                ROUNDING,
+            )
+            ints[:, channels], decoded[:, channels] = sub, out
+            return out
+
+        closedloop.code_down_tree(self.skeleton, coded, np.ones(values.shape[1], dtype=bool), quats, code, True, pos)
+        return ints, decoded, _fill(t.history[1], decoded, stride)
+
+    def _error(self, values: np.ndarray, decoded: np.ndarray) -> float:
+        p0, q0 = forward_kinematics(self.skeleton, values)
+        p1, q1 = forward_kinematics(self.skeleton, decoded)
+        if self.codec.config["error_measure"] == "shell":
+            return float(shell_errors(self.skeleton, p0 * self.cm, q0, p1 * self.cm, q1).max)
+        return float(np.linalg.norm((p1 - p0) * self.cm, axis=2).max())
+
+    def _fit(self, values: np.ndarray, orders: np.ndarray, stride: int, retries: int):
+        """(integers, coded frames, offset, worst error) of the packet at ``stride``, from the
+        stream's current offset and finer until the bound holds, or None."""
+        offset = self.offset
+        for _ in range(retries):
+            ints, coded, frames = self._code(values, orders, offset, stride)
+            worst = self._error(values, frames)
+            if worst <= self.bound:
+                return ints, coded, offset, worst
+            if offset <= -MAX_OFFSET:
+                return None
+            offset = max(offset - FINER, -MAX_OFFSET)
+        return None
+
+    def _bytes(self, ints, frames, offset, stride, orders, trial: bool) -> bytes:
+        t = self.tables
+        state, last = (t.state.copy(), t.last_nonzero.copy()) if trial else (t.state, t.last_nonzero)
+        buf = bc.buffer_for(bc.int_decisions(ints) + 2 * t.first.size + 64)
+        n = _code_packet(ints, frames, self.size, offset - t.offset, stride, t.first, t.count, orders, state, buf, last)
+        return buf[1:n].tobytes()  # the first byte is always 0
+
+    def _packet(self, values: np.ndarray) -> bytes:
+        t = self.tables
+        orders = self._orders(values)
+        sparse = t.started and len(values) == self.size
+        best = None
+        for stride in strides(len(values)) if sparse else [1]:
+            fit = self._fit(values, orders, stride, MAX_RETRIES if stride == 1 else SPARSE_RETRIES)
+            if fit is None:
+                continue
+            ints, coded, offset, worst = fit
+            size = len(self._bytes(ints, len(values), offset, stride, orders, trial=True))
+            if best is None or size < best[0]:
+                best = (size, stride, ints, coded, offset, worst)
+        if best is None:
+            raise CodecError(f"kinwave-live cannot hold {self.bound:g} cm on a packet")
+        _, stride, ints, coded, offset, worst = best
+        self.offset = min(offset + 1, MAX_OFFSET) if worst < COARSER_BELOW * self.bound else offset
+        data = self._bytes(ints, len(values), offset, stride, orders, trial=False)
+        _advance(t, coded, stride, offset)
+        return data
+
+
+class _LiveDecoder(StreamDecoder):
+    def __init__(self, codec: KinwaveLiveCodec, skeleton: Skeleton, fps: float):
+        self.codec, self.skeleton = codec, skeleton
+        self.tables = _Tables(codec, skeleton)
+        self.size = packet_frames(fps)
+
+    def push(self, packet: bytes) -> np.ndarray:
+        t = self.tables
+        data = np.frombuffer(b"\0" + bytes(packet), dtype=np.uint8)
+        st, frames, change, stride = _decode_head(data, self.size, t.state)
+        offset = t.offset + change
+        if not (
+            1 <= frames <= self.size
+            and abs(offset) <= MAX_OFFSET
+            and 1 <= stride <= frames
+            and frames % stride == 0
+            and (stride == 1 or t.started)
+        ):
+            raise CorruptStreamError(
+                f"kinwave-live packet: {frames} frames at stride {stride} and scale offset "
+                f"{offset} (the data is damaged)"
+            )
+        ints = np.zeros((frames // stride, self.skeleton.num_channels), dtype=np.int64)
+        orders = np.ones(t.first.size, dtype=np.int64)
+        _decode_ints(st, data, frames // stride, t.first, t.count, t.state, t.last_nonzero, ints, orders)
+        if np.abs(ints).max(initial=0) >= 1 << 40:
+            raise CorruptStreamError("kinwave-live packet: an integer out of range (the data is damaged)")
+        coded = _reconstruct(t, ints, orders, offset, stride)
+        out = _fill(t.history[1], coded, stride)
+        _advance(t, coded, stride, offset)
+        return out

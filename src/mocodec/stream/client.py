@@ -23,7 +23,7 @@ from mocodec.codecs.base import Codec
 from mocodec.errors import MocodecError
 from mocodec.motion import Motion
 from mocodec.stream.live import TICK_HZ, LiveDecoder, clip_encoder, tick_frames
-from mocodec.stream.packets import HEADER, Packet, StreamInfo, pack_batch, parse, split_batch
+from mocodec.stream.packets import HEADER, OutOfSync, Packet, Reader, StreamInfo, pack_batch, split_batch
 
 
 class RelayRefused(MocodecError):
@@ -138,6 +138,7 @@ class Watcher:
         self.counts: dict[int, int] = {}
         self.bytes: dict[int, int] = {}
         self.refused = 0
+        self.reader = Reader()
 
     def take(self, data: bytes) -> None:
         try:
@@ -147,11 +148,13 @@ class Watcher:
             return
         for raw in raws:
             try:
-                p = parse(raw)
+                p = self.reader.read(raw)
                 if p.kind == HEADER and p.stream not in self.decoders:
                     decoder = LiveDecoder(StreamInfo.from_payload(p.payload), self.conceal)
                     self.decoders[p.stream] = decoder
                     self.frames[p.stream], self.counts[p.stream], self.bytes[p.stream] = [], 0, 0
+            except OutOfSync:  # joined mid-stream: the stream starts for us at its next keyframe
+                continue
             except MocodecError:
                 self.refused += 1
                 continue

@@ -15,6 +15,7 @@ whatever it holds back, and a receiver knows how many frames to conceal for a lo
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 
@@ -31,6 +32,7 @@ from mocodec.stream.packets import CUTS, DATA, END, HEADER, KEYFRAME, Packet, St
 #: A sender's tick (Hz): frames are pushed, and packets sent, this often.
 TICK_HZ = 30.0
 #: Seconds of earlier input a restarted stream is primed with.
+POSITION_STEP_M = 0.5  # a compact packet carries the root position when it moved this far (m)
 PRIMER_S = 1.0
 #: How far extrapolation runs on before it holds (seconds), and the frames its velocity is
 #: measured over.
@@ -87,6 +89,7 @@ class LiveEncoder:
         keyframe_s: float = 1.0,
         name: str = "",
         primer: np.ndarray | None = None,
+        compact: bool = True,
     ):
         if not codec.streaming:
             raise CodecError(
@@ -111,6 +114,8 @@ class LiveEncoder:
         self.decoder: StreamDecoder | None = None
         self.keyframe_due = True
         self.position = (0.0, 0.0, 0.0)
+        self.compact = compact  # data packets in the compact wire form (packets.Packet.to_compact)
+        self.sent_position: tuple[float, float, float] | None = None  # the root position last sent
 
     def header(self, timestamp_us: int | None = None) -> Packet:
         return header_packet(self.stream, self.info, now_us() if timestamp_us is None else timestamp_us)
@@ -168,8 +173,26 @@ class LiveEncoder:
         return out
 
     def _packet(self, payload: bytes, frames: int, ts: int, flags: int) -> Packet:
+        sends = (
+            bool(flags & KEYFRAME)
+            or self.sent_position is None
+            or math.dist(self.position, self.sent_position) >= POSITION_STEP_M
+        )
+        if sends:
+            self.sent_position = self.position
         p = Packet(
-            self.stream, self.sequence, ts, self.codec.id, self.out_frames, frames, payload, DATA, flags, self.position
+            self.stream,
+            self.sequence,
+            ts,
+            self.codec.id,
+            self.out_frames,
+            frames,
+            payload,
+            DATA,
+            flags,
+            self.position if sends else (self.sent_position or self.position),
+            compact=self.compact,
+            sends_position=sends,
         )
         self.sequence = (self.sequence + 1) & 0xFFFFFFFF
         self.out_frames += frames

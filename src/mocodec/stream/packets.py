@@ -23,15 +23,18 @@ Parsing never trusts a length: a short, oversized or damaged packet raises
 
 from __future__ import annotations
 
+import binascii
 import json
 import struct
 import zlib
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from mocodec import limits
 from mocodec.errors import CorruptStreamError
+from mocodec.formats import varint
 from mocodec.formats.container import inflate_capped, skeleton_from_dict, skeleton_to_dict
 from mocodec.skeleton import Skeleton
 
@@ -60,6 +63,10 @@ _FIELDS = struct.Struct("<2sBBBBIIQIH3fI")
 _CRC = struct.Struct("<I")
 _U16 = struct.Struct("<H")
 _BATCH = struct.Struct("<2sI")
+_POSITION = struct.Struct("<3h")
+COMPACT = 0x80  # the tag bit of a compact data packet (a full packet starts with "M")
+C_EXPLICIT, C_POSITION = 8, 16  # compact tags: full sequence and first frame follow; the position follows
+COMPACT_MIN = 6
 OVERHEAD = _FIELDS.size + _CRC.size
 #: Where the timestamp, stream id and sequence number sit in a packet (read in bulk by the load test).
 STREAM_OFFSET, SEQUENCE_OFFSET, TIMESTAMP_OFFSET = 6, 10, 14
@@ -77,6 +84,8 @@ class Packet:
     kind: int = DATA
     flags: int = 0
     position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    compact: bool = False  # a data packet's wire form: compact (to_compact) or full
+    sends_position: bool = True  # a compact packet carries ``position`` (else the receiver keeps the last)
 
     @property
     def keyframe(self) -> bool:
@@ -107,6 +116,8 @@ class Packet:
         return self.with_payload(self.codec_payload, self.flags & ~CUTS) if self.flags & CUTS else self
 
     def to_bytes(self) -> bytes:
+        if self.compact and self.kind == DATA:
+            return self.to_compact()
         head = _FIELDS.pack(
             MAGIC,
             VERSION,
@@ -123,6 +134,103 @@ class Packet:
         )
         return head + self.payload + _CRC.pack(zlib.crc32(self.payload, zlib.crc32(head)))
 
+    def to_compact(self) -> bytes:
+        """The compact wire form of a data packet (docs/formats.md): a tag byte, the stream id
+        and frame count as varints, the sequence number's low byte, on keyframes the full
+        sequence number and first frame, the root position when it is sent (3 x i16, cm), the
+        payload, and a CRC-16 (CCITT) of all of it: 6 bytes around the payload for an ongoing
+        stream. The receiver keeps, per stream, what the omitted fields follow from
+        (:class:`Cursor`)."""
+        explicit = bool(self.flags & KEYFRAME) or self.sequence == 0
+        tag = COMPACT | (self.flags & 7) | (C_EXPLICIT if explicit else 0) | (C_POSITION if self.sends_position else 0)
+        out = bytearray([tag]) + varint.pack(self.stream) + bytes([self.sequence & 0xFF]) + varint.pack(self.frames)
+        if explicit:
+            out += varint.pack(self.sequence) + varint.pack(self.first_frame)
+        if self.sends_position:
+            out += _POSITION.pack(*(int(np.clip(round(v * 100.0), -32768, 32767)) for v in self.position))
+        out += self.payload
+        return bytes(out) + _U16.pack(binascii.crc_hqx(out, 0xFFFF))
+
+
+@dataclass
+class Cursor:
+    """What a receiver keeps per stream to read its compact packets: the codec (from the
+    stream header), the next sequence number and frame, the last root position."""
+
+    codec: str
+    next_sequence: int = 0
+    next_frame: int = 0
+    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    synced: bool = True  # a receiver that joined mid-stream waits for a keyframe
+
+    def advance(self, p: Packet) -> None:
+        """Past ``p``, unless it lies behind (a duplicate or a late packet)."""
+        if self.synced and (p.sequence - self.next_sequence) & 0xFFFFFFFF >= 1 << 31:
+            return
+        self.next_sequence, self.next_frame = (p.sequence + 1) & 0xFFFFFFFF, p.first_frame + p.frames
+        self.position, self.synced = p.position, True
+
+
+class OutOfSync(CorruptStreamError):
+    """A compact packet that cannot be placed yet: its receiver joined the stream after its
+    start and has not seen a keyframe (which carries the full sequence number and frame)."""
+
+
+def _parse_compact(data: bytes, where: str, cursor_of: Callable[[int], Cursor | None] | None) -> Packet:
+    if len(data) < COMPACT_MIN:
+        raise CorruptStreamError(f"{where}: {len(data)} bytes, shorter than a compact packet")
+    if binascii.crc_hqx(data[:-2], 0xFFFF) != _U16.unpack_from(data, len(data) - 2)[0]:
+        raise CorruptStreamError(f"{where}: byte {len(data) - 2}: CRC mismatch (damaged packet)")
+    tag, body = data[0], data[:-2]
+    if tag & ~(COMPACT | 7 | C_EXPLICIT | C_POSITION):
+        raise CorruptStreamError(f"{where}: byte 0: tag {tag:#04x} sets bits this version does not define")
+    try:
+        stream, pos = varint.unpack(body, 1, 5)
+        if pos >= len(body):
+            raise ValueError(f"ends at byte {pos}")
+        low = body[pos]
+        frames, pos = varint.unpack(body, pos + 1, 3)
+        if tag & C_EXPLICIT:
+            sequence, pos = varint.unpack(body, pos, 5)
+            first, pos = varint.unpack(body, pos, 5)
+    except ValueError as e:
+        raise CorruptStreamError(f"{where}: {e}") from None
+    cursor = cursor_of(stream) if cursor_of is not None else None
+    if cursor is None:
+        raise CorruptStreamError(f"{where}: a compact packet of stream {stream} before its stream header")
+    if not tag & C_EXPLICIT and not cursor.synced:
+        raise OutOfSync(f"{where}: stream {stream}: a packet before the first keyframe received")
+    if tag & C_EXPLICIT:
+        if sequence & 0xFF != low or sequence > 0xFFFFFFFF:
+            raise CorruptStreamError(f"{where}: sequence {sequence} does not end in byte {low}")
+    else:  # packets lost since the last one received had this one's frame count; a packet up to
+        # 128 behind (a duplicate, a late one) is placed behind
+        ahead = ((low - cursor.next_sequence + 128) & 0xFF) - 128
+        sequence = (cursor.next_sequence + ahead) & 0xFFFFFFFF
+        first = max(cursor.next_frame + ahead * frames, 0)
+    position = cursor.position
+    if tag & C_POSITION:
+        if pos + _POSITION.size > len(body):
+            raise CorruptStreamError(f"{where}: byte {pos}: the position runs past the packet")
+        position = tuple(v / 100.0 for v in _POSITION.unpack_from(body, pos))
+        pos += _POSITION.size
+    if frames > limits.MAX_PAYLOAD_FRAMES or first > 1 << 40:
+        raise CorruptStreamError(f"{where}: {frames} frames from frame {first} is not plausible")
+    return Packet(
+        stream,
+        sequence,
+        0,
+        cursor.codec,
+        first,
+        frames,
+        bytes(body[pos:]),
+        DATA,
+        tag & 7,
+        position,
+        compact=True,
+        sends_position=bool(tag & C_POSITION),
+    )
+
 
 def with_cuts(payload: bytes, cuts: bytes) -> bytes:
     """A payload carrying a cut table (flag CUTS)."""
@@ -138,9 +246,14 @@ def codec_number(codec_id: str) -> int:
         ) from None
 
 
-def parse(data: bytes | memoryview, where: str = "packet") -> Packet:
-    """The packet in ``data`` (exactly one), its CRC checked."""
+def parse(
+    data: bytes | memoryview, where: str = "packet", cursor_of: Callable[[int], Cursor | None] | None = None
+) -> Packet:
+    """The packet in ``data`` (exactly one), its CRC checked. A compact data packet needs its
+    stream's :class:`Cursor`, from ``cursor_of(stream)``."""
     data = bytes(data)
+    if data[:1] and data[0] & COMPACT:
+        return _parse_compact(data, where, cursor_of)
     if len(data) < OVERHEAD:
         raise CorruptStreamError(f"{where}: {len(data)} bytes, shorter than the {OVERHEAD}-byte packet frame")
     (magic, version, kind, flags, number, stream, seq, ts, first, frames, x, y, z, length) = _FIELDS.unpack_from(data)
@@ -161,6 +274,23 @@ def parse(data: bytes | memoryview, where: str = "packet") -> Packet:
     return Packet(
         stream, seq, ts, CODEC_NUMBERS[number], first, frames, data[_FIELDS.size : end], kind, flags, (x, y, z)
     )
+
+
+class Reader:
+    """A receiver's reading of packets, full or compact: it keeps every stream's
+    :class:`Cursor`, made by the stream's header and moved by each data packet read."""
+
+    def __init__(self):
+        self.cursors: dict[int, Cursor] = {}
+
+    def read(self, data: bytes | memoryview, where: str = "packet") -> Packet:
+        p = parse(data, where, self.cursors.get)
+        if p.kind == HEADER:
+            self.cursors.setdefault(p.stream, Cursor(p.codec, synced=False))
+        else:
+            cursor = self.cursors.setdefault(p.stream, Cursor(p.codec))
+            cursor.advance(p)
+        return p
 
 
 # ----- stream headers ---------------------------------------------------------------------------

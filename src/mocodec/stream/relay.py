@@ -54,7 +54,19 @@ from mocodec.coding.entropy.rangecoder import decode_ints
 from mocodec.errors import MocodecError
 from mocodec.scene import bandwidth_scores, split_budget
 from mocodec.stream import tokens
-from mocodec.stream.packets import BATCH_MAGIC, CUTS, END, HEADER, Packet, StreamInfo, pack_batch, parse, split_batch
+from mocodec.stream.packets import (
+    BATCH_MAGIC,
+    CUTS,
+    DATA,
+    END,
+    HEADER,
+    Cursor,
+    Packet,
+    StreamInfo,
+    pack_batch,
+    parse,
+    split_batch,
+)
 
 log = logging.getLogger("mocodec.relay")
 
@@ -114,6 +126,33 @@ class Forward:
     data: bytes  # without the cut table
     cuts: np.ndarray | None = None
     cutter: Callable[[float], bytes] | None = None  # the codec's packet cutter, made at the first cut
+
+
+class _Cursors:
+    """Reading a sender's packets against its room's streams: a compact packet follows on from
+    its stream's state (the packets of one message follow on from each other)."""
+
+    def __init__(self, room: Room):
+        self.room = room
+        self.pending: dict[int, Cursor] = {}
+
+    def read(self, raw: memoryview, where: str) -> Packet:
+        p = parse(raw, where, self._cursor)
+        if p.kind == DATA:
+            cursor = self._cursor(p.stream) or Cursor(p.codec)
+            cursor.advance(p)
+            self.pending[p.stream] = cursor
+        else:
+            self.pending[p.stream] = Cursor(p.codec)
+        return p
+
+    def _cursor(self, stream: int) -> Cursor | None:
+        if stream in self.pending:
+            return self.pending[stream]
+        state = self.room.streams.get(stream)
+        if state is None:
+            return None
+        return Cursor(state.header.packet.codec, state.next_sequence, state.next_frame, state.position)
 
 
 @dataclass
@@ -319,7 +358,8 @@ class Relay:
         """The packets of one sender message into the room; Closing if it is malformed."""
         try:
             raw = split_batch(data) if data[:2] == BATCH_MAGIC else [memoryview(data)]
-            packets = [parse(r, f"packet {k}") for k, r in enumerate(raw)]
+            cursors = _Cursors(room)
+            packets = [cursors.read(r, f"packet {k}") for k, r in enumerate(raw)]
         except MocodecError as e:
             raise Closing(BAD_MESSAGE, f"bad message: {e}") from None
         for p, r in zip(packets, raw):

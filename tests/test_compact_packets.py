@@ -1,0 +1,79 @@
+"""The compact wire form of data packets (docs/formats.md): 6 bytes around the payload for an
+ongoing stream, every field back at the receiver, losses and late packets placed right."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mocodec.codecs import get_codec
+from mocodec.errors import CorruptStreamError
+from mocodec.stream.live import stream_clip
+from mocodec.stream.packets import HEADER, OutOfSync, Reader, parse
+
+
+@pytest.fixture(scope="module")
+def packets(walk_bvh):
+    return stream_clip(walk_bvh, get_codec("kinwave-live"))
+
+
+def _same(a, b) -> bool:
+    return (a.stream, a.sequence, a.first_frame, a.frames, a.flags, a.payload, a.codec) == (
+        b.stream,
+        b.sequence,
+        b.first_frame,
+        b.frames,
+        b.flags,
+        b.payload,
+        b.codec,
+    )
+
+
+def test_an_ongoing_stream_spends_at_most_6_bytes_a_packet(packets):
+    data = [p for p in packets if p.kind != HEADER and not p.keyframe and not p.sends_position]
+    assert data and all(len(p.to_bytes()) - len(p.payload) <= 6 for p in data)
+    framing = sum(len(p.to_bytes()) - len(p.payload) for p in packets[1:]) / len(packets[1:])
+    assert framing < 7.0  # keyframes and moves carry more, on average under 7 bytes
+
+
+def test_every_field_comes_back(packets):
+    reader = Reader()
+    for p in packets:
+        got = reader.read(p.to_bytes())
+        assert _same(got, p)
+        if p.kind != HEADER and p.sends_position:
+            assert np.allclose(got.position, p.position, atol=0.005)
+
+
+def test_lost_packets_are_counted_and_late_ones_placed_behind(packets):
+    reader = Reader()
+    reader.read(packets[0].to_bytes())
+    reader.read(packets[1].to_bytes())
+    after_loss = reader.read(packets[5].to_bytes())  # 2-4 lost
+    assert _same(after_loss, packets[5])
+    late = reader.read(packets[3].to_bytes())  # arrives after 5
+    assert late.sequence == packets[3].sequence and late.first_frame == packets[3].first_frame
+    assert _same(reader.read(packets[6].to_bytes()), packets[6])  # the late one did not move the cursor
+
+
+def test_a_joiner_waits_for_a_keyframe(packets):
+    reader = Reader()
+    reader.read(packets[0].to_bytes())
+    key = next(k for k, p in enumerate(packets) if k > 2 and p.keyframe)
+    with pytest.raises(OutOfSync):
+        reader.read(packets[key - 1].to_bytes())
+    assert _same(reader.read(packets[key].to_bytes()), packets[key])
+    assert _same(reader.read(packets[key + 1].to_bytes()), packets[key + 1])
+
+
+def test_damage_and_strangers_are_refused(packets):
+    raw = bytearray(packets[2].to_bytes())
+    raw[len(raw) // 2] ^= 0x10
+    reader = Reader()
+    reader.read(packets[0].to_bytes())
+    with pytest.raises(CorruptStreamError, match="CRC"):
+        reader.read(bytes(raw))
+    with pytest.raises(CorruptStreamError, match="before its stream header"):
+        parse(packets[2].to_bytes())
+    with pytest.raises(CorruptStreamError):
+        reader.read(b"\x80\x00")

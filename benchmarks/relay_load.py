@@ -31,6 +31,7 @@ import subprocess
 import sys
 import time
 import zlib
+from dataclasses import replace
 
 import numpy as np
 
@@ -71,7 +72,8 @@ def templates(codec_id: str, bits_per_second: float, keyframe_s: float):
     ticks = -(-motion.num_frames // step)
     timed = [(k, p) for k in range(ticks) for p in enc.push(motion.channels[k * step : (k + 1) * step], 0)]
     timed += [(ticks - 1, p) for p in enc.close(0) if p.frames]
-    data = [(k, p.with_payload(p.payload, p.flags & ~END).to_bytes()) for k, p in timed]
+    # the full packet form: the load test restamps its fields in place, at fixed offsets
+    data = [(k, replace(p, flags=p.flags & ~END, compact=False).to_bytes()) for k, p in timed]
     return enc.header(0).to_bytes(), data, ticks, motion.num_frames
 
 

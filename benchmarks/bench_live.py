@@ -1,14 +1,17 @@
 """Live avatars at a guaranteed max joint error: kinwave-live against offline kinwave and
 deadreckoning, per source (CMU BVH and ASF/AMC at 120 fps, Bandai Namco at 30 fps).
 
-    python benchmarks/bench_live.py [--clips N] [--bound 1.0] [--jobs 2]
+    python benchmarks/bench_live.py [--clips N] [--bound 1.0] [--keyframe-s 1] [--loss 0.1] [--jobs 2]
 
 Per clip: kbit/s of one codec stream's packets alone, and of the live stream as a sender sends
 it (stream/live.py: keyframes every second, each restarting the codec stream, and the compact
 packet framing, header packet left out); the coding delay (how long a packet holds its first
 frame back); the measured max and mean joint error of every decoded frame; for deadreckoning
 the threshold rate control finds for the bound (its delay: 3 frames), for offline kinwave the
-whole clip at the bound (its delay: the 256-frame segment). Prints the medians per source.
+whole clip at the bound (its delay: the 256-frame segment); and the resync time under random
+packet loss (seeded): for every lost packet, from its first frame until the receiver decodes the
+stream exactly again (the next keyframe it gets). Prints the medians per source, and the 99th
+percentile of the resync times.
 """
 
 from __future__ import annotations
@@ -23,8 +26,8 @@ from mocodec import load, ratecontrol
 from mocodec.codecs import get_codec
 from mocodec.codecs.kinwave import live
 from mocodec.kinematics import forward_kinematics
-from mocodec.stream.live import stream_clip
-from mocodec.stream.packets import HEADER
+from mocodec.stream.live import LiveDecoder, stream_clip
+from mocodec.stream.packets import HEADER, StreamInfo
 
 SOURCES = (
     ("CMU BVH", "cmu/bvh", "*.bvh"),
@@ -40,7 +43,23 @@ def joint_errors(motion, channels) -> np.ndarray:
     return np.linalg.norm(p1 - p0, axis=2) * cm
 
 
-def measure(path: str, bound: float) -> dict:
+def resync_times(motion, packets, loss: float, seed: int) -> list[float]:
+    """Seconds from each lost packet's first frame until the receiver is back in sync."""
+    rng = np.random.default_rng(seed)
+    dec = LiveDecoder(StreamInfo.from_payload(packets[0].payload))
+    times, waiting = [], []
+    for p in packets[1:]:
+        if rng.random() < loss:
+            waiting.append(p.first_frame)
+            continue
+        dec.push(p)
+        if dec.in_sync and waiting:
+            times += [(p.first_frame - f) / motion.fps for f in waiting]
+            waiting = []
+    return times + [(packets[-1].first_frame + packets[-1].frames - f) / motion.fps for f in waiting]
+
+
+def measure(path: str, bound: float, keyframe_s: float = 1.0, loss: float = 0.1) -> dict:
     motion = load(path)
     seconds = motion.duration
     codec = get_codec("kinwave-live", max_error_cm=bound)
@@ -50,7 +69,8 @@ def measure(path: str, bound: float) -> dict:
     decoded = np.concatenate([dec.push(p) for p in packets])
     err = joint_errors(motion, decoded)
     payload = sum(map(len, packets))
-    stream = [p for p in stream_clip(motion, codec) if p.kind != HEADER]
+    sent = stream_clip(motion, codec, keyframe_s=keyframe_s)
+    stream = [p for p in sent if p.kind != HEADER]
     framing = sum(len(p.to_bytes()) - len(p.payload) for p in stream) / len(stream)
     offline = get_codec("kinwave", max_error_cm=bound)
     offline_bytes = len(offline.encode(motion))
@@ -66,6 +86,7 @@ def measure(path: str, bound: float) -> dict:
         "offline_delay_ms": 1000 * offline.config["window"] / motion.fps,
         "dr_kbps": dr.bitrate / 1000,
         "dr_max_cm": dr.max_error_cm,
+        "resync_s": resync_times(motion, sent, loss, sum(map(ord, path))),
     }
 
 
@@ -73,6 +94,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--clips", type=int, default=6, help="clips per source (0: all)")
     ap.add_argument("--bound", type=float, default=1.0, help="max joint error, cm")
+    ap.add_argument("--keyframe-s", type=float, default=1.0, help="seconds between keyframes (default 1)")
+    ap.add_argument("--loss", type=float, default=0.1, help="packet loss for the resync times (default 0.1)")
     ap.add_argument("--jobs", type=int, default=2)
     args = ap.parse_args()
     if SHARED is None:
@@ -81,7 +104,9 @@ def main() -> None:
         for name, folder, pattern in SOURCES:
             paths = sorted((SHARED / folder).glob(pattern))
             paths = paths[:: max(1, len(paths) // args.clips)][: args.clips] if args.clips else paths
-            rows = list(pool.map(measure, map(str, paths), [args.bound] * len(paths)))
+            n = len(paths)
+            rows = list(pool.map(measure, map(str, paths), [args.bound] * n, [args.keyframe_s] * n, [args.loss] * n))
+            resync = np.concatenate([r["resync_s"] for r in rows])
 
             def med(key: str) -> float:
                 return float(np.median([r[key] for r in rows]))
@@ -96,7 +121,8 @@ def main() -> None:
                 f"{med('offline_kbps'):.2f} kbit/s (delay {med('offline_delay_ms'):.0f} ms), "
                 f"live/offline x{ratio:.2f} | "
                 f"deadreckoning {med('dr_kbps'):.2f} kbit/s (max {max(r['dr_max_cm'] for r in rows):.3f} cm), "
-                f"live/deadreckoning x{vs_dr:.2f}",
+                f"live/deadreckoning x{vs_dr:.2f} | keyframes every {args.keyframe_s:g} s, {100 * args.loss:g}% loss: "
+                f"resync median {np.median(resync):.2f} s, 99th percentile {np.percentile(resync, 99):.2f} s",
                 flush=True,
             )
 

@@ -22,6 +22,7 @@ import numpy as np
 from mocodec.codecs.base import Codec
 from mocodec.errors import MocodecError
 from mocodec.motion import Motion
+from mocodec.stream.jitter import JitterBuffer
 from mocodec.stream.live import TICK_HZ, LiveDecoder, clip_encoder, tick_frames
 from mocodec.stream.packets import HEADER, OutOfSync, Packet, Reader, StreamInfo, pack_batch, split_batch
 
@@ -139,6 +140,7 @@ class Watcher:
         self.bytes: dict[int, int] = {}
         self.refused = 0
         self.reader = Reader()
+        self.jitter: dict[int, JitterBuffer] = {}  # each stream's frames, for a smooth playout (pose)
 
     def take(self, data: bytes) -> None:
         try:
@@ -163,12 +165,21 @@ class Watcher:
             dec = self.decoders.get(p.stream)
             if dec is not None:
                 out = dec.push(p)
+                if len(out) and dec.next_frame is not None:
+                    buffer = self.jitter.setdefault(p.stream, JitterBuffer(dec.info.fps, out.shape[1]))
+                    buffer.push(out, dec.next_frame - len(out), time.monotonic())
                 self.bytes[p.stream] += len(raw)
                 self.counts[p.stream] += len(out)
                 if self.keep:
                     self.frames[p.stream].append(out)
                 elif len(out):
                     self.frames[p.stream] = [out[-1:]]
+
+    def pose(self, stream: int, now_s: float | None = None) -> np.ndarray | None:
+        """The channels of ``stream`` to show now: played out smoothly at the stream's frame rate
+        a little behind the arrivals (:class:`~mocodec.stream.jitter.JitterBuffer`)."""
+        buffer = self.jitter.get(stream)
+        return None if buffer is None else buffer.pose(time.monotonic() if now_s is None else now_s)
 
     def motion(self, stream: int) -> Motion:
         info = self.decoders[stream].info

@@ -16,6 +16,7 @@ import aiohttp
 from aiohttp import web
 
 from mocodec.errors import MocodecError
+from mocodec.motion import Motion
 from mocodec.stream.client import TICK_HZ, Watcher, connect
 
 RATE_WINDOW_S = 4.0
@@ -76,7 +77,9 @@ def _update(watcher: Watcher, history: list[tuple[float, dict[int, int]]]) -> di
     for k, dec in watcher.decoders.items():
         if not watcher.frames[k] or dec.ended:
             continue
-        pose = watcher.motion(k).positions_m()[-1]
+        channels = watcher.pose(k)  # played out smoothly at the stream's frame rate
+        motion = watcher.motion(k) if channels is None else Motion(dec.info.skeleton, dec.info.fps, channels[None])
+        pose = motion.positions_m()[-1]
         streams[str(k)] = {
             "name": dec.info.name or f"stream {k}",
             "codec": dec.info.codec["codec"],

@@ -30,7 +30,7 @@ def test_jittered_bursts_play_out_smoothly_at_the_frame_rate():
         shown.append(buf.pose(now)[0])
     steps = np.diff(shown)
     assert np.allclose(steps, fps / 90.0, rtol=SLEW * 1.001)  # the played frame advances evenly
-    assert buf.late == 0                                # 60 ms of jitter under a 100 ms delay
+    assert buf.late == 0  # 60 ms of jitter under a 100 ms delay
 
 
 def test_a_late_burst_lengthens_the_delay_and_early_ones_shrink_it():

@@ -107,14 +107,20 @@ def cmd_analyze(args) -> int:
     return 0
 
 
+SAMPLE = "sample_walk_02_02.bvh"  # the bundled clip (mocodec/data)
+
+
+def _sample() -> Motion:
+    with resources.as_file(resources.files("mocodec") / "data" / SAMPLE) as path:
+        return load(path)
+
+
 def cmd_demo(args) -> int:
     """``eval`` of the default codec on the bundled sample clip."""
     from mocodec.cli.coding import evaluate
 
-    sample = resources.files("mocodec") / "data" / "sample_walk_02_02.bvh"
-    with resources.as_file(sample) as path:
-        motion = load(path)
-        print(describe(motion, f"(bundled) {Path(path).name}"))
+    motion = _sample()
+    print(describe(motion, f"(bundled) {SAMPLE}"))
     print()
     print(evaluate(motion, args))
     print("\nTry: mocodec codecs; mocodec eval FILE --codec ID; mocodec encode FILE -o out.moc")
@@ -131,9 +137,7 @@ def cmd_warmup(args) -> int:
     from mocodec.codecs import codec_class, codec_ids, get_codec
     from mocodec.errors import CodecError
 
-    sample = resources.files("mocodec") / "data" / "sample_walk_02_02.bvh"
-    with resources.as_file(sample) as path:
-        motion = load(path)
+    motion = _sample()
     clip = motion[: int(motion.fps)]
     t0 = time.perf_counter()
     warmed, skipped = [], []

@@ -1,7 +1,7 @@
 """The codec registry: ids to codec classes, and ``get_codec(id, **knobs)``.
 
 The built-in codecs are imported when first asked for (:data:`BUILT_IN` names each one's
-module), so a command that codes with one codec loads only that one; :func:`register` adds
+module below ``mocodec.codecs``), so a command that codes with one codec loads only that one; :func:`register` adds
 any other codec class.
 """
 
@@ -18,24 +18,16 @@ if TYPE_CHECKING:
 _CODECS: dict[str, type[Codec]] = {}
 DEFAULT_CODEC = "kinwave"
 BUILT_IN = {
-    **dict.fromkeys(("adpcm", "dct", "deadreckoning", "dpcm", "quant", "subband", "svq", "tvq"), "waveform"),
-    **dict.fromkeys(("gesture", "hybrid", "posture"), "model"),
-    **dict.fromkeys(("primitives", "rhythmic"), "motionprimitives"),
-    **dict.fromkeys(("pwavelet", "spiht"), "perceptual"),
+    **{c: f"waveform.{c}" for c in ("adpcm", "dct", "deadreckoning", "dpcm", "quant", "subband", "svq", "tvq")},
+    **{c: f"model.{c}" for c in ("gesture", "hybrid", "posture")},
+    **{c: f"motionprimitives.{c}" for c in ("primitives", "rhythmic")},
+    **{c: f"perceptual.{c}" for c in ("pwavelet", "spiht")},
     "kinwave": "kinwave.codec",
     "kinwave-live": "kinwave.live",
-    "raw": "reference",
-    "lossless": "reference",
-    **dict.fromkeys(("zstd", "sz3", "zfp", "fpzip"), "reference"),
+    "raw": "reference.raw",
+    "lossless": "reference.lossless",
+    **dict.fromkeys(("zstd", "sz3", "zfp", "fpzip"), "reference.floats"),
 }
-_MODULE = {"raw": "raw", "lossless": "lossless", "zstd": "floats", "sz3": "floats", "zfp": "floats", "fpzip": "floats"}
-
-
-def built_in_module(codec_id: str) -> str:
-    """The module that defines the built-in codec ``codec_id``."""
-    family = BUILT_IN[codec_id]
-    leaf = "" if "." in family else "." + _MODULE.get(codec_id, codec_id)
-    return f"mocodec.codecs.{family}{leaf}"
 
 
 def register(cls: type[Codec]) -> type[Codec]:
@@ -48,7 +40,7 @@ def register(cls: type[Codec]) -> type[Codec]:
 
 def codec_class(codec_id: str) -> type[Codec]:
     if codec_id not in _CODECS and codec_id in BUILT_IN:
-        importlib.import_module(built_in_module(codec_id))
+        importlib.import_module(f"mocodec.codecs.{BUILT_IN[codec_id]}")
     try:
         return _CODECS[codec_id]
     except KeyError:

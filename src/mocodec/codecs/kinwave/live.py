@@ -380,16 +380,19 @@ class _LiveEncoder(StreamEncoder):
         better = np.add.reduceat(miss2 - miss1, t.first) < 0
         return np.where(better, 2, 1).astype(np.int64)
 
-    def _code(self, values: np.ndarray, orders: np.ndarray, offset: int, stride: int):
+    def _code(
+        self, values: np.ndarray, goal: tuple[np.ndarray, np.ndarray], orders: np.ndarray, offset: int, stride: int
+    ):
         """The integers and decoded coded frames of one packet at ``offset`` and ``stride``
-        (every ``stride``-th frame coded, down the tree), and all its decoded frames."""
+        (every ``stride``-th frame coded, down the tree), and all its decoded frames; ``goal``
+        is the packet's original positions and orientations (forward kinematics, once)."""
         t = self.tables
         steps = t.steps(offset)
         order = orders[t.channel_joint]
         coded = np.ascontiguousarray(values[stride - 1 :: stride])
         ints = np.zeros(coded.shape, dtype=np.int64)
         decoded = np.zeros(coded.shape)
-        pos, quats = forward_kinematics(self.skeleton, coded)
+        pos, quats = (np.ascontiguousarray(g[stride - 1 :: stride]) for g in goal)
 
         def code(channels: np.ndarray, targets: np.ndarray) -> np.ndarray:
             out = np.empty(targets.shape)
@@ -413,20 +416,22 @@ class _LiveEncoder(StreamEncoder):
         closedloop.code_down_tree(self.skeleton, coded, np.ones(values.shape[1], dtype=bool), quats, code, True, pos)
         return ints, decoded, _fill(t.history[1], decoded, stride)
 
-    def _error(self, values: np.ndarray, decoded: np.ndarray) -> float:
-        p0, q0 = forward_kinematics(self.skeleton, values)
+    def _error(self, goal: tuple[np.ndarray, np.ndarray], decoded: np.ndarray) -> float:
+        p0, q0 = goal
         p1, q1 = forward_kinematics(self.skeleton, decoded)
         if self.codec.config["error_measure"] == "shell":
             return float(shell_errors(self.skeleton, p0 * self.cm, q0, p1 * self.cm, q1).max)
         return float(np.linalg.norm((p1 - p0) * self.cm, axis=2).max())
 
-    def _fit(self, values: np.ndarray, orders: np.ndarray, stride: int, retries: int):
+    def _fit(
+        self, values: np.ndarray, goal: tuple[np.ndarray, np.ndarray], orders: np.ndarray, stride: int, retries: int
+    ):
         """(integers, coded frames, offset, worst error) of the packet at ``stride``, from the
         stream's current offset and finer until the bound holds, or None."""
         offset = self.offset
         for _ in range(retries):
-            ints, coded, frames = self._code(values, orders, offset, stride)
-            worst = self._error(values, frames)
+            ints, coded, frames = self._code(values, goal, orders, offset, stride)
+            worst = self._error(goal, frames)
             if worst <= self.bound:
                 return ints, coded, offset, worst
             if offset <= -MAX_OFFSET:
@@ -444,10 +449,11 @@ class _LiveEncoder(StreamEncoder):
     def _packet(self, values: np.ndarray) -> bytes:
         t = self.tables
         orders = self._orders(values)
+        goal = forward_kinematics(self.skeleton, values)
         sparse = t.started and len(values) == self.size
         best = None
         for stride in strides(len(values)) if sparse else [1]:
-            fit = self._fit(values, orders, stride, MAX_RETRIES if stride == 1 else SPARSE_RETRIES)
+            fit = self._fit(values, goal, orders, stride, MAX_RETRIES if stride == 1 else SPARSE_RETRIES)
             if fit is None:
                 continue
             ints, coded, offset, worst = fit

@@ -22,7 +22,7 @@ from mocodec.errors import CodecError
 
 DELAY_S = 0.1  # how far behind the arrivals the playout starts
 WINDOW_S = 2.0  # the arrivals a shorter delay must still have played on time
-SLEW = 0.01  # the playout clock runs at most this much faster while a delay shrinks
+SLEW = 0.01  # the playout clock runs at most this much faster or slower while the delay follows the jitter
 KEEP_S = 2.0  # seconds of frames kept behind the playout point
 
 

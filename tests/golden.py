@@ -47,6 +47,9 @@ CONFIGS: dict[str, dict] = {
     "zfp": {},
     "zstd": {},
 }
+# further configurations pinned beside a codec's fixture: name -> knobs (files NAME.bin and
+# NAME_decoded.npy), checked by the codec's own tests
+VARIANTS: dict[str, dict[str, dict]] = {"kinwave-live": {"layers3": {"layers": 3}}}
 MODEL_KNOB = {
     "gesture": "tables",
     "posture": "tables",
@@ -115,6 +118,13 @@ def write(codec_id: str) -> None:
     (folder / "encoded.bin").write_bytes(body)
     np.save(folder / "decoded.npy", decoded)
     print(f"{codec_id}: {len(body):,} bytes")
+    for name, knobs in VARIANTS.get(codec_id, {}).items():
+        variant = type(c)(**{**CONFIGS[codec_id], **knobs})
+        body = variant.encode(motion)
+        decoded = variant.decode(body, motion.skeleton, motion.num_frames, motion.fps, trusted=True).channels
+        (folder / f"{name}.bin").write_bytes(body)
+        np.save(folder / f"{name}_decoded.npy", decoded)
+        print(f"{codec_id} {name}: {len(body):,} bytes")
 
 
 if __name__ == "__main__":

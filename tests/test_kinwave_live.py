@@ -74,8 +74,9 @@ def test_a_constant_clip_costs_almost_nothing(walk_amc):
     assert len(body) < 40 + 250  # the first frame, then about a byte per packet
 
 
-def test_damaged_packets_raise_only_our_error(walk_bvh):
-    codec = get_codec("kinwave-live")
+@pytest.mark.parametrize("layers", [1, 3])
+def test_damaged_packets_raise_only_our_error(walk_bvh, layers):
+    codec = get_codec("kinwave-live", layers=layers)
     enc = codec.encoder(walk_bvh.skeleton, walk_bvh.fps)
     packets = enc.push(walk_bvh.channels[:120]) + enc.flush()
     rng = np.random.default_rng(3)
@@ -89,3 +90,78 @@ def test_damaged_packets_raise_only_our_error(walk_bvh):
                 assert np.isfinite(out).all()
             except CorruptStreamError:
                 break
+
+
+# ----- layers ------------------------------------------------------------------------------------
+def _layered_packets(motion, layers=3, bound=1.0):
+    codec = get_codec("kinwave-live", max_error_cm=bound, layers=layers)
+    enc = codec.encoder(motion.skeleton, motion.fps)
+    return codec, enc.push(motion.channels) + enc.flush()
+
+
+def _cut(codec, packet, keep):
+    ends = codec.layer_ends(packet)
+    return packet[: ends[keep - 1]] if keep < len(ends) else packet
+
+
+def _decoded(codec, motion, packets, keeps):
+    dec = codec.decoder(motion.skeleton, motion.fps)
+    return np.concatenate([dec.push(_cut(codec, p, k)) for p, k in zip(packets, keeps)])
+
+
+@pytest.mark.parametrize("clip,fps", [("walk_bvh", None), ("walk_amc", None), ("walk_amc", 30.0)])
+def test_each_layer_holds_its_bound_on_every_frame_with_the_layers_below(clip, fps, request):
+    motion = request.getfixturevalue(clip)
+    motion = motion.resample(fps) if fps else motion
+    codec, packets = _layered_packets(motion)
+    assert codec.layer_bounds == [4.0, 2.0, 1.0]
+    for keep, bound in zip((1, 2, 3), codec.layer_bounds):
+        errors = _frame_errors(motion, _decoded(codec, motion, packets, [keep] * len(packets)))
+        assert errors.max() <= bound + 1e-9
+        assert np.median(errors) > 0.3 * bound
+    sizes = [sum(len(_cut(codec, p, k)) for p in packets) for k in (1, 2, 3)]
+    assert sizes[0] < sizes[1] < sizes[2]
+
+
+def test_a_single_layer_stream_is_the_stream_without_layers(walk_bvh):
+    plain, layered = get_codec("kinwave-live"), get_codec("kinwave-live", layers=1)
+    assert plain.encode(walk_bvh) == layered.encode(walk_bvh)
+    assert plain.layer_bounds == [1.0]
+
+
+def test_a_dropped_layer_stays_out_until_the_stream_restarts(walk_amc):
+    codec, packets = _layered_packets(walk_amc[:240])
+    n = len(packets)
+    keeps = [3] * 10 + [2] * 5 + [3] * (n - 15)  # the top layer comes back: it has lost its history
+    got = _decoded(codec, walk_amc, packets, keeps)
+    expected = _decoded(codec, walk_amc, packets, [3] * 10 + [2] * (n - 10))
+    assert np.array_equal(got, expected)
+    assert not np.array_equal(got, _decoded(codec, walk_amc, packets, [3] * n))
+    assert _frame_errors(walk_amc[:240], got).max() <= 2.0 + 1e-9
+
+
+def test_layer_sections_split_and_join():
+    for sections in ([b"ab", b"", b"c"], [b"", b"x" * 200, b""], [b"q"]):
+        packet = live.join_layers(sections)
+        top = sections[-1] or (b"\0" if len(sections) > 1 else b"")
+        assert live.split_layers(packet, len(sections)) == sections[:-1] + [top]
+        for keep in range(1, len(sections)):
+            cut = packet[: live.section_ends(packet, len(sections))[keep - 1]]
+            assert live.split_layers(cut, len(sections)) == sections[:keep]
+    with pytest.raises(CorruptStreamError, match="layer 1's 9 bytes at byte 4 run past"):
+        live.section_ends(bytes([2, 1, 1, 9, 1]), 3)
+    with pytest.raises(CorruptStreamError, match="layer 0's length at byte 0"):
+        live.section_ends(b"", 3)
+
+
+def test_the_layered_format_is_pinned():
+    """Like the golden fixtures (tests/golden.py): a layered stream's bytes and decoding."""
+    import golden
+
+    clip, folder = golden.clip(), golden.FIXTURES / "kinwave-live"
+    for name, knobs in golden.VARIANTS["kinwave-live"].items():
+        codec = get_codec("kinwave-live", **golden.CONFIGS["kinwave-live"], **knobs)
+        stored = (folder / f"{name}.bin").read_bytes()
+        assert codec.encode(clip) == stored
+        decoded = codec.decode(stored, clip.skeleton, clip.num_frames, clip.fps).channels
+        assert np.array_equal(decoded, np.load(folder / f"{name}_decoded.npy"))

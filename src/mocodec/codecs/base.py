@@ -107,6 +107,23 @@ class Embedded(Protocol):
         ...
 
 
+@runtime_checkable
+class Layered(Protocol):
+    """A codec whose stream packets carry layers, base first, each with an error bound that
+    holds on its own with the layers below it (``kinwave-live``): a relay serves a viewer the
+    lowest layers by cutting a packet after one, never decoding. A layer dropped from one
+    packet stays useless to the receiver until the codec stream restarts (a keyframe)."""
+
+    @property
+    def layer_bounds(self) -> list[float]:
+        """Each layer's bound in cm, base first (one entry: the stream has no layers)."""
+        ...
+
+    def layer_ends(self, packet: bytes) -> list[int]:
+        """Where each layer a stream packet carries ends; CorruptStreamError if it does not parse."""
+        ...
+
+
 def checked_frames(codec_id: str, skeleton: Skeleton, frames: np.ndarray) -> np.ndarray:
     """Pushed ``frames`` as a float64 ``(n, channels)`` array; CodecError unless they fit the
     skeleton and are finite."""

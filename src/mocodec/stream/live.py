@@ -267,7 +267,7 @@ class LiveDecoder:
         head = self._concealed(packet.first_frame)
         try:
             payload = packet.codec_payload
-            frames = np.asarray(self.decoder.push(payload), dtype=np.float64) if payload else empty
+            frames = np.asarray(self.decoder.push(payload), dtype=np.float64) if payload or packet.frames else empty
             if len(frames) != packet.frames:
                 raise CodecError(
                     f"packet {packet.sequence} decodes to {len(frames)} frames, its header says {packet.frames}"

@@ -20,11 +20,21 @@ they are in, with the pose representation of offline kinwave:
    channel and frame an integer whose zero flag is in the context of the channel's previous
    integer. The contexts carry over from packet to packet (a codec stream's packets depend on
    each other; the live stream restarts the codec at each keyframe, docs/streaming.md).
+5. **Layers** (knob ``layers``): the stream may carry up to four layers, base first, each at
+   twice the bound of the next (``layers=3`` at 1 cm: 4, 2 and 1 cm). Each layer is coded as
+   above with its own history, steps and contexts, and closed-loop on the layers below: its
+   prediction is clamped to the interval the nearest layer below that coded the frame puts the
+   target in (the quantiser cell of that layer's integer), for the channels whose decoded values
+   fell in those cells in the last packet (both ends judge this alike, nothing is sent). Its
+   bound is checked on the decoding of it and the layers below. A relay serves a viewer the
+   lowest layers by cutting a packet after one (:func:`section_ends`).
 
-Packet: the arithmetic-coded stream alone (:func:`~mocodec.coding.entropy.binarycoder.finish_short`,
+A layer's section: the arithmetic-coded stream alone (:func:`~mocodec.coding.entropy.binarycoder.finish_short`,
 its always-zero first byte left out): whether the packet is full (else its frame count), the
 change of the scale offset, then per joint its predictor order and its "any nonzero" flag and
-its integers.
+its integers. A packet of one layer is its section; of several, each section but the top one
+after its length (a varint), and a top section that is empty is one zero byte, so that a packet
+cut after a lower section is told apart.
 """
 
 from __future__ import annotations
@@ -54,6 +64,7 @@ SPARSE_RETRIES = 3  # ... at a stride above 1, before that stride is given up
 FINER = 4  # 1/8 octaves a packet over its bound goes finer at each retry
 COARSER_BELOW = 0.9  # a packet under this share of the bound lets the next start a code coarser
 MAX_OFFSET = 127
+MAX_LAYERS = 4
 ROUNDING = 0.25  # the quantiser's rounding offset (0.5: to the nearest; less: a dead zone)
 
 
@@ -63,12 +74,15 @@ def packet_frames(fps: float) -> int:
 
 
 @numba.njit(cache=True)
-def _predict(targets, history, count, gap, stride, steps, order, out, ints, quantise, rounding):
+def _predict(targets, history, count, gap, stride, steps, order, trust, lo, hi, out, ints, cell_lo, cell_hi, quantise):
     """Closed-loop prediction of the coded frames ``targets (T, k)``, ``stride`` frames apart,
     from the two last coded frames ``history (2, k)`` (``count`` of them valid, ``gap`` frames
-    apart): order 2 a straight line, order 1 the last value, none at the start. With
+    apart): order 2 a straight line, order 1 the last value, none at the start; the prediction
+    is then clamped to ``[lo, hi] (T, k)`` (a layer below says the target lies there). With
     ``quantise`` the integers of the differences at ``steps`` go to ``ints``; else ``ints`` are
-    given. ``out`` gets the decoded values; the arithmetic is the same on both ends."""
+    given. ``out`` gets the decoded values and ``cell_lo``, ``cell_hi`` the interval of targets
+    that give the same integer (what this layer tells the layer above); the arithmetic is the
+    same on both ends."""
     T, k = out.shape
     prev0 = history[0].copy()
     prev1 = history[1].copy()
@@ -83,10 +97,16 @@ def _predict(targets, history, count, gap, stride, steps, order, out, ints, quan
                 pred = prev1[c]
             else:
                 pred = 0.0
+            if trust[c]:
+                pred = min(max(pred, lo[t, c]), hi[t, c])
             if quantise:
                 x = (targets[t, c] - pred) / steps[c]
-                ints[t, c] = np.int64(np.floor(x + rounding)) if x >= 0 else -np.int64(np.floor(-x + rounding))
-            out[t, c] = pred + ints[t, c] * steps[c]
+                ints[t, c] = np.int64(np.floor(x + ROUNDING)) if x >= 0 else -np.int64(np.floor(-x + ROUNDING))
+            i = ints[t, c]
+            out[t, c] = pred + i * steps[c]
+            low = i - ROUNDING if i > 0 else (i - 1 + ROUNDING if i < 0 else ROUNDING - 1)
+            cell_lo[t, c] = pred + low * steps[c]
+            cell_hi[t, c] = pred + (low + (1.0 if i != 0 else 2.0 - 2.0 * ROUNDING)) * steps[c]
         for c in range(k):
             prev0[c] = prev1[c]
             prev1[c] = out[t, c]
@@ -211,17 +231,18 @@ def _decode_ints(st, data, frames, first, count, state, last_nonzero, ints, orde
     return st[2]
 
 
-class _Tables:
-    """What both ends derive from the skeleton and the bound: the joints with channels (their
-    first channel and count), the base step codes and the arithmetic coder's state."""
+class _Layer:
+    """What both ends keep for one layer of a stream: the joints with channels (their first
+    channel and count), the layer's base step codes for its bound, the arithmetic coder's
+    state, the last two coded frames and the last packet's scale offset."""
 
-    def __init__(self, codec: KinwaveLiveCodec, skeleton: Skeleton):
+    def __init__(self, skeleton: Skeleton, bound_cm: float, measure: str):
         self.skeleton = skeleton
         joints = [j for j in range(len(skeleton)) if skeleton.joints[j].channels]
         self.first = np.array([skeleton.channel_offsets[j] for j in joints], dtype=np.int64)
         self.count = np.array([len(skeleton.joints[j].channels) for j in joints], dtype=np.int64)
         self.channel_joint = np.repeat(np.arange(len(joints)), self.count)
-        self.base_codes = base_codes(skeleton, codec.config["max_error_cm"], codec.config["error_measure"])
+        self.base_codes = base_codes(skeleton, bound_cm, measure)
         self.state = bc.new_state(_contexts(skeleton.num_channels, len(joints)), warm=True)
         self.last_nonzero = np.zeros(skeleton.num_channels, dtype=np.int64)
         # the last two coded frames; before the first, one guess: a translation channel of a
@@ -236,10 +257,78 @@ class _Tables:
         self.started = False  # a frame has been coded (strides above 1 need one before them)
         self.gap = 1  # frames between them
         self.offset = 0  # the last packet's scale offset
+        self.trust = np.ones(skeleton.num_channels, dtype=np.bool_)
 
     def steps(self, offset: int) -> np.ndarray:
         codes = np.clip(self.base_codes.astype(np.int64) + offset, 0, 255).astype(np.uint8)
         return channel_steps(self.skeleton, codes)[:, 0]
+
+
+class _Cells:
+    """Per frame of a packet and channel, the interval the nearest layer below that coded the
+    frame puts the target in (everything before the base layer): a layer's prediction is
+    clamped to it (:func:`_predict`)."""
+
+    def __init__(self, frames: int, channels: int):
+        self.lo = np.full((frames, channels), -np.inf)
+        self.hi = np.full((frames, channels), np.inf)
+
+    def at(self, stride: int) -> tuple[np.ndarray, np.ndarray]:
+        return np.ascontiguousarray(self.lo[stride - 1 :: stride]), np.ascontiguousarray(self.hi[stride - 1 :: stride])
+
+    def update(self, stride: int, lo: np.ndarray, hi: np.ndarray) -> None:
+        self.lo[stride - 1 :: stride], self.hi[stride - 1 :: stride] = lo, hi
+
+
+def layer_bounds(max_error_cm: float, layers: int) -> list[float]:
+    """The bounds of a stream's layers, base first: each twice the next, the last ``max_error_cm``."""
+    return [max_error_cm * 2.0 ** (layers - 1 - k) for k in range(layers)]
+
+
+def section_ends(packet: bytes, layers: int) -> list[int]:
+    """Where each layer section of a packet ends; each but the last of a full packet follows
+    its length (a varint), so a relay drops the top layers by cutting after a section.
+    CorruptStreamError if a length does not parse or runs past the end."""
+    if layers == 1:
+        return [len(packet)]
+    ends: list[int] = []
+    pos = 0
+    for k in range(layers - 1):
+        if k > 0 and pos == len(packet):
+            return ends  # the top layers were dropped
+        try:
+            size, pos = varint.unpack(packet, pos, 4)
+        except ValueError as e:
+            raise CorruptStreamError(f"kinwave-live packet: layer {k}'s length at byte {pos}: {e}") from None
+        if pos + size > len(packet):
+            raise CorruptStreamError(
+                f"kinwave-live packet: layer {k}'s {size} bytes at byte {pos} run past its end ({len(packet)} bytes)"
+            )
+        pos += size
+        ends.append(pos)
+    return ends + [len(packet)] if pos < len(packet) else ends
+
+
+def split_layers(packet: bytes, layers: int) -> list[bytes]:
+    """A packet's layer sections, base first (those the relay left in it)."""
+    ends = section_ends(packet, layers)
+    sections, pos = [], 0
+    for k, end in enumerate(ends):
+        if k < layers - 1:
+            pos = varint.unpack(packet, pos, 4)[1]
+        sections.append(packet[pos:end])
+        pos = end
+    return sections
+
+
+def join_layers(sections: list[bytes]) -> bytes:
+    """The packet of ``sections`` (every layer of the stream): the inverse of
+    :func:`split_layers`. A top section that is empty is sent as one zero byte (the same to
+    its decoder, which reads zeros past the end), so that it is not taken for a dropped layer."""
+    if len(sections) == 1:
+        return sections[0]
+    *lower, top = sections
+    return b"".join(varint.pack(len(x)) + x for x in lower) + (top or b"\0")
 
 
 def base_codes(skeleton: Skeleton, bound_cm: float, measure: str) -> np.ndarray:
@@ -263,7 +352,8 @@ class KinwaveLiveCodec(Codec):
     id = "kinwave-live"
     description = (
         "kinwave for live avatars: closed-loop prediction down the kinematic tree, packets of at most "
-        "50 ms, context-adaptive arithmetic coding across packets, guaranteed max error on every frame"
+        "50 ms, context-adaptive arithmetic coding across packets, guaranteed max error on every frame, "
+        "layers a relay drops by cutting"
     )
     knobs = (
         Knob("max_error_cm", float, 1.0, "error bound in cm, held on every decoded frame", 1e-3, 1000.0),
@@ -274,6 +364,14 @@ class KinwaveLiveCodec(Codec):
             "joint: max joint position error; shell: points 3 cm off every bone",
             choices=("joint", "shell"),
         ),
+        Knob(
+            "layers",
+            int,
+            1,
+            "layers of the stream, each at twice the bound of the next (3: 4, 2 and 1 cm at max_error_cm 1)",
+            1,
+            MAX_LAYERS,
+        ),
     )
     quality = QualityKnob("max_error_cm", higher_is_better=False, log_scale=True)
     streaming = True
@@ -281,6 +379,14 @@ class KinwaveLiveCodec(Codec):
     @property
     def delay_frames(self) -> int:  # type: ignore[override]
         return 0  # plus the packet's own frames: packet_frames(fps) - 1 at most
+
+    @property
+    def layer_bounds(self) -> list[float]:
+        """Each layer's bound in cm, base first (the :class:`~mocodec.codecs.base.Layered` protocol)."""
+        return layer_bounds(self.config["max_error_cm"], self.config["layers"])
+
+    def layer_ends(self, packet: bytes) -> list[int]:
+        return section_ends(packet, self.config["layers"])
 
     def encoder(self, skeleton: Skeleton, fps: float) -> StreamEncoder:
         return _LiveEncoder(self, skeleton, fps)
@@ -308,47 +414,62 @@ class KinwaveLiveCodec(Codec):
         return np.concatenate(out) if out else np.zeros((0, skeleton.num_channels))
 
 
-def _reconstruct(tables: _Tables, ints: np.ndarray, orders: np.ndarray, offset: int, stride: int) -> np.ndarray:
-    """The decoded coded frames ``(T', C)`` of one packet from its integers and the previous
-    coded frames (``tables.history``): the arithmetic of the encoder's :func:`_predict`."""
+def _layers(codec: KinwaveLiveCodec, skeleton: Skeleton) -> list[_Layer]:
+    return [_Layer(skeleton, b, codec.config["error_measure"]) for b in codec.layer_bounds]
+
+
+def _reconstruct(layer: _Layer, ints: np.ndarray, orders: np.ndarray, offset: int, stride: int, cells: _Cells):
+    """The decoded coded frames ``(T', C)`` of one layer of a packet from its integers, the
+    layer's previous coded frames and the cells of the layers below, and this layer's cells:
+    the arithmetic of the encoder's :func:`_predict`."""
     out = np.empty_like(ints, dtype=np.float64)
+    cell_lo, cell_hi = np.empty_like(out), np.empty_like(out)
     _predict(
         np.zeros((0, 0)),
-        tables.history,
-        tables.count_history,
-        tables.gap,
+        layer.history,
+        layer.count_history,
+        layer.gap,
         stride,
-        tables.steps(offset),
-        orders[tables.channel_joint],
+        layer.steps(offset),
+        orders[layer.channel_joint],
+        layer.trust,
+        *cells.at(stride),
         out,
         ints,
+        cell_lo,
+        cell_hi,
         False,
-        0.5,
     )
-    return out
+    return out, cell_lo, cell_hi
 
 
-def _advance(tables: _Tables, coded: np.ndarray, stride: int, offset: int) -> None:
-    """Both ends after a packet: its last two coded frames are the next one's history."""
+def _advance(layer: _Layer, coded: np.ndarray, stride: int, offset: int, cells: _Cells) -> None:
+    """Both ends after a packet: its last two coded frames are the layer's next history, and
+    a channel trusts the cells of the layers below while its decoded values fall in them."""
+    lo, hi = cells.at(stride)
+    told = np.isfinite(lo)
+    slack = 0.75 * layer.steps(offset)
+    inside = (coded >= lo - slack) & (coded <= hi + slack)
+    layer.trust = np.where(told.any(axis=0), (inside | ~told).all(axis=0), layer.trust)
     if len(coded) >= 2:
-        tables.history, tables.gap = coded[-2:].copy(), stride
+        layer.history, layer.gap = coded[-2:].copy(), stride
     else:
-        tables.history = np.vstack((tables.history[1:], coded))
-        tables.gap = stride
-    tables.count_history = min(tables.count_history + len(coded), 2) if tables.started else min(len(coded), 2)
-    tables.started = True
-    tables.offset = offset
+        layer.history = np.vstack((layer.history[1:], coded))
+        layer.gap = stride
+    layer.count_history = min(layer.count_history + len(coded), 2) if layer.started else min(len(coded), 2)
+    layer.started = True
+    layer.offset = offset
 
 
 class _LiveEncoder(StreamEncoder):
     def __init__(self, codec: KinwaveLiveCodec, skeleton: Skeleton, fps: float):
         self.codec, self.skeleton, self.fps = codec, skeleton, fps
-        self.tables = _Tables(codec, skeleton)
+        self.layers = _layers(codec, skeleton)
+        self.bounds = codec.layer_bounds
         self.size = packet_frames(fps)
         self.pending = np.zeros((0, skeleton.num_channels))
         self.previous: np.ndarray | None = None  # the last continuous frame
-        self.offset = 0
-        self.bound = codec.config["max_error_cm"]
+        self.offsets = [0] * len(self.layers)  # where each layer's next packet starts
         self.cm = 100.0 / skeleton.units_per_metre
 
     def push(self, frames: np.ndarray) -> list[bytes]:
@@ -369,52 +490,56 @@ class _LiveEncoder(StreamEncoder):
         self.pending = self.pending[:0]
         return [packet]
 
-    def _orders(self, values: np.ndarray) -> np.ndarray:
+    @staticmethod
+    def _orders(layer: _Layer, values: np.ndarray) -> np.ndarray:
         """Per joint, the predictor (1 or 2) that misses the packet's original values least."""
-        t = self.tables
-        hist = np.vstack((t.history, values))[max(0, 2 - t.count_history) :]
+        hist = np.vstack((layer.history, values))[max(0, 2 - layer.count_history) :]
         if len(hist) < 3:
-            return np.ones(t.first.size, dtype=np.int64)
+            return np.ones(layer.first.size, dtype=np.int64)
         miss1 = np.abs(hist[2:] - hist[1:-1]).sum(axis=0)
         miss2 = np.abs(hist[2:] - 2.0 * hist[1:-1] + hist[:-2]).sum(axis=0)
-        better = np.add.reduceat(miss2 - miss1, t.first) < 0
+        better = np.add.reduceat(miss2 - miss1, layer.first) < 0
         return np.where(better, 2, 1).astype(np.int64)
 
-    def _code(
-        self, values: np.ndarray, goal: tuple[np.ndarray, np.ndarray], orders: np.ndarray, offset: int, stride: int
-    ):
-        """The integers and decoded coded frames of one packet at ``offset`` and ``stride``
-        (every ``stride``-th frame coded, down the tree), and all its decoded frames; ``goal``
-        is the packet's original positions and orientations (forward kinematics, once)."""
-        t = self.tables
-        steps = t.steps(offset)
-        order = orders[t.channel_joint]
+    def _code(self, layer: _Layer, values, goal, orders, offset: int, stride: int, cells: _Cells):
+        """The integers, decoded coded frames and cells of one layer of a packet at ``offset``
+        and ``stride`` (every ``stride``-th frame coded, down the tree), and all its decoded
+        frames; ``goal`` is the packet's original positions and orientations (forward
+        kinematics, once)."""
+        steps = layer.steps(offset)
+        order = orders[layer.channel_joint]
         coded = np.ascontiguousarray(values[stride - 1 :: stride])
         ints = np.zeros(coded.shape, dtype=np.int64)
-        decoded = np.zeros(coded.shape)
+        decoded, cell_lo, cell_hi = np.zeros(coded.shape), np.zeros(coded.shape), np.zeros(coded.shape)
+        lo, hi = cells.at(stride)
         pos, quats = (np.ascontiguousarray(g[stride - 1 :: stride]) for g in goal)
 
         def code(channels: np.ndarray, targets: np.ndarray) -> np.ndarray:
-            out = np.empty(targets.shape)
-            sub = np.zeros(targets.shape, dtype=np.int64)
+            shape = targets.shape
+            out, sub, c_lo, c_hi = np.empty(shape), np.zeros(shape, dtype=np.int64), np.empty(shape), np.empty(shape)
             _predict(
                 np.ascontiguousarray(targets),
-                np.ascontiguousarray(t.history[:, channels]),
-                t.count_history,
-                t.gap,
+                np.ascontiguousarray(layer.history[:, channels]),
+                layer.count_history,
+                layer.gap,
                 stride,
                 steps[channels],
                 order[channels],
+                layer.trust[channels],
+                np.ascontiguousarray(lo[:, channels]),
+                np.ascontiguousarray(hi[:, channels]),
                 out,
                 sub,
+                c_lo,
+                c_hi,
                 True,
-                ROUNDING,
             )
             ints[:, channels], decoded[:, channels] = sub, out
+            cell_lo[:, channels], cell_hi[:, channels] = c_lo, c_hi
             return out
 
         closedloop.code_down_tree(self.skeleton, coded, np.ones(values.shape[1], dtype=bool), quats, code, True, pos)
-        return ints, decoded, _fill(t.history[1], decoded, stride)
+        return ints, decoded, (cell_lo, cell_hi), _fill(layer.history[1], decoded, stride)
 
     def _error(self, goal: tuple[np.ndarray, np.ndarray], decoded: np.ndarray) -> float:
         p0, q0 = goal
@@ -423,80 +548,102 @@ class _LiveEncoder(StreamEncoder):
             return float(shell_errors(self.skeleton, p0 * self.cm, q0, p1 * self.cm, q1).max)
         return float(np.linalg.norm((p1 - p0) * self.cm, axis=2).max())
 
-    def _fit(
-        self, values: np.ndarray, goal: tuple[np.ndarray, np.ndarray], orders: np.ndarray, stride: int, retries: int
-    ):
-        """(integers, coded frames, offset, worst error) of the packet at ``stride``, from the
-        stream's current offset and finer until the bound holds, or None."""
-        offset = self.offset
+    def _fit(self, k: int, values, goal, orders, stride: int, retries: int, cells: _Cells):
+        """(integers, coded frames, cells, offset, worst error) of layer ``k`` of the packet at
+        ``stride``, from the layer's current offset and finer until its bound holds, or None."""
+        offset = self.offsets[k]
         for _ in range(retries):
-            ints, coded, frames = self._code(values, goal, orders, offset, stride)
+            ints, coded, coded_cells, frames = self._code(self.layers[k], values, goal, orders, offset, stride, cells)
             worst = self._error(goal, frames)
-            if worst <= self.bound:
-                return ints, coded, offset, worst
+            if worst <= self.bounds[k]:
+                return ints, coded, coded_cells, offset, worst
             if offset <= -MAX_OFFSET:
                 return None
             offset = max(offset - FINER, -MAX_OFFSET)
         return None
 
-    def _bytes(self, ints, frames, offset, stride, orders, trial: bool) -> bytes:
-        t = self.tables
-        state, last = (t.state.copy(), t.last_nonzero.copy()) if trial else (t.state, t.last_nonzero)
-        buf = bc.buffer_for(bc.int_decisions(ints) + 2 * t.first.size + 64)
-        n = _code_packet(ints, frames, self.size, offset - t.offset, stride, t.first, t.count, orders, state, buf, last)
+    def _bytes(self, layer: _Layer, ints, frames, offset, stride, orders, trial: bool) -> bytes:
+        state, last = (layer.state.copy(), layer.last_nonzero.copy()) if trial else (layer.state, layer.last_nonzero)
+        buf = bc.buffer_for(bc.int_decisions(ints) + 2 * layer.first.size + 64)
+        n = _code_packet(
+            ints, frames, self.size, offset - layer.offset, stride, layer.first, layer.count, orders, state, buf, last
+        )
         return buf[1:n].tobytes()  # the first byte is always 0
 
     def _packet(self, values: np.ndarray) -> bytes:
-        t = self.tables
-        orders = self._orders(values)
         goal = forward_kinematics(self.skeleton, values)
-        sparse = t.started and len(values) == self.size
+        cells = _Cells(len(values), values.shape[1])
+        return join_layers([self._layer_packet(k, values, goal, cells) for k in range(len(self.layers))])
+
+    def _layer_packet(self, k: int, values: np.ndarray, goal, cells: _Cells) -> bytes:
+        """Layer ``k`` of a packet: the cheapest stride that holds its bound on every frame,
+        predicted within the cells of the layers below; the cells become its own."""
+        layer = self.layers[k]
+        orders = self._orders(layer, values)
+        sparse = layer.started and len(values) == self.size
         best = None
         for stride in strides(len(values)) if sparse else [1]:
-            fit = self._fit(values, goal, orders, stride, MAX_RETRIES if stride == 1 else SPARSE_RETRIES)
+            fit = self._fit(k, values, goal, orders, stride, MAX_RETRIES if stride == 1 else SPARSE_RETRIES, cells)
             if fit is None:
                 continue
-            ints, coded, offset, worst = fit
-            size = len(self._bytes(ints, len(values), offset, stride, orders, trial=True))
+            ints, coded, coded_cells, offset, worst = fit
+            size = len(self._bytes(layer, ints, len(values), offset, stride, orders, trial=True))
             if best is None or size < best[0]:
-                best = (size, stride, ints, coded, offset, worst)
+                best = (size, stride, ints, coded, coded_cells, offset, worst)
         if best is None:
-            raise CodecError(f"kinwave-live cannot hold {self.bound:g} cm on a packet")
-        _, stride, ints, coded, offset, worst = best
-        self.offset = min(offset + 1, MAX_OFFSET) if worst < COARSER_BELOW * self.bound else offset
-        data = self._bytes(ints, len(values), offset, stride, orders, trial=False)
-        _advance(t, coded, stride, offset)
+            raise CodecError(f"kinwave-live cannot hold {self.bounds[k]:g} cm on a packet")
+        _, stride, ints, coded, coded_cells, offset, worst = best
+        self.offsets[k] = min(offset + 1, MAX_OFFSET) if worst < COARSER_BELOW * self.bounds[k] else offset
+        data = self._bytes(layer, ints, len(values), offset, stride, orders, trial=False)
+        _advance(layer, coded, stride, offset, cells)
+        cells.update(stride, *coded_cells)
         return data
 
 
 class _LiveDecoder(StreamDecoder):
+    """Decodes every layer a packet carries; once a layer is missing (a relay dropped it) it
+    stays out until the stream restarts, since its prediction lost its history."""
+
     def __init__(self, codec: KinwaveLiveCodec, skeleton: Skeleton, fps: float):
         self.codec, self.skeleton = codec, skeleton
-        self.tables = _Tables(codec, skeleton)
+        self.layers = _layers(codec, skeleton)
+        self.live = len(self.layers)  # the layers still decodable
         self.size = packet_frames(fps)
 
     def push(self, packet: bytes) -> np.ndarray:
-        t = self.tables
-        data = np.frombuffer(b"\0" + bytes(packet), dtype=np.uint8)
-        st, frames, change, stride = _decode_head(data, self.size, t.state)
-        offset = t.offset + change
+        sections = split_layers(bytes(packet), len(self.layers))
+        self.live = min(self.live, len(sections))
+        cells = out = None
+        for k in range(self.live):
+            out, cells = self._layer(self.layers[k], sections[k], cells)
+        assert out is not None  # the base layer is always there
+        return out
+
+    def _layer(self, layer: _Layer, section: bytes, cells: _Cells | None):
+        data = np.frombuffer(b"\0" + section, dtype=np.uint8)
+        st, frames, change, stride = _decode_head(data, self.size, layer.state)
+        offset = layer.offset + change
         if not (
             1 <= frames <= self.size
             and abs(offset) <= MAX_OFFSET
             and 1 <= stride <= frames
             and frames % stride == 0
-            and (stride == 1 or t.started)
+            and (stride == 1 or layer.started)
+            and (cells is None or cells.lo.shape[0] == frames)
         ):
             raise CorruptStreamError(
                 f"kinwave-live packet: {frames} frames at stride {stride} and scale offset "
                 f"{offset} (the data is damaged)"
             )
-        ints = np.zeros((frames // stride, self.skeleton.num_channels), dtype=np.int64)
-        orders = np.ones(t.first.size, dtype=np.int64)
-        _decode_ints(st, data, frames // stride, t.first, t.count, t.state, t.last_nonzero, ints, orders)
+        cells = cells or _Cells(frames, self.skeleton.num_channels)
+        coded_frames = frames // stride
+        ints = np.zeros((coded_frames, self.skeleton.num_channels), dtype=np.int64)
+        orders = np.ones(layer.first.size, dtype=np.int64)
+        _decode_ints(st, data, coded_frames, layer.first, layer.count, layer.state, layer.last_nonzero, ints, orders)
         if np.abs(ints).max(initial=0) >= 1 << 40:
             raise CorruptStreamError("kinwave-live packet: an integer out of range (the data is damaged)")
-        coded = _reconstruct(t, ints, orders, offset, stride)
-        out = _fill(t.history[1], coded, stride)
-        _advance(t, coded, stride, offset)
-        return out
+        coded, cell_lo, cell_hi = _reconstruct(layer, ints, orders, offset, stride, cells)
+        out = _fill(layer.history[1], coded, stride)
+        _advance(layer, coded, stride, offset, cells)
+        cells.update(stride, cell_lo, cell_hi)
+        return out, cells

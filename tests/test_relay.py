@@ -122,6 +122,43 @@ def test_the_nearer_avatar_gets_the_larger_share(walk_bvh):
     assert near_err < far_err
 
 
+def _max_joint_error_cm(motion, channels):
+    from mocodec.kinematics import forward_kinematics
+
+    p0, _ = forward_kinematics(motion.skeleton, motion.continuous().channels)
+    p1, _ = forward_kinematics(motion.skeleton, channels)
+    return float((np.linalg.norm(p1 - p0, axis=2) * 100.0 / motion.skeleton.units_per_metre).max())
+
+
+def test_the_far_avatar_of_a_layered_stream_gets_the_base_layer_only(walk_bvh):
+    """kinwave-live in three layers (4, 2, 1 cm): the relay keeps all of them for the near
+    avatar and the base alone for the one 20 m away, by cutting packets: the near one decodes
+    as the whole stream, the far one holds the base layer's bound and no more."""
+    far = walk_bvh.with_channels(walk_bvh.channels.copy())
+    x = walk_bvh.skeleton.channel_index("hip.Xposition")
+    far.channels[:, x] += 20 * walk_bvh.skeleton.units_per_metre
+    codec = get_codec("kinwave-live", layers=3)
+
+    async def go():
+        async with serving() as url:
+            camera = tuple(walk_bvh.positions_m()[0, 0])
+            viewer = asyncio.create_task(
+                record(url, "lobby", token(), budget=20000, camera=camera, timeout_s=30, stream=1)
+            )
+            await asyncio.sleep(0.2)
+            await asyncio.gather(
+                publish_clip(url, "lobby", token(), walk_bvh, codec, speed=8, stream=0),
+                publish_clip(url, "lobby", token(), far, codec, speed=8, stream=1),
+            )
+            return await viewer
+
+    got = asyncio.run(go())
+    whole = receive_clip(stream_clip(walk_bvh, codec, stream=0)).channels
+    np.testing.assert_array_equal(got[0].channels, whole)
+    assert _max_joint_error_cm(walk_bvh, got[0].channels) <= 1.0 + 1e-9
+    assert 2.0 < _max_joint_error_cm(far, got[1].channels) <= 4.0 + 1e-9
+
+
 @pytest.mark.parametrize(
     "bad, why",
     [
@@ -153,6 +190,21 @@ def test_a_malformed_message_closes_that_connection_only(walk_bvh):
             return await viewer
 
     assert asyncio.run(go())[0].num_frames == walk_bvh.num_frames
+
+
+def test_a_layered_packet_whose_sections_overrun_closes_its_sender(walk_bvh):
+    packets = stream_clip(walk_bvh[:120], get_codec("kinwave-live", layers=3))
+    bad = packets[2].with_payload(bytes([100, 1, 2]))  # layer 0 says 100 bytes, 2 follow
+
+    async def go():
+        async with serving() as url:
+            async with connect(url, "lobby", token(), "publish") as rogue:
+                await rogue.send_bytes(pack_batch([p.to_bytes() for p in packets[:2]] + [bad.to_bytes()]))
+                msg = await rogue.receive()
+                return rogue.close_code, msg.extra
+
+    code, reason = asyncio.run(go())
+    assert code == BAD_MESSAGE and "layer 0's 100 bytes at byte 1 run past" in reason
 
 
 def test_message_size_and_rate_limits_close_the_connection(walk_bvh):

@@ -8,10 +8,13 @@ sender's message is a batch of packets (:mod:`mocodec.stream.packets`); a viewer
 are JSON settings, ``{"budget": bit/s, "camera": [x, y, z] (metres)}``.
 
 Every tick (30 Hz) each viewer gets one batch with everything new in its room. A viewer that
-declared a budget gets the embedded (``spiht``) streams cut to their shares by the crowd rule
-of 001: scores S = d_min / d (6.4), shares B S / sum S (6.5), d the distance from its camera
-to each avatar's root, each share rounded down to a ladder of 4 rates per octave so that
-viewers with nearly equal shares share one cut; other streams pass whole. A viewer that joins
+declared a budget gets the scalable streams cut to their shares by the crowd rule of 001:
+scores S = d_min / d (6.4), shares B S / sum S (6.5), d the distance from its camera to each
+avatar's root. An embedded (``spiht``) stream is cut to its share rounded down to a ladder of
+4 rates per octave, so that viewers with nearly equal shares share one cut; a layered
+(``kinwave-live`` with layers) stream keeps the most layers whose measured rate fits the share
+(the base layer always), more only from a keyframe on, since a layer's prediction needs its
+history: the share by distance is spent as error bounds. Other streams pass whole. A viewer that joins
 late gets every stream header and the packets since each stream's last keyframe. A stream
 ends with its END packet; if its sender goes without one, the relay sends the END for it (and
 over the bus), so no viewer waits for a stream that will not come back.
@@ -49,7 +52,7 @@ from aiohttp import WSMsgType, web
 from aiohttp.abc import AbstractAccessLogger
 
 from mocodec.codecs import codec_from_untrusted
-from mocodec.codecs.base import Embedded
+from mocodec.codecs.base import Embedded, Layered
 from mocodec.coding.entropy.rangecoder import decode_ints
 from mocodec.errors import MocodecError
 from mocodec.scene import bandwidth_scores, split_budget
@@ -75,6 +78,8 @@ BAD_TOKEN, BAD_MESSAGE, RATE_LIMIT, TAKEN = 4003, 4400, 4429, 4409
 STATIC = Path(__file__).with_name("static")
 #: Shares are rounded down to this many rates per octave (19% apart), so cuts are shared.
 LADDER_STEPS = 4
+#: A layered stream's rate per layer is measured over about this long (an exponential average).
+LAYER_RATE_S = 1.0
 
 
 @dataclass
@@ -126,6 +131,7 @@ class Forward:
     data: bytes  # without the cut table
     cuts: np.ndarray | None = None
     cutter: Callable[[float], bytes] | None = None  # the codec's packet cutter, made at the first cut
+    layer_ends: list[int] | None = None  # a layered stream's data packet: where each layer ends
 
 
 class _Cursors:
@@ -166,6 +172,25 @@ class StreamState:
     next_sequence: int = 0
     next_frame: int = 0
     ended: bool = False
+    layer_rates: np.ndarray | None = None  # a layered stream: bit/s of its layers up to each
+
+    @property
+    def layered(self) -> bool:
+        return isinstance(self.codec, Layered) and len(self.codec.layer_bounds) > 1
+
+    def measure_layers(self, p: Packet, ends: list[int]) -> None:
+        """Fold a data packet's layer sizes into the stream's rates per layer (each with the
+        layers below it), an exponential average over LAYER_RATE_S that starts from zero: a
+        stream's first keyframe counts for its frames' share of that time, so a new stream's
+        viewers start with more layers and drop those that do not fit."""
+        rates = np.zeros(len(self.codec.layer_bounds))
+        rates[: len(ends)] = ends
+        rates[len(ends) :] = ends[-1]
+        rates *= 8.0 * self.info.fps / p.frames
+        weight = min(p.frames / (self.info.fps * LAYER_RATE_S), 1.0)
+        if self.layer_rates is None:
+            self.layer_rates = np.zeros_like(rates)
+        self.layer_rates += weight * (rates - self.layer_rates)
 
     def end_packet(self, stream: int) -> Packet:
         """The packet that ends this stream for its receivers when its sender vanishes."""
@@ -186,8 +211,9 @@ class StreamState:
 class Viewer:
     ws: web.WebSocketResponse
     transport: Any  # the connection (asyncio transport), aborted if the viewer stalls
-    budget: float = 0.0  # bit/s for the embedded streams; 0: everything whole
+    budget: float = 0.0  # bit/s for the scalable streams; 0: everything whole
     camera: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    layers: dict[int, int] = field(default_factory=dict)  # layered stream -> the layers it gets now
     pending: list[Forward] = field(default_factory=list)
     queue: asyncio.Queue = field(default_factory=lambda: asyncio.Queue(maxsize=1))
     missed_since: float | None = None
@@ -380,6 +406,12 @@ class Relay:
             if state is None:
                 raise Closing(BAD_MESSAGE, f"stream {p.stream}: data before its header")
             forward = self._forward(p, r)
+            if state.layered and p.frames:
+                try:
+                    forward.layer_ends = state.codec.layer_ends(p.codec_payload)
+                except MocodecError as e:
+                    raise Closing(BAD_MESSAGE, f"stream {p.stream}: packet {p.sequence}: {e}") from None
+                state.measure_layers(p, forward.layer_ends)
             state.position = p.position
             state.next_sequence, state.next_frame = (p.sequence + 1) & 0xFFFFFFFF, p.first_frame + p.frames
             if p.keyframe:
@@ -465,12 +497,12 @@ class Relay:
         fresh, room.fresh = room.fresh, []
         shared: bytes | None = None  # the batch of every viewer with nothing of its own
         cut_cache: dict[tuple[int, float], bytes] = {}
-        crowd = None  # the embedded streams and where they are, this tick
+        crowd = None  # the scalable streams and where they are, this tick
         for viewer in [v for v in room.viewers if not v.dropped]:
             items, viewer.pending = viewer.pending + fresh, []
             if not items:
                 continue
-            if viewer.budget > 0 and any(f.cuts is not None for f in items):
+            if viewer.budget > 0 and any(f.cuts is not None or f.layer_ends is not None for f in items):
                 crowd = crowd or self._crowd(room)
                 batch = pack_batch(self._cut(room, crowd, viewer, items, cut_cache))
             elif len(items) == len(fresh):
@@ -481,6 +513,8 @@ class Relay:
             self._offer(viewer, batch, items)
         for key in [k for k, state in room.streams.items() if state.ended]:
             del room.streams[key]  # over: late joiners will not see it
+            for viewer in room.viewers:
+                viewer.layers.pop(key, None)
 
     def _offer(self, viewer: Viewer, batch: bytes, items: list[Forward]) -> None:
         """Queue a viewer's batch, or miss the tick if the last is still on its way: it keeps
@@ -506,30 +540,57 @@ class Relay:
 
     @staticmethod
     def _crowd(room: Room) -> tuple[dict[int, int], np.ndarray]:
-        """The room's embedded (cuttable) streams, each with its row in ``(streams, 3)``
-        positions."""
-        embedded = [k for k, s in room.streams.items() if isinstance(s.codec, Embedded)]
-        where = np.array([room.streams[k].position for k in embedded], dtype=np.float64).reshape(-1, 3)
-        return {k: i for i, k in enumerate(embedded)}, where
+        """The room's scalable streams (embedded or layered), each with its row in
+        ``(streams, 3)`` positions."""
+        scalable = [k for k, s in room.streams.items() if isinstance(s.codec, Embedded) or s.layered]
+        where = np.array([room.streams[k].position for k in scalable], dtype=np.float64).reshape(-1, 3)
+        return {k: i for i, k in enumerate(scalable)}, where
 
     def _cut(self, room: Room, crowd, viewer: Viewer, items: list[Forward], cache: dict) -> list[bytes]:
-        """The viewer's packets, the embedded streams cut to their crowd shares (6.4, 6.5)."""
+        """The viewer's packets, the scalable streams cut to their crowd shares (6.4, 6.5)."""
         row, where = crowd
         d = np.maximum(np.linalg.norm(where - np.asarray(viewer.camera), axis=1), self.limits.min_distance_m)
         shares = split_budget(int(viewer.budget), bandwidth_scores(d)) if len(row) else None
         out = []
         for f in items:
             state = room.streams.get(f.packet.stream)
-            if f.cuts is None or state is None or f.packet.stream not in row:
+            if state is None or f.packet.stream not in row or (f.cuts is None and f.layer_ends is None):
                 out.append(f.data)
                 continue
             assert shares is not None  # the stream is in the row
-            rate = on_ladder(float(shares[row[f.packet.stream]]))
-            key = (id(f), rate)
-            if key not in cache:
-                cache[key] = self._cut_one(f, state, rate)
+            share = float(shares[row[f.packet.stream]])
+            if f.layer_ends is not None:
+                keep = self._layers_for(viewer, f, state, share)
+                key: tuple[int, float] = (id(f), -keep)
+                if key not in cache:
+                    cache[key] = self._drop_layers(f, keep)
+            else:
+                rate = on_ladder(share)
+                key = (id(f), rate)
+                if key not in cache:
+                    cache[key] = self._cut_one(f, state, rate)
             out.append(cache[key])
         return out
+
+    @staticmethod
+    def _layers_for(viewer: Viewer, f: Forward, state: StreamState, share: float) -> int:
+        """The layers of a layered stream's packet a viewer gets: the most whose rate fits its
+        share, at least the base; more than it had only from a keyframe (a layer it missed
+        has lost its prediction's history)."""
+        assert state.layer_rates is not None  # measured from the stream's first data packet
+        fits = max(int(np.searchsorted(state.layer_rates, share, side="right")), 1)
+        stream = f.packet.stream
+        had = viewer.layers.get(stream)
+        keep = fits if f.packet.keyframe or had is None else min(fits, had)
+        viewer.layers[stream] = keep
+        return keep
+
+    @staticmethod
+    def _drop_layers(f: Forward, keep: int) -> bytes:
+        assert f.layer_ends is not None
+        if keep >= len(f.layer_ends):
+            return f.data
+        return f.packet.with_payload(f.packet.payload[: f.layer_ends[keep - 1]]).to_bytes()
 
     @staticmethod
     def _cut_one(f: Forward, state: StreamState, rate: float) -> bytes:

@@ -1,7 +1,7 @@
 """Live avatars at a guaranteed max joint error: kinwave-live against offline kinwave and
 deadreckoning, per source (CMU BVH and ASF/AMC at 120 fps, Bandai Namco at 30 fps).
 
-    python benchmarks/bench_live.py [--clips N] [--bound 1.0] [--keyframe-s 1] [--loss 0.1] [--jobs 2]
+    python benchmarks/bench_live.py [--clips N] [--bound 1.0] [--keyframe-s 1] [--loss 0.1] [--layers 3] [--jobs 2]
 
 Per clip: kbit/s of one codec stream's packets alone, and of the live stream as a sender sends
 it (stream/live.py: keyframes every second, each restarting the codec stream, and the compact
@@ -10,7 +10,10 @@ frame back); the measured max and mean joint error of every decoded frame; for d
 the threshold rate control finds for the bound (its delay: 3 frames), for offline kinwave the
 whole clip at the bound (its delay: the 256-frame segment); and the resync time under random
 packet loss (seeded): for every lost packet, from its first frame until the receiver decodes the
-stream exactly again (the next keyframe it gets). Prints the medians per source, and the 99th
+stream exactly again (the next keyframe it gets). Then the layered stream (``--layers``, each
+layer twice the bound of the next, the top one at the bound): per layer, kbit/s of the live
+stream a relay sends a viewer that gets that layer and those below it (framing included), and
+the max and mean joint error of its decoding. Prints the medians per source, and the 99th
 percentile of the resync times.
 """
 
@@ -59,7 +62,31 @@ def resync_times(motion, packets, loss: float, seed: int) -> list[float]:
     return times + [(packets[-1].first_frame + packets[-1].frames - f) / motion.fps for f in waiting]
 
 
-def measure(path: str, bound: float, keyframe_s: float = 1.0, loss: float = 0.1) -> dict:
+def layer_rows(motion, bound: float, layers: int, keyframe_s: float) -> dict:
+    """Per layer kept (1..layers): the live stream's kbit/s cut to it, and the max and mean
+    joint error of the clip's packets cut to it."""
+    codec = get_codec("kinwave-live", max_error_cm=bound, layers=layers)
+    enc = codec.encoder(motion.skeleton, motion.fps)
+    packets = enc.push(motion.channels) + enc.flush()
+    stream = [p for p in stream_clip(motion, codec, keyframe_s=keyframe_s) if p.kind != HEADER]
+    kbps, max_cm, mean_cm = [], [], []
+    for keep in range(1, layers + 1):
+        cut = [p[: codec.layer_ends(p)[keep - 1]] if keep < layers else p for p in packets]
+        dec = codec.decoder(motion.skeleton, motion.fps)
+        err = joint_errors(motion, np.concatenate([dec.push(p) for p in cut]))
+        max_cm.append(float(err.max()))
+        mean_cm.append(float(err.mean()))
+        sent = sum(len(p.to_bytes()) - len(p.payload) + cut_size(codec, p.payload, keep) for p in stream)
+        kbps.append(sent * 8 / motion.duration / 1000)
+    return {"layer_kbps": kbps, "layer_max_cm": max_cm, "layer_mean_cm": mean_cm}
+
+
+def cut_size(codec, payload: bytes, keep: int) -> int:
+    ends = codec.layer_ends(payload) if payload else [0]
+    return ends[min(keep, len(ends)) - 1]
+
+
+def measure(path: str, bound: float, keyframe_s: float = 1.0, loss: float = 0.1, layers: int = 3) -> dict:
     motion = load(path)
     seconds = motion.duration
     codec = get_codec("kinwave-live", max_error_cm=bound)
@@ -87,6 +114,7 @@ def measure(path: str, bound: float, keyframe_s: float = 1.0, loss: float = 0.1)
         "dr_kbps": dr.bitrate / 1000,
         "dr_max_cm": dr.max_error_cm,
         "resync_s": resync_times(motion, sent, loss, sum(map(ord, path))),
+        **(layer_rows(motion, bound, layers, keyframe_s) if layers > 1 else {}),
     }
 
 
@@ -96,6 +124,7 @@ def main() -> None:
     ap.add_argument("--bound", type=float, default=1.0, help="max joint error, cm")
     ap.add_argument("--keyframe-s", type=float, default=1.0, help="seconds between keyframes (default 1)")
     ap.add_argument("--loss", type=float, default=0.1, help="packet loss for the resync times (default 0.1)")
+    ap.add_argument("--layers", type=int, default=3, help="layers of the layered stream (1: none; default 3)")
     ap.add_argument("--jobs", type=int, default=2)
     args = ap.parse_args()
     if SHARED is None:
@@ -105,7 +134,16 @@ def main() -> None:
             paths = sorted((SHARED / folder).glob(pattern))
             paths = paths[:: max(1, len(paths) // args.clips)][: args.clips] if args.clips else paths
             n = len(paths)
-            rows = list(pool.map(measure, map(str, paths), [args.bound] * n, [args.keyframe_s] * n, [args.loss] * n))
+            rows = list(
+                pool.map(
+                    measure,
+                    map(str, paths),
+                    [args.bound] * n,
+                    [args.keyframe_s] * n,
+                    [args.loss] * n,
+                    [args.layers] * n,
+                )
+            )
             resync = np.concatenate([r["resync_s"] for r in rows])
 
             def med(key: str) -> float:
@@ -125,6 +163,24 @@ def main() -> None:
                 f"resync median {np.median(resync):.2f} s, 99th percentile {np.percentile(resync, 99):.2f} s",
                 flush=True,
             )
+            if args.layers > 1:
+                print_layers(name, rows, args.bound, args.layers)
+
+
+def print_layers(name: str, rows: list[dict], bound: float, layers: int) -> None:
+    bounds = [bound * 2.0 ** (layers - 1 - k) for k in range(layers)]
+    kbps = np.median([r["layer_kbps"] for r in rows], axis=0)
+    base_share = np.median([r["layer_kbps"][0] / r["layer_kbps"][-1] for r in rows])
+    over_single = np.median([r["layer_kbps"][-1] / r["framed_kbps"] for r in rows])
+    worst = np.max([r["layer_max_cm"] for r in rows], axis=0)
+    mean = np.median([r["layer_mean_cm"] for r in rows], axis=0)
+    print(
+        f"{name} layers {'/'.join(f'{b:g}' for b in bounds)} cm: live stream "
+        f"{'/'.join(f'{k:.2f}' for k in kbps)} kbit/s, base {100 * base_share:.0f}% of the full stream, "
+        f"full / single layer x{over_single:.2f}, max {'/'.join(f'{w:.3f}' for w in worst)} cm, "
+        f"mean {'/'.join(f'{m:.3f}' for m in mean)} cm",
+        flush=True,
+    )
 
 
 if __name__ == "__main__":

@@ -7,7 +7,7 @@ import pytest
 
 from mocodec.codecs import get_codec
 from mocodec.codecs.kinwave import live
-from mocodec.errors import CorruptStreamError
+from mocodec.errors import CorruptStreamError, OutOfStepError
 from mocodec.kinematics import forward_kinematics
 from mocodec.metrics.pose import shell_errors
 
@@ -165,3 +165,49 @@ def test_the_layered_format_is_pinned():
         assert codec.encode(clip) == stored
         decoded = codec.decode(stored, clip.skeleton, clip.num_frames, clip.fps).channels
         assert np.array_equal(decoded, np.load(folder / f"{name}_decoded.npy"))
+
+
+# ----- refresh inside the codec stream -----------------------------------------------------------
+def test_layers_restart_on_their_own_spread_over_the_refresh_period(walk_bvh):
+    codec, packets = _layered_packets(walk_bvh, layers=3)
+    refreshing = get_codec("kinwave-live", layers=3, refresh_s=0.5)
+    enc = refreshing.encoder(walk_bvh.skeleton, walk_bvh.fps)
+    again = enc.push(walk_bvh.channels) + enc.flush()
+    starts = np.array([refreshing.layer_starts(p) for p in again])
+    period, phases = refreshing.restart_frames(walk_bvh.fps)
+    assert (period, phases) == (60, [0, 20, 40])
+    size = live.packet_frames(walk_bvh.fps)
+    for k, phase in enumerate(phases):  # each layer in the packets that hold its restart frames
+        expected = [a > 0 and (phase - a) % period < size for a in range(0, walk_bvh.num_frames, size)]
+        assert starts[:, k].tolist() == expected
+    assert starts.sum(axis=1).max() == 1  # never two layers at once: no bursts
+    assert not np.array(codec.layer_starts(packets[3])).any()  # without refresh_s: no flags
+    for keep, bound in zip((1, 2, 3), refreshing.layer_bounds):
+        errors = _frame_errors(walk_bvh, _decoded(refreshing, walk_bvh, again, [keep] * len(again)))
+        assert errors.max() <= bound + 1e-9
+
+
+def test_after_a_loss_each_layer_is_back_at_its_next_restart(walk_bvh):
+    codec = get_codec("kinwave-live", layers=3, refresh_s=0.5)
+    enc = codec.encoder(walk_bvh.skeleton, walk_bvh.fps)
+    packets = enc.push(walk_bvh.channels) + enc.flush()
+    clean = codec.decoder(walk_bvh.skeleton, walk_bvh.fps)
+    expected = [clean.push(p) for p in packets]
+    starts = [codec.layer_starts(p) for p in packets]
+    dec = codec.decoder(walk_bvh.skeleton, walk_bvh.fps)
+    for p in packets[:12]:
+        dec.push(p)
+    assert dec.lost() and not dec.in_step  # packet 12 is lost
+    base_back = next(i for i in range(13, len(packets)) if starts[i][0])
+    for i in range(13, base_back):
+        with pytest.raises(OutOfStepError):
+            dec.push(packets[i])
+    top_back = next(i for i in range(base_back, len(packets)) if starts[i][2])
+    layers_seen = []
+    for i in range(base_back, len(packets)):
+        out = dec.push(packets[i])
+        layers_seen.append(dec.layers_in_step)
+        if i >= top_back:
+            assert np.array_equal(out, expected[i])
+    assert layers_seen[0] == 1 and layers_seen[-1] == 3 and layers_seen == sorted(layers_seen)
+    assert (top_back - base_back) * live.packet_frames(walk_bvh.fps) <= 60  # within one period

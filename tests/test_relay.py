@@ -154,8 +154,10 @@ def test_the_far_avatar_of_a_layered_stream_gets_the_base_layer_only(walk_bvh):
 
     got = asyncio.run(go())
     whole = receive_clip(stream_clip(walk_bvh, codec, stream=0)).channels
-    np.testing.assert_array_equal(got[0].channels, whole)
-    assert _max_joint_error_cm(walk_bvh, got[0].channels) <= 1.0 + 1e-9
+    near = got[0].channels  # the recording stops at the far one's end: the near one may lack its last packets
+    assert len(near) > 0.9 * len(whole)
+    np.testing.assert_array_equal(near, whole[: len(near)])
+    assert _max_joint_error_cm(walk_bvh[: len(near)], near) <= 1.0 + 1e-9
     assert 2.0 < _max_joint_error_cm(far, got[1].channels) <= 4.0 + 1e-9
 
 
@@ -190,6 +192,27 @@ def test_a_malformed_message_closes_that_connection_only(walk_bvh):
             return await viewer
 
     assert asyncio.run(go())[0].num_frames == walk_bvh.num_frames
+
+
+def test_a_viewer_gains_a_layer_only_where_it_restarts(walk_bvh):
+    from mocodec.stream.relay import Forward, StreamState
+
+    codec = get_codec("kinwave-live", layers=3, refresh_s=0.5)
+    state = StreamState(None, None, None, codec, layer_rates=np.array([1000.0, 2000.0, 3000.0]))
+    viewer = Viewer(ws=None, transport=None)
+
+    def kept(share, starts, keyframe=False):
+        packet = stream_clip(walk_bvh[:12], codec)[1 if keyframe else 2]
+        f = Forward(packet, b"", layer_ends=[1, 2, 3], layer_starts=starts)
+        return Relay._layers_for(viewer, f, state, share)
+
+    assert kept(1500, [False] * 3, keyframe=True) == 1  # the share fits the base only
+    assert kept(5000, [False] * 3) == 1  # room for more, but layer 1 has no history
+    assert kept(5000, [False, False, True]) == 1  # layer 2 cannot come without layer 1
+    assert kept(5000, [False, True, False]) == 2
+    assert kept(5000, [False, False, True]) == 3
+    assert kept(2500, [False] * 3) == 2  # dropping a layer needs no restart
+    assert kept(500, [False] * 3) == 1  # the base always goes
 
 
 def test_a_layered_packet_whose_sections_overrun_closes_its_sender(walk_bvh):

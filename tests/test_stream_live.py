@@ -198,3 +198,24 @@ def test_random_payloads_are_concealed_for_every_codec(walk_bvh, codec_id):
     every_third = [packets[0]] + [noise(p) if k % 3 == 1 else p for k, p in enumerate(packets[1:])]
     got = receive_clip(every_third)  # no frames before the first good key
     assert got.num_frames <= 200 and np.isfinite(got.channels).all()
+
+
+def test_a_refreshing_stream_is_back_without_keyframes_after_a_loss_or_a_late_join(walk_bvh):
+    """kinwave-live with refresh_s: no keyframe after the first, yet a receiver that lost a
+    packet, or joined late, decodes exactly again once every layer has restarted."""
+    codec = get_codec("kinwave-live", layers=2, refresh_s=0.25)
+    packets = stream_clip(walk_bvh, codec, keyframe_s=60.0)
+    assert sum(p.keyframe for p in packets) == 1
+    clean = receive_clip(packets).channels
+    period = int(0.25 * walk_bvh.fps)
+    lost = 20
+    frame = packets[lost].first_frame
+    got = receive_clip(packets[:lost] + packets[lost + 1 :]).channels
+    assert len(got) == len(clean)
+    assert not np.array_equal(got[frame : frame + 4], clean[frame : frame + 4])  # concealed
+    back = frame + 2 * period  # both layers restart within a period, after the lost packet
+    np.testing.assert_array_equal(got[back:], clean[back:])
+    late = receive_clip(packets[:1] + packets[lost:])  # the header, then mid-stream
+    start = len(clean) - late.num_frames
+    assert packets[lost].first_frame <= start <= back
+    np.testing.assert_array_equal(late.channels[back - start :], clean[back:])

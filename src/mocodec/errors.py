@@ -32,3 +32,7 @@ class CorruptStreamError(MocodecError):
 
 class CodecError(MocodecError):
     """A codec cannot do what was asked: unknown id, bad knob, unencodable input, unmet target."""
+
+
+class OutOfStepError(MocodecError):
+    """A stream decoder that lost packets has not yet reached a packet it can decode from."""

@@ -123,6 +123,11 @@ class Layered(Protocol):
         """Where each layer a stream packet carries ends; CorruptStreamError if it does not parse."""
         ...
 
+    def layer_starts(self, packet: bytes) -> list[bool]:
+        """For each layer a stream packet carries, whether the layer restarts in it (a receiver
+        that did not have the layer may take it from this packet on)."""
+        ...
+
 
 def checked_frames(codec_id: str, skeleton: Skeleton, frames: np.ndarray) -> np.ndarray:
     """Pushed ``frames`` as a float64 ``(n, channels)`` array; CodecError unless they fit the
@@ -153,6 +158,19 @@ class StreamDecoder:
 
     def push(self, packet: bytes) -> np.ndarray:
         raise NotImplementedError
+
+    @property
+    def in_step(self) -> bool:
+        """Whether the next packet can decode (after :meth:`lost`, not until the codec stream
+        has restarted enough of itself)."""
+        return True
+
+    def lost(self) -> bool:
+        """Told that packets were lost (or one was damaged): True if the decoder finds its own way back (its codec
+        stream restarts parts of itself; :meth:`push` raises
+        :class:`~mocodec.errors.OutOfStepError` until it can decode again), False if it must be
+        replaced at the next keyframe."""
+        return False
 
 
 class Codec:

@@ -24,7 +24,7 @@ import numpy as np
 from mocodec.codecs import codec_from_untrusted
 from mocodec.codecs.base import Codec, Embedded, StreamDecoder, StreamEncoder, checked_frames
 from mocodec.coding.entropy.rangecoder import encode_ints
-from mocodec.errors import CodecError
+from mocodec.errors import CodecError, OutOfStepError
 from mocodec.motion import Motion
 from mocodec.skeleton import POSITION_CHANNELS, Skeleton
 from mocodec.stream.packets import CUTS, DATA, END, HEADER, KEYFRAME, Packet, StreamInfo, header_packet, with_cuts
@@ -223,6 +223,7 @@ class LiveDecoder:
         self.max_gap = max(min(int(MAX_CONCEAL_S * info.fps), MAX_CONCEAL_VALUES // info.skeleton.num_channels), 1)
         self.conceal = conceal
         self.decoder: StreamDecoder | None = None
+        self.resyncs: bool | None = None  # the codec's decoders find their way into a stream under way
         self.expected: int | None = None  # next sequence number
         self.next_frame: int | None = None  # next frame number to output
         self.tail = np.zeros((0, info.skeleton.num_channels))  # the last frames out
@@ -231,7 +232,7 @@ class LiveDecoder:
 
     @property
     def in_sync(self) -> bool:
-        return self.decoder is not None
+        return self.decoder is not None and self.decoder.in_step
 
     def push(self, packet: Packet) -> np.ndarray:
         """The frames up to the end of this packet's range: decoded, or concealed (none for
@@ -254,7 +255,8 @@ class LiveDecoder:
                 return empty
             if ahead:
                 self.stats.lost += ahead
-                self.decoder = None
+                if self.decoder is not None and not self.decoder.lost():
+                    self.decoder = None
         self.expected = (packet.sequence + 1) & 0xFFFFFFFF
         self.stats.packets += 1
         self.ended = self.ended or packet.end
@@ -262,8 +264,10 @@ class LiveDecoder:
             self.stats.resyncs += self.decoder is None and self.next_frame is not None
             self.decoder = self.codec.decoder(self.info.skeleton, self.info.fps)
         elif self.decoder is None:
-            self.stats.dropped += 1
-            return self._concealed(packet.first_frame + packet.frames)
+            self.decoder = self._resyncing_decoder()
+            if self.decoder is None:
+                self.stats.dropped += 1
+                return self._concealed(packet.first_frame + packet.frames)
         head = self._concealed(packet.first_frame)
         try:
             payload = packet.codec_payload
@@ -274,13 +278,29 @@ class LiveDecoder:
                 )
             if not np.isfinite(frames).all():
                 raise CodecError(f"packet {packet.sequence} decodes to values that are not finite")
+        except OutOfStepError:  # the codec finds its own way back: keep it, conceal meanwhile
+            self.stats.dropped += 1
+            if not len(self.tail):
+                self.next_frame = None  # nothing out yet: start where the first decoded frame is
+            return np.vstack((head, self._concealed(packet.first_frame + packet.frames)))
         except Exception:  # noqa: BLE001 - whatever a damaged payload does to a codec, conceal
-            self.decoder = None
+            if not self.decoder.lost():
+                self.decoder = None
             self.stats.dropped += 1
             return np.vstack((head, self._concealed(packet.first_frame + packet.frames)))
         if packet.end:
             self.decoder = None
         return np.vstack((head, self._emit(frames)))
+
+    def _resyncing_decoder(self) -> StreamDecoder | None:
+        """A decoder that finds its way into a codec stream already under way (one whose
+        codec restarts parts of itself), or None: wait for a keyframe."""
+        if self.resyncs is False:
+            return None
+        decoder = self.codec.decoder(self.info.skeleton, self.info.fps)
+        resyncs = decoder.lost()
+        self.resyncs = resyncs
+        return decoder if resyncs else None
 
     def _emit(self, frames: np.ndarray) -> np.ndarray:
         if self.next_frame is None:

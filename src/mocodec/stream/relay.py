@@ -132,6 +132,7 @@ class Forward:
     cuts: np.ndarray | None = None
     cutter: Callable[[float], bytes] | None = None  # the codec's packet cutter, made at the first cut
     layer_ends: list[int] | None = None  # a layered stream's data packet: where each layer ends
+    layer_starts: list[bool] = field(default_factory=list)  # ... and which layers restart in it
 
 
 class _Cursors:
@@ -409,6 +410,7 @@ class Relay:
             if state.layered and p.frames:
                 try:
                     forward.layer_ends = state.codec.layer_ends(p.codec_payload)
+                    forward.layer_starts = state.codec.layer_starts(p.codec_payload)
                 except MocodecError as e:
                     raise Closing(BAD_MESSAGE, f"stream {p.stream}: packet {p.sequence}: {e}") from None
                 state.measure_layers(p, forward.layer_ends)
@@ -575,13 +577,15 @@ class Relay:
     @staticmethod
     def _layers_for(viewer: Viewer, f: Forward, state: StreamState, share: float) -> int:
         """The layers of a layered stream's packet a viewer gets: the most whose rate fits its
-        share, at least the base; more than it had only from a keyframe (a layer it missed
-        has lost its prediction's history)."""
+        share, at least the base; more than it had only from a keyframe or a packet where the
+        next layer restarts (a layer it missed has lost its prediction's history)."""
         assert state.layer_rates is not None  # measured from the stream's first data packet
         fits = max(int(np.searchsorted(state.layer_rates, share, side="right")), 1)
         stream = f.packet.stream
         had = viewer.layers.get(stream)
         keep = fits if f.packet.keyframe or had is None else min(fits, had)
+        while keep < min(fits, len(f.layer_starts)) and f.layer_starts[keep]:
+            keep += 1
         viewer.layers[stream] = keep
         return keep
 

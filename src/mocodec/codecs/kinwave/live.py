@@ -50,7 +50,7 @@ from mocodec.codecs.kinwave.payload import channel_steps, rotation_joints, step_
 from mocodec.codecs.registry import register
 from mocodec.codecs.shared import closedloop
 from mocodec.coding.entropy import binarycoder as bc
-from mocodec.errors import CodecError, CorruptStreamError
+from mocodec.errors import CodecError, CorruptStreamError, OutOfStepError
 from mocodec.formats import varint
 from mocodec.kinematics import channel_plan, forward_kinematics
 from mocodec.metrics.pose import shell_errors
@@ -167,12 +167,26 @@ def _get_head(st, data, state, full):
     return frames, change, stride
 
 
+@numba.njit(inline="always")
+def _restart_context():
+    """The context of a section's restart flag, 1 in 16, made afresh for each flag (never
+    adapted), so that a decoder that lost the stream's contexts reads it."""
+    state = np.empty((3, 1), dtype=np.int64)
+    state[0, 0] = state[1, 0] = 65536 - 65536 // 16
+    state[2, 0] = bc.WARM_DONE
+    return state
+
+
 @numba.njit(cache=True)
-def _code_packet(ints, frames, full, offset_change, stride, first, count, orders, state, buf, last_nonzero):
-    """Arithmetic-code one packet: its head (:func:`_put_head`), then per joint (channels
-    ``first[j]`` to ``first[j] + count[j]``) its predictor order and an "any nonzero" flag, then
-    the integers ``(T, C)`` of its coded frames. Returns the bytes written."""
+def _code_packet(ints, frames, full, offset_change, stride, first, count, orders, state, buf, last_nonzero, restart):
+    """Arithmetic-code one packet: whether the layer restarts here (``restart`` 0 or 1, in a
+    fixed context, so that a decoder out of step reads it; -1: the stream has no refresh and no
+    flag), its head (:func:`_put_head`), then per joint (channels ``first[j]`` to
+    ``first[j] + count[j]``) its predictor order and an "any nonzero" flag, then the integers
+    ``(T, C)`` of its coded frames. Returns the bytes written."""
     st = bc.encoder_state()
+    if restart >= 0:
+        bc.put(st, buf, _restart_context(), 0, restart)
     T, C = ints.shape
     J = first.size
     per = PER_CHANNEL
@@ -202,10 +216,16 @@ def _code_packet(ints, frames, full, offset_change, stride, first, count, orders
 
 
 @numba.njit(cache=True)
-def _decode_head(data, full, state):
+def _restarts(data):
+    """The decoder after a section's restart flag, and the flag."""
     st = bc.start_decoder(data)
+    return st, bc.get(st, data, _restart_context(), 0)
+
+
+@numba.njit(cache=True)
+def _decode_head(st, data, full, state):
     frames, change, stride = _get_head(st, data, state, full)
-    return st, frames, change, stride
+    return frames, change, stride
 
 
 @numba.njit(cache=True)
@@ -372,6 +392,15 @@ class KinwaveLiveCodec(Codec):
             1,
             MAX_LAYERS,
         ),
+        Knob(
+            "refresh_s",
+            float,
+            0.0,
+            "seconds between restarts of each layer inside the codec stream, the layers' restarts "
+            "spread over that time (0: none; the live stream's keyframes restart the whole stream)",
+            0.0,
+            60.0,
+        ),
     )
     quality = QualityKnob("max_error_cm", higher_is_better=False, log_scale=True)
     streaming = True
@@ -387,6 +416,21 @@ class KinwaveLiveCodec(Codec):
 
     def layer_ends(self, packet: bytes) -> list[int]:
         return section_ends(packet, self.config["layers"])
+
+    def layer_starts(self, packet: bytes) -> list[bool]:
+        if not self.config["refresh_s"]:
+            return [False] * len(section_ends(packet, self.config["layers"]))
+        return [bool(_restarts(_section_data(x))[1]) for x in split_layers(packet, self.config["layers"])]
+
+    def restart_frames(self, fps: float) -> tuple[int, list[int]]:
+        """(period, phase of each layer) in frames of the layers' restarts inside a codec stream:
+        layer k restarts in the packet that holds a frame ``f`` with ``f % period == phase[k]``
+        (0: never)."""
+        if not self.config["refresh_s"]:
+            return 0, []
+        period = max(int(round(self.config["refresh_s"] * fps)), packet_frames(fps))
+        layers = self.config["layers"]
+        return period, [k * period // layers for k in range(layers)]
 
     def encoder(self, skeleton: Skeleton, fps: float) -> StreamEncoder:
         return _LiveEncoder(self, skeleton, fps)
@@ -416,6 +460,11 @@ class KinwaveLiveCodec(Codec):
 
 def _layers(codec: KinwaveLiveCodec, skeleton: Skeleton) -> list[_Layer]:
     return [_Layer(skeleton, b, codec.config["error_measure"]) for b in codec.layer_bounds]
+
+
+def _section_data(section: bytes) -> np.ndarray:
+    """A section as the arithmetic decoder reads it: its always-zero first byte put back."""
+    return np.frombuffer(b"\0" + bytes(section), dtype=np.uint8)
 
 
 def _reconstruct(layer: _Layer, ints: np.ndarray, orders: np.ndarray, offset: int, stride: int, cells: _Cells):
@@ -471,6 +520,8 @@ class _LiveEncoder(StreamEncoder):
         self.previous: np.ndarray | None = None  # the last continuous frame
         self.offsets = [0] * len(self.layers)  # where each layer's next packet starts
         self.cm = 100.0 / skeleton.units_per_metre
+        self.period, self.phases = codec.restart_frames(fps)
+        self.frame = 0  # the first frame of the next packet
 
     def push(self, frames: np.ndarray) -> list[bytes]:
         cont = continuous_frames(self.codec.id, self.skeleton, self.fps, frames, self.previous)
@@ -562,22 +613,47 @@ class _LiveEncoder(StreamEncoder):
             offset = max(offset - FINER, -MAX_OFFSET)
         return None
 
-    def _bytes(self, layer: _Layer, ints, frames, offset, stride, orders, trial: bool) -> bytes:
+    def _bytes(self, layer: _Layer, ints, frames, offset, stride, orders, restart: int, trial: bool) -> bytes:
         state, last = (layer.state.copy(), layer.last_nonzero.copy()) if trial else (layer.state, layer.last_nonzero)
         buf = bc.buffer_for(bc.int_decisions(ints) + 2 * layer.first.size + 64)
         n = _code_packet(
-            ints, frames, self.size, offset - layer.offset, stride, layer.first, layer.count, orders, state, buf, last
+            ints,
+            frames,
+            self.size,
+            offset - layer.offset,
+            stride,
+            layer.first,
+            layer.count,
+            orders,
+            state,
+            buf,
+            last,
+            restart,
         )
         return buf[1:n].tobytes()  # the first byte is always 0
 
     def _packet(self, values: np.ndarray) -> bytes:
         goal = forward_kinematics(self.skeleton, values)
         cells = _Cells(len(values), values.shape[1])
-        return join_layers([self._layer_packet(k, values, goal, cells) for k in range(len(self.layers))])
+        sections = [self._layer_packet(k, values, goal, cells) for k in range(len(self.layers))]
+        self.frame += len(values)
+        return join_layers(sections)
+
+    def _restart_flag(self, k: int, frames: int) -> int:
+        """-1 without refresh; else 1 if layer ``k`` restarts in the packet of ``frames`` frames
+        starting at ``self.frame`` (never in the stream's first: every layer starts there)."""
+        if not self.period:
+            return -1
+        first = (self.phases[k] - self.frame) % self.period  # the packet's first restart frame
+        return int(self.frame > 0 and first < frames)
 
     def _layer_packet(self, k: int, values: np.ndarray, goal, cells: _Cells) -> bytes:
         """Layer ``k`` of a packet: the cheapest stride that holds its bound on every frame,
-        predicted within the cells of the layers below; the cells become its own."""
+        predicted within the cells of the layers below; the cells become its own. A layer that
+        restarts here starts again from nothing: its history, contexts and scale offset."""
+        restart = self._restart_flag(k, len(values))
+        if restart == 1:
+            self.layers[k] = _Layer(self.skeleton, self.bounds[k], self.codec.config["error_measure"])
         layer = self.layers[k]
         orders = self._orders(layer, values)
         sparse = layer.started and len(values) == self.size
@@ -587,41 +663,72 @@ class _LiveEncoder(StreamEncoder):
             if fit is None:
                 continue
             ints, coded, coded_cells, offset, worst = fit
-            size = len(self._bytes(layer, ints, len(values), offset, stride, orders, trial=True))
+            size = len(self._bytes(layer, ints, len(values), offset, stride, orders, restart, trial=True))
             if best is None or size < best[0]:
                 best = (size, stride, ints, coded, coded_cells, offset, worst)
         if best is None:
             raise CodecError(f"kinwave-live cannot hold {self.bounds[k]:g} cm on a packet")
         _, stride, ints, coded, coded_cells, offset, worst = best
         self.offsets[k] = min(offset + 1, MAX_OFFSET) if worst < COARSER_BELOW * self.bounds[k] else offset
-        data = self._bytes(layer, ints, len(values), offset, stride, orders, trial=False)
+        data = self._bytes(layer, ints, len(values), offset, stride, orders, restart, trial=False)
         _advance(layer, coded, stride, offset, cells)
         cells.update(stride, *coded_cells)
         return data
 
 
 class _LiveDecoder(StreamDecoder):
-    """Decodes every layer a packet carries; once a layer is missing (a relay dropped it) it
-    stays out until the stream restarts, since its prediction lost its history."""
+    """Decodes every layer a packet carries that it is in step with: a layer the packet lacks
+    (a relay dropped it) or that followed a loss is out of step until it restarts (a packet
+    whose section says so, with ``refresh_s``, or the next codec stream), and so are the
+    layers above it, whose predictions lean on it."""
 
     def __init__(self, codec: KinwaveLiveCodec, skeleton: Skeleton, fps: float):
         self.codec, self.skeleton = codec, skeleton
         self.layers = _layers(codec, skeleton)
-        self.live = len(self.layers)  # the layers still decodable
+        self.bounds = codec.layer_bounds
+        self.layer_in_step = [True] * len(self.layers)
+        self.refresh = bool(codec.config["refresh_s"])
         self.size = packet_frames(fps)
+
+    @property
+    def in_step(self) -> bool:
+        return self.layer_in_step[0]
+
+    @property
+    def layers_in_step(self) -> int:
+        """How many layers the next packet can decode (those below an out-of-step one)."""
+        return self.layer_in_step.index(False) if False in self.layer_in_step else len(self.layers)
+
+    def lost(self) -> bool:
+        self.layer_in_step = [False] * len(self.layers)
+        return self.refresh
 
     def push(self, packet: bytes) -> np.ndarray:
         sections = split_layers(bytes(packet), len(self.layers))
-        self.live = min(self.live, len(sections))
         cells = out = None
-        for k in range(self.live):
-            out, cells = self._layer(self.layers[k], sections[k], cells)
-        assert out is not None  # the base layer is always there
+        below = True  # every layer below this one decoded this packet
+        for k in range(len(self.layers)):
+            if below and k < len(sections):
+                data = _section_data(sections[k])
+                st, restart = _restarts(data) if self.refresh else (bc.start_decoder(data), 0)
+                if restart:
+                    self.layers[k] = _Layer(self.skeleton, self.bounds[k], self.codec.config["error_measure"])
+                    self.layer_in_step[k] = True
+            below = below and k < len(sections) and self.layer_in_step[k]
+            if not below:
+                self.layer_in_step[k] = False
+                continue
+            try:
+                out, cells = self._layer(self.layers[k], st, data, cells)
+            except CorruptStreamError:
+                self.layer_in_step[k:] = [False] * (len(self.layers) - k)
+                raise
+        if out is None:
+            raise OutOfStepError("kinwave-live: waiting for the base layer to restart")
         return out
 
-    def _layer(self, layer: _Layer, section: bytes, cells: _Cells | None):
-        data = np.frombuffer(b"\0" + section, dtype=np.uint8)
-        st, frames, change, stride = _decode_head(data, self.size, layer.state)
+    def _layer(self, layer: _Layer, st: np.ndarray, data: np.ndarray, cells: _Cells | None):
+        frames, change, stride = _decode_head(st, data, self.size, layer.state)
         offset = layer.offset + change
         if not (
             1 <= frames <= self.size

@@ -1,7 +1,8 @@
 """Live avatars at a guaranteed max joint error: kinwave-live against offline kinwave and
 deadreckoning, per source (CMU BVH and ASF/AMC at 120 fps, Bandai Namco at 30 fps).
 
-    python benchmarks/bench_live.py [--clips N] [--bound 1.0] [--keyframe-s 1] [--loss 0.1] [--layers 3] [--jobs 2]
+    python benchmarks/bench_live.py [--clips N] [--bound 1.0] [--keyframe-s 1] [--refresh-s 0] [--loss 0.1]
+                                    [--layers 3] [--jobs 2]
 
 Per clip: kbit/s of one codec stream's packets alone, and of the live stream as a sender sends
 it (stream/live.py: keyframes every second, each restarting the codec stream, and the compact
@@ -10,7 +11,9 @@ frame back); the measured max and mean joint error of every decoded frame; for d
 the threshold rate control finds for the bound (its delay: 3 frames), for offline kinwave the
 whole clip at the bound (its delay: the 256-frame segment); and the resync time under random
 packet loss (seeded): for every lost packet, from its first frame until the receiver decodes the
-stream exactly again (the next keyframe it gets). Then the layered stream (``--layers``, each
+stream exactly again (the next keyframe it gets). With ``--refresh-s`` the codec stream refreshes
+itself instead (kinwave-live's ``refresh_s``: each layer restarts on its own, spread over that
+time) and keyframes come only every minute. Then the layered stream (``--layers``, each
 layer twice the bound of the next, the top one at the bound): per layer, kbit/s of the live
 stream a relay sends a viewer that gets that layer and those below it (framing included), and
 the max and mean joint error of its decoding. Prints the medians per source, and the 99th
@@ -46,8 +49,18 @@ def joint_errors(motion, channels) -> np.ndarray:
     return np.linalg.norm(p1 - p0, axis=2) * cm
 
 
-def resync_times(motion, packets, loss: float, seed: int) -> list[float]:
-    """Seconds from each lost packet's first frame until the receiver is back in sync."""
+NO_KEYFRAMES_S = 60.0  # keyframes of a stream that refreshes itself
+
+
+def layers_in_step(dec: LiveDecoder) -> int:
+    if not dec.in_sync:
+        return 0
+    return getattr(dec.decoder, "layers_in_step", 1)
+
+
+def resync_times(motion, packets, loss: float, seed: int, layers: int = 1) -> list[float]:
+    """Seconds from each lost packet's first frame until the receiver decodes ``layers``
+    layers (all of a single-layer stream) exactly again."""
     rng = np.random.default_rng(seed)
     dec = LiveDecoder(StreamInfo.from_payload(packets[0].payload))
     times, waiting = [], []
@@ -56,19 +69,20 @@ def resync_times(motion, packets, loss: float, seed: int) -> list[float]:
             waiting.append(p.first_frame)
             continue
         dec.push(p)
-        if dec.in_sync and waiting:
+        if layers_in_step(dec) >= layers and waiting:
             times += [(p.first_frame - f) / motion.fps for f in waiting]
             waiting = []
     return times + [(packets[-1].first_frame + packets[-1].frames - f) / motion.fps for f in waiting]
 
 
-def layer_rows(motion, bound: float, layers: int, keyframe_s: float) -> dict:
-    """Per layer kept (1..layers): the live stream's kbit/s cut to it, and the max and mean
-    joint error of the clip's packets cut to it."""
-    codec = get_codec("kinwave-live", max_error_cm=bound, layers=layers)
+def layer_rows(motion, bound: float, layers: int, keyframe_s: float, refresh_s: float, loss: float, seed: int) -> dict:
+    """Per layer kept (1..layers): the live stream's kbit/s cut to it, the max and mean
+    joint error of the clip's packets cut to it, and the resync times under loss."""
+    codec = get_codec("kinwave-live", max_error_cm=bound, layers=layers, refresh_s=refresh_s)
     enc = codec.encoder(motion.skeleton, motion.fps)
     packets = enc.push(motion.channels) + enc.flush()
-    stream = [p for p in stream_clip(motion, codec, keyframe_s=keyframe_s) if p.kind != HEADER]
+    sent = stream_clip(motion, codec, keyframe_s=keyframe_s)
+    stream = [p for p in sent if p.kind != HEADER]
     kbps, max_cm, mean_cm = [], [], []
     for keep in range(1, layers + 1):
         cut = [p[: codec.layer_ends(p)[keep - 1]] if keep < layers else p for p in packets]
@@ -76,9 +90,14 @@ def layer_rows(motion, bound: float, layers: int, keyframe_s: float) -> dict:
         err = joint_errors(motion, np.concatenate([dec.push(p) for p in cut]))
         max_cm.append(float(err.max()))
         mean_cm.append(float(err.mean()))
-        sent = sum(len(p.to_bytes()) - len(p.payload) + cut_size(codec, p.payload, keep) for p in stream)
-        kbps.append(sent * 8 / motion.duration / 1000)
-    return {"layer_kbps": kbps, "layer_max_cm": max_cm, "layer_mean_cm": mean_cm}
+        size = sum(len(p.to_bytes()) - len(p.payload) + cut_size(codec, p.payload, keep) for p in stream)
+        kbps.append(size * 8 / motion.duration / 1000)
+    return {
+        "layer_kbps": kbps,
+        "layer_max_cm": max_cm,
+        "layer_mean_cm": mean_cm,
+        "layer_resync_s": [resync_times(motion, sent, loss, seed, keep) for keep in (1, layers)],
+    }
 
 
 def cut_size(codec, payload: bytes, keep: int) -> int:
@@ -86,10 +105,14 @@ def cut_size(codec, payload: bytes, keep: int) -> int:
     return ends[min(keep, len(ends)) - 1]
 
 
-def measure(path: str, bound: float, keyframe_s: float = 1.0, loss: float = 0.1, layers: int = 3) -> dict:
+def measure(
+    path: str, bound: float, keyframe_s: float = 1.0, loss: float = 0.1, layers: int = 3, refresh_s: float = 0.0
+) -> dict:
     motion = load(path)
     seconds = motion.duration
-    codec = get_codec("kinwave-live", max_error_cm=bound)
+    codec = get_codec("kinwave-live", max_error_cm=bound, refresh_s=refresh_s)
+    keyframe_s = NO_KEYFRAMES_S if refresh_s else keyframe_s
+    seed = sum(map(ord, path))
     enc = codec.encoder(motion.skeleton, motion.fps)
     packets = enc.push(motion.channels) + enc.flush()
     dec = codec.decoder(motion.skeleton, motion.fps)
@@ -113,8 +136,8 @@ def measure(path: str, bound: float, keyframe_s: float = 1.0, loss: float = 0.1,
         "offline_delay_ms": 1000 * offline.config["window"] / motion.fps,
         "dr_kbps": dr.bitrate / 1000,
         "dr_max_cm": dr.max_error_cm,
-        "resync_s": resync_times(motion, sent, loss, sum(map(ord, path))),
-        **(layer_rows(motion, bound, layers, keyframe_s) if layers > 1 else {}),
+        "resync_s": resync_times(motion, sent, loss, seed),
+        **(layer_rows(motion, bound, layers, keyframe_s, refresh_s, loss, seed) if layers > 1 else {}),
     }
 
 
@@ -123,6 +146,7 @@ def main() -> None:
     ap.add_argument("--clips", type=int, default=6, help="clips per source (0: all)")
     ap.add_argument("--bound", type=float, default=1.0, help="max joint error, cm")
     ap.add_argument("--keyframe-s", type=float, default=1.0, help="seconds between keyframes (default 1)")
+    ap.add_argument("--refresh-s", type=float, default=0.0, help="the codec refreshes itself (default: keyframes)")
     ap.add_argument("--loss", type=float, default=0.1, help="packet loss for the resync times (default 0.1)")
     ap.add_argument("--layers", type=int, default=3, help="layers of the layered stream (1: none; default 3)")
     ap.add_argument("--jobs", type=int, default=2)
@@ -142,6 +166,7 @@ def main() -> None:
                     [args.keyframe_s] * n,
                     [args.loss] * n,
                     [args.layers] * n,
+                    [args.refresh_s] * n,
                 )
             )
             resync = np.concatenate([r["resync_s"] for r in rows])
@@ -150,6 +175,10 @@ def main() -> None:
                 return float(np.median([r[key] for r in rows]))
 
             ratio = np.median([r["live_kbps"] / r["offline_kbps"] for r in rows])
+            refresh = (
+                f"refresh every {args.refresh_s:g} s" if args.refresh_s else f"keyframes every {args.keyframe_s:g} s"
+            )
+
             vs_dr = np.median([r["live_kbps"] / r["dr_kbps"] for r in rows])
             print(
                 f"{name} ({len(rows)} clips) at {args.bound:g} cm: kinwave-live {med('live_kbps'):.2f} kbit/s "
@@ -159,7 +188,7 @@ def main() -> None:
                 f"{med('offline_kbps'):.2f} kbit/s (delay {med('offline_delay_ms'):.0f} ms), "
                 f"live/offline x{ratio:.2f} | "
                 f"deadreckoning {med('dr_kbps'):.2f} kbit/s (max {max(r['dr_max_cm'] for r in rows):.3f} cm), "
-                f"live/deadreckoning x{vs_dr:.2f} | keyframes every {args.keyframe_s:g} s, {100 * args.loss:g}% loss: "
+                f"live/deadreckoning x{vs_dr:.2f} | {refresh}, {100 * args.loss:g}% loss: "
                 f"resync median {np.median(resync):.2f} s, 99th percentile {np.percentile(resync, 99):.2f} s",
                 flush=True,
             )
@@ -174,11 +203,14 @@ def print_layers(name: str, rows: list[dict], bound: float, layers: int) -> None
     over_single = np.median([r["layer_kbps"][-1] / r["framed_kbps"] for r in rows])
     worst = np.max([r["layer_max_cm"] for r in rows], axis=0)
     mean = np.median([r["layer_mean_cm"] for r in rows], axis=0)
+    base, full = (np.concatenate([r["layer_resync_s"][k] for r in rows]) for k in (0, 1))
     print(
         f"{name} layers {'/'.join(f'{b:g}' for b in bounds)} cm: live stream "
         f"{'/'.join(f'{k:.2f}' for k in kbps)} kbit/s, base {100 * base_share:.0f}% of the full stream, "
         f"full / single layer x{over_single:.2f}, max {'/'.join(f'{w:.3f}' for w in worst)} cm, "
-        f"mean {'/'.join(f'{m:.3f}' for m in mean)} cm",
+        f"mean {'/'.join(f'{m:.3f}' for m in mean)} cm | resync base median {np.median(base):.2f} s, "
+        f"99th percentile {np.percentile(base, 99):.2f} s; all layers {np.median(full):.2f} s, "
+        f"{np.percentile(full, 99):.2f} s",
         flush=True,
     )
 

@@ -2,7 +2,7 @@
 
 The relay runs as `mocodec serve` in its own process (or two relays joined by a NATS server
 with --nats); publishers and viewers run in other processes. Each avatar replays the live
-packets of a real clip (07_03, dpcm, keyframes every --keyframe-s seconds), restamped with its
+packets of a real clip (07_03, dpcm, spiht or kinwave-live, keyframes every --keyframe-s seconds), restamped with its
 stream id, sequence number and the send time; viewers read every batch's timestamps and
 sequence numbers in bulk and report delivered and lost packets and the end-to-end latency
 (send -> receipt, which includes waiting for the relay's next 30 Hz tick). With --loss P each
@@ -14,6 +14,11 @@ memory (RSS) are read with psutil.
     .venv/bin/python benchmarks/relay_load.py                     # 500 avatars, 50 viewers, 20 s
     .venv/bin/python benchmarks/relay_load.py --loss 0.1
     .venv/bin/python benchmarks/relay_load.py --nats              # two relays over NATS
+    .venv/bin/python benchmarks/relay_load.py --codec kinwave-live --layers 3 --budget 200000
+
+With --budget each viewer declares that many bit/s from a random camera in the crowd: the relay
+cuts spiht streams to their crowd shares and keeps the layers of kinwave-live streams that fit
+them; the viewers report the bit/s they received.
 """
 
 from __future__ import annotations
@@ -58,16 +63,24 @@ def wait_port(port: int, seconds: float = 20.0) -> None:
     raise SystemExit(f"nothing listens on port {port} after {seconds} s")
 
 
-def templates(codec_id: str, bits_per_second: float, keyframe_s: float):
+def codec_of(codec_id: str, bits_per_second: float, layers: int, refresh_s: float):
+    from mocodec.codecs import get_codec
+
+    if codec_id == "spiht":
+        return get_codec("spiht", bits_per_second=bits_per_second)
+    if codec_id == "kinwave-live":
+        return get_codec("kinwave-live", layers=layers, refresh_s=refresh_s)
+    return get_codec(codec_id)
+
+
+def templates(codec: tuple, keyframe_s: float):
     """The clip's live stream as a sender makes it: (header, [(tick, packet bytes)], ticks, frames),
     the last packet's END flag cleared so the clip can loop (every loop starts at a keyframe)."""
     from mocodec import load
-    from mocodec.codecs import get_codec
     from mocodec.stream.live import END, clip_encoder, tick_frames
 
     motion = load(DATA / "07_03.bvh")
-    codec = get_codec(codec_id, **({"bits_per_second": bits_per_second} if codec_id == "spiht" else {}))
-    enc = clip_encoder(motion, codec, 0, keyframe_s)
+    enc = clip_encoder(motion, codec_of(*codec), 0, keyframe_s)
     step = tick_frames(motion.fps)
     ticks = -(-motion.num_frames // step)
     timed = [(k, p) for k in range(ticks) for p in enc.push(motion.channels[k * step : (k + 1) * step], 0)]
@@ -97,7 +110,7 @@ def publisher(url: str, token: str, streams: list[int], seconds: float, codec: t
 
     from mocodec.stream.packets import pack_batch
 
-    header, data, ticks, clip_frames = templates(*codec, keyframe_s)
+    header, data, ticks, clip_frames = templates(codec, keyframe_s)
     by_tick: dict[int, list[tuple[int, bytes, int]]] = {}
     for idx, (k, d) in enumerate(data):
         by_tick.setdefault(k, []).append((idx, d, struct.unpack_from("<I", d, 22)[0]))
@@ -178,7 +191,7 @@ def viewers(
     )
 
     hist = np.zeros(int(MAX_MS / BINS_MS) + 1, dtype=np.int64)
-    tally = {"received": 0, "dropped": 0, "batches": 0, "lost": 0}
+    tally = {"received": 0, "dropped": 0, "batches": 0, "lost": 0, "bytes": 0}
     followers = [Follower(120.0) for _ in range(follow)]
     rng = np.random.default_rng(seed)
 
@@ -206,6 +219,7 @@ def viewers(
             if time.monotonic() < measure_from:
                 continue
             data = msg.data
+            tally["bytes"] += len(data)
             offsets = batch_offsets(data)[:-1]
             ts = read_u64(data, offsets, TIMESTAMP_OFFSET)
             live = ts > 0  # stream headers carry no time
@@ -264,7 +278,7 @@ def drive(args, token: str, relays: list) -> tuple[list, list, list]:
     out = mp.Queue()
     total = args.seconds + 3.0
     ids = list(range(args.avatars))
-    codec = (args.codec, args.bits_per_second)
+    codec = (args.codec, args.bits_per_second, args.layers, args.refresh_s)
     workers = [
         mp.Process(
             target=publisher,
@@ -319,14 +333,18 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=20.0, help="measured time (after a 3 s start)")
     ap.add_argument("--loss", type=float, default=0.0, help="packet loss each viewer emulates (0..1)")
     ap.add_argument("--keyframe-s", type=float, default=0.5)
-    ap.add_argument("--codec", choices=("dpcm", "spiht"), default="dpcm", help="the avatars' codec (default dpcm)")
+    ap.add_argument(
+        "--codec", choices=("dpcm", "spiht", "kinwave-live"), default="dpcm", help="the avatars' codec (default dpcm)"
+    )
+    ap.add_argument("--layers", type=int, default=3, help="kinwave-live's layers (default 3: 4, 2 and 1 cm)")
+    ap.add_argument("--refresh-s", type=float, default=0.0, help="kinwave-live's refresh_s (default 0)")
     ap.add_argument("--bits-per-second", type=float, default=16000, help="spiht's rate as sent (default 16000)")
     ap.add_argument(
         "--budget",
         type=float,
         default=0.0,
         help="each viewer's bandwidth (bit/s) from a random camera in the crowd: spiht streams are cut "
-        "to their crowd shares (default 0: all whole)",
+        "to their crowd shares, kinwave-live streams keep the layers that fit them (default 0: all whole)",
     )
     ap.add_argument("--publishers", type=int, default=10, help="sending connections (avatars spread over them)")
     ap.add_argument("--viewer-procs", type=int, default=1)
@@ -388,10 +406,13 @@ def main() -> None:
             p.wait(10)
     sent = sum(r[1] for r in results if r[0] == "sent")
     hist = sum(r[2] for r in results if r[0] == "viewers")
-    tally = {k: sum(r[1][k] for r in results if r[0] == "viewers") for k in ("received", "dropped", "batches", "lost")}
+    kinds = ("received", "dropped", "batches", "lost", "bytes")
+    tally = {k: sum(r[1][k] for r in results if r[0] == "viewers") for k in kinds}
     resync = np.array([s for r in results if r[0] == "viewers" for s in r[3]])
     setup = (
-        f"{args.avatars} {args.codec} avatars at 30 Hz -> {args.viewers} viewers"
+        f"{args.avatars} {args.codec}"
+        + (f" ({args.layers} layers)" if args.codec == "kinwave-live" else "")
+        + f" avatars at 30 Hz -> {args.viewers} viewers"
         + (f" of {args.budget:g} bit/s each" if args.budget else "")
         + (", two relays over NATS" if args.nats else "")
     )
@@ -403,6 +424,7 @@ def main() -> None:
         f"lost on the way {tally['lost']:,}"
         + (f"; dropped by the emulated link {tally['dropped']:,}" if args.loss else "")
     )
+    print(f"  each viewer received {tally['bytes'] * 8 / args.viewers / args.seconds / 1000:,.0f} kbit/s")
     print(
         f"  latency p50 {percentile(hist, 0.5):.1f} ms, p99 {percentile(hist, 0.99):.1f} ms, "
         f"max {percentile(hist, 1.0):.1f} ms"

@@ -132,7 +132,7 @@ class Forward:
     cuts: np.ndarray | None = None
     cutter: Callable[[float], bytes] | None = None  # the codec's packet cutter, made at the first cut
     layer_ends: list[int] | None = None  # a layered stream's data packet: where each layer ends
-    layer_starts: list[bool] = field(default_factory=list)  # ... and which layers restart in it
+    layer_starts: list[bool] | None = None  # ... and which restart in it (read when a viewer may gain one)
 
 
 class _Cursors:
@@ -410,7 +410,6 @@ class Relay:
             if state.layered and p.frames:
                 try:
                     forward.layer_ends = state.codec.layer_ends(p.codec_payload)
-                    forward.layer_starts = state.codec.layer_starts(p.codec_payload)
                 except MocodecError as e:
                     raise Closing(BAD_MESSAGE, f"stream {p.stream}: packet {p.sequence}: {e}") from None
                 state.measure_layers(p, forward.layer_ends)
@@ -584,7 +583,13 @@ class Relay:
         stream = f.packet.stream
         had = viewer.layers.get(stream)
         keep = fits if f.packet.keyframe or had is None else min(fits, had)
-        while keep < min(fits, len(f.layer_starts)) and f.layer_starts[keep]:
+        if keep < fits and f.layer_starts is None:
+            try:
+                f.layer_starts = state.codec.layer_starts(f.packet.payload)
+            except MocodecError:
+                f.layer_starts = []
+        starts = f.layer_starts or []
+        while keep < min(fits, len(starts)) and starts[keep]:
             keep += 1
         viewer.layers[stream] = keep
         return keep

@@ -253,8 +253,9 @@ def _decode_ints(st, data, frames, first, count, state, last_nonzero, ints, orde
 
 class _Layer:
     """What both ends keep for one layer of a stream: the joints with channels (their first
-    channel and count), the layer's base step codes for its bound, the arithmetic coder's
-    state, the last two coded frames and the last packet's scale offset."""
+    channel and count) and the layer's base step codes for its bound, fixed; the arithmetic
+    coder's state, the last two coded frames, the last packet's scale offset and which
+    channels trust the cells of the layers below, from its (re)start on."""
 
     def __init__(self, skeleton: Skeleton, bound_cm: float, measure: str):
         self.skeleton = skeleton
@@ -263,21 +264,26 @@ class _Layer:
         self.count = np.array([len(skeleton.joints[j].channels) for j in joints], dtype=np.int64)
         self.channel_joint = np.repeat(np.arange(len(joints)), self.count)
         self.base_codes = base_codes(skeleton, bound_cm, measure)
-        self.state = bc.new_state(_contexts(skeleton.num_channels, len(joints)), warm=True)
-        self.last_nonzero = np.zeros(skeleton.num_channels, dtype=np.int64)
-        # the last two coded frames; before the first, one guess: a translation channel of a
-        # joint below the root at its offset (a MotionBuilder export repeats every offset)
-        self.history = np.zeros((2, skeleton.num_channels))
+        # before the first frame, one guess: a translation channel of a joint below the root at
+        # its offset (a MotionBuilder export repeats every offset)
+        self.guess = np.zeros(skeleton.num_channels)
         plan = channel_plan(skeleton)
         for j in range(1, len(skeleton)):
             for axis, c in enumerate(plan.pos_index[j]):
                 if c >= 0:
-                    self.history[1, c] = plan.offsets[j, axis]
+                    self.guess[c] = plan.offsets[j, axis]
+        self.restart()
+
+    def restart(self) -> None:
+        """Start again from nothing (the stream's start, or a refresh)."""
+        self.state = bc.new_state(_contexts(self.skeleton.num_channels, self.first.size), warm=True)
+        self.last_nonzero = np.zeros(self.skeleton.num_channels, dtype=np.int64)
+        self.history = np.vstack((np.zeros_like(self.guess), self.guess))  # the last two coded frames
         self.count_history = 1
         self.started = False  # a frame has been coded (strides above 1 need one before them)
         self.gap = 1  # frames between them
         self.offset = 0  # the last packet's scale offset
-        self.trust = np.ones(skeleton.num_channels, dtype=np.bool_)
+        self.trust = np.ones(self.skeleton.num_channels, dtype=np.bool_)
 
     def steps(self, offset: int) -> np.ndarray:
         codes = np.clip(self.base_codes.astype(np.int64) + offset, 0, 255).astype(np.uint8)
@@ -652,9 +658,9 @@ class _LiveEncoder(StreamEncoder):
         predicted within the cells of the layers below; the cells become its own. A layer that
         restarts here starts again from nothing: its history, contexts and scale offset."""
         restart = self._restart_flag(k, len(values))
-        if restart == 1:
-            self.layers[k] = _Layer(self.skeleton, self.bounds[k], self.codec.config["error_measure"])
         layer = self.layers[k]
+        if restart == 1:
+            layer.restart()
         orders = self._orders(layer, values)
         sparse = layer.started and len(values) == self.size
         best = None
@@ -685,7 +691,6 @@ class _LiveDecoder(StreamDecoder):
     def __init__(self, codec: KinwaveLiveCodec, skeleton: Skeleton, fps: float):
         self.codec, self.skeleton = codec, skeleton
         self.layers = _layers(codec, skeleton)
-        self.bounds = codec.layer_bounds
         self.layer_in_step = [True] * len(self.layers)
         self.refresh = bool(codec.config["refresh_s"])
         self.size = packet_frames(fps)
@@ -712,7 +717,7 @@ class _LiveDecoder(StreamDecoder):
                 data = _section_data(sections[k])
                 st, restart = _restarts(data) if self.refresh else (bc.start_decoder(data), 0)
                 if restart:
-                    self.layers[k] = _Layer(self.skeleton, self.bounds[k], self.codec.config["error_measure"])
+                    self.layers[k].restart()
                     self.layer_in_step[k] = True
             below = below and k < len(sections) and self.layer_in_step[k]
             if not below:

@@ -211,3 +211,17 @@ def test_after_a_loss_each_layer_is_back_at_its_next_restart(walk_bvh):
             assert np.array_equal(out, expected[i])
     assert layers_seen[0] == 1 and layers_seen[-1] == 3 and layers_seen == sorted(layers_seen)
     assert (top_back - base_back) * live.packet_frames(walk_bvh.fps) <= 60  # within one period
+
+
+def test_a_stream_that_follows_another_starts_at_its_scale_and_decodes_alone(walk_bvh):
+    codec = get_codec("kinwave-live", layers=2)
+    first = codec.encoder(walk_bvh.skeleton, walk_bvh.fps)
+    first.push(walk_bvh.channels[:240])
+    assert any(first.offsets)  # the scale has moved from the allocation's
+    second = codec.encoder(walk_bvh.skeleton, walk_bvh.fps)
+    second.follow(first)
+    assert second.offsets == first.offsets
+    part = walk_bvh[240:]
+    packets = second.push(part.channels) + second.flush()
+    dec = codec.decoder(walk_bvh.skeleton, walk_bvh.fps)  # knows nothing of the first stream
+    assert _frame_errors(part, np.concatenate([dec.push(p) for p in packets])).max() <= 1.0 + 1e-9

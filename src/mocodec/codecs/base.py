@@ -83,6 +83,12 @@ class StreamEncoder:
         parameters from the first frames it sees may look at them too (a live stream's intra
         refresh starts a new stream in mid-motion). Call before the first push."""
 
+    def follow(self, previous: StreamEncoder) -> None:
+        """This stream starts where ``previous`` (of the same codec) ended, at a live stream's
+        keyframe: take over what the sender learned that the receiver does not need (an
+        encoder's rate or scale settings), never what the decoder would have to know. Call
+        before the first push."""
+
 
 @runtime_checkable
 class Embedded(Protocol):

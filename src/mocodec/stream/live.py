@@ -111,6 +111,7 @@ class LiveEncoder:
         self.out_frames = 0  # frames the receiver has been told about
         self.in_group = 0  # input frames in the current codec stream
         self.encoder: StreamEncoder | None = None
+        self.ended: StreamEncoder | None = None  # the last codec stream's encoder
         self.decoder: StreamDecoder | None = None
         self.keyframe_due = True
         self.position = (0.0, 0.0, 0.0)
@@ -134,7 +135,7 @@ class LiveEncoder:
             self.recent = np.vstack((self.recent, chunk))[-self.primer_frames :]
             if self.in_group == self.refresh:
                 out += self._wrap(encoder.flush(), ts)
-                self.encoder = None
+                self.ended, self.encoder = encoder, None
         return out
 
     def close(self, timestamp_us: int | None = None) -> list[Packet]:
@@ -154,6 +155,8 @@ class LiveEncoder:
         self.decoder = self.codec.decoder(self.skeleton, self.fps)
         if len(self.recent):
             encoder.prime(self.recent)
+        if self.ended is not None:
+            encoder.follow(self.ended)
         self.in_group = 0
         self.keyframe_due = True
         return encoder

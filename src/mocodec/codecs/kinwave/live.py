@@ -529,6 +529,12 @@ class _LiveEncoder(StreamEncoder):
         self.period, self.phases = codec.restart_frames(fps)
         self.frame = 0  # the first frame of the next packet
 
+    def follow(self, previous: StreamEncoder) -> None:
+        """Each layer's scale offset goes on from where the last stream left it (a restart codes
+        it in full), rather than finding its way back from the allocation's a packet at a time."""
+        if isinstance(previous, _LiveEncoder) and len(previous.offsets) == len(self.offsets):
+            self.offsets = list(previous.offsets)
+
     def push(self, frames: np.ndarray) -> list[bytes]:
         cont = continuous_frames(self.codec.id, self.skeleton, self.fps, frames, self.previous)
         if len(cont):

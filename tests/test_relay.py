@@ -97,28 +97,34 @@ def test_late_joiner_gets_the_header_and_the_last_keyframe(walk_bvh):
     np.testing.assert_array_equal(got.channels, clean[start:])
 
 
-def test_the_nearer_avatar_gets_the_larger_share(walk_bvh):
-    far = walk_bvh.with_channels(walk_bvh.channels.copy())
-    x = walk_bvh.skeleton.channel_index("hip.Xposition")
-    far.channels[:, x] += 20 * walk_bvh.skeleton.units_per_metre  # 20 m further along x
-    codec = get_codec("spiht", bits_per_second=8000)
+def _near_and_far(walk, codec, budget):
+    """The walk and the same walk 20 m further along x, published at once to a viewer of
+    ``budget`` bit/s standing at the near one's start: what the viewer got of each."""
+    far = walk.with_channels(walk.channels.copy())
+    x = walk.skeleton.channel_index("hip.Xposition")
+    far.channels[:, x] += 20 * walk.skeleton.units_per_metre
 
     async def go():
         async with serving() as url:
-            camera = tuple(walk_bvh.positions_m()[0, 0])
+            camera = tuple(walk.positions_m()[0, 0])
             viewer = asyncio.create_task(
-                record(url, "lobby", token(), budget=4000, camera=camera, timeout_s=30, stream=1)
+                record(url, "lobby", token(), budget=budget, camera=camera, timeout_s=30, stream=1)
             )
             await asyncio.sleep(0.2)
             await asyncio.gather(
-                publish_clip(url, "lobby", token(), walk_bvh, codec, speed=8, stream=0),
+                publish_clip(url, "lobby", token(), walk, codec, speed=8, stream=0),
                 publish_clip(url, "lobby", token(), far, codec, speed=8, stream=1),
             )
             return await viewer
 
     got = asyncio.run(go())
-    near_err = np.abs(got[0].channels - walk_bvh.continuous().channels).mean()
-    far_err = np.abs(got[1].channels - far.continuous().channels).mean()
+    return far, got[0], got[1]
+
+
+def test_the_nearer_avatar_gets_the_larger_share(walk_bvh):
+    far, near_got, far_got = _near_and_far(walk_bvh, get_codec("spiht", bits_per_second=8000), 4000)
+    near_err = np.abs(near_got.channels - walk_bvh.continuous().channels).mean()
+    far_err = np.abs(far_got.channels - far.continuous().channels).mean()
     assert near_err < far_err
 
 
@@ -134,31 +140,14 @@ def test_the_far_avatar_of_a_layered_stream_gets_the_base_layer_only(walk_bvh):
     """kinwave-live in three layers (4, 2, 1 cm): the relay keeps all of them for the near
     avatar and the base alone for the one 20 m away, by cutting packets: the near one decodes
     as the whole stream, the far one holds the base layer's bound and no more."""
-    far = walk_bvh.with_channels(walk_bvh.channels.copy())
-    x = walk_bvh.skeleton.channel_index("hip.Xposition")
-    far.channels[:, x] += 20 * walk_bvh.skeleton.units_per_metre
     codec = get_codec("kinwave-live", layers=3)
-
-    async def go():
-        async with serving() as url:
-            camera = tuple(walk_bvh.positions_m()[0, 0])
-            viewer = asyncio.create_task(
-                record(url, "lobby", token(), budget=20000, camera=camera, timeout_s=30, stream=1)
-            )
-            await asyncio.sleep(0.2)
-            await asyncio.gather(
-                publish_clip(url, "lobby", token(), walk_bvh, codec, speed=8, stream=0),
-                publish_clip(url, "lobby", token(), far, codec, speed=8, stream=1),
-            )
-            return await viewer
-
-    got = asyncio.run(go())
+    far, near_got, far_got = _near_and_far(walk_bvh, codec, 20000)
     whole = receive_clip(stream_clip(walk_bvh, codec, stream=0)).channels
-    near = got[0].channels  # the recording stops at the far one's end: the near one may lack its last packets
+    near = near_got.channels  # the recording stops at the far one's end: the near one may lack its last packets
     assert len(near) > 0.9 * len(whole)
     np.testing.assert_array_equal(near, whole[: len(near)])
     assert _max_joint_error_cm(walk_bvh[: len(near)], near) <= 1.0 + 1e-9
-    assert 2.0 < _max_joint_error_cm(far, got[1].channels) <= 4.0 + 1e-9
+    assert 2.0 < _max_joint_error_cm(far, far_got.channels) <= 4.0 + 1e-9
 
 
 @pytest.mark.parametrize(

@@ -15,6 +15,20 @@ def test_info(capsys):
     assert "lfemur" in out and "left_leg" in out
 
 
+def test_info_on_a_moc_file_reads_its_header_only(tmp_path, capsys):
+    path = tmp_path / "w.moc"
+    assert main(["encode", str(DATA / "07_03.amc"), "-o", str(path), "--codec", "raw"]) == 0
+    capsys.readouterr()
+    assert main(["info", str(path)]) == 0
+    out = capsys.readouterr().out
+    size = path.stat().st_size
+    assert "codec       raw" in out and "415 at 120 fps" in out and "62 channels" in out
+    assert f"ratio {415 * 62 * 4 / size:.2f} vs 32-bit floats" in out
+    path.write_bytes(path.read_bytes()[:40])
+    assert main(["info", str(path)]) == 2  # a damaged file: one line, no traceback
+    assert "w.moc" in capsys.readouterr().err
+
+
 def test_convert_both_ways(tmp_path, capsys):
     assert main(["convert", str(DATA / "07_03.amc"), str(tmp_path / "w.bvh")]) == 0
     assert main(["convert", str(tmp_path / "w.bvh"), str(tmp_path / "w.amc")]) == 0

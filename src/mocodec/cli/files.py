@@ -41,8 +41,33 @@ def describe(motion: Motion, path: str) -> str:
     return "\n".join(lines)
 
 
+def describe_moc(path: str) -> str:
+    """The ``info`` summary of a .moc file, from its header and index (nothing is decoded)."""
+    from mocodec import moc
+
+    c = moc.info(path)
+    sk, codec = c.skeleton, c.header["codec"]
+    knobs = ", ".join(f"{k}={v}" for k, v in codec.get("knobs", {}).items())
+    seconds = c.frames / c.fps
+    raw_bytes = c.frames * sk.num_channels * 4
+    lines = [
+        f"file        {path}",
+        f"codec       {codec['codec']}" + (f" ({knobs})" if knobs else ""),
+        f"skeleton    {len(sk)} joints, {sk.num_channels} channels",
+        f"frames      {c.frames} at {c.fps:g} fps = {seconds:.2f} s, in {len(c.index)} chunks",
+        f"size        {_human_bytes(c.size)}: ratio {raw_bytes / max(c.size, 1):.2f} vs 32-bit floats, "
+        f"{c.size * 8 / max(seconds, 1e-9) / 1000:.2f} kbit/s",
+    ]
+    return "\n".join(lines)
+
+
 def cmd_info(args) -> int:
     for path in args.files:
+        if str(path).lower().endswith(".moc"):
+            print(describe_moc(path))
+            if len(args.files) > 1:
+                print()
+            continue
         motion = load(path, asf=args.asf, fps=args.fps)
         print(describe(motion, path))
         if args.joints:
@@ -159,10 +184,12 @@ def cmd_warmup(args) -> int:
 
 def add_commands(sub) -> None:
     p = sub.add_parser(
-        "info", description="Skeleton, frames, rate, duration, channels, raw size and bit rate at 32-bit floats."
+        "info",
+        description="Skeleton, frames, rate, duration, channels, raw size and bit rate at 32-bit floats; "
+        "for a .moc file its codec, size, ratio and bit rate.",
     )
-    p.add_argument("files", nargs="+", metavar="FILE", help=".bvh or .amc file")
-    p.add_argument("--joints", action="store_true", help="also list every joint")
+    p.add_argument("files", nargs="+", metavar="FILE", help=".bvh, .amc or .moc file")
+    p.add_argument("--joints", action="store_true", help="also list every joint (.bvh, .amc)")
     add_input_options(p)
     p.set_defaults(func=cmd_info)
 

@@ -105,12 +105,12 @@ def place(stream: int) -> tuple[float, float]:
 
 
 # ----- publishers ------------------------------------------------------------------------------------
-def publisher(url: str, token: str, streams: list[int], seconds: float, codec: tuple, keyframe_s: float, out) -> None:
+def publisher(url: str, token: str, streams: list[int], seconds: float, template: tuple, out) -> None:
     import aiohttp
 
     from mocodec.stream.packets import pack_batch
 
-    header, data, ticks, clip_frames = templates(codec, keyframe_s)
+    header, data, ticks, clip_frames = template
     by_tick: dict[int, list[tuple[int, bytes, int]]] = {}
     for idx, (k, d) in enumerate(data):
         by_tick.setdefault(k, []).append((idx, d, struct.unpack_from("<I", d, 22)[0]))
@@ -279,10 +279,11 @@ def drive(args, token: str, relays: list) -> tuple[list, list, list]:
     total = args.seconds + 3.0
     ids = list(range(args.avatars))
     codec = (args.codec, args.bits_per_second, args.layers, args.refresh_s)
+    template = templates(codec, args.keyframe_s)  # coded once, here: the publishers only restamp it
     workers = [
         mp.Process(
             target=publisher,
-            args=(relays[0][0], token, ids[k :: args.publishers], total + 1.0, codec, args.keyframe_s, out),
+            args=(relays[0][0], token, ids[k :: args.publishers], total + 1.0, template, out),
         )
         for k in range(args.publishers)
     ]

@@ -187,21 +187,21 @@ def test_a_viewer_gains_a_layer_only_where_it_restarts(walk_bvh):
     from mocodec.stream.relay import Forward, StreamState
 
     codec = get_codec("kinwave-live", layers=3, refresh_s=0.5)
-    state = StreamState(None, None, None, codec, layer_rates=np.array([1000.0, 2000.0, 3000.0]))
+    state = StreamState(None, None, None, codec)
     viewer = Viewer(ws=None, transport=None)
 
-    def kept(share, starts, keyframe=False):
+    def kept(fits, starts, keyframe=False):
         packet = stream_clip(walk_bvh[:12], codec)[1 if keyframe else 2]
         f = Forward(packet, b"", layer_ends=[1, 2, 3], layer_starts=starts)
-        return Relay._layers_for(viewer, f, state, share)
+        return Relay._layers_for(viewer, f, state, fits)
 
-    assert kept(1500, [False] * 3, keyframe=True) == 1  # the share fits the base only
-    assert kept(5000, [False] * 3) == 1  # room for more, but layer 1 has no history
-    assert kept(5000, [False, False, True]) == 1  # layer 2 cannot come without layer 1
-    assert kept(5000, [False, True, False]) == 2
-    assert kept(5000, [False, False, True]) == 3
-    assert kept(2500, [False] * 3) == 2  # dropping a layer needs no restart
-    assert kept(500, [False] * 3) == 1  # the base always goes
+    assert kept(1, [False] * 3, keyframe=True) == 1  # the share fits the base only
+    assert kept(3, [False] * 3) == 1  # room for more, but layer 1 has no history
+    assert kept(3, [False, False, True]) == 1  # layer 2 cannot come without layer 1
+    assert kept(3, [False, True, False]) == 2
+    assert kept(3, [False, False, True]) == 3
+    assert kept(2, [False] * 3) == 2  # dropping a layer needs no restart
+    assert kept(1, [False] * 3) == 1
 
 
 def test_a_layered_packet_whose_sections_overrun_closes_its_sender(walk_bvh):

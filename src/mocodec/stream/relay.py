@@ -173,25 +173,29 @@ class StreamState:
     next_sequence: int = 0
     next_frame: int = 0
     ended: bool = False
-    layer_rates: np.ndarray | None = None  # a layered stream: bit/s of its layers up to each
+    embedded: bool = field(init=False)  # cut by a cut table (spiht)
+    layers: int = field(init=False)  # a layered stream's layers (1: none)
+    layer_rates: list[float] = field(init=False)  # a layered stream: bit/s of its layers up to each
+
+    def __post_init__(self) -> None:
+        self.embedded = isinstance(self.codec, Embedded)
+        self.layers = len(self.codec.layer_bounds) if isinstance(self.codec, Layered) else 1
+        self.layer_rates = [0.0] * self.layers
 
     @property
     def layered(self) -> bool:
-        return isinstance(self.codec, Layered) and len(self.codec.layer_bounds) > 1
+        return self.layers > 1
 
     def measure_layers(self, p: Packet, ends: list[int]) -> None:
         """Fold a data packet's layer sizes into the stream's rates per layer (each with the
         layers below it), an exponential average over LAYER_RATE_S that starts from zero: a
         stream's first keyframe counts for its frames' share of that time, so a new stream's
         viewers start with more layers and drop those that do not fit."""
-        rates = np.zeros(len(self.codec.layer_bounds))
-        rates[: len(ends)] = ends
-        rates[len(ends) :] = ends[-1]
-        rates *= 8.0 * self.info.fps / p.frames
+        scale = 8.0 * self.info.fps / p.frames
         weight = min(p.frames / (self.info.fps * LAYER_RATE_S), 1.0)
-        if self.layer_rates is None:
-            self.layer_rates = np.zeros_like(rates)
-        self.layer_rates += weight * (rates - self.layer_rates)
+        for k in range(self.layers):
+            rate = ends[min(k, len(ends) - 1)] * scale
+            self.layer_rates[k] += weight * (rate - self.layer_rates[k])
 
     def end_packet(self, stream: int) -> Packet:
         """The packet that ends this stream for its receivers when its sender vanishes."""
@@ -540,57 +544,60 @@ class Relay:
                 viewer.transport.abort()
 
     @staticmethod
-    def _crowd(room: Room) -> tuple[dict[int, int], np.ndarray]:
-        """The room's scalable streams (embedded or layered), each with its row in
-        ``(streams, 3)`` positions."""
-        scalable = [k for k, s in room.streams.items() if isinstance(s.codec, Embedded) or s.layered]
+    def _crowd(room: Room) -> tuple[dict[int, int], np.ndarray, np.ndarray]:
+        """The room's scalable streams (embedded or layered): each one's row in ``(streams, 3)``
+        positions and in ``(streams, layers)`` layer rates (infinite past a stream's layers)."""
+        scalable = [k for k, s in room.streams.items() if s.embedded or s.layered]
         where = np.array([room.streams[k].position for k in scalable], dtype=np.float64).reshape(-1, 3)
-        return {k: i for i, k in enumerate(scalable)}, where
+        width = max((room.streams[k].layers for k in scalable), default=1)
+        rates = np.full((len(scalable), width), np.inf)
+        for i, k in enumerate(scalable):
+            state = room.streams[k]
+            rates[i, : state.layers] = state.layer_rates
+        return {k: i for i, k in enumerate(scalable)}, where, rates
 
     def _cut(self, room: Room, crowd, viewer: Viewer, items: list[Forward], cache: dict) -> list[bytes]:
         """The viewer's packets, the scalable streams cut to their crowd shares (6.4, 6.5)."""
-        row, where = crowd
+        row, where, rates = crowd
         d = np.maximum(np.linalg.norm(where - np.asarray(viewer.camera), axis=1), self.limits.min_distance_m)
-        shares = split_budget(int(viewer.budget), bandwidth_scores(d)) if len(row) else None
+        shares = split_budget(int(viewer.budget), bandwidth_scores(d)) if len(row) else np.zeros(0)
+        fits = np.maximum((rates <= shares[:, None]).sum(axis=1), 1).tolist()  # layers within each share
         out = []
         for f in items:
-            state = room.streams.get(f.packet.stream)
-            if state is None or f.packet.stream not in row or (f.cuts is None and f.layer_ends is None):
+            r = row.get(f.packet.stream)
+            if r is None or (f.cuts is None and f.layer_ends is None):
                 out.append(f.data)
-                continue
-            assert shares is not None  # the stream is in the row
-            share = float(shares[row[f.packet.stream]])
-            if f.layer_ends is not None:
-                keep = self._layers_for(viewer, f, state, share)
+            elif f.layer_ends is not None:
+                keep = self._layers_for(viewer, f, room.streams[f.packet.stream], fits[r])
                 key: tuple[int, float] = (id(f), -keep)
                 if key not in cache:
                     cache[key] = self._drop_layers(f, keep)
+                out.append(cache[key])
             else:
-                rate = on_ladder(share)
+                rate = on_ladder(float(shares[r]))
                 key = (id(f), rate)
                 if key not in cache:
-                    cache[key] = self._cut_one(f, state, rate)
-            out.append(cache[key])
+                    cache[key] = self._cut_one(f, room.streams[f.packet.stream], rate)
+                out.append(cache[key])
         return out
 
     @staticmethod
-    def _layers_for(viewer: Viewer, f: Forward, state: StreamState, share: float) -> int:
-        """The layers of a layered stream's packet a viewer gets: the most whose rate fits its
-        share, at least the base; more than it had only from a keyframe or a packet where the
-        next layer restarts (a layer it missed has lost its prediction's history)."""
-        assert state.layer_rates is not None  # measured from the stream's first data packet
-        fits = max(int(np.searchsorted(state.layer_rates, share, side="right")), 1)
+    def _layers_for(viewer: Viewer, f: Forward, state: StreamState, fits: int) -> int:
+        """The layers of a layered stream's packet a viewer gets: the ``fits`` whose rate fits
+        its share (at least the base), more than it had only from a keyframe or a packet where
+        the next layer restarts (a layer it missed has lost its prediction's history)."""
         stream = f.packet.stream
         had = viewer.layers.get(stream)
         keep = fits if f.packet.keyframe or had is None else min(fits, had)
-        if keep < fits and f.layer_starts is None:
-            try:
-                f.layer_starts = state.codec.layer_starts(f.packet.payload)
-            except MocodecError:
-                f.layer_starts = []
-        starts = f.layer_starts or []
-        while keep < min(fits, len(starts)) and starts[keep]:
-            keep += 1
+        if keep < fits:
+            if f.layer_starts is None:
+                try:
+                    f.layer_starts = state.codec.layer_starts(f.packet.payload)
+                except MocodecError:
+                    f.layer_starts = []
+            starts = f.layer_starts
+            while keep < min(fits, len(starts)) and starts[keep]:
+                keep += 1
         viewer.layers[stream] = keep
         return keep
 

@@ -42,6 +42,7 @@ import logging
 import math
 import resource
 import time
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -210,6 +211,23 @@ class StreamState:
             flags=END,
             position=self.position,
         )
+
+
+@dataclass
+class _Crowd:
+    """A tick's scalable streams (embedded or layered), worked out once for every viewer: each
+    stream's row in ``where`` (its position) and in ``rates`` (the bit/s of its layers up to
+    each, infinite past its own), and the tick's fresh layered packets, one per stream: their
+    streams, rows, keyframe flags and their variants with 1, 2, ... layers."""
+
+    row: dict[int, int]
+    where: np.ndarray
+    rates: np.ndarray
+    layered: list[Forward]
+    streams: list[int]
+    rows: np.ndarray
+    keyframes: np.ndarray
+    variants: list[list[bytes]]
 
 
 @dataclass
@@ -508,8 +526,8 @@ class Relay:
             if not items:
                 continue
             if viewer.budget > 0 and any(f.cuts is not None or f.layer_ends is not None for f in items):
-                crowd = crowd or self._crowd(room)
-                batch = pack_batch(self._cut(room, crowd, viewer, items, cut_cache))
+                crowd = crowd or self._crowd(room, fresh)
+                batch = pack_batch(self._cut(room, crowd, viewer, items, len(items) - len(fresh), cut_cache))
             elif len(items) == len(fresh):
                 shared = shared or pack_batch([f.data for f in fresh])
                 batch = shared
@@ -544,9 +562,7 @@ class Relay:
                 viewer.transport.abort()
 
     @staticmethod
-    def _crowd(room: Room) -> tuple[dict[int, int], np.ndarray, np.ndarray]:
-        """The room's scalable streams (embedded or layered): each one's row in ``(streams, 3)``
-        positions and in ``(streams, layers)`` layer rates (infinite past a stream's layers)."""
+    def _crowd(room: Room, fresh: list[Forward]) -> _Crowd:
         scalable = [k for k, s in room.streams.items() if s.embedded or s.layered]
         where = np.array([room.streams[k].position for k in scalable], dtype=np.float64).reshape(-1, 3)
         width = max((room.streams[k].layers for k in scalable), default=1)
@@ -554,21 +570,38 @@ class Relay:
         for i, k in enumerate(scalable):
             state = room.streams[k]
             rates[i, : state.layers] = state.layer_rates
-        return {k: i for i, k in enumerate(scalable)}, where, rates
+        row = {k: i for i, k in enumerate(scalable)}
+        count = Counter(f.packet.stream for f in fresh)  # a stream's packets keep their order: one by one
+        layered = [f for f in fresh if f.layer_ends is not None and f.packet.stream in row and count[f.packet.stream] < 2]
+        streams = [f.packet.stream for f in layered]
+        return _Crowd(
+            row,
+            where,
+            rates,
+            layered,
+            streams,
+            np.array([row[k] for k in streams], dtype=np.int64),
+            np.array([f.packet.keyframe for f in layered], dtype=bool),
+            [Relay._layer_variants(f) for f in layered],
+        )
 
-    def _cut(self, room: Room, crowd, viewer: Viewer, items: list[Forward], cache: dict) -> list[bytes]:
-        """The viewer's packets, the scalable streams cut to their crowd shares (6.4, 6.5)."""
-        row, where, rates = crowd
-        d = np.maximum(np.linalg.norm(where - np.asarray(viewer.camera), axis=1), self.limits.min_distance_m)
-        shares = split_budget(int(viewer.budget), bandwidth_scores(d)) if len(row) else np.zeros(0)
-        fits = np.maximum((rates <= shares[:, None]).sum(axis=1), 1).tolist()  # layers within each share
+    def _cut(
+        self, room: Room, crowd: _Crowd, viewer: Viewer, items: list[Forward], pending: int, cache: dict
+    ) -> list[bytes]:
+        """The viewer's packets, the scalable streams cut to their crowd shares (6.4, 6.5). The
+        tick's fresh layered packets (``crowd.layered``) go at once, in arrays; the rest, and
+        what the viewer has pending, one by one."""
+        d = np.maximum(np.linalg.norm(crowd.where - np.asarray(viewer.camera), axis=1), self.limits.min_distance_m)
+        shares = split_budget(int(viewer.budget), bandwidth_scores(d)) if len(crowd.row) else np.zeros(0)
+        fits = np.maximum((crowd.rates <= shares[:, None]).sum(axis=1), 1)  # layers within each share
+        together = {id(f) for f in crowd.layered} if pending < len(items) else set()
         out = []
-        for f in items:
-            r = row.get(f.packet.stream)
+        for f in items[:pending] + [f for f in items[pending:] if id(f) not in together]:
+            r = crowd.row.get(f.packet.stream)
             if r is None or (f.cuts is None and f.layer_ends is None):
                 out.append(f.data)
             elif f.layer_ends is not None:
-                keep = self._layers_for(viewer, f, room.streams[f.packet.stream], fits[r])
+                keep = self._layers_for(viewer, f, room.streams[f.packet.stream], int(fits[r]))
                 key: tuple[int, float] = (id(f), -keep)
                 if key not in cache:
                     cache[key] = self._drop_layers(f, keep)
@@ -579,7 +612,20 @@ class Relay:
                 if key not in cache:
                     cache[key] = self._cut_one(f, room.streams[f.packet.stream], rate)
                 out.append(cache[key])
+        if together:
+            out += self._cut_layered(room, crowd, viewer, fits[crowd.rows])
         return out
+
+    def _cut_layered(self, room: Room, crowd: _Crowd, viewer: Viewer, fits: np.ndarray) -> list[bytes]:
+        """The tick's fresh layered packets for a viewer (:meth:`_layers_for`, in arrays): the
+        only packet of its stream this tick, so its layers depend only on what the viewer had."""
+        had = np.array([viewer.layers.get(k, 0) for k in crowd.streams], dtype=np.int64)
+        keep = np.where(crowd.keyframes | (had == 0), fits, np.minimum(fits, had)).tolist()
+        for i in np.nonzero(np.asarray(keep) < fits)[0].tolist():  # a layer may come back where it restarts
+            f = crowd.layered[i]
+            keep[i] = self._layers_for(viewer, f, room.streams[f.packet.stream], int(fits[i]))
+        viewer.layers.update(zip(crowd.streams, keep))
+        return [variants[k - 1] for variants, k in zip(crowd.variants, keep)]
 
     @staticmethod
     def _layers_for(viewer: Viewer, f: Forward, state: StreamState, fits: int) -> int:
@@ -607,6 +653,12 @@ class Relay:
         if keep >= len(f.layer_ends):
             return f.data
         return f.packet.with_payload(f.packet.payload[: f.layer_ends[keep - 1]]).to_bytes()
+
+    @staticmethod
+    def _layer_variants(f: Forward) -> list[bytes]:
+        """A layered packet with 1, 2, ... of its layers (all of them: the packet)."""
+        assert f.layer_ends is not None
+        return [Relay._drop_layers(f, keep) for keep in range(1, len(f.layer_ends) + 1)]
 
     @staticmethod
     def _cut_one(f: Forward, state: StreamState, rate: float) -> bytes:

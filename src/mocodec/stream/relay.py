@@ -572,7 +572,8 @@ class Relay:
             rates[i, : state.layers] = state.layer_rates
         row = {k: i for i, k in enumerate(scalable)}
         count = Counter(f.packet.stream for f in fresh)  # a stream's packets keep their order: one by one
-        layered = [f for f in fresh if f.layer_ends is not None and f.packet.stream in row and count[f.packet.stream] < 2]
+        alone = [f for f in fresh if count[f.packet.stream] < 2]
+        layered = [f for f in alone if f.layer_ends is not None and f.packet.stream in row]
         streams = [f.packet.stream for f in layered]
         return _Crowd(
             row,

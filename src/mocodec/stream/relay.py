@@ -13,8 +13,9 @@ scores S = d_min / d (6.4), shares B S / sum S (6.5), d the distance from its ca
 avatar's root. An embedded (``spiht``) stream is cut to its share rounded down to a ladder of
 4 rates per octave, so that viewers with nearly equal shares share one cut; a layered
 (``kinwave-live`` with layers) stream keeps the most layers whose measured rate fits the share
-(the base layer always), more only from a keyframe on, since a layer's prediction needs its
-history: the share by distance is spent as error bounds. Other streams pass whole. A viewer that joins
+(the base layer always), more only from a keyframe or a packet where the layer restarts, since
+a layer's prediction needs its history: the share by distance is spent as error bounds. Other
+streams pass whole. A viewer that joins
 late gets every stream header and the packets since each stream's last keyframe. A stream
 ends with its END packet; if its sender goes without one, the relay sends the END for it (and
 over the bus), so no viewer waits for a stream that will not come back.

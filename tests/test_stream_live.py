@@ -219,3 +219,15 @@ def test_a_refreshing_stream_is_back_without_keyframes_after_a_loss_or_a_late_jo
     start = len(clean) - late.num_frames
     assert packets[lost].first_frame <= start <= back
     np.testing.assert_array_equal(late.channels[back - start :], clean[back:])
+
+
+def test_a_refreshing_stream_is_back_after_a_damaged_packet(walk_bvh):
+    codec = get_codec("kinwave-live", refresh_s=0.25)
+    packets = stream_clip(walk_bvh, codec, keyframe_s=60.0)
+    clean = receive_clip(packets).channels
+    victim = 20
+    damaged = packets[victim].with_payload(bytes(255 - b for b in packets[victim].payload))
+    got = receive_clip(packets[:victim] + [damaged] + packets[victim + 1 :]).channels
+    assert len(got) == len(clean) and np.isfinite(got).all()
+    back = packets[victim].first_frame + int(0.25 * walk_bvh.fps) + 6  # the next restart, and its packet
+    np.testing.assert_array_equal(got[back:], clean[back:])

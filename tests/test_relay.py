@@ -204,6 +204,20 @@ def test_a_viewer_gains_a_layer_only_where_it_restarts(walk_bvh):
     assert kept(1, [False] * 3) == 1
 
 
+def test_a_late_joiner_of_a_refreshing_stream_starts_at_its_last_restart(walk_bvh):
+    from mocodec.stream.relay import Room
+
+    codec = get_codec("kinwave-live", refresh_s=0.25)
+    packets = stream_clip(walk_bvh, codec, keyframe_s=60.0)[:-1]  # not ended
+    relay, room = Relay(SECRET), Room()
+    for p in packets:
+        relay._ingest(room, pack_batch([p.to_bytes()]), owner=1)
+    gop = room.streams[0].gop
+    last = max(i for i, p in enumerate(packets) if p.restart)
+    assert gop[0].packet.restart and not gop[0].packet.keyframe
+    assert [f.packet.sequence for f in gop] == [p.sequence for p in packets[last:]]
+
+
 def test_a_layered_packet_whose_sections_overrun_closes_its_sender(walk_bvh):
     packets = stream_clip(walk_bvh[:120], get_codec("kinwave-live", layers=3))
     bad = packets[2].with_payload(bytes([100, 1, 2]))  # layer 0 says 100 bytes, 2 follow

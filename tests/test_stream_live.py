@@ -231,3 +231,24 @@ def test_a_refreshing_stream_is_back_after_a_damaged_packet(walk_bvh):
     assert len(got) == len(clean) and np.isfinite(got).all()
     back = packets[victim].first_frame + int(0.25 * walk_bvh.fps) + 6  # the next restart, and its packet
     np.testing.assert_array_equal(got[back:], clean[back:])
+
+
+def test_restart_points_are_flagged_and_a_late_joiner_reads_from_one(walk_bvh):
+    from mocodec.stream.packets import RESTART, Reader
+
+    codec = get_codec("kinwave-live", layers=2, refresh_s=0.25)
+    packets = stream_clip(walk_bvh, codec, keyframe_s=60.0)
+    data = [p for p in packets if p.kind == DATA and p.frames]
+    flagged = [bool(p.flags & RESTART) for p in data]
+    assert flagged == [not p.keyframe and codec.layer_starts(p.payload)[0] for p in data]
+    assert sum(flagged) >= 10 and all(p.compact for p in data)
+    k = flagged.index(True, 5)
+    reader = Reader()
+    reader.read(packets[0].to_bytes())  # the stream header, then the stream from a restart point
+    again = [reader.read(p.to_bytes()) for p in data[k:]]
+    assert [(p.sequence, p.first_frame, p.flags) for p in again] == [
+        (p.sequence, p.first_frame, p.flags) for p in data[k:]
+    ]
+    late = receive_clip(packets[:1] + data[k:])
+    clean = receive_clip(packets).channels
+    np.testing.assert_array_equal(late.channels[-60:], clean[-60:])

@@ -22,12 +22,23 @@ from dataclasses import dataclass
 import numpy as np
 
 from mocodec.codecs import codec_from_untrusted
-from mocodec.codecs.base import Codec, Embedded, StreamDecoder, StreamEncoder, checked_frames
+from mocodec.codecs.base import Codec, Embedded, Layered, StreamDecoder, StreamEncoder, checked_frames
 from mocodec.coding.entropy.rangecoder import encode_ints
 from mocodec.errors import CodecError, OutOfStepError
 from mocodec.motion import Motion
 from mocodec.skeleton import POSITION_CHANNELS, Skeleton
-from mocodec.stream.packets import CUTS, DATA, END, HEADER, KEYFRAME, Packet, StreamInfo, header_packet, with_cuts
+from mocodec.stream.packets import (
+    CUTS,
+    DATA,
+    END,
+    HEADER,
+    KEYFRAME,
+    RESTART,
+    Packet,
+    StreamInfo,
+    header_packet,
+    with_cuts,
+)
 
 #: A sender's tick (Hz): frames are pushed, and packets sent, this often.
 TICK_HZ = 30.0
@@ -168,16 +179,20 @@ class LiveEncoder:
         assert decoder is not None, "a codec stream was started"
         for payload in payloads:
             n = len(decoder.push(payload))
-            flags = KEYFRAME if self.keyframe_due else 0
+            flags = KEYFRAME if self.keyframe_due else (RESTART if self._restarts(payload) else 0)
             if cut_table is not None:
                 payload, flags = with_cuts(payload, encode_ints(cut_table(payload, self.skeleton))), flags | CUTS
             out.append(self._packet(payload, n, ts, flags))
             self.keyframe_due = False
         return out
 
+    def _restarts(self, payload: bytes) -> bool:
+        """The codec stream restarts its base layer in ``payload`` (a receiver may join here)."""
+        return isinstance(self.codec, Layered) and bool(payload) and self.codec.layer_starts(payload)[0]
+
     def _packet(self, payload: bytes, frames: int, ts: int, flags: int) -> Packet:
         sends = (
-            bool(flags & KEYFRAME)
+            bool(flags & (KEYFRAME | RESTART))
             or self.sent_position is None
             or math.dist(self.position, self.sent_position) >= POSITION_STEP_M
         )

@@ -42,7 +42,7 @@ MAGIC = b"MP"
 BATCH_MAGIC = b"MB"
 VERSION = 1
 HEADER, DATA = 0, 1
-KEYFRAME, END, CUTS = 1, 2, 4
+KEYFRAME, END, CUTS, RESTART = 1, 2, 4, 8  # RESTART: the codec stream's base restarts here
 
 #: The codecs a packet can name, by number (the numbering is part of the format: append only).
 CODEC_NUMBERS = (  # a streaming codec's number in packets: append only
@@ -65,7 +65,8 @@ _U16 = struct.Struct("<H")
 _BATCH = struct.Struct("<2sI")
 _POSITION = struct.Struct("<3h")
 COMPACT = 0x80  # the tag bit of a compact data packet (a full packet starts with "M")
-C_EXPLICIT, C_POSITION = 8, 16  # compact tags: full sequence and first frame follow; the position follows
+C_EXPLICIT, C_POSITION, C_RESTART = 8, 16, 32  # compact tags: full sequence and first frame follow; the
+# position follows; RESTART
 COMPACT_MIN = 6
 OVERHEAD = _FIELDS.size + _CRC.size
 #: Where the timestamp, stream id and sequence number sit in a packet (read in bulk by the load test).
@@ -94,6 +95,12 @@ class Packet:
     @property
     def end(self) -> bool:
         return bool(self.flags & END)
+
+    @property
+    def restart(self) -> bool:
+        """A receiver may start decoding here (a keyframe, or a point where the codec stream
+        restarts its base layer on its own)."""
+        return bool(self.flags & (KEYFRAME | RESTART))
 
     @property
     def codec_payload(self) -> bytes:
@@ -136,13 +143,14 @@ class Packet:
 
     def to_compact(self) -> bytes:
         """The compact wire form of a data packet (docs/formats.md): a tag byte, the stream id
-        and frame count as varints, the sequence number's low byte, on keyframes the full
-        sequence number and first frame, the root position when it is sent (3 x i16, cm), the
-        payload, and a CRC-16 (CCITT) of all of it: 6 bytes around the payload for an ongoing
-        stream. The receiver keeps, per stream, what the omitted fields follow from
+        and frame count as varints, the sequence number's low byte, on keyframes and restarts
+        the full sequence number and first frame, the root position when it is sent (3 x i16,
+        cm), the payload, and a CRC-16 (CCITT) of all of it: 6 bytes around the payload for an
+        ongoing stream. The receiver keeps, per stream, what the omitted fields follow from
         (:class:`Cursor`)."""
-        explicit = bool(self.flags & KEYFRAME) or self.sequence == 0
+        explicit = self.restart or self.sequence == 0
         tag = COMPACT | (self.flags & 7) | (C_EXPLICIT if explicit else 0) | (C_POSITION if self.sends_position else 0)
+        tag |= C_RESTART if self.flags & RESTART else 0
         out = bytearray([tag]) + varint.pack(self.stream) + bytes([self.sequence & 0xFF]) + varint.pack(self.frames)
         if explicit:
             out += varint.pack(self.sequence) + varint.pack(self.first_frame)
@@ -182,7 +190,7 @@ def _parse_compact(data: bytes, where: str, cursor_of: Callable[[int], Cursor | 
     if binascii.crc_hqx(data[:-2], 0xFFFF) != _U16.unpack_from(data, len(data) - 2)[0]:
         raise CorruptStreamError(f"{where}: byte {len(data) - 2}: CRC mismatch (damaged packet)")
     tag, body = data[0], data[:-2]
-    if tag & ~(COMPACT | 7 | C_EXPLICIT | C_POSITION):
+    if tag & ~(COMPACT | 7 | C_EXPLICIT | C_POSITION | C_RESTART):
         raise CorruptStreamError(f"{where}: byte 0: tag {tag:#04x} sets bits this version does not define")
     try:
         stream, pos = varint.unpack(body, 1, 5)
@@ -225,7 +233,7 @@ def _parse_compact(data: bytes, where: str, cursor_of: Callable[[int], Cursor | 
         frames,
         bytes(body[pos:]),
         DATA,
-        tag & 7,
+        (tag & 7) | (RESTART if tag & C_RESTART else 0),
         position,
         compact=True,
         sends_position=bool(tag & C_POSITION),

@@ -15,10 +15,11 @@ avatar's root. An embedded (``spiht``) stream is cut to its share rounded down t
 (``kinwave-live`` with layers) stream keeps the most layers whose measured rate fits the share
 (the base layer always), more only from a keyframe or a packet where the layer restarts, since
 a layer's prediction needs its history: the share by distance is spent as error bounds. Other
-streams pass whole. A viewer that joins
-late gets every stream header and the packets since each stream's last keyframe. A stream
-ends with its END packet; if its sender goes without one, the relay sends the END for it (and
-over the bus), so no viewer waits for a stream that will not come back.
+streams pass whole. A viewer that joins late gets every stream header and the packets since
+each stream's last keyframe (or restart point, where the codec stream restarts its base layer
+on its own). A stream ends with its END packet; if its sender goes without one, the relay
+sends the END for it (and over the bus), so no viewer waits for a stream that will not come
+back.
 
 Limits: message size (the WebSocket refuses larger ones), per-connection rates of messages and
 bytes (token buckets; over the limit closes that connection), streams per room, and at most
@@ -438,7 +439,7 @@ class Relay:
                 state.measure_layers(p, forward.layer_ends)
             state.position = p.position
             state.next_sequence, state.next_frame = (p.sequence + 1) & 0xFFFFFFFF, p.first_frame + p.frames
-            if p.keyframe:
+            if p.restart:  # a late joiner starts at the last keyframe or restart
                 state.gop.clear()
             state.gop.append(forward)
             if len(state.gop) > self.limits.max_gop_packets:

@@ -24,6 +24,11 @@ def test_info_on_a_moc_file_reads_its_header_only(tmp_path, capsys):
     size = path.stat().st_size
     assert "codec       raw" in out and "415 at 120 fps" in out and "62 channels" in out
     assert f"ratio {415 * 62 * 4 / size:.2f} vs 32-bit floats" in out
+    ref = tmp_path / "ref.moc"
+    assert main(["encode", str(DATA / "07_03.amc"), "-o", str(ref), "--codec", "raw", "--skeleton-ref"]) == 0
+    assert main(["info", str(ref)]) == 2  # the skeleton is not in the file
+    assert main(["info", str(ref), "--skeleton", str(DATA / "07.asf")]) == 0
+    assert "62 channels" in capsys.readouterr().out
     path.write_bytes(path.read_bytes()[:40])
     assert main(["info", str(path)]) == 2  # a damaged file: one line, no traceback
     assert "w.moc" in capsys.readouterr().err

@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 from mocodec import limits, moc, ratecontrol
-from mocodec.cli.options import add_codec_options, add_input_options, target_of
+from mocodec.cli.options import add_codec_options, add_input_options, skeleton_from, target_of
 from mocodec.codecs import codec_class, codec_ids, get_codec
 from mocodec.errors import CodecError
 from mocodec.formats import load, save
@@ -76,17 +76,6 @@ def parse_frames(text: str | None) -> tuple[int, int] | None:
         return int(a or 0), int(b) if b else -1
     except ValueError:
         raise CodecError(f"--frames wants FIRST:STOP (e.g. 120:240), got {text!r}") from None
-
-
-def skeleton_from(path: str | None):
-    """The skeleton of an .asf file, or of a .bvh or .amc motion file; None for no path."""
-    if path is None:
-        return None
-    if Path(path).suffix.lower() == ".asf":
-        from mocodec.formats.asf import read_asf
-
-        return read_asf(path)
-    return load(path).skeleton
 
 
 def cmd_decode(args) -> int:

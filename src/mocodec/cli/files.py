@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mocodec.cli.options import add_codec_options, add_input_options
+from mocodec.cli.options import add_codec_options, add_input_options, skeleton_from
 from mocodec.formats import load, save
 from mocodec.motion import Motion
 
@@ -41,11 +41,12 @@ def describe(motion: Motion, path: str) -> str:
     return "\n".join(lines)
 
 
-def describe_moc(path: str) -> str:
-    """The ``info`` summary of a .moc file, from its header and index (nothing is decoded)."""
+def describe_moc(path: str, skeleton_path: str | None = None) -> str:
+    """The ``info`` summary of a .moc file, from its header and index (nothing is decoded);
+    ``skeleton_path`` gives the skeleton of a file coded without one."""
     from mocodec import moc
 
-    c = moc.info(path)
+    c = moc.info(path, skeleton_from(skeleton_path))
     sk, codec = c.skeleton, c.header["codec"]
     knobs = ", ".join(f"{k}={v}" for k, v in codec.get("knobs", {}).items())
     seconds = c.frames / c.fps
@@ -64,7 +65,7 @@ def describe_moc(path: str) -> str:
 def cmd_info(args) -> int:
     for path in args.files:
         if str(path).lower().endswith(".moc"):
-            print(describe_moc(path))
+            print(describe_moc(path, args.skeleton))
             if len(args.files) > 1:
                 print()
             continue
@@ -190,6 +191,7 @@ def add_commands(sub) -> None:
     )
     p.add_argument("files", nargs="+", metavar="FILE", help=".bvh, .amc or .moc file")
     p.add_argument("--joints", action="store_true", help="also list every joint (.bvh, .amc)")
+    p.add_argument("--skeleton", help="the skeleton (.asf, .bvh or .amc) of a .moc file encoded with --skeleton-ref")
     add_input_options(p)
     p.set_defaults(func=cmd_info)
 

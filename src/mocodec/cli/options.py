@@ -1,10 +1,24 @@
-"""Options several commands share: the input options of .amc files, the codec and its knobs,
-and a rate-control target. Light to import: every command's parser uses them."""
+"""Options several commands share: the input options of .amc files, the skeleton of a .moc file
+coded without one, the codec and its knobs, and a rate-control target. Light to import: every
+command's parser uses them."""
 
 from __future__ import annotations
 
 from mocodec.codecs.registry import DEFAULT_CODEC
 from mocodec.errors import CodecError
+
+
+def skeleton_from(path: str | None):
+    """The skeleton of an .asf file, or of a .bvh or .amc motion file; None for no path."""
+    if path is None:
+        return None
+    if path.lower().endswith(".asf"):
+        from mocodec.formats.asf import read_asf
+
+        return read_asf(path)
+    from mocodec.formats import load
+
+    return load(path).skeleton
 
 
 def add_input_options(p) -> None:

@@ -11,7 +11,7 @@ frame over ``blend`` seconds (fig. 8-5), at most half the segment. Lags and code
 index g as g, a posture index p as -1 - p; the first frame's posture first) are range coded.
 The root is sent as quantised samples of its own (``root_d``, ``root_step``).
 
-The tables come from ``tables`` (``mocodec tables train``) or are trained on the clip and
+The tables come from ``tables`` (``mocodec model train tables``) or are trained on the clip and
 carried. ``e`` is the quality knob: the thesis shows e = 5 on its dance at about 220 bit/s.
 A frame waits until its segment's end is detected (:meth:`delays`); the codec does not
 stream.

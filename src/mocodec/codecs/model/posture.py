@@ -7,7 +7,7 @@ decoder looks the entries' joint angles up and joins them by Hermite cubics (8-5
 Lags and codes are range coded. The root is sent as quantised samples of its own
 (``root_d``, ``root_step``: :mod:`mocodec.codecs.model.modelcoding`).
 
-The tables come from ``tables`` (a file from ``mocodec tables train``, which both ends load)
+The tables come from ``tables`` (a file from ``mocodec model train tables``, which both ends load)
 or, with ``tables`` empty, are trained on the clip (posture entries ``spacing`` cm apart) and
 carried in the payload. ``d`` is the quality knob: the thesis swept 80 to 10 (Appendix III)
 and shows d = 20 on its dance at about 450 bit/s.

@@ -39,7 +39,11 @@ ROOT_KNOBS = (
 )
 TABLE_KNOBS = (
     Knob(
-        "tables", str, "", "a motion tables file (mocodec tables train); empty: trained on the clip, carried", path=True
+        "tables",
+        str,
+        "",
+        "a motion tables file (mocodec model train tables); empty: trained on the clip, carried",
+        path=True,
     ),
     Knob(
         "spacing",

@@ -83,7 +83,7 @@ class PrimitivesCodec(Codec):
             high=256,
         ),
         Knob("bits", int, 10, "quantisation bits of the wavelet coefficients", low=4, high=20),
-        Knob("db", str, "", "a primitive database file (mocodec primitives train); empty: none", path=True),
+        Knob("db", str, "", "a primitive database file (mocodec model train primitives); empty: none", path=True),
         Knob(
             "history",
             int,

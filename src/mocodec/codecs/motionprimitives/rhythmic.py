@@ -50,7 +50,9 @@ class RhythmicCodec(Codec):
             "primitives", int, rhythmdb.COUNT, "primitives made from the clip and carried (db empty)", low=1, high=4096
         ),
         Knob("max_segment", int, 32, "longest segment in frames", low=quatseg.MIN_SEGMENT, high=256),
-        Knob("db", str, "", "a rhythm database file (mocodec rhythm train); empty: made from the clip", path=True),
+        Knob(
+            "db", str, "", "a rhythm database file (mocodec model train rhythm); empty: made from the clip", path=True
+        ),
         Knob("blend", bool, True, "blend consecutive segments (4.2.2); false: butt them together"),
         Knob(
             "root",

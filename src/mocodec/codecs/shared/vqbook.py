@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from mocodec.codecs.base import Knob
 from mocodec.codecs.shared import modelfile
 from mocodec.coding.entropy.parts import join_parts, split_parts
 from mocodec.coding.quantisation import vq
@@ -30,6 +31,15 @@ from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.metrics.groups import group_channels
 from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
+
+#: svq's and tvq's knob naming a trained codebook file
+CODEBOOK_KNOB = Knob(
+    "codebook",
+    str,
+    "",
+    "a codebook file (mocodec model train codebook); empty: train on the clip, send in-band",
+    path=True,
+)
 
 MAGIC = b"MOCVQ"
 VERSION = 1

@@ -8,7 +8,7 @@ each group's change from its last decoded frame in a closed loop; without it the
 itself is quantised, as the thesis did (whose PSNR was a few dB: a few hundred postures cannot
 cover a body's). Indices are sorted by training use and range coded per group.
 
-The codebook is ``codebook`` = a file made by ``mocodec codebook train --kind spatial`` on clips
+The codebook is ``codebook`` = a file made by ``mocodec model train codebook --vectors spatial`` on clips
 with the same channel layout (encoder and decoder load the same file; the payload names it by
 fingerprint), or, by default, trained on the first frames coded and sent in the header as
 float16 (self-contained, but the header costs ``size`` x channels x 2 bytes). No delay.
@@ -52,13 +52,7 @@ class SvqCodec(FramewiseCodec):
     knobs = (
         Knob("size", int, 32, "entries of each group's codebook (the thesis: 16-512)", low=2, high=4096),
         Knob("predictive", bool, True, "code each group's change from its last decoded frame"),
-        Knob(
-            "codebook",
-            str,
-            "",
-            "a codebook file (mocodec codebook train); empty: train on the clip, send in-band",
-            path=True,
-        ),
+        vqbook.CODEBOOK_KNOB,
     )
     quality = QualityKnob("size", higher_is_better=True, log_scale=True)
 

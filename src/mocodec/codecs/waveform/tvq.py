@@ -9,7 +9,7 @@ vectors themselves are quantised, as the thesis did (its PSNR stays low: a codeb
 absolute 6-sample vectors cannot cover every channel's range). Indices are sorted by training
 use and range coded per channel.
 
-The codebook is ``codebook`` = a file made by ``mocodec codebook train --kind temporal``
+The codebook is ``codebook`` = a file made by ``mocodec model train codebook --vectors temporal``
 (trained on other clips; encoder and decoder load the same file, the payload names it by
 fingerprint), or, by default, trained on the first frames coded and sent in the header as
 float16 (self-contained, but the header costs ``size`` x ``length`` x 2 bytes). Delay:
@@ -42,13 +42,7 @@ class TvqCodec(FramewiseCodec):
         Knob("size", int, 256, "codebook entries (the thesis: 16-512)", low=2, high=4096),
         Knob("length", int, 6, "samples per vector (the coding delay + 1)", low=2, high=64),
         Knob("predictive", bool, True, "code each vector minus the channel's last decoded sample"),
-        Knob(
-            "codebook",
-            str,
-            "",
-            "a codebook file (mocodec codebook train); empty: train on the clip, send in-band",
-            path=True,
-        ),
+        vqbook.CODEBOOK_KNOB,
     )
     quality = QualityKnob("size", higher_is_better=True, log_scale=True)
 

@@ -83,14 +83,14 @@ def layer_rows(motion, bound: float, layers: int, keyframe_s: float, refresh_s: 
     packets = enc.push(motion.channels) + enc.flush()
     sent = stream_clip(motion, codec, keyframe_s=keyframe_s)
     stream = [p for p in sent if p.kind != HEADER]
+    framing = sum(len(p.to_bytes()) - len(p.payload) for p in stream)
     kbps, max_cm, mean_cm = [], [], []
     for keep in range(1, layers + 1):
-        cut = [p[: codec.layer_ends(p)[keep - 1]] if keep < layers else p for p in packets]
         dec = codec.decoder(motion.skeleton, motion.fps)
-        err = joint_errors(motion, np.concatenate([dec.push(p) for p in cut]))
+        err = joint_errors(motion, np.concatenate([dec.push(p[: cut_size(codec, p, keep)]) for p in packets]))
         max_cm.append(float(err.max()))
         mean_cm.append(float(err.mean()))
-        size = sum(len(p.to_bytes()) - len(p.payload) + cut_size(codec, p.payload, keep) for p in stream)
+        size = framing + sum(cut_size(codec, p.payload, keep) for p in stream)
         kbps.append(size * 8 / motion.duration / 1000)
     return {
         "layer_kbps": kbps,
@@ -101,6 +101,7 @@ def layer_rows(motion, bound: float, layers: int, keyframe_s: float, refresh_s: 
 
 
 def cut_size(codec, payload: bytes, keep: int) -> int:
+    """The bytes of a kinwave-live packet with its ``keep`` lowest layers."""
     ends = codec.layer_ends(payload) if payload else [0]
     return ends[min(keep, len(ends)) - 1]
 

@@ -118,7 +118,8 @@ class Layered(Protocol):
     """A codec whose stream packets carry layers, base first, each with an error bound that
     holds on its own with the layers below it (``kinwave-live``): a relay serves a viewer the
     lowest layers by cutting a packet after one, never decoding. A layer dropped from one
-    packet stays useless to the receiver until the codec stream restarts (a keyframe)."""
+    packet stays useless to the receiver until it restarts (a keyframe, or its own restart:
+    :meth:`layer_starts`)."""
 
     @property
     def layer_bounds(self) -> list[float]:
@@ -172,8 +173,8 @@ class StreamDecoder:
         return True
 
     def lost(self) -> bool:
-        """Told that packets were lost (or one was damaged): True if the decoder finds its own way back (its codec
-        stream restarts parts of itself; :meth:`push` raises
+        """Told that packets were lost (or one was damaged): True if the decoder finds its own
+        way back (its codec stream restarts parts of itself; :meth:`push` raises
         :class:`~mocodec.errors.OutOfStepError` until it can decode again), False if it must be
         replaced at the next keyframe."""
         return False

@@ -65,8 +65,8 @@ _U16 = struct.Struct("<H")
 _BATCH = struct.Struct("<2sI")
 _POSITION = struct.Struct("<3h")
 COMPACT = 0x80  # the tag bit of a compact data packet (a full packet starts with "M")
-C_EXPLICIT, C_POSITION, C_RESTART = 8, 16, 32  # compact tags: full sequence and first frame follow; the
-# position follows; RESTART
+# compact tags: the full sequence number and first frame follow; the position follows; flag RESTART
+C_EXPLICIT, C_POSITION, C_RESTART = 8, 16, 32
 COMPACT_MIN = 6
 OVERHEAD = _FIELDS.size + _CRC.size
 #: Where the timestamp, stream id and sequence number sit in a packet (read in bulk by the load test).

@@ -311,40 +311,38 @@ def layer_bounds(max_error_cm: float, layers: int) -> list[float]:
     return [max_error_cm * 2.0 ** (layers - 1 - k) for k in range(layers)]
 
 
-def section_ends(packet: bytes, layers: int) -> list[int]:
-    """Where each layer section of a packet ends; each but the last of a full packet follows
-    its length (a varint), so a relay drops the top layers by cutting after a section.
-    CorruptStreamError if a length does not parse or runs past the end."""
+def _spans(packet: bytes, layers: int) -> list[tuple[int, int]]:
+    """Where each layer section of a packet starts and ends; each but the last of a full
+    packet follows its length (a varint), so a relay drops the top layers by cutting after a
+    section. CorruptStreamError if a length does not parse or runs past the end."""
     if layers == 1:
-        return [len(packet)]
-    ends: list[int] = []
+        return [(0, len(packet))]
+    spans: list[tuple[int, int]] = []
     pos = 0
     for k in range(layers - 1):
         if k > 0 and pos == len(packet):
-            return ends  # the top layers were dropped
+            return spans  # the top layers were dropped
         try:
-            size, pos = varint.unpack(packet, pos, 4)
+            size, start = varint.unpack(packet, pos, 4)
         except ValueError as e:
             raise CorruptStreamError(f"kinwave-live packet: layer {k}'s length at byte {pos}: {e}") from None
-        if pos + size > len(packet):
+        if start + size > len(packet):
             raise CorruptStreamError(
-                f"kinwave-live packet: layer {k}'s {size} bytes at byte {pos} run past its end ({len(packet)} bytes)"
+                f"kinwave-live packet: layer {k}'s {size} bytes at byte {start} run past its end ({len(packet)} bytes)"
             )
-        pos += size
-        ends.append(pos)
-    return ends + [len(packet)] if pos < len(packet) else ends
+        pos = start + size
+        spans.append((start, pos))
+    return spans + [(pos, len(packet))] if pos < len(packet) else spans
+
+
+def section_ends(packet: bytes, layers: int) -> list[int]:
+    """Where each layer section of a packet ends (a relay cuts a packet there)."""
+    return [end for _, end in _spans(packet, layers)]
 
 
 def split_layers(packet: bytes, layers: int) -> list[bytes]:
     """A packet's layer sections, base first (those the relay left in it)."""
-    ends = section_ends(packet, layers)
-    sections, pos = [], 0
-    for k, end in enumerate(ends):
-        if k < layers - 1:
-            pos = varint.unpack(packet, pos, 4)[1]
-        sections.append(packet[pos:end])
-        pos = end
-    return sections
+    return [packet[start:end] for start, end in _spans(packet, layers)]
 
 
 def join_layers(sections: list[bytes]) -> bytes:

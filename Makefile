@@ -6,7 +6,8 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 THREE_VERSION := 0.187.0
 VENDOR := src/mocodec/viewer/static/vendor
-THREE := $(VENDOR)/three.module.js
+# the last file the vendor rule writes: its presence means the whole set is there
+THREE := $(VENDOR)/addons/loaders/GLTFLoader.js
 
 .PHONY: demo test test-fast lint bench bench-suite vendor clean
 
@@ -16,32 +17,41 @@ $(BIN)/python:
 
 # every extra, then the numerical kernels compiled once (numba caches them)
 $(STAMP): $(BIN)/python pyproject.toml $(THREE)
-	$(BIN)/python -m pip install --quiet -e ".[test,plot,bench,stream,view,lint]"
+	$(BIN)/python -m pip install --quiet -e ".[test,plot,bench,stream,view,lint,formats,zarr]"
 	$(BIN)/mocodec warmup
 	touch $(STAMP)
 
-# the viewer's three.js, fetched from npm once (pinned; npm checks its integrity) and served
-# from the package, so the viewer works offline
+# the viewer's three.js (and the glTF loader the format tests load our files with), fetched from
+# npm once (pinned; npm checks its integrity) and served from the package, so the viewer works
+# offline
 vendor: $(THREE)
 
 $(THREE):
 	rm -rf $(VENDOR).tmp && mkdir -p $(VENDOR).tmp
 	cd $(VENDOR).tmp && npm pack --silent three@$(THREE_VERSION) > /dev/null && tar xzf three-$(THREE_VERSION).tgz
-	mkdir -p $(VENDOR)/addons/controls
+	mkdir -p $(VENDOR)/addons/controls $(VENDOR)/addons/loaders $(VENDOR)/addons/utils
 	cp $(VENDOR).tmp/package/build/three.core.js $(VENDOR).tmp/package/LICENSE $(VENDOR)/
 	cp $(VENDOR).tmp/package/examples/jsm/controls/OrbitControls.js $(VENDOR)/addons/controls/
+	cp $(VENDOR).tmp/package/examples/jsm/utils/BufferGeometryUtils.js \
+	   $(VENDOR).tmp/package/examples/jsm/utils/SkeletonUtils.js $(VENDOR)/addons/utils/
 	cp $(VENDOR).tmp/package/build/three.module.js $(VENDOR)/
+	cp $(VENDOR).tmp/package/examples/jsm/loaders/GLTFLoader.js $(VENDOR)/addons/loaders/
 	rm -rf $(VENDOR).tmp
 
 demo: $(STAMP)
 	$(BIN)/mocodec demo
 
+# the JavaScript tests (Node's own runner; tests/js/register.mjs resolves 'three' to the vendored copy)
+JS_TESTS := node --import ./tests/js/register.mjs --test tests/js/
+
 test: $(STAMP)
+	$(JS_TESTS)
 	$(BIN)/python -m pytest
 
 # the edit-test loop: everything but the slow tier (fuzzing, corruption sweeps, every shared
 # clip), the browser and the network (relay, NATS) tests
 test-fast: $(STAMP)
+	$(JS_TESTS)
 	$(BIN)/python -m pytest -n auto -m "not slow and not browser and not network"
 
 # ruff (lint and format check) and mypy

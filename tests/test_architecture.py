@@ -25,7 +25,7 @@ LAYERS = [
     {"moc"},
     {"ratecontrol"},
     {"scene"},
-    {"stream", "bench", "capture"},
+    {"stream", "bench", "capture", "numcodecs"},
     {"viewer"},
     {"cli"},
     {"__init__", "__main__"},

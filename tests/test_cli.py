@@ -45,7 +45,7 @@ def test_convert_both_ways(tmp_path, capsys):
     "argv, message",
     [
         (["info", "missing.bvh"], "missing.bvh: no such file"),
-        (["convert", str(DATA / "09_02.bvh"), "out.xyz"], "expected .bvh or .amc"),
+        (["convert", str(DATA / "09_02.bvh"), "out.xyz"], "expected .bvh, .amc, .gltf, .glb"),
         (["info", str(DATA / "07.asf")], "skeleton only"),
     ],
 )

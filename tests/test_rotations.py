@@ -82,3 +82,15 @@ def test_log_exp_inverse(v):
     q = r.quat_exp(v)
     np.testing.assert_allclose(np.linalg.norm(q), 1.0)
     np.testing.assert_allclose(r.quat_log(q), v, atol=1e-9)
+
+
+@pytest.mark.parametrize("order", ["XZ", "ZX", "XY", "YX", "YZ", "ZY"])
+def test_exact_euler_recovers_two_axis_angles_past_ninety_degrees(order):
+    rng = np.random.default_rng(11)
+    angles = rng.uniform(-179.0, 179.0, (2000, 2))
+    angles[:10, 1] = [90.0, -90.0, 89.9999, 179.0, -179.0, 120.0, -135.0, 0.0, 90.0, -90.0]
+    q = r.euler_to_quat(angles, order)
+    back = r.quat_to_exact_euler(q, order)
+    again = r.euler_to_quat(back, order)
+    assert np.abs(np.abs(np.sum(q * again, axis=-1)) - 1.0).max() < 1e-12
+    assert np.abs(back - angles).max() < 1e-9  # in (-180, 180): the angles themselves

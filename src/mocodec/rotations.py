@@ -247,6 +247,24 @@ def quat_to_partial_euler(q: np.ndarray, order: str, degrees: bool = True) -> np
     return (np.rad2deg(angle) if degrees else angle)[..., None]
 
 
+def quat_to_exact_euler(q: np.ndarray, order: str, degrees: bool = True) -> np.ndarray:
+    """:func:`quat_to_partial_euler` for rotations the joint can make exactly (a file's own
+    joint angles read back): with two axes ``"AB"``, ``q = R_A(a) R_B(b)`` turns the B axis
+    by ``a`` about A alone (R_B leaves it), which gives ``a`` without the gimbal and branch
+    trouble of a three-angle split, then ``b`` is the twist left about B."""
+    order = _check_order(order, allow_partial=True)
+    if len(order) != 2:
+        return quat_to_partial_euler(q, order, degrees)
+    e_a, e_b = np.eye(3)[_AXIS[order[0]]], np.eye(3)[_AXIS[order[1]]]
+    q = quat_normalize(np.asarray(q, dtype=np.float64))
+    v = quat_rotate(q, np.broadcast_to(e_b, q.shape[:-1] + (3,)))
+    a = np.arctan2(np.cross(e_b, v) @ e_a, v @ e_b)
+    rest = quat_multiply(axis_angle_to_quat(e_a, -a, degrees=False), q)
+    b = 2.0 * np.arctan2(rest[..., 1 + _AXIS[order[1]]], rest[..., 0])
+    angles = (np.stack((a, b), axis=-1) + np.pi) % (2 * np.pi) - np.pi
+    return np.rad2deg(angles) if degrees else angles
+
+
 def quat_continuous(q: np.ndarray, axis: int = 0) -> np.ndarray:
     """``q`` with signs flipped along ``axis`` (time) so each quaternion lies in the hemisphere of
     the one before: the same rotations, with no jump between ``q`` and ``-q``."""

@@ -9,13 +9,14 @@ import time
 from mocodec.capture.converter import convert
 from mocodec.capture.sensors import read_log, write_log
 from mocodec.capture.simulate import simulate
+from mocodec.cli.options import add_input_options, load_input
 from mocodec.errors import MocodecError
-from mocodec.formats import load, save
+from mocodec.formats import save
 
 
 def cmd_capture(args) -> int:
     if args.simulate:
-        motion = load(args.simulate, asf=args.asf, fps=args.fps)
+        motion = load_input(args.simulate, args)
         log = simulate(motion, args.noise_deg, args.noise_cm, args.seed)
         if not str(args.output).endswith(".npz"):
             raise MocodecError(f"{args.output}: a simulated sensor log is written as .npz")
@@ -49,7 +50,10 @@ def add_commands(sub) -> None:
     )
     p.add_argument("log", nargs="?", metavar="LOG", help="sensor log (.npz)")
     p.add_argument(
-        "-o", "--output", required=True, help="motion file to write (.bvh or .amc), or the log (.npz) with --simulate"
+        "-o",
+        "--output",
+        required=True,
+        help="motion file to write (.bvh, .amc, .gltf or .glb), or the log (.npz) with --simulate",
     )
     p.add_argument(
         "--no-wrist-correction",
@@ -60,6 +64,5 @@ def add_commands(sub) -> None:
     p.add_argument("--noise-deg", type=float, default=0.5, help="tracker orientation noise (deg, default 0.5)")
     p.add_argument("--noise-cm", type=float, default=0.3, help="tracker position noise (cm, default 0.3)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--asf", help="ASF skeleton of an .amc clip")
-    p.add_argument("--fps", type=float, help="frame rate of an .amc clip (default 120)")
+    add_input_options(p)
     p.set_defaults(func=cmd_capture)

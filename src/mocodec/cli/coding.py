@@ -12,10 +12,10 @@ import time
 from pathlib import Path
 
 from mocodec import limits, moc, ratecontrol
-from mocodec.cli.options import add_codec_options, add_input_options, skeleton_from, target_of
+from mocodec.cli.options import add_codec_options, add_input_options, load_input, skeleton_from, target_of
 from mocodec.codecs import codec_class, codec_ids, get_codec
 from mocodec.errors import CodecError
-from mocodec.formats import load, save
+from mocodec.formats import save
 from mocodec.formats.fileio import atomic_write_bytes
 from mocodec.metrics import compare
 from mocodec.metrics.compare import db_text
@@ -44,7 +44,7 @@ def cmd_encode(args) -> int:
     if len(inputs) > 1 and not out.is_dir():
         raise CodecError(f"{out}: with several inputs, -o must be an existing directory")
     for k, src in enumerate(inputs, 1):
-        motion = load(src, asf=args.asf, fps=args.fps)
+        motion = load_input(src, args)
         codec, _ = configured(args, motion)
         target = out / f"{src.stem}.moc" if out.is_dir() else out
         t0 = time.perf_counter()
@@ -147,7 +147,7 @@ def evaluate(motion: Motion, args) -> str:
 def cmd_eval(args) -> int:
     inputs = args.inputs
     for k, path in enumerate(inputs, 1):
-        motion = load(path, asf=args.asf, fps=args.fps)
+        motion = load_input(path, args)
         _progress(k, len(inputs), Path(path).name)
         print(f"{'file':<24}{path}")
         print(evaluate(motion, args))
@@ -183,7 +183,7 @@ def add_commands(sub) -> None:
         "after them (--name value); a target (--ratio, --bitrate, --psnr, "
         "--mean-error-cm, --max-error-cm) makes rate control choose the knob.",
     )
-    p.add_argument("inputs", nargs="+", metavar="IN", help=".bvh or .amc file(s)")
+    p.add_argument("inputs", nargs="+", metavar="IN", help="motion file(s): .bvh, .amc, .gltf, .glb or .fbx")
     p.add_argument("-o", "--output", required=True, help="output .moc file, or a directory for several inputs")
     p.add_argument(
         "--chunk-frames",
@@ -208,7 +208,7 @@ def add_commands(sub) -> None:
 
     p = sub.add_parser("decode", description="Decode a .moc file (only the chunks --frames needs) and write it.")
     p.add_argument("input", metavar="IN", help=".moc file")
-    p.add_argument("-o", "--output", required=True, help=".bvh or .amc file to write")
+    p.add_argument("-o", "--output", required=True, help="motion file to write: .bvh, .amc, .gltf or .glb")
     p.add_argument("--frames", help="FIRST:STOP, a frame range (e.g. 120:240)")
     p.add_argument("--skeleton", help="the skeleton (.asf, .bvh or .amc) of a file encoded with --skeleton-ref")
     p.add_argument("--out-asf", help="where to write the ASF when the output is .amc")
@@ -233,7 +233,7 @@ def add_commands(sub) -> None:
         description="Ratio vs 32-bit floats, bits per second, PSNR, VPSNR, mean/max joint "
         "error (cm), encode and decode time per frame.",
     )
-    p.add_argument("inputs", nargs="+", metavar="IN", help=".bvh or .amc file(s)")
+    p.add_argument("inputs", nargs="+", metavar="IN", help="motion file(s): .bvh, .amc, .gltf, .glb or .fbx")
     add_codec_options(p)
     add_input_options(p)
     p.set_defaults(func=cmd_eval, takes_knobs=True)

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mocodec.cli.options import add_codec_options, add_input_options, skeleton_from
+from mocodec.cli.options import add_codec_options, add_input_options, load_input, skeleton_from
 from mocodec.formats import load, save
 from mocodec.motion import Motion
 
@@ -69,7 +69,7 @@ def cmd_info(args) -> int:
             if len(args.files) > 1:
                 print()
             continue
-        motion = load(path, asf=args.asf, fps=args.fps)
+        motion = load_input(path, args)
         print(describe(motion, path))
         if args.joints:
             sk = motion.skeleton
@@ -86,7 +86,7 @@ def cmd_info(args) -> int:
 
 
 def cmd_convert(args) -> int:
-    motion = load(args.input, asf=args.asf, fps=args.fps)
+    motion = load_input(args.input, args)
     written = save(motion, args.output, asf=args.out_asf)
     print(f"wrote {', '.join(str(p) for p in written)} ({motion.num_frames} frames)")
     return 0
@@ -97,7 +97,7 @@ def cmd_compare(args) -> int:
 
     from mocodec.metrics import compare
 
-    original = load(args.original, asf=args.asf, fps=args.fps)
+    original = load_input(args.original, args)
     decoded = load(args.decoded, asf=args.decoded_asf or args.asf, fps=args.fps)
     result = compare(original, decoded, shell_cm=args.shell_cm)
     if args.json:
@@ -117,7 +117,7 @@ def cmd_analyze(args) -> int:
     from mocodec.analysis import analyze, summary_text
     from mocodec.formats.fileio import atomic_write
 
-    motion = load(args.file, asf=args.asf, fps=args.fps)
+    motion = load_input(args.file, args)
     result = analyze(motion, noise_deg=args.noise_deg, noise_cm=args.noise_cm)
     print(summary_text(result, args.file))
     if args.out:
@@ -200,8 +200,8 @@ def add_commands(sub) -> None:
         description="Convert a motion file; the pose of every frame is kept exactly. "
         "Writing .amc also writes its .asf (same stem unless --out-asf).",
     )
-    p.add_argument("input", metavar="IN", help=".bvh or .amc file")
-    p.add_argument("output", metavar="OUT", help=".bvh or .amc file to write")
+    p.add_argument("input", metavar="IN", help="motion file: .bvh, .amc, .gltf, .glb or .fbx")
+    p.add_argument("output", metavar="OUT", help="motion file to write: .bvh, .amc, .gltf or .glb")
     p.add_argument("--out-asf", help="where to write the ASF when OUT is .amc")
     add_input_options(p)
     p.set_defaults(func=cmd_convert)
@@ -213,8 +213,8 @@ def add_commands(sub) -> None:
         "and derivative outliers. Both files need the same skeleton, rate and "
         "frame count.",
     )
-    p.add_argument("original", metavar="ORIGINAL", help=".bvh or .amc file")
-    p.add_argument("decoded", metavar="DECODED", help=".bvh or .amc file")
+    p.add_argument("original", metavar="ORIGINAL", help="motion file: .bvh, .amc, .gltf, .glb or .fbx")
+    p.add_argument("decoded", metavar="DECODED", help="motion file: .bvh, .amc, .gltf, .glb or .fbx")
     p.add_argument("--decoded-asf", help="ASF skeleton of an .amc DECODED (default: as for ORIGINAL)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument("--per-joint", action="store_true", help="also list errors per joint (and per DOF in JSON)")
@@ -229,7 +229,7 @@ def add_commands(sub) -> None:
         "frequency and 40/50 dB cut-offs, the Markov fit of the autocorrelation, "
         "a stationarity check and the shape of the first-difference PDF.",
     )
-    p.add_argument("file", metavar="FILE", help=".bvh or .amc file")
+    p.add_argument("file", metavar="FILE", help="motion file: .bvh, .amc, .gltf, .glb or .fbx")
     p.add_argument("--out", metavar="DIR", help="write analysis.json and PNG plots here")
     p.add_argument("--no-plots", action="store_true", help="with --out, write only the JSON")
     p.add_argument("--noise-deg", type=float, default=0.1, help="sensor noise of angles (std, default 0.1 deg)")

@@ -8,7 +8,7 @@ import sys
 import time
 from pathlib import Path
 
-from mocodec.cli.options import add_input_options
+from mocodec.cli.options import add_input_options, load_input
 from mocodec.errors import CodecError
 
 # kind -> (the file's magic, what the model is for)
@@ -22,13 +22,12 @@ KINDS = {
 
 def _training_clips(args) -> list:
     """The clips a train command names, loaded with progress."""
-    from mocodec.formats import load
 
     clips = []
     for k, path in enumerate(args.inputs, 1):
         if len(args.inputs) > 1:
             print(f"[{k}/{len(args.inputs)}] {Path(path).name}", file=sys.stderr, flush=True)
-        clips.append(load(path, asf=args.asf, fps=args.fps))
+        clips.append(load_input(path, args))
     return clips
 
 
@@ -209,7 +208,7 @@ def add_commands(sub) -> None:
     kinds = train.add_subparsers(dest="kind", required=True, metavar="KIND")
     for kind, (_, text) in KINDS.items():
         k = kinds.add_parser(kind, help=text, description=f"Train {text}.")
-        k.add_argument("inputs", nargs="+", metavar="IN", help=".bvh or .amc clips")
+        k.add_argument("inputs", nargs="+", metavar="IN", help="motion clips: .bvh, .amc, .gltf, .glb or .fbx")
         k.add_argument("-o", "--output", required=True, help="model file to write")
         _kind_options(kind, k)
         add_input_options(k)

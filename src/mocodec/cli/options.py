@@ -9,7 +9,7 @@ from mocodec.errors import CodecError
 
 
 def skeleton_from(path: str | None):
-    """The skeleton of an .asf file, or of a .bvh or .amc motion file; None for no path."""
+    """The skeleton of an .asf file, or of a motion file (.bvh, .amc, .gltf, .glb, .fbx); None for no path."""
     if path is None:
         return None
     if path.lower().endswith(".asf"):
@@ -23,7 +23,22 @@ def skeleton_from(path: str | None):
 
 def add_input_options(p) -> None:
     p.add_argument("--asf", help="ASF skeleton of an .amc input (default: <subject>.asf beside it)")
-    p.add_argument("--fps", type=float, help="frame rate of an .amc input (default 120, the CMU rate)")
+    p.add_argument(
+        "--fps",
+        type=float,
+        help="frame rate of an .amc input (default 120, the CMU rate), or to sample a glTF/FBX animation at "
+        "(default: the file's own)",
+    )
+    p.add_argument(
+        "--animation", metavar="NAME|INDEX", help="the glTF animation or FBX take to read (default: the first)"
+    )
+
+
+def load_input(path, args):
+    """The motion file ``path`` read with the input options of ``args``."""
+    from mocodec.formats import load
+
+    return load(path, asf=args.asf, fps=args.fps, animation=getattr(args, "animation", None))
 
 
 TARGET_OPTIONS = (

@@ -13,9 +13,9 @@ from mocodec.extras import require
 require("aiohttp", "stream", "the relay and its clients")
 
 from mocodec.cli.coding import configured  # noqa: E402
-from mocodec.cli.options import add_codec_options  # noqa: E402
+from mocodec.cli.options import add_codec_options, add_input_options, load_input  # noqa: E402
 from mocodec.errors import MocodecError  # noqa: E402
-from mocodec.formats import load, save  # noqa: E402
+from mocodec.formats import save  # noqa: E402
 from mocodec.stream import client, tokens  # noqa: E402
 from mocodec.stream.relay import Limits, run  # noqa: E402
 
@@ -78,7 +78,7 @@ def cmd_token(args) -> int:
 
 
 def cmd_publish(args) -> int:
-    motion = load(args.file, asf=args.asf, fps=args.fps)
+    motion = load_input(args.file, args)
     codec, _ = configured(args, motion)
     stats = asyncio.run(
         client.publish_clip(
@@ -180,8 +180,7 @@ def add_commands(sub) -> None:
     p.add_argument("--stream", type=int, default=0, help="stream id in the room (default 0)")
     p.add_argument("--keyframe-s", type=float, default=1.0, help="seconds between keyframes (default 1)")
     add_codec_options(p, PUBLISH_CODEC)
-    p.add_argument("--asf", help="ASF skeleton of an .amc input (default: <subject>.asf beside it)")
-    p.add_argument("--fps", type=float, help="frame rate of an .amc input (default 120)")
+    add_input_options(p)
     p.set_defaults(func=cmd_publish, takes_knobs=True)
 
     p = sub.add_parser(
@@ -190,7 +189,7 @@ def add_commands(sub) -> None:
         "--frames frames, the stream's end, or --timeout.",
     )
     _connection(p)
-    p.add_argument("-o", "--output", required=True, help="motion file to write (.bvh or .amc)")
+    p.add_argument("-o", "--output", required=True, help="motion file to write (.bvh, .amc, .gltf or .glb)")
     p.add_argument("--frames", type=int, help="stop after this many frames")
     p.add_argument("--stream", type=int, help="stream id to record (default: the first to arrive)")
     p.add_argument("--budget", type=float, default=0.0, help="this viewer's bandwidth in bit/s (0: all)")

@@ -1,4 +1,4 @@
-"""Reading and writing motion files: BVH and ASF/AMC, chosen by file extension."""
+"""Reading and writing motion files: BVH, ASF/AMC, glTF and FBX, chosen by file extension."""
 
 from __future__ import annotations
 
@@ -10,9 +10,12 @@ from mocodec.formats.amc import CMU_FPS, find_asf, read_amc, write_amc
 from mocodec.formats.asf import read_asf, write_asf
 from mocodec.formats.bvh import guess_units_per_metre, read_bvh, write_bvh
 from mocodec.formats.convert import to_asf_form, to_bvh_form, with_units
+from mocodec.formats.fbx import read_fbx
+from mocodec.formats.gltf import read_gltf, write_gltf
 from mocodec.motion import Motion
 
-READABLE = (".bvh", ".amc")
+READABLE = (".bvh", ".amc", ".gltf", ".glb", ".fbx")
+WRITABLE = (".bvh", ".amc", ".gltf", ".glb")
 
 
 def load(
@@ -21,11 +24,15 @@ def load(
     asf: str | os.PathLike | None = None,
     fps: float | None = None,
     units_per_metre: float | None = None,
+    animation: str | int | None = None,
 ) -> Motion:
-    """Read a ``.bvh`` or ``.amc`` file (the ASF is found beside an AMC unless given).
+    """Read a ``.bvh``, ``.amc``, ``.gltf``/``.glb`` or ``.fbx`` file (the ASF is found beside
+    an AMC unless given).
 
-    ``fps`` sets the rate of an AMC (default 120, the CMU rate) or overrides a BVH's
-    ``Frame Time``; ``units_per_metre`` overrides a BVH's guessed unit.
+    ``fps`` sets the rate of an AMC (default 120, the CMU rate), overrides a BVH's ``Frame
+    Time``, and is the rate a glTF or FBX animation is sampled at (default: the file's own);
+    ``units_per_metre`` overrides a BVH's guessed unit; ``animation`` picks a glTF animation or
+    an FBX take by name or index (the first by default).
     """
     path = Path(path)
     ext = path.suffix.lower()
@@ -34,14 +41,20 @@ def load(
         return motion if fps is None else Motion(motion.skeleton, fps, motion.channels)
     if ext == ".amc":
         return read_amc(path, asf, fps=CMU_FPS if fps is None else fps)
+    if ext in (".gltf", ".glb"):
+        return read_gltf(path, animation=animation, fps=fps)
+    if ext == ".fbx":
+        return read_fbx(path, animation=animation, fps=fps)
     if ext == ".asf":
         raise FormatError(path, None, "an ASF file holds a skeleton only; load its .amc motion instead")
-    raise FormatError(path, None, f"unknown file type {path.suffix or '(none)'!r}, expected .bvh or .amc")
+    expected = ", ".join(READABLE)
+    raise FormatError(path, None, f"unknown file type {path.suffix or '(none)'!r}, expected one of {expected}")
 
 
 def save(motion: Motion, path: str | os.PathLike, *, asf: str | os.PathLike | None = None) -> list[Path]:
-    """Write ``motion`` as ``.bvh`` or ``.amc`` (plus its ``.asf``, by default beside it with the
-    same stem), converting the skeleton form as needed; returns the files written.
+    """Write ``motion`` as ``.bvh``, ``.amc`` (plus its ``.asf``, by default beside it with the
+    same stem) or ``.gltf``/``.glb``, converting the skeleton form as needed; returns the files
+    written.
 
     BVH does not state its unit, so a skeleton whose unit would not be recognised when read
     back (e.g. CMU ASF units) is written in centimetres."""
@@ -57,7 +70,11 @@ def save(motion: Motion, path: str | os.PathLike, *, asf: str | os.PathLike | No
         asf_path = Path(asf) if asf is not None else path.with_suffix(".asf")
         write_amc(to_asf_form(motion), path, asf_path)
         return [asf_path, path]
-    raise ConversionError(f"{path}: cannot write {path.suffix or 'files without extension'}, expected .bvh or .amc")
+    if ext in (".gltf", ".glb"):
+        write_gltf(motion, path)
+        return [path]
+    expected = ", ".join(WRITABLE)
+    raise ConversionError(f"{path}: cannot write {path.suffix or 'files without extension'}, expected {expected}")
 
 
 __all__ = [
@@ -73,5 +90,9 @@ __all__ = [
     "to_asf_form",
     "to_bvh_form",
     "with_units",
+    "read_gltf",
+    "write_gltf",
+    "read_fbx",
     "READABLE",
+    "WRITABLE",
 ]

@@ -147,7 +147,10 @@ class BoundSearch(Encoder):
         while worst < ACCEPT * bound:
             shift = int(np.floor(8.0 * math.log2(bound / max(worst, bound * 2.0**-8))))
             while shift > 0:
-                ps = self.run_pass(np.clip(best.steps.astype(np.int64) + shift, 0, 255).astype(np.uint8), best.offsets)
+                steps = np.clip(best.steps.astype(np.int64) + shift, 0, 255).astype(np.uint8)
+                if np.array_equal(steps, best.steps):
+                    return best  # every code is already the coarsest (a motion that holds still)
+                ps = self.run_pass(steps, best.offsets)
                 trial = self.joint_errors(ps.decoded).max()
                 if trial <= bound:
                     best, worst = ps, trial

@@ -1,0 +1,521 @@
+"""glTF 2.0 (``.gltf``, ``.glb``) animations: a skeleton as a node hierarchy, sampled motion.
+
+Writing: one node per joint (its rest offset as the node's translation, in metres as glTF
+requires), one skin over all joints (so loaders such as three.js make them bones), and one
+animation sampling every frame: a rotation channel (quaternions) for each joint that rotates, a
+translation channel for each joint that translates, LINEAR between frames. Each node's
+``extras.mocodec`` keeps the joint's channel layout (channels, Euler order, ASF axis, exact
+offset) and the asset's ``extras.mocodec`` the unit and frame rate, so a file read back has the
+same skeleton; other readers ignore them. Values are 32-bit floats, as glTF stores them.
+
+Reading: the skeleton is the first skin's joints (or, without a skin, the nodes the animation
+moves and the nodes between them), with the transforms above them composed into the root;
+the animation (``animation``: a name or an index, the first by default) is sampled at ``fps``
+(by default the file's own, from its key spacing), with STEP, LINEAR (slerp) and CUBICSPLINE
+interpolation. Buffers must be inside the file (a ``.glb`` chunk or a ``data:`` URI): a buffer
+naming another file is refused, as mocodec never opens a path a file names.
+"""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import json
+import os
+import struct
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from mocodec import limits, rotations
+from mocodec.errors import FormatError
+from mocodec.extras import require
+from mocodec.formats import nodetree
+from mocodec.formats.fileio import atomic_write_bytes
+from mocodec.motion import Motion
+from mocodec.version import __version__
+
+_GLB_MAGIC = b"glTF"
+_CHUNK_JSON = 0x4E4F534A
+_CHUNK_BIN = 0x004E4942
+_FLOAT = 5126
+_COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, _FLOAT: np.float32}
+_NORMALISE = {5120: 127.0, 5121: 255.0, 5122: 32767.0, 5123: 65535.0}
+_WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
+#: Bytes a glTF file may have: its buffers are read into memory whole.
+MAX_FILE_BYTES = 1 << 31
+#: Frame rate of a clip whose keys do not tell one (a single key).
+FALLBACK_FPS = 30.0
+
+
+def _pygltflib():
+    return require("pygltflib", "formats", "glTF import and export")
+
+
+# ----- writing -------------------------------------------------------------------------------
+
+
+class _Blob:
+    """The binary buffer and its views and accessors, built up one array at a time."""
+
+    def __init__(self, gltf):
+        self.gltf = gltf
+        self.data = bytearray()
+
+    def add(self, values: np.ndarray, kind: str, with_bounds: bool = False) -> int:
+        g = _pygltflib()
+        array = np.ascontiguousarray(values, dtype="<f4")
+        self.data += b"\0" * (-len(self.data) % 4)
+        view = g.BufferView(buffer=0, byteOffset=len(self.data), byteLength=array.nbytes)
+        self.data += array.tobytes()
+        self.gltf.bufferViews.append(view)
+        count = array.shape[0]
+        accessor = g.Accessor(bufferView=len(self.gltf.bufferViews) - 1, componentType=_FLOAT, count=count, type=kind)
+        if with_bounds:
+            flat = array.reshape(count, -1)
+            accessor.min = [float(v) for v in flat.min(axis=0)]
+            accessor.max = [float(v) for v in flat.max(axis=0)]
+        self.gltf.accessors.append(accessor)
+        return len(self.gltf.accessors) - 1
+
+
+def to_gltf_bytes(motion: Motion, binary: bool, animation_name: str = "") -> bytes:
+    """``motion`` as a ``.glb`` (``binary``) or a self-contained ``.gltf`` (buffer as a data URI)."""
+    g = _pygltflib()
+    sk = motion.skeleton
+    translation, rotation = nodetree.from_motion(motion)
+    gltf = g.GLTF2(asset=g.Asset(version="2.0", generator=f"mocodec {__version__}"))
+    gltf.asset.extras = {"mocodec": {"units_per_metre": sk.units_per_metre, "fps": motion.fps}}
+    blob = _Blob(gltf)
+    for i, joint in enumerate(sk.joints):
+        node = g.Node(name=joint.name, children=list(sk.children[i]) or [])
+        node.translation = [float(v) for v in sk.offsets[i] / sk.units_per_metre]
+        node.extras = {"mocodec": nodetree.layout_of(joint)}
+        gltf.nodes.append(node)
+    gltf.scenes = [g.Scene(nodes=[0])]
+    gltf.scene = 0
+    rest = sk.rest_positions / sk.units_per_metre
+    inverse_bind = np.tile(np.eye(4), (len(sk), 1, 1))
+    inverse_bind[:, :3, 3] = -rest
+    # glTF matrices are column-major: the transpose's rows are the columns
+    gltf.skins = [
+        g.Skin(
+            joints=list(range(len(sk))),
+            skeleton=0,
+            inverseBindMatrices=blob.add(inverse_bind.transpose(0, 2, 1).reshape(len(sk), 16), "MAT4"),
+        )
+    ]
+    times = blob.add(np.arange(motion.num_frames) / motion.fps, "SCALAR", with_bounds=True)
+    animation = g.Animation(name=animation_name or sk.name or "motion")
+    plan_rotates = [bool(j.rotation_order) for j in sk.joints]
+    plan_moves = [any(c.endswith("position") for c in j.channels) for j in sk.joints]
+    for i in range(len(sk)):
+        paths = []
+        if plan_moves[i]:
+            paths.append(("translation", translation[:, i], "VEC3"))
+        if plan_rotates[i]:
+            xyzw = rotations.quat_continuous(rotation[:, i])[:, [1, 2, 3, 0]]
+            paths.append(("rotation", xyzw, "VEC4"))
+        for path, values, kind in paths:
+            animation.samplers.append(g.AnimationSampler(input=times, output=blob.add(values, kind)))
+            target = g.AnimationChannelTarget(node=i, path=path)
+            animation.channels.append(g.AnimationChannel(sampler=len(animation.samplers) - 1, target=target))
+    if animation.channels:
+        gltf.animations = [animation]
+    data = bytes(blob.data) + b"\0" * (-len(blob.data) % 4)
+    if binary:
+        gltf.buffers = [g.Buffer(byteLength=len(data))]
+        gltf.set_binary_blob(data)
+        return b"".join(gltf.save_to_bytes())
+    uri = "data:application/octet-stream;base64," + base64.b64encode(data).decode("ascii")
+    gltf.buffers = [g.Buffer(byteLength=len(data), uri=uri)]
+    return gltf.gltf_to_json().encode("utf-8")
+
+
+def write_gltf(motion: Motion, path: str | os.PathLike, animation_name: str = "") -> None:
+    """Write ``motion`` as ``.glb`` or ``.gltf`` (by extension), atomically."""
+    binary = Path(path).suffix.lower() == ".glb"
+    atomic_write_bytes(path, to_gltf_bytes(motion, binary, animation_name))
+
+
+# ----- reading -------------------------------------------------------------------------------
+
+
+class _Document:
+    """A parsed glTF document with checked access to its arrays."""
+
+    def __init__(self, path: Path, gltf, binary_chunk: bytes | None):
+        self.path = path
+        self.gltf = gltf
+        self.binary_chunk = binary_chunk
+        self._buffers: dict[int, bytes] = {}
+
+    def fail(self, message: str) -> FormatError:
+        return FormatError(self.path, None, message)
+
+    def item(self, items, index, what: str):
+        if not isinstance(index, int) or isinstance(index, bool) or not 0 <= index < len(items or []):
+            raise self.fail(f"{what} index {index!r} out of range (the file has {len(items or [])})")
+        return items[index]
+
+    def buffer(self, index: int) -> bytes:
+        if index not in self._buffers:
+            buffer = self.item(self.gltf.buffers, index, "buffer")
+            uri = buffer.uri
+            if uri is None:
+                if index != 0 or self.binary_chunk is None:
+                    raise self.fail(f"buffer {index} has no data (no uri and no .glb binary chunk)")
+                data = self.binary_chunk
+            elif isinstance(uri, str) and uri.startswith("data:"):
+                head, _, payload = uri.partition(",")
+                if not head.endswith(";base64"):
+                    raise self.fail(f"buffer {index}: data URI is not base64")
+                try:
+                    data = base64.b64decode(payload, validate=True)
+                except (binascii.Error, ValueError):
+                    raise self.fail(f"buffer {index}: data URI is not valid base64") from None
+            else:
+                raise self.fail(
+                    f"buffer {index} names an external file ({str(uri)[:60]!r}); mocodec reads buffers "
+                    "only inside the file (.glb, or .gltf with data: URIs)"
+                )
+            length = buffer.byteLength
+            if not isinstance(length, int) or length < 0 or length > len(data):
+                raise self.fail(f"buffer {index}: byteLength {length!r} but {len(data)} bytes of data")
+            self._buffers[index] = data
+        return self._buffers[index]
+
+    def array(self, index: int, what: str) -> np.ndarray:
+        """Accessor ``index`` as float64 ``(count, width)``, every offset checked first."""
+        accessor = self.item(self.gltf.accessors, index, f"{what} accessor")
+        where = f"accessor {index} ({what})"
+        if getattr(accessor, "sparse", None) is not None:
+            raise self.fail(f"{where} is sparse, which mocodec does not read")
+        dtype = _COMPONENTS.get(accessor.componentType)
+        width = _WIDTHS.get(accessor.type)
+        count = accessor.count
+        if dtype is None or width is None:
+            raise self.fail(f"{where}: unknown componentType {accessor.componentType!r} or type {accessor.type!r}")
+        if not isinstance(count, int) or not 0 < count <= limits.MAX_DECODED_VALUES // width:
+            raise self.fail(f"{where}: count {count!r} out of range")
+        if accessor.bufferView is None:
+            return np.zeros((count, width))
+        view = self.item(self.gltf.bufferViews, accessor.bufferView, f"{where} bufferView")
+        data = self.buffer(view.buffer)
+        item = np.dtype(dtype).itemsize
+        element = item * width
+        stride = view.byteStride or element
+        start = (view.byteOffset or 0) + (accessor.byteOffset or 0)
+        view_end = (view.byteOffset or 0) + (view.byteLength or 0)
+        if not all(isinstance(v, int) and v >= 0 for v in (start, stride, view_end)):
+            raise self.fail(f"{where}: bad offsets")
+        end = start + stride * (count - 1) + element
+        if stride < element or end > view_end or view_end > len(data) or start % item:
+            raise self.fail(f"{where}: {count} elements from byte {start} overrun its view or buffer")
+        raw = np.ndarray(
+            (count, width), dtype=np.dtype(dtype).newbyteorder("<"), buffer=data, offset=start, strides=(stride, item)
+        )
+        values = raw.astype(np.float64)
+        if accessor.componentType in _NORMALISE and accessor.normalized:
+            values = np.maximum(values / _NORMALISE[accessor.componentType], -1.0)
+        if not np.isfinite(values).all():
+            raise self.fail(f"{where}: not finite")
+        return values
+
+
+def _split_glb(path: Path, data: bytes) -> tuple[str, bytes | None]:
+    """The JSON text and binary chunk of a ``.glb`` (header and chunk lengths checked)."""
+    if len(data) < 20:
+        raise FormatError(path, None, f"{len(data)} bytes: too short for a .glb (12-byte header and a chunk)")
+    magic, version, length = struct.unpack_from("<4sII", data)
+    if magic != _GLB_MAGIC:
+        raise FormatError(path, None, f"not a .glb file: magic {magic!r} at byte 0, expected b'glTF'")
+    if version != 2:
+        raise FormatError(path, None, f"glTF binary version {version} at byte 4, expected 2")
+    if length > len(data):
+        raise FormatError(path, None, f"header says {length} bytes at byte 8, the file has {len(data)}")
+    chunks: list[tuple[int, bytes]] = []
+    offset = 12
+    while offset + 8 <= length:
+        size, kind = struct.unpack_from("<II", data, offset)
+        if offset + 8 + size > length:
+            raise FormatError(path, None, f"chunk at byte {offset} claims {size} bytes past the file's end")
+        chunks.append((kind, data[offset + 8 : offset + 8 + size]))
+        offset += 8 + size
+    if not chunks or chunks[0][0] != _CHUNK_JSON:
+        raise FormatError(path, None, "the first chunk (byte 12) is not JSON")
+    binary = chunks[1][1] if len(chunks) > 1 and chunks[1][0] == _CHUNK_BIN else None
+    try:
+        return chunks[0][1].decode("utf-8"), binary
+    except UnicodeDecodeError as e:
+        raise FormatError(path, None, f"JSON chunk is not UTF-8 (byte {20 + e.start})") from None
+
+
+def _parse(path: Path) -> _Document:
+    g = _pygltflib()
+    try:
+        size = path.stat().st_size
+        if size > MAX_FILE_BYTES:
+            raise FormatError(path, None, f"{size} bytes, more than a glTF file may have ({MAX_FILE_BYTES})")
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise FormatError(path, None, "no such file") from None
+    except IsADirectoryError:
+        raise FormatError(path, None, "is a directory, expected a file") from None
+    except OSError as e:
+        raise FormatError(path, None, f"cannot read: {e.strerror}") from None
+    if data[:4] == _GLB_MAGIC:
+        text, binary = _split_glb(path, data)
+    else:
+        binary = None
+        try:
+            text = data.decode("utf-8")
+        except UnicodeDecodeError as e:
+            raise FormatError(path, None, f"not a .glb and not UTF-8 JSON (byte {e.start})") from None
+    try:
+        document = json.loads(text)
+    except json.JSONDecodeError as e:
+        raise FormatError(path, e.lineno, f"not JSON: {e.msg} (column {e.colno})") from None
+    if not isinstance(document, dict) or not isinstance(document.get("asset"), dict):
+        raise FormatError(path, None, "not a glTF document (no asset object)")
+    version = str(document["asset"].get("version", ""))
+    if not version.startswith("2."):
+        raise FormatError(path, None, f"glTF version {version!r}, expected 2.x")
+    try:
+        with warnings.catch_warnings():  # the library warns of every optional field left out
+            warnings.simplefilter("ignore")
+            gltf = g.GLTF2.from_dict(document, infer_missing=True)
+    except Exception as e:  # a hostile document breaks the library's mapping in many ways
+        raise FormatError(path, None, f"not a valid glTF document: {type(e).__name__}: {e}"[:300]) from None
+    return _Document(path, gltf, binary)
+
+
+def _vector(doc: _Document, values, size: int, default: tuple, what: str) -> np.ndarray:
+    if values is None:
+        return np.array(default, dtype=np.float64)
+    try:
+        array = np.array(values, dtype=np.float64)
+    except (TypeError, ValueError):
+        array = np.zeros(0)
+    if array.shape != (size,) or not np.isfinite(array).all():
+        raise doc.fail(f"{what}: expected {size} finite numbers, got {str(values)[:60]}")
+    return array
+
+
+def _rest(doc: _Document, k: int, node) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A node's own translation, rotation ``(w, x, y, z)`` and scale (from ``matrix`` if given)."""
+    if node.matrix is not None:
+        m = _vector(doc, node.matrix, 16, (), f"node {k} matrix").reshape(4, 4).T  # column-major
+        scale = np.linalg.norm(m[:3, :3], axis=0)
+        if (scale < 1e-12).any() or abs(np.linalg.det(m[:3, :3] / scale) - 1.0) > 1e-4:
+            raise doc.fail(f"node {k} matrix is not a rotation with a positive scale")
+        return m[:3, 3], rotations.matrix_to_quat(m[:3, :3] / scale), scale
+    translation = _vector(doc, node.translation, 3, (0.0, 0.0, 0.0), f"node {k} translation")
+    xyzw = _vector(doc, node.rotation, 4, (0.0, 0.0, 0.0, 1.0), f"node {k} rotation")
+    if not np.linalg.norm(xyzw) > 1e-12:
+        raise doc.fail(f"node {k} rotation is not a unit quaternion")
+    scale = _vector(doc, node.scale, 3, (1.0, 1.0, 1.0), f"node {k} scale")
+    return translation, rotations.quat_normalize(xyzw[[3, 0, 1, 2]]), scale
+
+
+def _tree(doc: _Document) -> np.ndarray:
+    """Each node's parent (-1 for none); FormatError for a node with two parents or a cycle."""
+    nodes = doc.gltf.nodes or []
+    parents = -np.ones(len(nodes), dtype=np.int64)
+    for k, node in enumerate(nodes):
+        for child in node.children or []:
+            doc.item(nodes, child, f"node {k} child")
+            if parents[child] >= 0 or child == k:
+                raise doc.fail(f"node {child} has two parents or is its own child (node {k})")
+            parents[child] = k
+    for k in range(len(nodes)):  # a cycle never reaches a root
+        node, steps = k, 0
+        while node >= 0:
+            node, steps = int(parents[node]), steps + 1
+            if steps > len(nodes):
+                raise doc.fail(f"node {k} is in a cycle of children")
+    return parents
+
+
+def _choose_animation(doc: _Document, animation: str | int | None):
+    animations = doc.gltf.animations or []
+    if not animations:
+        raise doc.fail("no animation: the file holds no motion to read")
+    if animation is None:
+        return animations[0]
+    if isinstance(animation, int) or str(animation).isdigit():
+        return doc.item(animations, int(animation), "animation")
+    for a in animations:
+        if a.name == animation:
+            return a
+    names = ", ".join(repr(a.name) for a in animations)
+    raise doc.fail(f"no animation named {animation!r} (the file has {names})")
+
+
+class _Track:
+    """One animation channel: key times, values and how to interpolate between them."""
+
+    def __init__(self, doc: _Document, animation, channel, k: int):
+        sampler = doc.item(animation.samplers, channel.sampler, f"channel {k} sampler")
+        self.times = doc.array(sampler.input, "key times")[:, 0]
+        if (np.diff(self.times) < 0).any():
+            raise doc.fail(f"channel {k}: key times decrease")
+        self.mode = sampler.interpolation or "LINEAR"
+        if self.mode not in ("LINEAR", "STEP", "CUBICSPLINE"):
+            raise doc.fail(f"channel {k}: unknown interpolation {self.mode!r}")
+        self.path = channel.target.path
+        values = doc.array(sampler.output, "key values")
+        width = 4 if self.path == "rotation" else 3
+        per_key = 3 if self.mode == "CUBICSPLINE" else 1
+        if values.shape != (per_key * len(self.times), width):
+            raise doc.fail(f"channel {k}: {values.shape[0]} values of {values.shape[1]} for {len(self.times)} keys")
+        if self.path == "rotation":
+            values = values[:, [3, 0, 1, 2]]  # (w, x, y, z)
+        self.values = values.reshape(len(self.times), per_key, width)
+
+    def sample(self, start: float, rate: float, frames: int) -> np.ndarray:
+        """Values at ``frames`` times from ``start`` at ``rate``. Keys on that grid (to within
+        a thousandth of a frame: key times are 32-bit floats) give their values exactly."""
+        times, n = self.times, len(self.times)
+        key = self.values[:, 1] if self.mode == "CUBICSPLINE" else self.values[:, 0]
+        if n == 1:
+            return np.repeat(key[:1], frames, axis=0)
+        t = start + np.arange(frames) / rate
+        grid = (times - start) * rate
+        if np.abs(grid - np.rint(grid)).max() < 1e-3:
+            frame_of_key = np.rint(grid)
+            nearest = np.searchsorted(frame_of_key, np.arange(frames)).clip(0, n - 1)
+            t = np.where(frame_of_key[nearest] == np.arange(frames), times[nearest], t)
+        k = np.clip(np.searchsorted(times, t, side="right") - 1, 0, n - 2)
+        span = times[k + 1] - times[k]
+        u = np.clip((t - times[k]) / np.where(span > 0, span, 1.0), 0.0, 1.0)
+        if self.mode == "STEP":
+            out = np.where((u >= 1.0)[:, None], key[k + 1], key[k])
+        elif self.mode == "LINEAR":
+            if self.path == "rotation":
+                out = rotations.quat_slerp(key[k], key[k + 1], u)
+            else:
+                out = key[k] + u[:, None] * (key[k + 1] - key[k])
+        else:
+            u2, u3 = u * u, u * u * u
+            out_tangent, in_tangent = self.values[k, 2], self.values[k + 1, 0]
+            out = (
+                (2 * u3 - 3 * u2 + 1)[:, None] * key[k]
+                + ((u3 - 2 * u2 + u) * span)[:, None] * out_tangent
+                + (-2 * u3 + 3 * u2)[:, None] * key[k + 1]
+                + ((u3 - u2) * span)[:, None] * in_tangent
+            )
+        return rotations.quat_normalize(out) if self.path == "rotation" else out
+
+
+def _frame_rate(tracks: list[_Track]) -> float:
+    """The rate of the densest track's keys (whole numbers kept whole), or FALLBACK_FPS."""
+    densest = max(tracks, key=lambda tr: len(tr.times))
+    steps = np.diff(densest.times)
+    steps = steps[steps > 0]
+    if not len(steps):
+        return FALLBACK_FPS
+    fps = 1.0 / float(np.median(steps))
+    return float(round(fps)) if abs(fps - round(fps)) < 1e-3 * fps else round(fps, 3)
+
+
+def _joint_nodes(doc: _Document, parents: np.ndarray, moved: set[int]) -> list[int]:
+    """The skeleton's nodes, parents first: the first skin's joints, or the moved nodes; with
+    every node between them and their common ancestor, and bone tips (childless nodes without
+    a mesh) below them."""
+    nodes = doc.gltf.nodes
+    if doc.gltf.skins:
+        joints = doc.gltf.skins[0].joints or []
+        for j in joints:
+            doc.item(nodes, j, "skin joint")
+        wanted = set(joints)
+    else:
+        wanted = set(moved)
+    if not wanted:
+        raise doc.fail("no joints: the first skin is empty and the animation moves no node")
+    keep = nodetree.closure(parents, wanted)
+    if keep is None:
+        raise doc.fail("the joints have no common ancestor node (several skeletons in one scene)")
+    if not doc.gltf.skins:
+        tips = {
+            child
+            for k in keep
+            for child in nodes[k].children or []
+            if not nodes[child].children and nodes[child].mesh is None and nodes[child].camera is None
+        }
+        keep = nodetree.closure(parents, set(keep) | tips) or keep
+    return keep
+
+
+def _mocodec_extras(obj) -> dict:
+    extras = getattr(obj, "extras", None)
+    value = extras.get("mocodec") if isinstance(extras, dict) else None
+    return value if isinstance(value, dict) else {}
+
+
+def _positive(value, ceiling: float) -> float | None:
+    return float(value) if isinstance(value, (int, float)) and 0 < value <= ceiling else None
+
+
+def read_gltf(path: str | os.PathLike, *, animation: str | int | None = None, fps: float | None = None) -> Motion:
+    """The motion of one animation of a ``.gltf`` or ``.glb`` file (see the module docstring)."""
+    path = Path(path)
+    doc = _parse(path)
+    nodes = doc.gltf.nodes or []
+    if not nodes:
+        raise doc.fail("no nodes: the file holds no skeleton")
+    if len(nodes) > limits.MAX_JOINTS:
+        raise doc.fail(f"{len(nodes)} nodes, more than a skeleton may have ({limits.MAX_JOINTS})")
+    parents = _tree(doc)
+    chosen = _choose_animation(doc, animation)
+    tracks: dict[tuple[int, str], _Track] = {}
+    for k, channel in enumerate(chosen.channels or []):
+        target = channel.target
+        if target is None or target.node is None or target.path not in ("translation", "rotation", "scale"):
+            continue  # morph weights, or a target of an extension
+        doc.item(nodes, target.node, f"channel {k} target node")
+        tracks[(target.node, target.path)] = _Track(doc, chosen, channel, k)
+    if not tracks:
+        raise doc.fail(f"animation {chosen.name or 0!r} moves no node")
+    stated = _mocodec_extras(doc.gltf.asset)
+    rate = fps or _positive(stated.get("fps"), limits.MAX_FPS) or _frame_rate(list(tracks.values()))
+    if not 0 < rate <= limits.MAX_FPS:
+        raise doc.fail(f"frame rate {rate} out of range (0, {limits.MAX_FPS:g}]")
+    start = min(tr.times[0] for tr in tracks.values())
+    end = max(tr.times[-1] for tr in tracks.values())
+    frames = int(round((end - start) * rate)) + 1
+    if frames * len(nodes) * 10 > limits.MAX_DECODED_VALUES:
+        raise doc.fail(f"{frames} frames of {len(nodes)} nodes: more than one read may decode")
+    keep = _joint_nodes(doc, parents, {node for node, _ in tracks})
+    needed = nodetree.ancestors(parents, keep[0]) + keep
+    position, rotation = _world(doc, needed, parents, tracks, (start, rate, frames))
+    top = len(needed) - len(keep)
+    layouts = [_mocodec_extras(nodes[node]) or None for node in keep]
+    names = nodetree.unique_names([str(nodes[node].name or "") for node in keep], keep)
+    joints = nodetree.NodeSamples(
+        names, nodetree.joint_parents(parents, keep), position[:, top:], rotation[:, top:], layouts
+    )
+    units = _positive(stated.get("units_per_metre"), 1e9) or 100.0
+    return nodetree.to_motion(joints, rate, units, chosen.name or path.stem)
+
+
+def _world(
+    doc: _Document,
+    needed: list[int],
+    parents: np.ndarray,
+    tracks: dict[tuple[int, str], _Track],
+    grid: tuple[float, float, int],
+) -> tuple[np.ndarray, np.ndarray]:
+    """World positions and rotations of the nodes ``needed`` (parents first) on the sample
+    ``grid`` (start time, rate, frames)."""
+    frames, count = grid[2], len(needed)
+    translation, rotation, scale = (np.empty((frames, count, w)) for w in (3, 4, 3))
+    for k, node in enumerate(needed):
+        rest = _rest(doc, node, doc.gltf.nodes[node])
+        for array, path, value in zip((translation, rotation, scale), ("translation", "rotation", "scale"), rest):
+            track = tracks.get((node, path))
+            array[:, k] = track.sample(*grid) if track is not None else value
+    index = {node: k for k, node in enumerate(needed)}
+    local_parents = np.array([index.get(int(parents[node]), -1) for node in needed], dtype=np.int64)
+    return nodetree.world_transforms(local_parents, translation, rotation, scale)

@@ -357,3 +357,15 @@ def test_the_command_line_reads_fbx_and_refuses_bad_files_in_one_line(tmp_path):
     for bad in (tmp_path / "bad.glb", FBX_DATA / "no_bones.fbx"):
         failed = _cli("info", bad)
         assert failed.returncode != 0 and failed.stderr.count("\n") == 1 and "Traceback" not in failed.stderr
+
+
+def test_a_crash_inside_the_fbx_loader_is_a_one_line_error(monkeypatch):
+    pytest.importorskip("ufbx")
+    import os
+    import signal
+
+    from mocodec.formats import fbx
+
+    monkeypatch.setattr(fbx, "_read", lambda *args: os.kill(os.getpid(), signal.SIGSEGV))
+    with pytest.raises(FormatError, match="the FBX loader failed on it: .*SIGSEGV"):
+        load(FBX_DATA / "nod.fbx")

@@ -341,3 +341,21 @@ def test_a_final_pass_far_under_its_bound_is_scaled_up(walk_bvh):
     after = enc.error(up.decoded)
     assert after <= 1.0 and len(enc.body(up)) < len(enc.body(fine))
     assert after >= ACCEPT or enc.error(enc.run_pass(up.steps + 1, up.offsets).decoded) > 1.0
+
+
+def test_a_rest_pose_held_still_codes_to_a_few_bytes():
+    """Every code coarsens and the error stays exactly zero: the bound search must still stop."""
+    from mocodec.motion import Motion
+    from mocodec.skeleton import Joint, Skeleton
+
+    joints = (
+        Joint("hips", -1, (0.0, 90.0, 0.0), ("Zrotation", "Xrotation", "Yrotation"), "ZXY"),
+        Joint("spine", 0, (0.0, 10.0, 0.0), ("Zrotation", "Xrotation", "Yrotation"), "ZXY"),
+        Joint("head", 1, (0.0, 10.0, 0.0)),
+    )
+    still = Motion(Skeleton(joints, 100.0), 24.0, np.zeros((120, 6)))
+    codec = get_codec("kinwave", max_error_cm=1.0)
+    body = codec.encode(still)
+    decoded = codec.decode(body, still.skeleton, still.num_frames, still.fps)
+    assert len(body) < 64
+    assert np.abs(decoded.positions() - still.positions()).max() <= 1.0

@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mocodec import limits, rotations
-from mocodec.errors import ConversionError, FormatError
+from mocodec import limits, rotations, sandbox
+from mocodec.errors import ConversionError, CorruptStreamError, FormatError
 from mocodec.extras import require
 from mocodec.formats import nodetree
 from mocodec.motion import Motion
@@ -62,8 +62,31 @@ def _choose_stack(path: Path, stacks: list, animation: str | int | None):
 
 
 def read_fbx(path: str | os.PathLike, *, animation: str | int | None = None, fps: float | None = None) -> Motion:
-    """The skeletal motion of one animation stack of an FBX file (see the module docstring)."""
+    """The skeletal motion of one animation stack of an FBX file (see the module docstring).
+
+    ufbx is native code reading a file nobody has checked, through young bindings: it runs in
+    a child process (:mod:`mocodec.sandbox`), so a crash, a runaway allocation or a hang is a
+    one-line error here, not the end of the caller."""
     path = Path(path)
+    _ufbx()  # a missing extra is named here, not in the child
+    try:
+        kind, value = sandbox.call_isolated(_read_outcome, path, animation, fps, what=str(path))
+    except CorruptStreamError as e:
+        raise FormatError(path, None, f"the FBX loader failed on it: {str(e).removeprefix(f'{path}: ')}") from None
+    if kind == "error":
+        raise FormatError(path, None, value)
+    return value
+
+
+def _read_outcome(path: Path, animation: str | int | None, fps: float | None) -> tuple[str, object]:
+    """("motion", the motion) or ("error", the FormatError's message): what the child sends."""
+    try:
+        return "motion", _read(path, animation, fps)
+    except FormatError as e:
+        return "error", e.message
+
+
+def _read(path: Path, animation: str | int | None, fps: float | None) -> Motion:
     scene = _load(path)
     # each of ufbx's lists is copied into a Python list once: walking one of them a second
     # time crashes the binding (0.0.5)

@@ -371,12 +371,71 @@ def fuzz_parsers(run: Run, folder: Path) -> None:
         run.check("amc", lambda: read_amc(folder / "x.amc", folder / "good.asf"))
 
 
+def _json_mutation(value, rng):
+    """``value`` (parsed JSON) with one random member replaced by a hostile value: a huge,
+    negative or fractional number, a string, a list, an object or null."""
+    holders = []
+    stack = [value]
+    while stack:
+        item = stack.pop()
+        keys = list(item) if isinstance(item, dict) else range(len(item)) if isinstance(item, list) else []
+        for key in keys:
+            holders.append((item, key))
+            stack.append(item[key])
+    if not holders:
+        return value
+    holder, key = holders[int(rng.integers(len(holders)))]
+    choices = [2**31, 2**53, -1, 0, 1, 0.5, 1e308, "x", [], [0, 0], {}, None, [[0]], 10**6]
+    holder[key] = choices[int(rng.integers(len(choices)))]
+    return value
+
+
+def fuzz_formats(run: Run, folder: Path) -> None:
+    """The glTF reader (mutated .glb bytes, and mutated values in its JSON), the FBX reader
+    (mutated ASCII FBX) and the numcodecs codec's chunks (mutated, CRC recomputed)."""
+    from mocodec.formats.gltf import to_gltf_bytes
+
+    glb = to_gltf_bytes(_walk()[:8], binary=True)
+    json_size = struct.unpack_from("<I", glb, 12)[0]
+    document, blob = json.loads(glb[20 : 20 + json_size]), glb[20 + json_size :]
+    fbx = (HERE / "formats" / "fbx" / "nod.fbx").read_bytes()
+    chunk_codec = None
+    try:
+        from mocodec.numcodecs import Kinwave
+
+        chunk_codec = Kinwave.for_motion(_walk(), max_error_cm=1.0)
+        chunk = chunk_codec.encode(_walk().channels[:48])
+    except MocodecError:  # the [zarr] extra is missing: its target is skipped
+        pass
+    while run.more():
+        (folder / "x.glb").write_bytes(mutate(glb, run.rng))
+        run.check("glb bytes", lambda: load(folder / "x.glb"))
+        text = json.dumps(_json_mutation(json.loads(json.dumps(document)), run.rng)).encode()
+        text += b" " * (-len(text) % 4)
+        (folder / "y.glb").write_bytes(
+            struct.pack("<4sII", b"glTF", 2, 20 + len(text) + len(blob))
+            + struct.pack("<I", len(text))
+            + b"JSON"
+            + text
+            + blob
+        )
+        run.check("glTF values", lambda: load(folder / "y.glb"))
+        if run.rng.random() < 0.1:  # each FBX read forks the loader's child
+            (folder / "x.fbx").write_bytes(mutate(fbx, run.rng))
+            run.check("fbx", lambda: load(folder / "x.fbx", fps=8))
+        if chunk_codec is not None:
+            framed = mutate(chunk[:-4], run.rng)
+            damaged = framed + zlib.crc32(framed).to_bytes(4, "little")
+            run.check("numcodecs chunk", lambda: chunk_codec.decode(damaged))
+
+
 TARGETS = {
     "decoders": fuzz_decoders,
     "container": fuzz_container,
     "live": fuzz_live,
     "relay": fuzz_relay,
     "parsers": fuzz_parsers,
+    "formats": fuzz_formats,
 }
 
 
@@ -385,9 +444,9 @@ def main(argv: list[str]) -> int:
 
     target, seed, seconds = argv[0], int(argv[1]), float(argv[2])
     run = Run(seed, seconds)
-    if target == "parsers":
+    if target in ("parsers", "formats"):
         with tempfile.TemporaryDirectory() as folder:
-            fuzz_parsers(run, Path(folder))
+            TARGETS[target](run, Path(folder))
     else:
         TARGETS[target](run)
     print(json.dumps({"target": target, "cases": run.cases, "failures": run.failures}))

@@ -225,7 +225,10 @@ HOSTILE = {
     "no animations": (_set("animations", []), "no animation"),
     "an unknown interpolation": (_set("animations.0.samplers.0.interpolation", "BEZIER"), "interpolation"),
     "a glTF 1 asset": (_set("asset", {"version": "1.0"}), "version"),
-    "a mapping the library rejects": (_set("nodes.0.children", "zz"), "not a valid glTF document"),
+    "a field of the wrong type": (_set("nodes.0.children", "zz"), r"nodes\[0\]\.children: expected a list"),
+    "an index of the wrong type": (_set("animations.0.channels.0.sampler", -1), "expected a non-negative integer"),
+    "a zero rotation key": (_set("nodes.1.rotation", [0, 0, 0, 0]), "not a unit quaternion"),
+    "a transform that overflows": (_set("nodes.0.scale", [1e300] * 3), "beyond"),
 }
 
 

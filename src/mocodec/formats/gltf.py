@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from mocodec import limits, rotations
-from mocodec.errors import FormatError
+from mocodec.errors import ConversionError, FormatError
 from mocodec.extras import require
 from mocodec.formats import nodetree
 from mocodec.formats.fileio import atomic_write_bytes
@@ -216,12 +216,94 @@ class _Document:
         raw = np.ndarray(
             (count, width), dtype=np.dtype(dtype).newbyteorder("<"), buffer=data, offset=start, strides=(stride, item)
         )
-        values = raw.astype(np.float64)
+        with np.errstate(all="ignore"):  # NaN and infinity are refused just below
+            values = raw.astype(np.float64)
         if accessor.componentType in _NORMALISE and accessor.normalized:
             values = np.maximum(values / _NORMALISE[accessor.componentType], -1.0)
         if not np.isfinite(values).all():
             raise self.fail(f"{where}: not finite")
         return values
+
+
+_INDEX = "index"
+_NUMBER = "number"
+_ANY = "any"
+_INDICES = [_INDEX]
+_NUMBERS = [_NUMBER]
+#: The parts of a glTF document mocodec reads, and the JSON type each must have: a field
+#: left out is fine, one of another type is refused before the document is used.
+_SCHEMA = {
+    "asset": {"version": str, "extras": _ANY},
+    "scene": _INDEX,
+    "scenes": [{"nodes": _INDICES}],
+    "nodes": [
+        {
+            "name": str,
+            "children": _INDICES,
+            "translation": _NUMBERS,
+            "rotation": _NUMBERS,
+            "scale": _NUMBERS,
+            "matrix": _NUMBERS,
+            "mesh": _INDEX,
+            "camera": _INDEX,
+            "skin": _INDEX,
+            "extras": _ANY,
+        }
+    ],
+    "skins": [{"joints": _INDICES, "skeleton": _INDEX, "inverseBindMatrices": _INDEX}],
+    "animations": [
+        {
+            "name": str,
+            "channels": [{"sampler": _INDEX, "target": {"node": _INDEX, "path": str}}],
+            "samplers": [{"input": _INDEX, "output": _INDEX, "interpolation": str}],
+        }
+    ],
+    "accessors": [
+        {
+            "bufferView": _INDEX,
+            "byteOffset": _INDEX,
+            "componentType": _INDEX,
+            "normalized": bool,
+            "count": _INDEX,
+            "type": str,
+            "sparse": _ANY,
+        }
+    ],
+    "bufferViews": [{"buffer": _INDEX, "byteOffset": _INDEX, "byteLength": _INDEX, "byteStride": _INDEX}],
+    "buffers": [{"byteLength": _INDEX, "uri": str}],
+}
+
+
+def _schema_error(value, spec, where: str) -> str | None:
+    """Where ``value`` first departs from ``spec`` (see _SCHEMA), or None. Iterative: a
+    document may nest as deep as it likes."""
+    stack = [(value, spec, where)]
+    while stack:
+        value, spec, where = stack.pop()
+        if spec is _ANY:
+            continue
+        if spec is _INDEX:
+            ok = isinstance(value, int) and not isinstance(value, bool) and value >= 0
+            expected = "a non-negative integer"
+        elif spec is _NUMBER:
+            ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+            expected = "a number"
+        elif isinstance(spec, list):
+            ok, expected = isinstance(value, list), "a list"
+            if ok:
+                stack.extend((item, spec[0], f"{where}[{k}]") for k, item in enumerate(value))
+        elif isinstance(spec, dict):
+            ok, expected = isinstance(value, dict), "an object"
+            if ok:
+                stack.extend((value[key], sub, f"{where}.{key}") for key, sub in spec.items() if key in value)
+        else:
+            ok, expected = (
+                isinstance(value, spec) and not isinstance(value, bool) or spec is bool and isinstance(value, bool),
+                f"a {spec.__name__}",
+            )
+        if not ok:
+            return f"{where.lstrip('.')}: expected {expected}, got {json.dumps(value)[:40]}"
+    return None
 
 
 def _split_glb(path: Path, data: bytes) -> tuple[str, bytes | None]:
@@ -279,6 +361,9 @@ def _parse(path: Path) -> _Document:
         raise FormatError(path, e.lineno, f"not JSON: {e.msg} (column {e.colno})") from None
     if not isinstance(document, dict) or not isinstance(document.get("asset"), dict):
         raise FormatError(path, None, "not a glTF document (no asset object)")
+    problem = _schema_error(document, _SCHEMA, "")
+    if problem:
+        raise FormatError(path, None, problem)
     version = str(document["asset"].get("version", ""))
     if not version.startswith("2."):
         raise FormatError(path, None, f"glTF version {version!r}, expected 2.x")
@@ -372,6 +457,8 @@ class _Track:
             raise doc.fail(f"channel {k}: {values.shape[0]} values of {values.shape[1]} for {len(self.times)} keys")
         if self.path == "rotation":
             values = values[:, [3, 0, 1, 2]]  # (w, x, y, z)
+            if per_key == 1 and not (np.linalg.norm(values, axis=1) > 1e-6).all():
+                raise doc.fail(f"channel {k}: a rotation key is not a unit quaternion")
         self.values = values.reshape(len(self.times), per_key, width)
 
     def sample(self, start: float, rate: float, frames: int) -> np.ndarray:
@@ -455,7 +542,8 @@ def _mocodec_extras(obj) -> dict:
 
 
 def _positive(value, ceiling: float) -> float | None:
-    return float(value) if isinstance(value, (int, float)) and 0 < value <= ceiling else None
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and 0 < value <= ceiling
+    return float(value) if ok else None
 
 
 def read_gltf(path: str | os.PathLike, *, animation: str | int | None = None, fps: float | None = None) -> Motion:
@@ -489,15 +577,32 @@ def read_gltf(path: str | os.PathLike, *, animation: str | int | None = None, fp
         raise doc.fail(f"{frames} frames of {len(nodes)} nodes: more than one read may decode")
     keep = _joint_nodes(doc, parents, {node for node, _ in tracks})
     needed = nodetree.ancestors(parents, keep[0]) + keep
-    position, rotation = _world(doc, needed, parents, tracks, (start, rate, frames))
+    try:
+        return _motion(doc, keep, needed, parents, tracks, (start, rate, frames), chosen.name or path.stem)
+    except ConversionError as e:
+        raise doc.fail(str(e)) from None
+
+
+def _motion(
+    doc: _Document,
+    keep: list[int],
+    needed: list[int],
+    parents: np.ndarray,
+    tracks: dict[tuple[int, str], _Track],
+    grid: tuple[float, float, int],
+    name: str,
+) -> Motion:
+    """The motion of the joint nodes ``keep``, sampled on ``grid`` (start, rate, frames)."""
+    nodes = doc.gltf.nodes
+    position, rotation = _world(doc, needed, parents, tracks, grid)
     top = len(needed) - len(keep)
     layouts = [_mocodec_extras(nodes[node]) or None for node in keep]
     names = nodetree.unique_names([str(nodes[node].name or "") for node in keep], keep)
     joints = nodetree.NodeSamples(
         names, nodetree.joint_parents(parents, keep), position[:, top:], rotation[:, top:], layouts
     )
-    units = _positive(stated.get("units_per_metre"), 1e9) or 100.0
-    return nodetree.to_motion(joints, rate, units, chosen.name or path.stem)
+    units = _positive(_mocodec_extras(doc.gltf.asset).get("units_per_metre"), 1e9) or 100.0
+    return nodetree.to_motion(joints, grid[1], units, name)
 
 
 def _world(

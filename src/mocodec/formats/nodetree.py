@@ -32,6 +32,9 @@ DEFAULT_ORDER = "ZYX"
 STILL_M = 1e-8
 #: A rotation within this angle (radians) of the identity on every frame is no rotation.
 STILL_RAD = 1e-9
+#: The farthest a node may be from the origin (metres; the diameter of the Earth's orbit),
+#: so that no composed transform overflows.
+MAX_COORDINATE_M = 3e11
 
 
 @dataclass
@@ -53,6 +56,8 @@ def to_motion(samples: NodeSamples, fps: float, units_per_metre: float, name: st
     layouts = samples.layouts or [None] * n
     joints: list[Joint] = []
     columns: list[np.ndarray] = []
+    if not (np.isfinite(samples.position).all() and np.abs(samples.position).max(initial=0.0) <= MAX_COORDINATE_M):
+        raise ConversionError(f"a node lies beyond {MAX_COORDINATE_M:g} m of the origin")
     for i in range(n):
         parent = int(samples.parents[i])
         if parent < 0:
@@ -70,7 +75,10 @@ def to_motion(samples: NodeSamples, fps: float, units_per_metre: float, name: st
         columns.append(values)
     skeleton = Skeleton(tuple(joints), units_per_metre, name)
     frames = samples.position.shape[0]
-    return Motion(skeleton, fps, np.concatenate(columns, axis=1) if columns else np.zeros((frames, 0)))
+    values = np.concatenate(columns, axis=1) if columns else np.zeros((frames, 0))
+    if not np.isfinite(values).all():
+        raise ConversionError("the node transforms give channel values that are not finite")
+    return Motion(skeleton, fps, values)
 
 
 def closure(parents: np.ndarray, wanted: set[int]) -> list[int] | None:
@@ -118,8 +126,11 @@ def world_transforms(
     local[..., :3, 3] = translation
     local[..., 3, 3] = 1.0
     world = np.empty_like(local)
-    for i in range(n):
-        world[:, i] = local[:, i] if parents[i] < 0 else world[:, parents[i]] @ local[:, i]
+    with np.errstate(all="ignore"):
+        for i in range(n):
+            world[:, i] = local[:, i] if parents[i] < 0 else world[:, parents[i]] @ local[:, i]
+    if not np.isfinite(world).all() or np.abs(world).max(initial=0.0) > MAX_COORDINATE_M:
+        raise ConversionError(f"node transforms compose to a position beyond {MAX_COORDINATE_M:g} m")
     u, _, vt = np.linalg.svd(world[..., :3, :3])
     polar = u @ vt
     if (np.linalg.det(polar) < 0).any():

@@ -114,12 +114,12 @@ def _matrix(t=(0, 0, 0), q=(0, 0, 0, 1), s=(1, 1, 1)) -> np.ndarray:
     return m
 
 
-def _rig(tmp_path):
+def _rig(tmp_path, scale=(0.01, 0.01, 0.01)):
     """A Z-up armature at 1/100 scale (as exporters write centimetre rigs), a hip that moves
     (LINEAR) and turns (STEP), a spine with a rest rotation, a head as the bone tip."""
     g = GltfBuilder()
     g.doc["nodes"] = [
-        {"name": "Armature", "children": [1], "rotation": _axis_quat_xyzw((1, 0, 0), -90), "scale": [0.01] * 3},
+        {"name": "Armature", "children": [1], "rotation": _axis_quat_xyzw((1, 0, 0), -90), "scale": list(scale)},
         {"name": "hips", "children": [2], "translation": [0, 0, 100]},
         {"name": "spine", "children": [3], "translation": [0, 20, 0], "rotation": _axis_quat_xyzw((0, 0, 1), 30)},
         {"name": "head", "translation": [0, 15, 0]},
@@ -138,11 +138,12 @@ def _rig(tmp_path):
     return path, hips_at, turns
 
 
-def test_a_foreign_rig_reads_with_its_parents_scale_rest_rotations_and_interpolation(tmp_path):
-    path, hips_at, turns = _rig(tmp_path)
+@pytest.mark.parametrize("scale", [(0.01, 0.01, 0.01), (0.01, 0.02, 0.015)], ids=["uniform", "non-uniform"])
+def test_a_foreign_rig_reads_with_its_parents_scale_rest_rotations_and_interpolation(scale, tmp_path):
+    path, hips_at, turns = _rig(tmp_path, scale)
     motion = load(path, fps=4)
     assert motion.skeleton.names == ("hips", "spine", "head") and motion.num_frames == 5 and motion.fps == 4
-    armature = _matrix(q=_axis_quat_xyzw((1, 0, 0), -90), s=[0.01] * 3)
+    armature = _matrix(q=_axis_quat_xyzw((1, 0, 0), -90), s=scale)
     for frame in range(5):
         t = frame / 4
         k = min(int(t / 0.5), 1)
@@ -372,3 +373,13 @@ def test_a_crash_inside_the_fbx_loader_is_a_one_line_error(monkeypatch):
     monkeypatch.setattr(fbx, "_read", lambda *args: os.kill(os.getpid(), signal.SIGSEGV))
     with pytest.raises(FormatError, match="the FBX loader failed on it: .*SIGSEGV"):
         load(FBX_DATA / "nod.fbx")
+
+
+@pytest.mark.parametrize(
+    "module, path", [("pygltflib", DATA.parent / "formats" / "walk.glb"), ("ufbx", FBX_DATA / "nod.fbx")]
+)
+def test_without_the_formats_extra_the_error_names_it(module, path):
+    script = f"import sys; sys.modules[{module!r}] = None\nimport mocodec\ntry:\n    mocodec.load({str(path)!r})\n"
+    script += "except mocodec.MocodecError as e:\n    print(e)"
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
+    assert "pip install 'mocodec[formats]'" in done.stdout, done.stderr

@@ -117,19 +117,48 @@ def world_transforms(
     parents: np.ndarray, translation: np.ndarray, rotation: np.ndarray, scale: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """World positions ``(F, n, 3)`` and rotations ``(F, n, 4)`` of nodes given parents first
-    with local translations, rotations ``(w, x, y, z)`` and scales: ``M = M_p T R S``, the
-    rotation the nearest one to ``M``'s 3x3 part (its polar factor, which is exact for a
-    uniform scale)."""
+    with local translations, rotations ``(w, x, y, z)`` and scales: ``M = M_p T R S``. With
+    uniform scales (the usual case) composed as quaternions and scale factors; otherwise as
+    matrices, the rotation then the nearest one to ``M``'s 3x3 part (its polar factor)."""
+    with np.errstate(all="ignore"):
+        if np.all(np.abs(scale - scale[..., :1]) <= 1e-12 * np.abs(scale[..., :1])):
+            position, turn = _compose_uniform(parents, translation, rotation, scale[..., 0])
+        else:
+            position, turn = _compose_matrices(parents, translation, rotation, scale)
+    if (
+        not (np.isfinite(position).all() and np.isfinite(turn).all())
+        or np.abs(position).max(initial=0.0) > MAX_COORDINATE_M
+    ):
+        raise ConversionError(f"node transforms compose to a position beyond {MAX_COORDINATE_M:g} m")
+    return position, turn
+
+
+def _compose_uniform(parents, translation, rotation, scale) -> tuple[np.ndarray, np.ndarray]:
+    """``x = x_p + s_p R_p T``, ``R = R_p R``, ``s = s_p s`` node by node."""
+    position, turn, size = np.empty_like(translation), np.empty_like(rotation), np.empty_like(scale)
+    for i in range(len(parents)):
+        p = parents[i]
+        if p < 0:
+            position[:, i], turn[:, i], size[:, i] = translation[:, i], rotation[:, i], scale[:, i]
+            continue
+        moved = rotations.quat_rotate(turn[:, p], translation[:, i]) * size[:, p, None]
+        position[:, i] = position[:, p] + moved
+        turn[:, i] = rotations.quat_multiply(turn[:, p], rotation[:, i])
+        size[:, i] = size[:, p] * scale[:, i]
+    return position, turn
+
+
+def _compose_matrices(parents, translation, rotation, scale) -> tuple[np.ndarray, np.ndarray]:
+    """The same with 4x4 matrices, for non-uniform scales."""
     frames, n = translation.shape[:2]
     local = np.zeros((frames, n, 4, 4))
     local[..., :3, :3] = rotations.quat_to_matrix(rotation) * scale[..., None, :]
     local[..., :3, 3] = translation
     local[..., 3, 3] = 1.0
     world = np.empty_like(local)
-    with np.errstate(all="ignore"):
-        for i in range(n):
-            world[:, i] = local[:, i] if parents[i] < 0 else world[:, parents[i]] @ local[:, i]
-    if not np.isfinite(world).all() or np.abs(world).max(initial=0.0) > MAX_COORDINATE_M:
+    for i in range(n):
+        world[:, i] = local[:, i] if parents[i] < 0 else world[:, parents[i]] @ local[:, i]
+    if not np.isfinite(world).all():
         raise ConversionError(f"node transforms compose to a position beyond {MAX_COORDINATE_M:g} m")
     u, _, vt = np.linalg.svd(world[..., :3, :3])
     polar = u @ vt

@@ -1,0 +1,86 @@
+"""glTF and FBX: conversion speed, file sizes and exactness on both sources.
+
+    python benchmarks/bench_formats.py [--clips N]
+
+For the first N clips (sorted; 0 = all) of CMU BVH, CMU ASF/AMC and Bandai Namco: the time to
+write and read back a .glb (frames per second, median over the clips), its size against the
+source file's and against a kinwave .moc at a max joint error of 1 cm, and the worst joint
+error of BVH -> glTF -> BVH (cm). Then the FBX files of ../shared/data/fbx: read time, joints,
+frames. Speeds are single-core figures on the machine it runs on.
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from common import SHARED
+from mocodec import load, moc, save
+from mocodec.codecs import get_codec
+
+
+def _clip_figures(path: Path, folder: Path) -> dict:
+    motion = load(path)
+    glb = folder / "m.glb"
+    t0 = time.perf_counter()
+    save(motion, glb)
+    t1 = time.perf_counter()
+    back = load(glb)
+    t2 = time.perf_counter()
+    save(back, folder / "m.bvh")
+    again = load(folder / "m.bvh")
+    error = np.abs(motion.positions_m() - again.positions_m()).max() * 100
+    moc_bytes = len(moc.pack(motion, get_codec("kinwave", max_error_cm=1.0)))
+    return {
+        "write_fps": motion.num_frames / (t1 - t0),
+        "read_fps": motion.num_frames / (t2 - t1),
+        "glb_vs_source": glb.stat().st_size / path.stat().st_size,
+        "moc_vs_glb": moc_bytes / glb.stat().st_size,
+        "error_cm": error,
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--clips", type=int, default=8, help="clips per source (0 = all)")
+    args = parser.parse_args()
+    if SHARED is None:
+        raise SystemExit("../shared/data is absent")
+    sources = {
+        "CMU BVH": sorted((SHARED / "cmu" / "bvh").glob("*.bvh")),
+        "CMU ASF/AMC": sorted((SHARED / "cmu" / "asf_amc").glob("*.amc")),
+        "Bandai Namco": sorted((SHARED / "bandai").rglob("*.bvh")),
+    }
+    print(
+        "| source | clips | .glb write (frames/s) | .glb read (frames/s) | .glb / source file | 1 cm .moc / .glb "
+        "| worst BVH -> glTF -> BVH error (cm) |"
+    )
+    print("|---|---|---|---|---|---|---|")
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, paths in sources.items():
+            paths = paths[: args.clips] if args.clips else paths
+            rows = [_clip_figures(p, Path(tmp)) for p in paths]
+            med = {key: float(np.median([r[key] for r in rows])) for key in rows[0]}
+            worst = max(r["error_cm"] for r in rows)
+            print(
+                f"| {name} | {len(rows)} | {med['write_fps']:,.0f} | {med['read_fps']:,.0f} | "
+                f"{med['glb_vs_source']:.2f} | {med['moc_vs_glb']:.4f} | {worst:.1e} |"
+            )
+    print()
+    print("| FBX file | joints | frames | fps | read (s) |")
+    print("|---|---|---|---|---|")
+    for path in sorted((SHARED / "fbx").glob("*.fbx")):
+        t0 = time.perf_counter()
+        motion = load(path)
+        print(
+            f"| {path.name} | {len(motion.skeleton)} | {motion.num_frames} | {motion.fps:g} | "
+            f"{time.perf_counter() - t0:.2f} |"
+        )
+
+
+if __name__ == "__main__":
+    main()

@@ -26,6 +26,7 @@ LAYERS = [
     {"ratecontrol"},
     {"scene"},
     {"stream", "bench", "capture", "numcodecs"},
+    {"zarr3"},
     {"viewer"},
     {"cli"},
     {"__init__", "__main__"},

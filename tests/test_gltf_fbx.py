@@ -383,3 +383,11 @@ def test_without_the_formats_extra_the_error_names_it(module, path):
     script += "except mocodec.MocodecError as e:\n    print(e)"
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
     assert "pip install 'mocodec[formats]'" in done.stdout, done.stderr
+
+
+def test_a_motion_without_frames_is_refused_in_one_line(walk_bvh, tmp_path):
+    from mocodec.errors import ConversionError
+
+    with pytest.raises(ConversionError, match="at least one frame"):
+        save(walk_bvh[:0], tmp_path / "empty.glb")
+    assert not (tmp_path / "empty.glb").exists()

@@ -75,6 +75,35 @@ def test_a_zarr_array_of_a_clip_reads_back_on_its_own(walk_bvh, tmp_path):
     assert _max_joint_error_cm(walk_bvh.skeleton, walk_bvh.fps, walk_bvh.channels.astype("f4"), back) <= 1.0
 
 
+def test_a_zarr_format_3_array_reads_back_on_its_own(walk_bvh, tmp_path):
+    zarr = pytest.importorskip("zarr")
+    from mocodec.zarr3 import Kinwave as Serializer
+
+    array = zarr.create_array(
+        store=str(tmp_path / "walk.zarr"),
+        shape=walk_bvh.channels.shape,
+        chunks=(128, walk_bvh.num_channels),
+        dtype="f8",
+        serializer=Serializer.for_motion(walk_bvh, max_error_cm=0.5),
+        compressors=None,
+    )
+    array[:] = walk_bvh.channels
+    script = (
+        "import sys, numpy as np, zarr; a = zarr.open_array(sys.argv[1]); "
+        "print(type(a.metadata.codecs[0]).__module__); np.save(sys.argv[2], a[:])"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script, str(tmp_path / "walk.zarr"), str(tmp_path / "back.npy")],
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "mocodec.zarr3"  # found through zarr's entry point
+    back = np.load(tmp_path / "back.npy")
+    assert back.dtype == np.float64
+    assert _max_joint_error_cm(walk_bvh.skeleton, walk_bvh.fps, walk_bvh.channels, back) <= 0.5
+
+
 def test_damaged_chunks_and_configs_are_refused(walk_bvh):
     codec = Kinwave.for_motion(walk_bvh, max_error_cm=1.0)
     encoded = bytearray(codec.encode(walk_bvh.channels[:64]))

@@ -83,6 +83,8 @@ class _Blob:
 def to_gltf_bytes(motion: Motion, binary: bool, animation_name: str = "") -> bytes:
     """``motion`` as a ``.glb`` (``binary``) or a self-contained ``.gltf`` (buffer as a data URI)."""
     g = _pygltflib()
+    if motion.num_frames == 0:
+        raise ConversionError("a glTF animation needs at least one frame; the motion has none")
     sk = motion.skeleton
     translation, rotation = nodetree.from_motion(motion)
     gltf = g.GLTF2(asset=g.Asset(version="2.0", generator=f"mocodec {__version__}"))

@@ -77,3 +77,16 @@ def test_damage_and_strangers_are_refused(packets):
         parse(packets[2].to_bytes())
     with pytest.raises(CorruptStreamError):
         reader.read(b"\x80\x00")
+
+
+@pytest.mark.parametrize("compact", [True, False])
+def test_a_packet_cut_from_its_bytes_is_the_packet_with_the_shorter_payload(packets, compact):
+    from dataclasses import replace
+
+    from mocodec.stream.packets import truncated
+
+    for p in [q for q in packets if q.kind != HEADER][:20]:
+        p = replace(p, compact=compact)
+        data = p.to_bytes()
+        for size in (0, 1, len(p.payload) // 2, len(p.payload)):
+            assert truncated(p, data, size) == p.with_payload(p.payload[:size]).to_bytes()

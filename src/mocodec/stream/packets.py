@@ -359,10 +359,27 @@ def header_packet(stream: int, info: StreamInfo, timestamp_us: int = 0) -> Packe
 
 
 # ----- batches ----------------------------------------------------------------------------------
-def pack_batch(packets: list[bytes]) -> bytes:
-    """One message holding ``packets`` (already serialised)."""
-    lengths = np.fromiter((len(p) for p in packets), dtype="<u4", count=len(packets))
-    return _BATCH.pack(BATCH_MAGIC, len(packets)) + lengths.tobytes() + b"".join(packets)
+def pack_batch(packets: list[bytes], lengths: np.ndarray | None = None) -> bytes:
+    """One message holding ``packets`` (already serialised); ``lengths``: their lengths, when
+    the caller has them in an array already."""
+    if lengths is None:
+        lengths = np.fromiter(map(len, packets), dtype="<u4", count=len(packets))
+    return _BATCH.pack(BATCH_MAGIC, len(packets)) + lengths.astype("<u4", copy=False).tobytes() + b"".join(packets)
+
+
+def truncated(p: Packet, data: bytes, size: int) -> bytes:
+    """The wire bytes ``data`` of packet ``p`` with its payload cut to its first ``size``
+    bytes (a layered packet cut after a section): the same as
+    ``p.with_payload(p.payload[:size]).to_bytes()``, made from the bytes as they came, the
+    header kept (the full form's payload length set anew) and the check recomputed."""
+    body = p.payload[:size]
+    if data[0] & COMPACT:
+        head = data[: len(data) - _U16.size - len(p.payload)]
+        out = head + body
+        return out + _U16.pack(binascii.crc_hqx(out, 0xFFFF))
+    fields = bytearray(data[: _FIELDS.size])
+    struct.pack_into("<I", fields, _FIELDS.size - 4, len(body))
+    return bytes(fields) + body + _CRC.pack(zlib.crc32(body, zlib.crc32(fields)))
 
 
 def split_batch(data: bytes | memoryview, where: str = "batch") -> list[memoryview]:

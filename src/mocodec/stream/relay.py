@@ -47,6 +47,7 @@ import time
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from itertools import repeat
 from pathlib import Path
 from typing import Any
 
@@ -72,6 +73,7 @@ from mocodec.stream.packets import (
     pack_batch,
     parse,
     split_batch,
+    truncated,
 )
 
 log = logging.getLogger("mocodec.relay")
@@ -220,7 +222,8 @@ class _Crowd:
     """A tick's scalable streams (embedded or layered), worked out once for every viewer: each
     stream's row in ``where`` (its position) and in ``rates`` (the bit/s of its layers up to
     each, infinite past its own), and the tick's fresh layered packets, one per stream: their
-    streams, rows, keyframe flags and their variants with 1, 2, ... layers."""
+    streams, rows, keyframe flags and their variants with 1, 2, ... layers (``variants[i *
+    width + k - 1]``, and their lengths), and the tick's other fresh packets (``others``)."""
 
     row: dict[int, int]
     where: np.ndarray
@@ -229,7 +232,11 @@ class _Crowd:
     streams: list[int]
     rows: np.ndarray
     keyframes: np.ndarray
-    variants: list[list[bytes]]
+    width: int
+    variants: list[bytes]
+    lengths: np.ndarray
+    together: set[int]
+    others: list[Forward]
 
 
 @dataclass
@@ -529,7 +536,7 @@ class Relay:
                 continue
             if viewer.budget > 0 and any(f.cuts is not None or f.layer_ends is not None for f in items):
                 crowd = crowd or self._crowd(room, fresh)
-                batch = pack_batch(self._cut(room, crowd, viewer, items, len(items) - len(fresh), cut_cache))
+                batch = pack_batch(*self._cut(room, crowd, viewer, items, len(items) - len(fresh), cut_cache))
             elif len(items) == len(fresh):
                 shared = shared or pack_batch([f.data for f in fresh])
                 batch = shared
@@ -577,6 +584,11 @@ class Relay:
         alone = [f for f in fresh if count[f.packet.stream] < 2]
         layered = [f for f in alone if f.layer_ends is not None and f.packet.stream in row]
         streams = [f.packet.stream for f in layered]
+        variants: list[bytes] = []
+        for f in layered:
+            own = Relay._layer_variants(f)
+            variants += own + own[-1:] * (width - len(own))
+        together = {id(f) for f in layered}
         return _Crowd(
             row,
             where,
@@ -585,21 +597,26 @@ class Relay:
             streams,
             np.array([row[k] for k in streams], dtype=np.int64),
             np.array([f.packet.keyframe for f in layered], dtype=bool),
-            [Relay._layer_variants(f) for f in layered],
+            width,
+            variants,
+            np.fromiter(map(len, variants), dtype="<u4", count=len(variants)),
+            together,
+            [f for f in fresh if id(f) not in together],
         )
 
     def _cut(
         self, room: Room, crowd: _Crowd, viewer: Viewer, items: list[Forward], pending: int, cache: dict
-    ) -> list[bytes]:
-        """The viewer's packets, the scalable streams cut to their crowd shares (6.4, 6.5). The
-        tick's fresh layered packets (``crowd.layered``) go at once, in arrays; the rest, and
-        what the viewer has pending, one by one."""
+    ) -> tuple[list[bytes], np.ndarray | None]:
+        """The viewer's packets, the scalable streams cut to their crowd shares (6.4, 6.5), and
+        their lengths (None: not worked out). The tick's fresh layered packets
+        (``crowd.layered``) go at once, in arrays; the rest, and what the viewer has pending,
+        one by one."""
         d = np.maximum(np.linalg.norm(crowd.where - np.asarray(viewer.camera), axis=1), self.limits.min_distance_m)
         shares = split_budget(int(viewer.budget), bandwidth_scores(d)) if len(crowd.row) else np.zeros(0)
         fits = np.maximum((crowd.rates <= shares[:, None]).sum(axis=1), 1)  # layers within each share
-        together = {id(f) for f in crowd.layered} if pending < len(items) else set()
+        together = pending < len(items) and bool(crowd.together)
         out = []
-        for f in items[:pending] + [f for f in items[pending:] if id(f) not in together]:
+        for f in items[:pending] + (crowd.others if together else items[pending:]):
             r = crowd.row.get(f.packet.stream)
             if r is None or (f.cuts is None and f.layer_ends is None):
                 out.append(f.data)
@@ -615,20 +632,24 @@ class Relay:
                 if key not in cache:
                     cache[key] = self._cut_one(f, room.streams[f.packet.stream], rate)
                 out.append(cache[key])
-        if together:
-            out += self._cut_layered(room, crowd, viewer, fits[crowd.rows])
-        return out
+        if not together:
+            return out, None
+        chosen = self._cut_layered(room, crowd, viewer, fits[crowd.rows])
+        lengths = np.concatenate((np.fromiter(map(len, out), dtype="<u4", count=len(out)), crowd.lengths[chosen]))
+        return out + list(map(crowd.variants.__getitem__, chosen.tolist())), lengths
 
-    def _cut_layered(self, room: Room, crowd: _Crowd, viewer: Viewer, fits: np.ndarray) -> list[bytes]:
-        """The tick's fresh layered packets for a viewer (:meth:`_layers_for`, in arrays): the
-        only packet of its stream this tick, so its layers depend only on what the viewer had."""
-        had = np.array([viewer.layers.get(k, 0) for k in crowd.streams], dtype=np.int64)
-        keep = np.where(crowd.keyframes | (had == 0), fits, np.minimum(fits, had)).tolist()
-        for i in np.nonzero(np.asarray(keep) < fits)[0].tolist():  # a layer may come back where it restarts
+    def _cut_layered(self, room: Room, crowd: _Crowd, viewer: Viewer, fits: np.ndarray) -> np.ndarray:
+        """Which variant of each of the tick's fresh layered packets a viewer gets (indices
+        into ``crowd.variants``; :meth:`_layers_for`, in arrays): the only packet of its stream
+        this tick, so its layers depend only on what the viewer had."""
+        count = len(crowd.streams)
+        had = np.fromiter(map(viewer.layers.get, crowd.streams, repeat(0, count)), dtype=np.int64, count=count)
+        keep = np.where(crowd.keyframes | (had == 0), fits, np.minimum(fits, had))
+        for i in np.nonzero(keep < fits)[0].tolist():  # a layer may come back where it restarts
             f = crowd.layered[i]
             keep[i] = self._layers_for(viewer, f, room.streams[f.packet.stream], int(fits[i]))
-        viewer.layers.update(zip(crowd.streams, keep))
-        return [variants[k - 1] for variants, k in zip(crowd.variants, keep)]
+        viewer.layers.update(zip(crowd.streams, keep.tolist()))
+        return np.arange(count) * crowd.width + keep - 1
 
     @staticmethod
     def _layers_for(viewer: Viewer, f: Forward, state: StreamState, fits: int) -> int:
@@ -655,7 +676,7 @@ class Relay:
         assert f.layer_ends is not None
         if keep >= len(f.layer_ends):
             return f.data
-        return f.packet.with_payload(f.packet.payload[: f.layer_ends[keep - 1]]).to_bytes()
+        return truncated(f.packet, f.data, f.layer_ends[keep - 1])
 
     @staticmethod
     def _layer_variants(f: Forward) -> list[bytes]:

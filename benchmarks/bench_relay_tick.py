@@ -1,0 +1,83 @@
+"""The relay's tick in one process: how long ``Relay._dispatch`` takes to serve every viewer of
+a room of layered avatars, each viewer with its own budget and camera (no sockets, so the figure
+is the relay's own work, free of the load generators that share the machine in relay_load.py).
+
+    python benchmarks/bench_relay_tick.py [--avatars 500] [--viewers 50] [--budget 3000000] [--ticks 200]
+
+Avatars replay the live stream of tests/data/07_03.bvh (kinwave-live, 3 layers, keyframes every
+0.5 s) at random phases on a 2 m grid; viewers stand at random places (seeded). Prints the
+median, 90th percentile and maximum time of a tick's dispatch after 50 warm-up ticks, and the
+time to take in a tick's packets.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import struct
+import time
+
+import numpy as np
+
+from mocodec.stream.packets import pack_batch
+from mocodec.stream.relay import Relay, Room, Viewer
+from relay_load import place, restamp, templates
+
+SEED = 29
+WARM_UP = 50
+
+
+class _Transport:
+    def abort(self) -> None:
+        pass
+
+
+async def run(avatars: int, viewers: int, budget: float, ticks: int) -> tuple[np.ndarray, np.ndarray]:
+    header, data, clip_ticks, clip_frames = templates(("kinwave-live", 0.0, 3, 0.0), 0.5)
+    by_tick: dict[int, list[tuple[int, bytes, int]]] = {}
+    for idx, (k, d) in enumerate(data):
+        by_tick.setdefault(k, []).append((idx, d, struct.unpack_from("<I", d, 22)[0]))
+    relay, room, owner = Relay("bench"), Room(), object()
+    relay._ingest(room, pack_batch([restamp(header, s, 0, 0, 0, *place(s)) for s in range(avatars)]), owner)
+    rng = np.random.default_rng(SEED)
+    for _ in range(viewers):
+        camera = (float(rng.uniform(0, 48)), 1.6, float(rng.uniform(0, 2 * avatars / 25)))
+        room.viewers.append(Viewer(None, _Transport(), budget=budget, camera=camera))
+    phase = rng.integers(clip_ticks, size=avatars)
+    dispatch, ingest = [], []
+    for tick in range(ticks):
+        batch = []
+        for s in range(avatars):
+            loop, k = divmod(int(phase[s]) + tick, clip_ticks)
+            for idx, d, first in by_tick.get(k, ()):
+                batch.append(restamp(d, s, loop * len(data) + idx + 1, 0, loop * clip_frames + first, *place(s)))
+        t0 = time.perf_counter()
+        relay._ingest(room, pack_batch(batch), owner)
+        t1 = time.perf_counter()
+        relay._dispatch(room)
+        t2 = time.perf_counter()
+        ingest.append(t1 - t0)
+        dispatch.append(t2 - t1)
+        for viewer in room.viewers:
+            while not viewer.queue.empty():
+                viewer.queue.get_nowait()
+    return np.array(dispatch[WARM_UP:]) * 1e3, np.array(ingest[WARM_UP:]) * 1e3
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--avatars", type=int, default=500)
+    parser.add_argument("--viewers", type=int, default=50)
+    parser.add_argument("--budget", type=float, default=3e6, help="bit/s per viewer (0: no budgets)")
+    parser.add_argument("--ticks", type=int, default=200)
+    args = parser.parse_args()
+    dispatch, ingest = asyncio.run(run(args.avatars, args.viewers, args.budget, args.ticks))
+    print(
+        f"relay tick, {args.avatars} layered avatars, {args.viewers} viewers at {args.budget:g} bit/s: "
+        f"dispatch median {np.median(dispatch):.2f} ms, p90 {np.percentile(dispatch, 90):.2f} ms, "
+        f"max {dispatch.max():.2f} ms; taking in a tick's packets median {np.median(ingest):.2f} ms"
+    )
+
+
+if __name__ == "__main__":
+    main()

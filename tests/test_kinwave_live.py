@@ -225,3 +225,14 @@ def test_a_stream_that_follows_another_starts_at_its_scale_and_decodes_alone(wal
     packets = second.push(part.channels) + second.flush()
     dec = codec.decoder(walk_bvh.skeleton, walk_bvh.fps)  # knows nothing of the first stream
     assert _frame_errors(part, np.concatenate([dec.push(p) for p in packets])).max() <= 1.0 + 1e-9
+
+
+def test_the_stream_header_carries_the_base_codes_the_decoder_derives(walk_bvh):
+    from mocodec.codecs.kinwave.live import base_codes
+    from mocodec.stream.live import LiveEncoder
+    from mocodec.stream.packets import StreamInfo
+
+    codec = get_codec("kinwave-live", layers=3, max_error_cm=1.0)
+    info = StreamInfo.from_payload(LiveEncoder(codec, walk_bvh.skeleton, walk_bvh.fps, 0).header(0).payload)
+    tables = info.extra["decoder"]["base_codes"]
+    assert tables == [base_codes(walk_bvh.skeleton, b, "joint").tolist() for b in (4.0, 2.0, 1.0)]

@@ -293,6 +293,14 @@ class Codec:
         raise NotImplementedError
 
     # ----- streaming --------------------------------------------------------------------
+    def decoder_tables(self, skeleton: Skeleton) -> dict:
+        """What a decoder written in another language needs beyond the config and the
+        skeleton: tables this codec derives from them by numerics it could not redo bit for
+        bit (an optimiser's result). The live stream's header carries them
+        (``StreamInfo.extra["decoder"]``); this package's decoders derive their own. None for
+        most codecs."""
+        return {}
+
     def encoder(self, skeleton: Skeleton, fps: float) -> StreamEncoder:
         raise CodecError(f"codec {self.id} does not stream")
 

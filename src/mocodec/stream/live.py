@@ -110,7 +110,8 @@ class LiveEncoder:
         if not keyframe_s > 0:
             raise CodecError(f"keyframe interval must be positive, got {keyframe_s}")
         self.codec, self.skeleton, self.fps, self.stream = codec, skeleton, fps, stream
-        self.info = StreamInfo(skeleton, fps, codec.get_config(), name)
+        tables = codec.decoder_tables(skeleton)
+        self.info = StreamInfo(skeleton, fps, codec.get_config(), name, {"decoder": tables} if tables else {})
         self.refresh = refresh_frames(codec, fps, keyframe_s)
         self.primer_frames = max(int(round(PRIMER_S * fps)), 1)
         self.recent = (

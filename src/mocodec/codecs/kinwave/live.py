@@ -436,6 +436,12 @@ class KinwaveLiveCodec(Codec):
         layers = self.config["layers"]
         return period, [k * period // layers for k in range(layers)]
 
+    def decoder_tables(self, skeleton: Skeleton) -> dict:
+        """Each layer's base step codes (:func:`base_codes`, base layer first): the convex
+        allocation's result, which a decoder elsewhere cannot recompute exactly."""
+        measure = self.config["error_measure"]
+        return {"base_codes": [base_codes(skeleton, b, measure).tolist() for b in self.layer_bounds]}
+
     def encoder(self, skeleton: Skeleton, fps: float) -> StreamEncoder:
         return _LiveEncoder(self, skeleton, fps)
 

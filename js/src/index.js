@@ -1,0 +1,10 @@
+// mocodec in JavaScript: decode live motion streams (the relay's packets, kinwave-live) and pose
+// skeletons, in the browser or in Node, with no dependency.
+export { DecodeError, OutOfStepError } from './errors.js';
+export { BinaryDecoder } from './binarycoder.js';
+export { Reader, splitBatch, codecPayload, HEADER, DATA, KEYFRAME, END, RESTART } from './packets.js';
+export { parseStreamHeader } from './header.js';
+export { Skeleton } from './skeleton.js';
+export { KinwaveLiveDecoder, layerSpans, packetFrames } from './kinwave-live.js';
+export { forwardKinematics } from './kinematics.js';
+export { StreamDecoder } from './stream.js';

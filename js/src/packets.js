@@ -1,0 +1,154 @@
+// Stream packets and batches as the relay and `mocodec publish` send them (docs/formats.md,
+// "Stream packets and batches"): full packets (magic "MP", CRC-32) and compact data packets (a tag
+// with its top bit set, varints, CRC-16), which a receiver reads against its stream's cursor.
+import { DecodeError } from './errors.js';
+import { crc16, crc32, i16, readVarint, u16, u32 } from './bytes.js';
+
+export const HEADER = 0;
+export const DATA = 1;
+export const KEYFRAME = 1;
+export const END = 2;
+export const CUTS = 4;
+export const RESTART = 8;
+export const CODECS = ['raw', 'quant', 'dpcm', 'adpcm', 'deadreckoning', 'dct', 'subband', 'spiht',
+  'primitives', 'kinwave', 'kinwave-live'];
+const FIELDS = 44;
+const COMPACT = 0x80;
+const C_EXPLICIT = 8;
+const C_POSITION = 16;
+const C_RESTART = 32;
+const MAX_PAYLOAD_FRAMES = 1 << 20;
+
+// The packets of a batch message ("MB", u32 count, u32 lengths, packets), as views into `data`.
+export function splitBatch(data) {
+  if (data.length < 6) throw new DecodeError(`${data.length} bytes, shorter than a batch header`, 0);
+  if (data[0] !== 0x4d || data[1] !== 0x42) throw new DecodeError('expected the batch magic "MB"', 0);
+  const count = u32(data, 2);
+  let pos = 6 + 4 * count;
+  if (pos > data.length) throw new DecodeError(`${count} packets announced, the message is ${data.length} bytes`, 2);
+  const out = [];
+  for (let k = 0; k < count; k++) {
+    const length = u32(data, 6 + 4 * k);
+    if (pos + length > data.length) throw new DecodeError(`packet ${k} of ${length} bytes runs past the message`, 6 + 4 * k);
+    out.push(data.subarray(pos, pos + length));
+    pos += length;
+  }
+  if (pos !== data.length) throw new DecodeError(`packet lengths add up to ${pos} bytes, the message is ${data.length}`, 2);
+  return out;
+}
+
+// What a receiver keeps per stream to place its compact packets (packets.Cursor).
+export class Cursor {
+  constructor(codec, synced = true) {
+    this.codec = codec;
+    this.nextSequence = 0;
+    this.nextFrame = 0;
+    this.position = [0, 0, 0];
+    this.synced = synced;
+  }
+
+  advance(p) {
+    if (this.synced && ((p.sequence - this.nextSequence) >>> 0) >= 2 ** 31) return; // behind: a duplicate
+    this.nextSequence = (p.sequence + 1) >>> 0;
+    this.nextFrame = p.firstFrame + p.frames;
+    this.position = p.position;
+    this.synced = true;
+  }
+}
+
+function parseFull(data) {
+  if (data.length < FIELDS + 4) throw new DecodeError(`${data.length} bytes, shorter than the ${FIELDS + 4}-byte packet frame`, 0);
+  if (data[0] !== 0x4d || data[1] !== 0x50) throw new DecodeError('expected the packet magic "MP"', 0);
+  if (data[2] !== 1) throw new DecodeError(`packet version ${data[2]}, this decoder reads 1`, 2);
+  const kind = data[3];
+  const flags = data[4];
+  const number = data[5];
+  if ((kind !== HEADER && kind !== DATA) || number >= CODECS.length) {
+    throw new DecodeError(`unknown packet kind ${kind} or codec number ${number}`, 3);
+  }
+  const length = u32(data, FIELDS - 4);
+  if (data.length !== FIELDS + 4 + length) {
+    throw new DecodeError(`payload of ${length} bytes announced, ${data.length - FIELDS - 4} present`, FIELDS - 4);
+  }
+  const end = FIELDS + length;
+  if (crc32(data, 0, end) !== u32(data, end)) throw new DecodeError('CRC mismatch (damaged packet)', end);
+  const view = new DataView(data.buffer, data.byteOffset, data.byteLength);
+  return {
+    stream: u32(data, 6),
+    sequence: u32(data, 10),
+    timestampUs: Number(view.getBigUint64(14, true)),
+    codec: CODECS[number],
+    firstFrame: u32(data, 22),
+    frames: u16(data, 26),
+    position: [view.getFloat32(28, true), view.getFloat32(32, true), view.getFloat32(36, true)],
+    payload: data.subarray(FIELDS, end),
+    kind,
+    flags,
+  };
+}
+
+function parseCompact(data, cursorOf) {
+  if (data.length < 6) throw new DecodeError(`${data.length} bytes, shorter than a compact packet`, 0);
+  const end = data.length - 2;
+  if (crc16(data, 0, end) !== u16(data, end)) throw new DecodeError('CRC mismatch (damaged packet)', end);
+  const tag = data[0];
+  if (tag & ~(COMPACT | 7 | C_EXPLICIT | C_POSITION | C_RESTART)) throw new DecodeError(`tag ${tag} sets undefined bits`, 0);
+  const body = data.subarray(0, end);
+  let [stream, pos] = readVarint(body, 1, 5, 'the stream id');
+  if (pos >= body.length) throw new DecodeError('the packet ends before its sequence byte', pos);
+  const low = body[pos];
+  let frames;
+  [frames, pos] = readVarint(body, pos + 1, 3, 'the frame count');
+  let sequence;
+  let first;
+  if (tag & C_EXPLICIT) {
+    [sequence, pos] = readVarint(body, pos, 5, 'the sequence number');
+    [first, pos] = readVarint(body, pos, 5, 'the first frame');
+  }
+  const cursor = cursorOf(stream);
+  if (!cursor) throw new DecodeError(`a compact packet of stream ${stream} before its stream header`, 0);
+  if (!(tag & C_EXPLICIT) && !cursor.synced) throw new DecodeError(`stream ${stream}: a packet before the first keyframe received`, 0);
+  if (tag & C_EXPLICIT) {
+    if ((sequence & 0xff) !== low || sequence > 0xffffffff) throw new DecodeError(`sequence ${sequence} does not end in byte ${low}`, 0);
+  } else {
+    const ahead = ((low - cursor.nextSequence + 128) & 0xff) - 128;
+    sequence = (cursor.nextSequence + ahead) >>> 0;
+    first = Math.max(cursor.nextFrame + ahead * frames, 0);
+  }
+  let position = cursor.position;
+  if (tag & C_POSITION) {
+    if (pos + 6 > body.length) throw new DecodeError('the position runs past the packet', pos);
+    position = [i16(body, pos) / 100, i16(body, pos + 2) / 100, i16(body, pos + 4) / 100];
+    pos += 6;
+  }
+  if (frames > MAX_PAYLOAD_FRAMES || first > 2 ** 40) throw new DecodeError(`${frames} frames from frame ${first} is not plausible`, 0);
+  return {
+    stream, sequence, timestampUs: 0, codec: cursor.codec, firstFrame: first, frames, position,
+    payload: body.subarray(pos), kind: DATA, flags: (tag & 7) | (tag & C_RESTART ? RESTART : 0),
+  };
+}
+
+// A receiver's reading of packets, full or compact: every stream's cursor (packets.Reader).
+export class Reader {
+  constructor() {
+    this.cursors = new Map();
+  }
+
+  read(data) {
+    const p = data.length && data[0] & COMPACT ? parseCompact(data, (s) => this.cursors.get(s)) : parseFull(data);
+    if (p.kind === HEADER) {
+      if (!this.cursors.has(p.stream)) this.cursors.set(p.stream, new Cursor(p.codec, false));
+    } else {
+      if (!this.cursors.has(p.stream)) this.cursors.set(p.stream, new Cursor(p.codec));
+      this.cursors.get(p.stream).advance(p);
+    }
+    return p;
+  }
+}
+
+// A data packet's codec payload, without its cut table (flag CUTS).
+export function codecPayload(p) {
+  if (!(p.flags & CUTS)) return p.payload;
+  if (p.payload.length < 2 || u16(p.payload, 0) > p.payload.length - 2) throw new DecodeError('the cut table overruns the packet', 0);
+  return p.payload.subarray(2 + u16(p.payload, 0));
+}

@@ -8,3 +8,5 @@ export { Skeleton } from './skeleton.js';
 export { KinwaveLiveDecoder, layerSpans, packetFrames } from './kinwave-live.js';
 export { forwardKinematics } from './kinematics.js';
 export { StreamDecoder } from './stream.js';
+export { JitterBuffer } from './jitter.js';
+export { Avatar, RelayClient } from './relay-client.js';

@@ -81,6 +81,8 @@ log = logging.getLogger("mocodec.relay")
 #: Close codes (4000-4999 are the application's).
 BAD_TOKEN, BAD_MESSAGE, RATE_LIMIT, TAKEN = 4003, 4400, 4429, 4409
 STATIC = Path(__file__).with_name("static")
+DECODER = STATIC / "decoder"
+VENDOR = Path(__file__).parent.parent / "viewer" / "static" / "vendor"  # the pinned three.js
 #: Shares are rounded down to this many rates per octave (19% apart), so cuts are shared.
 LADDER_STEPS = 4
 #: A layered stream's rate per layer is measured over about this long (an exponential average).
@@ -311,7 +313,12 @@ class Relay:
         app.router.add_get("/status", self.handle_status)
         if STATIC.is_dir():
             app.router.add_get("/", self.handle_index)
+            app.router.add_get("/watch", self.handle_watch)
             app.router.add_static("/static", STATIC)
+            if DECODER.is_dir():  # the JavaScript decoder (a link to js/src in a checkout)
+                app.router.add_static("/decoder", DECODER.resolve())
+            if VENDOR.is_dir():
+                app.router.add_static("/vendor", VENDOR)
         app.on_startup.append(self._start)
         app.on_cleanup.append(self._stop)
         return app
@@ -335,6 +342,10 @@ class Relay:
 
     async def handle_index(self, request: web.Request) -> web.FileResponse:
         return web.FileResponse(STATIC / "index.html")
+
+    async def handle_watch(self, request: web.Request) -> web.FileResponse:
+        """A page that joins a room itself and decodes it in the browser (/decoder)."""
+        return web.FileResponse(STATIC / "watch.html")
 
     async def handle_status(self, request: web.Request) -> web.Response:
         """Totals only: a room's name is what its tokens are issued for."""

@@ -1,0 +1,133 @@
+// Joins a relay room as a viewer over WebSocket and keeps each avatar's decoded motion in a jitter
+// buffer: `new RelayClient(url, {room, token})`, `await client.connect()`, then `client.avatars`
+// (stream id -> Avatar) and `avatar.pose(nowS)` (joint positions, metres). Batches are decoded in
+// order of arrival; a stream header is parsed before the packets after it.
+import { DecodeError } from './errors.js';
+import { parseStreamHeader } from './header.js';
+import { JitterBuffer } from './jitter.js';
+import { forwardKinematics } from './kinematics.js';
+import { DATA, HEADER, Reader, splitBatch } from './packets.js';
+import { StreamDecoder } from './stream.js';
+
+const now = () => performance.now() / 1000;
+
+export class Avatar {
+  constructor(stream, info) {
+    this.stream = stream;
+    this.info = info;
+    this.name = info.name;
+    this.skeleton = info.skeleton;
+    this.decoder = new StreamDecoder(info);
+    this.buffer = new JitterBuffer(info.fps, info.skeleton.numChannels);
+    this.frames = 0; // frames decoded
+    this.bytes = 0;
+    this.errors = 0;
+    this.decoded = new Map(); // the last decoded frames by stream frame number (a few seconds)
+  }
+
+  take(p, arrivalS) {
+    this.bytes += p.payload.length;
+    let frames = null;
+    try {
+      frames = this.decoder.push(p);
+    } catch (e) {
+      if (!(e instanceof DecodeError)) throw e;
+      this.errors += 1;
+    }
+    if (!frames || !frames.length) return;
+    const C = this.skeleton.numChannels;
+    for (let k = 0; k < frames.length / C; k++) {
+      this.decoded.set(p.firstFrame + k, frames.slice(k * C, (k + 1) * C));
+      this.decoded.delete(p.firstFrame + k - 10 * Math.ceil(this.info.fps));
+    }
+    this.frames += frames.length / C;
+    this.buffer.push(frames, p.firstFrame, arrivalS);
+  }
+
+  // Joint positions (joints x 3, metres) to show at `nowS`, or null before the first frame.
+  pose(nowS = now()) {
+    const channels = this.buffer.pose(nowS);
+    if (!channels) return null;
+    const positions = forwardKinematics(this.skeleton, channels);
+    return positions.map((v) => v / this.skeleton.unitsPerMetre);
+  }
+}
+
+export class RelayClient {
+  // `url`: the relay's ws:// or wss:// address; `room`, `token`: the room and a viewer token;
+  // `budget` (bit/s) and `camera` ([x, y, z] m): what the relay cuts the streams to.
+  constructor(url, { room, token, budget = 0, camera = [0, 0, 0], WebSocketClass = globalThis.WebSocket } = {}) {
+    this.url = url;
+    this.room = room;
+    this.token = token;
+    this.settings = { budget, camera };
+    this.WebSocketClass = WebSocketClass;
+    this.avatars = new Map();
+    this.reader = new Reader();
+    this.queue = Promise.resolve();
+    this.errors = 0;
+    this.closed = null;
+  }
+
+  connect() {
+    const query = new URLSearchParams({ room: this.room, role: 'subscribe', token: this.token });
+    const ws = new this.WebSocketClass(`${this.url.replace(/\/$/, '')}/ws?${query}`);
+    ws.binaryType = 'arraybuffer';
+    this.ws = ws;
+    return new Promise((resolve, reject) => {
+      ws.onmessage = (event) => {
+        if (typeof event.data === 'string') {
+          const message = JSON.parse(event.data);
+          if (message.welcome !== undefined) {
+            this.send(this.settings);
+            resolve(this);
+          }
+          return;
+        }
+        const arrival = now();
+        const data = new Uint8Array(event.data);
+        this.queue = this.queue.then(() => this.#batch(data, arrival)).catch(() => { this.errors += 1; });
+      };
+      ws.onclose = (event) => {
+        this.closed = { code: event.code, reason: event.reason };
+        reject(new Error(`the relay closed the connection (${event.code} ${event.reason})`));
+      };
+      ws.onerror = () => reject(new Error(`cannot connect to ${this.url}`));
+    });
+  }
+
+  // Tell the relay this viewer's budget (bit/s) and camera position (m).
+  send(settings) {
+    Object.assign(this.settings, settings);
+    this.ws.send(JSON.stringify(this.settings));
+  }
+
+  close() {
+    this.ws?.close();
+  }
+
+  async #batch(data, arrival) {
+    for (const raw of splitBatch(data)) {
+      let p;
+      try {
+        p = this.reader.read(raw);
+      } catch (e) {
+        if (!(e instanceof DecodeError)) throw e;
+        this.errors += 1; // a packet before its keyframe, or a damaged one: the others go on
+        continue;
+      }
+      if (p.kind === HEADER) {
+        if (!this.avatars.has(p.stream)) {
+          try {
+            this.avatars.set(p.stream, new Avatar(p.stream, await parseStreamHeader(p.payload)));
+          } catch (e) {
+            if (!(e instanceof DecodeError)) throw e;
+            this.errors += 1;
+          }
+        }
+      } else if (p.kind === DATA) {
+        this.avatars.get(p.stream)?.take(p, arrival);
+      }
+    }
+  }
+}

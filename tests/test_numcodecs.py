@@ -22,6 +22,22 @@ def _max_joint_error_cm(skeleton, fps, a, b) -> float:
     return float(np.linalg.norm(pa - pb, axis=2).max() * 100)
 
 
+def _read_in_a_new_process(tmp_path, codec_expression: str) -> tuple[str, np.ndarray]:
+    """``tmp_path/walk.zarr`` read by a new Python process: what ``codec_expression`` (of the
+    opened array ``a``) gives there, and the array's values."""
+    script = (
+        "import sys, numpy as np, zarr; a = zarr.open_array(sys.argv[1]); "
+        f"print({codec_expression}); np.save(sys.argv[2], a[:])"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script, str(tmp_path / "walk.zarr"), str(tmp_path / "back.npy")],
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 0, done.stderr
+    return done.stdout.strip(), np.load(tmp_path / "back.npy")
+
+
 def test_numcodecs_finds_the_codec_by_its_id(walk_bvh):
     config = Kinwave.for_motion(walk_bvh, max_error_cm=1.0).get_config()
     codec = numcodecs.get_codec(dict(config))
@@ -60,18 +76,8 @@ def test_a_zarr_array_of_a_clip_reads_back_on_its_own(walk_bvh, tmp_path):
     stored = sum(p.stat().st_size for p in (tmp_path / "walk.zarr").iterdir() if p.name[0].isdigit())
     assert stored < walk_bvh.channels.astype("f4").nbytes / 20
     # a new process: the codec comes from the array's metadata through numcodecs' entry point
-    script = (
-        "import sys, numpy as np, zarr; a = zarr.open_array(sys.argv[1]); "
-        "print(type(a.metadata.compressor).__name__); np.save(sys.argv[2], a[:])"
-    )
-    done = subprocess.run(
-        [sys.executable, "-c", script, str(tmp_path / "walk.zarr"), str(tmp_path / "back.npy")],
-        capture_output=True,
-        text=True,
-    )
-    assert done.returncode == 0, done.stderr
-    assert done.stdout.strip() == "Kinwave"
-    back = np.load(tmp_path / "back.npy")
+    found, back = _read_in_a_new_process(tmp_path, "type(a.metadata.compressor).__name__")
+    assert found == "Kinwave"
     assert _max_joint_error_cm(walk_bvh.skeleton, walk_bvh.fps, walk_bvh.channels.astype("f4"), back) <= 1.0
 
 
@@ -88,18 +94,8 @@ def test_a_zarr_format_3_array_reads_back_on_its_own(walk_bvh, tmp_path):
         compressors=None,
     )
     array[:] = walk_bvh.channels
-    script = (
-        "import sys, numpy as np, zarr; a = zarr.open_array(sys.argv[1]); "
-        "print(type(a.metadata.codecs[0]).__module__); np.save(sys.argv[2], a[:])"
-    )
-    done = subprocess.run(
-        [sys.executable, "-c", script, str(tmp_path / "walk.zarr"), str(tmp_path / "back.npy")],
-        capture_output=True,
-        text=True,
-    )
-    assert done.returncode == 0, done.stderr
-    assert done.stdout.strip() == "mocodec.zarr3"  # found through zarr's entry point
-    back = np.load(tmp_path / "back.npy")
+    found, back = _read_in_a_new_process(tmp_path, "type(a.metadata.codecs[0]).__module__")
+    assert found == "mocodec.zarr3"  # found through zarr's entry point
     assert back.dtype == np.float64
     assert _max_joint_error_cm(walk_bvh.skeleton, walk_bvh.fps, walk_bvh.channels, back) <= 0.5
 

@@ -15,17 +15,25 @@ import numpy as np
 from mocodec.errors import FormatError
 
 
-def read_text(path: str | os.PathLike) -> str:
-    """The whole file as text; FormatError if it is missing, empty or binary."""
+def read_bytes(path: str | os.PathLike, limit: int | None = None) -> bytes:
+    """The whole file; FormatError if it is missing, not a file, unreadable or over ``limit`` bytes."""
     path = Path(path)
     try:
-        data = path.read_bytes()
+        if limit is not None and (size := path.stat().st_size) > limit:
+            raise FormatError(path, None, f"{size} bytes, more than this kind of file may have ({limit})")
+        return path.read_bytes()
     except FileNotFoundError:
         raise FormatError(path, None, "no such file") from None
     except IsADirectoryError:
         raise FormatError(path, None, "is a directory, expected a file") from None
     except OSError as e:
         raise FormatError(path, None, f"cannot read: {e.strerror}") from None
+
+
+def read_text(path: str | os.PathLike) -> str:
+    """The whole file as text; FormatError if it is missing, empty or binary."""
+    path = Path(path)
+    data = read_bytes(path)
     if not data.strip():
         raise FormatError(path, None, "empty file")
     if b"\0" in data[:65536]:

@@ -32,7 +32,7 @@ from mocodec import limits, rotations
 from mocodec.errors import ConversionError, FormatError
 from mocodec.extras import require
 from mocodec.formats import nodetree
-from mocodec.formats.fileio import atomic_write_bytes
+from mocodec.formats.fileio import atomic_write_bytes, read_bytes
 from mocodec.motion import Motion
 from mocodec.version import __version__
 
@@ -338,17 +338,7 @@ def _split_glb(path: Path, data: bytes) -> tuple[str, bytes | None]:
 
 def _parse(path: Path) -> _Document:
     g = _pygltflib()
-    try:
-        size = path.stat().st_size
-        if size > MAX_FILE_BYTES:
-            raise FormatError(path, None, f"{size} bytes, more than a glTF file may have ({MAX_FILE_BYTES})")
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise FormatError(path, None, "no such file") from None
-    except IsADirectoryError:
-        raise FormatError(path, None, "is a directory, expected a file") from None
-    except OSError as e:
-        raise FormatError(path, None, f"cannot read: {e.strerror}") from None
+    data = read_bytes(path, MAX_FILE_BYTES)
     if data[:4] == _GLB_MAGIC:
         text, binary = _split_glb(path, data)
     else:

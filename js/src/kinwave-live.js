@@ -15,6 +15,7 @@ const ROUNDING = 0.25;
 const MAX_OFFSET = 127;
 const MAX_LAYERS = 4;
 const RESTART_ZERO = 65536 - 65536 / 16; // the restart flag's fixed probability of a 0
+const MAX_DECODED_VALUES = 2 ** 25; // values one packet may decode to (limits.MAX_DECODED_VALUES)
 
 // 2^(code / 8 - 20) for every step code, exactly as Python computes it: 2^(n + r/8) is 2^n times
 // the correctly rounded 2^(r/8), and scaling by a power of two is exact.
@@ -146,7 +147,7 @@ function layerTables(skeleton) {
 export class KinwaveLiveDecoder {
   // `config`: the codec config of the stream header; `decoderTables`: its extra.decoder.
   constructor(skeleton, fps, config, decoderTables) {
-    const knobs = config?.knobs ?? {};
+    const knobs = config?.knobs && typeof config.knobs === 'object' ? config.knobs : {};
     const layers = knobs.layers ?? 1;
     if (!Number.isInteger(layers) || layers < 1 || layers > MAX_LAYERS) throw new DecodeError(`kinwave-live: ${layers} layers`);
     const codes = decoderTables?.base_codes;
@@ -155,11 +156,14 @@ export class KinwaveLiveDecoder {
       || c.length !== this.tables.codesPerLayer || c.some((v) => !Number.isInteger(v) || v < 0 || v > 255))) {
       throw new DecodeError(`kinwave-live: the stream header's base_codes must be ${layers} lists of ${this.tables.codesPerLayer} step codes`);
     }
+    this.size = packetFrames(fps);
+    if (this.size * skeleton.numChannels > MAX_DECODED_VALUES) {
+      throw new DecodeError(`kinwave-live: packets of ${this.size} frames of ${skeleton.numChannels} channels are over ${MAX_DECODED_VALUES} values`);
+    }
     this.skeleton = skeleton;
     this.layers = codes.map((c) => new Layer(skeleton, c, this.tables));
     this.layerInStep = this.layers.map(() => true);
     this.refresh = Boolean(knobs.refresh_s);
-    this.size = packetFrames(fps);
     this.lastInts = [];
   }
 

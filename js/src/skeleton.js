@@ -70,9 +70,12 @@ export class Skeleton {
     const rotationOrder = order(j.rotation_order, `joint ${i}'s rotation order`, true);
     const rotAxes = channels.filter((c) => c.endsWith('rotation')).map((c) => c[0]).sort().join('');
     if ([...rotationOrder].sort().join('') !== rotAxes) throw new DecodeError(`skeleton: joint ${i}'s rotation order does not use its rotation channels`);
-    const offset = (j.offset ?? []).map((v, k) => finite(v, `joint ${i}'s offset ${k}`));
-    const axis = (j.axis ?? [0, 0, 0]).map((v, k) => finite(v, `joint ${i}'s axis ${k}`));
-    if (offset.length !== 3 || axis.length !== 3) throw new DecodeError(`skeleton: joint ${i}'s offset and axis need 3 numbers`);
+    const axisGiven = j.axis ?? [0, 0, 0];
+    if (!Array.isArray(j.offset) || !Array.isArray(axisGiven) || j.offset.length !== 3 || axisGiven.length !== 3) {
+      throw new DecodeError(`skeleton: joint ${i}'s offset and axis need 3 numbers`);
+    }
+    const offset = j.offset.map((v, k) => finite(v, `joint ${i}'s offset ${k}`));
+    const axis = axisGiven.map((v, k) => finite(v, `joint ${i}'s axis ${k}`));
     return { name: String(j.name), parent, offset, channels, rotationOrder, axis, axisOrder: order(j.axis_order ?? 'ZYX', `joint ${i}'s axis order`, false) };
   }
 

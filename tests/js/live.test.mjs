@@ -113,3 +113,37 @@ test('damaged packets, batches and headers end in DecodeError', async () => {
     }
   }
 });
+
+test('stream headers with hostile values end in DecodeError or decode', async () => {
+  const { inflateSync, deflateSync } = await import('node:zlib');
+  const { stream } = await fixture('walk-layers');
+  const reader = new Reader();
+  const packets = splitBatch(stream).map((raw) => reader.read(raw));
+  const original = JSON.parse(new TextDecoder().decode(inflateSync(packets[0].payload)));
+  let seed = 11;
+  const random = () => { seed = (seed * 1103515245 + 12345) % 2147483648; return seed / 2147483648; };
+  const hostile = [2 ** 31, 2 ** 53, -1, 0, 1, 0.5, 1e308, 'x', [], [0, 0], {}, null, [[0]], 1e6, true];
+  for (let trial = 0; trial < 400; trial++) {
+    const doc = structuredClone(original);
+    const holders = [];
+    const stack = [doc];
+    while (stack.length) {
+      const item = stack.pop();
+      if (item && typeof item === 'object') {
+        for (const key of Object.keys(item)) {
+          holders.push([item, key]);
+          stack.push(item[key]);
+        }
+      }
+    }
+    const [holder, key] = holders[Math.floor(random() * holders.length)];
+    holder[key] = hostile[Math.floor(random() * hostile.length)];
+    try {
+      const info = await parseStreamHeader(deflateSync(new TextEncoder().encode(JSON.stringify(doc))));
+      const decoder = new StreamDecoder(info);
+      for (const p of packets.slice(1, 12)) decoder.push(p);
+    } catch (e) {
+      if (!(e instanceof DecodeError)) throw new Error(`${key} = ${JSON.stringify(holder[key])}: ${e.stack}`);
+    }
+  }
+});

@@ -52,3 +52,16 @@ def test_damaged_scene_files_are_refused(walk_amc):
         scene.decode_scene(data[:20] + bytes([data[20] ^ 1]) + data[21:])
     with pytest.raises(CorruptStreamError, match="not a mocodec scene"):
         scene.decode_scene(b"MOC1" + data[4:])
+
+
+def test_split_budget_splits_each_column_as_its_own_budget():
+    from mocodec.scene import bandwidth_scores, split_budget
+
+    rng = np.random.default_rng(3)
+    scores = bandwidth_scores(rng.uniform(0.5, 30.0, (40, 7)))
+    totals = rng.integers(1_000, 5_000_000, 7)
+    together = split_budget(totals, scores)
+    for k in range(7):
+        assert np.array_equal(together[:, k], split_budget(int(totals[k]), scores[:, k]))
+        assert together[:, k].sum() <= totals[k]
+    assert np.array_equal(split_budget(100, np.zeros(3)), [0, 0, 0])

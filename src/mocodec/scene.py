@@ -45,11 +45,14 @@ def bandwidth_scores(distances: np.ndarray, weights: np.ndarray | None = None) -
     return scores
 
 
-def split_budget(total: int, scores: np.ndarray) -> np.ndarray:
-    """B_k = floor(S_k B / sum S) (6.5)."""
+def split_budget(total, scores: np.ndarray) -> np.ndarray:
+    """B_k = floor(S_k B / sum S) (6.5). With ``scores`` of shape (characters, columns) and a
+    ``total`` per column, each column on its own (a column whose scores are all 0 gets 0)."""
     scores = np.asarray(scores, dtype=np.float64)
-    s = scores.sum()
-    return np.floor(scores * total / s).astype(np.int64) if s > 0 else np.zeros(scores.size, dtype=np.int64)
+    s = scores.sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        shares = np.floor(scores * np.asarray(total, dtype=np.float64) / s)
+    return np.where(s > 0, shares, 0.0).astype(np.int64)
 
 
 def allocate(motions: list[Motion], bits_per_second: float, distances, weights=None, window: int = 128) -> np.ndarray:

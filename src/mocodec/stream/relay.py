@@ -541,13 +541,18 @@ class Relay:
         shared: bytes | None = None  # the batch of every viewer with nothing of its own
         cut_cache: dict[tuple[int, float], bytes] = {}
         crowd = None  # the scalable streams and where they are, this tick
-        for viewer in [v for v in room.viewers if not v.dropped]:
+        viewers = [v for v in room.viewers if not v.dropped]
+        shares: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        for viewer in viewers:
             items, viewer.pending = viewer.pending + fresh, []
             if not items:
                 continue
             if viewer.budget > 0 and any(f.cuts is not None or f.layer_ends is not None for f in items):
-                crowd = crowd or self._crowd(room, fresh)
-                batch = pack_batch(*self._cut(room, crowd, viewer, items, len(items) - len(fresh), cut_cache))
+                if crowd is None:
+                    crowd = self._crowd(room, fresh)
+                    shares = self._shares(crowd, [v for v in viewers if v.budget > 0])
+                cut = self._cut(room, crowd, viewer, *shares[id(viewer)], items, len(items) - len(fresh), cut_cache)
+                batch = pack_batch(*cut)
             elif len(items) == len(fresh):
                 shared = shared or pack_batch([f.data for f in fresh])
                 batch = shared
@@ -615,16 +620,35 @@ class Relay:
             [f for f in fresh if id(f) not in together],
         )
 
+    def _shares(self, crowd: _Crowd, viewers: list[Viewer]) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+        """For every viewer with a budget (by id), its shares of the crowd's streams (6.4, 6.5:
+        ``split_budget`` of its budget by the distance scores from its camera) and the layers of
+        each stream within its share (at least one), worked out for all viewers at once."""
+        streams = len(crowd.row)
+        if not streams or not viewers:
+            return {id(v): (np.zeros(streams), np.ones(streams, dtype=np.int64)) for v in viewers}
+        cameras = np.array([v.camera for v in viewers], dtype=np.float64)
+        d = np.linalg.norm(crowd.where[:, None, :] - cameras[None, :, :], axis=2)
+        scores = bandwidth_scores(np.maximum(d, self.limits.min_distance_m))  # (streams, viewers)
+        shares = split_budget(np.array([int(v.budget) for v in viewers]), scores)
+        fits = np.maximum((crowd.rates[:, None, :] <= shares[:, :, None]).sum(axis=2), 1)
+        return {id(v): (shares[:, k], fits[:, k]) for k, v in enumerate(viewers)}
+
     def _cut(
-        self, room: Room, crowd: _Crowd, viewer: Viewer, items: list[Forward], pending: int, cache: dict
+        self,
+        room: Room,
+        crowd: _Crowd,
+        viewer: Viewer,
+        shares: np.ndarray,
+        fits: np.ndarray,
+        items: list[Forward],
+        pending: int,
+        cache: dict,
     ) -> tuple[list[bytes], np.ndarray | None]:
-        """The viewer's packets, the scalable streams cut to their crowd shares (6.4, 6.5), and
-        their lengths (None: not worked out). The tick's fresh layered packets
-        (``crowd.layered``) go at once, in arrays; the rest, and what the viewer has pending,
-        one by one."""
-        d = np.maximum(np.linalg.norm(crowd.where - np.asarray(viewer.camera), axis=1), self.limits.min_distance_m)
-        shares = split_budget(int(viewer.budget), bandwidth_scores(d)) if len(crowd.row) else np.zeros(0)
-        fits = np.maximum((crowd.rates <= shares[:, None]).sum(axis=1), 1)  # layers within each share
+        """The viewer's packets, the scalable streams cut to its ``shares`` of the crowd (bit/s
+        per stream; ``fits``: the layers within each), and their lengths (None: not worked
+        out). The tick's fresh layered packets (``crowd.layered``) go at once, in arrays; the
+        rest, and what the viewer has pending, one by one."""
         together = pending < len(items) and bool(crowd.together)
         out = []
         for f in items[:pending] + (crowd.others if together else items[pending:]):

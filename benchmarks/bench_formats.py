@@ -6,7 +6,9 @@ For the first N clips (sorted; 0 = all) of CMU BVH, CMU ASF/AMC and Bandai Namco
 write and read back a .glb (frames per second, median over the clips), its size against the
 source file's and against a kinwave .moc at a max joint error of 1 cm, and the worst joint
 error of BVH -> glTF -> BVH (cm). Then the FBX files of ../shared/data/fbx: read time, joints,
-frames. Speeds are single-core figures on the machine it runs on.
+frames; and the same clips as zarr arrays (format 3, chunks of 1,024 frames, kinwave at a max
+joint error of 1 cm through mocodec.zarr3): raw 32-bit size against the chunks' bytes, and the
+worst joint error read back. Speeds are single-core figures on the machine it runs on.
 """
 
 from __future__ import annotations
@@ -44,6 +46,34 @@ def _clip_figures(path: Path, folder: Path) -> dict:
     }
 
 
+def _zarr_figures(paths: list[Path], folder: Path) -> tuple[int, int, float]:
+    """(raw float32 bytes, stored chunk bytes, worst joint error in cm) of ``paths`` as zarr arrays."""
+    import zarr
+
+    from mocodec.zarr3 import Kinwave
+
+    raw = stored = 0
+    worst = 0.0
+    for k, path in enumerate(paths):
+        motion = load(path)
+        where = folder / f"{k}.zarr"
+        array = zarr.create_array(
+            str(where),
+            shape=motion.channels.shape,
+            chunks=(1024, motion.num_channels),
+            dtype="f4",
+            serializer=Kinwave.for_motion(motion, max_error_cm=1.0),
+            compressors=None,
+        )
+        array[:] = motion.channels
+        back = zarr.open_array(str(where))[:]
+        error = np.linalg.norm(motion.positions_m() - motion.with_channels(back).positions_m(), axis=2).max() * 100
+        worst = max(worst, float(error))
+        raw += motion.channels.astype("f4").nbytes
+        stored += sum(p.stat().st_size for p in (where / "c").rglob("*") if p.is_file())
+    return raw, stored, worst
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--clips", type=int, default=8, help="clips per source (0 = all)")
@@ -70,6 +100,15 @@ def main() -> None:
                 f"| {name} | {len(rows)} | {med['write_fps']:,.0f} | {med['read_fps']:,.0f} | "
                 f"{med['glb_vs_source']:.2f} | {med['moc_vs_glb']:.4f} | {worst:.1e} |"
             )
+        print()
+        print("| source | clips | raw float32 | zarr chunks (kinwave, 1 cm) | ratio | worst joint error (cm) |")
+        print("|---|---|---|---|---|---|")
+        for name, paths in sources.items():
+            paths = paths[: args.clips] if args.clips else paths
+            folder = Path(tmp) / "".join(c if c.isalnum() else "_" for c in name)
+            folder.mkdir()
+            raw, stored, worst = _zarr_figures(paths, folder)
+            print(f"| {name} | {len(paths)} | {raw:,} | {stored:,} | {raw / stored:.1f} | {worst:.4f} |")
     print()
     print("| FBX file | joints | frames | fps | read (s) |")
     print("|---|---|---|---|---|")

@@ -543,11 +543,13 @@ class Relay:
         crowd = None  # the scalable streams and where they are, this tick
         viewers = [v for v in room.viewers if not v.dropped]
         shares: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        scalable = any(f.cuts is not None or f.layer_ends is not None for f in fresh)
         for viewer in viewers:
-            items, viewer.pending = viewer.pending + fresh, []
+            pending, viewer.pending = viewer.pending, []
+            items = pending + fresh
             if not items:
                 continue
-            if viewer.budget > 0 and any(f.cuts is not None or f.layer_ends is not None for f in items):
+            if viewer.budget > 0 and (scalable or any(f.cuts is not None or f.layer_ends is not None for f in pending)):
                 if crowd is None:
                     crowd = self._crowd(room, fresh)
                     shares = self._shares(crowd, [v for v in viewers if v.budget > 0])

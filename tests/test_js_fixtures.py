@@ -20,3 +20,12 @@ LIVE = DATA.parent / "formats" / "live"
 def test_live_fixtures_are_current(case):
     for name, data in live_fixture(*case).items():
         assert (LIVE / name).read_bytes() == data, f"{name} is stale: run tests/js/make_fixtures.py"
+
+
+def test_the_javascript_package_has_mocodecs_version():
+    import json
+
+    from mocodec.version import __version__
+
+    package = json.loads((DATA.parent.parent / "js" / "package.json").read_text())
+    assert package["version"] == __version__

@@ -23,6 +23,10 @@ from mocodec.extras import require
 from mocodec.formats import nodetree
 from mocodec.motion import Motion
 
+#: How long the loader's child may take: ufbx evaluates the whole scene at each frame, so the
+#: longest take the frame limit lets through needs tens of seconds (docs/formats.md).
+READ_TIMEOUT_S = 300.0
+
 
 def _ufbx():
     return require("ufbx", "formats", "FBX import")
@@ -70,7 +74,9 @@ def read_fbx(path: str | os.PathLike, *, animation: str | int | None = None, fps
     path = Path(path)
     _ufbx()  # a missing extra is named here, not in the child
     try:
-        kind, value = sandbox.call_isolated(_read_outcome, path, animation, fps, what=str(path))
+        kind, value = sandbox.call_isolated(
+            _read_outcome, path, animation, fps, what=str(path), timeout_s=READ_TIMEOUT_S
+        )
     except CorruptStreamError as e:
         raise FormatError(path, None, f"the FBX loader failed on it: {str(e).removeprefix(f'{path}: ')}") from None
     if kind == "error":

@@ -2,6 +2,7 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { JitterBuffer } from '../../js/src/index.js';
+import { seeded } from './seeded.mjs';
 
 // frames of two channels: frame k is (k, 2k)
 const ramp = (n, from = 0) => Float64Array.from({ length: 2 * (n - from) }, (_, i) => (from + (i >> 1)) * ((i & 1) + 1));
@@ -10,8 +11,7 @@ const close = (a, b, tol = 1e-9) => a.every((v, i) => Math.abs(v - b[i]) <= tol)
 test('jittered bursts play out smoothly at the frame rate', () => {
   const fps = 120;
   const packet = 6;
-  let seed = 5;
-  const random = () => { seed = (seed * 1103515245 + 12345) % 2147483648; return seed / 2147483648; };
+  const random = seeded(5);
   const buffer = new JitterBuffer(fps, 2, 0.1);
   const arrivals = [];
   for (let k = 0; k < 1200; k += packet) arrivals.push([k, (k + packet) / fps + random() * 0.06]);

@@ -8,6 +8,7 @@ import { gunzipSync } from 'node:zlib';
 import {
   DecodeError, Reader, StreamDecoder, forwardKinematics, parseStreamHeader, splitBatch,
 } from '../../js/src/index.js';
+import { seeded } from './seeded.mjs';
 
 const LIVE = new URL('../formats/live/', import.meta.url);
 const CASES = ['walk', 'walk-layers', 'asf-30fps-shell', 'run-refresh'];
@@ -73,8 +74,7 @@ for (const name of CASES) {
 
 test('damaged streams end in DecodeError, never another error or a hang', async () => {
   const { stream } = await fixture('walk-layers');
-  let seed = 2026;
-  const random = () => { seed = (seed * 1103515245 + 12345) % 2147483648; return seed / 2147483648; };
+  const random = seeded(2026);
   const reader = new Reader();
   const packets = splitBatch(stream).map((raw) => reader.read(raw));
   const info = await parseStreamHeader(packets[0].payload);
@@ -99,8 +99,7 @@ test('damaged streams end in DecodeError, never another error or a hang', async 
 
 test('damaged packets, batches and headers end in DecodeError', async () => {
   const { stream } = await fixture('walk');
-  let seed = 7;
-  const random = () => { seed = (seed * 1103515245 + 12345) % 2147483648; return seed / 2147483648; };
+  const random = seeded(7);
   for (let trial = 0; trial < 2000; trial++) {
     const damaged = Uint8Array.from(stream.subarray(0, Math.floor(random() * stream.length * 1.2) || stream.length));
     for (let n = 0; n < 1 + random() * 3; n++) damaged[Math.floor(random() * damaged.length)] ^= 1 << Math.floor(random() * 8);
@@ -120,8 +119,7 @@ test('stream headers with hostile values end in DecodeError or decode', async ()
   const reader = new Reader();
   const packets = splitBatch(stream).map((raw) => reader.read(raw));
   const original = JSON.parse(new TextDecoder().decode(inflateSync(packets[0].payload)));
-  let seed = 11;
-  const random = () => { seed = (seed * 1103515245 + 12345) % 2147483648; return seed / 2147483648; };
+  const random = seeded(11);
   const hostile = [2 ** 31, 2 ** 53, -1, 0, 1, 0.5, 1e308, 'x', [], [0, 0], {}, null, [[0]], 1e6, true];
   for (let trial = 0; trial < 400; trial++) {
     const doc = structuredClone(original);

@@ -98,7 +98,7 @@ def cmd_compare(args) -> int:
     from mocodec.metrics import compare
 
     original = load_input(args.original, args)
-    decoded = load(args.decoded, asf=args.decoded_asf or args.asf, fps=args.fps)
+    decoded = load(args.decoded, asf=args.decoded_asf or args.asf, fps=args.fps, animation=args.animation)
     result = compare(original, decoded, shell_cm=args.shell_cm)
     if args.json:
         print(json.dumps(result.as_dict(per_joint=args.per_joint), indent=2, allow_nan=False))
@@ -189,8 +189,8 @@ def add_commands(sub) -> None:
         description="Skeleton, frames, rate, duration, channels, raw size and bit rate at 32-bit floats; "
         "for a .moc file its codec, size, ratio and bit rate.",
     )
-    p.add_argument("files", nargs="+", metavar="FILE", help=".bvh, .amc or .moc file")
-    p.add_argument("--joints", action="store_true", help="also list every joint (.bvh, .amc)")
+    p.add_argument("files", nargs="+", metavar="FILE", help="motion file (.bvh, .amc, .gltf, .glb, .fbx) or .moc file")
+    p.add_argument("--joints", action="store_true", help="also list every joint (motion files)")
     p.add_argument("--skeleton", help="the skeleton (.asf, .bvh or .amc) of a .moc file encoded with --skeleton-ref")
     add_input_options(p)
     p.set_defaults(func=cmd_info)

@@ -297,7 +297,7 @@ class Codec:
         """What a decoder written in another language needs beyond the config and the
         skeleton: tables this codec derives from them by numerics it could not redo bit for
         bit (an optimiser's result). The live stream's header carries them
-        (``StreamInfo.extra["decoder"]``); this package's decoders derive their own. None for
+        (``StreamInfo.extra["decoder"]``); this package's decoders derive their own. Empty for
         most codecs."""
         return {}
 

@@ -34,6 +34,7 @@ from mocodec.extras import require
 from mocodec.formats import nodetree
 from mocodec.formats.fileio import atomic_write_bytes, read_bytes
 from mocodec.motion import Motion
+from mocodec.skeleton import POSITION_CHANNELS
 from mocodec.version import __version__
 
 _GLB_MAGIC = b"glTF"
@@ -110,13 +111,11 @@ def to_gltf_bytes(motion: Motion, binary: bool, animation_name: str = "") -> byt
     ]
     times = blob.add(np.arange(motion.num_frames) / motion.fps, "SCALAR", with_bounds=True)
     animation = g.Animation(name=animation_name or sk.name or "motion")
-    plan_rotates = [bool(j.rotation_order) for j in sk.joints]
-    plan_moves = [any(c.endswith("position") for c in j.channels) for j in sk.joints]
-    for i in range(len(sk)):
+    for i, joint in enumerate(sk.joints):
         paths = []
-        if plan_moves[i]:
+        if any(c in POSITION_CHANNELS for c in joint.channels):
             paths.append(("translation", translation[:, i], "VEC3"))
-        if plan_rotates[i]:
+        if joint.rotation_order:
             xyzw = rotations.quat_continuous(rotation[:, i])[:, [1, 2, 3, 0]]
             paths.append(("rotation", xyzw, "VEC4"))
         for path, values, kind in paths:
@@ -569,8 +568,9 @@ def read_gltf(path: str | os.PathLike, *, animation: str | int | None = None, fp
         raise doc.fail(f"{frames} frames of {len(nodes)} nodes: more than one read may decode")
     keep = _joint_nodes(doc, parents, {node for node, _ in tracks})
     needed = nodetree.ancestors(parents, keep[0]) + keep
+    units = _positive(stated.get("units_per_metre"), 1e9) or 100.0
     try:
-        return _motion(doc, keep, needed, parents, tracks, (start, rate, frames), chosen.name or path.stem)
+        return _motion(doc, keep, needed, parents, tracks, (start, rate, frames), units, chosen.name or path.stem)
     except ConversionError as e:
         raise doc.fail(str(e)) from None
 
@@ -582,9 +582,11 @@ def _motion(
     parents: np.ndarray,
     tracks: dict[tuple[int, str], _Track],
     grid: tuple[float, float, int],
+    units_per_metre: float,
     name: str,
 ) -> Motion:
-    """The motion of the joint nodes ``keep``, sampled on ``grid`` (start, rate, frames)."""
+    """The motion of the joint nodes ``keep``, sampled on ``grid`` (start, rate, frames), in
+    ``units_per_metre``."""
     nodes = doc.gltf.nodes
     position, rotation = _world(doc, needed, parents, tracks, grid)
     top = len(needed) - len(keep)
@@ -593,8 +595,7 @@ def _motion(
     joints = nodetree.NodeSamples(
         names, nodetree.joint_parents(parents, keep), position[:, top:], rotation[:, top:], layouts
     )
-    units = _positive(_mocodec_extras(doc.gltf.asset).get("units_per_metre"), 1e9) or 100.0
-    return nodetree.to_motion(joints, grid[1], units, name)
+    return nodetree.to_motion(joints, grid[1], units_per_metre, name)
 
 
 def _world(

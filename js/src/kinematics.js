@@ -1,8 +1,9 @@
 // Forward kinematics (kinematics._fk_kernel): joint positions of frames of channels, each joint
 // G_i = G_p C M C^-1 and x_i = x_p + G_p (offset_i + t_i), composed as quaternions.
 
-// Joint positions (frames x joints x 3, skeleton units) of `channels` (frames x channels, row-major).
-export function forwardKinematics(skeleton, channels) {
+// Joint positions (frames x joints x 3, skeleton units) of `channels` (frames x channels, row-major);
+// with `orientations` (frames x joints x 4), each joint's global rotation G_i there too.
+export function forwardKinematics(skeleton, channels, orientations = null) {
   const C = skeleton.numChannels;
   const J = skeleton.joints.length;
   const frames = C ? channels.length / C : 0;
@@ -59,6 +60,7 @@ export function forwardKinematics(skeleton, channels) {
       pos[out + 1] = pos[po + 1] + ty + pw * uy + pz * ux - px * uz;
       pos[out + 2] = pos[po + 2] + tz + pw * uz + px * uy - py * ux;
     }
+    if (orientations) orientations.set(quat, f * J * 4);
   }
   return pos;
 }

@@ -7,6 +7,7 @@
 import { BinaryDecoder, MAX_CLASS, fixedState, newState } from './binarycoder.js';
 import { readVarint } from './bytes.js';
 import { DecodeError, OutOfStepError } from './errors.js';
+import { CODE_STEP } from './steps.js';
 
 const ULEN = 6;
 const PER_CHANNEL = 7 + ULEN + MAX_CLASS + 1;
@@ -17,16 +18,6 @@ const MAX_LAYERS = 4;
 const RESTART_ZERO = 65536 - 65536 / 16; // the restart flag's fixed probability of a 0
 const MAX_DECODED_VALUES = 2 ** 25; // values one packet may decode to (limits.MAX_DECODED_VALUES)
 
-// 2^(code / 8 - 20) for every step code, exactly as Python computes it: 2^(n + r/8) is 2^n times
-// the correctly rounded 2^(r/8), and scaling by a power of two is exact.
-const EIGHTHS = [1.0, 1.0905077326652577, 1.189207115002721, 1.2968395546510096, 1.4142135623730951,
-  1.5422108254079407, 1.681792830507429, 1.8340080864093424];
-export const CODE_STEP = Float64Array.from({ length: 256 }, (_, c) => {
-  let scale = 1;
-  for (let e = (c >> 3) - 20; e < 0; e++) scale /= 2;
-  for (let e = (c >> 3) - 20; e > 0; e--) scale *= 2;
-  return EIGHTHS[c & 7] * scale;
-});
 
 // Frames per packet: as many as fit in 50 ms, at least one (live.packet_frames).
 export function packetFrames(fps) {

@@ -1,9 +1,10 @@
 """Write the fixtures the JavaScript tests load, and what they expect of them: the glTF file
-tests/formats/walk.glb (and walk.glb.json), and live streams in tests/formats/live/ (each case's
+tests/formats/walk.glb (and walk.glb.json), live streams in tests/formats/live/ (each case's
 stream as one batch message, the Python decoder's channels, the integers it read per packet and
-layer, and joint positions). Run from the repository root after a change to the glTF writer or the
-live format; tests/test_gltf_fbx.py and tests/test_js_fixtures.py check they are what the code
-makes now."""
+layer, and joint positions), .moc files in tests/formats/moc/ (the same per chunk) and the
+JavaScript copy of the .moc header dictionary (js/src/header-dict.js). Run from the repository
+root after a change to the glTF writer, the live format or kinwave's; tests/test_gltf_fbx.py and
+tests/test_js_fixtures.py check they are what the code makes now."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from pathlib import Path
 
 TESTS = Path(__file__).resolve().parent.parent
 DATA, FORMATS = TESTS / "data", TESTS / "formats"
+JS = TESTS.parent / "js" / "src"
 FRAMES = 30
 #: The frame whose pose the JavaScript tests check.
 POSE_FRAME = 17
@@ -114,6 +116,123 @@ def live_fixtures() -> dict[str, bytes]:
     return out
 
 
+#: .moc cases: (name, clip, frames, fps or None, re-expression, kinwave knobs, chunk frames). Between
+#: them they use every part of the format: chunks, segment step offsets, coding forms (vectors,
+#: coding orders, WORLD forms under a turned dummy root), world-axis translations, constant
+#: 6-channel joints, keyframes, an isolated frame, the three wavelets, a rate target and ASF axes.
+MOC_CASES = (
+    ("bvh-joint", "07_03.bvh", 600, None, None, {}, 256),
+    ("asf-30fps-shell", "135_08.amc", 300, 30.0, None, {"max_error_cm": 1.0, "error_measure": "shell"}, 1024),
+    ("dummy-root", "09_02.bvh", 300, None, "dummy", {"max_error_cm": 1.0}, 1024),
+    ("dummy-root-bind", "07_03.bvh", 200, None, "dummy-bind", {"max_error_cm": 1.0}, 1024),
+    ("zxz-d4", "07_03.bvh", 300, None, "zxz", {"wavelet": "d4", "window": 64}, 1024),
+    ("haar-bitrate", "07_03.amc", 300, None, None, {"wavelet": "haar", "bits_per_second": 6000.0, "levels": 3}, 1024),
+    ("glitch", "09_02.bvh", 300, None, "glitch", {}, 1024),
+)
+
+
+def _reexpressed(motion, how):
+    from mocodec import reexpress
+
+    if how == "dummy":
+        return reexpress.with_position_channels(reexpress.with_dummy_root(motion, (30.0, 20.0, 10.0)))
+    if how == "dummy-bind":
+        return reexpress.with_bind_frame(reexpress.with_dummy_root(motion, (0.0, -90.0, 0.0), position_channels=True))
+    if how == "zxz":
+        return reexpress.with_euler_orders(motion, "ZXZ")
+    if how == "glitch":
+        channels = motion.channels.copy()
+        channels[len(channels) // 2, motion.skeleton.rotation_mask] += 25.0
+        return motion.with_channels(channels)
+    return motion
+
+
+def moc_fixture(name, clip, frames, fps, how, knobs, chunk_frames) -> dict[str, bytes]:
+    """The files of one .moc case: ``<name>.moc``, ``<name>.json`` (frames, channels, per chunk
+    its body's flags and integers' count, joint positions at a few frames), ``<name>.f64.gz`` (the
+    decoded channels, float64) and ``<name>.ints.gz`` (per chunk the integers the coefficient
+    decoder read: side integers as sent, constant flags, knots, coefficients; int32)."""
+    import gzip
+
+    import numpy as np
+
+    from mocodec import load, moc
+    from mocodec.codecs import get_codec
+    from mocodec.coding.entropy import coefcoder
+
+    motion = load(DATA / clip)
+    motion = _reexpressed((motion.resample(fps) if fps else motion)[:frames], how)
+    data = moc.pack(motion, get_codec("kinwave", **knobs), chunk_frames=chunk_frames)
+    read: list[np.ndarray] = []
+    original = coefcoder.decode
+
+    def recording(*args, **kwargs):
+        coded = original(*args, **kwargs)
+        side = [np.diff(q, prepend=0) for q in coded.side]
+        parts = [*side, coded.const, coded.knots.ravel(), coded.coeffs.ravel()]
+        read.append(np.concatenate([np.asarray(p, dtype=np.int64) for p in parts]))
+        return coded
+
+    coefcoder.decode = recording
+    try:
+        decoded = moc.unpack(data)
+    finally:
+        coefcoder.decode = original
+    info = moc.container.open_container(__import__("io").BytesIO(data), len(data), name)
+    ints = np.concatenate(read)
+    assert np.abs(ints).max(initial=0) < 2**31
+    positions = decoded.positions()
+    meta = {
+        "clip": clip,
+        "frames": decoded.num_frames,
+        "channels": decoded.skeleton.num_channels,
+        "knobs": knobs,
+        "chunks": [{"flags": int(info.read_chunk(k)[1]), "ints": int(x.size)} for k, x in enumerate(read)],
+        "positions": {str(f % decoded.num_frames): positions[f].round(9).tolist() for f in POSE_FRAMES},
+    }
+    return {
+        f"{name}.moc": data,
+        f"{name}.json": (json.dumps(meta, indent=1) + "\n").encode(),
+        f"{name}.f64.gz": gzip.compress(decoded.channels.astype("<f8").tobytes(), mtime=0),
+        f"{name}.ints.gz": gzip.compress(ints.astype("<i4").tobytes(), mtime=0),
+    }
+
+
+def moc_fixtures() -> dict[str, bytes]:
+    out: dict[str, bytes] = {}
+    for case in MOC_CASES:
+        out.update(moc_fixture(*case))
+    return out
+
+
+def steps_table() -> bytes:
+    """Python's quantiser steps of every kinwave step code and segment offset factors, which the
+    JavaScript decoder makes from eight constants (js/src/steps.js)."""
+    from mocodec.codecs.kinwave.payload import code_step
+
+    table = {
+        "code_steps": [code_step(c) for c in range(256)],
+        "offset_factors": {str(o): 2.0 ** (o / 8.0) for o in range(-128, 129)},
+    }
+    return (json.dumps(table) + "\n").encode()
+
+
+def header_dictionary_module() -> str:
+    """js/src/header-dict.js: the .moc header dictionary as base64."""
+    import base64
+
+    from mocodec.formats.header_dict import DICTIONARY
+
+    text = base64.b64encode(DICTIONARY).decode()
+    lines = "\n".join(f"  '{text[k : k + 100]}'," for k in range(0, len(text), 100))
+    return (
+        "// The preset dictionary .moc headers are deflated with (formats/header_dict.py), generated by\n"
+        "// tests/js/make_fixtures.py; tests/test_js_fixtures.py checks it is Python's, byte for byte.\n"
+        f"const BASE64 = [\n{lines}\n].join('');\n\n"
+        "export const HEADER_DICTIONARY = Uint8Array.from(atob(BASE64), (c) => c.charCodeAt(0));\n"
+    )
+
+
 def main() -> int:
     glb, expected = fixture()
     (FORMATS / "walk.glb").write_bytes(glb)
@@ -123,6 +242,12 @@ def main() -> int:
     for name, data in live_fixtures().items():
         (FORMATS / "live" / name).write_bytes(data)
         print(f"wrote {FORMATS / 'live' / name} ({len(data)} bytes)")
+    (FORMATS / "moc").mkdir(exist_ok=True)
+    for name, data in {**moc_fixtures(), "steps.json": steps_table()}.items():
+        (FORMATS / "moc" / name).write_bytes(data)
+        print(f"wrote {FORMATS / 'moc' / name} ({len(data)} bytes)")
+    (JS / "header-dict.js").write_text(header_dictionary_module())
+    print(f"wrote {JS / 'header-dict.js'}")
     return 0
 
 

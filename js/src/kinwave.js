@@ -1,0 +1,315 @@
+// The decoder of a kinwave body (codecs/kinwave/payload.py, format 1; docs/formats.md): header,
+// the integers of the coefficient coder, then per channel the trend through its knots plus the
+// inverse wavelet of each segment's block, seams smoothed, isolated frames patched, translations
+// coded on the world's axes turned back and three-angle joints brought back from their coding
+// forms to the file's Euler angles. Integers are the Python decoder's exactly; floats agree to
+// rounding (the arithmetic is the same, the order of some sums is not).
+import { decodeCoefficients } from './coefcoder.js';
+import { DecodeError } from './errors.js';
+import { forwardKinematics } from './kinematics.js';
+import { conjugate, fromForm, quatExp, quatProduct, validForm, WORLD } from './rotvec.js';
+import { smoothSeams } from './seams.js';
+import { CODE_STEP, twoToEighths } from './steps.js';
+import { WAVELET_IDS, inverseWavelet } from './wavelets.js';
+
+const FORMAT = 1;
+const CODER_REVISION = 2;
+const HEAD_SIZE = 6;
+const FLAG_KEYFRAME = 1;
+const FLAG_OFFSETS = 8;
+const FLAG_FORMS = 16;
+const FLAG_SECOND_KEYFRAME = 32;
+const FLAG_MEANS = 64;
+const FLAG_ISOLATED = 128;
+const MAX_ISOLATED = 32;
+const MEAN_QUANTUM = 2.0;
+const CONST_FRACTION = 1.0 / 8.0;
+const KEYFRAME_QUANTUM = 0.5;
+const SEAM_HALF_WIDTH = 8;
+const SEAM_LIMIT = 1.0;
+
+// Per skeleton, what the payload's layout depends on (payload.step_groups and friends).
+const plans = new WeakMap();
+
+function planOf(skeleton) {
+  let plan = plans.get(skeleton);
+  if (plan) return plan;
+  const J = skeleton.joints.length;
+  const rotationJoints = [];
+  const translation = [];
+  const threeAngle = [];
+  const channelJoint = new Int32Array(skeleton.numChannels);
+  const base = new Float64Array(skeleton.numChannels);
+  for (let j = 0; j < J; j++) {
+    for (let c = skeleton.channelOffsets[j]; c < skeleton.channelOffsets[j + 1]; c++) channelJoint[c] = j;
+    for (let a = 0; a < 3; a++) {
+      const c = skeleton.posIndex[3 * j + a];
+      if (c >= 0) {
+        translation.push(c);
+        base[c] = skeleton.offsets[3 * j + a];
+      }
+    }
+    const rot = [0, 1, 2].map((s) => skeleton.rotIndex[3 * j + s]).filter((c) => c >= 0);
+    if (rot.length) rotationJoints.push({ joint: j, channels: rot });
+    if (rot.length === 3) threeAngle.push({ joint: j, channels: rot, order: skeleton.joints[j].rotationOrder });
+  }
+  plan = { rotationJoints, translation, threeAngle, channelJoint, base };
+  plans.set(skeleton, plan);
+  return plan;
+}
+
+// trendwave.layout: segments (a keyframe or two, then windows), knots, blocks.
+export function layout(frames, window, levels, keyframes) {
+  const first = frames > 1 ? Math.min(keyframes, frames - 1) : 0;
+  const starts = [];
+  if (frames > 0) {
+    for (let s = 0; s < first; s++) starts.push(s);
+    for (let s = first; s < Math.max(frames, 1); s += window) starts.push(s);
+  }
+  const lengths = starts.map((a, s) => (s + 1 < starts.length ? starts[s + 1] : frames) - a);
+  const segLevels = lengths.map((n) => (n < 2 ? 0 : Math.min(levels, 31 - Math.clz32(n))));
+  const padded = lengths.map((n, s) => (n < 2 ? 0 : Math.ceil(n / (1 << segLevels[s])) * (1 << segLevels[s])));
+  const knotFrames = [...starts];
+  if (frames > 0 && frames - 1 !== starts.at(-1)) knotFrames.push(frames - 1);
+  const left = new Int32Array(frames);
+  const frac = new Float64Array(frames);
+  starts.forEach((a, s) => {
+    const end = s + 1 < knotFrames.length ? knotFrames[s + 1] : a;
+    for (let i = 0; i < lengths[s]; i++) {
+      left[a + i] = s;
+      if (end > a) frac[a + i] = i / (end - a);
+    }
+  });
+  const quantum = Float64Array.from(knotFrames, (_, k) => (k < first ? KEYFRAME_QUANTUM : 1.0));
+  const offsets = [];
+  padded.reduce((at, n) => (offsets.push(at), at + n), 0);
+  return { frames, starts, lengths, padded, segLevels, knotFrames, left, frac, quantum, offsets };
+}
+
+function cumulative(values, from, count) {
+  const out = new Float64Array(count);
+  let sum = 0;
+  for (let i = 0; i < count; i++) out[i] = sum += values[from + i];
+  return out;
+}
+
+// Each channel's quantiser step: its joint's code (degrees), or the translation code (cm) in
+// skeleton units.
+function channelSteps(skeleton, plan, codes) {
+  const steps = new Float64Array(skeleton.numChannels);
+  plan.rotationJoints.forEach((g, k) => {
+    for (const c of g.channels) steps[c] = CODE_STEP[codes[k]];
+  });
+  const t = (CODE_STEP[codes[codes.length - 1]] * skeleton.unitsPerMetre) / 100.0;
+  for (const c of plan.translation) steps[c] = t;
+  return steps;
+}
+
+// Whether each joint and all above it hold constant rotations (payload.still_rotations).
+function stillRotations(skeleton, constant) {
+  const J = skeleton.joints.length;
+  const still = new Uint8Array(J);
+  for (let j = 0; j < J; j++) {
+    let own = 1;
+    for (let s = 0; s < 3; s++) {
+      const c = skeleton.rotIndex[3 * j + s];
+      if (c >= 0 && !constant[c]) own = 0;
+    }
+    const p = skeleton.parents[j];
+    still[j] = own && (p < 0 || still[p]) ? 1 : 0;
+  }
+  return still;
+}
+
+// Non-root joints with three moving translations under constant rotations: coded on the world's axes.
+function worldTranslations(skeleton, constant) {
+  const still = stillRotations(skeleton, constant);
+  const out = [];
+  for (let j = 1; j < skeleton.joints.length; j++) {
+    const pos = [0, 1, 2].map((a) => skeleton.posIndex[3 * j + a]);
+    if (still[skeleton.parents[j]] && pos.every((c) => c >= 0) && !pos.some((c) => constant[c])) out.push({ joint: j, pos });
+  }
+  return out;
+}
+
+function rotate(q, v) {
+  const [w, x, y, z] = q;
+  const ux = 2.0 * (y * v[2] - z * v[1]);
+  const uy = 2.0 * (z * v[0] - x * v[2]);
+  const uz = 2.0 * (x * v[1] - y * v[0]);
+  return [v[0] + w * ux + y * uz - z * uy, v[1] + w * uy + z * ux - x * uz, v[2] + w * uz + x * uy - y * ux];
+}
+
+function damaged(what, offset = null) {
+  return new DecodeError(`kinwave payload: ${what}`, offset);
+}
+
+// The header and integers of a kinwave body, every field checked: { lay, wavelet, coded (side,
+// constant, knots, coeffs), codes, offsets, forms, means, isolated, patches }.
+export function readKinwave(body, skeleton, frames) {
+  const plan = planOf(skeleton);
+  const C = skeleton.numChannels;
+  const numCodes = plan.rotationJoints.length + (plan.translation.length ? 1 : 0);
+  if (body.length < HEAD_SIZE) throw damaged(`${body.length} bytes is shorter than its ${HEAD_SIZE}-byte header`, 0);
+  const [version, flags, logWindow, levels] = body;
+  const channels = body[4] | (body[5] << 8);
+  if (version !== FORMAT) throw damaged(`format ${version}, this decoder reads ${FORMAT}`, 0);
+  if (channels !== C) throw damaged(`${channels} channels, the skeleton has ${C}: wrong skeleton?`, 4);
+  if (logWindow > 16 || levels < 1 || levels > 10 || ((flags >> 1) & 3) >= WAVELET_IDS.length) {
+    throw damaged(`header is damaged (window 2^${logWindow}, levels ${levels})`, 1);
+  }
+  const keyframes = flags & FLAG_KEYFRAME ? (flags & FLAG_SECOND_KEYFRAME ? 2 : 1) : 0;
+  const lay = layout(frames, 2 ** logWindow, levels, keyframes);
+  const S = lay.starts.length;
+  const numOffsets = flags & FLAG_OFFSETS ? S : 0;
+  const numVectors = flags & FLAG_FORMS ? plan.threeAngle.length : 0;
+  const numMeans = flags & FLAG_MEANS ? 3 * numVectors : 0;
+  let start = HEAD_SIZE;
+  let numIsolated = 0;
+  if (flags & FLAG_ISOLATED) {
+    if (body.length <= start || body[start] < 1 || body[start] > MAX_ISOLATED) throw damaged('its isolated frame count is damaged', start);
+    numIsolated = body[start];
+    start += 1;
+  }
+  const sizes = [numCodes, numOffsets, numVectors, numMeans, numIsolated, numIsolated * C];
+  let coded;
+  try {
+    coded = decodeCoefficients(body.subarray(start), C, lay.knotFrames.length, lay.padded, lay.segLevels, CODER_REVISION,
+      sizes.reduce((a, b) => a + b, 0));
+  } catch (e) {
+    if (e instanceof RangeError) throw damaged(e.message, start);
+    throw e;
+  }
+  const at = sizes.map((_, k) => sizes.slice(0, k).reduce((a, b) => a + b, 0));
+  const read = {
+    lay,
+    wavelet: WAVELET_IDS[(flags >> 1) & 3],
+    coded,
+    codes: cumulative(coded.side, at[0], numCodes),
+    offsets: numOffsets ? cumulative(coded.side, at[1], numOffsets) : new Float64Array(S),
+    forms: cumulative(coded.side, at[2], numVectors),
+    means: coded.side.subarray(at[3], at[3] + numMeans),
+    isolated: cumulative(coded.side, at[4], numIsolated),
+    patches: coded.side.subarray(at[5], at[5] + numIsolated * C),
+  };
+  const { codes, offsets, forms, means, isolated } = read;
+  for (let k = 0; k < numIsolated; k++) {
+    if (!(isolated[k] >= (k ? isolated[k - 1] + 2 : 1)) || isolated[k] >= frames - 1) throw damaged('its isolated frames are damaged', start);
+  }
+  if (codes.some((c) => c < 0 || c > 255) || offsets.some((o) => Math.abs(o) > 128) || !forms.every(validForm)
+    || means.some((m) => Math.abs(m) * MEAN_QUANTUM > 360.0)) {
+    throw damaged('its step codes are damaged', start);
+  }
+  return read;
+}
+
+// The channels (frames x channels, row-major Float64Array) of a kinwave body.
+export function decodeKinwave(body, skeleton, frames) {
+  const plan = planOf(skeleton);
+  const C = skeleton.numChannels;
+  const read = readKinwave(body, skeleton, frames);
+  const out = new Float64Array(frames * C);
+  if (!frames) return out;
+  const rows = reconstruct(skeleton, plan, read);
+  const steps = channelSteps(skeleton, plan, read.codes);
+  const n = read.isolated.length;
+  for (let k = 0; k < n; k++) {
+    for (let c = 0; c < C; c++) rows[c][read.isolated[k]] += read.patches[c * n + k] * (steps[c] * KEYFRAME_QUANTUM);
+  }
+  toFileLayout(skeleton, plan, rows, read.coded.constant, read.forms, read.means);
+  for (let c = 0; c < C; c++) {
+    const row = rows[c];
+    for (let t = 0; t < frames; t++) out[t * C + c] = row[t];
+  }
+  return out;
+}
+
+// payload.reconstruct: per channel its trend plus its blocks' residual, then the seams smoothed.
+function reconstruct(skeleton, plan, { coded, codes, offsets, lay, wavelet }) {
+  const C = skeleton.numChannels;
+  const { frames, starts, lengths, padded, segLevels, left, frac, quantum } = lay;
+  const S = starts.length;
+  const K = lay.knotFrames.length;
+  const N = padded.reduce((a, b) => a + b, 0);
+  const steps = channelSteps(skeleton, plan, codes);
+  const factor = Float64Array.from(offsets, (o) => twoToEighths(o));
+  const knotFactor = Float64Array.from({ length: K }, (_, k) => factor[Math.min(k, Math.max(S - 1, 0))]);
+  const seamFactor = Float64Array.from({ length: Math.max(S - 1, 0) }, (_, s) => Math.min(factor[s], factor[s + 1]));
+  const seams = starts.slice(1);
+  const longest = Math.max(1, ...padded);
+  const block = new Float64Array(longest);
+  const signal = new Float64Array(longest);
+  const work = new Float64Array(2 * longest);
+  const values = new Float64Array(K);
+  const limits = new Float64Array(seams.length);
+  const rows = [];
+  for (let c = 0; c < C; c++) {
+    const row = new Float64Array(frames);
+    rows.push(row);
+    const step = steps[c];
+    if (coded.constant[c]) {
+      row.fill(plan.base[c] + coded.knots[c * K] * (step * CONST_FRACTION));
+      continue;
+    }
+    for (let k = 0; k < K; k++) values[k] = coded.knots[c * K + k] * (step * quantum[k] * knotFactor[k]);
+    for (let t = 0; t < frames; t++) {
+      const a = values[left[t]];
+      const b = values[Math.min(left[t] + 1, K - 1)];
+      row[t] = a + (b - a) * frac[t];
+    }
+    for (let s = 0; s < S; s++) {
+      const n = padded[s];
+      if (!n) continue;
+      const from = c * N + lay.offsets[s];
+      let any = false;
+      for (let i = 0; i < n; i++) {
+        block[i] = coded.coeffs[from + i] * (step * factor[s]);
+        any ||= block[i] !== 0;
+      }
+      if (!any) continue;
+      inverseWavelet(block, 0, n, segLevels[s], wavelet, signal, work);
+      for (let i = 0; i < lengths[s]; i++) row[starts[s] + i] += signal[i];
+    }
+    for (let k = 0; k < seams.length; k++) limits[k] = SEAM_LIMIT * seamFactor[k] * step;
+    smoothSeams(row, seams, SEAM_HALF_WIDTH, limits);
+  }
+  return rows;
+}
+
+// payload.decode_channels after the reconstruction: world-axis translations back on their parent's
+// axes, three-angle joints from their coding forms back to the file's Euler angles.
+function toFileLayout(skeleton, plan, rows, constant, forms, means) {
+  const J = skeleton.joints.length;
+  const moved = worldTranslations(skeleton, constant);
+  const world = forms.some((f) => f >= WORLD);
+  let parents = null;
+  if (moved.length || world) {
+    const global = new Float64Array(4 * J);
+    forwardKinematics(skeleton, Float64Array.from(rows, (row) => row[0]), global);
+    parents = (j) => {
+      const p = skeleton.parents[j];
+      return p < 0 ? [1.0, 0.0, 0.0, 0.0] : Array.from(global.subarray(4 * p, 4 * p + 4));
+    };
+  }
+  for (const { joint, pos } of moved) {
+    const undo = conjugate(parents(joint));
+    for (let t = 0; t < rows[0].length; t++) {
+      const v = rotate(undo, pos.map((c) => rows[c][t]));
+      pos.forEach((c, a) => (rows[c][t] = v[a]));
+    }
+  }
+  forms.forEach((form, k) => {
+    if (!form) return;
+    const g = plan.threeAngle[k];
+    const mean = quatExp(means.length ? [0, 1, 2].map((a) => (means[3 * k + a] * MEAN_QUANTUM * (Math.PI / 180)) / 2.0) : [0, 0, 0]);
+    let pre = null;
+    if (world) {
+      pre = parents(g.joint);
+      if (skeleton.hasAxis[g.joint]) {
+        const axis = Array.from(skeleton.axisQuat.subarray(4 * g.joint, 4 * g.joint + 4));
+        pre = quatProduct(conjugate(axis), quatProduct(pre, axis));
+      }
+    }
+    fromForm(g.channels.map((c) => rows[c]), rows[0].length, g.order, form, mean, pre);
+  });
+}

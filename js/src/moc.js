@@ -1,0 +1,133 @@
+// .moc files (formats/container.py, version 1): the header (deflated with the preset dictionary,
+// CRC-32 checked) with the codec's config, frame rate, frame count and the compact skeleton; chunks
+// of a codec body each, CRC-32 checked; the index and footer at the end. Chunks decode on their own,
+// so a frame range costs only its chunks. The JavaScript decoder reads kinwave files that hold
+// their skeleton.
+import { crc32, readVarint, u16, u32 } from './bytes.js';
+import { unpackSkeleton } from './compact-skeleton.js';
+import { DecodeError } from './errors.js';
+import { HEADER_DICTIONARY } from './header-dict.js';
+import { MAX_FPS } from './header.js';
+import { inflate } from './inflate.js';
+import { decodeKinwave } from './kinwave.js';
+
+const MAGIC = 'MOC1';
+const FOOTER_MAGIC = 'MOCX';
+const VERSION = 1;
+const FLAG_SKELETON = 1;
+const START = 12;
+const FOOTER = 8;
+const MAX_HEADER = 1 << 24;
+const MAX_HEADER_TEXT = 8 << 20;
+const MAX_CHUNKS = 1 << 20;
+const MAX_PAYLOAD_FRAMES = 1 << 20;
+export const MAX_DECODED_VALUES = 2 ** 25;
+
+function ascii(data, pos) {
+  return String.fromCharCode(...data.subarray(pos, pos + 4));
+}
+
+// The header and index of .moc bytes, every length and check verified: { header, skeleton, fps,
+// frames, codec, chunks: [{ offset, first, count, size }] }.
+export async function openMoc(data) {
+  if (data.length < START + FOOTER) throw new DecodeError(`not a .moc file: ${data.length} bytes`, 0);
+  if (ascii(data, 0) !== MAGIC) throw new DecodeError(`not a .moc file (starts with ${JSON.stringify(ascii(data, 0))}, expected "MOC1")`, 0);
+  const version = u16(data, 4);
+  const flags = u16(data, 6);
+  const headLength = u32(data, 8);
+  if (version !== VERSION) throw new DecodeError(`.moc version ${version}; this decoder reads version ${VERSION}`, 4);
+  if (flags & ~FLAG_SKELETON) throw new DecodeError(`flags ${flags} set bits this version does not define`, 6);
+  if (headLength > MAX_HEADER || START + headLength + 4 > data.length) throw new DecodeError(`a header of ${headLength} bytes does not fit in the file`, 8);
+  const head = data.subarray(START, START + headLength);
+  if (crc32(head, 0, head.length) !== u32(data, START + headLength)) throw new DecodeError('header CRC mismatch, the header is damaged', START);
+  const text = await inflate(head, { limit: MAX_HEADER_TEXT, dictionary: HEADER_DICTIONARY, what: `header at byte ${START}` });
+  const split = flags & FLAG_SKELETON ? text.indexOf(0) : text.length;
+  if (split < 0) throw new DecodeError('the header has no compact skeleton after its JSON', START);
+  let header;
+  try {
+    header = JSON.parse(new TextDecoder('utf-8', { fatal: true }).decode(text.subarray(0, split)));
+  } catch (e) {
+    throw new DecodeError(`header does not parse (${e.message})`, START);
+  }
+  if (!header || typeof header !== 'object' || !header.codec || typeof header.codec !== 'object') {
+    throw new DecodeError('header: expected an object with a codec config', START);
+  }
+  if (!(flags & FLAG_SKELETON)) {
+    throw new DecodeError('the file holds only its skeleton\'s id: encode it with its skeleton (without --skeleton-ref) to decode it here', 6);
+  }
+  const skeleton = unpackSkeleton(text.subarray(split + 1));
+  const { frames, fps } = header;
+  if (!Number.isSafeInteger(frames) || frames < 0 || typeof fps !== 'number' || !(fps > 0 && fps <= MAX_FPS)) {
+    throw new DecodeError(`header says ${frames} frames at ${fps} fps`, START);
+  }
+  const chunks = index(data, START + headLength + 4);
+  const covered = chunks.reduce((n, e) => n + e.count, 0);
+  if (covered !== frames) throw new DecodeError(`the index's chunks cover ${covered} frames, the header says ${frames}`, data.length - FOOTER);
+  return { header, skeleton, fps, frames, codec: header.codec, chunks };
+}
+
+function index(data, chunksAt) {
+  const footAt = data.length - FOOTER;
+  const length = u32(data, footAt);
+  if (ascii(data, footAt + 4) !== FOOTER_MAGIC) throw new DecodeError('the footer is damaged or the file is truncated', footAt);
+  const at = footAt - length;
+  if (length < 5 || at < chunksAt) throw new DecodeError(`an index of ${length} bytes does not fit in the file`, footAt);
+  const raw = data.subarray(at, footAt);
+  if (crc32(raw, 0, length - 4) !== u32(raw, length - 4)) throw new DecodeError('index CRC mismatch, the index is damaged', at);
+  let [n, pos] = readVarint(raw, 0, 10, 'the chunk count');
+  if (n > MAX_CHUNKS) throw new DecodeError(`${n} chunks is implausible`, at);
+  const chunks = [];
+  let offset = chunksAt;
+  let first = 0;
+  for (let k = 0; k < n; k++) {
+    let count;
+    let size;
+    [count, pos] = readVarint(raw, pos, 10, `index entry ${k}`);
+    [size, pos] = readVarint(raw, pos, 10, `index entry ${k}`);
+    if (!(count > 0 && count <= MAX_PAYLOAD_FRAMES) || size < 5) throw new DecodeError(`index entry ${k} (${count} frames in ${size} bytes) is invalid`, at + pos);
+    chunks.push({ offset, first, count, size });
+    offset += size;
+    first += count;
+    if (offset > at) break;
+  }
+  if (pos !== length - 4 || offset !== at) throw new DecodeError('the index\'s entries do not match the file\'s layout', at);
+  return chunks;
+}
+
+// The codec body of chunk `k`, length- and CRC-checked.
+export function chunkBody(data, chunk, k) {
+  const bytes = data.subarray(chunk.offset, chunk.offset + chunk.size);
+  const [length, start] = readVarint(bytes, 0, 10, `chunk ${k}'s length`);
+  if (start + length + 4 !== chunk.size) throw new DecodeError(`chunk ${k}: a ${length}-byte body does not fill its ${chunk.size} bytes`, chunk.offset);
+  if (crc32(bytes, 0, chunk.size - 4) !== u32(bytes, chunk.size - 4)) throw new DecodeError(`chunk ${k}: CRC mismatch, the chunk is damaged`, chunk.offset);
+  return bytes.subarray(start, chunk.size - 4);
+}
+
+// Decode .moc bytes: all frames, or `frames: [first, stop]` (only the chunks they need). Returns
+// { skeleton, fps, codec, first, frames, channels } with `channels` (frames x channels, row-major).
+export async function decodeMoc(data, { frames = null, maxValues = MAX_DECODED_VALUES } = {}) {
+  const file = await openMoc(data);
+  const [first, stop] = frames ?? [0, file.frames];
+  if (!(Number.isInteger(first) && Number.isInteger(stop) && first >= 0 && first <= stop && stop <= file.frames)) {
+    throw new RangeError(`frames ${first}:${stop} are outside 0:${file.frames}`);
+  }
+  if (file.codec.codec !== 'kinwave') throw new DecodeError(`codec ${JSON.stringify(file.codec.codec)}: this decoder reads kinwave files only`, START);
+  const C = file.skeleton.numChannels;
+  const wanted = file.chunks.map((e, k) => [e, k]).filter(([e]) => e.first < stop && e.first + e.count > first);
+  const values = wanted.reduce((n, [e]) => n + e.count, 0) * C;
+  if (values > maxValues) throw new DecodeError(`decoding frames ${first}:${stop} makes ${values} values, over the limit of ${maxValues}`);
+  const channels = new Float64Array((stop - first) * C);
+  for (const [e, k] of wanted) {
+    let decoded;
+    try {
+      decoded = decodeKinwave(chunkBody(data, e, k), file.skeleton, e.count);
+    } catch (err) {
+      if (err instanceof DecodeError && !err.message.startsWith('chunk')) throw new DecodeError(`chunk ${k} at byte ${e.offset}: ${err.message}`);
+      throw err;
+    }
+    const from = Math.max(first - e.first, 0);
+    const to = Math.min(stop - e.first, e.count);
+    channels.set(decoded.subarray(from * C, to * C), (e.first + from - first) * C);
+  }
+  return { skeleton: file.skeleton, fps: file.fps, codec: file.codec, first, frames: stop - first, channels };
+}

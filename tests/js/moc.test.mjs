@@ -1,0 +1,164 @@
+// The JavaScript .moc decoder against the Python decoder, on the files of tests/formats/moc/
+// (tests/js/make_fixtures.py): every integer the coefficient decoder reads equal, every decoded
+// channel within 1e-9 (degrees or skeleton units), joint positions within 1e-8; the step tables
+// equal Python's; frame ranges; then damaged and hostile files end in DecodeError only.
+import { test } from 'node:test';
+import assert from 'node:assert/strict';
+import { readFile } from 'node:fs/promises';
+import { deflateSync, gunzipSync, inflateSync } from 'node:zlib';
+import { DecodeError, decodeMoc, forwardKinematics, openMoc } from '../../js/src/index.js';
+import { HEADER_DICTIONARY } from '../../js/src/header-dict.js';
+import { chunkBody } from '../../js/src/moc.js';
+import { readKinwave } from '../../js/src/kinwave.js';
+import { CODE_STEP, twoToEighths } from '../../js/src/steps.js';
+import { crc32 } from '../../js/src/bytes.js';
+import { seeded } from './seeded.mjs';
+
+const MOC = new URL('../formats/moc/', import.meta.url);
+const CASES = ['bvh-joint', 'asf-30fps-shell', 'dummy-root', 'dummy-root-bind', 'zxz-d4', 'haar-bitrate', 'glitch'];
+
+async function fixture(name) {
+  const data = new Uint8Array(await readFile(new URL(`${name}.moc`, MOC)));
+  const meta = JSON.parse(await readFile(new URL(`${name}.json`, MOC), 'utf8'));
+  const f64 = gunzipSync(await readFile(new URL(`${name}.f64.gz`, MOC)));
+  const ints = gunzipSync(await readFile(new URL(`${name}.ints.gz`, MOC)));
+  return {
+    data, meta,
+    channels: new Float64Array(f64.buffer, f64.byteOffset, f64.byteLength / 8),
+    ints: new Int32Array(ints.buffer, ints.byteOffset, ints.byteLength / 4),
+  };
+}
+
+function integersRead(coded) {
+  return [coded.side, coded.constant, coded.knots, coded.coeffs].flatMap((a) => Array.from(a));
+}
+
+test('step codes and segment factors are Python\'s, bit for bit', async () => {
+  const table = JSON.parse(await readFile(new URL('steps.json', MOC), 'utf8'));
+  table.code_steps.forEach((step, code) => assert.equal(CODE_STEP[code], step, `code ${code}`));
+  for (const [o, factor] of Object.entries(table.offset_factors)) assert.equal(twoToEighths(Number(o)), factor, `offset ${o}`);
+});
+
+const formsSeen = new Set();
+for (const name of CASES) {
+  test(`${name}: the integers and channels are the Python decoder's`, async () => {
+    const { data, meta, channels, ints } = await fixture(name);
+    const file = await openMoc(data);
+    assert.equal(file.chunks.length, meta.chunks.length);
+    let at = 0;
+    file.chunks.forEach((chunk, k) => {
+      const body = chunkBody(data, chunk, k);
+      assert.equal(body[1], meta.chunks[k].flags, `chunk ${k}: flags`);
+      const read = readKinwave(body, file.skeleton, chunk.count);
+      read.forms.forEach((f) => formsSeen.add(f));
+      const got = integersRead(read.coded);
+      assert.equal(got.length, meta.chunks[k].ints, `chunk ${k}: integers`);
+      for (let i = 0; i < got.length; i++, at++) {
+        if (got[i] !== ints[at]) assert.fail(`chunk ${k}: integer ${i} is ${got[i]}, Python read ${ints[at]}`);
+      }
+    });
+    assert.equal(at, ints.length);
+    const decoded = await decodeMoc(data);
+    assert.equal(decoded.channels.length, meta.frames * meta.channels);
+    let worst = 0;
+    for (let i = 0; i < channels.length; i++) worst = Math.max(worst, Math.abs(decoded.channels[i] - channels[i]));
+    assert.ok(worst <= 1e-9, `worst channel differs by ${worst}`);
+    const positions = forwardKinematics(decoded.skeleton, decoded.channels);
+    const J = decoded.skeleton.joints.length;
+    for (const [frame, want] of Object.entries(meta.positions)) {
+      want.forEach((p, j) => p.forEach((v, a) => {
+        const got = positions[(Number(frame) * J + j) * 3 + a];
+        assert.ok(Math.abs(got - v) <= 1e-8, `frame ${frame}, joint ${j}: ${got} vs ${v}`);
+      }));
+    }
+  });
+}
+
+test('the cases use every coding form: Euler, vector, coding orders and WORLD ones', () => {
+  assert.ok(formsSeen.has(0) && formsSeen.has(1), [...formsSeen].join());
+  assert.ok([...formsSeen].some((f) => f >= 2 && f < 8), 'a coding order');
+  assert.ok([...formsSeen].some((f) => f >= 8), 'a WORLD form');
+});
+
+test('a frame range decodes only its chunks and equals the whole file\'s frames', async () => {
+  const { data, meta } = await fixture('bvh-joint');
+  const whole = await decodeMoc(data);
+  const C = meta.channels;
+  for (const [a, b] of [[0, 1], [250, 262], [255, 257], [meta.frames - 3, meta.frames], [10, 10]]) {
+    const part = await decodeMoc(data, { frames: [a, b] });
+    assert.equal(part.frames, b - a);
+    assert.deepEqual(part.channels, whole.channels.subarray(a * C, b * C));
+  }
+  await assert.rejects(decodeMoc(data, { frames: [5, meta.frames + 1] }), RangeError);
+  await assert.rejects(decodeMoc(data, { maxValues: 1000 }), /over the limit/);
+});
+
+async function expectDecodeError(data, pattern = null) {
+  try {
+    await decodeMoc(data);
+  } catch (e) {
+    if (!(e instanceof DecodeError)) throw e;
+    if (pattern) assert.match(e.message, pattern);
+    return e;
+  }
+  return null;
+}
+
+// A .moc with its header's JSON replaced (deflated with the dictionary, CRC recomputed).
+function withHeader(data, edit) {
+  const headLength = data[8] | (data[9] << 8) | (data[10] << 16) | (data[11] << 24);
+  const text = inflateSync(data.subarray(12, 12 + headLength), { dictionary: HEADER_DICTIONARY });
+  const split = text.indexOf(0);
+  const doc = edit(JSON.parse(text.subarray(0, split).toString()));
+  const head = deflateSync(Buffer.concat([Buffer.from(JSON.stringify(doc)), text.subarray(split)]), { dictionary: HEADER_DICTIONARY });
+  const out = new Uint8Array(data.length - headLength + head.length);
+  out.set(data.subarray(0, 8));
+  new DataView(out.buffer).setUint32(8, head.length, true);
+  out.set(head, 12);
+  new DataView(out.buffer).setUint32(12 + head.length, crc32(head, 0, head.length), true);
+  out.set(data.subarray(16 + headLength), 16 + head.length);
+  return out;
+}
+
+test('hostile headers: clear errors naming what is wrong', async () => {
+  const { data } = await fixture('asf-30fps-shell');
+  await expectDecodeError(withHeader(data, (h) => ({ ...h, codec: { codec: 'spiht', knobs: {} } })), /kinwave files only/);
+  await expectDecodeError(withHeader(data, (h) => ({ ...h, frames: h.frames + 1 })), /cover/);
+  await expectDecodeError(withHeader(data, (h) => ({ ...h, fps: -1 })), /fps/);
+  await expectDecodeError(withHeader(data, (h) => ({ ...h, codec: 3 })), /codec/);
+  const decoded = await decodeMoc(withHeader(data, (h) => h));
+  assert.equal(decoded.frames, (await decodeMoc(data)).frames);
+  await expectDecodeError(data.subarray(0, 10), /not a .moc file/);
+  await expectDecodeError(Uint8Array.from(data, (b, i) => (i === 4 ? 2 : b)), /version 2/);
+});
+
+test('damaged and truncated files end in DecodeError, never another error or a hang', async () => {
+  const { data } = await fixture('dummy-root-bind');
+  const random = seeded(2027);
+  let errors = 0;
+  for (let cut = 0; cut < data.length; cut += 7) if (await expectDecodeError(data.subarray(0, cut))) errors += 1;
+  for (let trial = 0; trial < 300; trial++) {
+    const damaged = Uint8Array.from(data);
+    for (let n = 0; n < 1 + random() * 3; n++) damaged[Math.floor(random() * damaged.length)] ^= 1 << Math.floor(random() * 8);
+    if (await expectDecodeError(damaged)) errors += 1;
+  }
+  assert.ok(errors > 300);
+});
+
+test('damaged kinwave bodies (past the CRC) end in DecodeError or decode to finite values', async () => {
+  const { data } = await fixture('glitch');
+  const file = await openMoc(data);
+  const body = chunkBody(data, file.chunks[0], 0);
+  const random = seeded(99);
+  const { decodeKinwave } = await import('../../js/src/kinwave.js');
+  for (let trial = 0; trial < 400; trial++) {
+    const damaged = Uint8Array.from(body.subarray(0, random() < 0.2 ? Math.floor(random() * body.length) : body.length));
+    for (let n = 0; n < 1 + random() * 4; n++) damaged[Math.floor(random() * damaged.length)] = Math.floor(random() * 256);
+    try {
+      const out = decodeKinwave(damaged, file.skeleton, file.chunks[0].count);
+      assert.ok(out.every((v) => !Number.isNaN(v)));
+    } catch (e) {
+      if (!(e instanceof DecodeError)) throw new Error(`trial ${trial}: ${e.stack}`);
+    }
+  }
+});

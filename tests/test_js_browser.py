@@ -1,6 +1,8 @@
 """A page the relay serves (/watch) joins a room with two live kinwave-live avatars, decodes them
 in the page with mocodec's JavaScript decoder (no Python decoding anywhere in the loop) and draws
-them; every decoded pose it shows is within the codec's bound of the clip that was published."""
+them; every decoded pose it shows is within the codec's bound of the clip that was published. A
+page decodes a kinwave .moc file as the Python decoder does (the browser's own inflate, the
+header's preset dictionary)."""
 
 from __future__ import annotations
 
@@ -12,6 +14,8 @@ import threading
 import numpy as np
 
 from conftest import DATA, free_port
+
+MOC_CASE = DATA.parent / "formats" / "moc" / "dummy-root-bind"
 from mocodec import load
 from mocodec.motion import Motion
 
@@ -59,6 +63,37 @@ def test_a_relay_page_decodes_and_draws_two_live_avatars(browser):
         assert page.evaluate("window.watch.drawnPixels()") > 200
         assert not errors
         sender.join()
+        page.close()
+    finally:
+        relay.terminate()
+        relay.wait(10)
+
+
+def test_a_page_decodes_a_moc_file_as_python_does(browser):
+    import base64
+    import gzip
+    import json
+
+    port = free_port()
+    serve = [sys.executable, "-m", "mocodec", "serve", "--port", str(port), "--secret", "s"]
+    relay = subprocess.Popen(serve, stdout=subprocess.PIPE, text=True)
+    try:
+        assert "relay on" in relay.stdout.readline()
+        page = browser.new_page()
+        page.goto(f"http://127.0.0.1:{port}/")
+        data = base64.b64encode(MOC_CASE.with_suffix(".moc").read_bytes()).decode()
+        decoded = page.evaluate(
+            """async (text) => {
+                const { decodeMoc } = await import('/decoder/index.js');
+                const out = await decodeMoc(Uint8Array.from(atob(text), (c) => c.charCodeAt(0)));
+                return { frames: out.frames, channels: Array.from(out.channels) };
+            }""",
+            data,
+        )
+        python = np.frombuffer(gzip.decompress(MOC_CASE.with_suffix(".f64.gz").read_bytes()), "<f8")
+        meta = json.loads(MOC_CASE.with_suffix(".json").read_text())
+        assert decoded["frames"] == meta["frames"] and python.size == meta["frames"] * meta["channels"]
+        assert np.abs(np.array(decoded["channels"]) - python).max() <= 1e-9
         page.close()
     finally:
         relay.terminate()

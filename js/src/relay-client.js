@@ -1,13 +1,14 @@
 // Joins a relay room as a viewer over WebSocket and keeps each avatar's decoded motion in a jitter
 // buffer: `new RelayClient(url, {room, token})`, `await client.connect()`, then `client.avatars`
 // (stream id -> Avatar) and `avatar.pose(nowS)` (joint positions, metres). Batches are decoded in
-// order of arrival; a stream header is parsed before the packets after it.
+// order of arrival; a stream header is parsed before the packets after it. Streams of a codec
+// with no decoder here are kept in `client.others` (stream id -> their header, bytes received).
 import { DecodeError } from './errors.js';
 import { parseStreamHeader } from './header.js';
 import { JitterBuffer } from './jitter.js';
 import { forwardKinematics } from './kinematics.js';
 import { DATA, HEADER, Reader, splitBatch } from './packets.js';
-import { StreamDecoder } from './stream.js';
+import { StreamDecoder, hasDecoder } from './stream.js';
 
 const now = () => performance.now() / 1000;
 
@@ -16,6 +17,7 @@ export class Avatar {
     this.stream = stream;
     this.info = info;
     this.name = info.name;
+    this.codec = info.codec.codec;
     this.skeleton = info.skeleton;
     this.decoder = new StreamDecoder(info);
     this.buffer = new JitterBuffer(info.fps, info.skeleton.numChannels);
@@ -63,6 +65,7 @@ export class RelayClient {
     this.settings = { budget, camera };
     this.WebSocketClass = WebSocketClass;
     this.avatars = new Map();
+    this.others = new Map();
     this.reader = new Reader();
     this.queue = Promise.resolve();
     this.errors = 0;
@@ -117,16 +120,20 @@ export class RelayClient {
         continue;
       }
       if (p.kind === HEADER) {
-        if (!this.avatars.has(p.stream)) {
+        if (!this.avatars.has(p.stream) && !this.others.has(p.stream)) {
           try {
-            this.avatars.set(p.stream, new Avatar(p.stream, await parseStreamHeader(p.payload)));
+            const info = await parseStreamHeader(p.payload);
+            if (hasDecoder(info.codec.codec)) this.avatars.set(p.stream, new Avatar(p.stream, info));
+            else this.others.set(p.stream, { stream: p.stream, name: info.name, codec: info.codec.codec, bytes: 0 });
           } catch (e) {
             if (!(e instanceof DecodeError)) throw e;
             this.errors += 1;
           }
         }
       } else if (p.kind === DATA) {
-        this.avatars.get(p.stream)?.take(p, arrival);
+        const other = this.others.get(p.stream);
+        if (other) other.bytes += p.payload.length;
+        else this.avatars.get(p.stream)?.take(p, arrival);
       }
     }
   }

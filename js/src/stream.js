@@ -7,6 +7,11 @@ import { DATA, END, KEYFRAME, codecPayload } from './packets.js';
 
 const DECODERS = { 'kinwave-live': KinwaveLiveDecoder };
 
+// Whether streams of codec `id` decode here.
+export function hasDecoder(id) {
+  return Object.hasOwn(DECODERS, id);
+}
+
 export class StreamDecoder {
   // `info`: a parsed stream header (parseStreamHeader).
   constructor(info) {
@@ -19,6 +24,11 @@ export class StreamDecoder {
     this.ended = false;
     this.lost = 0;
     this.lastInts = []; // the integers the last packet held, per layer (what the exactness tests compare)
+  }
+
+  // Whether the decoder follows the stream now (false before a keyframe or a restart after a loss).
+  get inStep() {
+    return this.decoder !== null;
   }
 
   #fresh() {

@@ -64,7 +64,9 @@ def add_commands(sub) -> None:
         "time and shows ratio, bit rate, joint errors, PSNR and VPSNR; codec and knobs "
         "can be changed in the page. Opens .bvh, .amc and .moc (a .moc file's motion is "
         "the reference). With --relay, the page also watches a relay room live (every "
-        "avatar and the bit rate it gets). Codec knobs as --name value.",
+        "avatar and the bit rate it gets): the page joins the relay itself and decodes the streams "
+        "in the browser (kinwave-live; streams of other codecs are listed, not drawn). Codec "
+        "knobs as --name value.",
     )
     p.add_argument("file", metavar="FILE", nargs="?", help=".bvh, .amc or .moc (optional with --relay)")
     add_codec_options(p)
@@ -72,7 +74,11 @@ def add_commands(sub) -> None:
     p.add_argument("--host", default="127.0.0.1")
     p.add_argument("--no-browser", action="store_true", help="do not open the default browser")
     p.add_argument("--asf", help="ASF skeleton of an .amc input (default: <subject>.asf beside it)")
-    p.add_argument("--relay", metavar="ws://HOST:PORT", help="a relay whose rooms the page can watch (?room=R&token=T)")
+    p.add_argument(
+        "--relay",
+        metavar="ws://HOST:PORT",
+        help="a relay whose rooms the page can watch (?room=R&token=T); the browser connects to it",
+    )
     p.add_argument("--room", help="open the page on this room of --relay")
     p.add_argument("--token", help="the room token for --room")
     p.set_defaults(func=cmd_view, takes_knobs=True)

@@ -1,12 +1,14 @@
 """The viewer's web server (``mocodec view``): the page, its three.js, and a small JSON API.
 
     GET  /                 the page
-    GET  /static/...       its script, style and the vendored three.js (no CDN: works offline)
+    GET  /static/...       its script, style, the vendored three.js (no CDN: works offline) and
+                           mocodec's JavaScript decoder (/static/decoder/, a link to js/src)
     GET  /api/state        the clip, its decoded version and the numbers (session.ViewSession.state)
     GET  /api/codecs       every codec and its knobs
     POST /api/encode       {"codec": id, "knobs": {...}, "target": ["ratio", 40] | null}: re-encode,
                            then the new state; a bad codec, knob or target answers 400 with the reason
-    GET  /api/live         WebSocket: a relay room's avatars, decoded here (viewer.live)
+    GET  /api/relay        {"relay": "ws://HOST:PORT" | null}: the relay the page joins itself to
+                           watch a room (?room=R&token=T), decoding every stream in the browser
 
 Encoding runs in a worker thread, so the page stays served while a slow codec works.
 """
@@ -20,11 +22,11 @@ from pathlib import Path
 from aiohttp import web
 
 from mocodec.errors import MocodecError
-from mocodec.viewer.live import live_handler
 from mocodec.viewer.session import ViewSession, codec_menu
 
 STATIC = Path(__file__).with_name("static")
 VENDOR = STATIC / "vendor"
+DECODER = STATIC / "decoder"  # mocodec's JavaScript decoder (a link to js/src in a checkout)
 
 
 def vendored() -> bool:
@@ -45,6 +47,9 @@ def make_app(session: ViewSession | None, relay_url: str | None = None) -> web.A
 
     async def state(request: web.Request) -> web.Response:
         return web.json_response(session.state()) if session else no_clip()
+
+    async def relay(request: web.Request) -> web.Response:
+        return web.json_response({"relay": relay_url})
 
     async def codecs(request: web.Request) -> web.Response:
         return web.json_response(codec_menu())
@@ -74,7 +79,9 @@ def make_app(session: ViewSession | None, relay_url: str | None = None) -> web.A
     app.router.add_get("/api/state", state)
     app.router.add_get("/api/codecs", codecs)
     app.router.add_post("/api/encode", encode)
-    app.router.add_get("/api/live", live_handler(relay_url))
+    app.router.add_get("/api/relay", relay)
+    if DECODER.is_dir():  # before /static, whose files do not follow links out of it
+        app.router.add_static("/static/decoder", DECODER.resolve())
     app.router.add_static("/static", STATIC)
     return app
 

@@ -1,10 +1,12 @@
 // The mocodec viewer: the original and the decoded motion in sync, the decoded joints coloured
 // by their error, the error over time, the numbers, and re-encoding with another codec or knob;
-// or, with ?room=R&token=T, every avatar of a relay room live with the bit rate it gets.
-// Joint positions come from the server in metres (forward kinematics is done there).
+// or, with ?room=R&token=T, every avatar of a relay room live with the bit rate it gets, the page
+// joining the relay itself and decoding in the browser (mocodec's JavaScript decoder).
+// A clip's joint positions come from the server in metres (forward kinematics is done there).
 import * as THREE from "three";
 import { OrbitControls } from "three/addons/controls/OrbitControls.js";
 import { Figure, f32 } from "/static/figure.js";
+import { RelayClient } from "/static/decoder/index.js";
 
 const $ = (id) => document.getElementById(id);
 const state = { ready: false, playing: false, frame: 0, frames: 0, fps: 30, time: 0, numbers: null, codecs: [] };
@@ -234,52 +236,85 @@ $("coding").addEventListener("submit", async (event) => {
   state.ready = true;
 });
 
-// ----- live: a relay room ------------------------------------------------------------------------
+// ----- live: a relay room, decoded in this page -------------------------------------------------
+const RATE_WINDOW_S = 4;                // seconds over which an avatar's bit rate is measured
+const CAMERA_EVERY_S = 1;               // how often the relay hears where this viewer looks from
+const TABLE_EVERY_S = 0.25;             // how often the table of avatars is redrawn
 const avatars = new Map();              // stream id -> Figure
-function startLive(params) {
+async function startLive(params) {
   resize();
   for (const id of ["chart", "transport"]) $(id).hidden = true;
   $("clip-panel").hidden = true;
   $("live-panel").hidden = false;
   $("room-name").textContent = params.get("room");
-  state.live = { streams: 0, frames: {}, bits: {} };
-  const query = new URLSearchParams({ room: params.get("room"), token: params.get("token") || "",
-                                      budget: params.get("budget") || "0", camera: params.get("camera") || "0,1.6,6" });
-  const socket = new WebSocket(`${location.protocol === "https:" ? "wss" : "ws"}://${location.host}/api/live?${query}`);
-  socket.onmessage = (event) => {
-    const data = JSON.parse(event.data);
-    if (data.error) { $("status").textContent = `error: ${data.error}`; state.error = data.error; return; }
-    live(data.streams);
-  };
-  socket.onclose = () => { if (!state.error) $("status").textContent = "disconnected"; };
-  $("status").textContent = "watching";
+  state.live = { streams: 0, frames: {}, bits: {}, others: {} };
+  const { relay } = await (await fetch("/api/relay")).json();
+  if (!relay) throw new Error("this viewer has no relay: start it with --relay ws://HOST:PORT");
+  const client = new RelayClient(relay, {
+    room: params.get("room"), token: params.get("token") || "", budget: Number(params.get("budget") || 0),
+    camera: (params.get("camera") || "0,1.6,6").split(",").map(Number),
+  });
+  await client.connect();
+  state.live.client = client;
+  $("status").textContent = "watching, decoded in this page";
   state.ready = true;
-  const loop = () => { renderer.render(scene, camera); requestAnimationFrame(loop); };
+  const history = [];                   // [seconds, {stream: bytes}]
+  let cameraSent = 0, tableAt = 0;
+  const loop = () => {
+    const now = performance.now() / 1000;
+    const bytes = {};
+    for (const [id, a] of [...client.avatars, ...client.others]) bytes[id] = a.bytes;
+    history.push([now, bytes]);
+    while (history.length > 2 && now - history[0][0] > RATE_WINDOW_S) history.shift();
+    live(client, now, history, now - tableAt > TABLE_EVERY_S);
+    if (now - tableAt > TABLE_EVERY_S) tableAt = now;
+    if (now - cameraSent > CAMERA_EVERY_S) {
+      client.send({ camera: camera.position.toArray().map((v) => Math.round(v * 100) / 100) });
+      cameraSent = now;
+    }
+    renderer.render(scene, camera);
+    requestAnimationFrame(loop);
+  };
   requestAnimationFrame(loop);
 }
 
-function live(streams) {
+function live(client, now, history, table) {
+  const [[t0, first], [t1, last]] = [history[0], history.at(-1)];
+  const rate = (id) => (8 * ((last[id] ?? 0) - (first[id] ?? 0))) / Math.max(t1 - t0, 1e-3);
   for (const [id, figure] of avatars) {
-    if (!(id in streams)) { scene.remove(figure.group); avatars.delete(id); }
+    const a = client.avatars.get(id);
+    if (!a || a.decoder.ended) { scene.remove(figure.group); avatars.delete(id); }
   }
   const rows = [];
-  let cx = 0, cz = 0;
-  for (const [id, s] of Object.entries(streams)) {
-    if (!avatars.has(id)) avatars.set(id, new Figure(scene, s.parents, 0x3b4a6b, 0x2a6fdb));
-    avatars.get(id).pose(Float32Array.from(s.positions), 0);
-    cx += s.positions[0]; cz += s.positions[2];
-    state.live.frames[id] = s.frames; state.live.bits[id] = s.bits_per_second;
-    rows.push(`<tr><td>${s.name}</td><td>${s.codec}</td><td>${(s.bits_per_second / 1000).toFixed(2)}</td>` +
-              `<td>${s.frames}${s.in_sync ? "" : " (resync)"}</td></tr>`);
+  let cx = 0, cz = 0, shown = 0;
+  for (const [id, a] of client.avatars) {
+    if (a.decoder.ended) continue;
+    const pose = a.pose(now);              // joint positions (m), played out smoothly by the jitter buffer
+    if (pose) {
+      if (!avatars.has(id)) avatars.set(id, new Figure(scene, Array.from(a.skeleton.parents), 0x3b4a6b, 0x2a6fdb));
+      avatars.get(id).pose(pose, 0);
+      cx += pose[0]; cz += pose[2]; shown += 1;
+    }
+    state.live.frames[id] = a.frames; state.live.bits[id] = rate(id);
+    rows.push(`<tr><td>${escape(a.name || `stream ${id}`)}</td><td>${escape(a.codec)}</td><td>${(rate(id) / 1000).toFixed(2)}</td>` +
+              `<td>${a.frames}${a.decoder.inStep ? "" : " (resync)"}</td></tr>`);
   }
-  $("avatars").tBodies[0].innerHTML = rows.join("");
-  const n = Object.keys(streams).length;
-  if (n && !state.live.streams) {          // look at the crowd when it first appears
-    controls.target.set(cx / n, 0.9, cz / n);
-    camera.position.set(cx / n + 1.5, 2.5, cz / n + 7);
+  for (const [id, o] of client.others) {
+    state.live.others[id] = o.codec;
+    rows.push(`<tr class="undecodable"><td>${escape(o.name || `stream ${id}`)}</td><td>${escape(o.codec)}</td>` +
+              `<td>${(rate(id) / 1000).toFixed(2)}</td><td>not decodable in the browser</td></tr>`);
+  }
+  if (table) $("avatars").tBodies[0].innerHTML = rows.join("");
+  if (shown && !state.live.streams) {     // look at the crowd when it first appears
+    controls.target.set(cx / shown, 0.9, cz / shown);
+    camera.position.set(cx / shown + 1.5, 2.5, cz / shown + 7);
     controls.update();
   }
-  state.live.streams = n;
+  state.live.streams = shown;
+}
+
+function escape(text) {
+  return String(text).replace(/[&<>"]/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;" })[c]);
 }
 
 // ----- start -------------------------------------------------------------------------------------
@@ -293,5 +328,5 @@ async function start() {
   requestAnimationFrame(tick);
 }
 const params = new URLSearchParams(location.search);
-if (params.get("room")) startLive(params);
-else start().catch((e) => { $("status").textContent = `error: ${e}`; state.error = String(e); });
+const fail = (e) => { $("status").textContent = `error: ${e.message ?? e}`; state.error = String(e.message ?? e); };
+(params.get("room") ? startLive(params) : start()).catch(fail);

@@ -14,10 +14,10 @@ import threading
 import numpy as np
 
 from conftest import DATA, free_port
-
-MOC_CASE = DATA.parent / "formats" / "moc" / "dummy-root-bind"
 from mocodec import load
 from mocodec.motion import Motion
+
+MOC_CASE = DATA.parent / "formats" / "moc" / "dummy-root-bind"
 
 
 def test_a_relay_page_decodes_and_draws_two_live_avatars(browser):

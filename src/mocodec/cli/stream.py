@@ -19,7 +19,7 @@ from mocodec.formats import save  # noqa: E402
 from mocodec.stream import client, tokens  # noqa: E402
 from mocodec.stream.relay import Limits, run  # noqa: E402
 
-PUBLISH_CODEC = "spiht"
+PUBLISH_CODEC = "kinwave-live"  # guaranteed error, 50 ms of coding delay, decodes in the browser
 
 
 SECRET_ENV = "MOCODEC_RELAY_SECRET"

@@ -17,7 +17,7 @@ from conftest import DATA, free_port
 from mocodec import load
 from mocodec.motion import Motion
 
-MOC_CASE = DATA.parent / "formats" / "moc" / "dummy-root-bind"
+MOC_CASE = DATA / "moc" / "dummy-root-bind"
 
 
 def test_a_relay_page_decodes_and_draws_two_live_avatars(browser):

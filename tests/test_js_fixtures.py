@@ -1,4 +1,4 @@
-"""The fixtures the JavaScript tests decode (tests/formats/live/, tests/formats/moc/) and the
+"""The fixtures the JavaScript tests decode (tests/data/live/, tests/data/moc/) and the
 JavaScript copy of the .moc header dictionary are what the encoders and the Python decoders make
 now: a change to the live or kinwave format shows here first (then run tests/js/make_fixtures.py,
 and the Node tests check the JavaScript decoders against it)."""
@@ -21,8 +21,8 @@ from make_fixtures import (  # noqa: E402
     steps_table,
 )
 
-LIVE = DATA.parent / "formats" / "live"
-MOC = DATA.parent / "formats" / "moc"
+LIVE = DATA / "live"
+MOC = DATA / "moc"
 
 
 @pytest.mark.parametrize("case", LIVE_CASES, ids=[c[0] for c in LIVE_CASES])

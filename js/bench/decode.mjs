@@ -1,4 +1,4 @@
-// Decode speed in Node on one core: the live kinwave-live streams of tests/formats/live/ (a 38-joint ASF skeleton
+// Decode speed in Node on one core: the live kinwave-live streams of tests/data/live/ (a 38-joint ASF skeleton
 // at 30 fps, 57-joint BVH ones at 120 fps), decoded and posed (forward
 // kinematics) over and over; prints poses per second and what that means in avatars at 30
 // packets/s.      node js/bench/decode.mjs [seconds]
@@ -6,7 +6,7 @@ import { readFileSync } from 'node:fs';
 import { Reader, StreamDecoder, forwardKinematics, parseStreamHeader, splitBatch } from '../src/index.js';
 
 const seconds = Number(process.argv[2] ?? 3);
-const LIVE = new URL('../../tests/formats/live/', import.meta.url);
+const LIVE = new URL('../../tests/data/live/', import.meta.url);
 
 for (const name of ['asf-30fps-shell', 'walk', 'walk-layers']) {
   const reader = new Reader();

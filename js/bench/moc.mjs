@@ -1,5 +1,5 @@
 // .moc kinwave decode speed in Node on one core: each file given (default: the .moc files of
-// tests/formats/moc/) decoded whole over and over for a while; prints frames per second, with and
+// tests/data/moc/) decoded whole over and over for a while; prints frames per second, with and
 // without forward kinematics, and where FILE.f64 (the Python decoder's channels, float64) sits
 // beside it, the largest difference from them.      node js/bench/moc.mjs [--seconds S] [file.moc ...]
 import { existsSync, readFileSync, readdirSync } from 'node:fs';
@@ -10,7 +10,7 @@ import { decodeMoc, forwardKinematics } from '../src/index.js';
 const args = process.argv.slice(2);
 const at = args.indexOf('--seconds');
 const seconds = at >= 0 ? Number(args.splice(at, 2)[1]) : 2;
-const fixtures = fileURLToPath(new URL('../../tests/formats/moc/', import.meta.url));
+const fixtures = fileURLToPath(new URL('../../tests/data/moc/', import.meta.url));
 const files = args.length ? args : readdirSync(fixtures).filter((f) => f.endsWith('.moc')).map((f) => fixtures + f);
 
 async function rate(data, pose) {

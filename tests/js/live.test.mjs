@@ -1,4 +1,4 @@
-// The JavaScript live decoder against the Python decoder, on the streams of tests/formats/live/
+// The JavaScript live decoder against the Python decoder, on the streams of tests/data/live/
 // (tests/js/make_fixtures.py): every integer read equal, every decoded channel within 1e-9 degrees
 // (or skeleton units), joint positions within 1e-8; then damaged streams end in DecodeError only.
 import { test } from 'node:test';
@@ -10,7 +10,7 @@ import {
 } from '../../js/src/index.js';
 import { seeded } from './seeded.mjs';
 
-const LIVE = new URL('../formats/live/', import.meta.url);
+const LIVE = new URL('../data/live/', import.meta.url);
 const CASES = ['walk', 'walk-layers', 'asf-30fps-shell', 'run-refresh'];
 
 async function fixture(name) {

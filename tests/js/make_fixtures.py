@@ -1,7 +1,7 @@
 """Write the fixtures the JavaScript tests load, and what they expect of them: the glTF file
-tests/formats/walk.glb (and walk.glb.json), live streams in tests/formats/live/ (each case's
+tests/formats/walk.glb (and walk.glb.json), live streams in tests/data/live/ (each case's
 stream as one batch message, the Python decoder's channels, the integers it read per packet and
-layer, and joint positions), .moc files in tests/formats/moc/ (the same per chunk) and the
+layer, and joint positions), .moc files in tests/data/moc/ (the same per chunk) and the
 JavaScript copy of the .moc header dictionary (js/src/header-dict.js). Run from the repository
 root after a change to the glTF writer, the live format or kinwave's; tests/test_gltf_fbx.py and
 tests/test_js_fixtures.py check they are what the code makes now."""
@@ -238,14 +238,11 @@ def main() -> int:
     (FORMATS / "walk.glb").write_bytes(glb)
     (FORMATS / "walk.glb.json").write_text(expected)
     print(f"wrote {FORMATS / 'walk.glb'} ({len(glb)} bytes) and walk.glb.json")
-    (FORMATS / "live").mkdir(exist_ok=True)
-    for name, data in live_fixtures().items():
-        (FORMATS / "live" / name).write_bytes(data)
-        print(f"wrote {FORMATS / 'live' / name} ({len(data)} bytes)")
-    (FORMATS / "moc").mkdir(exist_ok=True)
-    for name, data in {**moc_fixtures(), "steps.json": steps_table()}.items():
-        (FORMATS / "moc" / name).write_bytes(data)
-        print(f"wrote {FORMATS / 'moc' / name} ({len(data)} bytes)")
+    for folder, files in (("live", live_fixtures()), ("moc", {**moc_fixtures(), "steps.json": steps_table()})):
+        (DATA / folder).mkdir(exist_ok=True)
+        for name, data in files.items():
+            (DATA / folder / name).write_bytes(data)
+            print(f"wrote {DATA / folder / name} ({len(data)} bytes)")
     (JS / "header-dict.js").write_text(header_dictionary_module())
     print(f"wrote {JS / 'header-dict.js'}")
     return 0

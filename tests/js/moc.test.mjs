@@ -1,4 +1,4 @@
-// The JavaScript .moc decoder against the Python decoder, on the files of tests/formats/moc/
+// The JavaScript .moc decoder against the Python decoder, on the files of tests/data/moc/
 // (tests/js/make_fixtures.py): every integer the coefficient decoder reads equal, every decoded
 // channel within 1e-9 (degrees or skeleton units), joint positions within 1e-8; the step tables
 // equal Python's; frame ranges; then damaged and hostile files end in DecodeError only.
@@ -14,7 +14,7 @@ import { CODE_STEP, twoToEighths } from '../../js/src/steps.js';
 import { crc32 } from '../../js/src/bytes.js';
 import { seeded } from './seeded.mjs';
 
-const MOC = new URL('../formats/moc/', import.meta.url);
+const MOC = new URL('../data/moc/', import.meta.url);
 const CASES = ['bvh-joint', 'asf-30fps-shell', 'dummy-root', 'dummy-root-bind', 'zxz-d4', 'haar-bitrate', 'glitch'];
 
 async function fixture(name) {

@@ -118,11 +118,12 @@ export async function decodeMoc(data, { frames = null, maxValues = MAX_DECODED_V
   if (values > maxValues) throw new DecodeError(`decoding frames ${first}:${stop} makes ${values} values, over the limit of ${maxValues}`);
   const channels = new Float64Array((stop - first) * C);
   for (const [e, k] of wanted) {
+    const body = chunkBody(data, e, k);
     let decoded;
     try {
-      decoded = decodeKinwave(chunkBody(data, e, k), file.skeleton, e.count);
+      decoded = decodeKinwave(body, file.skeleton, e.count);
     } catch (err) {
-      if (err instanceof DecodeError && !err.message.startsWith('chunk')) throw new DecodeError(`chunk ${k} at byte ${e.offset}: ${err.message}`);
+      if (err instanceof DecodeError) throw new DecodeError(`chunk ${k} at byte ${e.offset}: ${err.message}`);
       throw err;
     }
     const from = Math.max(first - e.first, 0);

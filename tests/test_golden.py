@@ -1,5 +1,8 @@
 """Every codec's format pinned by its golden fixture (tests/golden.py): the stored bytes decode
-to the stored output bit for bit, and encoding the stored input again gives the same bytes."""
+to the stored output (to the last bits that the platform's sin, cos and arctan2 leave open:
+numpy picks their SIMD loops by the CPU's instruction set, and one AVX-512 machine decoded the
+primitives fixture 1 ulp away in 90 of 7,440 values), and encoding the stored input again gives
+the same bytes."""
 
 from __future__ import annotations
 
@@ -29,7 +32,7 @@ def test_every_codec_has_a_fixture():
 
 
 @pytest.mark.parametrize("codec_id", sorted(golden.CONFIGS))
-def test_fixture_decodes_bit_exact(codec_id, clip):
+def test_fixture_decodes_to_its_output(codec_id, clip):
     _skip_without_library(codec_id)
     folder = golden.FIXTURES / codec_id
     assert json.loads((folder / "config.json").read_text())["knobs"] == golden.CONFIGS[codec_id]
@@ -37,7 +40,8 @@ def test_fixture_decodes_bit_exact(codec_id, clip):
     stored = (folder / "encoded.bin").read_bytes()
     decoded = codec.decode(stored, clip.skeleton, clip.num_frames, clip.fps).channels
     expected = np.load(folder / "decoded.npy")
-    assert decoded.dtype == expected.dtype and np.array_equal(decoded, expected)
+    assert decoded.dtype == expected.dtype
+    np.testing.assert_allclose(decoded, expected, rtol=1e-14, atol=1e-12)
 
 
 @pytest.mark.parametrize("codec_id", sorted(golden.CONFIGS))

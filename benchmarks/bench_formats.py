@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from common import SHARED
+from common import SHARED, shared_sources
 from mocodec import load, moc, save
 from mocodec.codecs import get_codec
 
@@ -78,13 +78,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--clips", type=int, default=8, help="clips per source (0 = all)")
     args = parser.parse_args()
-    if SHARED is None:
-        raise SystemExit("../shared/data is absent")
-    sources = {
-        "CMU BVH": sorted((SHARED / "cmu" / "bvh").glob("*.bvh")),
-        "CMU ASF/AMC": sorted((SHARED / "cmu" / "asf_amc").glob("*.amc")),
-        "Bandai Namco": sorted((SHARED / "bandai").rglob("*.bvh")),
-    }
+    sources = shared_sources(args.clips)
     print(
         "| source | clips | .glb write (frames/s) | .glb read (frames/s) | .glb / source file | 1 cm .moc / .glb "
         "| worst BVH -> glTF -> BVH error (cm) |"
@@ -92,7 +86,6 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as tmp:
         for name, paths in sources.items():
-            paths = paths[: args.clips] if args.clips else paths
             rows = [_clip_figures(p, Path(tmp)) for p in paths]
             med = {key: float(np.median([r[key] for r in rows])) for key in rows[0]}
             worst = max(r["error_cm"] for r in rows)
@@ -104,7 +97,6 @@ def main() -> None:
         print("| source | clips | raw float32 | zarr chunks (kinwave, 1 cm) | ratio | worst joint error (cm) |")
         print("|---|---|---|---|---|---|")
         for name, paths in sources.items():
-            paths = paths[: args.clips] if args.clips else paths
             folder = Path(tmp) / "".join(c if c.isalnum() else "_" for c in name)
             folder.mkdir()
             raw, stored, worst = _zarr_figures(paths, folder)

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from common import ROOT, SHARED
+from common import ROOT, shared_sources
 from mocodec import load, moc
 from mocodec.codecs import get_codec
 
@@ -48,20 +48,13 @@ def main() -> None:
     parser.add_argument("--clips", type=int, default=8, help="clips per source (0 = all)")
     parser.add_argument("--seconds", type=float, default=0.5, help="seconds of decoding per file and mode")
     args = parser.parse_args()
-    if SHARED is None:
-        raise SystemExit("../shared/data is absent")
-    sources = {
-        "CMU BVH": sorted((SHARED / "cmu" / "bvh").glob("*.bvh")),
-        "CMU ASF/AMC": sorted((SHARED / "cmu" / "asf_amc").glob("*.amc")),
-        "Bandai Namco": sorted((SHARED / "bandai").rglob("*.bvh")),
-    }
+    sources = shared_sources(args.clips)
     print(
         "| source | clips | median frames | worst JS - Python channel difference | JS decode (frames/s) "
         "| JS decode + FK | Python decode |"
     )
     print("|---|---|---|---|---|---|---|")
     for name, paths in sources.items():
-        paths = paths[: args.clips] if args.clips else paths
         with tempfile.TemporaryDirectory() as tmp:
             python = _prepare(paths, Path(tmp))
             files = sorted(str(p) for p in Path(tmp).glob("*.moc"))

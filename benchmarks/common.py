@@ -15,6 +15,19 @@ DATA = ROOT / "tests" / "data"
 SHARED = next((p for p in (ROOT.parent / "shared" / "data", Path("/work/shared/data")) if (p / "cmu").is_dir()), None)
 
 
+def shared_sources(clips: int = 0) -> dict[str, list[Path]]:
+    """The shared clips of each source (CMU BVH, CMU ASF/AMC, Bandai Namco), sorted, the first
+    ``clips`` of each (0: all); exits with a message where ../shared/data is absent."""
+    if SHARED is None:
+        raise SystemExit("../shared/data is absent")
+    sources = {
+        "CMU BVH": sorted((SHARED / "cmu" / "bvh").glob("*.bvh")),
+        "CMU ASF/AMC": sorted((SHARED / "cmu" / "asf_amc").glob("*.amc")),
+        "Bandai Namco": sorted((SHARED / "bandai").rglob("*.bvh")),
+    }
+    return {name: paths[:clips] if clips else paths for name, paths in sources.items()}
+
+
 def best_of(fn, repeats: int = 5) -> float:
     """The fastest of ``repeats`` runs of ``fn``, in seconds (the least disturbed by others)."""
     times = []

@@ -7,8 +7,9 @@
 import { decodeCoefficients } from './coefcoder.js';
 import { DecodeError } from './errors.js';
 import { forwardKinematics } from './kinematics.js';
-import { conjugate, fromForm, quatExp, quatProduct, validForm, WORLD } from './rotvec.js';
+import { conjugate, fromForm, quatExp, validForm, WORLD } from './rotvec.js';
 import { smoothSeams } from './seams.js';
+import { quatMultiply } from './skeleton.js';
 import { CODE_STEP, twoToEighths } from './steps.js';
 import { WAVELET_IDS, inverseWavelet } from './wavelets.js';
 
@@ -307,7 +308,7 @@ function toFileLayout(skeleton, plan, rows, constant, forms, means) {
       pre = parents(g.joint);
       if (skeleton.hasAxis[g.joint]) {
         const axis = Array.from(skeleton.axisQuat.subarray(4 * g.joint, 4 * g.joint + 4));
-        pre = quatProduct(conjugate(axis), quatProduct(pre, axis));
+        pre = quatMultiply(conjugate(axis), quatMultiply(pre, axis));
       }
     }
     fromForm(g.channels.map((c) => rows[c]), rows[0].length, g.order, form, mean, pre);

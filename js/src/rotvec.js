@@ -41,15 +41,6 @@ function productInto(a, b, out) {
   out[2] = y;
 }
 
-export function quatProduct(a, b) {
-  return [
-    a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
-    a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
-    a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
-    a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0],
-  ];
-}
-
 export function conjugate(q) {
   return [q[0], -q[1], -q[2], -q[3]];
 }

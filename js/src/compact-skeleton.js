@@ -5,8 +5,8 @@
 import { DecodeError } from './errors.js';
 import { Skeleton } from './skeleton.js';
 
-export const CHANNEL_NAMES = ['Xposition', 'Yposition', 'Zposition', 'Xrotation', 'Yrotation', 'Zrotation'];
-export const BODY_PARTS = ['torso', 'head', 'left_arm', 'left_hand', 'right_arm', 'right_hand', 'left_leg', 'right_leg'];
+const CHANNEL_NAMES = ['Xposition', 'Yposition', 'Zposition', 'Xrotation', 'Yrotation', 'Zrotation'];
+const BODY_PARTS = ['torso', 'head', 'left_arm', 'left_hand', 'right_arm', 'right_hand', 'left_leg', 'right_leg'];
 const VERSION = 1;
 const ZERO = 0;
 const POS_INF = 1;

@@ -7,7 +7,7 @@ import { DecodeError } from './errors.js';
 
 const WINDOW = 32768;
 
-export function adler32(data) {
+function adler32(data) {
   let a = 1;
   let b = 0;
   for (let i = 0; i < data.length;) {

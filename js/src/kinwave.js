@@ -39,10 +39,8 @@ function planOf(skeleton) {
   const rotationJoints = [];
   const translation = [];
   const threeAngle = [];
-  const channelJoint = new Int32Array(skeleton.numChannels);
   const base = new Float64Array(skeleton.numChannels);
   for (let j = 0; j < J; j++) {
-    for (let c = skeleton.channelOffsets[j]; c < skeleton.channelOffsets[j + 1]; c++) channelJoint[c] = j;
     for (let a = 0; a < 3; a++) {
       const c = skeleton.posIndex[3 * j + a];
       if (c >= 0) {
@@ -54,18 +52,18 @@ function planOf(skeleton) {
     if (rot.length) rotationJoints.push({ joint: j, channels: rot });
     if (rot.length === 3) threeAngle.push({ joint: j, channels: rot, order: skeleton.joints[j].rotationOrder });
   }
-  plan = { rotationJoints, translation, threeAngle, channelJoint, base };
+  plan = { rotationJoints, translation, threeAngle, base };
   plans.set(skeleton, plan);
   return plan;
 }
 
 // trendwave.layout: segments (a keyframe or two, then windows), knots, blocks.
-export function layout(frames, window, levels, keyframes) {
+function layout(frames, window, levels, keyframes) {
   const first = frames > 1 ? Math.min(keyframes, frames - 1) : 0;
   const starts = [];
   if (frames > 0) {
     for (let s = 0; s < first; s++) starts.push(s);
-    for (let s = first; s < Math.max(frames, 1); s += window) starts.push(s);
+    for (let s = first; s < frames; s += window) starts.push(s);
   }
   const lengths = starts.map((a, s) => (s + 1 < starts.length ? starts[s + 1] : frames) - a);
   const segLevels = lengths.map((n) => (n < 2 ? 0 : Math.min(levels, 31 - Math.clz32(n))));
@@ -211,8 +209,8 @@ export function decodeKinwave(body, skeleton, frames) {
   const read = readKinwave(body, skeleton, frames);
   const out = new Float64Array(frames * C);
   if (!frames) return out;
-  const rows = reconstruct(skeleton, plan, read);
   const steps = channelSteps(skeleton, plan, read.codes);
+  const rows = reconstruct(skeleton, plan, read, steps);
   const n = read.isolated.length;
   for (let k = 0; k < n; k++) {
     for (let c = 0; c < C; c++) rows[c][read.isolated[k]] += read.patches[c * n + k] * (steps[c] * KEYFRAME_QUANTUM);
@@ -226,13 +224,12 @@ export function decodeKinwave(body, skeleton, frames) {
 }
 
 // payload.reconstruct: per channel its trend plus its blocks' residual, then the seams smoothed.
-function reconstruct(skeleton, plan, { coded, codes, offsets, lay, wavelet }) {
+function reconstruct(skeleton, plan, { coded, offsets, lay, wavelet }, steps) {
   const C = skeleton.numChannels;
   const { frames, starts, lengths, padded, segLevels, left, frac, quantum } = lay;
   const S = starts.length;
   const K = lay.knotFrames.length;
   const N = padded.reduce((a, b) => a + b, 0);
-  const steps = channelSteps(skeleton, plan, codes);
   const factor = Float64Array.from(offsets, (o) => twoToEighths(o));
   const knotFactor = Float64Array.from({ length: K }, (_, k) => factor[Math.min(k, Math.max(S - 1, 0))]);
   const seamFactor = Float64Array.from({ length: Math.max(S - 1, 0) }, (_, s) => Math.min(factor[s], factor[s + 1]));

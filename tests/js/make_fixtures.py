@@ -148,8 +148,9 @@ def _reexpressed(motion, how):
 
 
 def moc_fixture(name, clip, frames, fps, how, knobs, chunk_frames) -> dict[str, bytes]:
-    """The files of one .moc case: ``<name>.moc``, ``<name>.json`` (frames, channels, per chunk
-    its body's flags and integers' count, joint positions at a few frames), ``<name>.f64.gz`` (the
+    """The files of one .moc case: ``<name>.moc``, ``<name>.json`` (frames, channels, the error
+    bound, per chunk its body's flags and integers' count, joint positions decoded and original
+    at a few frames), ``<name>.f64.gz`` (the
     decoded channels, float64) and ``<name>.ints.gz`` (per chunk the integers the coefficient
     decoder read: side integers as sent, constant flags, knots, coefficients; int32)."""
     import gzip
@@ -181,14 +182,20 @@ def moc_fixture(name, clip, frames, fps, how, knobs, chunk_frames) -> dict[str, 
     info = moc.container.open_container(__import__("io").BytesIO(data), len(data), name)
     ints = np.concatenate(read)
     assert np.abs(ints).max(initial=0) < 2**31
-    positions = decoded.positions()
+    positions, original = decoded.positions(), motion.positions()
+    frames_shown = [f % decoded.num_frames for f in POSE_FRAMES]
     meta = {
         "clip": clip,
         "frames": decoded.num_frames,
         "channels": decoded.skeleton.num_channels,
         "knobs": knobs,
+        # a max joint error bound, which the JavaScript test checks (shell errors it does not compute)
+        "bound_cm": None
+        if knobs.get("bits_per_second") or knobs.get("error_measure", "joint") != "joint"
+        else knobs.get("max_error_cm", 0.5),
         "chunks": [{"flags": int(info.read_chunk(k)[1]), "ints": int(x.size)} for k, x in enumerate(read)],
-        "positions": {str(f % decoded.num_frames): positions[f].round(9).tolist() for f in POSE_FRAMES},
+        "positions": {str(f): positions[f].round(9).tolist() for f in frames_shown},
+        "original_positions": {str(f): original[f].round(9).tolist() for f in frames_shown},
     }
     return {
         f"{name}.moc": data,

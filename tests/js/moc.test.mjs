@@ -1,6 +1,7 @@
 // The JavaScript .moc decoder against the Python decoder, on the files of tests/data/moc/
 // (tests/js/make_fixtures.py): every integer the coefficient decoder reads equal, every decoded
-// channel within 1e-9 (degrees or skeleton units), joint positions within 1e-8; the step tables
+// channel within 1e-9 (degrees or skeleton units), joint positions within 1e-8 and, under a max joint
+// error bound, within the bound of the original clip; the step tables
 // equal Python's; frame ranges; then damaged and hostile files end in DecodeError only.
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
@@ -65,11 +66,18 @@ for (const name of CASES) {
     assert.ok(worst <= 1e-9, `worst channel differs by ${worst}`);
     const positions = forwardKinematics(decoded.skeleton, decoded.channels);
     const J = decoded.skeleton.joints.length;
+    const cm = 100 / decoded.skeleton.unitsPerMetre;
     for (const [frame, want] of Object.entries(meta.positions)) {
       want.forEach((p, j) => p.forEach((v, a) => {
         const got = positions[(Number(frame) * J + j) * 3 + a];
         assert.ok(Math.abs(got - v) <= 1e-8, `frame ${frame}, joint ${j}: ${got} vs ${v}`);
       }));
+      if (meta.bound_cm === null) continue;
+      meta.original_positions[frame].forEach((p, j) => {  // the file's error bound holds on this decoder's output
+        const at = (Number(frame) * J + j) * 3;
+        const error = Math.hypot(...p.map((v, a) => positions[at + a] - v)) * cm;
+        assert.ok(error <= meta.bound_cm + 1e-9, `frame ${frame}, joint ${j}: ${error} cm over ${meta.bound_cm}`);
+      });
     }
   });
 }

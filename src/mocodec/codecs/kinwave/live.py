@@ -40,6 +40,7 @@ cut after a lower section is told apart.
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
 import numba
 import numpy as np
@@ -251,6 +252,27 @@ def _decode_ints(st, data, frames, first, count, state, last_nonzero, ints, orde
     return st[2]
 
 
+@lru_cache(maxsize=64)
+def _joint_tables(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """What every layer of a stream on ``skeleton`` shares (read-only): each joint with channels'
+    first channel and count, each channel's joint among them, and the guess before the first
+    frame: a translation channel of a joint below the root at its offset (a MotionBuilder export
+    repeats every offset), everything else zero."""
+    joints = [j for j in range(len(skeleton)) if skeleton.joints[j].channels]
+    first = np.array([skeleton.channel_offsets[j] for j in joints], dtype=np.int64)
+    count = np.array([len(skeleton.joints[j].channels) for j in joints], dtype=np.int64)
+    guess = np.zeros(skeleton.num_channels)
+    plan = channel_plan(skeleton)
+    for j in range(1, len(skeleton)):
+        for axis, c in enumerate(plan.pos_index[j]):
+            if c >= 0:
+                guess[c] = plan.offsets[j, axis]
+    tables = (first, count, np.repeat(np.arange(len(joints)), count), guess)
+    for table in tables:
+        table.setflags(write=False)
+    return tables
+
+
 class _Layer:
     """What both ends keep for one layer of a stream: the joints with channels (their first
     channel and count) and the layer's base step codes for its bound, fixed; the arithmetic
@@ -259,19 +281,8 @@ class _Layer:
 
     def __init__(self, skeleton: Skeleton, bound_cm: float, measure: str):
         self.skeleton = skeleton
-        joints = [j for j in range(len(skeleton)) if skeleton.joints[j].channels]
-        self.first = np.array([skeleton.channel_offsets[j] for j in joints], dtype=np.int64)
-        self.count = np.array([len(skeleton.joints[j].channels) for j in joints], dtype=np.int64)
-        self.channel_joint = np.repeat(np.arange(len(joints)), self.count)
+        self.first, self.count, self.channel_joint, self.guess = _joint_tables(skeleton)
         self.base_codes = base_codes(skeleton, bound_cm, measure)
-        # before the first frame, one guess: a translation channel of a joint below the root at
-        # its offset (a MotionBuilder export repeats every offset)
-        self.guess = np.zeros(skeleton.num_channels)
-        plan = channel_plan(skeleton)
-        for j in range(1, len(skeleton)):
-            for axis, c in enumerate(plan.pos_index[j]):
-                if c >= 0:
-                    self.guess[c] = plan.offsets[j, axis]
         self.restart()
 
     def restart(self) -> None:

@@ -359,3 +359,23 @@ def test_a_rest_pose_held_still_codes_to_a_few_bytes():
     decoded = codec.decode(body, still.skeleton, still.num_frames, still.fps)
     assert len(body) < 64
     assert np.abs(decoded.positions() - still.positions()).max() <= 1.0
+
+
+def test_a_pass_far_under_the_bound_gives_single_codes_their_slack(walk_bvh):
+    """The last stage of a max-bound search (every code one step coarser together would break
+    the bound): from a pass at 40% of it, codes one at a time take their slack (those whose
+    points stayed far from the worst one); the result stays within the bound and is smaller."""
+    from mocodec.codecs.kinwave.search import FILL_BELOW
+
+    bound = 0.5
+    enc = BoundSearch(get_codec("kinwave", max_error_cm=bound), walk_bvh)
+    scale = 1.0
+    start = enc.run_pass(enc.codes(scale))
+    while enc.error(start.decoded) > 0.4 * bound:
+        scale *= 0.8
+        start = enc.run_pass(enc.codes(scale))
+    filled = enc._fill(start, bound)
+    assert enc.error(filled.decoded) <= bound
+    assert (filled.steps >= start.steps).all() and (filled.steps > start.steps).any()
+    assert len(enc.body(filled)) < len(enc.body(start))
+    assert enc._fill(filled, bound) is filled or enc.error(filled.decoded) < FILL_BELOW * bound

@@ -95,6 +95,14 @@ def rotation_joints(skeleton: Skeleton) -> list[int]:
     return [g.joint for g in step_groups(skeleton) if g.rotation]
 
 
+def code_channels(skeleton: Skeleton) -> list[np.ndarray]:
+    """Per step code (one per rotation joint, then the translations'), the channels it steps."""
+    groups = step_groups(skeleton)
+    rows = [g.channels for g in groups if g.rotation]
+    translations = [g.channels for g in groups if not g.rotation]
+    return rows + [np.concatenate(translations)] if translations else rows
+
+
 def has_translation(skeleton: Skeleton) -> bool:
     return any(not g.rotation for g in step_groups(skeleton))
 

@@ -15,6 +15,7 @@ from mocodec.codecs.kinwave.encoder import (
     influence,
 )
 from mocodec.codecs.kinwave.payload import (
+    code_channels,
     decode_body,
 )
 from mocodec.errors import CodecError
@@ -30,6 +31,8 @@ MARGIN = 0.95  # a segment whose error was this close to the bound goes a code f
 SEGMENT_ACCEPT = 0.8  # a segment's worst error is near enough to the bound at this share of it
 ADAPTIVE_SEGMENTS = 4  # time-adaptive steps from this many segments on (on fewer, one scale is smaller)
 RATE_TOLERANCE = 0.02
+FILL_BELOW = 0.85  # a final max-bound pass under this share of the bound gives single codes their slack
+FILL_TRIES = 8  # codes tried one at a time
 
 
 class BoundSearch(Encoder):
@@ -137,7 +140,38 @@ class BoundSearch(Encoder):
                 coarser = np.floor(coarser / 2.0)
             else:
                 break
-        return self._scale_up(best, errors.max(), bound)
+        return self._fill(self._scale_up(best, errors.max(), bound), bound)
+
+    def _fill(self, best: Pass, bound: float) -> Pass:
+        """A final pass still under FILL_BELOW x bound (every code one step coarser together
+        breaks the bound: the worst error jumps with single codes at a few frames) gives the
+        codes their slack one at a time (FILL_TRIES codes at most): each code coarser by the
+        1/8 octaves between the bound and the worst error among the points it moves, halved
+        while that breaks the bound, kept if the payload shrinks. Codes go in order of the
+        slack times the nonzero coefficients of their channels (a joint that barely moves saves
+        nothing)."""
+        errors = self.joint_errors(best.decoded).max(axis=0)
+        if errors.max() >= FILL_BELOW * bound:
+            return best
+        coded = np.count_nonzero(best.coeffs, axis=1)  # per channel: what a coarser step saves
+        gain = self._slack_codes(errors, bound) * np.array([coded[rows].sum() for rows in code_channels(self.skeleton)])
+        size = len(self.body(best))
+        for code in np.argsort(-gain, kind="stable")[: min(FILL_TRIES, int(np.count_nonzero(gain > 0)))]:
+            amount = int(self._slack_codes(errors, bound)[code])
+            while amount > 0:
+                steps = best.steps.astype(np.int64)
+                steps[code] = min(steps[code] + amount, 255)
+                ps = self.run_pass(steps.astype(np.uint8), best.offsets)
+                trial = self.joint_errors(ps.decoded).max(axis=0)
+                if trial.max() <= bound:
+                    smaller = len(self.body(ps))
+                    if smaller < size:  # (a coarser step rarely costs bytes: contexts)
+                        best, errors, size = ps, trial, smaller
+                    break
+                amount //= 2
+            if errors.max() >= FILL_BELOW * bound:
+                break
+        return best
 
     def _scale_up(self, best: Pass, worst: float, bound: float) -> Pass:
         """A final pass still under ACCEPT x bound (the time-adaptive search can stop far below

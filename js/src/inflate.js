@@ -1,4 +1,4 @@
-// zlib streams inflated through the platform (DecompressionStream in browsers and Node), capped
+// zlib streams inflated through the platform (DecompressionStream in browsers and Node >= 20.12), capped
 // before the output is kept, with the preset dictionary that .moc headers are deflated with
 // (formats/container.py): the platform cannot be given a dictionary, so the raw deflate data is
 // read after a stored block holding the dictionary, whose bytes are then dropped. The zlib
@@ -63,17 +63,11 @@ async function readCapped(stream, limit, what) {
 }
 
 async function inflateRaw(raw, dictionary, limit, what) {
-  if (typeof DecompressionStream === 'undefined') {
-    const zlib = await import('node:zlib');
-    try {
-      return new Uint8Array(zlib.inflateRawSync(raw, { maxOutputLength: limit, ...(dictionary ? { dictionary } : {}) }));
-    } catch (e) {
-      throw new DecodeError(`${what}: does not inflate (${e.code ?? e.message})`);
-    }
-  }
-  const prefix = dictionary ? storedBlock(dictionary) : new Uint8Array(0);
-  const stream = new Blob([prefix, raw]).stream().pipeThrough(new DecompressionStream('deflate-raw'));
-  return (await readCapped(stream, limit + (dictionary ? dictionary.length : 0), what)).subarray(dictionary ? dictionary.length : 0);
+  if (typeof DecompressionStream === 'undefined') throw new DecodeError(`${what}: this platform has no DecompressionStream`);
+  const history = dictionary ? dictionary.length : 0; // output bytes that are the dictionary's
+  const parts = dictionary ? [storedBlock(dictionary), raw] : [raw];
+  const stream = new Blob(parts).stream().pipeThrough(new DecompressionStream('deflate-raw'));
+  return (await readCapped(stream, limit + history, what)).subarray(history);
 }
 
 // The bytes a zlib stream holds, at most `limit` of them; `dictionary` for one deflated with it.

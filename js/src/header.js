@@ -2,10 +2,9 @@
 // codec config, name and extra, inflated to at most MAX_HEADER_TEXT bytes and checked.
 import { DecodeError } from './errors.js';
 import { inflate } from './inflate.js';
+import { MAX_FPS, MAX_HEADER_TEXT } from './limits.js';
 import { Skeleton } from './skeleton.js';
 
-export const MAX_HEADER_TEXT = 8 << 20;
-export const MAX_FPS = 10000;
 
 export async function parseStreamHeader(payload) {
   const text = new TextDecoder().decode(await inflate(payload, { limit: MAX_HEADER_TEXT, what: 'stream header' }));

@@ -7,6 +7,7 @@
 import { BinaryDecoder, MAX_CLASS, fixedState, newState } from './binarycoder.js';
 import { readVarint } from './bytes.js';
 import { DecodeError, OutOfStepError } from './errors.js';
+import { MAX_DECODED_VALUES } from './limits.js';
 import { CODE_STEP } from './steps.js';
 
 const ULEN = 6;
@@ -16,7 +17,6 @@ const ROUNDING = 0.25;
 const MAX_OFFSET = 127;
 const MAX_LAYERS = 4;
 const RESTART_ZERO = 65536 - 65536 / 16; // the restart flag's fixed probability of a 0
-const MAX_DECODED_VALUES = 2 ** 25; // values one packet may decode to (limits.MAX_DECODED_VALUES)
 
 
 // Frames per packet: as many as fit in 50 ms, at least one (live.packet_frames).

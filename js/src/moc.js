@@ -7,9 +7,9 @@ import { crc32, readVarint, u16, u32 } from './bytes.js';
 import { unpackSkeleton } from './compact-skeleton.js';
 import { DecodeError } from './errors.js';
 import { HEADER_DICTIONARY } from './header-dict.js';
-import { MAX_FPS } from './header.js';
 import { inflate } from './inflate.js';
 import { decodeKinwave } from './kinwave.js';
+import { MAX_DECODED_VALUES, MAX_FPS, MAX_HEADER_TEXT, MAX_PAYLOAD_FRAMES } from './limits.js';
 
 const MAGIC = 'MOC1';
 const FOOTER_MAGIC = 'MOCX';
@@ -18,10 +18,7 @@ const FLAG_SKELETON = 1;
 const START = 12;
 const FOOTER = 8;
 const MAX_HEADER = 1 << 24;
-const MAX_HEADER_TEXT = 8 << 20;
 const MAX_CHUNKS = 1 << 20;
-const MAX_PAYLOAD_FRAMES = 1 << 20;
-export const MAX_DECODED_VALUES = 2 ** 25;
 
 function ascii(data, pos) {
   return String.fromCharCode(...data.subarray(pos, pos + 4));

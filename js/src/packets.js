@@ -3,6 +3,7 @@
 // with its top bit set, varints, CRC-16), which a receiver reads against its stream's cursor.
 import { DecodeError } from './errors.js';
 import { crc16, crc32, i16, readVarint, u16, u32 } from './bytes.js';
+import { MAX_PAYLOAD_FRAMES } from './limits.js';
 
 export const HEADER = 0;
 export const DATA = 1;
@@ -17,7 +18,6 @@ const COMPACT = 0x80;
 const C_EXPLICIT = 8;
 const C_POSITION = 16;
 const C_RESTART = 32;
-const MAX_PAYLOAD_FRAMES = 1 << 20;
 
 // The packets of a batch message ("MB", u32 count, u32 lengths, packets), as views into `data`.
 export function splitBatch(data) {

@@ -12,7 +12,7 @@ import { HEADER_DICTIONARY } from '../../js/src/header-dict.js';
 import { chunkBody } from '../../js/src/moc.js';
 import { readKinwave } from '../../js/src/kinwave.js';
 import { CODE_STEP, twoToEighths } from '../../js/src/steps.js';
-import { crc32 } from '../../js/src/bytes.js';
+import { crc32, u32 } from '../../js/src/bytes.js';
 import { seeded } from './seeded.mjs';
 
 const MOC = new URL('../data/moc/', import.meta.url);
@@ -114,7 +114,7 @@ async function expectDecodeError(data, pattern = null) {
 
 // A .moc with its header's JSON replaced (deflated with the dictionary, CRC recomputed).
 function withHeader(data, edit) {
-  const headLength = data[8] | (data[9] << 8) | (data[10] << 16) | (data[11] << 24);
+  const headLength = u32(data, 8);
   const text = inflateSync(data.subarray(12, 12 + headLength), { dictionary: HEADER_DICTIONARY });
   const split = text.indexOf(0);
   const doc = edit(JSON.parse(text.subarray(0, split).toString()));

@@ -17,7 +17,7 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from common import SHARED
+from common import shared_sources
 from mocodec import load, moc, reexpress
 from mocodec.codecs import get_codec
 from mocodec.kinematics import forward_kinematics
@@ -74,12 +74,7 @@ def main() -> None:
     ap.add_argument("--bounds", type=float, nargs="+", default=[1.0, 0.1])
     ap.add_argument("--jobs", type=int, default=2)
     args = ap.parse_args()
-    sources = {
-        "CMU BVH": sorted((SHARED / "cmu" / "bvh").glob("*.bvh")),
-        "CMU ASF/AMC": sorted((SHARED / "cmu" / "asf_amc").glob("*.amc")),
-        "Bandai Namco": sorted((SHARED / "bandai").glob("*.bvh")),
-    }
-    chosen = {name: (files[: args.clips] if args.clips else files) for name, files in sources.items()}
+    chosen = shared_sources(args.clips)
     with ProcessPoolExecutor(args.jobs) as pool:
         results = {
             name: list(pool.map(measure, map(str, files), [tuple(args.bounds)] * len(files)))

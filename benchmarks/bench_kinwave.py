@@ -19,17 +19,13 @@ import time
 import numpy as np
 
 from baselines import sz3_per_channel
-from common import SHARED
+from common import shared_sources
 from mocodec import load, moc
 from mocodec.codecs import get_codec
 from mocodec.kinematics import forward_kinematics
 from mocodec.metrics.pose import shell_errors
 
-SOURCES = (
-    ("CMU BVH", "cmu/bvh", "*.bvh"),
-    ("CMU ASF/AMC", "cmu/asf_amc", "*.amc"),
-    ("Bandai Namco", "bandai", "*.bvh"),
-)
+SETS = {"bvh": "CMU BVH", "amc": "CMU ASF/AMC", "bandai": "Bandai Namco"}
 
 
 def errors(motion, channels):
@@ -60,11 +56,12 @@ def main() -> None:
     ap.add_argument("--set", choices=("bvh", "amc", "bandai", "all"), default="all")
     ap.add_argument("--limit", type=int, default=0, help="only the first N clips of each set")
     args = ap.parse_args()
-    sources = {"bvh": [SOURCES[0]], "amc": [SOURCES[1]], "bandai": [SOURCES[2]], "all": SOURCES}[args.set]
-    clips = []
-    for name, folder, pattern in sources:
-        found = sorted((SHARED / folder).glob(pattern))
-        clips += [(name, p) for p in (found[: args.limit] if args.limit else found)]
+    clips = [
+        (name, p)
+        for name, paths in shared_sources(args.limit).items()
+        if args.set == "all" or SETS[args.set] == name
+        for p in paths
+    ]
     rel, ratio, over, used, enc_fps, dec_fps = {}, {}, {}, {}, [], []
     print(f"{'clip':36s} {'frames':>6s} | shell 0.1: kinwave/SZ3 | shell 1.0: kinwave/SZ3 | mean 0.5 / 1.0 ratio")
     for source, path in clips:
@@ -99,7 +96,7 @@ def main() -> None:
                 enc_fps.append(motion.num_frames / (t1 - t0))
                 dec_fps.append(motion.num_frames / (t2 - t1))
         print(" | ".join(row), flush=True)
-    names = [name for name, _, _ in sources]
+    names = list(dict.fromkeys(name for name, _ in clips))
     print(f"\n{len(clips)} clips; per source: " + ", ".join(f"{n} ({sum(s == n for s, _ in clips)})" for n in names))
     print(f"{'':44s}" + "".join(f"{n:>16s}" for n in names))
 

@@ -27,19 +27,13 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
-from common import SHARED
+from common import shared_sources
 from mocodec import load, ratecontrol
 from mocodec.codecs import get_codec
 from mocodec.codecs.kinwave import live
 from mocodec.kinematics import forward_kinematics
 from mocodec.stream.live import LiveDecoder, stream_clip
 from mocodec.stream.packets import HEADER, StreamInfo
-
-SOURCES = (
-    ("CMU BVH", "cmu/bvh", "*.bvh"),
-    ("CMU ASF/AMC", "cmu/asf_amc", "*.amc"),
-    ("Bandai Namco", "bandai", "*.bvh"),
-)
 
 
 def joint_errors(motion, channels) -> np.ndarray:
@@ -152,11 +146,8 @@ def main() -> None:
     ap.add_argument("--layers", type=int, default=3, help="layers of the layered stream (1: none; default 3)")
     ap.add_argument("--jobs", type=int, default=2)
     args = ap.parse_args()
-    if SHARED is None:
-        raise SystemExit("needs ../shared/data")
     with ProcessPoolExecutor(args.jobs) as pool:
-        for name, folder, pattern in SOURCES:
-            paths = sorted((SHARED / folder).glob(pattern))
+        for name, paths in shared_sources().items():
             paths = paths[:: max(1, len(paths) // args.clips)][: args.clips] if args.clips else paths
             n = len(paths)
             rows = list(

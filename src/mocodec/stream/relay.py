@@ -141,6 +141,11 @@ class Forward:
     layer_ends: list[int] | None = None  # a layered stream's data packet: where each layer ends
     layer_starts: list[bool] | None = None  # ... and which restart in it (read when a viewer may gain one)
 
+    @property
+    def scalable(self) -> bool:
+        """Whether a viewer's budget may cut it (an embedded codec's cut table, or layers)."""
+        return self.cuts is not None or self.layer_ends is not None
+
 
 class _Cursors:
     """Reading a sender's packets against its room's streams: a compact packet follows on from
@@ -543,13 +548,13 @@ class Relay:
         crowd = None  # the scalable streams and where they are, this tick
         viewers = [v for v in room.viewers if not v.dropped]
         shares: dict[int, tuple[np.ndarray, np.ndarray]] = {}
-        scalable = any(f.cuts is not None or f.layer_ends is not None for f in fresh)
+        scalable = any(f.scalable for f in fresh)
         for viewer in viewers:
             pending, viewer.pending = viewer.pending, []
             items = pending + fresh
             if not items:
                 continue
-            if viewer.budget > 0 and (scalable or any(f.cuts is not None or f.layer_ends is not None for f in pending)):
+            if viewer.budget > 0 and (scalable or any(f.scalable for f in pending)):
                 if crowd is None:
                     crowd = self._crowd(room, fresh)
                     shares = self._shares(crowd, [v for v in viewers if v.budget > 0])

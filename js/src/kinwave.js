@@ -7,9 +7,9 @@
 import { decodeCoefficients } from './coefcoder.js';
 import { DecodeError } from './errors.js';
 import { forwardKinematics } from './kinematics.js';
-import { conjugate, fromForm, quatExp, validForm, WORLD } from './rotvec.js';
+import { DEG, conjugate, quatExp, quatMultiply, rotate } from './quaternions.js';
+import { fromForm, validForm, WORLD } from './rotvec.js';
 import { smoothSeams } from './seams.js';
-import { quatMultiply } from './skeleton.js';
 import { CODE_STEP, twoToEighths } from './steps.js';
 import { WAVELET_IDS, inverseWavelet } from './wavelets.js';
 
@@ -129,14 +129,6 @@ function worldTranslations(skeleton, constant) {
     if (still[skeleton.parents[j]] && pos.every((c) => c >= 0) && !pos.some((c) => constant[c])) out.push({ joint: j, pos });
   }
   return out;
-}
-
-function rotate(q, v) {
-  const [w, x, y, z] = q;
-  const ux = 2.0 * (y * v[2] - z * v[1]);
-  const uy = 2.0 * (z * v[0] - x * v[2]);
-  const uz = 2.0 * (x * v[1] - y * v[0]);
-  return [v[0] + w * ux + y * uz - z * uy, v[1] + w * uy + z * ux - x * uz, v[2] + w * uz + x * uy - y * ux];
 }
 
 function damaged(what, offset = null) {
@@ -286,7 +278,7 @@ function toFileLayout(skeleton, plan, rows, constant, forms, means) {
     forwardKinematics(skeleton, Float64Array.from(rows, (row) => row[0]), global);
     parents = (j) => {
       const p = skeleton.parents[j];
-      return p < 0 ? [1.0, 0.0, 0.0, 0.0] : Array.from(global.subarray(4 * p, 4 * p + 4));
+      return p < 0 ? Float64Array.of(1.0, 0.0, 0.0, 0.0) : global.slice(4 * p, 4 * p + 4);
     };
   }
   for (const { joint, pos } of moved) {
@@ -299,12 +291,12 @@ function toFileLayout(skeleton, plan, rows, constant, forms, means) {
   forms.forEach((form, k) => {
     if (!form) return;
     const g = plan.threeAngle[k];
-    const mean = quatExp(means.length ? [0, 1, 2].map((a) => (means[3 * k + a] * MEAN_QUANTUM * (Math.PI / 180)) / 2.0) : [0, 0, 0]);
+    const mean = quatExp(means.length ? [0, 1, 2].map((a) => (means[3 * k + a] * MEAN_QUANTUM * DEG) / 2.0) : [0, 0, 0]);
     let pre = null;
     if (world) {
       pre = parents(g.joint);
       if (skeleton.hasAxis[g.joint]) {
-        const axis = Array.from(skeleton.axisQuat.subarray(4 * g.joint, 4 * g.joint + 4));
+        const axis = skeleton.axisQuat.slice(4 * g.joint, 4 * g.joint + 4);
         pre = quatMultiply(conjugate(axis), quatMultiply(pre, axis));
       }
     }

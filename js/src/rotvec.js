@@ -2,54 +2,14 @@
 // (codecs/shared/rotvec.py, from_forms): a rotation vector about a mean rotation, Euler angles in a
 // coding order, either one turned by a constant `pre`, to a quaternion, then to the file's Euler
 // triple (Bernardes and Viollet's formula, any of the 12 orders) nearest the previous frame's.
-const DEG = Math.PI / 180.0;
+import { AXIS, DEG, conjugate, expInto, productInto, turn } from './quaternions.js';
+
 export const VECTOR = 1;
 export const WORLD = 8;
 const CODING_ORDERS = ['XYZ', 'XZY', 'YXZ', 'YZX', 'ZXY', 'ZYX'];
-const AXIS = { X: 0, Y: 1, Z: 2 };
 
 export function validForm(form) {
   return Number.isInteger(form) && form >= 0 && form < 2 * WORLD;
-}
-
-// q (a Float64Array of 4) times the rotation by `deg` degrees about axis 0, 1 or 2, in place (rotvec._turn).
-function turn(q, axis, deg) {
-  const h = 0.5 * (deg * DEG);
-  const c = Math.cos(h);
-  const s = Math.sin(h);
-  const w = q[0];
-  const x = q[1];
-  const y = q[2];
-  const z = q[3];
-  if (axis === 0) {
-    q[0] = w * c - x * s; q[1] = x * c + w * s; q[2] = y * c + z * s; q[3] = z * c - y * s;
-  } else if (axis === 1) {
-    q[0] = w * c - y * s; q[1] = x * c - z * s; q[2] = y * c + w * s; q[3] = z * c + x * s;
-  } else {
-    q[0] = w * c - z * s; q[1] = x * c + y * s; q[2] = y * c - x * s; q[3] = z * c + w * s;
-  }
-}
-
-// a times b into out (Float64Arrays of 4; out may be b).
-function productInto(a, b, out) {
-  const w = a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3];
-  const x = a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2];
-  const y = a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1];
-  out[3] = a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0];
-  out[0] = w;
-  out[1] = x;
-  out[2] = y;
-}
-
-export function conjugate(q) {
-  return [q[0], -q[1], -q[2], -q[3]];
-}
-
-// exp of the pure quaternion v (rotations.quat_exp).
-export function quatExp(v) {
-  const n = Math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-  const sinc = n < 1e-12 ? 1.0 : Math.sin(n) / n;
-  return [Math.cos(n), v[0] * sinc, v[1] * sinc, v[2] * sinc];
 }
 
 // Python's float modulo (the sign of the divisor).
@@ -125,25 +85,16 @@ export function fromForm(rows, frames, order, form, mean, pre) {
   const base = form % WORLD;
   const vector = base === VECTOR;
   const formAxes = [...(base >= 2 ? CODING_ORDERS[base - 2] : order)].map((c) => AXIS[c]);
-  const m = Float64Array.from(vector ? mean : [1.0, 0.0, 0.0, 0.0]);
-  const undo = form >= WORLD ? Float64Array.from(conjugate(pre)) : null;
+  const m = vector ? mean : Float64Array.of(1.0, 0.0, 0.0, 0.0);
+  const undo = form >= WORLD ? conjugate(pre) : null;
   const setup = orderSetup(order);
   const q = new Float64Array(4);
   const angles = new Float64Array(3);
   const previous = new Float64Array(3);
   const [x, y, z] = rows;
   for (let t = 0; t < frames; t++) {
-    if (vector) {
-      const vx = (x[t] * DEG) / 2.0;
-      const vy = (y[t] * DEG) / 2.0;
-      const vz = (z[t] * DEG) / 2.0;
-      const n = Math.sqrt(vx * vx + vy * vy + vz * vz);
-      const sinc = n < 1e-12 ? 1.0 : Math.sin(n) / n;
-      q[0] = Math.cos(n);
-      q[1] = vx * sinc;
-      q[2] = vy * sinc;
-      q[3] = vz * sinc;
-    } else {
+    if (vector) expInto((x[t] * DEG) / 2.0, (y[t] * DEG) / 2.0, (z[t] * DEG) / 2.0, q);
+    else {
       q[0] = 1.0;
       q[1] = 0.0;
       q[2] = 0.0;

@@ -1,9 +1,9 @@
 // A skeleton from the JSON form of stream headers and .moc files (formats/container.py), with the
 // index tables forward kinematics and the decoders use (kinematics.channel_plan), every field checked.
 import { DecodeError } from './errors.js';
+import { AXIS, eulerToQuat } from './quaternions.js';
 
 const CHANNELS = ['Xposition', 'Yposition', 'Zposition', 'Xrotation', 'Yrotation', 'Zrotation'];
-const AXIS = { X: 0, Y: 1, Z: 2 };
 export const MAX_JOINTS = 1 << 16;
 
 function finite(v, what) {
@@ -18,29 +18,6 @@ function order(text, what, allowEmpty) {
   }
   for (let k = 1; k < text.length; k++) if (text[k] === text[k - 1]) throw new DecodeError(`skeleton: ${what} repeats an axis`);
   return text;
-}
-
-// Rotation about `axis` by `angle` degrees as a quaternion (w, x, y, z), composed in `axes` order.
-export function eulerToQuat(angles, axes) {
-  let q = [1, 0, 0, 0];
-  for (let n = 0; n < axes.length; n++) {
-    const half = (angles[n] * Math.PI) / 360;
-    const c = Math.cos(half);
-    const s = Math.sin(half);
-    const e = [0, 0, 0];
-    e[AXIS[axes[n]]] = s;
-    q = quatMultiply(q, [c, e[0], e[1], e[2]]);
-  }
-  return q;
-}
-
-export function quatMultiply(p, q) {
-  return [
-    p[0] * q[0] - p[1] * q[1] - p[2] * q[2] - p[3] * q[3],
-    p[0] * q[1] + p[1] * q[0] + p[2] * q[3] - p[3] * q[2],
-    p[0] * q[2] - p[1] * q[3] + p[2] * q[0] + p[3] * q[1],
-    p[0] * q[3] + p[1] * q[2] - p[2] * q[1] + p[3] * q[0],
-  ];
 }
 
 export class Skeleton {

@@ -238,7 +238,7 @@ $("coding").addEventListener("submit", async (event) => {
 
 // ----- live: a relay room, decoded in this page -------------------------------------------------
 const RATE_WINDOW_S = 4;                // seconds over which an avatar's bit rate is measured
-const CAMERA_EVERY_S = 1;               // how often the relay hears where this viewer looks from
+const CAMERA_EVERY_S = 1;               // how often the relay may hear where this viewer looks from
 const TABLE_EVERY_S = 0.25;             // how often the table of avatars is redrawn
 const avatars = new Map();              // stream id -> Figure
 async function startLive(params) {
@@ -259,18 +259,22 @@ async function startLive(params) {
   $("status").textContent = "watching, decoded in this page";
   state.ready = true;
   const history = [];                   // [seconds, {stream: bytes}]
-  let cameraSent = 0, tableAt = 0;
+  let cameraAt = 0, cameraSent = "", tableAt = 0;
   const loop = () => {
     const now = performance.now() / 1000;
     const bytes = {};
     for (const [id, a] of [...client.avatars, ...client.others]) bytes[id] = a.bytes;
     history.push([now, bytes]);
     while (history.length > 2 && now - history[0][0] > RATE_WINDOW_S) history.shift();
-    live(client, now, history, now - tableAt > TABLE_EVERY_S);
-    if (now - tableAt > TABLE_EVERY_S) tableAt = now;
-    if (now - cameraSent > CAMERA_EVERY_S) {
-      client.send({ camera: camera.position.toArray().map((v) => Math.round(v * 100) / 100) });
-      cameraSent = now;
+    drawRoom(client, now);
+    if (now - tableAt > TABLE_EVERY_S) {
+      tabulate(client, history);
+      tableAt = now;
+    }
+    const where = camera.position.toArray().map((v) => Math.round(v * 100) / 100);
+    if (now - cameraAt > CAMERA_EVERY_S && String(where) !== cameraSent) {
+      client.send({ camera: where });
+      [cameraAt, cameraSent] = [now, String(where)];
     }
     renderer.render(scene, camera);
     requestAnimationFrame(loop);
@@ -278,23 +282,35 @@ async function startLive(params) {
   requestAnimationFrame(loop);
 }
 
-function live(client, now, history, table) {
-  const [[t0, first], [t1, last]] = [history[0], history.at(-1)];
-  const rate = (id) => (8 * ((last[id] ?? 0) - (first[id] ?? 0))) / Math.max(t1 - t0, 1e-3);
+// Every avatar's pose now (joint positions in metres, played out by its jitter buffer).
+function drawRoom(client, now) {
   for (const [id, figure] of avatars) {
     const a = client.avatars.get(id);
     if (!a || a.decoder.ended) { scene.remove(figure.group); avatars.delete(id); }
   }
-  const rows = [];
   let cx = 0, cz = 0, shown = 0;
   for (const [id, a] of client.avatars) {
+    const pose = a.decoder.ended ? null : a.pose(now);
+    if (!pose) continue;
+    if (!avatars.has(id)) avatars.set(id, new Figure(scene, Array.from(a.skeleton.parents), 0x3b4a6b, 0x2a6fdb));
+    avatars.get(id).pose(pose, 0);
+    cx += pose[0]; cz += pose[2]; shown += 1;
+  }
+  if (shown && !state.live.streams) {     // look at the crowd when it first appears
+    controls.target.set(cx / shown, 0.9, cz / shown);
+    camera.position.set(cx / shown + 1.5, 2.5, cz / shown + 7);
+    controls.update();
+  }
+  state.live.streams = shown;
+}
+
+// The table of avatars: each one's codec, frames and bit rate over the window of `history`.
+function tabulate(client, history) {
+  const [[t0, first], [t1, last]] = [history[0], history.at(-1)];
+  const rate = (id) => (8 * ((last[id] ?? 0) - (first[id] ?? 0))) / Math.max(t1 - t0, 1e-3);
+  const rows = [];
+  for (const [id, a] of client.avatars) {
     if (a.decoder.ended) continue;
-    const pose = a.pose(now);              // joint positions (m), played out smoothly by the jitter buffer
-    if (pose) {
-      if (!avatars.has(id)) avatars.set(id, new Figure(scene, Array.from(a.skeleton.parents), 0x3b4a6b, 0x2a6fdb));
-      avatars.get(id).pose(pose, 0);
-      cx += pose[0]; cz += pose[2]; shown += 1;
-    }
     state.live.frames[id] = a.frames; state.live.bits[id] = rate(id);
     rows.push(`<tr><td>${escape(a.name || `stream ${id}`)}</td><td>${escape(a.codec)}</td><td>${(rate(id) / 1000).toFixed(2)}</td>` +
               `<td>${a.frames}${a.decoder.inStep ? "" : " (resync)"}</td></tr>`);
@@ -304,13 +320,7 @@ function live(client, now, history, table) {
     rows.push(`<tr class="undecodable"><td>${escape(o.name || `stream ${id}`)}</td><td>${escape(o.codec)}</td>` +
               `<td>${(rate(id) / 1000).toFixed(2)}</td><td>not decodable in the browser</td></tr>`);
   }
-  if (table) $("avatars").tBodies[0].innerHTML = rows.join("");
-  if (shown && !state.live.streams) {     // look at the crowd when it first appears
-    controls.target.set(cx / shown, 0.9, cz / shown);
-    camera.position.set(cx / shown + 1.5, 2.5, cz / shown + 7);
-    controls.update();
-  }
-  state.live.streams = shown;
+  $("avatars").tBodies[0].innerHTML = rows.join("");
 }
 
 function escape(text) {

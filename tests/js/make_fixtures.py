@@ -154,12 +154,14 @@ def moc_fixture(name, clip, frames, fps, how, knobs, chunk_frames) -> dict[str, 
     decoded channels, float64) and ``<name>.ints.gz`` (per chunk the integers the coefficient
     decoder read: side integers as sent, constant flags, knots, coefficients; int32)."""
     import gzip
+    import io
 
     import numpy as np
 
     from mocodec import load, moc
     from mocodec.codecs import get_codec
     from mocodec.coding.entropy import coefcoder
+    from mocodec.formats import container
 
     motion = load(DATA / clip)
     motion = _reexpressed((motion.resample(fps) if fps else motion)[:frames], how)
@@ -179,7 +181,7 @@ def moc_fixture(name, clip, frames, fps, how, knobs, chunk_frames) -> dict[str, 
         decoded = moc.unpack(data)
     finally:
         coefcoder.decode = original
-    info = moc.container.open_container(__import__("io").BytesIO(data), len(data), name)
+    info = container.open_container(io.BytesIO(data), len(data), name)
     ints = np.concatenate(read)
     assert np.abs(ints).max(initial=0) < 2**31
     positions, original = decoded.positions(), motion.positions()

@@ -39,6 +39,10 @@ def transforms(motion, rng):
     yield "d units x 2.54", reexpress.with_units(motion, 2.54)
     yield "e translation on a dummy root's child", reexpress.with_dummy_root(motion, position_channels=True)
     yield "f bind pose in frame 0", reexpress.with_bind_frame(motion)
+    bind = reexpress.with_bind_frame(motion)
+    channels = bind.channels.copy()
+    channels[0, motion.skeleton.rotation_mask] = 5.0
+    yield "f bind pose, every angle 5 degrees", bind.with_channels(channels)
     for fps in (24.0, 30.0, 60.0):
         if fps < motion.fps:
             yield f"g {fps:g} fps", motion.resample(fps)

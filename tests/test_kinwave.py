@@ -85,11 +85,14 @@ def test_closed_loop_beats_open_loop_at_equal_error(walk_bvh):
 
 
 def test_keyframes_are_chosen_by_cost_and_keep_the_bound(walk_amc):
-    """A bind pose before the walk is coded as a keyframe (a pass with it is smaller), the
-    walk alone has none; either way the bound holds."""
+    """A bind pose before the walk (not the rest pose: every angle 5 degrees) is coded as a
+    keyframe (a pass with it is smaller), the walk alone has none; either way the bound holds."""
     from mocodec.reexpress import with_bind_frame
 
     bound = with_bind_frame(walk_amc)
+    channels = bound.channels.copy()
+    channels[0, bound.skeleton.rotation_mask] = 5.0
+    bound = bound.with_channels(channels)
     codec = get_codec("kinwave", max_error_cm=0.3)
     assert BoundSearch(codec, bound).lay.starts[:2].tolist() == [0, 1]
     assert BoundSearch(codec, walk_amc).keyframes == 0
@@ -295,6 +298,64 @@ def test_a_damaged_isolated_frame_count_is_refused(walk_bvh):
         bad = body[:6] + bytes([count]) + body[7:]
         with pytest.raises(CorruptStreamError):
             codec.decode(bad, walk_bvh.skeleton, walk_bvh.num_frames, walk_bvh.fps)
+
+
+@pytest.mark.parametrize("measure", ["joint", "shell"])
+@pytest.mark.parametrize("at_zero", [False, True])
+def test_a_leading_rest_pose_costs_a_flag(walk_bvh, walk_amc, measure, at_zero):
+    """A rest pose in frame 0 (every rotation 0; the translations frame 1's, or all 0) is not
+    coded: the body is the rest of the clip's, in format 2 with one byte more, and decodes to
+    that pose exactly (the copied translations within the bound)."""
+    from mocodec.codecs.kinwave.payload import REST, REST_AT_ZERO, with_rest
+    from mocodec.reexpress import with_bind_frame
+
+    for motion in (walk_bvh, walk_amc):
+        rest = with_bind_frame(motion)
+        if at_zero:
+            rest = rest.with_channels(np.vstack((np.zeros((1, motion.skeleton.num_channels)), motion.channels)))
+        codec = get_codec("kinwave", max_error_cm=0.5, error_measure=measure)
+        body = codec.encode(rest)
+        assert body == with_rest(codec.encode(motion), REST_AT_ZERO if at_zero else REST)
+        decoded = codec.decode(body, rest.skeleton, rest.num_frames, rest.fps)
+        assert _errors(rest, decoded)[measure] <= 0.5
+        rot = motion.skeleton.rotation_mask
+        assert (decoded.channels[0, rot] == 0.0).all()
+        if at_zero:
+            assert (decoded.channels[0] == 0.0).all()
+        else:
+            np.testing.assert_array_equal(decoded.channels[0, ~rot], decoded.channels[1, ~rot])
+
+
+def test_a_rest_pose_whose_copied_translations_break_the_bound_is_coded_as_a_frame(walk_bvh):
+    """Under a dummy root turned (0, -90, 0) whose rotation is 0 only in the rest pose, frame
+    1's translations are coded against the dummy's decoded turn, so copied into the rest pose
+    they miss its joints by more than the bound: the clip is coded whole (format 1)."""
+    from mocodec.reexpress import with_bind_frame, with_dummy_root
+
+    rest = with_bind_frame(with_dummy_root(walk_bvh[:200], (0.0, -90.0, 0.0), position_channels=True))
+    codec = get_codec("kinwave", max_error_cm=0.5, error_measure="shell")
+    body = codec.encode(rest)
+    assert body[0] == 1
+    assert _errors(rest, codec.decode(body, rest.skeleton, rest.num_frames, rest.fps))["shell"] <= 0.5
+
+
+def test_a_damaged_rest_pose_flag_is_refused(walk_bvh):
+    from mocodec.errors import CorruptStreamError
+    from mocodec.reexpress import with_bind_frame
+
+    rest = with_bind_frame(walk_bvh)
+    codec = get_codec("kinwave", max_error_cm=1.0)
+    body = codec.encode(rest)
+    assert body[0] == 2
+    frames = rest.num_frames
+    for bad, count in (
+        (body[:6] + b"\0" + body[7:], frames),
+        (body[:6] + b"\3" + body[7:], frames),
+        (body, 1),
+        (body[:6], frames),
+    ):
+        with pytest.raises(CorruptStreamError):
+            codec.decode(bad, walk_bvh.skeleton, count, walk_bvh.fps)
 
 
 @pytest.mark.parametrize("turn", [(0.0, 90.0, 0.0), (30.0, -20.0, 10.0)])

@@ -1,4 +1,4 @@
-// The decoder of a kinwave body (codecs/kinwave/payload.py, format 1; docs/formats.md): header,
+// The decoder of a kinwave body (codecs/kinwave/payload.py, formats 1 and 2; docs/formats.md): header,
 // the integers of the coefficient coder, then per channel the trend through its knots plus the
 // inverse wavelet of each segment's block, seams smoothed, isolated frames patched, translations
 // coded on the world's axes turned back and three-angle joints brought back from their coding
@@ -14,6 +14,9 @@ import { CODE_STEP, twoToEighths } from './steps.js';
 import { WAVELET_IDS, inverseWavelet } from './wavelets.js';
 
 const FORMAT = 1;
+const FORMAT_MORE = 2; // format 1 with a byte of more flags after the header
+const REST = 1; // more flags: frame 0 is the rest pose (rotations 0), its translations frame 1's
+const REST_AT_ZERO = 2; // ... with every translation 0 too
 const CODER_REVISION = 2;
 const HEAD_SIZE = 6;
 const FLAG_KEYFRAME = 1;
@@ -52,7 +55,9 @@ function planOf(skeleton) {
     if (rot.length) rotationJoints.push({ joint: j, channels: rot });
     if (rot.length === 3) threeAngle.push({ joint: j, channels: rot, order: skeleton.joints[j].rotationOrder });
   }
-  plan = { rotationJoints, translation, threeAngle, base };
+  const isTranslation = new Uint8Array(skeleton.numChannels);
+  for (const c of translation) isTranslation[c] = 1;
+  plan = { rotationJoints, translation, isTranslation, threeAngle, base };
   plans.set(skeleton, plan);
   return plan;
 }
@@ -135,16 +140,34 @@ function damaged(what, offset = null) {
   return new DecodeError(`kinwave payload: ${what}`, offset);
 }
 
+// A format 2 body as { body, frames, rest }: the format 1 body of the frames after a rest pose
+// in frame 0 (payload.rest_kind), which is not coded; a format 1 body as it is, rest 0.
+function withoutRest(body, frames) {
+  if (body[0] !== FORMAT_MORE) return { body, frames, rest: 0 };
+  if (body.length <= HEAD_SIZE) throw damaged(`${body.length} bytes is shorter than its ${HEAD_SIZE + 1}-byte header`, 0);
+  const rest = body[HEAD_SIZE];
+  if ((rest !== REST && rest !== REST_AT_ZERO) || frames < 2) {
+    throw damaged(`its more flags are damaged (${rest} for ${frames} frames)`, HEAD_SIZE);
+  }
+  const inner = new Uint8Array(body.length - 1);
+  inner[0] = FORMAT;
+  inner.set(body.subarray(1, HEAD_SIZE), 1);
+  inner.set(body.subarray(HEAD_SIZE + 1), HEAD_SIZE);
+  return { body: inner, frames: frames - 1, rest };
+}
+
 // The header and integers of a kinwave body, every field checked: { lay, wavelet, coded (side,
-// constant, knots, coeffs), codes, offsets, forms, means, isolated, patches }.
-export function readKinwave(body, skeleton, frames) {
+// constant, knots, coeffs), codes, offsets, forms, means, isolated, patches } of its coded
+// frames (a rest pose in frame 0 is not coded: rest, payload.rest_kind).
+export function readKinwave(whole, skeleton, allFrames) {
+  const { body, frames, rest } = withoutRest(whole, allFrames);
   const plan = planOf(skeleton);
   const C = skeleton.numChannels;
   const numCodes = plan.rotationJoints.length + (plan.translation.length ? 1 : 0);
   if (body.length < HEAD_SIZE) throw damaged(`${body.length} bytes is shorter than its ${HEAD_SIZE}-byte header`, 0);
   const [version, flags, logWindow, levels] = body;
   const channels = body[4] | (body[5] << 8);
-  if (version !== FORMAT) throw damaged(`format ${version}, this decoder reads ${FORMAT}`, 0);
+  if (version !== FORMAT) throw damaged(`format ${version}, this decoder reads ${FORMAT} and ${FORMAT_MORE}`, 0);
   if (channels !== C) throw damaged(`${channels} channels, the skeleton has ${C}: wrong skeleton?`, 4);
   if (logWindow > 16 || levels < 1 || levels > 10 || ((flags >> 1) & 3) >= WAVELET_IDS.length) {
     throw damaged(`header is damaged (window 2^${logWindow}, levels ${levels})`, 1);
@@ -173,6 +196,7 @@ export function readKinwave(body, skeleton, frames) {
   }
   const at = sizes.map((_, k) => sizes.slice(0, k).reduce((a, b) => a + b, 0));
   const read = {
+    rest,
     lay,
     wavelet: WAVELET_IDS[(flags >> 1) & 3],
     coded,
@@ -195,12 +219,14 @@ export function readKinwave(body, skeleton, frames) {
 }
 
 // The channels (frames x channels, row-major Float64Array) of a kinwave body.
-export function decodeKinwave(body, skeleton, frames) {
+export function decodeKinwave(body, skeleton, allFrames) {
   const plan = planOf(skeleton);
   const C = skeleton.numChannels;
-  const read = readKinwave(body, skeleton, frames);
-  const out = new Float64Array(frames * C);
-  if (!frames) return out;
+  const read = readKinwave(body, skeleton, allFrames);
+  const out = new Float64Array(allFrames * C);
+  if (!allFrames) return out;
+  const frames = read.lay.frames;
+  const first = allFrames - frames; // 1 after a rest pose
   const steps = channelSteps(skeleton, plan, read.codes);
   const rows = reconstruct(skeleton, plan, read, steps);
   const n = read.isolated.length;
@@ -210,7 +236,8 @@ export function decodeKinwave(body, skeleton, frames) {
   toFileLayout(skeleton, plan, rows, read.coded.constant, read.forms, read.means);
   for (let c = 0; c < C; c++) {
     const row = rows[c];
-    for (let t = 0; t < frames; t++) out[t * C + c] = row[t];
+    for (let t = 0; t < frames; t++) out[(t + first) * C + c] = row[t];
+    if (first) out[c] = read.rest === REST && plan.isTranslation[c] ? row[0] : 0.0;
   }
   return out;
 }

@@ -119,7 +119,8 @@ def live_fixtures() -> dict[str, bytes]:
 #: .moc cases: (name, clip, frames, fps or None, re-expression, kinwave knobs, chunk frames). Between
 #: them they use every part of the format: chunks, segment step offsets, coding forms (vectors,
 #: coding orders, WORLD forms under a turned dummy root), world-axis translations, constant
-#: 6-channel joints, keyframes, an isolated frame, the three wavelets, a rate target and ASF axes.
+#: 6-channel joints, keyframes, an isolated frame, the three wavelets, a rate target, ASF axes and
+#: a leading rest pose (payload format 2) of either kind.
 MOC_CASES = (
     ("bvh-joint", "07_03.bvh", 600, None, None, {}, 256),
     ("asf-30fps-shell", "135_08.amc", 300, 30.0, None, {"max_error_cm": 1.0, "error_measure": "shell"}, 1024),
@@ -128,16 +129,24 @@ MOC_CASES = (
     ("zxz-d4", "07_03.bvh", 300, None, "zxz", {"wavelet": "d4", "window": 64}, 1024),
     ("haar-bitrate", "07_03.amc", 300, None, None, {"wavelet": "haar", "bits_per_second": 6000.0, "levels": 3}, 1024),
     ("glitch", "09_02.bvh", 300, None, "glitch", {}, 1024),
+    ("rest-pose", "07_03.bvh", 300, None, "rest", {"max_error_cm": 1.0, "error_measure": "shell"}, 256),
+    ("rest-at-zero", "135_08.amc", 200, None, "rest-at-zero", {}, 1024),
 )
 
 
 def _reexpressed(motion, how):
+    import numpy as np
+
     from mocodec import reexpress
 
     if how == "dummy":
         return reexpress.with_position_channels(reexpress.with_dummy_root(motion, (30.0, 20.0, 10.0)))
     if how == "dummy-bind":
         return reexpress.with_bind_frame(reexpress.with_dummy_root(motion, (0.0, -90.0, 0.0), position_channels=True))
+    if how == "rest":
+        return reexpress.with_bind_frame(motion)
+    if how == "rest-at-zero":
+        return motion.with_channels(np.vstack((np.zeros((1, motion.skeleton.num_channels)), motion.channels)))
     if how == "zxz":
         return reexpress.with_euler_orders(motion, "ZXZ")
     if how == "glitch":

@@ -46,13 +46,19 @@ import numpy as np
 from mocodec.codecs.base import Codec, Knob, QualityKnob, StreamDecoder, StreamEncoder
 from mocodec.codecs.kinwave import kinalloc
 from mocodec.codecs.kinwave.payload import (
+    REST,
     WAVELET_IDS,
     decode_body,
+    rest_kind,
+    rest_pose,
+    with_rest,
 )
 from mocodec.codecs.kinwave.search import BoundSearch
 from mocodec.codecs.registry import register
 from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.formats import varint
+from mocodec.kinematics import forward_kinematics
+from mocodec.metrics.pose import shell_errors
 from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
@@ -164,10 +170,33 @@ class KinwaveCodec(Codec):
 
     # ----- encoding -----------------------------------------------------------------------
     def _encode(self, motion: Motion) -> bytes:
-        return BoundSearch(self, motion).run()
+        return self._encode_for(motion, motion.skeleton)
 
     def _encode_for(self, motion: Motion, output_skeleton: Skeleton) -> bytes:
+        """A leading rest pose (:func:`.payload.rest_kind`) is a flag, the other frames the
+        body, where frame 0 then holds the bound; else the whole motion is the body."""
+        kind = rest_kind(motion.skeleton, motion.channels) if self.config["keyframes"] else 0
+        if kind:
+            body = BoundSearch(self, Motion(motion.skeleton, motion.fps, motion.channels[1:]), output_skeleton).run()
+            if kind != REST or self._rest_holds(
+                motion, decode_body(body, output_skeleton, motion.num_frames - 1)[0], output_skeleton
+            ):
+                return with_rest(body, kind)
         return BoundSearch(self, motion, output_skeleton).run()
+
+    def _rest_holds(self, motion: Motion, frame1: np.ndarray, output_skeleton: Skeleton) -> bool:
+        """Whether the rest pose that takes its translations from the decoded ``frame1`` holds
+        the bound at frame 0 (its rotations are exact, its translations those of frame 1, whose
+        errors the joints below may add up differently there)."""
+        bound = self.config["max_error_cm"]
+        if self.config["bits_per_second"] > 0:
+            return True
+        cm = 100.0 / motion.skeleton.units_per_metre
+        p0, q0 = forward_kinematics(motion.skeleton, motion.channels[:1])
+        p1, q1 = forward_kinematics(output_skeleton, rest_pose(output_skeleton, REST, frame1)[None])
+        if self.config["error_measure"] == "shell":
+            return float(shell_errors(motion.skeleton, p0 * cm, q0, p1 * cm, q1).max) <= bound
+        return float(np.linalg.norm((p1 - p0) * cm, axis=2).max()) <= bound
 
     # ----- decoding -----------------------------------------------------------------------
     def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:

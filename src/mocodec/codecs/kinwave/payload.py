@@ -1,4 +1,4 @@
-"""kinwave's payload, format 1: what encoder and decoder share (the step codes, the
+"""kinwave's payload, formats 1 and 2: what encoder and decoder share (the step codes, the
 reconstruction of channels from their integers, the coding forms and world-axis translations)
 and the decoder of a body.
 
@@ -11,7 +11,10 @@ stream (:mod:`mocodec.coding.entropy.coefcoder`, revision 2), which opens with o
 with rotation channels and one for translations (step = 2^(code/8 - 20) degrees or cm), with
 bit 3 one step offset per segment, with bit 4 a coding form per three-angle joint
 (:mod:`mocodec.codecs.shared.rotvec`) and with bit 6 three mean-rotation integers per such joint.
-docs/formats.md gives the layout byte by byte.
+Format 2 is format 1 with a byte of more flags after the header: bit 0, frame 0 is the
+skeleton's rest pose (every rotation 0, the translations frame 1's), bit 1, the rest pose with
+every translation 0 too; that frame is not coded, and the rest is a format 1 body of the other
+frames (:func:`rest_kind`). docs/formats.md gives the layout byte by byte.
 """
 
 from __future__ import annotations
@@ -32,6 +35,9 @@ from mocodec.kinematics import channel_plan, forward_kinematics
 from mocodec.skeleton import Skeleton
 
 FORMAT = 1  # the payload format (docs/formats.md), pinned by the golden fixtures
+FORMAT_MORE = 2  # format 1 with a byte of more flags after the header
+REST = 1  # more flags bit 0: frame 0 is the rest pose, its translations frame 1's (not coded)
+REST_AT_ZERO = 2  # more flags bit 1: frame 0 is the rest pose with every translation 0 (not coded)
 CODER_REVISION = 2  # the coefficient coder's revision (coefcoder: differences in the approximation band)
 HEAD = struct.Struct("<BBBBH")  # format, flags, log2 window, levels, channels
 FLAG_OFFSETS = 8  # flags bit 3: a signed step offset per segment follows the step codes
@@ -281,6 +287,31 @@ def apply_patches(out: np.ndarray, steps: np.ndarray, frames: np.ndarray, patche
         out[:, frames] += patches * (steps * trendwave.KEYFRAME_QUANTUM)
 
 
+def rest_kind(skeleton: Skeleton, channels: np.ndarray) -> int:
+    """Whether frame 0 of ``channels (T, C)`` is the skeleton's rest pose, which exporters
+    write before a take (a bind pose): every rotation exactly 0, the translations frame 1's
+    (REST) or all 0 (REST_AT_ZERO), and frame 1 not so. Such a frame costs a flag instead of a
+    keyframe and the wavelet starts after it; 0 if not."""
+    if len(channels) < 2:
+        return 0
+    rot = skeleton.rotation_mask
+    if not rot.any() or channels[0, rot].any() or not channels[1, rot].any():
+        return 0
+    if np.array_equal(channels[0, ~rot], channels[1, ~rot]):
+        return REST
+    return REST_AT_ZERO if not channels[0, ~rot].any() else 0
+
+
+def rest_pose(skeleton: Skeleton, kind: int, frame1: np.ndarray) -> np.ndarray:
+    """Frame 0 of a payload whose more flags say ``kind``, from its decoded frame 1 ``(C,)``."""
+    return np.where(skeleton.rotation_mask, 0.0, frame1) if kind == REST else np.zeros_like(frame1)
+
+
+def with_rest(body: bytes, kind: int) -> bytes:
+    """The format 2 body of a rest pose of ``kind`` before the frames of the format 1 ``body``."""
+    return bytes([FORMAT_MORE]) + body[1 : HEAD.size] + bytes([kind]) + body[HEAD.size :]
+
+
 def channel_steps(skeleton: Skeleton, codes: np.ndarray) -> np.ndarray:
     """``(C, 1)``: every channel's quantiser step from the payload's step codes."""
     steps = np.empty((skeleton.num_channels, 1))
@@ -290,7 +321,20 @@ def channel_steps(skeleton: Skeleton, codes: np.ndarray) -> np.ndarray:
 
 
 def decode_body(body: bytes, skeleton: Skeleton, frames: int) -> np.ndarray:
-    """Channels ``(frames, C)`` of a kinwave body (format 1, docs/formats.md), every field checked."""
+    """Channels ``(frames, C)`` of a kinwave body (format 1 or 2, docs/formats.md), every field
+    checked."""
+    if body[:1] == bytes([FORMAT_MORE]):
+        if len(body) <= HEAD.size:
+            raise CorruptStreamError(
+                f"kinwave payload of {len(body)} bytes is shorter than its {HEAD.size + 1}-byte header"
+            )
+        kind = body[HEAD.size]
+        if kind not in (REST, REST_AT_ZERO) or frames < 2:
+            raise CorruptStreamError(
+                f"kinwave payload's more flags at byte {HEAD.size} are damaged ({kind} for {frames} frames)"
+            )
+        rest = decode_body(bytes([FORMAT]) + body[1 : HEAD.size] + body[HEAD.size + 1 :], skeleton, frames - 1)
+        return np.vstack((rest_pose(skeleton, kind, rest[0]), rest))
     rot_joints = rotation_joints(skeleton)
     trans = has_translation(skeleton)
     num_codes = len(rot_joints) + trans
@@ -298,7 +342,7 @@ def decode_body(body: bytes, skeleton: Skeleton, frames: int) -> np.ndarray:
         raise CorruptStreamError(f"kinwave payload of {len(body)} bytes is shorter than its {HEAD.size}-byte header")
     version, flags, log_w, levels, channels = HEAD.unpack_from(body)
     if version != FORMAT:
-        raise CorruptStreamError(f"kinwave payload format {version}, this mocodec reads {FORMAT}")
+        raise CorruptStreamError(f"kinwave payload format {version}, this mocodec reads {FORMAT} and {FORMAT_MORE}")
     if channels != skeleton.num_channels:
         raise CorruptStreamError(
             f"kinwave payload has {channels} channels, the skeleton {skeleton.num_channels}: wrong skeleton?"

@@ -326,6 +326,28 @@ def test_a_leading_rest_pose_costs_a_flag(walk_bvh, walk_amc, measure, at_zero):
             np.testing.assert_array_equal(decoded.channels[0, ~rot], decoded.channels[1, ~rot])
 
 
+def test_a_rest_pose_leaves_the_chunks_of_a_file_as_they_were(walk_bvh):
+    """With a rest pose before the take, the first chunk of a .moc file takes it along: every
+    chunk codes the take's frames it coded without it, in the very same bytes but the first
+    chunk's flag byte."""
+    import io
+
+    from mocodec.codecs.kinwave.payload import REST, with_rest
+    from mocodec.formats import container
+    from mocodec.reexpress import with_bind_frame
+
+    codec = get_codec("kinwave", max_error_cm=1.0)
+
+    def bodies(motion):
+        data = moc.pack(motion, codec, chunk_frames=128)
+        c = container.open_container(io.BytesIO(data), len(data), "test")
+        return [c.read_chunk(k) for k in range(len(c.index))], [(e.first, e.count) for e in c.index]
+
+    (plain, plain_spans), (rest, rest_spans) = bodies(walk_bvh), bodies(with_bind_frame(walk_bvh))
+    assert rest_spans == [(0, 129)] + [(a + 1, n) for a, n in plain_spans[1:]]
+    assert rest == [with_rest(plain[0], REST), *plain[1:]]
+
+
 def test_a_rest_pose_whose_copied_translations_break_the_bound_is_coded_as_a_frame(walk_bvh):
     """Under a dummy root turned (0, -90, 0) whose rotation is 0 only in the rest pose, frame
     1's translations are coded against the dummy's decoded turn, so copied into the rest pose

@@ -1,7 +1,7 @@
 """Coded motion files: ``encode(motion, path, codec)`` writes a .moc container, ``decode(path,
 frames=(a, b))`` reads back the whole clip or only the chunks a frame range needs.
 
-Each chunk of ``chunk_frames`` frames is coded on its own by the codec (so chunks decode
+Each chunk of ``chunk_frames`` frames (:func:`chunk_spans`) is coded on its own by the codec (so chunks decode
 independently and a range costs only its chunks); the container stores the codec's config and
 the skeleton, so a file decodes without anything else. A lossy codec's file stores the
 skeleton's offsets rounded to 0.001 cm (:func:`stored_skeleton`) and decodes on that skeleton;
@@ -44,6 +44,15 @@ def stored_skeleton(
     return round_offsets(motion.skeleton, SKELETON_PRECISION_CM)
 
 
+def chunk_spans(motion: Motion, chunk_frames: int) -> list[tuple[int, int]]:
+    """The chunks' frames ``[a, b)``: ``chunk_frames`` each, counted from frame 1 where frame 0
+    is a rest pose (:attr:`Motion.starts_at_rest`; the first chunk takes it along), so a bind
+    pose before a take leaves the take's chunks as they were."""
+    lead = 1 if motion.starts_at_rest else 0
+    ends = list(range(lead + chunk_frames, motion.num_frames, chunk_frames)) + [motion.num_frames]
+    return list(zip([0, *ends[:-1]], ends)) if motion.num_frames else []
+
+
 def pack(
     motion: Motion,
     codec: Codec | None = None,
@@ -60,8 +69,7 @@ def pack(
     skeleton = stored_skeleton(motion, codec, embed_skeleton, exact_skeleton)
     output = None if skeleton is motion.skeleton else skeleton
     chunks = [
-        container.Chunk(a, min(chunk_frames, motion.num_frames - a), codec.encode(motion[a : a + chunk_frames], output))
-        for a in range(0, motion.num_frames, chunk_frames)
+        container.Chunk(a, b - a, codec.encode(motion[a:b], output)) for a, b in chunk_spans(motion, chunk_frames)
     ]
     header = {
         "codec": codec.get_config(),

@@ -72,6 +72,15 @@ class Motion:
             raise ValueError("frame step must be positive")
         return Motion(self.skeleton, self.fps / step, self.channels[frames].copy())
 
+    @property
+    def starts_at_rest(self) -> bool:
+        """Whether frame 0 is the skeleton's rest pose (every rotation exactly 0) and frame 1
+        is not: the bind pose exporters write before a take."""
+        rot = self.skeleton.rotation_mask
+        return (
+            self.num_frames >= 2 and bool(rot.any()) and not self.channels[0, rot].any() and self.channels[1, rot].any()
+        )
+
     def channel_indices(self, keys) -> np.ndarray:
         """Channel indices for ``keys``: ints, ``"joint.Xrotation"`` names or joint names (all
         channels of that joint)."""

@@ -32,6 +32,7 @@ from mocodec.coding.entropy import coefcoder
 from mocodec.coding.transforms import seams, trendwave
 from mocodec.errors import CorruptStreamError
 from mocodec.kinematics import channel_plan, forward_kinematics
+from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
 FORMAT = 1  # the payload format (docs/formats.md), pinned by the golden fixtures
@@ -292,11 +293,9 @@ def rest_kind(skeleton: Skeleton, channels: np.ndarray) -> int:
     write before a take (a bind pose): every rotation exactly 0, the translations frame 1's
     (REST) or all 0 (REST_AT_ZERO), and frame 1 not so. Such a frame costs a flag instead of a
     keyframe and the wavelet starts after it; 0 if not."""
-    if len(channels) < 2:
+    if not Motion(skeleton, 1.0, channels[:2]).starts_at_rest:
         return 0
     rot = skeleton.rotation_mask
-    if not rot.any() or channels[0, rot].any() or not channels[1, rot].any():
-        return 0
     if np.array_equal(channels[0, ~rot], channels[1, ~rot]):
         return REST
     return REST_AT_ZERO if not channels[0, ~rot].any() else 0

@@ -1,5 +1,6 @@
-"""The compact wire form of data packets (docs/formats.md): 6 bytes around the payload for an
-ongoing stream, every field back at the receiver, losses and late packets placed right."""
+"""The compact wire form of data packets (docs/formats.md): 5 bytes around the payload for an
+ongoing stream of full packets (6 where packets vary in length), every field back at the
+receiver, losses and late packets placed right."""
 
 from __future__ import annotations
 
@@ -29,11 +30,33 @@ def _same(a, b) -> bool:
     )
 
 
-def test_an_ongoing_stream_spends_at_most_6_bytes_a_packet(packets):
+def test_an_ongoing_stream_spends_at_most_5_bytes_a_packet(packets):
+    """kinwave-live's packets code 6 frames at 120 fps, which its header says once; the last
+    packet of the clip (fewer frames) says its own count."""
+    assert packets[0].kind == HEADER and packets[0].frames == 6
     data = [p for p in packets if p.kind != HEADER and not p.keyframe and not p.sends_position]
-    assert data and all(len(p.to_bytes()) - len(p.payload) <= 6 for p in data)
+    assert data and all(len(p.to_bytes()) - len(p.payload) == (5 if p.frames == 6 else 6) for p in data)
+    assert packets[-1].frames < 6
     framing = sum(len(p.to_bytes()) - len(p.payload) for p in packets[1:]) / len(packets[1:])
-    assert framing < 7.0  # keyframes and moves carry more, on average under 7 bytes
+    assert framing < 6.0  # keyframes and moves carry more, on average under 6 bytes
+
+
+def test_packets_of_varying_length_say_their_frame_count(walk_bvh):
+    varying = stream_clip(walk_bvh[:240], get_codec("dpcm"))
+    assert varying[0].kind == HEADER and varying[0].frames == 0
+    data = [p for p in varying if p.kind != HEADER and not p.keyframe and not p.sends_position]
+    assert data and all(len(p.to_bytes()) - len(p.payload) == 6 for p in data)
+    reader = Reader()
+    assert all(_same(reader.read(p.to_bytes()), p) for p in varying)
+
+
+def test_the_usual_frame_count_of_a_stream_without_one_is_refused(packets):
+    from dataclasses import replace
+
+    reader = Reader()
+    reader.read(replace(packets[0], frames=0).to_bytes())  # a header that gives no usual count
+    with pytest.raises(CorruptStreamError, match="usual frame count"):
+        reader.read(packets[1].to_bytes())
 
 
 def test_every_field_comes_back(packets):

@@ -16,6 +16,7 @@ export const CODECS = ['raw', 'quant', 'dpcm', 'adpcm', 'deadreckoning', 'dct', 
 const FIELDS = 44;
 const COMPACT = 0x80;
 const C_EXPLICIT = 8;
+const C_USUAL = 64; // the frame count is the stream's usual one (its header's frames field)
 const C_POSITION = 16;
 const C_RESTART = 32;
 
@@ -39,8 +40,9 @@ export function splitBatch(data) {
 
 // What a receiver keeps per stream to place its compact packets (packets.Cursor).
 export class Cursor {
-  constructor(codec, synced = true) {
+  constructor(codec, synced = true, usualFrames = 0) {
     this.codec = codec;
+    this.usualFrames = usualFrames; // a full packet's frame count, from the stream header (0: none)
     this.nextSequence = 0;
     this.nextFrame = 0;
     this.position = [0, 0, 0];
@@ -88,25 +90,30 @@ function parseFull(data) {
 }
 
 function parseCompact(data, cursorOf) {
-  if (data.length < 6) throw new DecodeError(`${data.length} bytes, shorter than a compact packet`, 0);
+  if (data.length < 5) throw new DecodeError(`${data.length} bytes, shorter than a compact packet`, 0);
   const end = data.length - 2;
   if (crc16(data, 0, end) !== u16(data, end)) throw new DecodeError('CRC mismatch (damaged packet)', end);
   const tag = data[0];
-  if (tag & ~(COMPACT | 7 | C_EXPLICIT | C_POSITION | C_RESTART)) throw new DecodeError(`tag ${tag} sets undefined bits`, 0);
+  if (tag & ~(COMPACT | 7 | C_EXPLICIT | C_POSITION | C_RESTART | C_USUAL)) throw new DecodeError(`tag ${tag} sets undefined bits`, 0);
   const body = data.subarray(0, end);
   let [stream, pos] = readVarint(body, 1, 5, 'the stream id');
   if (pos >= body.length) throw new DecodeError('the packet ends before its sequence byte', pos);
   const low = body[pos];
+  const cursor = cursorOf(stream);
+  if (!cursor) throw new DecodeError(`a compact packet of stream ${stream} before its stream header`, 0);
   let frames;
-  [frames, pos] = readVarint(body, pos + 1, 3, 'the frame count');
+  if (tag & C_USUAL) {
+    if (!cursor.usualFrames) throw new DecodeError(`the usual frame count of stream ${stream}, whose header gives none`, 0);
+    [frames, pos] = [cursor.usualFrames, pos + 1];
+  } else {
+    [frames, pos] = readVarint(body, pos + 1, 3, 'the frame count');
+  }
   let sequence;
   let first;
   if (tag & C_EXPLICIT) {
     [sequence, pos] = readVarint(body, pos, 5, 'the sequence number');
     [first, pos] = readVarint(body, pos, 5, 'the first frame');
   }
-  const cursor = cursorOf(stream);
-  if (!cursor) throw new DecodeError(`a compact packet of stream ${stream} before its stream header`, 0);
   if (!(tag & C_EXPLICIT) && !cursor.synced) throw new DecodeError(`stream ${stream}: a packet before the first keyframe received`, 0);
   if (tag & C_EXPLICIT) {
     if ((sequence & 0xff) !== low || sequence > 0xffffffff) throw new DecodeError(`sequence ${sequence} does not end in byte ${low}`, 0);
@@ -137,7 +144,7 @@ export class Reader {
   read(data) {
     const p = data.length && data[0] & COMPACT ? parseCompact(data, (s) => this.cursors.get(s)) : parseFull(data);
     if (p.kind === HEADER) {
-      if (!this.cursors.has(p.stream)) this.cursors.set(p.stream, new Cursor(p.codec, false));
+      if (!this.cursors.has(p.stream)) this.cursors.set(p.stream, new Cursor(p.codec, false, p.frames));
     } else {
       if (!this.cursors.has(p.stream)) this.cursors.set(p.stream, new Cursor(p.codec));
       this.cursors.get(p.stream).advance(p);

@@ -293,6 +293,11 @@ class Codec:
         raise NotImplementedError
 
     # ----- streaming --------------------------------------------------------------------
+    def packet_frames(self, fps: float) -> int:
+        """The frames every packet of this codec's stream codes but a stream's last, or 0
+        where they vary (a live stream's header says it, so its packets need not)."""
+        return 0
+
     def decoder_tables(self, skeleton: Skeleton) -> dict:
         """What a decoder written in another language needs beyond the config and the
         skeleton: tables this codec derives from them by numerics it could not redo bit for

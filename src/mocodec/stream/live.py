@@ -131,7 +131,8 @@ class LiveEncoder:
         self.sent_position: tuple[float, float, float] | None = None  # the root position last sent
 
     def header(self, timestamp_us: int | None = None) -> Packet:
-        return header_packet(self.stream, self.info, now_us() if timestamp_us is None else timestamp_us)
+        ts = now_us() if timestamp_us is None else timestamp_us
+        return header_packet(self.stream, self.info, ts, self.codec.packet_frames(self.fps))
 
     def push(self, frames: np.ndarray, timestamp_us: int | None = None) -> list[Packet]:
         frames = checked_frames(self.codec.id, self.skeleton, frames)
@@ -212,6 +213,7 @@ class LiveEncoder:
             self.position if sends else (self.sent_position or self.position),
             compact=self.compact,
             sends_position=sends,
+            usual_frames=self.codec.packet_frames(self.fps),
         )
         self.sequence = (self.sequence + 1) & 0xFFFFFFFF
         self.out_frames += frames

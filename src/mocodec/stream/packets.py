@@ -65,9 +65,10 @@ _U16 = struct.Struct("<H")
 _BATCH = struct.Struct("<2sI")
 _POSITION = struct.Struct("<3h")
 COMPACT = 0x80  # the tag bit of a compact data packet (a full packet starts with "M")
-# compact tags: the full sequence number and first frame follow; the position follows; flag RESTART
-C_EXPLICIT, C_POSITION, C_RESTART = 8, 16, 32
-COMPACT_MIN = 6
+# compact tags: the full sequence number and first frame follow; the position follows; flag RESTART;
+# the frame count is the stream's usual one (its header's), not sent
+C_EXPLICIT, C_POSITION, C_RESTART, C_USUAL = 8, 16, 32, 64
+COMPACT_MIN = 5
 OVERHEAD = _FIELDS.size + _CRC.size
 #: Where the timestamp, stream id and sequence number sit in a packet (read in bulk by the load test).
 STREAM_OFFSET, SEQUENCE_OFFSET, TIMESTAMP_OFFSET = 6, 10, 14
@@ -87,6 +88,7 @@ class Packet:
     position: tuple[float, float, float] = (0.0, 0.0, 0.0)
     compact: bool = False  # a data packet's wire form: compact (to_compact) or full
     sends_position: bool = True  # a compact packet carries ``position`` (else the receiver keeps the last)
+    usual_frames: int = 0  # a data packet: its stream's usual frame count, which its header gives
 
     @property
     def keyframe(self) -> bool:
@@ -145,13 +147,15 @@ class Packet:
         """The compact wire form of a data packet (docs/formats.md): a tag byte, the stream id
         and frame count as varints, the sequence number's low byte, on keyframes and restarts
         the full sequence number and first frame, the root position when it is sent (3 x i16,
-        cm), the payload, and a CRC-16 (CCITT) of all of it: 6 bytes around the payload for an
-        ongoing stream. The receiver keeps, per stream, what the omitted fields follow from
-        (:class:`Cursor`)."""
+        cm), the payload, and a CRC-16 (CCITT) of all of it: 5 bytes around the payload for an
+        ongoing stream whose packets code the usual frame count its header gives (6 else). The
+        receiver keeps, per stream, what the omitted fields follow from (:class:`Cursor`)."""
         explicit = self.restart or self.sequence == 0
+        usual = self.usual_frames > 0 and self.frames == self.usual_frames
         tag = COMPACT | (self.flags & 7) | (C_EXPLICIT if explicit else 0) | (C_POSITION if self.sends_position else 0)
-        tag |= C_RESTART if self.flags & RESTART else 0
-        out = bytearray([tag]) + varint.pack(self.stream) + bytes([self.sequence & 0xFF]) + varint.pack(self.frames)
+        tag |= (C_RESTART if self.flags & RESTART else 0) | (C_USUAL if usual else 0)
+        out = bytearray([tag]) + varint.pack(self.stream) + bytes([self.sequence & 0xFF])
+        out += b"" if usual else varint.pack(self.frames)
         if explicit:
             out += varint.pack(self.sequence) + varint.pack(self.first_frame)
         if self.sends_position:
@@ -162,14 +166,21 @@ class Packet:
 
 @dataclass
 class Cursor:
-    """What a receiver keeps per stream to read its compact packets: the codec (from the
-    stream header), the next sequence number and frame, the last root position."""
+    """What a receiver keeps per stream to read its compact packets: the codec and the usual
+    frame count (from the stream header), the next sequence number and frame, the last root
+    position."""
 
     codec: str
     next_sequence: int = 0
     next_frame: int = 0
     position: tuple[float, float, float] = (0.0, 0.0, 0.0)
     synced: bool = True  # a receiver that joined mid-stream waits for a keyframe
+    usual_frames: int = 0  # the header's frame count of a full packet (0: every packet says its own)
+
+    @classmethod
+    def of_header(cls, header: Packet, synced: bool = True) -> Cursor:
+        """The cursor a stream's header packet starts (its frames field: the usual frame count)."""
+        return cls(header.codec, synced=synced, usual_frames=header.frames)
 
     def advance(self, p: Packet) -> None:
         """Past ``p``, unless it lies behind (a duplicate or a late packet)."""
@@ -190,22 +201,29 @@ def _parse_compact(data: bytes, where: str, cursor_of: Callable[[int], Cursor | 
     if binascii.crc_hqx(data[:-2], 0xFFFF) != _U16.unpack_from(data, len(data) - 2)[0]:
         raise CorruptStreamError(f"{where}: byte {len(data) - 2}: CRC mismatch (damaged packet)")
     tag, body = data[0], data[:-2]
-    if tag & ~(COMPACT | 7 | C_EXPLICIT | C_POSITION | C_RESTART):
+    if tag & ~(COMPACT | 7 | C_EXPLICIT | C_POSITION | C_RESTART | C_USUAL):
         raise CorruptStreamError(f"{where}: byte 0: tag {tag:#04x} sets bits this version does not define")
     try:
         stream, pos = varint.unpack(body, 1, 5)
         if pos >= len(body):
             raise ValueError(f"ends at byte {pos}")
         low = body[pos]
-        frames, pos = varint.unpack(body, pos + 1, 3)
+        cursor = cursor_of(stream) if cursor_of is not None else None
+        if cursor is None:
+            raise CorruptStreamError(f"{where}: a compact packet of stream {stream} before its stream header")
+        if tag & C_USUAL:
+            if not cursor.usual_frames:
+                raise CorruptStreamError(
+                    f"{where}: byte 0: the usual frame count of stream {stream}, whose header gives none"
+                )
+            frames, pos = cursor.usual_frames, pos + 1
+        else:
+            frames, pos = varint.unpack(body, pos + 1, 3)
         if tag & C_EXPLICIT:
             sequence, pos = varint.unpack(body, pos, 5)
             first, pos = varint.unpack(body, pos, 5)
     except ValueError as e:
         raise CorruptStreamError(f"{where}: {e}") from None
-    cursor = cursor_of(stream) if cursor_of is not None else None
-    if cursor is None:
-        raise CorruptStreamError(f"{where}: a compact packet of stream {stream} before its stream header")
     if not tag & C_EXPLICIT and not cursor.synced:
         raise OutOfSync(f"{where}: stream {stream}: a packet before the first keyframe received")
     if tag & C_EXPLICIT:
@@ -237,6 +255,7 @@ def _parse_compact(data: bytes, where: str, cursor_of: Callable[[int], Cursor | 
         position,
         compact=True,
         sends_position=bool(tag & C_POSITION),
+        usual_frames=cursor.usual_frames,
     )
 
 
@@ -294,7 +313,7 @@ class Reader:
     def read(self, data: bytes | memoryview, where: str = "packet") -> Packet:
         p = parse(data, where, self.cursors.get)
         if p.kind == HEADER:
-            self.cursors.setdefault(p.stream, Cursor(p.codec, synced=False))
+            self.cursors.setdefault(p.stream, Cursor.of_header(p, synced=False))
         else:
             cursor = self.cursors.setdefault(p.stream, Cursor(p.codec))
             cursor.advance(p)
@@ -354,8 +373,10 @@ class StreamInfo:
             raise CorruptStreamError(f"{where}: does not parse ({type(e).__name__}: {e})") from None
 
 
-def header_packet(stream: int, info: StreamInfo, timestamp_us: int = 0) -> Packet:
-    return Packet(stream, 0, timestamp_us, info.codec["codec"], 0, 0, info.to_payload(), kind=HEADER)
+def header_packet(stream: int, info: StreamInfo, timestamp_us: int = 0, usual_frames: int = 0) -> Packet:
+    """A stream's header packet; its frames field is the frame count of the stream's full
+    packets (0: they vary), which compact packets then need not send."""
+    return Packet(stream, 0, timestamp_us, info.codec["codec"], 0, usual_frames, info.to_payload(), kind=HEADER)
 
 
 # ----- batches ----------------------------------------------------------------------------------

@@ -162,7 +162,7 @@ class _Cursors:
             cursor.advance(p)
             self.pending[p.stream] = cursor
         else:
-            self.pending[p.stream] = Cursor(p.codec)
+            self.pending[p.stream] = Cursor.of_header(p)
         return p
 
     def _cursor(self, stream: int) -> Cursor | None:
@@ -171,7 +171,8 @@ class _Cursors:
         state = self.room.streams.get(stream)
         if state is None:
             return None
-        return Cursor(state.header.packet.codec, state.next_sequence, state.next_frame, state.position)
+        header = state.header.packet
+        return Cursor(header.codec, state.next_sequence, state.next_frame, state.position, usual_frames=header.frames)
 
 
 @dataclass

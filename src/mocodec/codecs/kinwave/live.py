@@ -447,6 +447,9 @@ class KinwaveLiveCodec(Codec):
         layers = self.config["layers"]
         return period, [k * period // layers for k in range(layers)]
 
+    def packet_frames(self, fps: float) -> int:  # type: ignore[override]
+        return packet_frames(fps)
+
     def decoder_tables(self, skeleton: Skeleton) -> dict:
         """Each layer's base step codes (:func:`base_codes`, base layer first): the convex
         allocation's result, which a decoder elsewhere cannot recompute exactly."""

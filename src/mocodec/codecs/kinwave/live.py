@@ -447,7 +447,7 @@ class KinwaveLiveCodec(Codec):
         layers = self.config["layers"]
         return period, [k * period // layers for k in range(layers)]
 
-    def packet_frames(self, fps: float) -> int:  # type: ignore[override]
+    def packet_frames(self, fps: float) -> int:
         return packet_frames(fps)
 
     def decoder_tables(self, skeleton: Skeleton) -> dict:

@@ -175,7 +175,7 @@ class KinwaveCodec(Codec):
     def _encode_for(self, motion: Motion, output_skeleton: Skeleton) -> bytes:
         """A leading rest pose (:func:`.payload.rest_kind`) is a flag, the other frames the
         body, where frame 0 then holds the bound; else the whole motion is the body."""
-        kind = rest_kind(motion.skeleton, motion.channels) if self.config["keyframes"] else 0
+        kind = rest_kind(motion) if self.config["keyframes"] else 0
         if kind:
             body = BoundSearch(self, Motion(motion.skeleton, motion.fps, motion.channels[1:]), output_skeleton).run()
             if kind != REST or self._rest_holds(

@@ -288,14 +288,14 @@ def apply_patches(out: np.ndarray, steps: np.ndarray, frames: np.ndarray, patche
         out[:, frames] += patches * (steps * trendwave.KEYFRAME_QUANTUM)
 
 
-def rest_kind(skeleton: Skeleton, channels: np.ndarray) -> int:
-    """Whether frame 0 of ``channels (T, C)`` is the skeleton's rest pose, which exporters
-    write before a take (a bind pose): every rotation exactly 0, the translations frame 1's
-    (REST) or all 0 (REST_AT_ZERO), and frame 1 not so. Such a frame costs a flag instead of a
-    keyframe and the wavelet starts after it; 0 if not."""
-    if not Motion(skeleton, 1.0, channels[:2]).starts_at_rest:
+def rest_kind(motion: Motion) -> int:
+    """Whether frame 0 of ``motion`` is its skeleton's rest pose, which exporters write before
+    a take (a bind pose, :attr:`Motion.starts_at_rest`), with the translations of frame 1
+    (REST) or all 0 (REST_AT_ZERO). Such a frame costs a flag instead of a keyframe and the
+    wavelet starts after it; 0 if not."""
+    if not motion.starts_at_rest:
         return 0
-    rot = skeleton.rotation_mask
+    channels, rot = motion.channels, motion.skeleton.rotation_mask
     if np.array_equal(channels[0, ~rot], channels[1, ~rot]):
         return REST
     return REST_AT_ZERO if not channels[0, ~rot].any() else 0

@@ -82,6 +82,21 @@ def shell_errors(
     return JointErrors(out)
 
 
+def worst_error(
+    skeleton: Skeleton,
+    positions_cm: np.ndarray,
+    quats: np.ndarray,
+    decoded_positions_cm: np.ndarray,
+    decoded_quats: np.ndarray,
+    measure: str,
+) -> float:
+    """The worst error (cm) a max bound of ``measure`` limits: with "shell" that of
+    :func:`shell_errors`, else the largest joint distance."""
+    if measure == "shell":
+        return shell_errors(skeleton, positions_cm, quats, decoded_positions_cm, decoded_quats).max
+    return joint_errors(positions_cm, decoded_positions_cm).max
+
+
 @numba.njit(cache=True)
 def _shell_kernel(pos, quat, dpos, dquat, joints, d, out):
     """For each frame and bone joint: max over k of |dp + d (R'_k - R_k)|, with R_k the k-th

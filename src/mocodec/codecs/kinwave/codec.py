@@ -58,7 +58,7 @@ from mocodec.codecs.registry import register
 from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.formats import varint
 from mocodec.kinematics import forward_kinematics
-from mocodec.metrics.pose import shell_errors
+from mocodec.metrics.pose import worst_error
 from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
@@ -194,9 +194,7 @@ class KinwaveCodec(Codec):
         cm = 100.0 / motion.skeleton.units_per_metre
         p0, q0 = forward_kinematics(motion.skeleton, motion.channels[:1])
         p1, q1 = forward_kinematics(output_skeleton, rest_pose(output_skeleton, REST, frame1)[None])
-        if self.config["error_measure"] == "shell":
-            return float(shell_errors(motion.skeleton, p0 * cm, q0, p1 * cm, q1).max) <= bound
-        return float(np.linalg.norm((p1 - p0) * cm, axis=2).max()) <= bound
+        return worst_error(motion.skeleton, p0 * cm, q0, p1 * cm, q1, self.config["error_measure"]) <= bound
 
     # ----- decoding -----------------------------------------------------------------------
     def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:

@@ -54,7 +54,7 @@ from mocodec.coding.entropy import binarycoder as bc
 from mocodec.errors import CodecError, CorruptStreamError, OutOfStepError
 from mocodec.formats import varint
 from mocodec.kinematics import channel_plan, forward_kinematics
-from mocodec.metrics.pose import shell_errors
+from mocodec.metrics.pose import worst_error
 from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
@@ -625,9 +625,7 @@ class _LiveEncoder(StreamEncoder):
     def _error(self, goal: tuple[np.ndarray, np.ndarray], decoded: np.ndarray) -> float:
         p0, q0 = goal
         p1, q1 = forward_kinematics(self.skeleton, decoded)
-        if self.codec.config["error_measure"] == "shell":
-            return float(shell_errors(self.skeleton, p0 * self.cm, q0, p1 * self.cm, q1).max)
-        return float(np.linalg.norm((p1 - p0) * self.cm, axis=2).max())
+        return worst_error(self.skeleton, p0 * self.cm, q0, p1 * self.cm, q1, self.codec.config["error_measure"])
 
     def _fit(self, k: int, values, goal, orders, stride: int, retries: int, cells: _Cells):
         """(integers, coded frames, cells, offset, worst error) of layer ``k`` of the packet at

@@ -113,6 +113,7 @@ class LiveEncoder:
         tables = codec.decoder_tables(skeleton)
         self.info = StreamInfo(skeleton, fps, codec.get_config(), name, {"decoder": tables} if tables else {})
         self.refresh = refresh_frames(codec, fps, keyframe_s)
+        self.usual_frames = codec.packet_frames(fps)  # the header says it once
         self.primer_frames = max(int(round(PRIMER_S * fps)), 1)
         self.recent = (
             np.zeros((0, skeleton.num_channels))
@@ -132,7 +133,7 @@ class LiveEncoder:
 
     def header(self, timestamp_us: int | None = None) -> Packet:
         ts = now_us() if timestamp_us is None else timestamp_us
-        return header_packet(self.stream, self.info, ts, self.codec.packet_frames(self.fps))
+        return header_packet(self.stream, self.info, ts, self.usual_frames)
 
     def push(self, frames: np.ndarray, timestamp_us: int | None = None) -> list[Packet]:
         frames = checked_frames(self.codec.id, self.skeleton, frames)
@@ -213,7 +214,7 @@ class LiveEncoder:
             self.position if sends else (self.sent_position or self.position),
             compact=self.compact,
             sends_position=sends,
-            usual_frames=self.codec.packet_frames(self.fps),
+            usual_frames=self.usual_frames,
         )
         self.sequence = (self.sequence + 1) & 0xFFFFFFFF
         self.out_frames += frames

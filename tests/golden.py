@@ -112,8 +112,12 @@ def write(codec_id: str) -> None:
     c, motion = codec(codec_id), clip()
     body = c.encode(motion)
     decoded = c.decode(body, motion.skeleton, motion.num_frames, motion.fps, trusted=True).channels
+    revision = {"revision": c.revision} if c.revision > 1 else {}
     (folder / "config.json").write_text(
-        json.dumps({"codec": codec_id, "knobs": CONFIGS[codec_id], "input": "07_03.amc frames 0-119"}, indent=1) + "\n"
+        json.dumps(
+            {"codec": codec_id, "knobs": CONFIGS[codec_id], **revision, "input": "07_03.amc frames 0-119"}, indent=1
+        )
+        + "\n"
     )
     (folder / "encoded.bin").write_bytes(body)
     np.save(folder / "decoded.npy", decoded)

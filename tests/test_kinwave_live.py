@@ -236,3 +236,49 @@ def test_the_stream_header_carries_the_base_codes_the_decoder_derives(walk_bvh):
     info = StreamInfo.from_payload(LiveEncoder(codec, walk_bvh.skeleton, walk_bvh.fps, 0).header(0).payload)
     tables = info.extra["decoder"]["base_codes"]
     assert tables == [base_codes(walk_bvh.skeleton, b, "joint").tolist() for b in (4.0, 2.0, 1.0)]
+
+
+def test_each_channel_takes_the_predictor_that_missed_its_decoded_frames_less(walk_amc):
+    # a ramp: the straight line misses nothing, the last value misses the slope each frame,
+    # and each miss counts half as much one frame later
+    ramp = np.array([[0.0, 5.0], [2.0, 5.0], [4.0, 5.0], [6.0, 5.0]])
+    misses = np.zeros((2, 2))
+    live._update_misses(misses, ramp[:2].copy(), 2, 1, 1, ramp[2:].copy())
+    assert misses[:, 0].tolist() == [2.0 * 0.5 + 2.0, 0.0]
+    assert misses[:, 1].tolist() == [0.0, 0.0]  # a constant channel: both exact
+    layer = live._Layer(walk_amc.skeleton, 1.0, "joint")
+    layer.misses[:, :2] = misses
+    orders = layer.orders()
+    assert orders[:2].tolist() == [2, 1]  # a tie goes to the last value
+    assert (orders[2:] == 1).all()  # nothing decoded yet
+
+
+def test_a_steady_turn_costs_about_what_standing_still_does(walk_amc):
+    # every channel still but one angle turning 1 degree a frame: the decoded frames make both
+    # ends switch that channel to the straight line, after which its integers are zero
+    still = np.repeat(walk_amc.channels[:1], 240, axis=0)
+    turning = still.copy()
+    turning[:, 3] += np.arange(240) * 1.0
+    codec = get_codec("kinwave-live")
+    sizes = []
+    for channels in (still, turning):
+        motion = walk_amc.with_channels(channels)
+        body = codec.encode(motion)
+        decoded = codec.decode(body, motion.skeleton, motion.num_frames, motion.fps)
+        assert _frame_errors(motion, decoded.channels).max() <= 1.0 + 1e-9
+        sizes.append(len(body))
+    assert sizes[1] < sizes[0] + 30
+
+
+def test_data_of_another_format_revision_is_refused():
+    from mocodec.codecs import codec_from_untrusted
+
+    config = get_codec("kinwave-live").get_config()
+    assert config["revision"] == 2
+    for revision in (None, 1, 3):
+        older = {k: v for k, v in config.items() if k != "revision"}
+        if revision is not None:
+            older["revision"] = revision
+        with pytest.raises(CorruptStreamError, match="format revision"):
+            codec_from_untrusted(older, "stream header")
+    assert "revision" not in get_codec("kinwave").get_config()  # revision 1 is not written

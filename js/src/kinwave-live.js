@@ -1,7 +1,8 @@
 // The kinwave-live decoder (codecs/kinwave/live.py): per layer, the packet's head and integers
 // from the binary arithmetic decoder (contexts carried across packets), then closed-loop
-// reconstruction with the encoder's arithmetic (order-2 or order-1 prediction, clamped to the
-// quantiser cell of the layer below, plus the integer times the channel's step). Step tables come
+// reconstruction with the encoder's arithmetic (order-2 or order-1 prediction, each channel's
+// order chosen from its decoded frames, clamped to the quantiser cell of the layer below, plus
+// the integer times the channel's step). Format revision 2 only. Step tables come
 // from the stream header (`extra.decoder.base_codes`), as the convex allocation that makes them
 // cannot be redone bit for bit here.
 import { BinaryDecoder, MAX_CLASS, fixedState, newState } from './binarycoder.js';
@@ -17,6 +18,8 @@ const ROUNDING = 0.25;
 const MAX_OFFSET = 127;
 const MAX_LAYERS = 4;
 const RESTART_ZERO = 65536 - 65536 / 16; // the restart flag's fixed probability of a 0
+const MISS_DECAY = 0.5;
+export const REVISION = 2; // the format revision this decoder reads (live.KinwaveLiveCodec.revision)
 
 
 // Frames per packet: as many as fit in 50 ms, at least one (live.packet_frames).
@@ -78,6 +81,7 @@ class Layer {
     this.gap = 1;
     this.offset = 0;
     this.trust = new Uint8Array(channels).fill(1);
+    this.misses = [new Float64Array(channels), new Float64Array(channels)];
   }
 
   steps(offset) {
@@ -102,8 +106,6 @@ function layerTables(skeleton) {
     }
   });
   const channels = skeleton.numChannels;
-  const channelJoint = new Int32Array(channels);
-  first.forEach((f, k) => channelJoint.fill(k, f, f + count[k]));
   const channelCode = new Int32Array(channels);
   const translation = new Uint8Array(channels);
   let rotationJoints = 0;
@@ -130,14 +132,16 @@ function layerTables(skeleton) {
   translation.forEach((t, c) => { if (t) channelCode[c] = rotationJoints; });
   const codesPerLayer = rotationJoints + (hasTranslation ? 1 : 0);
   return {
-    first: Int32Array.from(first), count: Int32Array.from(count), channels, channelJoint, channelCode,
-    translation, guess, codesPerLayer, contexts: HEAD_CONTEXTS + 2 * first.length + channels * PER_CHANNEL,
+    first: Int32Array.from(first), count: Int32Array.from(count), channels, channelCode,
+    translation, guess, codesPerLayer, contexts: HEAD_CONTEXTS + first.length + channels * PER_CHANNEL,
   };
 }
 
 export class KinwaveLiveDecoder {
   // `config`: the codec config of the stream header; `decoderTables`: its extra.decoder.
   constructor(skeleton, fps, config, decoderTables) {
+    const revision = config?.revision ?? 1;
+    if (revision !== REVISION) throw new DecodeError(`kinwave-live data of format revision ${JSON.stringify(revision)}; this decoder reads revision ${REVISION}`);
     const knobs = config?.knobs && typeof config.knobs === 'object' ? config.knobs : {};
     const layers = knobs.layers ?? 1;
     if (!Number.isInteger(layers) || layers < 1 || layers > MAX_LAYERS) throw new DecodeError(`kinwave-live: ${layers} layers`);
@@ -217,13 +221,13 @@ export class KinwaveLiveDecoder {
     cells = cells ?? new Cells(frames, C);
     const coded = frames / stride;
     const ints = new Float64Array(coded * C);
-    const orders = this.#ints(dec, layer, coded, ints);
+    this.#ints(dec, layer, coded, ints);
     this.lastInts.push(ints);
     const steps = layer.steps(offset);
     const decoded = new Float64Array(coded * C);
     const cellLo = new Float64Array(coded * C);
     const cellHi = new Float64Array(coded * C);
-    this.#predict(layer, stride, steps, orders, cells, ints, decoded, cellLo, cellHi);
+    this.#predict(layer, stride, steps, cells, ints, decoded, cellLo, cellHi);
     const out = fill(layer.history[1], decoded, coded, C, stride);
     this.#advance(layer, decoded, coded, stride, offset, steps, cells);
     for (let t = 0; t < coded; t++) {
@@ -234,21 +238,19 @@ export class KinwaveLiveDecoder {
     return [out, cells];
   }
 
-  // live._decode_ints: per joint its predictor order and "any nonzero" flag, then its integers.
+  // live._decode_ints: per joint its "any nonzero" flag, then its integers.
   #ints(dec, layer, coded, ints) {
     const { first, count, channels: C } = this.tables;
     const J = first.length;
     const H = HEAD_CONTEXTS;
     const st = layer.state;
     const last = layer.lastNonzero;
-    const orders = new Int32Array(J);
     for (let j = 0; j < J; j++) {
-      orders[j] = dec.get(st, H + j) === 1 ? 2 : 1;
-      if (dec.get(st, H + J + j) === 1) {
+      if (dec.get(st, H + j) === 1) {
         for (let t = 0; t < coded; t++) {
           let neighbour = 0;
           for (let c = first[j]; c < first[j] + count[j]; c++) {
-            const base = H + 2 * J + c * PER_CHANNEL;
+            const base = H + J + c * PER_CHANNEL;
             const v = dec.getInt(st, base + 3 * last[c] + neighbour, base + 7, ULEN, base + 7 + ULEN, base + 6);
             ints[t * C + c] = v;
             last[c] = v !== 0 ? 1 : 0;
@@ -259,13 +261,12 @@ export class KinwaveLiveDecoder {
         last.fill(0, first[j], first[j] + count[j]);
       }
     }
-    return orders;
   }
 
   // live._predict with given integers: the same arithmetic, operation for operation.
-  #predict(layer, stride, steps, orders, cells, ints, out, cellLo, cellHi) {
+  #predict(layer, stride, steps, cells, ints, out, cellLo, cellHi) {
     const C = this.tables.channels;
-    const channelJoint = this.tables.channelJoint;
+    const [miss1, miss2] = layer.misses;
     const prev0 = Float64Array.from(layer.history[0]);
     const prev1 = Float64Array.from(layer.history[1]);
     let n = layer.countHistory;
@@ -276,7 +277,7 @@ export class KinwaveLiveDecoder {
       const row = cells.row(t, stride);
       for (let c = 0; c < C; c++) {
         let pred = 0.0;
-        if (n >= 2 && orders[channelJoint[c]] === 2) pred = prev1[c] + (prev1[c] - prev0[c]) * ratio;
+        if (n >= 2 && miss2[c] < miss1[c]) pred = prev1[c] + (prev1[c] - prev0[c]) * ratio;
         else if (n >= 1) pred = prev1[c];
         if (layer.trust[c]) pred = Math.min(Math.max(pred, cells.lo[row + c]), cells.hi[row + c]);
         const i = ints[t * C + c];
@@ -294,7 +295,8 @@ export class KinwaveLiveDecoder {
     }
   }
 
-  // live._advance: the layer's next history, and which channels trust the cells below.
+  // live._advance: the layer's next history, the predictors' misses, and which channels trust
+  // the cells below.
   #advance(layer, decoded, coded, stride, offset, steps, cells) {
     const C = this.tables.channels;
     for (let c = 0; c < C; c++) {
@@ -311,6 +313,7 @@ export class KinwaveLiveDecoder {
       }
       if (told) layer.trust[c] = inside ? 1 : 0;
     }
+    updateMisses(layer, decoded, coded, stride);
     if (coded >= 2) {
       layer.history = [decoded.slice((coded - 2) * C, (coded - 1) * C), decoded.slice((coded - 1) * C)];
     } else {
@@ -320,6 +323,34 @@ export class KinwaveLiveDecoder {
     layer.countHistory = layer.started ? Math.min(layer.countHistory + coded, 2) : Math.min(coded, 2);
     layer.started = true;
     layer.offset = offset;
+  }
+}
+
+// live._update_misses: each channel's recent miss of the order-1 and order-2 predictions of the
+// decoded coded frames, from the layer's history before them; the same arithmetic.
+function updateMisses(layer, decoded, coded, stride) {
+  const C = layer.tables.channels;
+  const [miss1, miss2] = layer.misses;
+  const prev0 = Float64Array.from(layer.history[0]);
+  const prev1 = Float64Array.from(layer.history[1]);
+  let n = layer.started ? layer.countHistory : 0;
+  let g = layer.gap;
+  for (let t = 0; t < coded; t++) {
+    if (n >= 2) {
+      const ratio = stride / g;
+      for (let c = 0; c < C; c++) {
+        const v = decoded[t * C + c];
+        const line = prev1[c] + (prev1[c] - prev0[c]) * ratio;
+        miss1[c] = miss1[c] * MISS_DECAY + Math.abs(v - prev1[c]);
+        miss2[c] = miss2[c] * MISS_DECAY + Math.abs(v - line);
+      }
+    }
+    for (let c = 0; c < C; c++) {
+      prev0[c] = prev1[c];
+      prev1[c] = decoded[t * C + c];
+    }
+    n = Math.min(n + 1, 2);
+    g = stride;
   }
 }
 

@@ -145,3 +145,20 @@ test('stream headers with hostile values end in DecodeError or decode', async ()
     }
   }
 });
+
+test('a stream of another format revision is refused with a DecodeError that says so', async () => {
+  const { inflateSync, deflateSync } = await import('node:zlib');
+  const { stream } = await fixture('walk');
+  const reader = new Reader();
+  const packets = splitBatch(stream).map((raw) => reader.read(raw));
+  const doc = JSON.parse(new TextDecoder().decode(inflateSync(packets[0].payload)));
+  assert.equal(doc.codec.revision, 2);
+  for (const revision of [undefined, 1, 3]) {
+    const older = structuredClone(doc);
+    if (revision === undefined) delete older.codec.revision;
+    else older.codec.revision = revision;
+    const info = await parseStreamHeader(deflateSync(new TextEncoder().encode(JSON.stringify(older))));
+    const decoder = new StreamDecoder(info);
+    assert.throws(() => decoder.push(packets[1]), (e) => e instanceof DecodeError && /format revision/.test(e.message));
+  }
+});

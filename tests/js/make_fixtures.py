@@ -75,8 +75,8 @@ def live_fixture(name, clip, frames, fps, knobs, keyframe_s) -> dict[str, bytes]
     read: list[np.ndarray] = []
     original = kinwave_live._decode_ints
 
-    def recording(st, data, coded, first, count, state, last_nonzero, ints, orders):
-        result = original(st, data, coded, first, count, state, last_nonzero, ints, orders)
+    def recording(st, data, coded, first, count, state, last_nonzero, ints):
+        result = original(st, data, coded, first, count, state, last_nonzero, ints)
         read.append(ints.copy())
         return result
 

@@ -193,6 +193,9 @@ class Codec:
     variable_delay: ClassVar[bool] = False  # the delay depends on the motion (000 ch. 8)
     baseline: ClassVar[bool] = False  # a generic float compressor, for comparison
     native_decoder: ClassVar[bool] = False  # hands the body to a C library: untrusted bodies decode in a child
+    # the revision of the codec's body and packet format; a config above 1 says it, and a reader
+    # refuses another (docs/formats.md)
+    revision: ClassVar[int] = 1
 
     def __init__(self, **knobs):
         specs = {k.name: k for k in self.knobs}
@@ -207,13 +210,24 @@ class Codec:
 
     # ----- configuration ----------------------------------------------------------------
     def get_config(self) -> dict:
-        return {"codec": self.id, "knobs": dict(self.config)}
+        config = {"codec": self.id, "knobs": dict(self.config)}
+        return config | {"revision": self.revision} if self.revision > 1 else config
 
     @classmethod
     def from_config(cls, config: dict) -> Codec:
         if config.get("codec") != cls.id:
             raise CodecError(f"config is for codec {config.get('codec')!r}, not {cls.id!r}")
+        cls.check_revision(config)
         return cls(**config.get("knobs", {}))
+
+    @classmethod
+    def check_revision(cls, config: dict) -> None:
+        """CodecError unless ``config`` is of the format revision this build reads (none given: 1)."""
+        revision = config.get("revision", 1)
+        if revision != cls.revision:
+            raise CodecError(
+                f"{cls.id} data of format revision {revision!r}; this mocodec reads revision {cls.revision}"
+            )
 
     def with_knob(self, name: str, value) -> Codec:
         return type(self)(**{**self.config, name: value})

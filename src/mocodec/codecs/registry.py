@@ -72,6 +72,7 @@ def codec_from_untrusted(config: object, where: str, local_files: dict[str, str]
         raise CorruptStreamError(f"{where}: the codec's knobs must be an object of strings, numbers and booleans")
     try:
         cls = codec_class(config["codec"])
+        cls.check_revision(config)
         paths = {k.name for k in cls.knobs if k.path}
         chosen = {k: v for k, v in knobs.items() if k not in paths}
         chosen.update({k: v for k, v in (local_files or {}).items() if k in paths and v})

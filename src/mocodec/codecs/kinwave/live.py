@@ -7,9 +7,10 @@ they are in, with the pose representation of offline kinwave:
    (:func:`~mocodec.codecs.shared.closedloop.code_down_tree`), so a joint's orientation error is
    its own quantisation error and errors do not pile up along the chains.
 2. Each channel is predicted from its last two decoded frames (order 2, a straight line, or
-   order 1, the last value; chosen per joint and packet on the targets) and the difference is
-   quantised with its joint's step: the decoded angle is within half a step of its target on
-   every frame, whatever came before.
+   order 1, the last value) and the difference is quantised with its joint's step: the decoded
+   angle is within half a step of its target on every frame, whatever came before. Both ends
+   choose the order per channel from the decoded frames alone (:func:`_update_misses`: the
+   one that missed them less lately), so the choice costs no bits.
 3. The steps' shape per joint is the convex allocation of :mod:`.kinalloc` for the max joint
    error; one scale offset per packet (1/8 octave) multiplies it. The encoder decodes each
    packet bit-exactly and checks the max joint (or shell) error of every frame against
@@ -31,10 +32,10 @@ they are in, with the pose representation of offline kinwave:
 
 A layer's section: the arithmetic-coded stream alone (:func:`~mocodec.coding.entropy.binarycoder.finish_short`,
 its always-zero first byte left out): whether the packet is full (else its frame count), the
-change of the scale offset, then per joint its predictor order and its "any nonzero" flag and
-its integers. A packet of one layer is its section; of several, each section but the top one
-after its length (a varint), and a top section that is empty is one zero byte, so that a packet
-cut after a lower section is told apart.
+change of the scale offset, the stride, then per joint its "any nonzero" flag and its
+integers. A packet of one layer is its section; of several, each section but the top one after
+its length (a varint), and a top section that is empty is one zero byte, so that a packet cut
+after a lower section is told apart.
 """
 
 from __future__ import annotations
@@ -67,6 +68,7 @@ COARSER_BELOW = 0.9  # a packet under this share of the bound lets the next star
 MAX_OFFSET = 127
 MAX_LAYERS = 4
 ROUNDING = 0.25  # the quantiser's rounding offset (0.5: to the nearest; less: a dead zone)
+MISS_DECAY = 0.5  # what a predictor's miss weighs one coded frame later (exact in binary)
 
 
 def packet_frames(fps: float) -> int:
@@ -115,6 +117,31 @@ def _predict(targets, history, count, gap, stride, steps, order, trust, lo, hi, 
         g = stride
 
 
+@numba.njit(cache=True)
+def _update_misses(misses, history, count, gap, stride, coded):
+    """After a layer's packet, on both ends: each channel's recent miss of the order-1 and the
+    order-2 prediction (``misses (2, C)``) of its decoded coded frames ``coded (T, C)``,
+    ``stride`` frames apart, from the last two before them (``history``, ``count`` valid,
+    ``gap`` apart), each miss |decoded - prediction| added to the last times MISS_DECAY."""
+    T, k = coded.shape
+    prev0 = history[0].copy()
+    prev1 = history[1].copy()
+    n = count
+    g = gap
+    for t in range(T):
+        if n >= 2:
+            ratio = stride / g
+            for c in range(k):
+                line = prev1[c] + (prev1[c] - prev0[c]) * ratio
+                misses[0, c] = misses[0, c] * MISS_DECAY + abs(coded[t, c] - prev1[c])
+                misses[1, c] = misses[1, c] * MISS_DECAY + abs(coded[t, c] - line)
+        for c in range(k):
+            prev0[c] = prev1[c]
+            prev1[c] = coded[t, c]
+        n = min(n + 1, 2)
+        g = stride
+
+
 def _fill(previous: np.ndarray, coded: np.ndarray, stride: int) -> np.ndarray:
     """All frames of a packet from its coded ones (every ``stride``-th, the last included) and
     the frame before the packet, by straight lines (the same arithmetic on both ends)."""
@@ -140,7 +167,7 @@ _HEAD_CONTEXTS = 2 + 3 * PER_CHANNEL  # full flag, frames, offset change, stride
 
 
 def _contexts(channels: int, joints: int) -> int:
-    return _HEAD_CONTEXTS + 2 * joints + channels * PER_CHANNEL
+    return _HEAD_CONTEXTS + joints + channels * PER_CHANNEL
 
 
 @numba.njit(inline="always")
@@ -179,11 +206,11 @@ def _restart_context():
 
 
 @numba.njit(cache=True)
-def _code_packet(ints, frames, full, offset_change, stride, first, count, orders, state, buf, last_nonzero, restart):
+def _code_packet(ints, frames, full, offset_change, stride, first, count, state, buf, last_nonzero, restart):
     """Arithmetic-code one packet: whether the layer restarts here (``restart`` 0 or 1, in a
     fixed context, so that a decoder out of step reads it; -1: the stream has no refresh and no
     flag), its head (:func:`_put_head`), then per joint (channels ``first[j]`` to
-    ``first[j] + count[j]``) its predictor order and an "any nonzero" flag, then the integers
+    ``first[j] + count[j]``) an "any nonzero" flag, then the integers
     ``(T, C)`` of its coded frames. Returns the bytes written."""
     st = bc.encoder_state()
     if restart >= 0:
@@ -194,18 +221,17 @@ def _code_packet(ints, frames, full, offset_change, stride, first, count, orders
     _put_head(st, buf, state, frames, full, offset_change, stride)
     H = _HEAD_CONTEXTS
     for j in range(J):
-        bc.put(st, buf, state, H + j, 1 if orders[j] == 2 else 0)
         nonzero = 0
         for t in range(T):
             for c in range(first[j], first[j] + count[j]):
                 if ints[t, c] != 0:
                     nonzero = 1
-        bc.put(st, buf, state, H + J + j, nonzero)
+        bc.put(st, buf, state, H + j, nonzero)
         if nonzero:
             for t in range(T):
                 neighbour = 0
                 for c in range(first[j], first[j] + count[j]):
-                    base = H + 2 * J + c * per
+                    base = H + J + c * per
                     z = base + 3 * last_nonzero[c] + neighbour
                     bc.put_int(st, buf, state, ints[t, c], z, base + 7, ULEN, base + 7 + ULEN, base + 6)
                     last_nonzero[c] = 1 if ints[t, c] != 0 else 0
@@ -230,17 +256,16 @@ def _decode_head(st, data, full, state):
 
 
 @numba.njit(cache=True)
-def _decode_ints(st, data, frames, first, count, state, last_nonzero, ints, orders):
+def _decode_ints(st, data, frames, first, count, state, last_nonzero, ints):
     J = first.size
     per = PER_CHANNEL
     H = _HEAD_CONTEXTS
     for j in range(J):
-        orders[j] = 2 if bc.get(st, data, state, H + j) == 1 else 1
-        if bc.get(st, data, state, H + J + j) == 1:
+        if bc.get(st, data, state, H + j) == 1:
             for t in range(frames):
                 neighbour = 0
                 for c in range(first[j], first[j] + count[j]):
-                    base = H + 2 * J + c * per
+                    base = H + J + c * per
                     z = base + 3 * last_nonzero[c] + neighbour
                     v = bc.get_int(st, data, state, z, base + 7, ULEN, base + 7 + ULEN, base + 6)
                     ints[t, c] = v
@@ -253,9 +278,9 @@ def _decode_ints(st, data, frames, first, count, state, last_nonzero, ints, orde
 
 
 @lru_cache(maxsize=64)
-def _joint_tables(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _joint_tables(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """What every layer of a stream on ``skeleton`` shares (read-only): each joint with channels'
-    first channel and count, each channel's joint among them, and the guess before the first
+    first channel and count, and the guess before the first
     frame: a translation channel of a joint below the root at its offset (a MotionBuilder export
     repeats every offset), everything else zero."""
     joints = [j for j in range(len(skeleton)) if skeleton.joints[j].channels]
@@ -267,7 +292,7 @@ def _joint_tables(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray, np.ndarra
         for axis, c in enumerate(plan.pos_index[j]):
             if c >= 0:
                 guess[c] = plan.offsets[j, axis]
-    tables = (first, count, np.repeat(np.arange(len(joints)), count), guess)
+    tables = (first, count, guess)
     for table in tables:
         table.setflags(write=False)
     return tables
@@ -276,12 +301,13 @@ def _joint_tables(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray, np.ndarra
 class _Layer:
     """What both ends keep for one layer of a stream: the joints with channels (their first
     channel and count) and the layer's base step codes for its bound, fixed; the arithmetic
-    coder's state, the last two coded frames, the last packet's scale offset and which
-    channels trust the cells of the layers below, from its (re)start on."""
+    coder's state, the last two coded frames, each channel's recent misses of both predictors,
+    the last packet's scale offset and which channels trust the cells of the layers below, from
+    its (re)start on."""
 
     def __init__(self, skeleton: Skeleton, bound_cm: float, measure: str):
         self.skeleton = skeleton
-        self.first, self.count, self.channel_joint, self.guess = _joint_tables(skeleton)
+        self.first, self.count, self.guess = _joint_tables(skeleton)
         self.base_codes = base_codes(skeleton, bound_cm, measure)
         self.restart()
 
@@ -295,6 +321,12 @@ class _Layer:
         self.gap = 1  # frames between them
         self.offset = 0  # the last packet's scale offset
         self.trust = np.ones(self.skeleton.num_channels, dtype=np.bool_)
+        self.misses = np.zeros((2, self.skeleton.num_channels))
+
+    def orders(self) -> np.ndarray:
+        """Each channel's predictor for the next packet: 2 (a straight line) where it missed
+        the decoded frames less lately than 1 (the last value), else 1."""
+        return np.where(self.misses[1] < self.misses[0], 2, 1)
 
     def steps(self, offset: int) -> np.ndarray:
         codes = np.clip(self.base_codes.astype(np.int64) + offset, 0, 255).astype(np.uint8)
@@ -419,6 +451,7 @@ class KinwaveLiveCodec(Codec):
     )
     quality = QualityKnob("max_error_cm", higher_is_better=False, log_scale=True)
     streaming = True
+    revision = 2  # 2: the predictor orders are no longer sent (both ends choose them, _update_misses)
 
     @property
     def delay_frames(self) -> int:  # type: ignore[override]
@@ -491,7 +524,7 @@ def _section_data(section: bytes) -> np.ndarray:
     return np.frombuffer(b"\0" + bytes(section), dtype=np.uint8)
 
 
-def _reconstruct(layer: _Layer, ints: np.ndarray, orders: np.ndarray, offset: int, stride: int, cells: _Cells):
+def _reconstruct(layer: _Layer, ints: np.ndarray, offset: int, stride: int, cells: _Cells):
     """The decoded coded frames ``(T', C)`` of one layer of a packet from its integers, the
     layer's previous coded frames and the cells of the layers below, and this layer's cells:
     the arithmetic of the encoder's :func:`_predict`."""
@@ -504,7 +537,7 @@ def _reconstruct(layer: _Layer, ints: np.ndarray, orders: np.ndarray, offset: in
         layer.gap,
         stride,
         layer.steps(offset),
-        orders[layer.channel_joint],
+        layer.orders(),
         layer.trust,
         *cells.at(stride),
         out,
@@ -517,13 +550,15 @@ def _reconstruct(layer: _Layer, ints: np.ndarray, orders: np.ndarray, offset: in
 
 
 def _advance(layer: _Layer, coded: np.ndarray, stride: int, offset: int, cells: _Cells) -> None:
-    """Both ends after a packet: its last two coded frames are the layer's next history, and
-    a channel trusts the cells of the layers below while its decoded values fall in them."""
+    """Both ends after a packet: its last two coded frames are the layer's next history, the
+    predictors' misses take them in, and a channel trusts the cells of the layers below while
+    its decoded values fall in them."""
     lo, hi = cells.at(stride)
     told = np.isfinite(lo)
     slack = 0.75 * layer.steps(offset)
     inside = (coded >= lo - slack) & (coded <= hi + slack)
     layer.trust = np.where(told.any(axis=0), (inside | ~told).all(axis=0), layer.trust)
+    _update_misses(layer.misses, layer.history, layer.count_history if layer.started else 0, layer.gap, stride, coded)
     if len(coded) >= 2:
         layer.history, layer.gap = coded[-2:].copy(), stride
     else:
@@ -571,24 +606,13 @@ class _LiveEncoder(StreamEncoder):
         self.pending = self.pending[:0]
         return [packet]
 
-    @staticmethod
-    def _orders(layer: _Layer, values: np.ndarray) -> np.ndarray:
-        """Per joint, the predictor (1 or 2) that misses the packet's original values least."""
-        hist = np.vstack((layer.history, values))[max(0, 2 - layer.count_history) :]
-        if len(hist) < 3:
-            return np.ones(layer.first.size, dtype=np.int64)
-        miss1 = np.abs(hist[2:] - hist[1:-1]).sum(axis=0)
-        miss2 = np.abs(hist[2:] - 2.0 * hist[1:-1] + hist[:-2]).sum(axis=0)
-        better = np.add.reduceat(miss2 - miss1, layer.first) < 0
-        return np.where(better, 2, 1).astype(np.int64)
-
-    def _code(self, layer: _Layer, values, goal, orders, offset: int, stride: int, cells: _Cells):
+    def _code(self, layer: _Layer, values, goal, offset: int, stride: int, cells: _Cells):
         """The integers, decoded coded frames and cells of one layer of a packet at ``offset``
         and ``stride`` (every ``stride``-th frame coded, down the tree), and all its decoded
         frames; ``goal`` is the packet's original positions and orientations (forward
         kinematics, once)."""
         steps = layer.steps(offset)
-        order = orders[layer.channel_joint]
+        order = layer.orders()
         coded = np.ascontiguousarray(values[stride - 1 :: stride])
         ints = np.zeros(coded.shape, dtype=np.int64)
         decoded, cell_lo, cell_hi = np.zeros(coded.shape), np.zeros(coded.shape), np.zeros(coded.shape)
@@ -627,12 +651,12 @@ class _LiveEncoder(StreamEncoder):
         p1, q1 = forward_kinematics(self.skeleton, decoded)
         return worst_error(self.skeleton, p0 * self.cm, q0, p1 * self.cm, q1, self.codec.config["error_measure"])
 
-    def _fit(self, k: int, values, goal, orders, stride: int, retries: int, cells: _Cells):
+    def _fit(self, k: int, values, goal, stride: int, retries: int, cells: _Cells):
         """(integers, coded frames, cells, offset, worst error) of layer ``k`` of the packet at
         ``stride``, from the layer's current offset and finer until its bound holds, or None."""
         offset = self.offsets[k]
         for _ in range(retries):
-            ints, coded, coded_cells, frames = self._code(self.layers[k], values, goal, orders, offset, stride, cells)
+            ints, coded, coded_cells, frames = self._code(self.layers[k], values, goal, offset, stride, cells)
             worst = self._error(goal, frames)
             if worst <= self.bounds[k]:
                 return ints, coded, coded_cells, offset, worst
@@ -641,7 +665,7 @@ class _LiveEncoder(StreamEncoder):
             offset = max(offset - FINER, -MAX_OFFSET)
         return None
 
-    def _bytes(self, layer: _Layer, ints, frames, offset, stride, orders, restart: int, trial: bool) -> bytes:
+    def _bytes(self, layer: _Layer, ints, frames, offset, stride, restart: int, trial: bool) -> bytes:
         state, last = (layer.state.copy(), layer.last_nonzero.copy()) if trial else (layer.state, layer.last_nonzero)
         buf = bc.buffer_for(bc.int_decisions(ints) + 2 * layer.first.size + 64)
         n = _code_packet(
@@ -652,7 +676,6 @@ class _LiveEncoder(StreamEncoder):
             stride,
             layer.first,
             layer.count,
-            orders,
             state,
             buf,
             last,
@@ -683,22 +706,21 @@ class _LiveEncoder(StreamEncoder):
         layer = self.layers[k]
         if restart == 1:
             layer.restart()
-        orders = self._orders(layer, values)
         sparse = layer.started and len(values) == self.size
         best = None
         for stride in strides(len(values)) if sparse else [1]:
-            fit = self._fit(k, values, goal, orders, stride, MAX_RETRIES if stride == 1 else SPARSE_RETRIES, cells)
+            fit = self._fit(k, values, goal, stride, MAX_RETRIES if stride == 1 else SPARSE_RETRIES, cells)
             if fit is None:
                 continue
             ints, coded, coded_cells, offset, worst = fit
-            size = len(self._bytes(layer, ints, len(values), offset, stride, orders, restart, trial=True))
+            size = len(self._bytes(layer, ints, len(values), offset, stride, restart, trial=True))
             if best is None or size < best[0]:
                 best = (size, stride, ints, coded, coded_cells, offset, worst)
         if best is None:
             raise CodecError(f"kinwave-live cannot hold {self.bounds[k]:g} cm on a packet")
         _, stride, ints, coded, coded_cells, offset, worst = best
         self.offsets[k] = min(offset + 1, MAX_OFFSET) if worst < COARSER_BELOW * self.bounds[k] else offset
-        data = self._bytes(layer, ints, len(values), offset, stride, orders, restart, trial=False)
+        data = self._bytes(layer, ints, len(values), offset, stride, restart, trial=False)
         _advance(layer, coded, stride, offset, cells)
         cells.update(stride, *coded_cells)
         return data
@@ -772,11 +794,10 @@ class _LiveDecoder(StreamDecoder):
         cells = cells or _Cells(frames, self.skeleton.num_channels)
         coded_frames = frames // stride
         ints = np.zeros((coded_frames, self.skeleton.num_channels), dtype=np.int64)
-        orders = np.ones(layer.first.size, dtype=np.int64)
-        _decode_ints(st, data, coded_frames, layer.first, layer.count, layer.state, layer.last_nonzero, ints, orders)
+        _decode_ints(st, data, coded_frames, layer.first, layer.count, layer.state, layer.last_nonzero, ints)
         if np.abs(ints).max(initial=0) >= 1 << 40:
             raise CorruptStreamError("kinwave-live packet: an integer out of range (the data is damaged)")
-        coded, cell_lo, cell_hi = _reconstruct(layer, ints, orders, offset, stride, cells)
+        coded, cell_lo, cell_hi = _reconstruct(layer, ints, offset, stride, cells)
         out = _fill(layer.history[1], coded, stride)
         _advance(layer, coded, stride, offset, cells)
         cells.update(stride, cell_lo, cell_hi)

@@ -5,7 +5,9 @@ they are in, with the pose representation of offline kinwave:
 
 1. Joints are coded parents first, each against its parent's *decoded* orientation
    (:func:`~mocodec.codecs.shared.closedloop.code_down_tree`), so a joint's orientation error is
-   its own quantisation error and errors do not pile up along the chains.
+   its own quantisation error and errors do not pile up along the chains. A translation below
+   the root that moves restores its joint's position from its parent's decoded one; one that
+   stands still is coded as it is (:meth:`_LiveEncoder._retarget`).
 2. Each channel is predicted from its last two decoded frames (order 2, a straight line, or
    order 1, the last value) and the difference is quantised with its joint's step: the decoded
    angle is within half a step of its target on every frame, whatever came before. Both ends
@@ -69,6 +71,7 @@ MAX_OFFSET = 127
 MAX_LAYERS = 4
 ROUNDING = 0.25  # the quantiser's rounding offset (0.5: to the nearest; less: a dead zone)
 MISS_DECAY = 0.5  # what a predictor's miss weighs one coded frame later (exact in binary)
+STILL_CM = 1e-3  # a translation that moves less than this in a packet stands still
 
 
 def packet_frames(fps: float) -> int:
@@ -278,21 +281,23 @@ def _decode_ints(st, data, frames, first, count, state, last_nonzero, ints):
 
 
 @lru_cache(maxsize=64)
-def _joint_tables(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _joint_tables(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """What every layer of a stream on ``skeleton`` shares (read-only): each joint with channels'
-    first channel and count, and the guess before the first
-    frame: a translation channel of a joint below the root at its offset (a MotionBuilder export
-    repeats every offset), everything else zero."""
+    first channel and count, the guess before the first frame: a translation channel of a joint
+    below the root at its offset (a MotionBuilder export repeats every offset), everything else
+    zero; and which channels are such translations."""
     joints = [j for j in range(len(skeleton)) if skeleton.joints[j].channels]
     first = np.array([skeleton.channel_offsets[j] for j in joints], dtype=np.int64)
     count = np.array([len(skeleton.joints[j].channels) for j in joints], dtype=np.int64)
     guess = np.zeros(skeleton.num_channels)
+    shifts = np.zeros(skeleton.num_channels, dtype=bool)
     plan = channel_plan(skeleton)
     for j in range(1, len(skeleton)):
         for axis, c in enumerate(plan.pos_index[j]):
             if c >= 0:
                 guess[c] = plan.offsets[j, axis]
-    tables = (first, count, guess)
+                shifts[c] = True
+    tables = (first, count, guess, shifts)
     for table in tables:
         table.setflags(write=False)
     return tables
@@ -307,7 +312,7 @@ class _Layer:
 
     def __init__(self, skeleton: Skeleton, bound_cm: float, measure: str):
         self.skeleton = skeleton
-        self.first, self.count, self.guess = _joint_tables(skeleton)
+        self.first, self.count, self.guess, self.shifts = _joint_tables(skeleton)
         self.base_codes = base_codes(skeleton, bound_cm, measure)
         self.restart()
 
@@ -581,6 +586,7 @@ class _LiveEncoder(StreamEncoder):
         self.cm = 100.0 / skeleton.units_per_metre
         self.period, self.phases = codec.restart_frames(fps)
         self.frame = 0  # the first frame of the next packet
+        self.last_values: np.ndarray | None = None  # the last packet's last original frame
 
     def follow(self, previous: StreamEncoder) -> None:
         """Each layer's scale offset goes on from where the last stream left it (a restart codes
@@ -606,11 +612,11 @@ class _LiveEncoder(StreamEncoder):
         self.pending = self.pending[:0]
         return [packet]
 
-    def _code(self, layer: _Layer, values, goal, offset: int, stride: int, cells: _Cells):
+    def _code(self, layer: _Layer, values, goal, retarget, offset: int, stride: int, cells: _Cells):
         """The integers, decoded coded frames and cells of one layer of a packet at ``offset``
         and ``stride`` (every ``stride``-th frame coded, down the tree), and all its decoded
         frames; ``goal`` is the packet's original positions and orientations (forward
-        kinematics, once)."""
+        kinematics, once), ``retarget`` the channels the closed loop sets (:meth:`_retarget`)."""
         steps = layer.steps(offset)
         order = layer.orders()
         coded = np.ascontiguousarray(values[stride - 1 :: stride])
@@ -643,7 +649,7 @@ class _LiveEncoder(StreamEncoder):
             cell_lo[:, channels], cell_hi[:, channels] = c_lo, c_hi
             return out
 
-        closedloop.code_down_tree(self.skeleton, coded, np.ones(values.shape[1], dtype=bool), quats, code, True, pos)
+        closedloop.code_down_tree(self.skeleton, coded, retarget, quats, code, True, pos)
         return ints, decoded, (cell_lo, cell_hi), _fill(layer.history[1], decoded, stride)
 
     def _error(self, goal: tuple[np.ndarray, np.ndarray], decoded: np.ndarray) -> float:
@@ -651,12 +657,12 @@ class _LiveEncoder(StreamEncoder):
         p1, q1 = forward_kinematics(self.skeleton, decoded)
         return worst_error(self.skeleton, p0 * self.cm, q0, p1 * self.cm, q1, self.codec.config["error_measure"])
 
-    def _fit(self, k: int, values, goal, stride: int, retries: int, cells: _Cells):
+    def _fit(self, k: int, values, goal, retarget, stride: int, retries: int, cells: _Cells):
         """(integers, coded frames, cells, offset, worst error) of layer ``k`` of the packet at
         ``stride``, from the layer's current offset and finer until its bound holds, or None."""
         offset = self.offsets[k]
         for _ in range(retries):
-            ints, coded, coded_cells, frames = self._code(self.layers[k], values, goal, offset, stride, cells)
+            ints, coded, coded_cells, frames = self._code(self.layers[k], values, goal, retarget, offset, stride, cells)
             worst = self._error(goal, frames)
             if worst <= self.bounds[k]:
                 return ints, coded, coded_cells, offset, worst
@@ -683,10 +689,23 @@ class _LiveEncoder(StreamEncoder):
         )
         return buf[1:n].tobytes()  # the first byte is always 0
 
+    def _retarget(self, values: np.ndarray) -> np.ndarray:
+        """The channels whose targets the closed loop sets: every one but the translations below
+        the root that stand still through this packet (and since the last). A translation the
+        motion moves (the body's root under a dummy root) restores its joint's position from its
+        parent's decoded one; one that stands still (a MotionBuilder export's six channels on
+        every joint repeat the offsets) is coded as it is, nearly for free, rather than made to
+        carry its parents' quantisation errors in every frame."""
+        since = values[0] if self.last_values is None else self.last_values
+        moved = np.abs(values - since).max(axis=0) > STILL_CM / self.cm
+        self.last_values = values[-1]
+        return ~self.layers[0].shifts | moved
+
     def _packet(self, values: np.ndarray) -> bytes:
         goal = forward_kinematics(self.skeleton, values)
+        retarget = self._retarget(values)
         cells = _Cells(len(values), values.shape[1])
-        sections = [self._layer_packet(k, values, goal, cells) for k in range(len(self.layers))]
+        sections = [self._layer_packet(k, values, goal, retarget, cells) for k in range(len(self.layers))]
         self.frame += len(values)
         return join_layers(sections)
 
@@ -698,7 +717,7 @@ class _LiveEncoder(StreamEncoder):
         first = (self.phases[k] - self.frame) % self.period  # the packet's first restart frame
         return int(self.frame > 0 and first < frames)
 
-    def _layer_packet(self, k: int, values: np.ndarray, goal, cells: _Cells) -> bytes:
+    def _layer_packet(self, k: int, values: np.ndarray, goal, retarget, cells: _Cells) -> bytes:
         """Layer ``k`` of a packet: the cheapest stride that holds its bound on every frame,
         predicted within the cells of the layers below; the cells become its own. A layer that
         restarts here starts again from nothing: its history, contexts and scale offset."""
@@ -709,7 +728,7 @@ class _LiveEncoder(StreamEncoder):
         sparse = layer.started and len(values) == self.size
         best = None
         for stride in strides(len(values)) if sparse else [1]:
-            fit = self._fit(k, values, goal, stride, MAX_RETRIES if stride == 1 else SPARSE_RETRIES, cells)
+            fit = self._fit(k, values, goal, retarget, stride, MAX_RETRIES if stride == 1 else SPARSE_RETRIES, cells)
             if fit is None:
                 continue
             ints, coded, coded_cells, offset, worst = fit

@@ -6,18 +6,18 @@ deadreckoning, per source (CMU BVH and ASF/AMC at 120 fps, Bandai Namco at 30 fp
 
 Per clip: kbit/s of one codec stream's packets alone, and of the live stream as a sender sends
 it (stream/live.py: keyframes every second, each restarting the codec stream, and the compact
-packet framing, header packet left out); the coding delay (how long a packet holds its first
-frame back); the measured max and mean joint error of every decoded frame; for deadreckoning
-the threshold rate control finds for the bound (its delay: 3 frames), for offline kinwave the
-whole clip at the bound (its delay: the 256-frame segment); and the resync time under random
-packet loss (seeded): for every lost packet, from its first frame until the receiver decodes the
-stream exactly again (the next keyframe it gets). With ``--refresh-s`` the codec stream refreshes
-itself instead (kinwave-live's ``refresh_s``: each layer restarts on its own, spread over that
-time) and keyframes come only every minute. Then the layered stream (``--layers``, each
-layer twice the bound of the next, the top one at the bound): per layer, kbit/s of the live
-stream a relay sends a viewer that gets that layer and those below it (framing included), and
-the max and mean joint error of its decoding. Prints the medians per source, and the 99th
-percentile of the resync times.
+packet framing with each packet's length in its batch, header packet left out); the coding delay
+(how long a packet holds its first frame back); the measured max and mean joint error of every
+decoded frame; for deadreckoning the threshold rate control finds for the bound (its delay: 3
+frames), for offline kinwave the whole clip at the bound (its delay: the 256-frame segment); and
+the resync time under random packet loss (seeded): for every lost packet, from its first frame
+until the receiver decodes the stream exactly again (the next keyframe it gets). With
+``--refresh-s`` the codec stream refreshes itself instead (kinwave-live's ``refresh_s``: each
+layer restarts on its own, spread over that time) and keyframes come only every minute. Then the
+layered stream (``--layers``, each layer twice the bound of the next, the top one at the bound):
+per layer, kbit/s of the live stream a relay sends a viewer that gets that layer and those below
+it (framing included), and the max and mean joint error of its decoding. Prints the medians per
+source, and the 99th percentile of the resync times.
 """
 
 from __future__ import annotations
@@ -31,6 +31,7 @@ from common import shared_sources
 from mocodec import load, ratecontrol
 from mocodec.codecs import get_codec
 from mocodec.codecs.kinwave import live
+from mocodec.formats import varint
 from mocodec.kinematics import forward_kinematics
 from mocodec.stream.live import LiveDecoder, stream_clip
 from mocodec.stream.packets import HEADER, StreamInfo
@@ -41,6 +42,13 @@ def joint_errors(motion, channels) -> np.ndarray:
     p0, _ = forward_kinematics(sk, motion.channels)
     p1, _ = forward_kinematics(sk, channels)
     return np.linalg.norm(p1 - p0, axis=2) * cm
+
+
+def framing_bytes(p) -> int:
+    """What a packet costs around its payload on the wire: its compact frame and its length in
+    the batch that carries it (one message may hold many avatars' packets)."""
+    size = len(p.to_bytes())
+    return size - len(p.payload) + len(varint.pack(size))
 
 
 NO_KEYFRAMES_S = 60.0  # keyframes of a stream that refreshes itself
@@ -77,7 +85,7 @@ def layer_rows(motion, bound: float, layers: int, keyframe_s: float, refresh_s: 
     packets = enc.push(motion.channels) + enc.flush()
     sent = stream_clip(motion, codec, keyframe_s=keyframe_s)
     stream = [p for p in sent if p.kind != HEADER]
-    framing = sum(len(p.to_bytes()) - len(p.payload) for p in stream)
+    framing = sum(map(framing_bytes, stream))
     kbps, max_cm, mean_cm = [], [], []
     for keep in range(1, layers + 1):
         dec = codec.decoder(motion.skeleton, motion.fps)
@@ -116,13 +124,13 @@ def measure(
     payload = sum(map(len, packets))
     sent = stream_clip(motion, codec, keyframe_s=keyframe_s)
     stream = [p for p in sent if p.kind != HEADER]
-    framing = sum(len(p.to_bytes()) - len(p.payload) for p in stream) / len(stream)
+    framing = sum(map(framing_bytes, stream)) / len(stream)
     offline = get_codec("kinwave", max_error_cm=bound)
     offline_bytes = len(offline.encode(motion))
     dr = ratecontrol.tune(get_codec("deadreckoning"), motion, "max_error_cm", bound, whole_file=False)
     return {
         "live_kbps": payload * 8 / seconds / 1000,
-        "framed_kbps": sum(len(p.to_bytes()) for p in stream) * 8 / seconds / 1000,
+        "framed_kbps": sum(len(p.payload) + framing_bytes(p) for p in stream) * 8 / seconds / 1000,
         "framing_bytes": framing,
         "delay_ms": 1000 * (live.packet_frames(motion.fps) - 1) / motion.fps,
         "max_cm": float(err.max()),

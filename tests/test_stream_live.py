@@ -60,6 +60,22 @@ def test_batch_split_and_bulk_fields():
         split_batch(b"XX" + batch[2:])
 
 
+def test_a_batch_spends_a_byte_on_each_short_packets_length_and_refuses_what_it_cannot_hold():
+    packets = [bytes(n) for n in (0, 1, 127, 128, 16383, 16384)]
+    batch = pack_batch(packets)
+    assert len(batch) == 2 + 1 + (1 + 1 + 1 + 2 + 2 + 3) + sum(map(len, packets))
+    assert [bytes(r) for r in split_batch(batch)] == packets
+    assert pack_batch([]) == b"Mb\0" and split_batch(b"Mb\0") == []
+    with pytest.raises(CorruptStreamError, match="format 1"):
+        split_batch(b"MB" + (1).to_bytes(4, "little") + (3).to_bytes(4, "little") + b"abc")
+    with pytest.raises(CorruptStreamError, match="announced"):  # refused before anything is allocated
+        split_batch(b"Mb\xff\xff\xff\xff\x0f" + bytes(8))
+    with pytest.raises(CorruptStreamError, match="inside a number"):
+        split_batch(b"Mb\x02\x80\x80")
+    with pytest.raises(CorruptStreamError, match="longer than 4 bytes"):
+        split_batch(b"Mb\x01\x80\x80\x80\x80\x01" + bytes(3))
+
+
 def test_stream_header_carries_skeleton_and_codec(walk_bvh):
     info = StreamInfo(walk_bvh.skeleton, walk_bvh.fps, get_codec("dpcm").get_config(), "walker")
     back = StreamInfo.from_payload(info.to_payload())

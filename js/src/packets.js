@@ -20,19 +20,21 @@ const C_USUAL = 64; // the frame count is the stream's usual one (its header's f
 const C_POSITION = 16;
 const C_RESTART = 32;
 
-// The packets of a batch message ("MB", u32 count, u32 lengths, packets), as views into `data`.
+// The packets of a batch message ("Mb", the packet count and each packet's length as varints,
+// then the packets: format 2), as views into `data`.
 export function splitBatch(data) {
-  if (data.length < 6) throw new DecodeError(`${data.length} bytes, shorter than a batch header`, 0);
-  if (data[0] !== 0x4d || data[1] !== 0x42) throw new DecodeError('expected the batch magic "MB"', 0);
-  const count = u32(data, 2);
-  let pos = 6 + 4 * count;
-  if (pos > data.length) throw new DecodeError(`${count} packets announced, the message is ${data.length} bytes`, 2);
+  if (data.length < 3) throw new DecodeError(`${data.length} bytes, shorter than a batch header`, 0);
+  if (data[0] === 0x4d && data[1] === 0x42) throw new DecodeError('a batch of format 1 (u32 lengths); this decoder reads format 2', 0);
+  if (data[0] !== 0x4d || data[1] !== 0x62) throw new DecodeError('expected the batch magic "Mb"', 0);
+  let [count, pos] = readVarint(data, 2, 5, 'the packet count');
+  if (count > data.length - pos) throw new DecodeError(`${count} packets announced, the message is ${data.length} bytes`, 2);
+  const lengths = new Array(count);
+  for (let k = 0; k < count; k++) [lengths[k], pos] = readVarint(data, pos, 4, `packet ${k}'s length`);
   const out = [];
   for (let k = 0; k < count; k++) {
-    const length = u32(data, 6 + 4 * k);
-    if (pos + length > data.length) throw new DecodeError(`packet ${k} of ${length} bytes runs past the message`, 6 + 4 * k);
-    out.push(data.subarray(pos, pos + length));
-    pos += length;
+    if (pos + lengths[k] > data.length) throw new DecodeError(`packet ${k} of ${lengths[k]} bytes runs past the message`, pos);
+    out.push(data.subarray(pos, pos + lengths[k]));
+    pos += lengths[k];
   }
   if (pos !== data.length) throw new DecodeError(`packet lengths add up to ${pos} bytes, the message is ${data.length}`, 2);
   return out;

@@ -162,3 +162,9 @@ test('a stream of another format revision is refused with a DecodeError that say
     assert.throws(() => decoder.push(packets[1]), (e) => e instanceof DecodeError && /format revision/.test(e.message));
   }
 });
+
+test('a batch of format 1 (u32 lengths) is refused as such', () => {
+  const old = Uint8Array.from([0x4d, 0x42, 1, 0, 0, 0, 3, 0, 0, 0, 1, 2, 3]);
+  assert.throws(() => splitBatch(old), (e) => e instanceof DecodeError && /format 1/.test(e.message));
+  assert.deepEqual(splitBatch(Uint8Array.from([0x4d, 0x62, 2, 1, 2, 9, 8, 7])).map((p) => [...p]), [[9], [8, 7]]);
+});

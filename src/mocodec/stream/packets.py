@@ -10,8 +10,8 @@ A packet is one codec packet with what a network needs around it::
 
 All integers little-endian; 48 bytes around the payload. A *stream header* packet (kind 0)
 carries the skeleton, frame rate and codec configuration as compressed JSON, so a receiver
-needs nothing else. A *batch* (one WebSocket message) is "MB", a count u32, the packet lengths
-u32 each, then the packets: the relay sends each viewer one per tick.
+needs nothing else. A *batch* (one WebSocket message) is "Mb", the packet count and each
+packet's length as varints, then the packets: the relay sends each viewer one per tick.
 
 An embedded (truncatable) codec's packets travel from the sender to the relay with a *cut
 table*: where each channel's stream ends, so the relay cuts every viewer's share by slicing,
@@ -39,7 +39,8 @@ from mocodec.formats.container import inflate_capped, skeleton_from_dict, skelet
 from mocodec.skeleton import Skeleton
 
 MAGIC = b"MP"
-BATCH_MAGIC = b"MB"
+BATCH_MAGIC = b"Mb"  # a batch of format 2 (varint lengths)
+OLD_BATCH_MAGIC = b"MB"  # format 1 (u32 lengths), no longer read
 VERSION = 1
 HEADER, DATA = 0, 1
 KEYFRAME, END, CUTS, RESTART = 1, 2, 4, 8  # RESTART: the codec stream's base restarts here
@@ -62,7 +63,6 @@ CODEC_NUMBERS = (  # a streaming codec's number in packets: append only
 _FIELDS = struct.Struct("<2sBBBBIIQIH3fI")
 _CRC = struct.Struct("<I")
 _U16 = struct.Struct("<H")
-_BATCH = struct.Struct("<2sI")
 _POSITION = struct.Struct("<3h")
 COMPACT = 0x80  # the tag bit of a compact data packet (a full packet starts with "M")
 # compact tags: the full sequence number and first frame follow; the position follows; flag RESTART;
@@ -384,8 +384,13 @@ def pack_batch(packets: list[bytes], lengths: np.ndarray | None = None) -> bytes
     """One message holding ``packets`` (already serialised); ``lengths``: their lengths, when
     the caller has them in an array already."""
     if lengths is None:
-        lengths = np.fromiter(map(len, packets), dtype="<u4", count=len(packets))
-    return _BATCH.pack(BATCH_MAGIC, len(packets)) + lengths.astype("<u4", copy=False).tobytes() + b"".join(packets)
+        lengths = np.fromiter(map(len, packets), dtype=np.int64, count=len(packets))
+    return BATCH_MAGIC + varint.pack(len(packets)) + varint.pack_array(lengths) + b"".join(packets)
+
+
+def is_batch(data: bytes | memoryview) -> bool:
+    """Whether a message is a batch (of either format: a format 1 batch is refused as such)."""
+    return bytes(data[:2]) in (BATCH_MAGIC, OLD_BATCH_MAGIC)
 
 
 def truncated(p: Packet, data: bytes, size: int) -> bytes:
@@ -412,15 +417,18 @@ def split_batch(data: bytes | memoryview, where: str = "batch") -> list[memoryvi
 
 def batch_offsets(data: bytes | memoryview, where: str = "batch") -> np.ndarray:
     """Where each packet of a batch starts, and where the last ends: ``(count + 1,)``."""
-    if len(data) < _BATCH.size:
-        raise CorruptStreamError(f"{where}: {len(data)} bytes, shorter than a batch header")
-    magic, count = _BATCH.unpack_from(data)
+    magic = bytes(data[:2])
+    if magic == OLD_BATCH_MAGIC:
+        raise CorruptStreamError(f"{where}: byte 0: a batch of format 1 (u32 lengths); this mocodec reads format 2")
     if magic != BATCH_MAGIC:
-        raise CorruptStreamError(f"{where}: byte 0: expected the batch magic {BATCH_MAGIC!r}, got {bytes(magic)!r}")
-    start = _BATCH.size + 4 * count
-    if start > len(data):
-        raise CorruptStreamError(f"{where}: byte 2: {count} packets announced, the message is {len(data)} bytes")
-    lengths = np.frombuffer(data, dtype="<u4", count=count, offset=_BATCH.size).astype(np.int64)
+        raise CorruptStreamError(f"{where}: byte 0: expected the batch magic {BATCH_MAGIC!r}, got {magic!r}")
+    try:
+        count, pos = varint.unpack(data, 2, 5)
+        if count > len(data) - pos:  # a length takes a byte at least
+            raise ValueError(f"{count} packets announced, the message is {len(data)} bytes")
+        lengths, start = varint.unpack_array(data, pos, count)
+    except ValueError as e:
+        raise CorruptStreamError(f"{where}: {e}") from None
     offsets = start + np.concatenate(([0], np.cumsum(lengths)))
     if offsets[-1] != len(data):
         raise CorruptStreamError(f"{where}: packet lengths add up to {offsets[-1]} bytes, the message is {len(data)}")

@@ -62,7 +62,6 @@ from mocodec.errors import MocodecError
 from mocodec.scene import bandwidth_scores, split_budget
 from mocodec.stream import tokens
 from mocodec.stream.packets import (
-    BATCH_MAGIC,
     CUTS,
     DATA,
     END,
@@ -70,6 +69,7 @@ from mocodec.stream.packets import (
     Cursor,
     Packet,
     StreamInfo,
+    is_batch,
     pack_batch,
     parse,
     split_batch,
@@ -432,7 +432,7 @@ class Relay:
     def _ingest(self, room: Room, data: bytes, owner: object) -> None:
         """The packets of one sender message into the room; Closing if it is malformed."""
         try:
-            raw = split_batch(data) if data[:2] == BATCH_MAGIC else [memoryview(data)]
+            raw = split_batch(data) if is_batch(data) else [memoryview(data)]
             cursors = _Cursors(room)
             packets = [cursors.read(r, f"packet {k}") for k, r in enumerate(raw)]
         except MocodecError as e:

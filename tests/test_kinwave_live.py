@@ -296,3 +296,33 @@ def test_translations_that_stand_still_are_not_made_to_carry_their_parents_error
     decoded = codec.decode(body, six.skeleton, six.num_frames, six.fps)
     assert _frame_errors(six, decoded.channels).max() <= 1.0 + 1e-9
     assert len(body) < 1.4 * len(codec.encode(plain))  # 2.6x when they were re-aimed
+
+
+def test_keyframes_predicted_from_the_reference_pose_cost_less_and_decode_the_same(walk_bvh):
+    # a live stream primed with the clip carries its first frame in the header; each codec
+    # stream (a keyframe every 0.25 s) predicts its first frame from it, not from the rest pose
+    from mocodec.stream.live import LiveDecoder, LiveEncoder, clip_encoder
+    from mocodec.stream.packets import StreamInfo
+
+    clip = walk_bvh[:720]
+    codec = get_codec("kinwave-live", layers=2)
+    sizes = []
+    unprimed = LiveEncoder(codec, clip.skeleton, clip.fps, 0, 0.25)
+    for encoder, primed in ((unprimed, False), (clip_encoder(clip, codec, 0, 0.25), True)):
+        packets = [encoder.header(0)] + encoder.push(clip.channels, 0) + encoder.close(0)
+        info = StreamInfo.from_payload(packets[0].payload)
+        assert ("reference" in info.extra["decoder"]) == primed
+        receiver = LiveDecoder(info)
+        frames = np.concatenate([receiver.push(p) for p in packets[1:]])
+        assert _frame_errors(clip, frames).max() <= 1.0 + 1e-9
+        sizes.append(sum(len(p.payload) for p in packets[1:]))
+    assert sizes[1] < 0.97 * sizes[0]
+
+
+@pytest.mark.parametrize("reference", [[0.0] * 3, "pose", [True] * 132, [1e12] * 132, [float("nan")] * 132])
+def test_a_hostile_reference_pose_is_refused(walk_bvh, reference):
+    codec = get_codec("kinwave-live")
+    assert walk_bvh.skeleton.num_channels == 132
+    with pytest.raises(CorruptStreamError, match="reference"):
+        codec.for_stream(walk_bvh.skeleton, {"reference": reference})
+    assert codec.for_stream(walk_bvh.skeleton, {}) is codec and codec.for_stream(walk_bvh.skeleton, []) is codec

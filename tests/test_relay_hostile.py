@@ -201,3 +201,18 @@ def test_the_secret_comes_from_a_file_or_the_environment(tmp_path, capsys, monke
     monkeypatch.delenv("MOCODEC_RELAY_SECRET")
     assert main(["token", "--room", "r"]) == 2
     assert "--secret-file" in capsys.readouterr().err
+
+
+def test_a_header_with_a_hostile_reference_pose_closes_its_connection(walk_bvh):
+    header = stream_clip(walk_bvh[:10], get_codec("kinwave-live"))[0]
+    doc = json.loads(zlib.decompress(header.payload))
+    assert len(doc["extra"]["decoder"]["reference"]) == walk_bvh.skeleton.num_channels
+    doc["extra"]["decoder"]["reference"] = [1e12] * walk_bvh.skeleton.num_channels
+    message = Packet(7, 0, 0, "kinwave-live", 0, 6, zlib.compress(json.dumps(doc).encode()), kind=HEADER).to_bytes()
+
+    async def go():
+        async with serving() as url:
+            return await refused_with(url, pack_batch([message]))
+
+    code, reason = asyncio.run(go())
+    assert code == BAD_MESSAGE and "reference" in reason

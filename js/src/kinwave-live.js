@@ -4,7 +4,8 @@
 // order chosen from its decoded frames, clamped to the quantiser cell of the layer below, plus
 // the integer times the channel's step). Format revision 2 only. Step tables come
 // from the stream header (`extra.decoder.base_codes`), as the convex allocation that makes them
-// cannot be redone bit for bit here.
+// cannot be redone bit for bit here; so does the reference pose a codec stream's first frame is
+// predicted from, where the header gives one (`extra.decoder.reference`).
 import { BinaryDecoder, MAX_CLASS, fixedState, newState } from './binarycoder.js';
 import { readVarint } from './bytes.js';
 import { DecodeError, OutOfStepError } from './errors.js';
@@ -17,6 +18,7 @@ const HEAD_CONTEXTS = 2 + 3 * PER_CHANNEL;
 const ROUNDING = 0.25;
 const MAX_OFFSET = 127;
 const MAX_LAYERS = 4;
+const MAX_REFERENCE = 1e9; // live.MAX_REFERENCE
 const RESTART_ZERO = 65536 - 65536 / 16; // the restart flag's fixed probability of a 0
 const MISS_DECAY = 0.5;
 export const REVISION = 2; // the format revision this decoder reads (live.KinwaveLiveCodec.revision)
@@ -154,6 +156,14 @@ export class KinwaveLiveDecoder {
     this.size = packetFrames(fps);
     if (this.size * skeleton.numChannels > MAX_DECODED_VALUES) {
       throw new DecodeError(`kinwave-live: packets of ${this.size} frames of ${skeleton.numChannels} channels are over ${MAX_DECODED_VALUES} values`);
+    }
+    const reference = decoderTables.reference;
+    if (reference !== undefined) {
+      if (!Array.isArray(reference) || reference.length !== skeleton.numChannels
+        || reference.some((v) => typeof v !== 'number' || !Number.isFinite(v) || Math.abs(v) > MAX_REFERENCE)) {
+        throw new DecodeError(`kinwave-live: the stream header's reference pose must be ${skeleton.numChannels} numbers within ${MAX_REFERENCE}`);
+      }
+      this.tables = { ...this.tables, guess: Float64Array.from(reference) };
     }
     this.skeleton = skeleton;
     this.layers = codes.map((c) => new Layer(skeleton, c, this.tables));

@@ -312,13 +312,19 @@ class Codec:
         where they vary (a live stream's header says it, so its packets need not)."""
         return 0
 
-    def decoder_tables(self, skeleton: Skeleton) -> dict:
-        """What a decoder written in another language needs beyond the config and the
-        skeleton: tables this codec derives from them by numerics it could not redo bit for
-        bit (an optimiser's result). The live stream's header carries them
-        (``StreamInfo.extra["decoder"]``); this package's decoders derive their own. Empty for
-        most codecs."""
+    def decoder_tables(self, skeleton: Skeleton, primer: np.ndarray | None = None) -> dict:
+        """What a live stream's header carries for its decoders beyond the config and the
+        skeleton (``StreamInfo.extra["decoder"]``): tables this codec derives by numerics a
+        decoder in another language could not redo bit for bit (an optimiser's result), and
+        what it takes from ``primer`` (frames like the ones to come) for every codec stream of
+        the live stream (see :meth:`for_stream`). Empty for most codecs."""
         return {}
+
+    def for_stream(self, skeleton: Skeleton, tables: dict) -> Codec:
+        """This codec for one live stream whose header carries ``tables`` (from
+        :meth:`decoder_tables`; hostile on a receiver: checked, CorruptStreamError): itself for
+        most codecs."""
+        return self
 
     def encoder(self, skeleton: Skeleton, fps: float) -> StreamEncoder:
         raise CodecError(f"codec {self.id} does not stream")

@@ -109,17 +109,15 @@ class LiveEncoder:
             )
         if not keyframe_s > 0:
             raise CodecError(f"keyframe interval must be positive, got {keyframe_s}")
-        self.codec, self.skeleton, self.fps, self.stream = codec, skeleton, fps, stream
-        tables = codec.decoder_tables(skeleton)
+        primer = None if primer is None else checked_frames(codec.id, skeleton, primer)
+        tables = codec.decoder_tables(skeleton, primer)
+        self.codec = codec.for_stream(skeleton, tables)
+        self.skeleton, self.fps, self.stream = skeleton, fps, stream
         self.info = StreamInfo(skeleton, fps, codec.get_config(), name, {"decoder": tables} if tables else {})
         self.refresh = refresh_frames(codec, fps, keyframe_s)
         self.usual_frames = codec.packet_frames(fps)  # the header says it once
         self.primer_frames = max(int(round(PRIMER_S * fps)), 1)
-        self.recent = (
-            np.zeros((0, skeleton.num_channels))
-            if primer is None
-            else checked_frames(codec.id, skeleton, primer)[-self.primer_frames :]
-        )
+        self.recent = np.zeros((0, skeleton.num_channels)) if primer is None else primer[-self.primer_frames :]
         self.sequence = 0
         self.out_frames = 0  # frames the receiver has been told about
         self.in_group = 0  # input frames in the current codec stream
@@ -241,7 +239,8 @@ class LiveDecoder:
         if conceal not in ("hold", "extrapolate"):
             raise CodecError(f"concealment must be hold or extrapolate, got {conceal!r}")
         self.info = info
-        self.codec = codec_from_untrusted(info.codec, "stream header", local_files)
+        codec = codec_from_untrusted(info.codec, "stream header", local_files)
+        self.codec = codec.for_stream(info.skeleton, info.extra.get("decoder", {}))
         self.max_gap = max(min(int(MAX_CONCEAL_S * info.fps), MAX_CONCEAL_VALUES // info.skeleton.num_channels), 1)
         self.conceal = conceal
         self.decoder: StreamDecoder | None = None

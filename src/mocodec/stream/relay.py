@@ -290,7 +290,8 @@ def stream_setup(header_payload: bytes) -> tuple[StreamInfo, object]:
     """A stream header's contents and codec, parsed once for every avatar that sends the same
     header (a crowd of one kind joins at the cost of one)."""
     info = StreamInfo.from_payload(header_payload)
-    return info, codec_from_untrusted(info.codec, "stream header")
+    codec = codec_from_untrusted(info.codec, "stream header")
+    return info, codec.for_stream(info.skeleton, info.extra.get("decoder", {}))
 
 
 class Relay:

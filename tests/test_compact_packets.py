@@ -1,4 +1,4 @@
-"""The compact wire form of data packets (docs/formats.md): 5 bytes around the payload for an
+"""The compact wire form of data packets (docs/formats.md): 4 bytes around the payload for an
 ongoing stream of full packets (6 where packets vary in length), every field back at the
 receiver, losses and late packets placed right."""
 
@@ -30,15 +30,16 @@ def _same(a, b) -> bool:
     )
 
 
-def test_an_ongoing_stream_spends_at_most_5_bytes_a_packet(packets):
-    """kinwave-live's packets code 6 frames at 120 fps, which its header says once; the last
+def test_an_ongoing_stream_spends_4_bytes_a_packet(packets):
+    """kinwave-live's packets code 6 frames at 120 fps, which its header says once: a short
+    packet is a tag with the sequence number's low 6 bits, the stream id and the CRC; the last
     packet of the clip (fewer frames) says its own count."""
     assert packets[0].kind == HEADER and packets[0].frames == 6
     data = [p for p in packets if p.kind != HEADER and not p.keyframe and not p.sends_position]
-    assert data and all(len(p.to_bytes()) - len(p.payload) == (5 if p.frames == 6 else 6) for p in data)
+    assert data and all(len(p.to_bytes()) - len(p.payload) == (4 if p.frames == 6 else 6) for p in data)
     assert packets[-1].frames < 6
     framing = sum(len(p.to_bytes()) - len(p.payload) for p in packets[1:]) / len(packets[1:])
-    assert framing < 6.0  # keyframes and moves carry more, on average under 6 bytes
+    assert framing < 5.0  # keyframes and moves carry more, on average under 5 bytes
 
 
 def test_packets_of_varying_length_say_their_frame_count(walk_bvh):
@@ -55,8 +56,9 @@ def test_the_usual_frame_count_of_a_stream_without_one_is_refused(packets):
 
     reader = Reader()
     reader.read(replace(packets[0], frames=0).to_bytes())  # a header that gives no usual count
+    short = next(p for p in packets[2:] if not (p.restart or p.sends_position))
     with pytest.raises(CorruptStreamError, match="usual frame count"):
-        reader.read(packets[1].to_bytes())
+        reader.read(short.to_bytes())
 
 
 def test_every_field_comes_back(packets):
@@ -77,6 +79,9 @@ def test_lost_packets_are_counted_and_late_ones_placed_behind(packets):
     late = reader.read(packets[3].to_bytes())  # arrives after 5
     assert late.sequence == packets[3].sequence and late.first_frame == packets[3].first_frame
     assert _same(reader.read(packets[6].to_bytes()), packets[6])  # the late one did not move the cursor
+    # a short packet's 6 bits place it up to 31 packets ahead (a second at 120 fps), whatever the count
+    far = next(k for k in range(7 + 31, 7, -1) if not (packets[k].restart or packets[k].sends_position))
+    assert _same(reader.read(packets[far].to_bytes()), packets[far])
 
 
 def test_a_joiner_waits_for_a_keyframe(packets):

@@ -16,9 +16,11 @@ export const CODECS = ['raw', 'quant', 'dpcm', 'adpcm', 'deadreckoning', 'dct', 
 const FIELDS = 44;
 const COMPACT = 0x80;
 const C_EXPLICIT = 8;
-const C_USUAL = 64; // the frame count is the stream's usual one (its header's frames field)
 const C_POSITION = 16;
 const C_RESTART = 32;
+const C_SHORT = 64; // an ongoing packet of the usual frame count, the sequence's low 6 bits in the tag
+const SHORT_SEQUENCE = 63;
+const VERSION = 2;
 
 // The packets of a batch message ("Mb", the packet count and each packet's length as varints,
 // then the packets: format 2), as views into `data`.
@@ -63,7 +65,7 @@ export class Cursor {
 function parseFull(data) {
   if (data.length < FIELDS + 4) throw new DecodeError(`${data.length} bytes, shorter than the ${FIELDS + 4}-byte packet frame`, 0);
   if (data[0] !== 0x4d || data[1] !== 0x50) throw new DecodeError('expected the packet magic "MP"', 0);
-  if (data[2] !== 1) throw new DecodeError(`packet version ${data[2]}, this decoder reads 1`, 2);
+  if (data[2] !== VERSION) throw new DecodeError(`packet version ${data[2]}, this decoder reads ${VERSION}`, 2);
   const kind = data[3];
   const flags = data[4];
   const number = data[5];
@@ -92,40 +94,43 @@ function parseFull(data) {
 }
 
 function parseCompact(data, cursorOf) {
-  if (data.length < 5) throw new DecodeError(`${data.length} bytes, shorter than a compact packet`, 0);
+  if (data.length < 4) throw new DecodeError(`${data.length} bytes, shorter than a compact packet`, 0);
   const end = data.length - 2;
   if (crc16(data, 0, end) !== u16(data, end)) throw new DecodeError('CRC mismatch (damaged packet)', end);
   const tag = data[0];
-  if (tag & ~(COMPACT | 7 | C_EXPLICIT | C_POSITION | C_RESTART | C_USUAL)) throw new DecodeError(`tag ${tag} sets undefined bits`, 0);
+  const short = (tag & C_SHORT) !== 0;
+  const flags = short ? 0 : tag; // a short tag's low bits are the sequence number's
   const body = data.subarray(0, end);
   let [stream, pos] = readVarint(body, 1, 5, 'the stream id');
-  if (pos >= body.length) throw new DecodeError('the packet ends before its sequence byte', pos);
-  const low = body[pos];
+  if (!short && pos >= body.length) throw new DecodeError('the packet ends before its sequence byte', pos);
   const cursor = cursorOf(stream);
   if (!cursor) throw new DecodeError(`a compact packet of stream ${stream} before its stream header`, 0);
   let frames;
-  if (tag & C_USUAL) {
-    if (!cursor.usualFrames) throw new DecodeError(`the usual frame count of stream ${stream}, whose header gives none`, 0);
-    [frames, pos] = [cursor.usualFrames, pos + 1];
+  let low;
+  let window;
+  if (short) {
+    if (!cursor.usualFrames) throw new DecodeError(`a short packet of stream ${stream}, whose header gives no usual frame count`, 0);
+    [frames, low, window] = [cursor.usualFrames, tag & SHORT_SEQUENCE, SHORT_SEQUENCE + 1];
   } else {
+    [low, window] = [body[pos], 256];
     [frames, pos] = readVarint(body, pos + 1, 3, 'the frame count');
   }
   let sequence;
   let first;
-  if (tag & C_EXPLICIT) {
+  if (flags & C_EXPLICIT) {
     [sequence, pos] = readVarint(body, pos, 5, 'the sequence number');
     [first, pos] = readVarint(body, pos, 5, 'the first frame');
   }
-  if (!(tag & C_EXPLICIT) && !cursor.synced) throw new DecodeError(`stream ${stream}: a packet before the first keyframe received`, 0);
-  if (tag & C_EXPLICIT) {
+  if (!(flags & C_EXPLICIT) && !cursor.synced) throw new DecodeError(`stream ${stream}: a packet before the first keyframe received`, 0);
+  if (flags & C_EXPLICIT) {
     if ((sequence & 0xff) !== low || sequence > 0xffffffff) throw new DecodeError(`sequence ${sequence} does not end in byte ${low}`, 0);
   } else {
-    const ahead = ((low - cursor.nextSequence + 128) & 0xff) - 128;
+    const ahead = (((low - cursor.nextSequence + window / 2) % window) + window) % window - window / 2;
     sequence = (cursor.nextSequence + ahead) >>> 0;
     first = Math.max(cursor.nextFrame + ahead * frames, 0);
   }
   let position = cursor.position;
-  if (tag & C_POSITION) {
+  if (flags & C_POSITION) {
     if (pos + 6 > body.length) throw new DecodeError('the position runs past the packet', pos);
     position = [i16(body, pos) / 100, i16(body, pos + 2) / 100, i16(body, pos + 4) / 100];
     pos += 6;
@@ -133,7 +138,7 @@ function parseCompact(data, cursorOf) {
   if (frames > MAX_PAYLOAD_FRAMES || first > 2 ** 40) throw new DecodeError(`${frames} frames from frame ${first} is not plausible`, 0);
   return {
     stream, sequence, timestampUs: 0, codec: cursor.codec, firstFrame: first, frames, position,
-    payload: body.subarray(pos), kind: DATA, flags: (tag & 7) | (tag & C_RESTART ? RESTART : 0),
+    payload: body.subarray(pos), kind: DATA, flags: (flags & 7) | (flags & C_RESTART ? RESTART : 0),
   };
 }
 

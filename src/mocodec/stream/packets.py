@@ -41,7 +41,7 @@ from mocodec.skeleton import Skeleton
 MAGIC = b"MP"
 BATCH_MAGIC = b"Mb"  # a batch of format 2 (varint lengths)
 OLD_BATCH_MAGIC = b"MB"  # format 1 (u32 lengths), no longer read
-VERSION = 1
+VERSION = 2  # 2: compact packets of an ongoing stream carry their sequence number in the tag
 HEADER, DATA = 0, 1
 KEYFRAME, END, CUTS, RESTART = 1, 2, 4, 8  # RESTART: the codec stream's base restarts here
 
@@ -65,10 +65,12 @@ _CRC = struct.Struct("<I")
 _U16 = struct.Struct("<H")
 _POSITION = struct.Struct("<3h")
 COMPACT = 0x80  # the tag bit of a compact data packet (a full packet starts with "M")
-# compact tags: the full sequence number and first frame follow; the position follows; flag RESTART;
-# the frame count is the stream's usual one (its header's), not sent
-C_EXPLICIT, C_POSITION, C_RESTART, C_USUAL = 8, 16, 32, 64
-COMPACT_MIN = 5
+# a compact tag with SHORT: an ongoing packet of the stream's usual frame count, flagged nothing,
+# the sequence number's low 6 bits in the tag; without: the flags (KEYFRAME, END, CUTS), the
+# full sequence number and first frame follow (EXPLICIT), the position follows, flag RESTART
+C_EXPLICIT, C_POSITION, C_RESTART, C_SHORT = 8, 16, 32, 64
+SHORT_SEQUENCE = 63  # the sequence bits a short tag carries
+COMPACT_MIN = 4
 OVERHEAD = _FIELDS.size + _CRC.size
 #: Where the timestamp, stream id and sequence number sit in a packet (read in bulk by the load test).
 STREAM_OFFSET, SEQUENCE_OFFSET, TIMESTAMP_OFFSET = 6, 10, 14
@@ -144,18 +146,24 @@ class Packet:
         return head + self.payload + _CRC.pack(zlib.crc32(self.payload, zlib.crc32(head)))
 
     def to_compact(self) -> bytes:
-        """The compact wire form of a data packet (docs/formats.md): a tag byte, the stream id
-        and frame count as varints, the sequence number's low byte, on keyframes and restarts
-        the full sequence number and first frame, the root position when it is sent (3 x i16,
-        cm), the payload, and a CRC-16 (CCITT) of all of it: 5 bytes around the payload for an
-        ongoing stream whose packets code the usual frame count its header gives (6 else). The
-        receiver keeps, per stream, what the omitted fields follow from (:class:`Cursor`)."""
+        """The compact wire form of a data packet (docs/formats.md). An ongoing packet that
+        codes the usual frame count its stream's header gives, flagged nothing and sending no
+        position, is *short*: a tag holding the sequence number's low 6 bits, the stream id (a
+        varint), the payload and a CRC-16 (CCITT) of all of it, 4 bytes around the payload.
+        Any other is a tag of flags, the stream id and frame count (varints), the sequence
+        number's low byte, on keyframes, restarts and a stream's first packet the full sequence
+        number and first frame, the root position when it is sent (3 x i16, cm), the payload
+        and the CRC. The receiver keeps, per stream, what the omitted fields follow from
+        (:class:`Cursor`)."""
         explicit = self.restart or self.sequence == 0
         usual = self.usual_frames > 0 and self.frames == self.usual_frames
+        if usual and not (explicit or self.sends_position or self.flags):
+            out = bytearray([COMPACT | C_SHORT | (self.sequence & SHORT_SEQUENCE)]) + varint.pack(self.stream)
+            out += self.payload
+            return bytes(out) + _U16.pack(binascii.crc_hqx(out, 0xFFFF))
         tag = COMPACT | (self.flags & 7) | (C_EXPLICIT if explicit else 0) | (C_POSITION if self.sends_position else 0)
-        tag |= (C_RESTART if self.flags & RESTART else 0) | (C_USUAL if usual else 0)
-        out = bytearray([tag]) + varint.pack(self.stream) + bytes([self.sequence & 0xFF])
-        out += b"" if usual else varint.pack(self.frames)
+        tag |= C_RESTART if self.flags & RESTART else 0
+        out = bytearray([tag]) + varint.pack(self.stream) + bytes([self.sequence & 0xFF]) + varint.pack(self.frames)
         if explicit:
             out += varint.pack(self.sequence) + varint.pack(self.first_frame)
         if self.sends_position:
@@ -201,41 +209,41 @@ def _parse_compact(data: bytes, where: str, cursor_of: Callable[[int], Cursor | 
     if binascii.crc_hqx(data[:-2], 0xFFFF) != _U16.unpack_from(data, len(data) - 2)[0]:
         raise CorruptStreamError(f"{where}: byte {len(data) - 2}: CRC mismatch (damaged packet)")
     tag, body = data[0], data[:-2]
-    if tag & ~(COMPACT | 7 | C_EXPLICIT | C_POSITION | C_RESTART | C_USUAL):
-        raise CorruptStreamError(f"{where}: byte 0: tag {tag:#04x} sets bits this version does not define")
+    short = bool(tag & C_SHORT)
+    flags = 0 if short else tag  # every bit of a tag is defined: a short one's low bits are the sequence's
     try:
         stream, pos = varint.unpack(body, 1, 5)
-        if pos >= len(body):
+        if not short and pos >= len(body):
             raise ValueError(f"ends at byte {pos}")
-        low = body[pos]
         cursor = cursor_of(stream) if cursor_of is not None else None
         if cursor is None:
             raise CorruptStreamError(f"{where}: a compact packet of stream {stream} before its stream header")
-        if tag & C_USUAL:
+        if short:
             if not cursor.usual_frames:
                 raise CorruptStreamError(
-                    f"{where}: byte 0: the usual frame count of stream {stream}, whose header gives none"
+                    f"{where}: byte 0: a short packet of stream {stream}, whose header gives no usual frame count"
                 )
-            frames, pos = cursor.usual_frames, pos + 1
+            frames, low, window = cursor.usual_frames, tag & SHORT_SEQUENCE, SHORT_SEQUENCE + 1
         else:
+            low, window = body[pos], 256
             frames, pos = varint.unpack(body, pos + 1, 3)
-        if tag & C_EXPLICIT:
+        if flags & C_EXPLICIT:
             sequence, pos = varint.unpack(body, pos, 5)
             first, pos = varint.unpack(body, pos, 5)
     except ValueError as e:
         raise CorruptStreamError(f"{where}: {e}") from None
-    if not tag & C_EXPLICIT and not cursor.synced:
+    if not flags & C_EXPLICIT and not cursor.synced:
         raise OutOfSync(f"{where}: stream {stream}: a packet before the first keyframe received")
-    if tag & C_EXPLICIT:
+    if flags & C_EXPLICIT:
         if sequence & 0xFF != low or sequence > 0xFFFFFFFF:
             raise CorruptStreamError(f"{where}: sequence {sequence} does not end in byte {low}")
     else:  # packets lost since the last one received had this one's frame count; a packet up to
-        # 128 behind (a duplicate, a late one) is placed behind
-        ahead = ((low - cursor.next_sequence + 128) & 0xFF) - 128
+        # half the window (32 or 128 packets) behind (a duplicate, a late one) is placed behind
+        ahead = ((low - cursor.next_sequence + window // 2) % window) - window // 2
         sequence = (cursor.next_sequence + ahead) & 0xFFFFFFFF
         first = max(cursor.next_frame + ahead * frames, 0)
     position = cursor.position
-    if tag & C_POSITION:
+    if flags & C_POSITION:
         if pos + _POSITION.size > len(body):
             raise CorruptStreamError(f"{where}: byte {pos}: the position runs past the packet")
         position = tuple(v / 100.0 for v in _POSITION.unpack_from(body, pos))
@@ -251,10 +259,10 @@ def _parse_compact(data: bytes, where: str, cursor_of: Callable[[int], Cursor | 
         frames,
         bytes(body[pos:]),
         DATA,
-        (tag & 7) | (RESTART if tag & C_RESTART else 0),
+        (flags & 7) | (RESTART if flags & C_RESTART else 0),
         position,
         compact=True,
-        sends_position=bool(tag & C_POSITION),
+        sends_position=bool(flags & C_POSITION),
         usual_frames=cursor.usual_frames,
     )
 

@@ -15,7 +15,7 @@ def pack(v: int) -> bytes:
             return bytes(out)
 
 
-def unpack(data: bytes, pos: int, max_bytes: int = 10) -> tuple[int, int]:
+def unpack(data: bytes | memoryview, pos: int, max_bytes: int = 10) -> tuple[int, int]:
     """(value, next position) of the varint at ``pos``; ValueError if the data ends inside
     it or it runs past ``max_bytes``."""
     v = shift = 0
@@ -39,7 +39,9 @@ def pack_array(values: np.ndarray) -> bytes:
     v = np.asarray(values, dtype=np.int64)
     if v.size and (v.min() < 0 or v.max() >= 1 << (7 * ARRAY_MAX_BYTES)):
         raise ValueError(f"a value outside 0 to 2^{7 * ARRAY_MAX_BYTES} - 1")
-    size = 1 + sum((v >= 1 << (7 * k)).astype(np.int64) for k in range(1, ARRAY_MAX_BYTES))
+    size = np.ones(v.shape, dtype=np.int64)
+    for k in range(1, ARRAY_MAX_BYTES):
+        size += v >= 1 << (7 * k)
     starts = np.cumsum(size) - size
     out = np.empty(int(size.sum()), dtype=np.uint8)
     for k in range(ARRAY_MAX_BYTES):

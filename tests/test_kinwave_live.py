@@ -328,3 +328,30 @@ def test_a_hostile_reference_pose_is_refused(walk_bvh, reference):
     with pytest.raises(CorruptStreamError, match="reference"):
         codec.for_stream(walk_bvh.skeleton, {"reference": reference})
     assert codec.for_stream(walk_bvh.skeleton, {}) is codec and codec.for_stream(walk_bvh.skeleton, []) is codec
+
+
+def test_a_primed_stream_takes_its_levers_from_the_motions_bones(walk_bvh):
+    # bones kept in position channels over zero offsets: a primed stream's allocation sees the
+    # bones of its first frame, and costs about what the plain skeleton's stream does
+    from mocodec.reexpress import with_position_channels
+    from mocodec.stream.live import LiveDecoder, stream_clip
+    from mocodec.stream.packets import StreamInfo
+
+    codec = get_codec("kinwave-live")
+    plain = walk_bvh[:600]
+    sizes = []
+    for motion in (plain, with_position_channels(plain)):
+        packets = stream_clip(motion, codec)
+        receiver = LiveDecoder(StreamInfo.from_payload(packets[0].payload))
+        frames = np.concatenate([receiver.push(p) for p in packets[1:]])
+        assert _frame_errors(motion, frames).max() <= 1.0 + 1e-9
+        sizes.append(sum(len(p.payload) for p in packets[1:]))
+    assert sizes[1] < 1.1 * sizes[0]  # 1.16x with the offsets' (zero) levers
+
+
+@pytest.mark.parametrize("codes", ["x", [[0] * 44], [[0] * 44, [0] * 43], [[256] * 44] * 2, [[True] * 44] * 2])
+def test_hostile_base_codes_are_refused(walk_bvh, codes):
+    codec = get_codec("kinwave-live", layers=2)
+    assert len(codec.layer_codes(walk_bvh.skeleton)[0]) == 44
+    with pytest.raises(CorruptStreamError, match="base_codes"):
+        codec.for_stream(walk_bvh.skeleton, {"base_codes": codes})

@@ -50,7 +50,8 @@ import numpy as np
 
 from mocodec.codecs.base import Codec, Knob, QualityKnob, StreamDecoder, StreamEncoder, continuous_frames
 from mocodec.codecs.kinwave import kinalloc
-from mocodec.codecs.kinwave.payload import channel_steps, rotation_joints, step_code, step_groups
+from mocodec.codecs.kinwave.encoder import bone_skeleton
+from mocodec.codecs.kinwave.payload import channel_steps, code_channels, rotation_joints, step_code, step_groups
 from mocodec.codecs.registry import register
 from mocodec.codecs.shared import closedloop
 from mocodec.coding.entropy import binarycoder as bc
@@ -312,12 +313,12 @@ class _Layer:
     its (re)start on, when the last coded frame is the guess: the stream's reference pose, or
     else zero and the offsets (:func:`_joint_tables`)."""
 
-    def __init__(self, skeleton: Skeleton, bound_cm: float, measure: str, reference: np.ndarray | None = None):
+    def __init__(self, skeleton: Skeleton, codes: np.ndarray, reference: np.ndarray | None = None):
         self.skeleton = skeleton
         self.first, self.count, self.guess, self.shifts = _joint_tables(skeleton)
         if reference is not None:
             self.guess = reference
-        self.base_codes = base_codes(skeleton, bound_cm, measure)
+        self.base_codes = codes
         self.restart()
 
     def restart(self) -> None:
@@ -462,6 +463,7 @@ class KinwaveLiveCodec(Codec):
     streaming = True
     revision = 2  # 2: the predictor orders are no longer sent (both ends choose them, _update_misses)
     reference: np.ndarray | None = None  # the stream's reference pose (for_stream)
+    codes: np.ndarray | None = None  # the stream's base step codes per layer (for_stream)
 
     @property
     def delay_frames(self) -> int:  # type: ignore[override]
@@ -499,34 +501,38 @@ class KinwaveLiveCodec(Codec):
         ``primer``, its first frame as the stream's *reference pose* (to 1e-4 of a degree or a
         skeleton unit), from which every codec stream of the live stream predicts its first
         frame (:meth:`for_stream`): a keyframe then codes how the pose moved since, not the
-        pose."""
+        pose. The allocation's levers are then the motion's own bones (the offsets plus the
+        reference's translations below the root, :func:`.encoder.bone_skeleton`: a skeleton
+        that keeps its bones in position channels has zero offsets)."""
         measure = self.config["error_measure"]
-        tables: dict = {"base_codes": [base_codes(skeleton, b, measure).tolist() for b in self.layer_bounds]}
+        levers = skeleton
+        tables: dict = {}
         if primer is not None and len(primer):
             tables["reference"] = [round(float(v), 4) for v in primer[0]]
+            levers = bone_skeleton(skeleton, np.array(tables["reference"])[:, None], _joint_tables(skeleton)[3])
+        tables["base_codes"] = [base_codes(levers, b, measure).tolist() for b in self.layer_bounds]
         return tables
 
     def for_stream(self, skeleton: Skeleton, tables: dict) -> KinwaveLiveCodec:
-        """This codec predicting each codec stream's first frame from the stream header's
-        reference pose, if it has one (CorruptStreamError for one that is not a finite value
-        per channel, each within MAX_REFERENCE)."""
-        reference = tables.get("reference") if isinstance(tables, dict) else None
-        if reference is None:
+        """This codec with a live stream header's base step codes and reference pose
+        (:meth:`decoder_tables`), where it gives them: CorruptStreamError for codes that are
+        not a list per layer of one integer 0-255 per step, or a reference that is not a
+        finite value per channel within MAX_REFERENCE."""
+        if not isinstance(tables, dict) or not ("base_codes" in tables or "reference" in tables):
             return self
-        if (
-            not isinstance(reference, list)
-            or len(reference) != skeleton.num_channels
-            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in reference)
-        ):
-            raise CorruptStreamError(
-                f"kinwave-live stream header: the reference pose must be {skeleton.num_channels} numbers"
-            )
-        values = np.array(reference, dtype=np.float64)
-        if not (np.isfinite(values).all() and np.abs(values).max(initial=0.0) <= MAX_REFERENCE):
-            raise CorruptStreamError(f"kinwave-live stream header: a reference value beyond {MAX_REFERENCE:g}")
         bound = type(self)(**self.config)
-        bound.reference = values
+        if "base_codes" in tables:
+            bound.codes = _checked_codes(tables["base_codes"], skeleton, len(self.layer_bounds))
+        if "reference" in tables:
+            bound.reference = _checked_reference(tables["reference"], skeleton)
         return bound
+
+    def layer_codes(self, skeleton: Skeleton) -> list[np.ndarray]:
+        """Each layer's base step codes: a stream header's (:meth:`for_stream`), else those of
+        the skeleton's offsets."""
+        if self.codes is not None:
+            return list(self.codes)
+        return [base_codes(skeleton, b, self.config["error_measure"]) for b in self.layer_bounds]
 
     def encoder(self, skeleton: Skeleton, fps: float) -> StreamEncoder:
         return _LiveEncoder(self, skeleton, fps)
@@ -554,8 +560,41 @@ class KinwaveLiveCodec(Codec):
         return np.concatenate(out) if out else np.zeros((0, skeleton.num_channels))
 
 
+def _checked_codes(codes: object, skeleton: Skeleton, layers: int) -> np.ndarray:
+    count = len(code_channels(skeleton))
+    if not (
+        isinstance(codes, list)
+        and len(codes) == layers
+        and all(
+            isinstance(row, list)
+            and len(row) == count
+            and all(isinstance(v, int) and not isinstance(v, bool) and 0 <= v <= 255 for v in row)
+            for row in codes
+        )
+    ):
+        raise CorruptStreamError(
+            f"kinwave-live stream header: base_codes must be {layers} lists of {count} step codes 0-255"
+        )
+    return np.array(codes, dtype=np.int64)
+
+
+def _checked_reference(reference: object, skeleton: Skeleton) -> np.ndarray:
+    if (
+        not isinstance(reference, list)
+        or len(reference) != skeleton.num_channels
+        or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in reference)
+    ):
+        raise CorruptStreamError(
+            f"kinwave-live stream header: the reference pose must be {skeleton.num_channels} numbers"
+        )
+    values = np.array(reference, dtype=np.float64)
+    if not (np.isfinite(values).all() and np.abs(values).max(initial=0.0) <= MAX_REFERENCE):
+        raise CorruptStreamError(f"kinwave-live stream header: a reference value beyond {MAX_REFERENCE:g}")
+    return values
+
+
 def _layers(codec: KinwaveLiveCodec, skeleton: Skeleton) -> list[_Layer]:
-    return [_Layer(skeleton, b, codec.config["error_measure"], codec.reference) for b in codec.layer_bounds]
+    return [_Layer(skeleton, codes, codec.reference) for codes in codec.layer_codes(skeleton)]
 
 
 def _section_data(section: bytes) -> np.ndarray:

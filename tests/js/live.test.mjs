@@ -4,7 +4,7 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { readFile } from 'node:fs/promises';
-import { gunzipSync } from 'node:zlib';
+import { deflateSync, gunzipSync, inflateSync } from 'node:zlib';
 import {
   DecodeError, Reader, StreamDecoder, forwardKinematics, parseStreamHeader, splitBatch,
 } from '../../js/src/index.js';
@@ -113,12 +113,20 @@ test('damaged packets, batches and headers end in DecodeError', async () => {
   }
 });
 
-test('stream headers with hostile values end in DecodeError or decode', async () => {
-  const { inflateSync, deflateSync } = await import('node:zlib');
-  const { stream } = await fixture('walk-layers');
+// A fixture stream's packets and its header's JSON, and the stream header a changed JSON makes.
+async function withHeader(name) {
+  const { stream } = await fixture(name);
   const reader = new Reader();
   const packets = splitBatch(stream).map((raw) => reader.read(raw));
-  const original = JSON.parse(new TextDecoder().decode(inflateSync(packets[0].payload)));
+  return { packets, doc: JSON.parse(new TextDecoder().decode(inflateSync(packets[0].payload))) };
+}
+
+function headerOf(doc) {
+  return parseStreamHeader(deflateSync(new TextEncoder().encode(JSON.stringify(doc))));
+}
+
+test('stream headers with hostile values end in DecodeError or decode', async () => {
+  const { packets, doc: original } = await withHeader('walk-layers');
   const random = seeded(11);
   const hostile = [2 ** 31, 2 ** 53, -1, 0, 1, 0.5, 1e308, 'x', [], [0, 0], {}, null, [[0]], 1e6, true];
   for (let trial = 0; trial < 400; trial++) {
@@ -137,8 +145,7 @@ test('stream headers with hostile values end in DecodeError or decode', async ()
     const [holder, key] = holders[Math.floor(random() * holders.length)];
     holder[key] = hostile[Math.floor(random() * hostile.length)];
     try {
-      const info = await parseStreamHeader(deflateSync(new TextEncoder().encode(JSON.stringify(doc))));
-      const decoder = new StreamDecoder(info);
+      const decoder = new StreamDecoder(await headerOf(doc));
       for (const p of packets.slice(1, 12)) decoder.push(p);
     } catch (e) {
       if (!(e instanceof DecodeError)) throw new Error(`${key} = ${JSON.stringify(holder[key])}: ${e.stack}`);
@@ -147,18 +154,13 @@ test('stream headers with hostile values end in DecodeError or decode', async ()
 });
 
 test('a stream of another format revision is refused with a DecodeError that says so', async () => {
-  const { inflateSync, deflateSync } = await import('node:zlib');
-  const { stream } = await fixture('walk');
-  const reader = new Reader();
-  const packets = splitBatch(stream).map((raw) => reader.read(raw));
-  const doc = JSON.parse(new TextDecoder().decode(inflateSync(packets[0].payload)));
+  const { packets, doc } = await withHeader('walk');
   assert.equal(doc.codec.revision, 2);
   for (const revision of [undefined, 1, 3]) {
     const older = structuredClone(doc);
     if (revision === undefined) delete older.codec.revision;
     else older.codec.revision = revision;
-    const info = await parseStreamHeader(deflateSync(new TextEncoder().encode(JSON.stringify(older))));
-    const decoder = new StreamDecoder(info);
+    const decoder = new StreamDecoder(await headerOf(older));
     assert.throws(() => decoder.push(packets[1]), (e) => e instanceof DecodeError && /format revision/.test(e.message));
   }
 });

@@ -771,7 +771,6 @@ class _LiveEncoder(StreamEncoder):
         carry its parents' quantisation errors in every frame."""
         since = values[0] if self.last_values is None else self.last_values
         moved = np.abs(values - since).max(axis=0) > STILL_CM / self.cm
-        self.last_values = values[-1]
         return ~self.layers[0].shifts | moved
 
     def _packet(self, values: np.ndarray) -> bytes:
@@ -780,6 +779,7 @@ class _LiveEncoder(StreamEncoder):
         cells = _Cells(len(values), values.shape[1])
         sections = [self._layer_packet(k, values, goal, retarget, cells) for k in range(len(self.layers))]
         self.frame += len(values)
+        self.last_values = values[-1]
         return join_layers(sections)
 
     def _restart_flag(self, k: int, frames: int) -> int:

@@ -21,7 +21,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mocodec.codecs import codec_from_untrusted
 from mocodec.codecs.base import Codec, Embedded, Layered, StreamDecoder, StreamEncoder, checked_frames
 from mocodec.coding.entropy.rangecoder import encode_ints
 from mocodec.errors import CodecError, OutOfStepError
@@ -239,8 +238,7 @@ class LiveDecoder:
         if conceal not in ("hold", "extrapolate"):
             raise CodecError(f"concealment must be hold or extrapolate, got {conceal!r}")
         self.info = info
-        codec = codec_from_untrusted(info.codec, "stream header", local_files)
-        self.codec = codec.for_stream(info.skeleton, info.extra.get("decoder", {}))
+        self.codec = info.stream_codec(local_files)
         self.max_gap = max(min(int(MAX_CONCEAL_S * info.fps), MAX_CONCEAL_VALUES // info.skeleton.num_channels), 1)
         self.conceal = conceal
         self.decoder: StreamDecoder | None = None

@@ -33,6 +33,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from mocodec import limits
+from mocodec.codecs import codec_from_untrusted
+from mocodec.codecs.base import Codec
 from mocodec.errors import CorruptStreamError
 from mocodec.formats import varint
 from mocodec.formats.container import inflate_capped, skeleton_from_dict, skeleton_to_dict
@@ -379,6 +381,14 @@ class StreamInfo:
             )
         except Exception as e:  # noqa: BLE001 - anything malformed in a header
             raise CorruptStreamError(f"{where}: does not parse ({type(e).__name__}: {e})") from None
+
+    def stream_codec(self, local_files: dict[str, str] | None = None) -> Codec:
+        """The codec of the stream, bound to the tables the header carries for its decoders
+        (``extra["decoder"]``, :meth:`~mocodec.codecs.base.Codec.for_stream`); the config and
+        tables are hostile, checked (CorruptStreamError), and a knob naming a local file is the
+        caller's ``local_files`` entry (:func:`~mocodec.codecs.codec_from_untrusted`)."""
+        codec = codec_from_untrusted(self.codec, "stream header", local_files)
+        return codec.for_stream(self.skeleton, self.extra.get("decoder", {}))
 
 
 def header_packet(stream: int, info: StreamInfo, timestamp_us: int = 0, usual_frames: int = 0) -> Packet:

@@ -55,7 +55,6 @@ import numpy as np
 from aiohttp import WSMsgType, web
 from aiohttp.abc import AbstractAccessLogger
 
-from mocodec.codecs import codec_from_untrusted
 from mocodec.codecs.base import Embedded, Layered
 from mocodec.coding.entropy.rangecoder import decode_ints
 from mocodec.errors import MocodecError
@@ -290,8 +289,7 @@ def stream_setup(header_payload: bytes) -> tuple[StreamInfo, object]:
     """A stream header's contents and codec, parsed once for every avatar that sends the same
     header (a crowd of one kind joins at the cost of one)."""
     info = StreamInfo.from_payload(header_payload)
-    codec = codec_from_untrusted(info.codec, "stream header")
-    return info, codec.for_stream(info.skeleton, info.extra.get("decoder", {}))
+    return info, info.stream_codec()
 
 
 class Relay:

@@ -79,7 +79,7 @@ def test_lost_packets_are_counted_and_late_ones_placed_behind(packets):
     late = reader.read(packets[3].to_bytes())  # arrives after 5
     assert late.sequence == packets[3].sequence and late.first_frame == packets[3].first_frame
     assert _same(reader.read(packets[6].to_bytes()), packets[6])  # the late one did not move the cursor
-    # a short packet's 6 bits place it up to 31 packets ahead (a second at 120 fps), whatever the count
+    # a short packet's 6 bits place it up to 31 packets ahead (1.5 s at 120 fps), whatever the count
     far = next(k for k in range(7 + 31, 7, -1) if not (packets[k].restart or packets[k].sends_position))
     assert _same(reader.read(packets[far].to_bytes()), packets[far])
 

@@ -246,7 +246,7 @@ def test_each_channel_takes_the_predictor_that_missed_its_decoded_frames_less(wa
     live._update_misses(misses, ramp[:2].copy(), 2, 1, 1, ramp[2:].copy())
     assert misses[:, 0].tolist() == [2.0 * 0.5 + 2.0, 0.0]
     assert misses[:, 1].tolist() == [0.0, 0.0]  # a constant channel: both exact
-    layer = live._Layer(walk_amc.skeleton, 1.0, "joint")
+    layer = live._Layer(walk_amc.skeleton, get_codec("kinwave-live").layer_codes(walk_amc.skeleton)[0])
     layer.misses[:, :2] = misses
     orders = layer.orders()
     assert orders[:2].tolist() == [2, 1]  # a tie goes to the last value

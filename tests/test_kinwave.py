@@ -165,23 +165,46 @@ def test_segment_seams_are_smoothed(martial_amc, walk_bvh):
         )
 
 
-def test_time_adaptive_steps_shrink_max_error_files(walk_amc):
-    """Each segment gets its own step offset under a max-error bound: quieter stretches take
-    coarser steps and the bound still holds; under a shell bound the file is smaller than with
-    one scale (2%; over the shared clips 0.1-2.5% at shell and joint bounds, docs/kinwave.md)."""
+def test_time_adaptive_steps_hold_the_bound(walk_amc):
+    """Knob ``segment_steps``: each segment gets its own step offset under a max-error bound
+    (window 128: 4 segments), flagged in the payload, and the bound still holds. Off by
+    default: since far-off frames round their coefficients plainly, one scale gives smaller
+    files on every source (docs/kinwave.md)."""
     from mocodec.codecs.kinwave.payload import FLAG_OFFSETS
 
+    assert not get_codec("kinwave").config["segment_steps"]
     for measure in ("shell", "joint"):
-        codec = get_codec("kinwave", max_error_cm=0.5, error_measure=measure, window=128)  # 4 segments
+        codec = get_codec("kinwave", max_error_cm=0.5, error_measure=measure, window=128, segment_steps=True)
         payload = codec.encode(walk_amc)
         assert payload[1] & FLAG_OFFSETS
         decoded = codec.decode(payload, walk_amc.skeleton, walk_amc.num_frames, walk_amc.fps)
         assert decoded.num_frames == walk_amc.num_frames
         assert _errors(walk_amc, decoded)[measure] <= 0.5
-    single = BoundSearch(
-        codec := get_codec("kinwave", max_error_cm=0.5, error_measure="shell", window=128), walk_amc
-    )._to_bound(0.5)
-    assert len(codec.encode(walk_amc)) < len(single)
+
+
+def test_frames_far_off_round_their_coefficients_plainly(walk_amc):
+    """Eight random walks quantised at a step of 2: where the reconstruction misses its
+    target by more than FAR_STEPS steps, the coefficients reaching that frame go from the dead
+    zone's rounding to the nearest integer (one more in magnitude, nothing else changes),
+    those frames come closer, and the output is what the decoder's reconstruction gives."""
+    from mocodec.codecs.kinwave.encoder import FAR_STEPS
+    from mocodec.codecs.kinwave.payload import ConstantCoding, reconstruct, segment_factors
+
+    enc = BoundSearch(get_codec("kinwave", max_error_cm=0.5, error_measure="shell"), walk_amc)
+    target = np.cumsum(np.random.default_rng(7).normal(0.0, 1.0, (8, enc.frames)), axis=1)
+    step, const = np.full((8, 1), 2.0), np.zeros(8, dtype=bool)
+    factors = segment_factors(np.zeros(enc.lay.starts.size), enc.lay)
+    constants = ConstantCoding(1.0, np.zeros(8))
+    knots, coeffs, scaled = enc._quantise(target, const, step, factors, constants)
+    out = reconstruct(knots, coeffs, const, step, enc.lay, factors, constants)
+    rounded, closer = enc._round_where_far(target, out, scaled, (knots, coeffs, const), step, factors, constants)
+    changed = rounded != coeffs
+    assert changed.sum() > 10
+    assert (np.abs(rounded[changed]) == np.abs(coeffs[changed]) + 1).all()
+    assert (np.abs(scaled[changed]) % 1.0 >= 0.5).all()
+    far = np.abs(out - target) > FAR_STEPS * step
+    assert np.abs(closer - target)[far].mean() < 0.9 * np.abs(out - target)[far].mean()
+    assert np.array_equal(closer, reconstruct(knots, rounded, const, step, enc.lay, factors, constants))
 
 
 def test_joint_feedback_coarsens_joints_with_slack(walk_amc):
@@ -191,7 +214,9 @@ def test_joint_feedback_coarsens_joints_with_slack(walk_amc):
     (With one scale the final slack rounds do the same: within 1% either way.)"""
     sizes = {}
     for feedback in (True, False):
-        codec = get_codec("kinwave", max_error_cm=0.1, error_measure="shell", joint_feedback=feedback, window=128)
+        codec = get_codec(
+            "kinwave", max_error_cm=0.1, error_measure="shell", joint_feedback=feedback, window=128, segment_steps=True
+        )
         payload = codec.encode(walk_amc)
         assert (
             _errors(walk_amc, codec.decode(payload, walk_amc.skeleton, walk_amc.num_frames, walk_amc.fps))["shell"]
@@ -202,9 +227,9 @@ def test_joint_feedback_coarsens_joints_with_slack(walk_amc):
 
 
 def test_the_final_slack_rounds_coarsen_quiet_joints_within_the_bound(walk_amc, monkeypatch):
-    """One scale (no time-adaptive steps): the final pass gives the slack of quiet joints to
-    their codes, with or without the joint feedback (17% and 4% smaller at max shell 0.1 cm on
-    the AMC walk), and the bound holds."""
+    """One scale: the final pass gives the slack of quiet joints to their codes (21% smaller
+    without the joint feedback at max shell 0.1 cm on the AMC walk; with it, the pass the
+    search lands on has none left to give there), and the bound holds."""
     from mocodec.codecs.kinwave import search
 
     sizes = {}
@@ -221,7 +246,7 @@ def test_the_final_slack_rounds_coarsen_quiet_joints_within_the_bound(walk_amc, 
             )
             sizes[rounds > 0, feedback] = len(payload)
     assert sizes[True, False] < 0.9 * sizes[False, False]
-    assert sizes[True, True] < 0.98 * sizes[False, True]
+    assert sizes[True, True] <= sizes[False, True]
 
 
 def test_coding_forms_shrink_files_within_the_bound(walk_amc):
@@ -270,7 +295,8 @@ def test_segment_offsets_keep_the_encoder_bit_exact(walk_bvh):
 
 def test_an_isolated_glitch_frame_is_coded_apart(walk_bvh):
     """One frame 25 degrees off on every angle (a glitch) is found, coded apart (flag 128),
-    and costs a few percent instead of the wavelet's 60%; the bound holds on the glitch too."""
+    and costs 4-16% (where the search lands on the clip without it) instead of the wavelet's 60%;
+    the bound holds on the glitch too."""
     from mocodec.codecs.kinwave.payload import FLAG_ISOLATED
 
     glitch = walk_bvh.channels.copy()
@@ -284,7 +310,7 @@ def test_an_isolated_glitch_frame_is_coded_apart(walk_bvh):
     assert _errors(spiked, codec.decode(payload, spiked.skeleton, spiked.num_frames, spiked.fps))["shell"] <= 1.0
     plain = get_codec("kinwave", max_error_cm=1.0, error_measure="shell", keyframes=False).encode(spiked)
     assert len(payload) < 0.8 * len(plain)
-    assert len(payload) < 1.1 * len(codec.encode(walk_bvh))
+    assert len(payload) < 1.2 * len(codec.encode(walk_bvh))
 
 
 def test_a_damaged_isolated_frame_count_is_refused(walk_bvh):

@@ -119,9 +119,10 @@ class KinwaveCodec(Codec):
         Knob(
             "segment_steps",
             bool,
-            True,
+            False,
             "under a max-error bound, give each segment its own step offset (time-"
-            "adaptive steps, from 4 segments on): quiet stretches get coarser steps",
+            "adaptive steps, from 4 segments on): quiet stretches get coarser steps "
+            "(off: since coefficients round plainly where a frame is far off, one scale is smaller)",
         ),
         Knob(
             "rotation_vectors",

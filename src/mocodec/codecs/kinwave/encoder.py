@@ -56,6 +56,7 @@ MEAN_LEAST = 20.0  # degrees: a mean rotation smaller than this is left at the i
 CONSTANT = 1e-6  # a channel whose range is below this is one knot
 JUMP_CM = 10.0  # a leading frame jumping less than this is not tried as a keyframe
 TRIAL_FRAMES = 1024  # frames the choice of forms codes each form of every joint on
+FAR_STEPS = 0.7  # a frame missing its target by more than this many steps rounds its coefficients plainly
 GIMBAL_MARGIN = 15.0  # degrees from an Euler order's lock within which a joint goes as a vector
 
 
@@ -313,7 +314,7 @@ class Encoder:
                 else np.zeros(idx.size, bool)
             )
             flat, none = np.zeros(rows.size, dtype=bool), ConstantCoding(1.0, np.zeros(rows.size))
-            k_int, c_int = self._quantise(values, flat, step[rows], factors, none, lay)
+            k_int, c_int, _ = self._quantise(values, flat, step[rows], factors, none, lay)
             sizes = np.array(
                 [
                     len(
@@ -438,9 +439,11 @@ class Encoder:
             wanted = values[:, iso]
             if iso.size:  # the wavelet sees the neighbours' mean there
                 values[:, iso] = (values[:, iso - 1] + values[:, iso + 1]) / 2.0
-            k_int, c_int = self._quantise(values, const, step, factors, constants)
-            knots[channels], coeffs[channels] = k_int, c_int
+            k_int, c_int, scaled = self._quantise(values, const, step, factors, constants)
             out = reconstruct(k_int, c_int, const, step, lay, factors, constants)
+            if self.cfg["error_measure"] != "mean":
+                c_int, out = self._round_where_far(values, out, scaled, (k_int, c_int, const), step, factors, constants)
+            knots[channels], coeffs[channels] = k_int, c_int
             if iso.size:
                 patch = np.round((wanted - out[:, iso]) / (step * trendwave.KEYFRAME_QUANTUM)).astype(np.int64)
                 patch[const] = 0
@@ -471,7 +474,7 @@ class Encoder:
     ):
         """Knots and dead-zone quantised coefficients of ``target (k, T)`` with steps ``(k, 1)``,
         the segments' step :func:`segment_factors` and the rows' :class:`ConstantCoding`, laid out as
-        ``lay`` (default: the payload's)."""
+        ``lay`` (default: the payload's), and the coefficients in steps before rounding."""
         lay = lay or self.lay
         knot_f, coeff_f, _ = factors
         quantum = step * lay.knot_quantum * knot_f
@@ -484,7 +487,47 @@ class Encoder:
         c = trendwave.analyse(residual, lay) / (step * coeff_f)
         c_int = (np.sign(c) * np.floor(np.abs(c) + self.cfg["deadzone"])).astype(np.int64)
         c_int[const] = 0
-        return k_int, c_int
+        return k_int, c_int, c
+
+    def _round_where_far(
+        self,
+        target: np.ndarray,
+        out: np.ndarray,
+        scaled: np.ndarray,
+        integers: tuple[np.ndarray, np.ndarray, np.ndarray],
+        step: np.ndarray,
+        factors: tuple[np.ndarray, np.ndarray, np.ndarray],
+        constants: ConstantCoding,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Max bounds: where the reconstruction ``out`` misses ``target`` by more than FAR_STEPS
+        of the frame's step, the coefficients reaching that frame are rounded to the nearest
+        integer instead of through the dead zone. A max bound is set by a few such frames
+        (several zeroed coefficients adding up), and the whole clip's steps went finer for
+        them; the dead zone keeps its savings everywhere else (docs/kinwave.md). Encoder only:
+        the decoder reads the integers as ever. ``integers`` are the rows' knots, coefficients
+        and constant flags; returns the coefficients and ``out`` again."""
+        knots, coeffs, const = integers
+        frame_step = step * factors[0][self.lay.left]
+        far = np.abs(out - target) > FAR_STEPS * frame_step
+        far[const] = False
+        if not far.any() or self.cfg["deadzone"] >= 0.5:
+            return coeffs, out
+        nearest = np.sign(scaled) * np.floor(np.abs(scaled) + 0.5)
+        rounded = np.where(trendwave.coefficients_at(far, self.lay), nearest, coeffs).astype(np.int64)
+        rows = np.flatnonzero((rounded != coeffs).any(axis=1))
+        if not rows.size:
+            return coeffs, out
+        coeffs, out = rounded, out.copy()
+        out[rows] = reconstruct(
+            knots[rows],
+            coeffs[rows],
+            const[rows],
+            step[rows],
+            self.lay,
+            factors,
+            ConstantCoding(constants.fraction, constants.base[rows]),
+        )
+        return coeffs, out
 
     # ----- measures and bytes ---------------------------------------------------------------
     def joint_errors(self, decoded: np.ndarray) -> np.ndarray:

@@ -111,6 +111,31 @@ def analyse(residual: np.ndarray, lay: Layout) -> np.ndarray:
     return out
 
 
+@lru_cache(maxsize=64)
+def _reach(n: int, levels: int, wavelet: str) -> np.ndarray:
+    """``(frames, coefficients)`` 0/1 of a block: which coefficients' synthesis functions
+    carry at least 5% of their peak at each frame."""
+    synthesis = np.abs(wavelets.matrices(n, wavelet, levels)[1])
+    reach = (synthesis > 0.05 * synthesis.max(axis=0)).astype(np.float64)
+    reach.setflags(write=False)
+    return reach
+
+
+def coefficients_at(frames: np.ndarray, lay: Layout) -> np.ndarray:
+    """``(channels, N)`` bool: the coefficients whose synthesis reaches any frame marked in
+    ``frames (channels, T)`` (of the same segment)."""
+    out = np.zeros((frames.shape[0], lay.num_coeffs), dtype=bool)
+    for n, lev, segs, offs in lay.blocks:
+        reach = _reach(n, lev, lay.wavelet)
+        for s, o in zip(segs, offs):
+            a, m = lay.starts[s], lay.lengths[s]
+            marked = frames[:, a : a + m]
+            rows = np.flatnonzero(marked.any(axis=1))
+            if rows.size:
+                out[rows, o : o + n] = marked[rows].astype(np.float64) @ reach[:m] > 0
+    return out
+
+
 def synthesise(coeffs: np.ndarray, lay: Layout) -> np.ndarray:
     """Inverse of :func:`analyse`: the residual ``(channels, T)`` (zero where no block)."""
     channels = coeffs.shape[0]

@@ -315,21 +315,7 @@ class Encoder:
             )
             flat, none = np.zeros(rows.size, dtype=bool), ConstantCoding(1.0, np.zeros(rows.size))
             k_int, c_int, _ = self._quantise(values, flat, step[rows], factors, none, lay)
-            sizes = np.array(
-                [
-                    len(
-                        coefcoder.encode(
-                            np.zeros(3, np.int64),
-                            k_int[3 * i : 3 * i + 3],
-                            c_int[3 * i : 3 * i + 3],
-                            lay.padded,
-                            lay.levels,
-                            revision=CODER_REVISION,
-                        )
-                    )
-                    for i in range(idx.size)
-                ]
-            )
+            sizes = coefcoder.group_sizes(k_int, c_int, lay.padded, lay.levels, 3, revision=CODER_REVISION)
             rec = reconstruct(k_int, c_int, flat, step[rows], lay, factors, none)
             back = rotvec.from_forms(rec, kept, forms, turns[idx], pre[idx]) if form else rec
             err = np.maximum(

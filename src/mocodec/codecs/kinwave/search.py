@@ -22,7 +22,7 @@ from mocodec.errors import CodecError
 
 MAX_PASSES = 8  # secant passes before falling back to halving
 JOINT_FEEDBACK = 1.0  # share of a joint's measured slack (in octaves) its steps take on
-SLACK_PASSES = 2  # rounds in which a max bound's final pass gives its slack away (_use_slack)
+SLACK_PASSES = 1  # rounds in which a max bound's final pass gives its slack away (_use_slack)
 SEGMENT_SLACK_BELOW = 0.9  # ... with time-adaptive steps only when its worst error is under this share
 ACCEPT = 0.95  # a max-error bound is met well enough at 95-100% of it
 MEAN_ACCEPT = 0.97  # a mean-error bound (smooth in the scale, so the search can aim closer)

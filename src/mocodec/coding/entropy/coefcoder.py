@@ -267,6 +267,33 @@ def encode(
     return buf[:n].tobytes()
 
 
+def group_sizes(
+    knots: np.ndarray, coeffs: np.ndarray, seg_pad: np.ndarray, seg_lev: np.ndarray, rows: int, revision: int = 1
+) -> np.ndarray:
+    """The bytes :func:`encode` gives every ``rows`` consecutive rows of ``knots`` and
+    ``coeffs`` coded on their own (no constant flags set, no side sequences), in one call: a
+    choice that codes many small groups (kinwave's coding forms) without a call per group."""
+    knots = np.ascontiguousarray(knots, dtype=np.int64)
+    coeffs = np.ascontiguousarray(coeffs, dtype=np.int64)
+    seg_pad, seg_lev = np.asarray(seg_pad, dtype=np.int64), np.asarray(seg_lev, dtype=np.int64)
+    values = [coeffs.ravel(), knots[:, :1].ravel(), np.diff(knots, axis=1).ravel()]
+    if revision >= 2:
+        values.append(_approx_differences(coeffs, seg_pad, seg_lev))
+    buf = buffer_for(rows + int_decisions(np.concatenate(values)) + 2 * len(seg_pad) * rows)
+    return _group_sizes(knots, coeffs, seg_pad, seg_lev, rows, revision >= 2, buf)
+
+
+@numba.njit(cache=True)
+def _group_sizes(knots, coeffs, seg_pad, seg_lev, rows, rev2, buf):
+    groups = knots.shape[0] // rows
+    out = np.empty(groups, dtype=np.int64)
+    side, const = np.zeros(0, dtype=np.int64), np.zeros(rows, dtype=np.int64)
+    for g in range(groups):
+        a = g * rows
+        out[g] = _encode(side, const, knots[a : a + rows], coeffs[a : a + rows], seg_pad, seg_lev, rev2, buf)
+    return out
+
+
 @dataclass(frozen=True)
 class Decoded:
     const: np.ndarray

@@ -47,6 +47,20 @@ def test_coefficient_coder_round_trips(seed, frames, keyframe, spread, rev):
     assert np.array_equal(co2, coeffs)
 
 
+@pytest.mark.parametrize("rev", [1, 2])
+def test_group_sizes_are_each_groups_own_encoding(rev):
+    rng = np.random.default_rng(5)
+    lay = trendwave.layout(700, 256, 5, False)
+    knots = np.cumsum(rng.integers(-50, 50, (12, lay.num_knots)), axis=1)
+    coeffs = np.round(rng.laplace(0, rng.choice([0.2, 2.0, 40.0], (12, 1)), (12, lay.num_coeffs))).astype(np.int64)
+    sizes = coefcoder.group_sizes(knots, coeffs, lay.padded, lay.levels, 3, revision=rev)
+    one_by_one = [
+        len(coefcoder.encode(np.zeros(3, np.int64), knots[a : a + 3], coeffs[a : a + 3], lay.padded, lay.levels, rev))
+        for a in range(0, 12, 3)
+    ]
+    assert sizes.tolist() == one_by_one and len(set(one_by_one)) == 4
+
+
 def test_differences_code_a_smooth_approximation_band_smaller():
     """Neighbouring approximation values that are alike cost fewer bits as differences
     (revision 2)."""

@@ -30,10 +30,11 @@ Per payload of T frames:
    functions), so the bound holds on what the decoder will produce, verified on the final bytes;
    with ``bits_per_second`` the same search aims at the payload's byte budget within 2%.
 5. Under a max-error bound a first pass corrects the model's step per joint by the slack it
-   measured at the points the joint moves (the model overstates quiet joints' errors), and a
-   payload of 4 segments or more gets time-adaptive steps: each segment a step offset of its
-   own (1/8 octave), searched on its own worst error, so quiet stretches are not coded as
-   finely as the busiest one needs.
+   measured at the points the joint moves (the model overstates quiet joints' errors), and
+   the coefficients that reach a frame far off its target round to the nearest integer
+   instead of through the dead zone (the few frames that set a max bound). With the knob
+   ``segment_steps`` a payload of 4 segments or more gets time-adaptive steps: each segment a
+   step offset of its own (1/8 octave), searched on its own worst error.
 
 The payload format is :mod:`.payload`'s, the encoder :mod:`.encoder`'s and the search of
 the steps :mod:`.search`'s.

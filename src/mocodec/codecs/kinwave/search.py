@@ -116,7 +116,8 @@ class BoundSearch(Encoder):
     def _use_slack(self, best: Pass, bound: float, below: float = math.inf) -> Pass:
         """Under a max bound, the final pass gives the slack to the codes whose points have it:
         each code coarser by the 1/8 octaves between the bound and the worst error among the
-        points it moves, halved if the pass then breaks the bound (SLACK_PASSES rounds at most;
+        points it moves; if the pass then breaks the bound, the codes that move a point now over
+        it halve theirs and the others keep it, for one more try (SLACK_PASSES rounds at most;
         segment offsets kept). The joint feedback set the codes' shape at the starting scale;
         at the final one, and near the bound, where the worst error jumps with single step
         codes, the points' errors differ again. A pass whose worst error is already ``below`` x
@@ -137,7 +138,8 @@ class BoundSearch(Encoder):
                 if trial.max() <= bound:
                     best, errors = ps, trial
                     break
-                coarser = np.floor(coarser / 2.0)
+                moving_over = influence(self.skeleton, self.cfg["error_measure"])[:, trial > bound].any(axis=1)
+                coarser = np.where(moving_over, np.floor(coarser / 2.0), coarser)
             else:
                 break
         return self._fill(self._scale_up(best, errors.max(), bound), bound)

@@ -249,6 +249,30 @@ def test_the_final_slack_rounds_coarsen_quiet_joints_within_the_bound(walk_amc, 
     assert sizes[True, True] <= sizes[False, True]
 
 
+def test_a_slack_try_over_the_bound_halves_only_the_codes_moving_the_points_over_it(walk_amc):
+    """The first slack try on the AMC walk breaks the bound; the second keeps the coarsening
+    of every code that moves no point over it and halves the others'."""
+    from mocodec.codecs.kinwave.encoder import influence
+
+    enc = BoundSearch(get_codec("kinwave", max_error_cm=0.5, error_measure="shell"), walk_amc)
+    best = enc.run_pass(enc.codes(enc.first_scale()))
+    bound = 1.02 * enc.error(best.decoded)
+    tries, run_pass = [], enc.run_pass
+
+    def recording(codes, offsets=None):
+        ps = run_pass(codes, offsets)
+        tries.append((codes.astype(np.int64) - best.steps, enc.joint_errors(ps.decoded).max(axis=0)))
+        return ps
+
+    enc.run_pass = recording
+    enc._use_slack(best, bound)
+    (first, errors), (second, _) = tries[:2]
+    assert errors.max() > bound
+    moving_over = influence(walk_amc.skeleton, "shell")[:, errors > bound].any(axis=1)
+    assert moving_over.any() and (~moving_over & (first > 0)).any()
+    assert np.array_equal(second, np.where(moving_over, first // 2, first))
+
+
 def test_coding_forms_shrink_files_within_the_bound(walk_amc):
     """On a BVH clip (09_02, a run) some joints go in another form (flag 16: a rotation vector
     about their mean, or Euler angles in another order), the file is smaller than with the

@@ -23,6 +23,7 @@ from mocodec.errors import CodecError
 MAX_PASSES = 8  # secant passes before falling back to halving
 JOINT_FEEDBACK = 1.0  # share of a joint's measured slack (in octaves) its steps take on
 SLACK_PASSES = 1  # rounds in which a max bound's final pass gives its slack away (_use_slack)
+SLACK_TRIES = 3  # passes a round tries, halving the codes that move the points over the bound
 SEGMENT_SLACK_BELOW = 0.9  # ... with time-adaptive steps only when its worst error is under this share
 ACCEPT = 0.95  # a max-error bound is met well enough at 95-100% of it
 MEAN_ACCEPT = 0.97  # a mean-error bound (smooth in the scale, so the search can aim closer)
@@ -116,9 +117,9 @@ class BoundSearch(Encoder):
     def _use_slack(self, best: Pass, bound: float, below: float = math.inf) -> Pass:
         """Under a max bound, the final pass gives the slack to the codes whose points have it:
         each code coarser by the 1/8 octaves between the bound and the worst error among the
-        points it moves; if the pass then breaks the bound, the codes that move a point now over
-        it halve theirs and the others keep it, for one more try (SLACK_PASSES rounds at most;
-        segment offsets kept). The joint feedback set the codes' shape at the starting scale;
+        points it moves; while the pass then breaks the bound, the codes that move a point now
+        over it halve theirs and the others keep it (SLACK_TRIES passes a round, SLACK_PASSES
+        rounds at most; segment offsets kept). The joint feedback set the codes' shape at the starting scale;
         at the final one, and near the bound, where the worst error jumps with single step
         codes, the points' errors differ again. A pass whose worst error is already ``below`` x
         bound or more is kept (the time-adaptive steps' segments take most of the slack). What
@@ -130,7 +131,7 @@ class BoundSearch(Encoder):
             if errors.max() >= below * bound:
                 return best
             coarser = self._slack_codes(errors, bound)
-            for _ in range(2):
+            for _ in range(SLACK_TRIES):
                 if not coarser.any():
                     break
                 ps = self.run_pass(np.clip(best.steps + coarser, 0, 255).astype(np.uint8), best.offsets)

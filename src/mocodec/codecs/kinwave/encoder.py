@@ -493,10 +493,11 @@ class Encoder:
         the decoder reads the integers as ever. ``integers`` are the rows' knots, coefficients
         and constant flags; returns the coefficients and ``out`` again."""
         knots, coeffs, const = integers
-        frame_step = step * factors[0][self.lay.left]
-        far = np.abs(out - target) > FAR_STEPS * frame_step
+        if self.cfg["deadzone"] >= 0.5:  # plain rounding already
+            return coeffs, out
+        far = np.abs(out - target) > FAR_STEPS * step * factors[0][self.lay.left]
         far[const] = False
-        if not far.any() or self.cfg["deadzone"] >= 0.5:
+        if not far.any():
             return coeffs, out
         nearest = np.sign(scaled) * np.floor(np.abs(scaled) + 0.5)
         rounded = np.where(trendwave.coefficients_at(far, self.lay), nearest, coeffs).astype(np.int64)

@@ -427,8 +427,7 @@ class Encoder:
                 values[:, iso] = (values[:, iso - 1] + values[:, iso + 1]) / 2.0
             k_int, c_int, scaled = self._quantise(values, const, step, factors, constants)
             out = reconstruct(k_int, c_int, const, step, lay, factors, constants)
-            if self.cfg["error_measure"] != "mean":
-                c_int, out = self._round_where_far(values, out, scaled, (k_int, c_int, const), step, factors, constants)
+            c_int, out = self._round_where_far(values, out, scaled, (k_int, c_int, const), step, factors, constants)
             knots[channels], coeffs[channels] = k_int, c_int
             if iso.size:
                 patch = np.round((wanted - out[:, iso]) / (step * trendwave.KEYFRAME_QUANTUM)).astype(np.int64)
@@ -493,8 +492,8 @@ class Encoder:
         the decoder reads the integers as ever. ``integers`` are the rows' knots, coefficients
         and constant flags; returns the coefficients and ``out`` again."""
         knots, coeffs, const = integers
-        if self.cfg["deadzone"] >= 0.5:  # plain rounding already
-            return coeffs, out
+        if self.cfg["error_measure"] == "mean" or self.cfg["deadzone"] >= 0.5:
+            return coeffs, out  # a mean is not set by single frames; plain rounding already
         far = np.abs(out - target) > FAR_STEPS * step * factors[0][self.lay.left]
         far[const] = False
         if not far.any():

@@ -6,6 +6,7 @@ decoder (docs/kinwave.md)."""
 from __future__ import annotations
 
 import math
+from functools import cached_property
 
 import numpy as np
 
@@ -39,6 +40,11 @@ FILL_TRIES = 8  # codes tried one at a time
 class BoundSearch(Encoder):
     """The encoder's search for the steps that meet a bound (or a bit rate) on the decoded output."""
 
+    @cached_property
+    def moved_points(self) -> np.ndarray:
+        """``(codes, points)``: which points each step code moves (:func:`.encoder.influence`)."""
+        return influence(self.skeleton, self.cfg["error_measure"])
+
     def _adapt_joints(self, errors: np.ndarray, bound: float) -> float:
         """Correct the model's step shape by what a pass measured (max bounds): a joint whose
         points all stayed well below the worst one is coded finer than it needs (the model's
@@ -57,8 +63,7 @@ class BoundSearch(Encoder):
         """Per step code, the 1/8 octaves (times ``share``, floored) between ``reference`` and
         the worst of ``errors (points,)`` among the points the code moves (the joints below it,
         and with ``shell`` its own bone's shell; the translations: all)."""
-        moved = influence(self.skeleton, self.cfg["error_measure"])
-        own = np.array([errors[row].max() if row.any() else errors.max() for row in moved])
+        own = np.array([errors[row].max() if row.any() else errors.max() for row in self.moved_points])
         return np.floor(8.0 * share * np.log2(reference / np.maximum(own, reference * 2.0**-8)))
 
     def run(self) -> bytes:
@@ -139,7 +144,7 @@ class BoundSearch(Encoder):
                 if trial.max() <= bound:
                     best, errors = ps, trial
                     break
-                moving_over = influence(self.skeleton, self.cfg["error_measure"])[:, trial > bound].any(axis=1)
+                moving_over = self.moved_points[:, trial > bound].any(axis=1)
                 coarser = np.where(moving_over, np.floor(coarser / 2.0), coarser)
             else:
                 break

@@ -255,16 +255,23 @@ def encode(
     and a sign in the context of the previous value's and the parent's signs (kinwave's gain:
     docs/kinwave.md)."""
     const = np.ascontiguousarray(const, dtype=np.int64)
+    side_values = _differences(side)
+    knots, coeffs, seg_pad, seg_lev, buf = _prepared(knots, coeffs, seg_pad, seg_lev, revision, side_values, const.size)
+    n = _encode(side_values, const, knots, coeffs, seg_pad, seg_lev, revision >= 2, buf)
+    return buf[:n].tobytes()
+
+
+def _prepared(knots, coeffs, seg_pad, seg_lev, revision: int, side_values: np.ndarray, rows: int) -> tuple:
+    """The coder's arrays as int64, and an output buffer large enough for ``rows`` channels of
+    them (or any of their groups) after ``side_values``."""
     knots = np.ascontiguousarray(knots, dtype=np.int64)
     coeffs = np.ascontiguousarray(coeffs, dtype=np.int64)
     seg_pad, seg_lev = np.asarray(seg_pad, dtype=np.int64), np.asarray(seg_lev, dtype=np.int64)
-    side_values = _differences(side)
     values = [side_values, coeffs.ravel(), knots[:, :1].ravel(), np.diff(knots, axis=1).ravel()]
     if revision >= 2:
         values.append(_approx_differences(coeffs, seg_pad, seg_lev))
-    buf = buffer_for(const.size + int_decisions(np.concatenate(values)) + 2 * len(seg_pad) * const.size)
-    n = _encode(side_values, const, knots, coeffs, seg_pad, seg_lev, revision >= 2, buf)
-    return buf[:n].tobytes()
+    buf = buffer_for(rows + int_decisions(np.concatenate(values)) + 2 * len(seg_pad) * rows)
+    return knots, coeffs, seg_pad, seg_lev, buf
 
 
 def group_sizes(
@@ -273,13 +280,9 @@ def group_sizes(
     """The bytes :func:`encode` gives every ``rows`` consecutive rows of ``knots`` and
     ``coeffs`` coded on their own (no constant flags set, no side sequences), in one call: a
     choice that codes many small groups (kinwave's coding forms) without a call per group."""
-    knots = np.ascontiguousarray(knots, dtype=np.int64)
-    coeffs = np.ascontiguousarray(coeffs, dtype=np.int64)
-    seg_pad, seg_lev = np.asarray(seg_pad, dtype=np.int64), np.asarray(seg_lev, dtype=np.int64)
-    values = [coeffs.ravel(), knots[:, :1].ravel(), np.diff(knots, axis=1).ravel()]
-    if revision >= 2:
-        values.append(_approx_differences(coeffs, seg_pad, seg_lev))
-    buf = buffer_for(rows + int_decisions(np.concatenate(values)) + 2 * len(seg_pad) * rows)
+    knots, coeffs, seg_pad, seg_lev, buf = _prepared(
+        knots, coeffs, seg_pad, seg_lev, revision, np.zeros(0, dtype=np.int64), rows
+    )
     return _group_sizes(knots, coeffs, seg_pad, seg_lev, rows, revision >= 2, buf)
 
 

@@ -121,6 +121,39 @@ def test_layout_keyframe_and_knots():
     assert one.starts.tolist() == [0] and one.num_coeffs == 0 and one.num_knots == 1
 
 
+@pytest.mark.parametrize("lead", [1, 2, 3])
+def test_layout_lead_moves_the_grid_earlier(lead):
+    """A lead shortens the first window and pads its block in front, so every later block
+    starts ``lead`` frames earlier; the wavelets still reconstruct exactly, and a tail of at
+    most ``lead`` frames joins the last window instead of costing a knot of its own."""
+    lay = trendwave.layout(300, 128, 4, True, lead=lead)
+    assert lay.starts.tolist() == [0, 1, 129 - lead, 257 - lead]
+    assert lay.leads.tolist() == [0, lead, 0, 0] and lay.padded[1] == 128
+    x = np.random.default_rng(lead).normal(size=(2, 300))
+    back = trendwave.synthesise(trendwave.analyse(x, lay), lay)
+    assert np.allclose(back[:, 1:], x[:, 1:], atol=1e-10) and not back[:, 0].any()  # the keyframe: its knot
+    short = trendwave.layout(256, 128, 4, False, lead=lead)
+    assert short.starts.tolist() == [0, 128 - lead] and short.lengths[-1] == 128 + lead
+    assert short.knot_frames.tolist() == [0, 128 - lead, 255] and short.padded.tolist() == [128, 144]
+
+
+def _resampled_walk(rng, frames, every):
+    """A random walk drawn at every ``every``-th frame, joined linearly between."""
+    coarse = np.cumsum(rng.normal(size=(6, frames // every + 2)), axis=1)
+    return np.array([np.interp(np.arange(frames) / every, np.arange(coarse.shape[1]), row) for row in coarse])
+
+
+@pytest.mark.parametrize("trim", [0, 1, 2, 3])
+def test_grid_phase_finds_the_frames_of_a_lower_rate(trim):
+    """Motion resampled from a quarter of the rate has its drawn samples every fourth frame:
+    a clip cut ``trim`` frames later has them on frames -trim mod 4. Noise has no such frames."""
+    rng = np.random.default_rng(trim)
+    walk = _resampled_walk(rng, 1200, 4)[:, trim:] * 20.0
+    assert trendwave.grid_phase(walk, "cdf97") == -trim % 4
+    assert trendwave.grid_phase(rng.normal(size=(6, 1200)) * 20.0, "cdf97") is None
+    assert trendwave.grid_phase(walk[:, :40], "cdf97") is None  # too short to tell
+
+
 def test_trend_and_wavelets_reconstruct_exactly():
     rng = np.random.default_rng(1)
     lay = trendwave.layout(333, 64, 4, False)

@@ -17,6 +17,8 @@ const FORMAT = 1;
 const FORMAT_MORE = 2; // format 1 with a byte of more flags after the header
 const REST = 1; // more flags: frame 0 is the rest pose (rotations 0), its translations frame 1's
 const REST_AT_ZERO = 2; // ... with every translation 0 too
+const LEAD_SHIFT = 2; // more flags bits 2-3: the layout's lead (trendwave.layout)
+const LEADS = 4;
 const CODER_REVISION = 2;
 const HEAD_SIZE = 6;
 const FLAG_KEYFRAME = 1;
@@ -62,17 +64,23 @@ function planOf(skeleton) {
   return plan;
 }
 
-// trendwave.layout: segments (a keyframe or two, then windows), knots, blocks.
-function layout(frames, window, levels, keyframes) {
+// trendwave.layout: segments (a keyframe or two, then windows, the first `lead` frames shorter
+// and led by as many zeros in its block), knots, blocks.
+function layout(frames, window, levels, keyframes, lead) {
   const first = frames > 1 ? Math.min(keyframes, frames - 1) : 0;
   const starts = [];
   if (frames > 0) {
     for (let s = 0; s < first; s++) starts.push(s);
-    for (let s = first; s < frames; s += window) starts.push(s);
+    const windows = [first];
+    for (let s = first + (lead && frames > first + 1 ? window - lead : window); s < frames; s += window) windows.push(s);
+    if (lead && frames > first + 1 && windows.length > 1 && frames - windows.at(-1) <= lead) windows.pop();
+    starts.push(...windows);
   }
   const lengths = starts.map((a, s) => (s + 1 < starts.length ? starts[s + 1] : frames) - a);
-  const segLevels = lengths.map((n) => (n < 2 ? 0 : Math.min(levels, 31 - Math.clz32(n))));
-  const padded = lengths.map((n, s) => (n < 2 ? 0 : Math.ceil(n / (1 << segLevels[s])) * (1 << segLevels[s])));
+  const leads = lengths.map((n, s) => (s === first && n >= 2 ? lead : 0));
+  const spans = lengths.map((n, s) => n + leads[s]);
+  const segLevels = spans.map((n) => (n < 2 ? 0 : Math.min(levels, 31 - Math.clz32(n))));
+  const padded = spans.map((n, s) => (lengths[s] < 2 ? 0 : Math.ceil(n / (1 << segLevels[s])) * (1 << segLevels[s])));
   const knotFrames = [...starts];
   if (frames > 0 && frames - 1 !== starts.at(-1)) knotFrames.push(frames - 1);
   const left = new Int32Array(frames);
@@ -87,7 +95,7 @@ function layout(frames, window, levels, keyframes) {
   const quantum = Float64Array.from(knotFrames, (_, k) => (k < first ? KEYFRAME_QUANTUM : 1.0));
   const offsets = [];
   padded.reduce((at, n) => (offsets.push(at), at + n), 0);
-  return { frames, starts, lengths, padded, segLevels, knotFrames, left, frac, quantum, offsets };
+  return { frames, starts, lengths, leads, padded, segLevels, knotFrames, left, frac, quantum, offsets };
 }
 
 function cumulative(values, from, count) {
@@ -140,27 +148,30 @@ function damaged(what, offset = null) {
   return new DecodeError(`kinwave payload: ${what}`, offset);
 }
 
-// A format 2 body as { body, frames, rest }: the format 1 body of the frames after a rest pose
-// in frame 0 (payload.rest_kind), which is not coded; a format 1 body as it is, rest 0.
-function withoutRest(body, frames) {
-  if (body[0] !== FORMAT_MORE) return { body, frames, rest: 0 };
+// A format 2 body as { body, frames, rest, lead }: the format 1 body of the frames after a rest
+// pose in frame 0 (payload.rest_kind), which is not coded, and its layout's lead; a format 1
+// body as it is, rest 0, lead 0.
+function withoutMore(body, frames) {
+  if (body[0] !== FORMAT_MORE) return { body, frames, rest: 0, lead: 0 };
   if (body.length <= HEAD_SIZE) throw damaged(`${body.length} bytes is shorter than its ${HEAD_SIZE + 1}-byte header`, 0);
-  const rest = body[HEAD_SIZE];
-  if ((rest !== REST && rest !== REST_AT_ZERO) || frames < 2) {
-    throw damaged(`its more flags are damaged (${rest} for ${frames} frames)`, HEAD_SIZE);
+  const more = body[HEAD_SIZE];
+  const rest = more & 3;
+  const lead = more >> LEAD_SHIFT;
+  if (!more || ![0, REST, REST_AT_ZERO].includes(rest) || lead >= LEADS || frames < 1 + (rest ? 1 : 0)) {
+    throw damaged(`its more flags are damaged (${more} for ${frames} frames)`, HEAD_SIZE);
   }
   const inner = new Uint8Array(body.length - 1);
   inner[0] = FORMAT;
   inner.set(body.subarray(1, HEAD_SIZE), 1);
   inner.set(body.subarray(HEAD_SIZE + 1), HEAD_SIZE);
-  return { body: inner, frames: frames - 1, rest };
+  return { body: inner, frames: rest ? frames - 1 : frames, rest, lead };
 }
 
 // The header and integers of a kinwave body, every field checked: { lay, wavelet, coded (side,
 // constant, knots, coeffs), codes, offsets, forms, means, isolated, patches } of its coded
 // frames (a rest pose in frame 0 is not coded: rest, payload.rest_kind).
 export function readKinwave(whole, skeleton, allFrames) {
-  const { body, frames, rest } = withoutRest(whole, allFrames);
+  const { body, frames, rest, lead } = withoutMore(whole, allFrames);
   const plan = planOf(skeleton);
   const C = skeleton.numChannels;
   const numCodes = plan.rotationJoints.length + (plan.translation.length ? 1 : 0);
@@ -173,7 +184,7 @@ export function readKinwave(whole, skeleton, allFrames) {
     throw damaged(`header is damaged (window 2^${logWindow}, levels ${levels})`, 1);
   }
   const keyframes = flags & FLAG_KEYFRAME ? (flags & FLAG_SECOND_KEYFRAME ? 2 : 1) : 0;
-  const lay = layout(frames, 2 ** logWindow, levels, keyframes);
+  const lay = layout(frames, 2 ** logWindow, levels, keyframes, lead);
   const S = lay.starts.length;
   const numOffsets = flags & FLAG_OFFSETS ? S : 0;
   const numVectors = flags & FLAG_FORMS ? plan.threeAngle.length : 0;
@@ -245,7 +256,7 @@ export function decodeKinwave(body, skeleton, allFrames) {
 // payload.reconstruct: per channel its trend plus its blocks' residual, then the seams smoothed.
 function reconstruct(skeleton, plan, { coded, offsets, lay, wavelet }, steps) {
   const C = skeleton.numChannels;
-  const { frames, starts, lengths, padded, segLevels, left, frac, quantum } = lay;
+  const { frames, starts, lengths, leads, padded, segLevels, left, frac, quantum } = lay;
   const S = starts.length;
   const K = lay.knotFrames.length;
   const N = padded.reduce((a, b) => a + b, 0);
@@ -285,7 +296,7 @@ function reconstruct(skeleton, plan, { coded, offsets, lay, wavelet }, steps) {
       }
       if (!any) continue;
       inverseWavelet(block, 0, n, segLevels[s], wavelet, signal, work);
-      for (let i = 0; i < lengths[s]; i++) row[starts[s] + i] += signal[i];
+      for (let i = 0; i < lengths[s]; i++) row[starts[s] + i] += signal[leads[s] + i];
     }
     for (let k = 0; k < seams.length; k++) limits[k] = SEAM_LIMIT * seamFactor[k] * step;
     smoothSeams(row, seams, SEAM_HALF_WIDTH, limits);

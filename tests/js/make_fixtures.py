@@ -120,7 +120,8 @@ def live_fixtures() -> dict[str, bytes]:
 #: them they use every part of the format: chunks, segment step offsets, coding forms (vectors,
 #: coding orders, WORLD forms under a turned dummy root), world-axis translations, constant
 #: 6-channel joints, keyframes, an isolated frame, the three wavelets, a rate target, ASF axes and
-#: a leading rest pose (payload format 2) of either kind.
+#: a leading rest pose (payload format 2) of either kind, and a layout's lead (a clip cut off the
+#: frames its wavelet grid falls on).
 MOC_CASES = (
     ("bvh-joint", "07_03.bvh", 600, None, None, {}, 256),
     ("asf-30fps-shell", "135_08.amc", 300, 30.0, None, {"max_error_cm": 1.0, "error_measure": "shell"}, 1024),
@@ -131,6 +132,7 @@ MOC_CASES = (
     ("glitch", "09_02.bvh", 300, None, "glitch", {}, 1024),
     ("rest-pose", "07_03.bvh", 300, None, "rest", {"max_error_cm": 1.0, "error_measure": "shell"}, 256),
     ("rest-at-zero", "135_08.amc", 200, None, "rest-at-zero", {}, 1024),
+    ("lead", "07_03.bvh", 400, None, "cut", {"max_error_cm": 0.2}, 256),
 )
 
 
@@ -147,6 +149,8 @@ def _reexpressed(motion, how):
         return reexpress.with_bind_frame(motion)
     if how == "rest-at-zero":
         return motion.with_channels(np.vstack((np.zeros((1, motion.skeleton.num_channels)), motion.channels)))
+    if how == "cut":
+        return motion[1:]
     if how == "zxz":
         return reexpress.with_euler_orders(motion, "ZXZ")
     if how == "glitch":
@@ -159,7 +163,7 @@ def _reexpressed(motion, how):
 def moc_fixture(name, clip, frames, fps, how, knobs, chunk_frames) -> dict[str, bytes]:
     """The files of one .moc case: ``<name>.moc``, ``<name>.json`` (frames, channels, the error
     bound, per chunk its body's flags and integers' count, joint positions decoded and original
-    at a few frames), ``<name>.f64.gz`` (the
+    at a few frames; per chunk its more flags, 0 in format 1), ``<name>.f64.gz`` (the
     decoded channels, float64) and ``<name>.ints.gz`` (per chunk the integers the coefficient
     decoder read: side integers as sent, constant flags, knots, coefficients; int32)."""
     import gzip
@@ -204,7 +208,10 @@ def moc_fixture(name, clip, frames, fps, how, knobs, chunk_frames) -> dict[str, 
         "bound_cm": None
         if knobs.get("bits_per_second") or knobs.get("error_measure", "joint") != "joint"
         else knobs.get("max_error_cm", 0.5),
-        "chunks": [{"flags": int(info.read_chunk(k)[1]), "ints": int(x.size)} for k, x in enumerate(read)],
+        "chunks": [
+            {"flags": int(body[1]), "more": int(body[6]) if body[0] == 2 else 0, "ints": int(x.size)}
+            for body, x in ((info.read_chunk(k), x) for k, x in enumerate(read))
+        ],
         "positions": {str(f): positions[f].round(9).tolist() for f in frames_shown},
         "original_positions": {str(f): original[f].round(9).tolist() for f in frames_shown},
     }

@@ -16,7 +16,7 @@ import { crc32, u32 } from '../../js/src/bytes.js';
 import { seeded } from './seeded.mjs';
 
 const MOC = new URL('../data/moc/', import.meta.url);
-const CASES = ['bvh-joint', 'asf-30fps-shell', 'dummy-root', 'dummy-root-bind', 'zxz-d4', 'haar-bitrate', 'glitch', 'rest-pose', 'rest-at-zero'];
+const CASES = ['bvh-joint', 'asf-30fps-shell', 'dummy-root', 'dummy-root-bind', 'zxz-d4', 'haar-bitrate', 'glitch', 'rest-pose', 'rest-at-zero', 'lead'];
 
 async function fixture(name) {
   const data = new Uint8Array(await readFile(new URL(`${name}.moc`, MOC)));
@@ -50,6 +50,7 @@ for (const name of CASES) {
     file.chunks.forEach((chunk, k) => {
       const body = chunkBody(data, chunk, k);
       assert.equal(body[1], meta.chunks[k].flags, `chunk ${k}: flags`);
+      assert.equal(body[0] === 2 ? body[6] : 0, meta.chunks[k].more, `chunk ${k}: more flags`);
       const read = readKinwave(body, file.skeleton, chunk.count);
       read.forms.forEach((f) => formsSeen.add(f));
       const got = integersRead(read.coded);
@@ -86,6 +87,11 @@ test('the cases use every coding form: Euler, vector, coding orders and WORLD on
   assert.ok(formsSeen.has(0) && formsSeen.has(1), [...formsSeen].join());
   assert.ok([...formsSeen].some((f) => f >= 2 && f < 8), 'a coding order');
   assert.ok([...formsSeen].some((f) => f >= 8), 'a WORLD form');
+});
+
+test('the lead case has chunks whose wavelet grid starts early', async () => {
+  const { meta } = await fixture('lead');
+  assert.ok(meta.chunks.some((c) => c.more >> 2), JSON.stringify(meta.chunks));
 });
 
 test('a frame range decodes only its chunks and equals the whole file\'s frames', async () => {

@@ -52,7 +52,7 @@ from mocodec.codecs.kinwave.payload import (
     decode_body,
     rest_kind,
     rest_pose,
-    with_rest,
+    with_more,
 )
 from mocodec.codecs.kinwave.search import BoundSearch
 from mocodec.codecs.registry import register
@@ -183,7 +183,7 @@ class KinwaveCodec(Codec):
             if kind != REST or self._rest_holds(
                 motion, decode_body(body, output_skeleton, motion.num_frames - 1)[0], output_skeleton
             ):
-                return with_rest(body, kind)
+                return with_more(body, kind)
         return BoundSearch(self, motion, output_skeleton).run()
 
     def _rest_holds(self, motion: Motion, frame1: np.ndarray, output_skeleton: Skeleton) -> bool:

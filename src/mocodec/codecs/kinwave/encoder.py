@@ -23,6 +23,7 @@ from mocodec.codecs.kinwave.payload import (
     FLAG_SECOND_KEYFRAME,
     FORMAT,
     HEAD,
+    LEAD_SHIFT,
     MAX_ISOLATED,
     MEAN_QUANTUM,
     WAVELET_IDS,
@@ -42,6 +43,7 @@ from mocodec.codecs.kinwave.payload import (
     step_groups,
     still_rotations,
     three_angle_groups,
+    with_more,
     world_translations,
 )
 from mocodec.codecs.shared import closedloop, rotvec
@@ -161,6 +163,7 @@ class Encoder:
         self.positions = pos * self.cm
         self.quats = quat
         self.const = (np.ptp(self.values, axis=1) <= CONSTANT) if self.frames else np.ones(sk.num_channels, bool)
+        self.grid: int | None = None  # the frames (mod trendwave.LEADS) the blocks' grid starts on
         self._set_layout(0)
         self.first_pass: Pass | None = None
         self.isolated = isolated_frames(self.positions, 2) if self.cfg["keyframes"] else np.zeros(0, np.int64)
@@ -173,6 +176,8 @@ class Encoder:
         self.forms = self._choose_forms() if self.cfg["rotation_vectors"] else np.zeros(0, dtype=np.int64)
         self._constant_in_forms()
         self.world_translations = world_translations(sk, self.const)
+        self.grid = self._grid_phase()
+        self._set_layout(0)
         if self.cfg["keyframes"] and jumps_at_start(self.positions):
             self._choose_keyframes()
 
@@ -190,11 +195,21 @@ class Encoder:
         turns = parent_turns(sk, parent_orientations(sk, self.values[:, 0]))
         return turns, above & (np.abs(turns[:, 0]) < 1.0 - 1e-12)
 
+    def _grid_phase(self) -> int | None:
+        """Where the wavelet grid goes (:func:`trendwave.grid_phase`, the channels in the
+        starting scale's steps, the two frames keyframes may take left out); None: after the
+        keyframes, as it would without a lead."""
+        steps = channel_steps(self.skeleton, self.codes(self.first_scale()))
+        return trendwave.grid_phase(self.values / steps, self.cfg["wavelet"], skip=2)
+
     def _set_layout(self, keyframes: int) -> None:
-        """Segments and knots with ``keyframes`` leading one-frame segments, and the header."""
+        """Segments and knots with ``keyframes`` leading one-frame segments, the wavelet grid
+        on ``self.grid``, and the header."""
         self.keyframes = keyframes
         levels = self.cfg["levels"] or levels_for(self.motion.fps)
-        self.lay = trendwave.layout(self.frames, self.cfg["window"], levels, keyframes, self.cfg["wavelet"])
+        first = min(keyframes, self.frames - 1) if self.frames > 1 else 0
+        self.lead = 0 if self.grid is None else (first - self.grid) % trendwave.LEADS
+        self.lay = trendwave.layout(self.frames, self.cfg["window"], levels, keyframes, self.cfg["wavelet"], self.lead)
         flags = (FLAG_KEYFRAME if keyframes else 0) | (FLAG_SECOND_KEYFRAME if keyframes == 2 else 0)
         self.header = HEAD.pack(
             FORMAT,
@@ -543,6 +558,7 @@ class Encoder:
             flags, count = flags | FLAG_ISOLATED, bytes([self.isolated.size])
             side = side + (self.isolated, np.cumsum(ps.patches.ravel()))
         head = self.header[:1] + bytes([flags]) + self.header[2:] + count
-        return head + coefcoder.encode(
+        body = head + coefcoder.encode(
             ps.const, ps.knots, ps.coeffs, self.lay.padded, self.lay.levels, revision=CODER_REVISION, side=side
         )
+        return with_more(body, self.lead << LEAD_SHIFT) if self.lead else body

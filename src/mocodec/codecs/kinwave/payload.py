@@ -14,7 +14,8 @@ bit 3 one step offset per segment, with bit 4 a coding form per three-angle join
 Format 2 is format 1 with a byte of more flags after the header: bit 0, frame 0 is the
 skeleton's rest pose (every rotation 0, the translations frame 1's), bit 1, the rest pose with
 every translation 0 too; that frame is not coded, and the rest is a format 1 body of the other
-frames (:func:`rest_kind`). docs/formats.md gives the layout byte by byte.
+frames (:func:`rest_kind`); bits 2-3, the lead of the layout (:func:`trendwave.layout`).
+docs/formats.md gives the layout byte by byte.
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ FORMAT = 1  # the payload format (docs/formats.md), pinned by the golden fixture
 FORMAT_MORE = 2  # format 1 with a byte of more flags after the header
 REST = 1  # more flags bit 0: frame 0 is the rest pose, its translations frame 1's (not coded)
 REST_AT_ZERO = 2  # more flags bit 1: frame 0 is the rest pose with every translation 0 (not coded)
+LEAD_SHIFT = 2  # more flags bits 2-3: the layout's lead (trendwave.layout), in frames
 CODER_REVISION = 2  # the coefficient coder's revision (coefcoder: differences in the approximation band)
 HEAD = struct.Struct("<BBBBH")  # format, flags, log2 window, levels, channels
 FLAG_OFFSETS = 8  # flags bit 3: a signed step offset per segment follows the step codes
@@ -306,9 +308,12 @@ def rest_pose(skeleton: Skeleton, kind: int, frame1: np.ndarray) -> np.ndarray:
     return np.where(skeleton.rotation_mask, 0.0, frame1) if kind == REST else np.zeros_like(frame1)
 
 
-def with_rest(body: bytes, kind: int) -> bytes:
-    """The format 2 body of a rest pose of ``kind`` before the frames of the format 1 ``body``."""
-    return bytes([FORMAT_MORE]) + body[1 : HEAD.size] + bytes([kind]) + body[HEAD.size :]
+def with_more(body: bytes, more: int) -> bytes:
+    """``body`` (format 1, or 2 whose more flags are kept) as format 2 with the more flags ``more``
+    set too: a rest pose before its frames (REST, REST_AT_ZERO) or its layout's lead."""
+    if body[:1] == bytes([FORMAT_MORE]):
+        return body[: HEAD.size] + bytes([body[HEAD.size] | more]) + body[HEAD.size + 1 :]
+    return bytes([FORMAT_MORE]) + body[1 : HEAD.size] + bytes([more]) + body[HEAD.size :]
 
 
 def channel_steps(skeleton: Skeleton, codes: np.ndarray) -> np.ndarray:
@@ -322,18 +327,27 @@ def channel_steps(skeleton: Skeleton, codes: np.ndarray) -> np.ndarray:
 def decode_body(body: bytes, skeleton: Skeleton, frames: int) -> np.ndarray:
     """Channels ``(frames, C)`` of a kinwave body (format 1 or 2, docs/formats.md), every field
     checked."""
-    if body[:1] == bytes([FORMAT_MORE]):
-        if len(body) <= HEAD.size:
-            raise CorruptStreamError(
-                f"kinwave payload of {len(body)} bytes is shorter than its {HEAD.size + 1}-byte header"
-            )
-        kind = body[HEAD.size]
-        if kind not in (REST, REST_AT_ZERO) or frames < 2:
-            raise CorruptStreamError(
-                f"kinwave payload's more flags at byte {HEAD.size} are damaged ({kind} for {frames} frames)"
-            )
-        rest = decode_body(bytes([FORMAT]) + body[1 : HEAD.size] + body[HEAD.size + 1 :], skeleton, frames - 1)
-        return np.vstack((rest_pose(skeleton, kind, rest[0]), rest))
+    if body[:1] != bytes([FORMAT_MORE]):
+        return _decode_frames(body, skeleton, frames, 0)
+    if len(body) <= HEAD.size:
+        raise CorruptStreamError(
+            f"kinwave payload of {len(body)} bytes is shorter than its {HEAD.size + 1}-byte header"
+        )
+    more = body[HEAD.size]
+    kind, lead = more & 3, more >> LEAD_SHIFT
+    if not more or kind not in (0, REST, REST_AT_ZERO) or lead >= trendwave.LEADS or frames < 1 + bool(kind):
+        raise CorruptStreamError(
+            f"kinwave payload's more flags at byte {HEAD.size} are damaged ({more} for {frames} frames)"
+        )
+    inner = bytes([FORMAT]) + body[1 : HEAD.size] + body[HEAD.size + 1 :]
+    if not kind:
+        return _decode_frames(inner, skeleton, frames, lead)
+    rest = _decode_frames(inner, skeleton, frames - 1, lead)
+    return np.vstack((rest_pose(skeleton, kind, rest[0]), rest))
+
+
+def _decode_frames(body: bytes, skeleton: Skeleton, frames: int, lead: int) -> np.ndarray:
+    """Channels ``(frames, C)`` of a format 1 body whose layout has ``lead``."""
     rot_joints = rotation_joints(skeleton)
     trans = has_translation(skeleton)
     num_codes = len(rot_joints) + trans
@@ -349,7 +363,7 @@ def decode_body(body: bytes, skeleton: Skeleton, frames: int) -> np.ndarray:
     if log_w > 16 or not 1 <= levels <= 10 or (flags >> 1) & 3 >= len(WAVELET_IDS):
         raise CorruptStreamError(f"kinwave payload header is damaged (window 2^{log_w}, levels {levels})")
     keyframes = int(bool(flags & FLAG_KEYFRAME)) * (2 if flags & FLAG_SECOND_KEYFRAME else 1)
-    lay = trendwave.layout(frames, 1 << log_w, levels, keyframes, WAVELET_IDS[(flags >> 1) & 3])
+    lay = trendwave.layout(frames, 1 << log_w, levels, keyframes, WAVELET_IDS[(flags >> 1) & 3], lead)
     num_offsets = lay.starts.size if flags & FLAG_OFFSETS else 0
     num_vectors = len(three_angle_groups(skeleton)) if flags & FLAG_FORMS else 0
     num_means = 3 * num_vectors if flags & FLAG_MEANS else 0

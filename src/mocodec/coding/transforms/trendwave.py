@@ -22,6 +22,9 @@ import numpy as np
 from mocodec.coding.transforms import wavelets
 
 KEYFRAME_QUANTUM = 0.5
+LEADS = 4  # the leads a layout may take (0 to 3: a grid of four frames, two dyadic levels)
+EDGE = 4  # detail coefficients at either end of a band that the periodised transform's wrap reaches
+LEAD_GAIN = 0.9  # a grid phase is taken when its details cost at most this share of the dearest phase's
 
 
 @dataclass(frozen=True, eq=False)
@@ -30,6 +33,7 @@ class Layout:
     wavelet: str
     starts: np.ndarray  # (S,) first frame of each segment
     lengths: np.ndarray  # (S,) frames in each segment
+    leads: np.ndarray  # (S,) zeros before each segment's frames in its block
     padded: np.ndarray  # (S,) coefficients of each segment's block (0: no block)
     levels: np.ndarray  # (S,) wavelet levels of each block
     knot_frames: np.ndarray  # (K,)
@@ -48,17 +52,27 @@ class Layout:
 
 
 @lru_cache(maxsize=256)
-def layout(frames: int, window: int, levels: int, keyframes: int, wavelet: str = "cdf97") -> Layout:
+def layout(frames: int, window: int, levels: int, keyframes: int, wavelet: str = "cdf97", lead: int = 0) -> Layout:
     """The segments and knots of a ``frames``-long payload (``window`` a power of two), its
-    first ``keyframes`` frames (a bind pose, a T-pose) one-frame segments of their own."""
+    first ``keyframes`` frames (a bind pose, a T-pose) one-frame segments of their own. With a
+    ``lead``, the first window is ``lead`` frames shorter and its block starts with that many
+    zeros, so every block's dyadic grid falls ``lead`` frames earlier in the motion (where a
+    clip resampled from a lower rate has its smooth samples: :func:`grid_phase`)."""
     first = min(int(keyframes), frames - 1) if frames > 1 else 0
-    starts = np.array(list(range(first)) + list(range(first, max(frames, 1), window)), dtype=np.int64)
+    windows = list(range(first, max(frames, 1), window))
+    if lead and frames > first + 1:
+        windows = [first] + list(range(first + window - lead, frames, window))
+        if len(windows) > 1 and frames - windows[-1] <= lead:
+            windows.pop()  # the last window takes the few frames the lead left over
+    starts = np.array(list(range(first)) + windows, dtype=np.int64)
     if frames == 0:
         starts = np.zeros(0, dtype=np.int64)
     lengths = np.diff(np.append(starts, frames))
-    seg_levels = np.array([0 if n < 2 else min(levels, int(np.log2(n))) for n in lengths], dtype=np.int64)
+    leads = np.where((np.arange(starts.size) == first) & (lengths >= 2), lead, 0).astype(np.int64)
+    spans = lengths + leads
+    seg_levels = np.array([0 if n < 2 else min(levels, int(np.log2(n))) for n in spans], dtype=np.int64)
     unit = 1 << seg_levels
-    padded = np.where(lengths < 2, 0, -(-lengths // unit) * unit)
+    padded = np.where(lengths < 2, 0, -(-spans // unit) * unit)
     knots = starts.copy()
     if frames > 0 and frames - 1 != starts[-1]:
         knots = np.append(knots, frames - 1)
@@ -74,8 +88,40 @@ def layout(frames: int, window: int, levels: int, keyframes: int, wavelet: str =
     quantum[:first] = KEYFRAME_QUANTUM
     padded = padded.astype(np.int64)
     return Layout(
-        frames, wavelet, starts, lengths, padded, seg_levels, knots, left, frac, quantum, _blocks(padded, seg_levels)
+        frames,
+        wavelet,
+        starts,
+        lengths,
+        leads,
+        padded,
+        seg_levels,
+        knots,
+        left,
+        frac,
+        quantum,
+        _blocks(padded, seg_levels),
     )
+
+
+def grid_phase(scaled: np.ndarray, wavelet: str, skip: int = 0) -> int | None:
+    """The frame (mod LEADS) where a block's dyadic grid makes the two finest bands of ``scaled
+    (channels, T)`` (the channels in quantiser steps; the first ``skip`` frames, which may jump,
+    left out) cheapest, summed as log2(1 + |detail|) (about the bits a coefficient costs) away
+    from the ends; None unless it saves more than 1 - LEAD_GAIN against the dearest. A clip
+    resampled from a lower rate (CMU's cgspeed BVH files: 120 fps with the smoothness of 30)
+    has every fourth frame on the original grid, and a block aligned elsewhere pays for the
+    interpolation in its finest bands (docs/kinwave.md)."""
+    usable = (scaled.shape[1] - skip - (LEADS - 1)) // LEADS * LEADS
+    if usable < 16 * LEADS or not scaled.shape[0]:
+        return None
+    inner = np.r_[usable // 4 + EDGE : usable // 2 - EDGE, usable // 2 + EDGE : usable - EDGE]
+    costs = np.zeros(LEADS)
+    for phase in range(LEADS):
+        at = skip + (phase - skip) % LEADS
+        coeffs = wavelets.forward(scaled[:, at : at + usable], wavelet, 2)
+        costs[phase] = np.log2(1.0 + np.abs(coeffs[:, inner])).sum()
+    best = int(np.argmin(costs))
+    return best if costs[best] < LEAD_GAIN * costs.max() else None
 
 
 def trend(knot_values: np.ndarray, lay: Layout) -> np.ndarray:
@@ -103,8 +149,8 @@ def analyse(residual: np.ndarray, lay: Layout) -> np.ndarray:
     for n, lev, segs, offs in lay.blocks:
         block = np.zeros((channels, segs.size, n))
         for k, s in enumerate(segs):
-            a, m = lay.starts[s], lay.lengths[s]
-            block[:, k, :m] = residual[:, a : a + m]
+            a, m, z = lay.starts[s], lay.lengths[s], lay.leads[s]
+            block[:, k, z : z + m] = residual[:, a : a + m]
         coeffs = wavelets.forward(block.reshape(-1, n), lay.wavelet, lev).reshape(channels, segs.size, n)
         for k, o in enumerate(offs):
             out[:, o : o + n] = coeffs[:, k]
@@ -128,11 +174,11 @@ def coefficients_at(frames: np.ndarray, lay: Layout) -> np.ndarray:
     for n, lev, segs, offs in lay.blocks:
         reach = _reach(n, lev, lay.wavelet)
         for s, o in zip(segs, offs):
-            a, m = lay.starts[s], lay.lengths[s]
+            a, m, z = lay.starts[s], lay.lengths[s], lay.leads[s]
             marked = frames[:, a : a + m]
             rows = np.flatnonzero(marked.any(axis=1))
             if rows.size:
-                out[rows, o : o + n] = marked[rows].astype(np.float64) @ reach[:m] > 0
+                out[rows, o : o + n] = marked[rows].astype(np.float64) @ reach[z : z + m] > 0
     return out
 
 
@@ -144,6 +190,6 @@ def synthesise(coeffs: np.ndarray, lay: Layout) -> np.ndarray:
         block = np.stack([coeffs[:, o : o + n] for o in offs], axis=1).reshape(-1, n)
         signal = wavelets.inverse(block, n, lay.wavelet, lev).reshape(channels, segs.size, n)
         for k, s in enumerate(segs):
-            a, m = lay.starts[s], lay.lengths[s]
-            out[:, a : a + m] = signal[:, k, :m]
+            a, m, z = lay.starts[s], lay.lengths[s], lay.leads[s]
+            out[:, a : a + m] = signal[:, k, z : z + m]
     return out

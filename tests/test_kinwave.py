@@ -433,6 +433,32 @@ def test_a_clip_cut_off_its_grid_is_coded_on_it(walk_bvh, trim):
     assert _errors(clip, codec.decode(body, clip.skeleton, clip.num_frames, clip.fps))["joint"] <= 0.2
 
 
+def test_bones_in_position_channels_cost_only_their_constants(walk_amc):
+    """A skeleton whose offsets are 0 and whose bones are constant position channels (another
+    exporter's layout) takes fine constants (more flags bit 4): at the same steps its worst
+    error is within 2% of the clip's own, so the bound's search lands where it does for the
+    clip, and it costs at most two bytes more a constant (12 bits for a 20 cm bone at a
+    64th of a 0.3 cm step); the clip itself does not take them."""
+    from mocodec.codecs.kinwave.payload import FINE_CONSTANTS
+    from mocodec.reexpress import with_position_channels
+
+    codec = get_codec("kinwave", max_error_cm=1.0, error_measure="shell")
+    clip = walk_amc[:300]
+    moved = with_position_channels(clip)
+    base, bones = BoundSearch(codec, clip), BoundSearch(codec, moved)
+    assert bones.constants.fine and not base.constants.fine
+    codes = base.codes(base.first_scale())
+    passes = base.run_pass(codes), bones.run_pass(bones.codes(bones.first_scale()))
+    assert np.array_equal(passes[1].steps, codes)
+    sizes = [len(enc.body(ps)) for enc, ps in zip((base, bones), passes)]
+    errors = [enc.error(ps.decoded) for enc, ps in zip((base, bones), passes)]
+    constants = moved.skeleton.num_channels - clip.skeleton.num_channels
+    assert abs(errors[1] / errors[0] - 1) < 0.02 and sizes[0] < sizes[1] <= sizes[0] + 2 * constants
+    body = codec.encode(moved)
+    assert body[0] == 2 and body[6] & FINE_CONSTANTS and codec.encode(clip)[0] == 1
+    assert _errors(moved, codec.decode(body, moved.skeleton, moved.num_frames, moved.fps))["shell"] <= 1.0
+
+
 def test_a_damaged_rest_pose_flag_is_refused(walk_bvh):
     from mocodec.errors import CorruptStreamError
     from mocodec.reexpress import with_bind_frame
@@ -445,7 +471,7 @@ def test_a_damaged_rest_pose_flag_is_refused(walk_bvh):
     for bad, count in (
         (body[:6] + b"\0" + body[7:], frames),
         (body[:6] + b"\3" + body[7:], frames),
-        (body[:6] + b"\x11" + body[7:], frames),  # a lead of 4
+        (body[:6] + b"\x21" + body[7:], frames),  # bit 5
         (body, 1),
         (body[:6], frames),
     ):

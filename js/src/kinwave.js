@@ -18,7 +18,7 @@ const FORMAT_MORE = 2; // format 1 with a byte of more flags after the header
 const REST = 1; // more flags: frame 0 is the rest pose (rotations 0), its translations frame 1's
 const REST_AT_ZERO = 2; // ... with every translation 0 too
 const LEAD_SHIFT = 2; // more flags bits 2-3: the layout's lead (trendwave.layout)
-const LEADS = 4;
+const FINE_CONSTANTS = 16; // more flags bit 4: constant translations at FINE_CONST_FRACTION of their step
 const CODER_REVISION = 2;
 const HEAD_SIZE = 6;
 const FLAG_KEYFRAME = 1;
@@ -30,6 +30,7 @@ const FLAG_ISOLATED = 128;
 const MAX_ISOLATED = 32;
 const MEAN_QUANTUM = 2.0;
 const CONST_FRACTION = 1.0 / 8.0;
+const FINE_CONST_FRACTION = 1.0 / 64.0;
 const KEYFRAME_QUANTUM = 0.5;
 const SEAM_HALF_WIDTH = 8;
 const SEAM_LIMIT = 1.0;
@@ -148,30 +149,32 @@ function damaged(what, offset = null) {
   return new DecodeError(`kinwave payload: ${what}`, offset);
 }
 
-// A format 2 body as { body, frames, rest, lead }: the format 1 body of the frames after a rest
-// pose in frame 0 (payload.rest_kind), which is not coded, and its layout's lead; a format 1
-// body as it is, rest 0, lead 0.
+// A format 2 body as { body, frames, rest, lead, fine }: the format 1 body of the frames after a
+// rest pose in frame 0 (payload.rest_kind), which is not coded, its layout's lead and whether its
+// constant translations are fine (payload.ConstantCoding); a format 1 body as it is, rest 0,
+// lead 0, not fine.
 function withoutMore(body, frames) {
-  if (body[0] !== FORMAT_MORE) return { body, frames, rest: 0, lead: 0 };
+  if (body[0] !== FORMAT_MORE) return { body, frames, rest: 0, lead: 0, fine: false };
   if (body.length <= HEAD_SIZE) throw damaged(`${body.length} bytes is shorter than its ${HEAD_SIZE + 1}-byte header`, 0);
   const more = body[HEAD_SIZE];
   const rest = more & 3;
-  const lead = more >> LEAD_SHIFT;
-  if (!more || ![0, REST, REST_AT_ZERO].includes(rest) || lead >= LEADS || frames < 1 + (rest ? 1 : 0)) {
+  const lead = (more >> LEAD_SHIFT) & 3;
+  const fine = (more & FINE_CONSTANTS) !== 0;
+  if (!more || more >> 5 || ![0, REST, REST_AT_ZERO].includes(rest) || frames < 1 + (rest ? 1 : 0)) {
     throw damaged(`its more flags are damaged (${more} for ${frames} frames)`, HEAD_SIZE);
   }
   const inner = new Uint8Array(body.length - 1);
   inner[0] = FORMAT;
   inner.set(body.subarray(1, HEAD_SIZE), 1);
   inner.set(body.subarray(HEAD_SIZE + 1), HEAD_SIZE);
-  return { body: inner, frames: rest ? frames - 1 : frames, rest, lead };
+  return { body: inner, frames: rest ? frames - 1 : frames, rest, lead, fine };
 }
 
 // The header and integers of a kinwave body, every field checked: { lay, wavelet, coded (side,
 // constant, knots, coeffs), codes, offsets, forms, means, isolated, patches } of its coded
 // frames (a rest pose in frame 0 is not coded: rest, payload.rest_kind).
 export function readKinwave(whole, skeleton, allFrames) {
-  const { body, frames, rest, lead } = withoutMore(whole, allFrames);
+  const { body, frames, rest, lead, fine } = withoutMore(whole, allFrames);
   const plan = planOf(skeleton);
   const C = skeleton.numChannels;
   const numCodes = plan.rotationJoints.length + (plan.translation.length ? 1 : 0);
@@ -208,6 +211,7 @@ export function readKinwave(whole, skeleton, allFrames) {
   const at = sizes.map((_, k) => sizes.slice(0, k).reduce((a, b) => a + b, 0));
   const read = {
     rest,
+    fine,
     lay,
     wavelet: WAVELET_IDS[(flags >> 1) & 3],
     coded,
@@ -254,7 +258,7 @@ export function decodeKinwave(body, skeleton, allFrames) {
 }
 
 // payload.reconstruct: per channel its trend plus its blocks' residual, then the seams smoothed.
-function reconstruct(skeleton, plan, { coded, offsets, lay, wavelet }, steps) {
+function reconstruct(skeleton, plan, { coded, offsets, lay, wavelet, fine }, steps) {
   const C = skeleton.numChannels;
   const { frames, starts, lengths, leads, padded, segLevels, left, frac, quantum } = lay;
   const S = starts.length;
@@ -276,7 +280,8 @@ function reconstruct(skeleton, plan, { coded, offsets, lay, wavelet }, steps) {
     rows.push(row);
     const step = steps[c];
     if (coded.constant[c]) {
-      row.fill(plan.base[c] + coded.knots[c * K] * (step * CONST_FRACTION));
+      const fraction = fine && plan.isTranslation[c] ? FINE_CONST_FRACTION : CONST_FRACTION;
+      row.fill(plan.base[c] + coded.knots[c * K] * (step * fraction));
       continue;
     }
     for (let k = 0; k < K; k++) values[k] = coded.knots[c * K + k] * (step * quantum[k] * knotFactor[k]);

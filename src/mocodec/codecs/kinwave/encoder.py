@@ -15,6 +15,7 @@ from mocodec.codecs.base import Codec
 from mocodec.codecs.kinwave import kinalloc
 from mocodec.codecs.kinwave.payload import (
     CODER_REVISION,
+    FINE_CONSTANTS,
     FLAG_FORMS,
     FLAG_ISOLATED,
     FLAG_KEYFRAME,
@@ -59,6 +60,7 @@ CONSTANT = 1e-6  # a channel whose range is below this is one knot
 JUMP_CM = 10.0  # a leading frame jumping less than this is not tried as a keyframe
 TRIAL_FRAMES = 1024  # frames the choice of forms codes each form of every joint on
 FAR_STEPS = 0.7  # a frame missing its target by more than this many steps rounds its coefficients plainly
+CONST_AWAY_CM = 0.1  # a constant translation this far from its joint's offset takes fine constants
 GIMBAL_MARGIN = 15.0  # degrees from an Euler order's lock within which a joint goes as a vector
 
 
@@ -154,7 +156,6 @@ class Encoder:
         self.cfg = codec.config
         self.skeleton = sk = motion.skeleton
         self.output_skeleton = output_skeleton or sk  # the decoder's: errors are measured on its joints
-        self.constants = constant_coding(self.output_skeleton)
         self.motion = motion.continuous() if motion.num_frames else motion
         self.values = self.motion.channels.T.copy()  # (C, T)
         self.frames = motion.num_frames
@@ -163,6 +164,7 @@ class Encoder:
         self.positions = pos * self.cm
         self.quats = quat
         self.const = (np.ptp(self.values, axis=1) <= CONSTANT) if self.frames else np.ones(sk.num_channels, bool)
+        self.constants = self._constant_coding()
         self.grid: int | None = None  # the frames (mod trendwave.LEADS) the blocks' grid starts on
         self._set_layout(0)
         self.first_pass: Pass | None = None
@@ -194,6 +196,17 @@ class Encoder:
         above = np.where(parents >= 0, still[np.maximum(parents, 0)], False)
         turns = parent_turns(sk, parent_orientations(sk, self.values[:, 0]))
         return turns, above & (np.abs(turns[:, 0]) < 1.0 - 1e-12)
+
+    def _constant_coding(self) -> ConstantCoding:
+        """Fine constants (:class:`ConstantCoding`) where a constant translation lies
+        CONST_AWAY_CM or more from its joint's offset on the decoder's skeleton: offsets moved
+        into position channels."""
+        coarse = constant_coding(self.output_skeleton)
+        if not self.frames:
+            return coarse
+        away = np.abs(self.values[:, 0] - coarse.base) * self.cm >= CONST_AWAY_CM
+        moved = self.const & ~self.skeleton.rotation_mask & away
+        return constant_coding(self.output_skeleton, fine=True) if moved.any() else coarse
 
     def _grid_phase(self) -> int | None:
         """Where the wavelet grid goes (:func:`trendwave.grid_phase`, the channels in the
@@ -328,7 +341,7 @@ class Encoder:
                 if base != rotvec.VECTOR
                 else np.zeros(idx.size, bool)
             )
-            flat, none = np.zeros(rows.size, dtype=bool), ConstantCoding(1.0, np.zeros(rows.size))
+            flat, none = np.zeros(rows.size, dtype=bool), ConstantCoding(np.ones(rows.size), np.zeros(rows.size))
             k_int, c_int, _ = self._quantise(values, flat, step[rows], factors, none, lay)
             sizes = coefcoder.group_sizes(k_int, c_int, lay.padded, lay.levels, 3, revision=CODER_REVISION)
             rec = reconstruct(k_int, c_int, flat, step[rows], lay, factors, none)
@@ -435,7 +448,7 @@ class Encoder:
                 values[cols] = rotvec.to_forms(values[cols], orders, forms, turns, quats, pre)
             for j, rows in moved:
                 values[rows] = on_axes(values[rows], parents[j])
-            constants = ConstantCoding(self.constants.fraction, self.constants.base[channels])
+            constants = ConstantCoding(self.constants.fraction[channels], self.constants.base[channels])
             iso = self.isolated
             wanted = values[:, iso]
             if iso.size:  # the wavelet sees the neighbours' mean there
@@ -480,7 +493,7 @@ class Encoder:
         quantum = step * lay.knot_quantum * knot_f
         k_int = np.round(target[:, lay.knot_frames] / quantum).astype(np.int64)
         k_int[const] = np.round(
-            (target[const, :1] - constants.base[const, None]) / (step[const] * constants.fraction)
+            (target[const, :1] - constants.base[const, None]) / (step[const] * constants.fraction[const, None])
         ).astype(np.int64)
         residual = target - trendwave.trend(k_int * quantum, lay)
         residual[const] = 0.0
@@ -526,7 +539,7 @@ class Encoder:
             step[rows],
             self.lay,
             factors,
-            ConstantCoding(constants.fraction, constants.base[rows]),
+            ConstantCoding(constants.fraction[rows], constants.base[rows]),
         )
         return coeffs, out
 
@@ -561,4 +574,5 @@ class Encoder:
         body = head + coefcoder.encode(
             ps.const, ps.knots, ps.coeffs, self.lay.padded, self.lay.levels, revision=CODER_REVISION, side=side
         )
-        return with_more(body, self.lead << LEAD_SHIFT) if self.lead else body
+        more = self.lead << LEAD_SHIFT | (FINE_CONSTANTS if self.constants.fine else 0)
+        return with_more(body, more) if more else body

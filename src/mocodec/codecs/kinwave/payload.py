@@ -14,7 +14,8 @@ bit 3 one step offset per segment, with bit 4 a coding form per three-angle join
 Format 2 is format 1 with a byte of more flags after the header: bit 0, frame 0 is the
 skeleton's rest pose (every rotation 0, the translations frame 1's), bit 1, the rest pose with
 every translation 0 too; that frame is not coded, and the rest is a format 1 body of the other
-frames (:func:`rest_kind`); bits 2-3, the lead of the layout (:func:`trendwave.layout`).
+frames (:func:`rest_kind`); bits 2-3, the lead of the layout (:func:`trendwave.layout`); bit 4,
+constant translations at a finer quantum (:class:`ConstantCoding`).
 docs/formats.md gives the layout byte by byte.
 """
 
@@ -41,6 +42,7 @@ FORMAT_MORE = 2  # format 1 with a byte of more flags after the header
 REST = 1  # more flags bit 0: frame 0 is the rest pose, its translations frame 1's (not coded)
 REST_AT_ZERO = 2  # more flags bit 1: frame 0 is the rest pose with every translation 0 (not coded)
 LEAD_SHIFT = 2  # more flags bits 2-3: the layout's lead (trendwave.layout), in frames
+FINE_CONSTANTS = 16  # more flags bit 4: constant translations at FINE_CONST_FRACTION of their step
 CODER_REVISION = 2  # the coefficient coder's revision (coefcoder: differences in the approximation band)
 HEAD = struct.Struct("<BBBBH")  # format, flags, log2 window, levels, channels
 FLAG_OFFSETS = 8  # flags bit 3: a signed step offset per segment follows the step codes
@@ -55,6 +57,7 @@ FLAG_KEYFRAME = 1  # flags bit 0: frame 0 is a keyframe (a one-frame segment)
 FLAG_SECOND_KEYFRAME = 32  # flags bit 5 (with bit 0): frame 1 is one too
 WAVELET_IDS = ("cdf97", "d4", "haar")
 CONST_FRACTION = 1.0 / 8.0  # format 3: a constant channel's quantum, in steps of its joint
+FINE_CONST_FRACTION = 1.0 / 64.0  # ... a constant translation's with FINE_CONSTANTS
 COARSEST_BAND_S = 0.25  # seconds between the coarsest band's samples (the automatic levels)
 SEAM_HALF_WIDTH = 8  # frames each side of a seam over which its step is spread
 SEAM_LIMIT = 1.0  # the largest step removed, in quantiser steps of the channel
@@ -200,20 +203,26 @@ class ConstantCoding:
     that the closed loop averages out (a dummy root's rotation turns the whole body), so its
     quantum is 8 times finer than the step, and a constant translation is coded as its
     difference from the joint's offset on the decoder's skeleton (a MotionBuilder export
-    repeats every offset in its position channels: these cost one decision each)."""
+    repeats every offset in its position channels: these cost one decision each). With
+    FINE_CONSTANTS a constant translation's quantum is 8 times finer again: a skeleton whose
+    offsets are 0 and whose bones are constant position channels (another exporter's layout)
+    would otherwise add up a quantum's error along every chain, which the steps then pay."""
 
-    fraction: float
-    base: np.ndarray
+    fraction: np.ndarray  # (C,)
+    base: np.ndarray  # (C,)
+    fine: bool = False  # the more flag FINE_CONSTANTS
 
 
-def constant_coding(skeleton: Skeleton) -> ConstantCoding:
+def constant_coding(skeleton: Skeleton, fine: bool = False) -> ConstantCoding:
     base = np.zeros(skeleton.num_channels)
+    fraction = np.full(skeleton.num_channels, CONST_FRACTION)
     plan = channel_plan(skeleton)
     for j in range(len(skeleton)):
         for axis, c in enumerate(plan.pos_index[j]):
             if c >= 0:
                 base[c] = plan.offsets[j, axis]
-    return ConstantCoding(CONST_FRACTION, base)
+                fraction[c] = FINE_CONST_FRACTION if fine else CONST_FRACTION
+    return ConstantCoding(fraction, base, fine)
 
 
 def reconstruct(
@@ -232,7 +241,7 @@ def reconstruct(
     rows)."""
     knot_f, coeff_f, seam_f = factors
     values = knots * (step * lay.knot_quantum * knot_f)
-    values[const] = constants.base[const, None] + knots[const, :1] * (step[const] * constants.fraction)
+    values[const] = constants.base[const, None] + knots[const, :1] * (step[const] * constants.fraction[const, None])
     out = trendwave.trend(values, lay) + trendwave.synthesise(coeffs * (step * coeff_f), lay)
     limits = SEAM_LIMIT * seam_f[:, None] * step[:, 0]
     return seams.smooth_seams(out.T, lay.starts[1:], SEAM_HALF_WIDTH, limits).T
@@ -328,26 +337,27 @@ def decode_body(body: bytes, skeleton: Skeleton, frames: int) -> np.ndarray:
     """Channels ``(frames, C)`` of a kinwave body (format 1 or 2, docs/formats.md), every field
     checked."""
     if body[:1] != bytes([FORMAT_MORE]):
-        return _decode_frames(body, skeleton, frames, 0)
+        return _decode_frames(body, skeleton, frames, 0, False)
     if len(body) <= HEAD.size:
         raise CorruptStreamError(
             f"kinwave payload of {len(body)} bytes is shorter than its {HEAD.size + 1}-byte header"
         )
     more = body[HEAD.size]
-    kind, lead = more & 3, more >> LEAD_SHIFT
-    if not more or kind not in (0, REST, REST_AT_ZERO) or lead >= trendwave.LEADS or frames < 1 + bool(kind):
+    kind, lead, fine = more & 3, (more >> LEAD_SHIFT) & 3, bool(more & FINE_CONSTANTS)
+    if not more or more >> 5 or kind not in (0, REST, REST_AT_ZERO) or frames < 1 + bool(kind):
         raise CorruptStreamError(
             f"kinwave payload's more flags at byte {HEAD.size} are damaged ({more} for {frames} frames)"
         )
     inner = bytes([FORMAT]) + body[1 : HEAD.size] + body[HEAD.size + 1 :]
     if not kind:
-        return _decode_frames(inner, skeleton, frames, lead)
-    rest = _decode_frames(inner, skeleton, frames - 1, lead)
+        return _decode_frames(inner, skeleton, frames, lead, fine)
+    rest = _decode_frames(inner, skeleton, frames - 1, lead, fine)
     return np.vstack((rest_pose(skeleton, kind, rest[0]), rest))
 
 
-def _decode_frames(body: bytes, skeleton: Skeleton, frames: int, lead: int) -> np.ndarray:
-    """Channels ``(frames, C)`` of a format 1 body whose layout has ``lead``."""
+def _decode_frames(body: bytes, skeleton: Skeleton, frames: int, lead: int, fine: bool) -> np.ndarray:
+    """Channels ``(frames, C)`` of a format 1 body whose layout has ``lead``, its constant
+    translations ``fine`` (:class:`ConstantCoding`)."""
     rot_joints = rotation_joints(skeleton)
     trans = has_translation(skeleton)
     num_codes = len(rot_joints) + trans
@@ -406,7 +416,7 @@ def _decode_frames(body: bytes, skeleton: Skeleton, frames: int, lead: int) -> n
         coded.coeffs,
         lay,
         forms,
-        constant_coding(skeleton),
+        constant_coding(skeleton, fine),
         means,
         (isolated, patches),
     ).T

@@ -194,7 +194,7 @@ def test_frames_far_off_round_their_coefficients_plainly(walk_amc):
     target = np.cumsum(np.random.default_rng(7).normal(0.0, 1.0, (8, enc.frames)), axis=1)
     step, const = np.full((8, 1), 2.0), np.zeros(8, dtype=bool)
     factors = segment_factors(np.zeros(enc.lay.starts.size), enc.lay)
-    constants = ConstantCoding(1.0, np.zeros(8))
+    constants = ConstantCoding(np.ones(8), np.zeros(8))
     knots, coeffs, scaled = enc._quantise(target, const, step, factors, constants)
     out = reconstruct(knots, coeffs, const, step, enc.lay, factors, constants)
     rounded, closer = enc._round_where_far(target, out, scaled, (knots, coeffs, const), step, factors, constants)
@@ -506,6 +506,21 @@ def test_a_turned_dummy_root_codes_the_body_as_without_it(walk_amc, turn):
     p0, q0 = forward_kinematics(sk, moved.channels)
     p1, q1 = forward_kinematics(decoded.skeleton, decoded.channels)
     assert shell_errors(sk, p0 * cm, q0, p1 * cm, q1).max <= 1.0
+
+
+def test_a_short_payload_keeps_the_smallest_of_its_searches(walk_amc):
+    """A payload of at most SHORT_FRAMES frames searches once per joint-feedback share and
+    keeps the smallest body, each search on its own encoder the same; the bound holds."""
+    from mocodec.codecs.kinwave.search import SHORT_FRAMES, SHORT_SHARES
+
+    codec = get_codec("kinwave", max_error_cm=1.0, error_measure="shell")
+    clip = walk_amc[:200]
+    assert clip.num_frames <= SHORT_FRAMES
+    bodies = [BoundSearch(codec, clip)._to_bound_with_share(share) for share in SHORT_SHARES]
+    assert len(set(bodies)) > 1  # the shares land apart on this clip
+    body = BoundSearch(codec, clip).run()
+    assert body == min(bodies, key=len)
+    assert _errors(clip, codec.decode(body, clip.skeleton, clip.num_frames, clip.fps))["shell"] <= 1.0
 
 
 def test_a_final_pass_far_under_its_bound_is_scaled_up(walk_bvh):

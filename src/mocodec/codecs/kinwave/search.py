@@ -87,10 +87,9 @@ class BoundSearch(Encoder):
 
     def _to_bound_with_share(self, share: float) -> bytes:
         """:meth:`_to_bound` with the joint feedback taking ``share`` of the slack. Where a max
-        bound's search lands moves a short payload by up to 10% (its worst error is a handful
-        of frames, and the first pass's slack sets every joint's step); three landings cost
-        little on a short payload, and the smallest is 0.5-1% smaller on Bandai Namco's clips
-        (docs/kinwave.md)."""
+        bound's search lands moves a short payload a lot (its worst error is a handful of
+        frames, and the first pass's slack sets every joint's step); three landings cost little
+        on a short payload, and the smallest wins (what it buys: docs/kinwave.md)."""
         self.feedback_share, self.joint_offsets = share, np.zeros_like(self.joint_offsets)
         return self._to_bound(self.cfg["max_error_cm"])
 

@@ -220,7 +220,7 @@ class Encoder:
         on ``self.grid``, and the header."""
         self.keyframes = keyframes
         levels = self.cfg["levels"] or levels_for(self.motion.fps)
-        first = min(keyframes, self.frames - 1) if self.frames > 1 else 0
+        first = trendwave.first_window(self.frames, keyframes)
         self.lead = 0 if self.grid is None else (first - self.grid) % trendwave.LEADS
         self.lay = trendwave.layout(self.frames, self.cfg["window"], levels, keyframes, self.cfg["wavelet"], self.lead)
         flags = (FLAG_KEYFRAME if keyframes else 0) | (FLAG_SECOND_KEYFRAME if keyframes == 2 else 0)

@@ -319,7 +319,8 @@ def rest_pose(skeleton: Skeleton, kind: int, frame1: np.ndarray) -> np.ndarray:
 
 def with_more(body: bytes, more: int) -> bytes:
     """``body`` (format 1, or 2 whose more flags are kept) as format 2 with the more flags ``more``
-    set too: a rest pose before its frames (REST, REST_AT_ZERO) or its layout's lead."""
+    set too: a rest pose before its frames (REST, REST_AT_ZERO), its layout's lead, fine
+    constants."""
     if body[:1] == bytes([FORMAT_MORE]):
         return body[: HEAD.size] + bytes([body[HEAD.size] | more]) + body[HEAD.size + 1 :]
     return bytes([FORMAT_MORE]) + body[1 : HEAD.size] + bytes([more]) + body[HEAD.size :]

@@ -51,6 +51,12 @@ class Layout:
         return int(self.padded.sum())
 
 
+def first_window(frames: int, keyframes: int) -> int:
+    """The frame a payload's windows start on: after its keyframes, of which a payload keeps
+    at least one frame for the windows (none for a single frame)."""
+    return min(int(keyframes), frames - 1) if frames > 1 else 0
+
+
 @lru_cache(maxsize=256)
 def layout(frames: int, window: int, levels: int, keyframes: int, wavelet: str = "cdf97", lead: int = 0) -> Layout:
     """The segments and knots of a ``frames``-long payload (``window`` a power of two), its
@@ -58,7 +64,7 @@ def layout(frames: int, window: int, levels: int, keyframes: int, wavelet: str =
     ``lead``, the first window is ``lead`` frames shorter and its block starts with that many
     zeros, so every block's dyadic grid falls ``lead`` frames earlier in the motion (where a
     clip resampled from a lower rate has its smooth samples: :func:`grid_phase`)."""
-    first = min(int(keyframes), frames - 1) if frames > 1 else 0
+    first = first_window(frames, keyframes)
     windows = list(range(first, max(frames, 1), window))
     if lead and frames > first + 1:
         windows = [first] + list(range(first + window - lead, frames, window))

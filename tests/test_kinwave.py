@@ -399,12 +399,16 @@ def test_a_rest_pose_leaves_the_chunks_of_a_file_as_they_were(walk_bvh):
 
 
 def test_a_rest_pose_whose_copied_translations_break_the_bound_is_coded_as_a_frame(walk_bvh):
-    """Under a dummy root turned (0, -90, 0) whose rotation is 0 only in the rest pose, frame
-    1's translations are coded against the dummy's decoded turn, so copied into the rest pose
-    they miss its joints by more than the bound: the clip is coded whole (format 1)."""
+    """Under a dummy root turned (13.7, 21.1, -7.9) whose rotation is 0 only in the rest pose,
+    frame 1's translations are coded against the dummy's decoded turn; 30 m from the origin its
+    quantum's error, copied into the rest pose, misses the joints by more than the bound: the
+    clip is coded whole (format 1)."""
     from mocodec.reexpress import with_bind_frame, with_dummy_root
 
-    rest = with_bind_frame(with_dummy_root(walk_bvh[:200], (0.0, -90.0, 0.0), position_channels=True))
+    channels = walk_bvh.channels[:200].copy()
+    channels[:, 0] += 3000.0
+    far = walk_bvh[:200].with_channels(channels)
+    rest = with_bind_frame(with_dummy_root(far, (13.7, 21.1, -7.9), position_channels=True))
     codec = get_codec("kinwave", max_error_cm=0.5, error_measure="shell")
     body = codec.encode(rest)
     assert body[0] == 1
@@ -429,7 +433,7 @@ def test_a_clip_cut_off_its_grid_is_coded_on_it(walk_bvh, trim):
     sizes = [len(enc.body(enc.run_pass(codes))) for enc in (uncut, cut, plain)]
     assert sizes[1] < 1.03 * sizes[0] and sizes[2] > 1.05 * sizes[1]
     body = codec.encode(clip)
-    assert body[0] == 2 and body[6] == trim << LEAD_SHIFT
+    assert body[0] == 2 and body[6] & 12 == trim << LEAD_SHIFT
     assert _errors(clip, codec.decode(body, clip.skeleton, clip.num_frames, clip.fps))["joint"] <= 0.2
 
 
@@ -455,8 +459,54 @@ def test_bones_in_position_channels_cost_only_their_constants(walk_amc):
     constants = moved.skeleton.num_channels - clip.skeleton.num_channels
     assert abs(errors[1] / errors[0] - 1) < 0.02 and sizes[0] < sizes[1] <= sizes[0] + 2 * constants
     body = codec.encode(moved)
-    assert body[0] == 2 and body[6] & FINE_CONSTANTS and codec.encode(clip)[0] == 1
+    own = codec.encode(clip)
+    assert body[0] == 2 and body[6] & FINE_CONSTANTS and (own[0] == 1 or not own[6] & FINE_CONSTANTS)
     assert _errors(moved, codec.decode(body, moved.skeleton, moved.num_frames, moved.fps))["shell"] <= 1.0
+
+
+def test_a_turned_dummy_root_takes_fine_turns(walk_bvh):
+    """A constant rotation of a joint with channels below it (a dummy root turned (0, 90, 0))
+    is coded at a 64th of its step (more flags bit 5): its error turns every joint below it in
+    every frame. A constant rotation of a joint with none below it keeps the 8th, and a clip
+    whose carrying joints' constant rotations are all 0 does not set the flag."""
+    from mocodec.codecs.kinwave.payload import (
+        CONST_FRACTION,
+        FINE_CONST_FRACTION,
+        FINE_TURNS,
+        carrying_turns,
+        constant_coding,
+    )
+    from mocodec.kinematics import channel_plan
+    from mocodec.reexpress import with_dummy_root
+
+    clip = walk_bvh[:200]
+    moved = with_dummy_root(clip, (0.0, 90.0, 0.0))
+    sk = moved.skeleton
+    carrying = carrying_turns(sk)
+    plan = channel_plan(sk)
+    has_channels = (plan.rot_index >= 0).any(axis=1) | (plan.pos_index >= 0).any(axis=1)
+
+    def above(k: int) -> set[int]:
+        return set() if plan.parents[k] < 0 else {int(plan.parents[k])} | above(plan.parents[k])
+
+    carriers = set().union(*(above(k) for k in range(len(sk)) if has_channels[k]))
+    for j in range(len(sk)):
+        rot = plan.rot_index[j][plan.rot_index[j] >= 0]
+        assert (carrying[rot] == (j in carriers)).all()
+    assert carrying[:3].all() and not carrying[~sk.rotation_mask].any()
+    fine, coarse = constant_coding(sk, fine_turns=True), constant_coding(sk)
+    assert (fine.fraction[carrying] == FINE_CONST_FRACTION).all()
+    assert (fine.fraction[~carrying] == coarse.fraction[~carrying]).all()
+    assert (coarse.fraction[sk.rotation_mask] == CONST_FRACTION).all()
+    codec = get_codec("kinwave", max_error_cm=1.0, error_measure="shell")
+    body = codec.encode(moved)
+    assert body[0] == 2 and body[6] & FINE_TURNS
+    decoded = codec.decode(body, sk, moved.num_frames, moved.fps)
+    assert _errors(moved, decoded)["shell"] <= 1.0
+    still = with_dummy_root(clip, (0.0, 0.0, 0.0))
+    turns = still.skeleton.rotation_mask & (np.ptp(still.channels, axis=0) < 1e-3)
+    still_body = codec.encode(still.with_channels(np.where(turns, 0.0, still.channels)))
+    assert still_body[0] == 1 or not still_body[6] & FINE_TURNS
 
 
 def test_a_damaged_rest_pose_flag_is_refused(walk_bvh):
@@ -471,7 +521,7 @@ def test_a_damaged_rest_pose_flag_is_refused(walk_bvh):
     for bad, count in (
         (body[:6] + b"\0" + body[7:], frames),
         (body[:6] + b"\3" + body[7:], frames),
-        (body[:6] + b"\x21" + body[7:], frames),  # bit 5
+        (body[:6] + b"\x41" + body[7:], frames),  # bit 6
         (body, 1),
         (body[:6], frames),
     ):

@@ -1,4 +1,5 @@
-"""A whole .moc file pinned (container version 1, kinwave payload format 1): a checked-in
+"""A whole .moc file pinned (container version 1, kinwave payload format 2: the rest pose, a
+lead of 2 frames and fine turns in its more flags): a checked-in
 file (a CMU walk re-expressed as another pipeline writes it: a MotionBuilder dummy root at
 (0, -90, 0), a bind pose in frame 0, a proper Euler order on the legs) must decode to the
 same channels, and encoding its input with the same settings must give the very same bytes.
@@ -16,6 +17,7 @@ import numpy as np
 
 from mocodec import load, moc, reexpress
 from mocodec.codecs import get_codec
+from mocodec.codecs.kinwave.payload import FINE_TURNS, LEAD_SHIFT, REST
 from mocodec.formats import container
 from mocodec.kinematics import forward_kinematics
 from mocodec.metrics.pose import shell_errors
@@ -23,7 +25,7 @@ from mocodec.metrics.pose import shell_errors
 DATA = Path(__file__).parent / "data"
 GOLDEN = DATA / "kinwave_reexpressed.moc"
 KNOBS = {"max_error_cm": 0.5, "error_measure": "shell"}
-DECODED_SHA256 = "076d7b8af7afd92161f14db5c2301e13e52a99abb96c12d6274a8aa82d5baa2c"
+DECODED_SHA256 = "0684696289745eb8300ebf4f11afd5dcd84adef2459b49ad2c3abfa33431f5b2"
 
 
 def _input():
@@ -49,7 +51,8 @@ def test_the_golden_file_decodes_to_the_same_channels_within_its_bound():
     p1, q1 = forward_kinematics(decoded.skeleton, decoded.channels)
     assert shell_errors(sk, p0 * cm, q0, p1 * cm, q1).max <= KNOBS["max_error_cm"]
     assert data[4] == 1  # .moc version 1
-    assert container.open_container(io.BytesIO(data), len(data), "golden").read_chunk(0)[0] == 1  # payload format 1
+    chunk = container.open_container(io.BytesIO(data), len(data), "golden").read_chunk(0)
+    assert chunk[0] == 2 and chunk[6] == REST | 2 << LEAD_SHIFT | FINE_TURNS  # payload format 2
 
 
 def test_encoding_the_golden_input_gives_the_same_bytes():

@@ -19,6 +19,7 @@ const REST = 1; // more flags: frame 0 is the rest pose (rotations 0), its trans
 const REST_AT_ZERO = 2; // ... with every translation 0 too
 const LEAD_SHIFT = 2; // more flags bits 2-3: the layout's lead (trendwave.layout)
 const FINE_CONSTANTS = 16; // more flags bit 4: constant translations at FINE_CONST_FRACTION of their step
+const FINE_TURNS = 32; // more flags bit 5: constant rotations of joints with channels below them, the same
 const CODER_REVISION = 2;
 const HEAD_SIZE = 6;
 const FLAG_KEYFRAME = 1;
@@ -60,7 +61,15 @@ function planOf(skeleton) {
   }
   const isTranslation = new Uint8Array(skeleton.numChannels);
   for (const c of translation) isTranslation[c] = 1;
-  plan = { rotationJoints, translation, isTranslation, threeAngle, base };
+  // payload.carrying_turns: the rotation channels of joints with a joint with channels below them.
+  const below = new Uint8Array(J);
+  for (let j = J - 1; j > 0; j--) {
+    const own = skeleton.joints[j].channels.length > 0;
+    if (own || below[j]) below[skeleton.parents[j]] = 1;
+  }
+  const carryingTurn = new Uint8Array(skeleton.numChannels);
+  for (const { joint, channels } of rotationJoints) for (const c of channels) carryingTurn[c] = below[joint];
+  plan = { rotationJoints, translation, isTranslation, carryingTurn, threeAngle, base };
   plans.set(skeleton, plan);
   return plan;
 }
@@ -149,32 +158,33 @@ function damaged(what, offset = null) {
   return new DecodeError(`kinwave payload: ${what}`, offset);
 }
 
-// A format 2 body as { body, frames, rest, lead, fine }: the format 1 body of the frames after a
-// rest pose in frame 0 (payload.rest_kind), which is not coded, its layout's lead and whether its
-// constant translations are fine (payload.ConstantCoding); a format 1 body as it is, rest 0,
-// lead 0, not fine.
+// A format 2 body as { body, frames, rest, lead, fine, fineTurns }: the format 1 body of the
+// frames after a rest pose in frame 0 (payload.rest_kind), which is not coded, its layout's lead
+// and whether its constant translations and its constant rotations of joints with channels below
+// them are fine (payload.ConstantCoding); a format 1 body as it is, rest 0, lead 0, not fine.
 function withoutMore(body, frames) {
-  if (body[0] !== FORMAT_MORE) return { body, frames, rest: 0, lead: 0, fine: false };
+  if (body[0] !== FORMAT_MORE) return { body, frames, rest: 0, lead: 0, fine: false, fineTurns: false };
   if (body.length <= HEAD_SIZE) throw damaged(`${body.length} bytes is shorter than its ${HEAD_SIZE + 1}-byte header`, 0);
   const more = body[HEAD_SIZE];
   const rest = more & 3;
   const lead = (more >> LEAD_SHIFT) & 3;
   const fine = (more & FINE_CONSTANTS) !== 0;
-  if (!more || more >> 5 || ![0, REST, REST_AT_ZERO].includes(rest) || frames < 1 + (rest ? 1 : 0)) {
+  const fineTurns = (more & FINE_TURNS) !== 0;
+  if (!more || more >> 6 || ![0, REST, REST_AT_ZERO].includes(rest) || frames < 1 + (rest ? 1 : 0)) {
     throw damaged(`its more flags are damaged (${more} for ${frames} frames)`, HEAD_SIZE);
   }
   const inner = new Uint8Array(body.length - 1);
   inner[0] = FORMAT;
   inner.set(body.subarray(1, HEAD_SIZE), 1);
   inner.set(body.subarray(HEAD_SIZE + 1), HEAD_SIZE);
-  return { body: inner, frames: rest ? frames - 1 : frames, rest, lead, fine };
+  return { body: inner, frames: rest ? frames - 1 : frames, rest, lead, fine, fineTurns };
 }
 
 // The header and integers of a kinwave body, every field checked: { lay, wavelet, coded (side,
 // constant, knots, coeffs), codes, offsets, forms, means, isolated, patches } of its coded
 // frames (a rest pose in frame 0 is not coded: rest, payload.rest_kind).
 export function readKinwave(whole, skeleton, allFrames) {
-  const { body, frames, rest, lead, fine } = withoutMore(whole, allFrames);
+  const { body, frames, rest, lead, fine, fineTurns } = withoutMore(whole, allFrames);
   const plan = planOf(skeleton);
   const C = skeleton.numChannels;
   const numCodes = plan.rotationJoints.length + (plan.translation.length ? 1 : 0);
@@ -212,6 +222,7 @@ export function readKinwave(whole, skeleton, allFrames) {
   const read = {
     rest,
     fine,
+    fineTurns,
     lay,
     wavelet: WAVELET_IDS[(flags >> 1) & 3],
     coded,
@@ -258,7 +269,7 @@ export function decodeKinwave(body, skeleton, allFrames) {
 }
 
 // payload.reconstruct: per channel its trend plus its blocks' residual, then the seams smoothed.
-function reconstruct(skeleton, plan, { coded, offsets, lay, wavelet, fine }, steps) {
+function reconstruct(skeleton, plan, { coded, offsets, lay, wavelet, fine, fineTurns }, steps) {
   const C = skeleton.numChannels;
   const { frames, starts, lengths, leads, padded, segLevels, left, frac, quantum } = lay;
   const S = starts.length;
@@ -280,7 +291,8 @@ function reconstruct(skeleton, plan, { coded, offsets, lay, wavelet, fine }, ste
     rows.push(row);
     const step = steps[c];
     if (coded.constant[c]) {
-      const fraction = fine && plan.isTranslation[c] ? FINE_CONST_FRACTION : CONST_FRACTION;
+      const isFine = plan.isTranslation[c] ? fine : fineTurns && plan.carryingTurn[c];
+      const fraction = isFine ? FINE_CONST_FRACTION : CONST_FRACTION;
       row.fill(plan.base[c] + coded.knots[c * K] * (step * fraction));
       continue;
     }

@@ -89,11 +89,15 @@ test('the cases use every coding form: Euler, vector, coding orders and WORLD on
   assert.ok([...formsSeen].some((f) => f >= 8), 'a WORLD form');
 });
 
-test('the lead case has chunks whose wavelet grid starts early, the bones case fine constants', async () => {
+test('the lead case has chunks whose wavelet grid starts early, the bones case fine constants, the dummy roots fine turns', async () => {
   const { meta } = await fixture('lead');
   assert.ok(meta.chunks.some((c) => (c.more >> 2) & 3), JSON.stringify(meta.chunks));
   const bones = (await fixture('bones-in-channels')).meta;
   assert.ok(bones.chunks.every((c) => c.more & 16), JSON.stringify(bones.chunks));
+  for (const name of ['dummy-root', 'dummy-root-bind']) {
+    const turned = (await fixture(name)).meta;
+    assert.ok(turned.chunks.every((c) => c.more & 32), `${name}: ${JSON.stringify(turned.chunks)}`);
+  }
 });
 
 test('a frame range decodes only its chunks and equals the whole file\'s frames', async () => {

@@ -16,6 +16,7 @@ from mocodec.codecs.kinwave import kinalloc
 from mocodec.codecs.kinwave.payload import (
     CODER_REVISION,
     FINE_CONSTANTS,
+    FINE_TURNS,
     FLAG_FORMS,
     FLAG_ISOLATED,
     FLAG_KEYFRAME,
@@ -30,6 +31,7 @@ from mocodec.codecs.kinwave.payload import (
     WAVELET_IDS,
     ConstantCoding,
     apply_patches,
+    carrying_turns,
     channel_steps,
     constant_coding,
     has_translation,
@@ -198,15 +200,17 @@ class Encoder:
         return turns, above & (np.abs(turns[:, 0]) < 1.0 - 1e-12)
 
     def _constant_coding(self) -> ConstantCoding:
-        """Fine constants (:class:`ConstantCoding`) where a constant translation lies
-        CONST_AWAY_CM or more from its joint's offset on the decoder's skeleton: offsets moved
-        into position channels."""
+        """Fine constants (:class:`ConstantCoding`): translations where a constant one lies
+        CONST_AWAY_CM or more from its joint's offset on the decoder's skeleton (offsets moved
+        into position channels), rotations where a joint with channels below it holds a
+        constant rotation other than 0 (a turned dummy root)."""
         coarse = constant_coding(self.output_skeleton)
         if not self.frames:
             return coarse
         away = np.abs(self.values[:, 0] - coarse.base) * self.cm >= CONST_AWAY_CM
         moved = self.const & ~self.skeleton.rotation_mask & away
-        return constant_coding(self.output_skeleton, fine=True) if moved.any() else coarse
+        turned = self.const & carrying_turns(self.skeleton) & (self.values[:, 0] != 0)
+        return constant_coding(self.output_skeleton, moved.any(), turned.any())
 
     def _grid_phase(self) -> int | None:
         """Where the wavelet grid goes (:func:`trendwave.grid_phase`, the channels in the
@@ -575,4 +579,5 @@ class Encoder:
             ps.const, ps.knots, ps.coeffs, self.lay.padded, self.lay.levels, revision=CODER_REVISION, side=side
         )
         more = self.lead << LEAD_SHIFT | (FINE_CONSTANTS if self.constants.fine else 0)
+        more |= FINE_TURNS if self.constants.fine_turns else 0
         return with_more(body, more) if more else body

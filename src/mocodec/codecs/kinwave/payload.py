@@ -43,6 +43,7 @@ REST = 1  # more flags bit 0: frame 0 is the rest pose, its translations frame 1
 REST_AT_ZERO = 2  # more flags bit 1: frame 0 is the rest pose with every translation 0 (not coded)
 LEAD_SHIFT = 2  # more flags bits 2-3: the layout's lead (trendwave.layout), in frames
 FINE_CONSTANTS = 16  # more flags bit 4: constant translations at FINE_CONST_FRACTION of their step
+FINE_TURNS = 32  # more flags bit 5: constant rotations of joints with channels below them, the same
 CODER_REVISION = 2  # the coefficient coder's revision (coefcoder: differences in the approximation band)
 HEAD = struct.Struct("<BBBBH")  # format, flags, log2 window, levels, channels
 FLAG_OFFSETS = 8  # flags bit 3: a signed step offset per segment follows the step codes
@@ -57,7 +58,7 @@ FLAG_KEYFRAME = 1  # flags bit 0: frame 0 is a keyframe (a one-frame segment)
 FLAG_SECOND_KEYFRAME = 32  # flags bit 5 (with bit 0): frame 1 is one too
 WAVELET_IDS = ("cdf97", "d4", "haar")
 CONST_FRACTION = 1.0 / 8.0  # format 3: a constant channel's quantum, in steps of its joint
-FINE_CONST_FRACTION = 1.0 / 64.0  # ... a constant translation's with FINE_CONSTANTS
+FINE_CONST_FRACTION = 1.0 / 64.0  # ... with FINE_CONSTANTS or FINE_TURNS
 COARSEST_BAND_S = 0.25  # seconds between the coarsest band's samples (the automatic levels)
 SEAM_HALF_WIDTH = 8  # frames each side of a seam over which its step is spread
 SEAM_LIMIT = 1.0  # the largest step removed, in quantiser steps of the channel
@@ -206,23 +207,43 @@ class ConstantCoding:
     repeats every offset in its position channels: these cost one decision each). With
     FINE_CONSTANTS a constant translation's quantum is 8 times finer again: a skeleton whose
     offsets are 0 and whose bones are constant position channels (another exporter's layout)
-    would otherwise add up a quantum's error along every chain, which the steps then pay."""
+    would otherwise add up a quantum's error along every chain, which the steps then pay. With
+    FINE_TURNS so is a constant rotation of a joint with channels below it: a dummy root turned
+    (0, 90, 0) turns the whole body by its quantum's error, which the closed loop below cannot
+    take back in every frame."""
 
     fraction: np.ndarray  # (C,)
     base: np.ndarray  # (C,)
     fine: bool = False  # the more flag FINE_CONSTANTS
+    fine_turns: bool = False  # the more flag FINE_TURNS
 
 
-def constant_coding(skeleton: Skeleton, fine: bool = False) -> ConstantCoding:
+def carrying_turns(skeleton: Skeleton) -> np.ndarray:
+    """``(C,)`` bool: the rotation channels of joints with a joint with channels below them
+    (their constant rotations turn moving joints: FINE_TURNS)."""
+    plan = channel_plan(skeleton)
+    own = [bool((plan.rot_index[j] >= 0).any() or (plan.pos_index[j] >= 0).any()) for j in range(len(skeleton))]
+    below = np.zeros(len(skeleton), dtype=bool)
+    for j in range(len(skeleton) - 1, 0, -1):  # a joint's parent comes before it
+        below[plan.parents[j]] |= own[j] or below[j]
+    out = np.zeros(skeleton.num_channels, dtype=bool)
+    rot = plan.rot_index[below]
+    out[rot[rot >= 0]] = True
+    return out
+
+
+def constant_coding(skeleton: Skeleton, fine: bool = False, fine_turns: bool = False) -> ConstantCoding:
     base = np.zeros(skeleton.num_channels)
     fraction = np.full(skeleton.num_channels, CONST_FRACTION)
+    if fine_turns:
+        fraction[carrying_turns(skeleton)] = FINE_CONST_FRACTION
     plan = channel_plan(skeleton)
     for j in range(len(skeleton)):
         for axis, c in enumerate(plan.pos_index[j]):
             if c >= 0:
                 base[c] = plan.offsets[j, axis]
                 fraction[c] = FINE_CONST_FRACTION if fine else CONST_FRACTION
-    return ConstantCoding(fraction, base, fine)
+    return ConstantCoding(fraction, base, fine, fine_turns)
 
 
 def reconstruct(
@@ -320,7 +341,7 @@ def rest_pose(skeleton: Skeleton, kind: int, frame1: np.ndarray) -> np.ndarray:
 def with_more(body: bytes, more: int) -> bytes:
     """``body`` (format 1, or 2 whose more flags are kept) as format 2 with the more flags ``more``
     set too: a rest pose before its frames (REST, REST_AT_ZERO), its layout's lead, fine
-    constants."""
+    constants (FINE_CONSTANTS, FINE_TURNS)."""
     if body[:1] == bytes([FORMAT_MORE]):
         return body[: HEAD.size] + bytes([body[HEAD.size] | more]) + body[HEAD.size + 1 :]
     return bytes([FORMAT_MORE]) + body[1 : HEAD.size] + bytes([more]) + body[HEAD.size :]
@@ -338,27 +359,28 @@ def decode_body(body: bytes, skeleton: Skeleton, frames: int) -> np.ndarray:
     """Channels ``(frames, C)`` of a kinwave body (format 1 or 2, docs/formats.md), every field
     checked."""
     if body[:1] != bytes([FORMAT_MORE]):
-        return _decode_frames(body, skeleton, frames, 0, False)
+        return _decode_frames(body, skeleton, frames, 0, constant_coding(skeleton))
     if len(body) <= HEAD.size:
         raise CorruptStreamError(
             f"kinwave payload of {len(body)} bytes is shorter than its {HEAD.size + 1}-byte header"
         )
     more = body[HEAD.size]
-    kind, lead, fine = more & 3, (more >> LEAD_SHIFT) & 3, bool(more & FINE_CONSTANTS)
-    if not more or more >> 5 or kind not in (0, REST, REST_AT_ZERO) or frames < 1 + bool(kind):
+    kind, lead = more & 3, (more >> LEAD_SHIFT) & 3
+    constants = constant_coding(skeleton, bool(more & FINE_CONSTANTS), bool(more & FINE_TURNS))
+    if not more or more >> 6 or kind not in (0, REST, REST_AT_ZERO) or frames < 1 + bool(kind):
         raise CorruptStreamError(
             f"kinwave payload's more flags at byte {HEAD.size} are damaged ({more} for {frames} frames)"
         )
     inner = bytes([FORMAT]) + body[1 : HEAD.size] + body[HEAD.size + 1 :]
     if not kind:
-        return _decode_frames(inner, skeleton, frames, lead, fine)
-    rest = _decode_frames(inner, skeleton, frames - 1, lead, fine)
+        return _decode_frames(inner, skeleton, frames, lead, constants)
+    rest = _decode_frames(inner, skeleton, frames - 1, lead, constants)
     return np.vstack((rest_pose(skeleton, kind, rest[0]), rest))
 
 
-def _decode_frames(body: bytes, skeleton: Skeleton, frames: int, lead: int, fine: bool) -> np.ndarray:
+def _decode_frames(body: bytes, skeleton: Skeleton, frames: int, lead: int, constants: ConstantCoding) -> np.ndarray:
     """Channels ``(frames, C)`` of a format 1 body whose layout has ``lead``, its constant
-    translations ``fine`` (:class:`ConstantCoding`)."""
+    channels coded as ``constants`` says."""
     rot_joints = rotation_joints(skeleton)
     trans = has_translation(skeleton)
     num_codes = len(rot_joints) + trans
@@ -417,7 +439,7 @@ def _decode_frames(body: bytes, skeleton: Skeleton, frames: int, lead: int, fine
         coded.coeffs,
         lay,
         forms,
-        constant_coding(skeleton, fine),
+        constants,
         means,
         (isolated, patches),
     ).T

@@ -465,48 +465,45 @@ def test_bones_in_position_channels_cost_only_their_constants(walk_amc):
 
 
 def test_a_turned_dummy_root_takes_fine_turns(walk_bvh):
-    """A constant rotation of a joint with channels below it (a dummy root turned (0, 90, 0))
-    is coded at a 64th of its step (more flags bit 5): its error turns every joint below it in
-    every frame. A constant rotation of a joint with none below it keeps the 8th, and a clip
-    whose carrying joints' constant rotations are all 0 does not set the flag."""
+    """A constant rotation of a joint with a translation channel below it (a dummy root turned
+    (0, 90, 0) above the body's root) is coded at a 64th of its step (more flags bit 5): its
+    error turns that translation, which may be metres long. Every other constant rotation keeps
+    the 8th, and a clip without such a joint does not set the flag."""
     from mocodec.codecs.kinwave.payload import (
         CONST_FRACTION,
         FINE_CONST_FRACTION,
         FINE_TURNS,
-        carrying_turns,
         constant_coding,
+        turns_over_translations,
     )
     from mocodec.kinematics import channel_plan
-    from mocodec.reexpress import with_dummy_root
+    from mocodec.reexpress import with_dummy_root, with_position_channels
 
     clip = walk_bvh[:200]
     moved = with_dummy_root(clip, (0.0, 90.0, 0.0))
-    sk = moved.skeleton
-    carrying = carrying_turns(sk)
+    assert np.array_equal(np.flatnonzero(turns_over_translations(moved.skeleton)), [0, 1, 2])
+    sk = with_position_channels(moved).skeleton
+    over = turns_over_translations(sk)
     plan = channel_plan(sk)
-    has_channels = (plan.rot_index >= 0).any(axis=1) | (plan.pos_index >= 0).any(axis=1)
 
     def above(k: int) -> set[int]:
         return set() if plan.parents[k] < 0 else {int(plan.parents[k])} | above(plan.parents[k])
 
-    carriers = set().union(*(above(k) for k in range(len(sk)) if has_channels[k]))
+    carriers = set().union(*(above(k) for k in range(len(sk)) if (plan.pos_index[k] >= 0).any()))
     for j in range(len(sk)):
         rot = plan.rot_index[j][plan.rot_index[j] >= 0]
-        assert (carrying[rot] == (j in carriers)).all()
-    assert carrying[:3].all() and not carrying[~sk.rotation_mask].any()
+        assert (over[rot] == (j in carriers)).all()
     fine, coarse = constant_coding(sk, fine_turns=True), constant_coding(sk)
-    assert (fine.fraction[carrying] == FINE_CONST_FRACTION).all()
-    assert (fine.fraction[~carrying] == coarse.fraction[~carrying]).all()
+    assert (fine.fraction[over] == FINE_CONST_FRACTION).all()
+    assert (fine.fraction[~over] == coarse.fraction[~over]).all()
     assert (coarse.fraction[sk.rotation_mask] == CONST_FRACTION).all()
     codec = get_codec("kinwave", max_error_cm=1.0, error_measure="shell")
     body = codec.encode(moved)
     assert body[0] == 2 and body[6] & FINE_TURNS
-    decoded = codec.decode(body, sk, moved.num_frames, moved.fps)
+    decoded = codec.decode(body, moved.skeleton, moved.num_frames, moved.fps)
     assert _errors(moved, decoded)["shell"] <= 1.0
-    still = with_dummy_root(clip, (0.0, 0.0, 0.0))
-    turns = still.skeleton.rotation_mask & (np.ptp(still.channels, axis=0) < 1e-3)
-    still_body = codec.encode(still.with_channels(np.where(turns, 0.0, still.channels)))
-    assert still_body[0] == 1 or not still_body[6] & FINE_TURNS
+    own = codec.encode(clip)
+    assert own[0] == 1 or not own[6] & FINE_TURNS
 
 
 def test_a_damaged_rest_pose_flag_is_refused(walk_bvh):

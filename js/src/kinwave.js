@@ -19,7 +19,7 @@ const REST = 1; // more flags: frame 0 is the rest pose (rotations 0), its trans
 const REST_AT_ZERO = 2; // ... with every translation 0 too
 const LEAD_SHIFT = 2; // more flags bits 2-3: the layout's lead (trendwave.layout)
 const FINE_CONSTANTS = 16; // more flags bit 4: constant translations at FINE_CONST_FRACTION of their step
-const FINE_TURNS = 32; // more flags bit 5: constant rotations of joints with channels below them, the same
+const FINE_TURNS = 32; // more flags bit 5: constant rotations of joints above translation channels, the same
 const CODER_REVISION = 2;
 const HEAD_SIZE = 6;
 const FLAG_KEYFRAME = 1;
@@ -61,15 +61,15 @@ function planOf(skeleton) {
   }
   const isTranslation = new Uint8Array(skeleton.numChannels);
   for (const c of translation) isTranslation[c] = 1;
-  // payload.carrying_turns: the rotation channels of joints with a joint with channels below them.
+  // payload.turns_over_translations: the rotation channels of joints with a translation channel below them.
   const below = new Uint8Array(J);
   for (let j = J - 1; j > 0; j--) {
-    const own = skeleton.joints[j].channels.length > 0;
+    const own = skeleton.joints[j].channels.some((c) => c.endsWith('position'));
     if (own || below[j]) below[skeleton.parents[j]] = 1;
   }
-  const carryingTurn = new Uint8Array(skeleton.numChannels);
-  for (const { joint, channels } of rotationJoints) for (const c of channels) carryingTurn[c] = below[joint];
-  plan = { rotationJoints, translation, isTranslation, carryingTurn, threeAngle, base };
+  const turnOverTranslation = new Uint8Array(skeleton.numChannels);
+  for (const { joint, channels } of rotationJoints) for (const c of channels) turnOverTranslation[c] = below[joint];
+  plan = { rotationJoints, translation, isTranslation, turnOverTranslation, threeAngle, base };
   plans.set(skeleton, plan);
   return plan;
 }
@@ -160,8 +160,8 @@ function damaged(what, offset = null) {
 
 // A format 2 body as { body, frames, rest, lead, fine, fineTurns }: the format 1 body of the
 // frames after a rest pose in frame 0 (payload.rest_kind), which is not coded, its layout's lead
-// and whether its constant translations and its constant rotations of joints with channels below
-// them are fine (payload.ConstantCoding); a format 1 body as it is, rest 0, lead 0, not fine.
+// and whether its constant translations and its constant rotations of joints above translation
+// channels are fine (payload.ConstantCoding); a format 1 body as it is, rest 0, lead 0, not fine.
 function withoutMore(body, frames) {
   if (body[0] !== FORMAT_MORE) return { body, frames, rest: 0, lead: 0, fine: false, fineTurns: false };
   if (body.length <= HEAD_SIZE) throw damaged(`${body.length} bytes is shorter than its ${HEAD_SIZE + 1}-byte header`, 0);
@@ -291,7 +291,7 @@ function reconstruct(skeleton, plan, { coded, offsets, lay, wavelet, fine, fineT
     rows.push(row);
     const step = steps[c];
     if (coded.constant[c]) {
-      const isFine = plan.isTranslation[c] ? fine : fineTurns && plan.carryingTurn[c];
+      const isFine = plan.isTranslation[c] ? fine : fineTurns && plan.turnOverTranslation[c];
       const fraction = isFine ? FINE_CONST_FRACTION : CONST_FRACTION;
       row.fill(plan.base[c] + coded.knots[c * K] * (step * fraction));
       continue;

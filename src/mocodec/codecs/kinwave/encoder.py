@@ -31,7 +31,6 @@ from mocodec.codecs.kinwave.payload import (
     WAVELET_IDS,
     ConstantCoding,
     apply_patches,
-    carrying_turns,
     channel_steps,
     constant_coding,
     has_translation,
@@ -46,6 +45,7 @@ from mocodec.codecs.kinwave.payload import (
     step_groups,
     still_rotations,
     three_angle_groups,
+    turns_over_translations,
     with_more,
     world_translations,
 )
@@ -202,14 +202,14 @@ class Encoder:
     def _constant_coding(self) -> ConstantCoding:
         """Fine constants (:class:`ConstantCoding`): translations where a constant one lies
         CONST_AWAY_CM or more from its joint's offset on the decoder's skeleton (offsets moved
-        into position channels), rotations where a joint with channels below it holds a
-        constant rotation other than 0 (a turned dummy root)."""
+        into position channels), rotations where a joint with a translation channel below it
+        holds a constant rotation other than 0 (a turned dummy root)."""
         coarse = constant_coding(self.output_skeleton)
         if not self.frames:
             return coarse
         away = np.abs(self.values[:, 0] - coarse.base) * self.cm >= CONST_AWAY_CM
         moved = self.const & ~self.skeleton.rotation_mask & away
-        turned = self.const & carrying_turns(self.skeleton) & (self.values[:, 0] != 0)
+        turned = self.const & turns_over_translations(self.skeleton) & (self.values[:, 0] != 0)
         return constant_coding(self.output_skeleton, moved.any(), turned.any())
 
     def _grid_phase(self) -> int | None:

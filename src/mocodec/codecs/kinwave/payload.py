@@ -43,7 +43,7 @@ REST = 1  # more flags bit 0: frame 0 is the rest pose, its translations frame 1
 REST_AT_ZERO = 2  # more flags bit 1: frame 0 is the rest pose with every translation 0 (not coded)
 LEAD_SHIFT = 2  # more flags bits 2-3: the layout's lead (trendwave.layout), in frames
 FINE_CONSTANTS = 16  # more flags bit 4: constant translations at FINE_CONST_FRACTION of their step
-FINE_TURNS = 32  # more flags bit 5: constant rotations of joints with channels below them, the same
+FINE_TURNS = 32  # more flags bit 5: constant rotations of joints above translation channels, the same
 CODER_REVISION = 2  # the coefficient coder's revision (coefcoder: differences in the approximation band)
 HEAD = struct.Struct("<BBBBH")  # format, flags, log2 window, levels, channels
 FLAG_OFFSETS = 8  # flags bit 3: a signed step offset per segment follows the step codes
@@ -208,9 +208,9 @@ class ConstantCoding:
     FINE_CONSTANTS a constant translation's quantum is 8 times finer again: a skeleton whose
     offsets are 0 and whose bones are constant position channels (another exporter's layout)
     would otherwise add up a quantum's error along every chain, which the steps then pay. With
-    FINE_TURNS so is a constant rotation of a joint with channels below it: a dummy root turned
-    (0, 90, 0) turns the whole body by its quantum's error, which the closed loop below cannot
-    take back in every frame."""
+    FINE_TURNS so is a constant rotation of a joint with a translation channel below it: its
+    quantum's error turns that translation, which can be far longer than any bone (a dummy root
+    turned (0, 90, 0) above a body walking metres from the origin)."""
 
     fraction: np.ndarray  # (C,)
     base: np.ndarray  # (C,)
@@ -218,11 +218,11 @@ class ConstantCoding:
     fine_turns: bool = False  # the more flag FINE_TURNS
 
 
-def carrying_turns(skeleton: Skeleton) -> np.ndarray:
-    """``(C,)`` bool: the rotation channels of joints with a joint with channels below them
-    (their constant rotations turn moving joints: FINE_TURNS)."""
+def turns_over_translations(skeleton: Skeleton) -> np.ndarray:
+    """``(C,)`` bool: the rotation channels of joints with a translation channel below them
+    (FINE_TURNS)."""
     plan = channel_plan(skeleton)
-    own = [bool((plan.rot_index[j] >= 0).any() or (plan.pos_index[j] >= 0).any()) for j in range(len(skeleton))]
+    own = [bool((plan.pos_index[j] >= 0).any()) for j in range(len(skeleton))]
     below = np.zeros(len(skeleton), dtype=bool)
     for j in range(len(skeleton) - 1, 0, -1):  # a joint's parent comes before it
         below[plan.parents[j]] |= own[j] or below[j]
@@ -236,7 +236,7 @@ def constant_coding(skeleton: Skeleton, fine: bool = False, fine_turns: bool = F
     base = np.zeros(skeleton.num_channels)
     fraction = np.full(skeleton.num_channels, CONST_FRACTION)
     if fine_turns:
-        fraction[carrying_turns(skeleton)] = FINE_CONST_FRACTION
+        fraction[turns_over_translations(skeleton)] = FINE_CONST_FRACTION
     plan = channel_plan(skeleton)
     for j in range(len(skeleton)):
         for axis, c in enumerate(plan.pos_index[j]):

@@ -1,18 +1,21 @@
 """How much of a max bound kinwave uses, and what its files weigh, on every shared clip.
 
-    python benchmarks/bench_bound_usage.py [--clips N] [--jobs 2]
+    python benchmarks/bench_bound_usage.py [--clips N] [--jobs 2] [--save F] [--against F]
 
 For the first N clips (sorted; 0 = all) of CMU BVH, CMU ASF/AMC and Bandai Namco, whole .moc
 files (skeleton included) at max shell 1 cm, max shell 0.1 cm and max joint 0.5 cm: per source
 and bound the total bytes, the median and least share of the bound the decoded file's measured
 error uses, how many encodings use less than 85% of it (the issue's floor) and how many go over;
 with every Bandai Namco clip, the sums over the issue's 22 (every fourth, sorted) at shell 1
-and 0.1 cm.
+and 0.1 cm. ``--save F`` writes every clip's bytes per setting to F (JSON); ``--against F``
+compares every clip with such a file (another commit's: ``PYTHONPATH=<its src>``) and prints,
+per source, the median and largest change and the clip-and-setting pairs more than 1% larger.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
@@ -25,6 +28,7 @@ from mocodec.metrics.pose import shell_errors
 
 SETTINGS = (("shell", 1.0), ("shell", 0.1), ("joint", 0.5))
 FLOOR = 0.85
+GREW = 0.01  # a clip this much larger than the saved run's is listed
 ISSUE_SOURCE, ISSUE_CLIPS = "Bandai Namco", 22  # the issue's targets: every fourth clip from the first
 
 
@@ -51,13 +55,17 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--clips", type=int, default=0, help="clips per source (0 = all)")
     parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--save", help="write every clip's bytes per setting to this JSON file")
+    parser.add_argument("--against", help="compare every clip with a --save file of another run")
     args = parser.parse_args()
+    sizes_by_clip: dict[str, dict[str, list[int]]] = {}
     print("| source | clips | bound | bytes | median share of the bound | least | under 85% | over |")
     print("|---|---|---|---|---|---|---|---|")
     issue_sums = None  # bytes at shell 1 and 0.1 cm over the issue's clips
     with ProcessPoolExecutor(args.jobs) as pool:
         for name, paths in shared_sources(args.clips).items():
             rows = list(pool.map(_clip, paths))
+            sizes_by_clip[name] = {p.name: [r[0] for r in row] for p, row in zip(paths, rows)}
             for k, (measure, bound) in enumerate(SETTINGS):
                 sizes = np.array([r[k][0] for r in rows])
                 shares = np.array([r[k][1] for r in rows])
@@ -73,6 +81,34 @@ def main() -> None:
         print(
             f"the issue's {ISSUE_CLIPS} {ISSUE_SOURCE} clips (every fourth, sorted): "
             f"{one_cm:,} bytes at shell 1 cm, {tenth:,} at 0.1 cm"
+        )
+    if args.save:
+        with open(args.save, "w") as f:
+            json.dump(sizes_by_clip, f)
+    if args.against:
+        with open(args.against) as f:
+            compare(sizes_by_clip, json.load(f))
+
+
+def compare(now: dict[str, dict[str, list[int]]], before: dict[str, dict[str, list[int]]]) -> None:
+    """Per source, every clip's change against ``before`` at each setting both runs have."""
+    names = [f"{measure} {bound:g} cm" for measure, bound in SETTINGS]
+    for source, clips in now.items():
+        pairs = [
+            (now_bytes / old[k] - 1.0, clip, names[k])
+            for clip, sizes in clips.items()
+            if (old := before.get(source, {}).get(clip))
+            for k, now_bytes in enumerate(sizes[: len(old)])
+        ]
+        if not pairs:
+            continue
+        changes = np.array([c for c, _, _ in pairs])
+        grew = sorted((p for p in pairs if p[0] > GREW), reverse=True)
+        listed = "".join(f", {clip} {100 * c:+.1f}% ({setting})" for c, clip, setting in grew)
+        print(
+            f"{source} against the saved run: {len(pairs)} clip-and-setting pairs, "
+            f"median {100 * np.median(changes):+.1f}%, largest {100 * changes.max():+.1f}%; "
+            f"{len(grew)} more than {100 * GREW:g}% larger{listed}"
         )
 
 

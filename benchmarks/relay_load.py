@@ -5,7 +5,7 @@ with --nats); publishers and viewers run in other processes. Each avatar replays
 packets of a real clip (07_03, dpcm, spiht or kinwave-live, keyframes every --keyframe-s seconds), restamped with its
 stream id, sequence number and the send time; viewers read every batch's timestamps and
 sequence numbers in bulk and report delivered and lost packets and the end-to-end latency
-(send -> receipt, which includes waiting for the relay's next tick, 30 Hz or --tick-hz). With --loss P each
+(send -> receipt, which includes waiting for the relay's next tick, 60 Hz or --tick-hz). With --loss P each
 viewer drops packets at random (an emulated lossy link) and a sample of viewers follows every
 stream as a receiver would: after a loss it waits for the next keyframe; the time from the
 first lost frame to the keyframe is the resync time. Server CPU (share of one core) and
@@ -41,6 +41,7 @@ from dataclasses import replace
 import numpy as np
 
 from common import DATA
+from mocodec.stream.relay import TICK_HZ
 
 SECRET = "load-test"
 BINS_MS = 0.1  # latency histogram resolution
@@ -348,7 +349,7 @@ def main() -> None:
         "to their crowd shares, kinwave-live streams keep the layers that fit them (default 0: all whole)",
     )
     ap.add_argument("--publishers", type=int, default=10, help="sending connections (avatars spread over them)")
-    ap.add_argument("--tick-hz", type=float, default=30.0, help="the relay's batches per second to each viewer")
+    ap.add_argument("--tick-hz", type=float, default=TICK_HZ, help="the relay's batches per second to each viewer")
     ap.add_argument("--viewer-procs", type=int, default=1)
     ap.add_argument(
         "--nats",

@@ -17,7 +17,7 @@ from mocodec.cli.options import add_codec_options, add_input_options, load_input
 from mocodec.errors import MocodecError  # noqa: E402
 from mocodec.formats import save  # noqa: E402
 from mocodec.stream import client, tokens  # noqa: E402
-from mocodec.stream.relay import Limits, run  # noqa: E402
+from mocodec.stream.relay import TICK_HZ, Limits, run  # noqa: E402
 
 PUBLISH_CODEC = "kinwave-live"  # guaranteed error, 50 ms of coding delay, decodes in the browser
 
@@ -144,7 +144,9 @@ def add_commands(sub) -> None:
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1; 0.0.0.0: all)")
     add_secret_options(p)
     p.add_argument("--bus", metavar="nats://HOST:4222", help="share rooms with other relays through NATS")
-    p.add_argument("--tick-hz", type=float, default=30.0, help="batches per second to each viewer (default 30)")
+    p.add_argument(
+        "--tick-hz", type=float, default=TICK_HZ, help=f"batches per second to each viewer (default {TICK_HZ:g})"
+    )
     p.add_argument("--max-message-bytes", type=int, default=Limits.max_message_bytes)
     p.add_argument(
         "--max-messages-per-s",

@@ -24,7 +24,7 @@ back.
 
 Limits: message size (the WebSocket refuses larger ones), per-connection rates of messages and
 bytes (token buckets; over the limit closes that connection), streams per room, and at most
-one batch queued per viewer: a slow viewer misses ticks and resynchronises at the next
+QUEUED_S of batches queued per viewer (two at 60 Hz): a slow viewer misses ticks and resynchronises at the next
 keyframe, and missing ticks for ``slow_viewer_s`` drops it (its connection is cut, as a close
 frame would wait behind the data its link cannot take), so memory does not grow with slow
 links. A malformed message closes its connection only, with a close code and the reason.
@@ -294,6 +294,7 @@ def stream_setup(header_payload: bytes) -> tuple[StreamInfo, object]:
 
 
 TICK_HZ = 60.0  # batches a second to each viewer: twice the senders' packet rate halves the wait
+QUEUED_S = 1.0 / 30.0  # batches a viewer may have queued, in seconds (one at 30 Hz, two at 60)
 
 
 class Relay:
@@ -301,6 +302,7 @@ class Relay:
         if not secret:
             raise MocodecError("the relay needs a secret (--secret) to check room tokens")
         self.secret, self.limits, self.tick_s = secret, limits or Limits(), 1.0 / tick_hz
+        self.queued = max(1, round(QUEUED_S * tick_hz))  # batches a viewer may have queued
         self.rooms: dict[str, Room] = {}
         self.bus = bus
         self.guard: ConnectionGuard | None = None  # set by start()
@@ -493,7 +495,7 @@ class Relay:
 
     # ----- viewers -----------------------------------------------------------------------------
     async def _viewer(self, ws: web.WebSocketResponse, room: Room, transport) -> None:
-        viewer = Viewer(ws, transport)
+        viewer = Viewer(ws, transport, queue=asyncio.Queue(maxsize=self.queued))
         for state in room.streams.values():  # a late joiner starts at the last keyframes
             if not state.ended:
                 viewer.pending += [state.header, *state.gop]

@@ -8,26 +8,26 @@ sender's message is a batch of packets (:mod:`mocodec.stream.packets`); a viewer
 are JSON settings, ``{"budget": bit/s, "camera": [x, y, z] (metres)}``.
 
 Every tick (TICK_HZ, 60 a second: a packet waits 17 ms at most) each viewer gets one batch with
-everything new in its room. A viewer that
-declared a budget gets the scalable streams cut to their shares by the crowd rule of 001:
-scores S = d_min / d (6.4), shares B S / sum S (6.5), d the distance from its camera to each
-avatar's root. An embedded (``spiht``) stream is cut to its share rounded down to a ladder of
-4 rates per octave, so that viewers with nearly equal shares share one cut; a layered
-(``kinwave-live`` with layers) stream keeps the most layers whose measured rate fits the share
-(the base layer always), more only from a keyframe or a packet where the layer restarts, since
-a layer's prediction needs its history: the share by distance is spent as error bounds. Other
-streams pass whole. A viewer that joins late gets every stream header and the packets since
-each stream's last keyframe (or restart point, where the codec stream restarts its base layer
-on its own). A stream ends with its END packet; if its sender goes without one, the relay
-sends the END for it (and over the bus), so no viewer waits for a stream that will not come
-back.
+everything new in its room. A viewer that declared a budget gets the scalable streams cut to
+their shares by the crowd rule of 001: scores S = d_min / d (6.4), shares B S / sum S (6.5), d
+the distance from its camera to each avatar's root. An embedded (``spiht``) stream is cut to its
+share rounded down to a ladder of 4 rates per octave, so that viewers with nearly equal shares
+share one cut; a layered (``kinwave-live`` with layers) stream keeps the most layers whose
+measured rate fits the share (the base layer always), more only from a keyframe or a packet
+where the layer restarts, since a layer's prediction needs its history: the share by distance is
+spent as error bounds. Other streams pass whole. A viewer that joins late gets every stream
+header and the packets since each stream's last keyframe (or restart point, where the codec
+stream restarts its base layer on its own). A stream ends with its END packet; if its sender
+goes without one, the relay sends the END for it (and over the bus), so no viewer waits for a
+stream that will not come back.
 
 Limits: message size (the WebSocket refuses larger ones), per-connection rates of messages and
 bytes (token buckets; over the limit closes that connection), streams per room, and at most
-QUEUED_S of batches queued per viewer (two at 60 Hz): a slow viewer misses ticks and resynchronises at the next
-keyframe, and missing ticks for ``slow_viewer_s`` drops it (its connection is cut, as a close
-frame would wait behind the data its link cannot take), so memory does not grow with slow
-links. A malformed message closes its connection only, with a close code and the reason.
+QUEUED_S of batches queued per viewer (two at 60 Hz): a slow viewer misses ticks and
+resynchronises at the next keyframe, and missing ticks for ``slow_viewer_s`` drops it (its
+connection is cut, as a close frame would wait behind the data its link cannot take), so memory
+does not grow with slow links. A malformed message closes its connection only, with a close code
+and the reason.
 Connections are counted before HTTP parses anything (:class:`ConnectionGuard`): at most
 ``max_connections`` in all and ``max_connections_per_host`` from one address, and one that has
 not made its request within ``request_timeout_s`` is cut. A connection is closed when its

@@ -7,8 +7,8 @@ stream id, sequence number and the send time; viewers read every batch's timesta
 sequence numbers in bulk and report delivered and lost packets and the end-to-end latency
 (send -> receipt, which includes waiting for the relay's next tick, 60 Hz or --tick-hz). With --loss P each
 viewer drops packets at random (an emulated lossy link) and a sample of viewers follows every
-stream as a receiver would: after a loss it waits for the next keyframe; the time from the
-first lost frame to the keyframe is the resync time. Server CPU (share of one core) and
+stream as a receiver would: after a loss it waits for the next keyframe or restart point; the
+time from the first lost frame to it is the resync time. Server CPU (share of one core) and
 memory (RSS) are read with psutil.
 
     .venv/bin/python benchmarks/relay_load.py                     # 500 avatars, 50 viewers, 20 s
@@ -41,9 +41,11 @@ from dataclasses import replace
 import numpy as np
 
 from common import DATA
+from mocodec.stream.packets import KEYFRAME, RESTART
 from mocodec.stream.relay import TICK_HZ
 
 SECRET = "load-test"
+RESUMES = KEYFRAME | RESTART  # the flags of a packet a receiver can start decoding from
 BINS_MS = 0.1  # latency histogram resolution
 MAX_MS = 5000.0
 _STAMP = struct.Struct("<IIQI")  # stream, sequence, timestamp, first frame: bytes 6..26 of a packet
@@ -149,7 +151,8 @@ def publisher(url: str, token: str, streams: list[int], seconds: float, template
 
 # ----- viewers ---------------------------------------------------------------------------------------
 class Follower:
-    """What a receiver does with flags only: after a loss it is out of step until a keyframe."""
+    """What a receiver does with flags only: after a loss it is out of step until a keyframe or
+    a restart point (where a self-refreshing codec stream's base layer restarts)."""
 
     def __init__(self, fps: float):
         self.fps = fps
@@ -158,12 +161,12 @@ class Follower:
         self.lost_at: dict[int, int] = {}  # stream -> first frame lost
         self.resync_s: list[float] = []
 
-    def see(self, stream: int, seq: int, keyframe: bool, first: int, frames: int) -> None:
+    def see(self, stream: int, seq: int, resumes: bool, first: int, frames: int) -> None:
         exp = self.expected.get(stream)
         if exp is not None and seq > exp and stream not in self.lost_at:
             self.lost_at[stream] = self.last_end.get(stream, first)
         self.expected[stream] = seq + 1
-        if stream in self.lost_at and keyframe:
+        if stream in self.lost_at and resumes:
             self.resync_s.append((first - self.lost_at.pop(stream)) / self.fps)
         self.last_end[stream] = first + frames
 
@@ -252,7 +255,7 @@ def viewers(
                 for s, q, fl, a, n in zip(
                     streams.tolist(), seqs.tolist(), flags.tolist(), firsts.tolist(), frames.tolist()
                 ):
-                    f.see(s, q, bool(fl & 1), a, n)
+                    f.see(s, q, bool(fl & RESUMES), a, n)
         await ws.close()
         got = counts > 0
         tally["lost"] += int((hi[got] - lo[got] + 1).sum() - counts[got].sum())

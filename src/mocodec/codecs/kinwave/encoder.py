@@ -167,21 +167,19 @@ class Encoder:
         self.quats = quat
         self.const = (np.ptp(self.values, axis=1) <= CONSTANT) if self.frames else np.ones(sk.num_channels, bool)
         self.constants = self._constant_coding()
-        self.grid: int | None = None  # the frames (mod trendwave.LEADS) the blocks' grid starts on
-        self._set_layout(0)
         self.first_pass: Pass | None = None
         self.isolated = isolated_frames(self.positions, 2) if self.cfg["keyframes"] else np.zeros(0, np.int64)
         self.rot_joints = rotation_joints(sk)
         self.trans = has_translation(sk)
         self.shape_rot, self.shape_trans = self._shape()
         self.joint_offsets = np.zeros(len(self.rot_joints) + self.trans, dtype=np.int64)
+        self.grid = self._grid_phase()  # the frames (mod trendwave.LEADS) the blocks' grid starts on
+        self._set_layout(0)
         self.means = np.zeros((len(three_angle_groups(sk)), 3), dtype=np.int64)
         self.turns, self.turned = self._turns()
         self.forms = self._choose_forms() if self.cfg["rotation_vectors"] else np.zeros(0, dtype=np.int64)
         self._constant_in_forms()
         self.world_translations = world_translations(sk, self.const)
-        self.grid = self._grid_phase()
-        self._set_layout(0)
         if self.cfg["keyframes"] and jumps_at_start(self.positions):
             self._choose_keyframes()
 

@@ -366,11 +366,11 @@ def decode_body(body: bytes, skeleton: Skeleton, frames: int) -> np.ndarray:
         )
     more = body[HEAD.size]
     kind, lead = more & 3, (more >> LEAD_SHIFT) & 3
-    constants = constant_coding(skeleton, bool(more & FINE_CONSTANTS), bool(more & FINE_TURNS))
     if not more or more >> 6 or kind not in (0, REST, REST_AT_ZERO) or frames < 1 + bool(kind):
         raise CorruptStreamError(
             f"kinwave payload's more flags at byte {HEAD.size} are damaged ({more} for {frames} frames)"
         )
+    constants = constant_coding(skeleton, bool(more & FINE_CONSTANTS), bool(more & FINE_TURNS))
     inner = bytes([FORMAT]) + body[1 : HEAD.size] + body[HEAD.size + 1 :]
     if not kind:
         return _decode_frames(inner, skeleton, frames, lead, constants)

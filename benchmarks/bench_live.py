@@ -33,6 +33,7 @@ from mocodec.codecs import get_codec
 from mocodec.codecs.kinwave import live
 from mocodec.formats import varint
 from mocodec.kinematics import forward_kinematics
+from mocodec.stream.client import REPAIR_AGAIN_S, REPAIR_HOLD_S
 from mocodec.stream.live import LiveDecoder, stream_clip
 from mocodec.stream.packets import HEADER, StreamInfo
 
@@ -77,6 +78,44 @@ def resync_times(motion, packets, loss: float, seed: int, layers: int = 1) -> li
     return times + [(packets[-1].first_frame + packets[-1].frames - f) / motion.fps for f in waiting]
 
 
+def repaired_resync_times(motion, packets, loss: float, seed: int, round_trip_s: float) -> list[float]:
+    """As :func:`resync_times`, for a receiver that asks for what it lost (a relay's repair,
+    docs/streaming.md): a packet arrives when its last frame is in (its first frame plus its
+    frames); a lost one is asked for when the next arrives, resent ``round_trip_s`` later and
+    every REPAIR_AGAIN_S after that while the resent one is lost too, until REPAIR_HOLD_S; the
+    receiver holds the packets after a gap that long (:class:`LiveDecoder` ``hold_s``). Seconds
+    from each lost packet's first frame until the receiver decodes the stream exactly again."""
+    rng = np.random.default_rng(seed)
+    data = packets[1:]
+    sent_at = [(p.first_frame + p.frames) / motion.fps for p in data]
+    lost = rng.random(len(data)) < loss
+    arrivals = [(sent_at[i], i) for i in range(len(data)) if not lost[i]]
+    for i in np.nonzero(lost)[0].tolist():
+        after = next((j for j in range(i + 1, len(data)) if not lost[j]), None)
+        if after is None:
+            continue
+        t = sent_at[after] + round_trip_s
+        while t - sent_at[after] <= REPAIR_HOLD_S:
+            if rng.random() >= loss:
+                arrivals.append((t, i))
+                break
+            t += REPAIR_AGAIN_S
+    arrivals.sort()
+    dec = LiveDecoder(StreamInfo.from_payload(packets[0].payload), hold_s=REPAIR_HOLD_S)
+    pending = [i for i in range(len(data)) if lost[i]]
+    times, waiting, k = [], [], 0
+    for t, i in arrivals:
+        while k < len(pending) and sent_at[pending[k]] <= t:
+            waiting.append(data[pending[k]].first_frame)
+            k += 1
+        dec.push(data[i])
+        if waiting and dec.in_sync and not dec.wanted():
+            times += [t - f / motion.fps for f in waiting]
+            waiting = []
+    end = (data[-1].first_frame + data[-1].frames) / motion.fps
+    return times + [end - f / motion.fps for f in waiting]
+
+
 def layer_rows(motion, bound: float, layers: int, keyframe_s: float, refresh_s: float, loss: float, seed: int) -> dict:
     """Per layer kept (1..layers): the live stream's kbit/s cut to it, the max and mean
     joint error of the clip's packets cut to it, and the resync times under loss."""
@@ -109,7 +148,13 @@ def cut_size(codec, payload: bytes, keep: int) -> int:
 
 
 def measure(
-    path: str, bound: float, keyframe_s: float = 1.0, loss: float = 0.1, layers: int = 3, refresh_s: float = 0.0
+    path: str,
+    bound: float,
+    keyframe_s: float = 1.0,
+    loss: float = 0.1,
+    layers: int = 3,
+    refresh_s: float = 0.0,
+    round_trip_s: float = 0.05,
 ) -> dict:
     motion = load(path)
     seconds = motion.duration
@@ -140,6 +185,7 @@ def measure(
         "dr_kbps": dr.bitrate / 1000,
         "dr_max_cm": dr.max_error_cm,
         "resync_s": resync_times(motion, sent, loss, seed),
+        "repaired_resync_s": repaired_resync_times(motion, sent, loss, seed, round_trip_s),
         **(layer_rows(motion, bound, layers, keyframe_s, refresh_s, loss, seed) if layers > 1 else {}),
     }
 
@@ -152,6 +198,12 @@ def main() -> None:
     ap.add_argument("--refresh-s", type=float, default=0.0, help="the codec refreshes itself (default: keyframes)")
     ap.add_argument("--loss", type=float, default=0.1, help="packet loss for the resync times (default 0.1)")
     ap.add_argument("--layers", type=int, default=3, help="layers of the layered stream (1: none; default 3)")
+    ap.add_argument(
+        "--round-trip-s",
+        type=float,
+        default=0.05,
+        help="a repair's round trip, request to resent packet (default 0.05: a relay tick and a network's)",
+    )
     ap.add_argument("--jobs", type=int, default=2)
     args = ap.parse_args()
     with ProcessPoolExecutor(args.jobs) as pool:
@@ -167,9 +219,11 @@ def main() -> None:
                     [args.loss] * n,
                     [args.layers] * n,
                     [args.refresh_s] * n,
+                    [args.round_trip_s] * n,
                 )
             )
             resync = np.concatenate([r["resync_s"] for r in rows])
+            repaired = np.concatenate([r["repaired_resync_s"] for r in rows])
 
             def med(key: str) -> float:
                 return float(np.median([r[key] for r in rows]))
@@ -189,7 +243,9 @@ def main() -> None:
                 f"live/offline x{ratio:.2f} | "
                 f"deadreckoning {med('dr_kbps'):.2f} kbit/s (max {max(r['dr_max_cm'] for r in rows):.3f} cm), "
                 f"live/deadreckoning x{vs_dr:.2f} | {refresh}, {100 * args.loss:g}% loss: "
-                f"resync median {np.median(resync):.2f} s, 99th percentile {np.percentile(resync, 99):.2f} s",
+                f"resync median {np.median(resync):.2f} s, 99th percentile {np.percentile(resync, 99):.2f} s; "
+                f"with repair (round trip {args.round_trip_s:g} s) {np.median(repaired):.2f} s, "
+                f"{np.percentile(repaired, 99):.2f} s",
                 flush=True,
             )
             if args.layers > 1:

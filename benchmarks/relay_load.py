@@ -41,7 +41,8 @@ from dataclasses import replace
 import numpy as np
 
 from common import DATA
-from mocodec.stream.packets import KEYFRAME, RESTART
+from mocodec.stream.client import REPAIR_AGAIN_S, REPAIR_HOLD_S
+from mocodec.stream.packets import KEYFRAME, MAX_REPAIRS, RESTART
 from mocodec.stream.relay import TICK_HZ
 
 SECRET = "load-test"
@@ -152,23 +153,81 @@ def publisher(url: str, token: str, streams: list[int], seconds: float, template
 # ----- viewers ---------------------------------------------------------------------------------------
 class Follower:
     """What a receiver does with flags only: after a loss it is out of step until a keyframe or
-    a restart point (where a self-refreshing codec stream's base layer restarts)."""
+    a restart point (where a self-refreshing codec stream's base layer restarts); with
+    ``hold_s`` it first waits that long (in stream frames) for the missing packets to be resent,
+    as :class:`~mocodec.stream.live.LiveDecoder` does, and is in step again once they are in."""
 
-    def __init__(self, fps: float):
-        self.fps = fps
+    def __init__(self, fps: float, hold_s: float = 0.0):
+        self.fps, self.hold_frames = fps, hold_s * fps
         self.expected: dict[int, int] = {}
         self.last_end: dict[int, int] = {}  # stream -> the frame after the last one received
         self.lost_at: dict[int, int] = {}  # stream -> first frame lost
+        self.gaps: dict[int, set[int]] = {}  # stream -> the sequence numbers waited for
         self.resync_s: list[float] = []
 
     def see(self, stream: int, seq: int, resumes: bool, first: int, frames: int) -> None:
         exp = self.expected.get(stream)
-        if exp is not None and seq > exp and stream not in self.lost_at:
-            self.lost_at[stream] = self.last_end.get(stream, first)
+        if exp is not None and seq < exp:  # resent
+            gap = self.gaps.get(stream)
+            if gap is not None and seq in gap:
+                gap.discard(seq)
+                if not gap:
+                    del self.gaps[stream]
+                    self._back(stream, self.last_end[stream])
+            return
+        if exp is not None and seq > exp:
+            if stream not in self.lost_at:
+                self.lost_at[stream] = self.last_end.get(stream, first)
+                if self.hold_frames:
+                    self.gaps[stream] = set(range(exp, seq))
+            elif stream in self.gaps:
+                self.gaps[stream] |= set(range(exp, seq))
         self.expected[stream] = seq + 1
-        if stream in self.lost_at and resumes:
-            self.resync_s.append((first - self.lost_at.pop(stream)) / self.fps)
         self.last_end[stream] = first + frames
+        if stream in self.gaps and not resumes:
+            if first + frames - self.lost_at[stream] > self.hold_frames:  # given up
+                del self.gaps[stream]
+            return
+        self.gaps.pop(stream, None)  # a packet to start from: the gap does not matter now
+        if stream in self.lost_at and resumes:
+            self._back(stream, first)
+
+    def _back(self, stream: int, frame: int) -> None:
+        self.resync_s.append((frame - self.lost_at.pop(stream)) / self.fps)
+
+
+class Repairs:
+    """What a lossy viewer asks the relay to resend: every gap in a stream's sequence, asked
+    for again each REPAIR_AGAIN_S until it is filled or REPAIR_HOLD_S has passed."""
+
+    def __init__(self):
+        self.expected = np.full(1 << 12, -1, dtype=np.int64)
+        self.asked: dict[tuple[int, int], tuple[float, float]] = {}  # -> (first asked, last asked)
+
+    def resent(self, streams: np.ndarray, seqs: np.ndarray) -> np.ndarray:
+        """Which packets of a batch are behind their stream's newest (resent ones)."""
+        exp = self.expected[streams]
+        return (exp >= 0) & (seqs < exp)
+
+    def see(self, streams: np.ndarray, seqs: np.ndarray, resent: np.ndarray, now: float) -> list[list[int]]:
+        """The kept packets of a batch in; the ``[stream, sequence]`` pairs to ask for now."""
+        for s, q in zip(streams[resent].tolist(), seqs[resent].tolist()):
+            self.asked.pop((s, q), None)
+        fresh_streams, fresh_seqs = streams[~resent], seqs[~resent]
+        for s, q in zip(fresh_streams.tolist(), fresh_seqs.tolist()):
+            exp = int(self.expected[s])
+            if exp >= 0:
+                for m in range(exp, min(q, exp + 64)):
+                    self.asked.setdefault((s, m), (now, -np.inf))
+            self.expected[s] = max(exp, q + 1)
+        due = []
+        for key, (first, last) in list(self.asked.items()):
+            if now - first > REPAIR_HOLD_S:
+                del self.asked[key]
+            elif now - last >= REPAIR_AGAIN_S:
+                self.asked[key] = (first, now)
+                due.append(list(key))
+        return due[:MAX_REPAIRS]
 
 
 def viewers(
@@ -182,6 +241,7 @@ def viewers(
     out,
     warmup_s: float,
     budget: float,
+    repair: bool,
 ) -> None:
     import aiohttp
 
@@ -195,8 +255,8 @@ def viewers(
     )
 
     hist = np.zeros(int(MAX_MS / BINS_MS) + 1, dtype=np.int64)
-    tally = {"received": 0, "dropped": 0, "batches": 0, "lost": 0, "bytes": 0}
-    followers = [Follower(120.0) for _ in range(follow)]
+    tally = {"received": 0, "dropped": 0, "batches": 0, "lost": 0, "bytes": 0, "resent": 0}
+    followers = [Follower(120.0, REPAIR_HOLD_S if repair else 0.0) for _ in range(follow)]
     rng = np.random.default_rng(seed)
 
     async def one(k: int, session) -> None:
@@ -207,6 +267,7 @@ def viewers(
         if budget:  # somewhere in the crowd, looking at it
             x, z = rng.uniform(0, 50), rng.uniform(0, 40)
             await ws.send_str(json.dumps({"budget": budget, "camera": [x, 1.6, z]}))
+        repairs = Repairs()
         counts = np.zeros(1 << 12, dtype=np.int64)
         lo = np.full(1 << 12, np.iinfo(np.int64).max)
         hi = np.full(1 << 12, -1, dtype=np.int64)
@@ -230,21 +291,27 @@ def viewers(
             offsets, ts = offsets[live], ts[live]
             streams = read_u32(data, offsets, STREAM_OFFSET).astype(np.int64)
             seqs = read_u32(data, offsets, SEQUENCE_OFFSET).astype(np.int64)
-            n = np.bincount(streams)  # what the relay delivered
+            resent = repairs.resent(streams, seqs)  # counted apart: their time stamps are old
+            tally["resent"] += int(resent.sum())
+            new_streams, new_seqs = streams[~resent], seqs[~resent]
+            n = np.bincount(new_streams)  # what the relay delivered
             counts[: len(n)] += n
             if n.max(initial=0) > 1:  # a late joiner's keyframe run
-                np.minimum.at(lo, streams, seqs)
-                np.maximum.at(hi, streams, seqs)
+                np.minimum.at(lo, new_streams, new_seqs)
+                np.maximum.at(hi, new_streams, new_seqs)
             else:
-                lo[streams] = np.minimum(lo[streams], seqs)
-                hi[streams] = np.maximum(hi[streams], seqs)
-            lat = np.bincount(np.clip((now_us - ts.astype(np.int64)) // int(BINS_MS * 1000), 0, len(hist) - 1))
+                lo[new_streams] = np.minimum(lo[new_streams], new_seqs)
+                hi[new_streams] = np.maximum(hi[new_streams], new_seqs)
+            ages = (now_us - ts[~resent].astype(np.int64)) // int(BINS_MS * 1000)
+            lat = np.bincount(np.clip(ages, 0, len(hist) - 1))
             hist[: len(lat)] += lat
-            tally["received"] += len(offsets)
+            tally["received"] += len(new_seqs)
             if loss:  # the emulated lossy link
                 keep = rng.random(len(offsets)) >= loss
-                tally["dropped"] += int((~keep).sum())
-                offsets, streams, seqs = offsets[keep], streams[keep], seqs[keep]
+                tally["dropped"] += int((~keep[~resent]).sum())
+                offsets, streams, seqs, resent = offsets[keep], streams[keep], seqs[keep], resent[keep]
+            if repair and (asks := repairs.see(streams, seqs, resent, time.monotonic())):
+                await ws.send_str(json.dumps({"repair": asks}))
             tally["batches"] += 1
             if k < follow:
                 raw = np.frombuffer(data, dtype=np.uint8)
@@ -298,7 +365,19 @@ def drive(args, token: str, relays: list) -> tuple[list, list, list]:
         workers.append(
             mp.Process(
                 target=viewers,
-                args=(url, token, n, total + 1.0, args.loss, 2 if args.loss else 0, k, out, 4.0, args.budget),
+                args=(
+                    url,
+                    token,
+                    n,
+                    total + 1.0,
+                    args.loss,
+                    2 if args.loss else 0,
+                    k,
+                    out,
+                    4.0,
+                    args.budget,
+                    args.repair,
+                ),
             )
         )
     for w in workers[args.publishers :]:
@@ -337,6 +416,12 @@ def main() -> None:
     ap.add_argument("--viewers", type=int, default=50)
     ap.add_argument("--seconds", type=float, default=20.0, help="measured time (after a 3 s start)")
     ap.add_argument("--loss", type=float, default=0.0, help="packet loss each viewer emulates (0..1)")
+    ap.add_argument(
+        "--repair",
+        action="store_true",
+        help="lossy viewers ask the relay to resend what they lost, and their receivers wait "
+        "REPAIR_HOLD_S for it before they wait for a restart",
+    )
     ap.add_argument("--keyframe-s", type=float, default=0.5)
     ap.add_argument(
         "--codec", choices=("dpcm", "spiht", "kinwave-live"), default="dpcm", help="the avatars' codec (default dpcm)"
@@ -414,7 +499,7 @@ def main() -> None:
             p.wait(10)
     sent = sum(r[1] for r in results if r[0] == "sent")
     hist = sum(r[2] for r in results if r[0] == "viewers")
-    kinds = ("received", "dropped", "batches", "lost", "bytes")
+    kinds = ("received", "dropped", "batches", "lost", "bytes", "resent")
     tally = {k: sum(r[1][k] for r in results if r[0] == "viewers") for k in kinds}
     resync = np.array([s for r in results if r[0] == "viewers" for s in r[3]])
     setup = (
@@ -431,6 +516,7 @@ def main() -> None:
         f"  packets sent {sent:,}; delivered to viewers {tally['received']:,} in {tally['batches']:,} batches; "
         f"lost on the way {tally['lost']:,}"
         + (f"; dropped by the emulated link {tally['dropped']:,}" if args.loss else "")
+        + (f"; resent on request {tally['resent']:,}" if args.repair else "")
     )
     print(f"  each viewer received {tally['bytes'] * 8 / args.viewers / args.seconds / 1000:,.0f} kbit/s")
     print(

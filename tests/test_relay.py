@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import json
 import shutil
 import socket
 import subprocess
@@ -21,7 +22,7 @@ from mocodec.stream import tokens
 from mocodec.stream.bus import NatsBus
 from mocodec.stream.client import RelayRefused, connect, publish_clip, record
 from mocodec.stream.live import receive_clip, stream_clip
-from mocodec.stream.packets import pack_batch
+from mocodec.stream.packets import Reader, pack_batch, split_batch
 from mocodec.stream.relay import BAD_MESSAGE, RATE_LIMIT, Limits, Relay, Viewer, on_ladder, start
 
 pytestmark = pytest.mark.network  # a relay (and NATS) on loopback sockets
@@ -95,6 +96,60 @@ def test_late_joiner_gets_the_header_and_the_last_keyframe(walk_bvh):
     start = walk_bvh.num_frames - got.num_frames
     assert start in starts[1:]  # joined at a keyframe after the first
     np.testing.assert_array_equal(got.channels, clean[start:])
+
+
+def test_a_viewer_that_lost_a_packet_gets_it_again_and_stays_exact(walk_bvh):
+    from mocodec.stream.client import Watcher
+
+    codec = get_codec("kinwave-live", layers=2)
+
+    async def go():
+        watcher = Watcher(hold_s=0.5)  # beyond the relay's round trip on a busy test machine
+        async with serving() as url:
+            async with connect(url, "lobby", token(), "subscribe") as ws:
+                sender = asyncio.create_task(publish_clip(url, "lobby", token(), walk_bvh, codec, speed=2.0))
+                seen, lost, asked, link = 0, None, [], Reader()
+                while not (watcher.decoders and watcher.decoders[0].ended):
+                    msg = await asyncio.wait_for(ws.receive(), 10)
+                    if msg.type != aiohttp.WSMsgType.BINARY:
+                        continue
+                    raws = [bytes(r) for r in split_batch(msg.data)]
+                    sequences = [link.read(r).sequence for r in raws]
+                    if lost is None and seen + len(raws) > 12:  # the emulated link drops one
+                        lost = sequences[12 - seen]
+                        del raws[12 - seen]
+                    seen += len(raws)
+                    watcher.take(pack_batch(raws))
+                    if asks := watcher.repairs():
+                        asked += asks
+                        await ws.send_str(json.dumps({"repair": asks}))
+                await sender
+        return watcher, asked, lost
+
+    watcher, asked, lost = asyncio.run(go())
+    assert asked[0] == [0, lost]
+    assert watcher.decoders[0].stats.repaired == 1 and watcher.decoders[0].stats.concealed_frames == 0
+    clean = receive_clip(stream_clip(walk_bvh, codec)).channels
+    np.testing.assert_array_equal(watcher.motion(0).channels, clean)
+
+
+def test_repair_requests_are_checked_and_limited(walk_bvh):
+    from mocodec.stream.relay import REPAIR_PACKETS, Bucket, Closing, Room
+
+    packets = stream_clip(walk_bvh, get_codec("kinwave-live", refresh_s=0.5), keyframe_s=60.0)[:-1]
+    relay, room, viewer = Relay(SECRET), Room(), Viewer(ws=None, transport=None)
+    for p in packets:
+        relay._ingest(room, pack_batch([p.to_bytes()]), owner=1)
+    kept = [f.packet.sequence for f in room.streams[0].recent]  # the last REPAIR_PACKETS, restarts or not
+    assert kept == [p.sequence for p in packets[-REPAIR_PACKETS:]] and len(packets) > REPAIR_PACKETS
+    bucket = Bucket(rate=1.0, burst_s=3.0)  # three packets
+    relay._resend(viewer, room, [[0, kept[1]], [0, kept[0] - 1], [7, kept[1]], [0, kept[2]], [0, kept[3]]], bucket)
+    relay._resend(viewer, room, [[0, kept[4]]], bucket)  # the bucket is empty: ignored
+    assert [f.packet.sequence for f in viewer.pending] == [kept[1], kept[2]] and all(f.resent for f in viewer.pending)
+    assert relay.counters["repairs"] == 2 and relay.counters["repairs_missed"] == 4
+    for bad in ([[0, -1]], [[0]], [[0, 1.5]], [["0", 1]], [[0, 1]] * 257, {"0": 1}):
+        with pytest.raises(Closing, match="repair"):
+            relay._resend(viewer, room, bad, Bucket(100.0, 1.0))
 
 
 def _near_and_far(walk, codec, budget):

@@ -117,6 +117,33 @@ def test_a_lost_packet_is_concealed_and_the_receiver_resyncs_at_the_next_keyfram
     assert resync - first_lost <= refresh_frames(get_codec("dpcm"), 120, 0.5)
 
 
+def test_a_receiver_that_holds_decodes_a_late_packet_in_step(walk_bvh):
+    packets = stream_clip(walk_bvh, get_codec("kinwave-live"), keyframe_s=60.0)
+    clean = receive_clip(packets).channels
+    dec = LiveDecoder(StreamInfo.from_payload(packets[0].payload), hold_s=0.1)  # 12 frames, two packets
+    late = 10
+    out = [dec.push(p) for p in packets[1:late]]
+    assert dec.push(packets[late + 1]).shape[0] == 0 and dec.wanted() == [packets[late].sequence]
+    out.append(dec.push(packets[late]))  # resent: both come out, decoded in order
+    assert dec.wanted() == [] and out[-1].shape[0] == packets[late].frames + packets[late + 1].frames
+    out += [dec.push(p) for p in packets[late + 2 :]]
+    np.testing.assert_array_equal(np.vstack(out), clean)
+    assert (dec.stats.lost, dec.stats.repaired, dec.stats.concealed_frames) == (0, 1, 0)
+
+
+def test_a_receiver_that_holds_gives_a_gap_up_after_hold_s(walk_bvh):
+    packets = stream_clip(walk_bvh, get_codec("kinwave-live"), keyframe_s=0.5)
+    late = 10
+    lossy = packets[:late] + packets[late + 1 :]
+    plain = receive_clip(lossy).channels
+    dec = LiveDecoder(StreamInfo.from_payload(packets[0].payload), hold_s=0.1)
+    out = [dec.push(p) for p in lossy[1:]]
+    held = [len(x) for x in out[late - 1 : late + 1]]  # 12 frames held, the next packet is past them
+    assert held == [0, sum(p.frames for p in packets[late : late + 3])]
+    np.testing.assert_array_equal(np.vstack(out), plain)  # then as without holding: concealed, resynced
+    assert dec.stats.lost == 1 and dec.push(packets[late]).shape[0] == 0  # too late now
+
+
 def test_late_joiner_starts_at_a_keyframe(walk_bvh):
     packets = stream_clip(walk_bvh, get_codec("spiht"), keyframe_s=2.0)  # two segments per refresh
     clean = receive_clip(packets).channels

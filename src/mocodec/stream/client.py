@@ -13,6 +13,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import math
 import time
 from dataclasses import dataclass
 
@@ -24,7 +25,7 @@ from mocodec.errors import MocodecError
 from mocodec.motion import Motion
 from mocodec.stream.jitter import JitterBuffer
 from mocodec.stream.live import TICK_HZ, LiveDecoder, clip_encoder, tick_frames
-from mocodec.stream.packets import HEADER, OutOfSync, Packet, Reader, StreamInfo, pack_batch, split_batch
+from mocodec.stream.packets import HEADER, MAX_REPAIRS, OutOfSync, Packet, Reader, StreamInfo, pack_batch, split_batch
 
 
 class RelayRefused(MocodecError):
@@ -126,14 +127,20 @@ async def _drain(ws) -> None:
         raise RelayRefused(f"the relay closed the stream: {closed_reason(ws, msg)}")
 
 
+REPAIR_HOLD_S = 0.2  # how long a watcher's decoder waits for a missing packet (four requests)
+REPAIR_AGAIN_S = 0.05  # a request not answered in this time is made again (the resent packet was lost too)
+
+
 class Watcher:
     """What a viewer holds: a decoder per stream, the frames received so far (or, with
     ``keep=False``, only each stream's newest frame, for watching without end), and the bytes
     each stream has brought. A message, packet or stream header that does not parse is
-    skipped and counted (``refused``): one stream's damage never stops the others."""
+    skipped and counted (``refused``): one stream's damage never stops the others. Its
+    decoders wait ``hold_s`` for a missing packet; :meth:`repairs` says which to ask for."""
 
-    def __init__(self, conceal: str = "hold", keep: bool = True):
-        self.conceal, self.keep = conceal, keep
+    def __init__(self, conceal: str = "hold", keep: bool = True, hold_s: float = REPAIR_HOLD_S):
+        self.conceal, self.keep, self.hold_s = conceal, keep, hold_s
+        self.asked: dict[tuple[int, int], float] = {}  # (stream, sequence) -> when last asked for
         self.decoders: dict[int, LiveDecoder] = {}
         self.frames: dict[int, list[np.ndarray]] = {}
         self.counts: dict[int, int] = {}
@@ -152,7 +159,7 @@ class Watcher:
             try:
                 p = self.reader.read(raw)
                 if p.kind == HEADER and p.stream not in self.decoders:
-                    decoder = LiveDecoder(StreamInfo.from_payload(p.payload), self.conceal)
+                    decoder = LiveDecoder(StreamInfo.from_payload(p.payload), self.conceal, hold_s=self.hold_s)
                     self.decoders[p.stream] = decoder
                     self.frames[p.stream], self.counts[p.stream], self.bytes[p.stream] = [], 0, 0
             except OutOfSync:  # joined mid-stream: the stream starts for us at its next keyframe
@@ -174,6 +181,16 @@ class Watcher:
                     self.frames[p.stream].append(out)
                 elif len(out):
                     self.frames[p.stream] = [out[-1:]]
+
+    def repairs(self, now_s: float | None = None) -> list[list[int]]:
+        """The ``[stream, sequence]`` pairs to ask the relay for now (its ``repair`` request):
+        the packets the decoders wait for, not asked for in the last REPAIR_AGAIN_S."""
+        now = time.monotonic() if now_s is None else now_s
+        wanted = {(stream, seq) for stream, dec in self.decoders.items() for seq in dec.wanted()}
+        self.asked = {key: at for key, at in self.asked.items() if key in wanted}
+        due = sorted(key for key in wanted if now - self.asked.get(key, -math.inf) >= REPAIR_AGAIN_S)
+        self.asked.update(dict.fromkeys(due, now))
+        return [list(key) for key in due]
 
     def pose(self, stream: int, now_s: float | None = None) -> np.ndarray | None:
         """The channels of ``stream`` to show now: played out smoothly at the stream's frame rate
@@ -221,6 +238,8 @@ async def record(
             if msg.type != aiohttp.WSMsgType.BINARY:
                 continue
             watcher.take(msg.data)
+            if asks := watcher.repairs():
+                await ws.send_str(json.dumps({"repair": asks[:MAX_REPAIRS]}))
             target = stream if stream is not None else next(iter(watcher.decoders), None)
             if target is None or target not in watcher.decoders:
                 continue

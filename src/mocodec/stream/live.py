@@ -53,6 +53,10 @@ VELOCITY_FRAMES = 5
 #: frame count there instead, so a packet cannot make a receiver allocate without bound.
 MAX_CONCEAL_S = 10.0
 MAX_CONCEAL_VALUES = 1 << 22
+#: A receiver that repairs losses (``hold_s`` > 0) waits for at most this many missing packets
+#: of one stream, and holds at most this many packets behind them.
+MAX_MISSING = 64
+MAX_HELD = 256
 
 
 def now_us() -> int:
@@ -225,6 +229,7 @@ class ReceiverStats:
     dropped: int = 0  # received but not decodable (waiting for a keyframe, damaged)
     concealed_frames: int = 0
     resyncs: int = 0
+    repaired: int = 0  # missing packets that came later (resent), and were decoded in order
 
 
 class LiveDecoder:
@@ -232,11 +237,23 @@ class LiveDecoder:
     conceals (``hold`` the last frame, or ``extrapolate`` the velocity of the last few frames
     for a quarter second, then hold) until the next keyframe. The stream header is checked
     when the decoder is made (CorruptStreamError for one no codec can be made of; a knob naming
-    a local file is the caller's ``local_files`` entry, never the header's)."""
+    a local file is the caller's ``local_files`` entry, never the header's).
 
-    def __init__(self, info: StreamInfo, conceal: str = "hold", local_files: dict | None = None):
+    With ``hold_s`` > 0 a decoder in step that sees a gap in the sequence first waits for the
+    missing packets (:meth:`wanted`: a relay resends them on request, docs/streaming.md): it
+    holds the packets after the gap, up to ``hold_s`` of frames past the last frame out, and
+    decodes them in order once the gap is filled, so nothing is concealed and the decoder
+    stays in step. Past ``hold_s``, or at a keyframe or restart point after the gap, it gives the
+    gap up and goes on as without it."""
+
+    def __init__(self, info: StreamInfo, conceal: str = "hold", local_files: dict | None = None, hold_s: float = 0.0):
         if conceal not in ("hold", "extrapolate"):
             raise CodecError(f"concealment must be hold or extrapolate, got {conceal!r}")
+        if not (0.0 <= hold_s <= MAX_CONCEAL_S):
+            raise CodecError(f"hold_s must be 0 to {MAX_CONCEAL_S:g} seconds, got {hold_s!r}")
+        self.hold_frames = int(math.ceil(hold_s * info.fps))
+        self.missing: set[int] = set()  # sequence numbers of a gap being waited for
+        self.held: dict[int, Packet] = {}  # the packets after it
         self.info = info
         self.codec = info.stream_codec(local_files)
         self.max_gap = max(min(int(MAX_CONCEAL_S * info.fps), MAX_CONCEAL_VALUES // info.skeleton.num_channels), 1)
@@ -253,9 +270,54 @@ class LiveDecoder:
     def in_sync(self) -> bool:
         return self.decoder is not None and self.decoder.in_step
 
+    def wanted(self) -> list[int]:
+        """The sequence numbers of the packets this decoder waits for (``hold_s``), oldest first."""
+        return sorted(self.missing, key=self._ahead)
+
+    def _ahead(self, sequence: int) -> int:
+        return (sequence - (self.expected or 0)) & 0xFFFFFFFF
+
     def push(self, packet: Packet) -> np.ndarray:
         """The frames up to the end of this packet's range: decoded, or concealed (none for
-        a gap over :data:`MAX_CONCEAL_S`)."""
+        a gap over :data:`MAX_CONCEAL_S`); with ``hold_s``, none while it waits for a gap
+        before this packet, and then every frame held."""
+        if not self.hold_frames or packet.kind != DATA or self.expected is None:
+            return self._push_safely(packet)
+        ahead = self._ahead(packet.sequence)
+        if ahead >= 1 << 31 and packet.sequence not in self.missing:
+            return self._push_safely(packet)  # old or repeated: dropped there
+        if not self.missing:
+            if ahead == 0 or ahead > MAX_MISSING or not self.in_sync:
+                return self._push_safely(packet)
+            self.missing = {(self.expected + k) & 0xFFFFFFFF for k in range(ahead)}
+        elif packet.keyframe or packet.restart:  # decodable without the gap: wait no more
+            self.held[packet.sequence] = packet
+            return self._release()
+        elif packet.sequence in self.missing:
+            self.missing.discard(packet.sequence)
+            self.stats.repaired += 1
+        else:
+            last = max(self.held, key=self._ahead)
+            beyond = self._ahead(packet.sequence) - self._ahead(last)
+            if beyond > 1:  # another gap behind the first
+                self.missing |= {(last + k) & 0xFFFFFFFF for k in range(1, min(beyond, MAX_MISSING + 1))}
+        self.held[packet.sequence] = packet
+        if not self.missing:
+            return self._release()
+        newest = max(self.held.values(), key=lambda p: self._ahead(p.sequence))
+        late = newest.first_frame + newest.frames - (self.next_frame or 0) > self.hold_frames
+        if late or len(self.held) > MAX_HELD or len(self.missing) > MAX_MISSING:
+            return self._release()
+        return np.zeros((0, self.info.skeleton.num_channels))
+
+    def _release(self) -> np.ndarray:
+        """Every held packet in sequence order (the gaps left, if any, given up)."""
+        held = sorted(self.held.values(), key=lambda p: self._ahead(p.sequence))
+        self.held, self.missing = {}, set()
+        out = [self._push_safely(p) for p in held]
+        return np.vstack(out) if out else np.zeros((0, self.info.skeleton.num_channels))
+
+    def _push_safely(self, packet: Packet) -> np.ndarray:
         try:
             return self._push(packet)
         except Exception:  # noqa: BLE001 - a hostile packet must not take the receiver down

@@ -74,6 +74,7 @@ C_EXPLICIT, C_POSITION, C_RESTART, C_SHORT = 8, 16, 32, 64
 SHORT_SEQUENCE = 63  # the sequence bits a short tag carries
 COMPACT_MIN = 4
 OVERHEAD = _FIELDS.size + _CRC.size
+MAX_REPAIRS = 256  # packets a viewer's repair request may name (docs/streaming.md)
 #: Where the timestamp, stream id and sequence number sit in a packet (read in bulk by the load test).
 STREAM_OFFSET, SEQUENCE_OFFSET, TIMESTAMP_OFFSET = 6, 10, 14
 
@@ -404,6 +405,20 @@ def pack_batch(packets: list[bytes], lengths: np.ndarray | None = None) -> bytes
     if lengths is None:
         lengths = np.fromiter(map(len, packets), dtype=np.int64, count=len(packets))
     return BATCH_MAGIC + varint.pack(len(packets)) + varint.pack_array(lengths) + b"".join(packets)
+
+
+def pack_batch_before(packets: list[bytes], joined: tuple[np.ndarray, bytes]) -> bytes:
+    """The batch of ``packets`` followed by packets already joined (``joined``: their lengths
+    and bytes), which many batches share."""
+    lengths = np.fromiter(map(len, packets), dtype=np.int64, count=len(packets))
+    count = len(packets) + len(joined[0])
+    return (
+        BATCH_MAGIC
+        + varint.pack(count)
+        + varint.pack_array(np.concatenate((lengths, joined[0])))
+        + b"".join(packets)
+        + joined[1]
+    )
 
 
 def is_batch(data: bytes | memoryview) -> bool:

@@ -5,7 +5,11 @@ the token in ``Authorization: Bearer T`` or ``&token=T``), ``/status`` a JSON su
 anything else the static files of the viewer. The relay greets an accepted connection with
 ``{"welcome": room, "role": role}`` and closes a refused one with code 4003 and the reason. A
 sender's message is a batch of packets (:mod:`mocodec.stream.packets`); a viewer's messages
-are JSON settings, ``{"budget": bit/s, "camera": [x, y, z] (metres)}``.
+are JSON: settings, ``{"budget": bit/s, "camera": [x, y, z] (metres)}``, and requests to
+resend packets it lost, ``{"repair": [[stream, sequence], ...]}``: the relay resends those it
+still has (the packets since each stream's last keyframe or restart point) in the viewer's
+next batch, with the layers the viewer gets now, so a receiver that holds the packets after a
+gap decodes on in step instead of waiting for the next restart.
 
 Every tick (TICK_HZ, 60 a second: a packet waits 17 ms at most) each viewer gets one batch with
 everything new in its room. A viewer that declared a budget gets the scalable streams cut to
@@ -45,9 +49,9 @@ import logging
 import math
 import resource
 import time
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from itertools import repeat
 from pathlib import Path
 from typing import Any
@@ -66,11 +70,13 @@ from mocodec.stream.packets import (
     DATA,
     END,
     HEADER,
+    MAX_REPAIRS,
     Cursor,
     Packet,
     StreamInfo,
     is_batch,
     pack_batch,
+    pack_batch_before,
     parse,
     split_batch,
     truncated,
@@ -87,6 +93,8 @@ VENDOR = Path(__file__).parent.parent / "viewer" / "static" / "vendor"  # the pi
 LADDER_STEPS = 4
 #: A layered stream's rate per layer is measured over about this long (an exponential average).
 LAYER_RATE_S = 1.0
+#: The packets of each stream the relay keeps to resend on a viewer's request (a second at 60 a second).
+REPAIR_PACKETS = 64
 
 
 @dataclass
@@ -94,7 +102,9 @@ class Limits:
     max_message_bytes: int = 1 << 20
     publish_messages_per_s: float = 400.0
     publish_bytes_per_s: float = 8e6
-    control_messages_per_s: float = 20.0
+    control_messages_per_s: float = 120.0  # settings and repair requests (one a tick, and some)
+    max_control_bytes: int = 16384  # a viewer's message (MAX_REPAIRS pairs fit)
+    repair_packets_per_s: float = 2000.0  # packets resent to one viewer; past it requests are ignored
     burst_s: float = 2.0  # a bucket holds this many seconds of its rate
     slow_viewer_s: float = 5.0
     max_gop_packets: int = 512
@@ -140,6 +150,7 @@ class Forward:
     cutter: Callable[[float], bytes] | None = None  # the codec's packet cutter, made at the first cut
     layer_ends: list[int] | None = None  # a layered stream's data packet: where each layer ends
     layer_starts: list[bool] | None = None  # ... and which restart in it (read when a viewer may gain one)
+    resent: bool = False  # a viewer asked for it again: its layers are the viewer's now, unchanged
 
     @property
     def scalable(self) -> bool:
@@ -182,6 +193,7 @@ class StreamState:
     info: StreamInfo
     codec: Any  # the stream's codec (an embedded one offers packet_cutter)
     gop: list[Forward] = field(default_factory=list)
+    recent: deque[Forward] = field(default_factory=lambda: deque(maxlen=REPAIR_PACKETS))  # resent on request
     position: tuple[float, float, float] = (0.0, 0.0, 0.0)
     next_sequence: int = 0
     next_frame: int = 0
@@ -315,6 +327,8 @@ class Relay:
             "closed_rate": 0,
             "closed_expired": 0,
             "dropped_slow": 0,
+            "repairs": 0,
+            "repairs_missed": 0,
         }
 
     # ----- the application -------------------------------------------------------------------
@@ -471,6 +485,7 @@ class Relay:
             if p.restart:  # a late joiner starts at the last keyframe or restart
                 state.gop.clear()
             state.gop.append(forward)
+            state.recent.append(forward)
             if len(state.gop) > self.limits.max_gop_packets:
                 del state.gop[0]
             room.fresh.append(forward)
@@ -502,19 +517,25 @@ class Relay:
         room.viewers.append(viewer)
         sender = asyncio.create_task(self._send_loop(viewer))
         control = Bucket(self.limits.control_messages_per_s, self.limits.burst_s)
+        repairs = Bucket(self.limits.repair_packets_per_s, self.limits.burst_s)
         try:
             async for text in messages_of(ws, WSMsgType.TEXT, "a viewer sends JSON settings only"):
                 if not control.take():
                     raise Closing(
                         RATE_LIMIT, f"rate limit: over {self.limits.control_messages_per_s:g} settings per second"
                     )
-                self._settings(viewer, text)
+                if len(text) > self.limits.max_control_bytes:
+                    raise Closing(BAD_MESSAGE, f"a viewer's message is at most {self.limits.max_control_bytes} bytes")
+                doc = self._settings(viewer, text)
+                if "repair" in doc:
+                    self._resend(viewer, room, doc["repair"], repairs)
         finally:
             room.viewers.remove(viewer)
             sender.cancel()
 
     @staticmethod
-    def _settings(viewer: Viewer, text: str) -> None:
+    def _settings(viewer: Viewer, text: str) -> dict:
+        """Apply a viewer's settings; the message, parsed."""
         try:
             doc = json.loads(text)
             budget = float(doc.get("budget", viewer.budget))
@@ -524,6 +545,29 @@ class Relay:
         if not (math.isfinite(budget) and budget >= 0) or len(camera) != 3 or not all(map(math.isfinite, camera)):
             raise Closing(BAD_MESSAGE, "budget must be >= 0 bit/s and camera three finite numbers")
         viewer.budget, viewer.camera = budget, camera
+        return doc
+
+    def _resend(self, viewer: Viewer, room: Room, pairs: object, bucket: Bucket) -> None:
+        """Queue the packets a viewer asks for again (``[[stream, sequence], ...]``) that the
+        relay still has (the last REPAIR_PACKETS of each stream), while its repair bucket lasts
+        (past it, requests are ignored: the viewer's receivers wait for the next restart)."""
+        if not (isinstance(pairs, list) and len(pairs) <= MAX_REPAIRS):
+            raise Closing(BAD_MESSAGE, f"repair must be a list of at most {MAX_REPAIRS} [stream, sequence] pairs")
+        for pair in pairs:
+            if not (
+                isinstance(pair, list) and len(pair) == 2 and all(type(x) is int and 0 <= x <= 0xFFFFFFFF for x in pair)
+            ):
+                raise Closing(BAD_MESSAGE, "a repair pair is [stream, sequence], two integers 0 to 2**32 - 1")
+            state = room.streams.get(pair[0])
+            if state is None or not state.recent or not bucket.take():
+                self.counters["repairs_missed"] += 1
+                continue
+            at = (pair[1] - state.recent[0].packet.sequence) & 0xFFFFFFFF
+            if at >= len(state.recent) or state.recent[at].packet.sequence != pair[1]:
+                self.counters["repairs_missed"] += 1
+                continue
+            viewer.pending.append(replace(state.recent[at], resent=True))
+            self.counters["repairs"] += 1
 
     async def _send_loop(self, viewer: Viewer) -> None:
         while True:
@@ -550,6 +594,7 @@ class Relay:
     def _dispatch(self, room: Room) -> None:
         fresh, room.fresh = room.fresh, []
         shared: bytes | None = None  # the batch of every viewer with nothing of its own
+        joined: tuple[np.ndarray, bytes] | None = None  # the fresh packets' lengths and bytes, joined
         cut_cache: dict[tuple[int, float], bytes] = {}
         crowd = None  # the scalable streams and where they are, this tick
         viewers = [v for v in room.viewers if not v.dropped]
@@ -569,8 +614,13 @@ class Relay:
             elif len(items) == len(fresh):
                 shared = shared or pack_batch([f.data for f in fresh])
                 batch = shared
-            else:
-                batch = pack_batch([f.data for f in items])
+            else:  # what it asked for, or joined late, before the tick's packets
+                if joined is None:
+                    joined = (
+                        np.fromiter((len(f.data) for f in fresh), dtype=np.int64, count=len(fresh)),
+                        b"".join(f.data for f in fresh),
+                    )
+                batch = pack_batch_before([f.data for f in pending], joined)
             self._offer(viewer, batch, items)
         for key in [k for k, state in room.streams.items() if state.ended]:
             del room.streams[key]  # over: late joiners will not see it
@@ -669,7 +719,10 @@ class Relay:
             if r is None or (f.cuts is None and f.layer_ends is None):
                 out.append(f.data)
             elif f.layer_ends is not None:
-                keep = self._layers_for(viewer, f, room.streams[f.packet.stream], int(fits[r]))
+                if f.resent:
+                    keep = min(viewer.layers.get(f.packet.stream, 1), len(f.layer_ends))
+                else:
+                    keep = self._layers_for(viewer, f, room.streams[f.packet.stream], int(fits[r]))
                 key: tuple[int, float] = (id(f), -keep)
                 if key not in cache:
                     cache[key] = self._drop_layers(f, keep)

@@ -11,7 +11,8 @@ packet framing with each packet's length in its batch, header packet left out); 
 decoded frame; for deadreckoning the threshold rate control finds for the bound (its delay: 3
 frames), for offline kinwave the whole clip at the bound (its delay: the 256-frame segment); and
 the resync time under random packet loss (seeded): for every lost packet, from its first frame
-until the receiver decodes the stream exactly again (the next keyframe it gets). With
+until the receiver decodes the stream exactly again (the next keyframe it gets), and the same
+for a receiver that asks a relay to resend what it lost (``--round-trip-s``, ``--hold-s``). With
 ``--refresh-s`` the codec stream refreshes itself instead (kinwave-live's ``refresh_s``: each
 layer restarts on its own, spread over that time) and keyframes come only every minute. Then the
 layered stream (``--layers``, each layer twice the bound of the next, the top one at the bound):
@@ -78,11 +79,13 @@ def resync_times(motion, packets, loss: float, seed: int, layers: int = 1) -> li
     return times + [(packets[-1].first_frame + packets[-1].frames - f) / motion.fps for f in waiting]
 
 
-def repaired_resync_times(motion, packets, loss: float, seed: int, round_trip_s: float) -> list[float]:
+def repaired_resync_times(
+    motion, packets, loss: float, seed: int, round_trip_s: float, hold_s: float = REPAIR_HOLD_S
+) -> list[float]:
     """As :func:`resync_times`, for a receiver that asks for what it lost (a relay's repair,
     docs/streaming.md): a packet arrives when its last frame is in (its first frame plus its
     frames); a lost one is asked for when the next arrives, resent ``round_trip_s`` later and
-    every REPAIR_AGAIN_S after that while the resent one is lost too, until REPAIR_HOLD_S; the
+    every REPAIR_AGAIN_S after that while the resent one is lost too, until ``hold_s``; the
     receiver holds the packets after a gap that long (:class:`LiveDecoder` ``hold_s``). Seconds
     from each lost packet's first frame until the receiver decodes the stream exactly again."""
     rng = np.random.default_rng(seed)
@@ -95,13 +98,13 @@ def repaired_resync_times(motion, packets, loss: float, seed: int, round_trip_s:
         if after is None:
             continue
         t = sent_at[after] + round_trip_s
-        while t - sent_at[after] <= REPAIR_HOLD_S:
+        while t - sent_at[after] <= hold_s:
             if rng.random() >= loss:
                 arrivals.append((t, i))
                 break
             t += REPAIR_AGAIN_S
     arrivals.sort()
-    dec = LiveDecoder(StreamInfo.from_payload(packets[0].payload), hold_s=REPAIR_HOLD_S)
+    dec = LiveDecoder(StreamInfo.from_payload(packets[0].payload), hold_s=hold_s)
     pending = [i for i in range(len(data)) if lost[i]]
     times, waiting, k = [], [], 0
     for t, i in arrivals:
@@ -155,6 +158,7 @@ def measure(
     layers: int = 3,
     refresh_s: float = 0.0,
     round_trip_s: float = 0.05,
+    hold_s: float = REPAIR_HOLD_S,
 ) -> dict:
     motion = load(path)
     seconds = motion.duration
@@ -185,7 +189,7 @@ def measure(
         "dr_kbps": dr.bitrate / 1000,
         "dr_max_cm": dr.max_error_cm,
         "resync_s": resync_times(motion, sent, loss, seed),
-        "repaired_resync_s": repaired_resync_times(motion, sent, loss, seed, round_trip_s),
+        "repaired_resync_s": repaired_resync_times(motion, sent, loss, seed, round_trip_s, hold_s),
         **(layer_rows(motion, bound, layers, keyframe_s, refresh_s, loss, seed) if layers > 1 else {}),
     }
 
@@ -204,6 +208,12 @@ def main() -> None:
         default=0.05,
         help="a repair's round trip, request to resent packet (default 0.05: a relay tick and a network's)",
     )
+    ap.add_argument(
+        "--hold-s",
+        type=float,
+        default=REPAIR_HOLD_S,
+        help=f"how long the receiver waits for a resent packet (default {REPAIR_HOLD_S:g})",
+    )
     ap.add_argument("--jobs", type=int, default=2)
     args = ap.parse_args()
     with ProcessPoolExecutor(args.jobs) as pool:
@@ -220,6 +230,7 @@ def main() -> None:
                     [args.layers] * n,
                     [args.refresh_s] * n,
                     [args.round_trip_s] * n,
+                    [args.hold_s] * n,
                 )
             )
             resync = np.concatenate([r["resync_s"] for r in rows])
@@ -244,8 +255,8 @@ def main() -> None:
                 f"deadreckoning {med('dr_kbps'):.2f} kbit/s (max {max(r['dr_max_cm'] for r in rows):.3f} cm), "
                 f"live/deadreckoning x{vs_dr:.2f} | {refresh}, {100 * args.loss:g}% loss: "
                 f"resync median {np.median(resync):.2f} s, 99th percentile {np.percentile(resync, 99):.2f} s; "
-                f"with repair (round trip {args.round_trip_s:g} s) {np.median(repaired):.2f} s, "
-                f"{np.percentile(repaired, 99):.2f} s",
+                f"with repair (round trip {args.round_trip_s:g} s, hold {args.hold_s:g} s) "
+                f"{np.median(repaired):.2f} s, {np.percentile(repaired, 99):.2f} s",
                 flush=True,
             )
             if args.layers > 1:

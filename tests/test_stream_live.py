@@ -144,6 +144,31 @@ def test_a_receiver_that_holds_gives_a_gap_up_after_hold_s(walk_bvh):
     assert dec.stats.lost == 1 and dec.push(packets[late]).shape[0] == 0  # too late now
 
 
+def test_a_receiver_that_holds_takes_reordered_and_hostile_sequences(walk_bvh):
+    from mocodec.stream.live import MAX_HELD
+
+    packets = stream_clip(walk_bvh, get_codec("kinwave-live"), keyframe_s=0.5)
+    clean = receive_clip(packets).channels
+    order = list(range(1, len(packets)))
+    rng = np.random.default_rng(5)
+    for k in range(0, len(order) - 1, 2):  # swap neighbours: a gap, filled by the next packet
+        if rng.random() < 0.5:
+            order[k], order[k + 1] = order[k + 1], order[k]
+    dec = LiveDecoder(StreamInfo.from_payload(packets[0].payload), hold_s=0.1)
+    np.testing.assert_array_equal(np.vstack([dec.push(packets[k]) for k in order]), clean)
+    assert dec.stats.repaired > 0 and dec.stats.lost == 0
+    dec = LiveDecoder(StreamInfo.from_payload(packets[0].payload), hold_s=10.0)
+    for p in packets[1:12]:
+        dec.push(p)
+    p = packets[12]
+    for k in range(3 * MAX_HELD):  # sequence numbers from a hostile sender, far and near
+        near = (p.sequence + int(rng.integers(-5, 70))) & 0xFFFFFFFF
+        seq = near if k % 2 else int(rng.integers(0, 1 << 32))
+        hostile = Packet(p.stream, seq, 0, p.codec, p.first_frame + 6 * k, p.frames, p.payload)
+        out = dec.push(hostile)
+        assert len(dec.held) <= MAX_HELD and len(dec.wanted()) <= 2 * 64 and np.isfinite(out).all()
+
+
 def test_late_joiner_starts_at_a_keyframe(walk_bvh):
     packets = stream_clip(walk_bvh, get_codec("spiht"), keyframe_s=2.0)  # two segments per refresh
     clean = receive_clip(packets).channels

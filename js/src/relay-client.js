@@ -8,9 +8,11 @@ import { parseStreamHeader } from './header.js';
 import { JitterBuffer } from './jitter.js';
 import { forwardKinematics } from './kinematics.js';
 import { DATA, HEADER, Reader, splitBatch } from './packets.js';
-import { StreamDecoder, hasDecoder } from './stream.js';
+import { HoldingDecoder, hasDecoder } from './stream.js';
 
 const now = () => performance.now() / 1000;
+export const REPAIR_HOLD_S = 0.2; // stream/client.py's: how long a gap is waited for
+export const REPAIR_AGAIN_S = 0.05; // and how often a missing packet is asked for again
 
 export class Avatar {
   constructor(stream, info) {
@@ -19,7 +21,7 @@ export class Avatar {
     this.name = info.name;
     this.codec = info.codec.codec;
     this.skeleton = info.skeleton;
-    this.decoder = new StreamDecoder(info);
+    this.decoder = new HoldingDecoder(info, REPAIR_HOLD_S);
     this.buffer = new JitterBuffer(info.fps, info.skeleton.numChannels);
     this.frames = 0; // frames decoded
     this.bytes = 0;
@@ -29,14 +31,13 @@ export class Avatar {
 
   take(p, arrivalS) {
     this.bytes += p.payload.length;
-    let frames = null;
-    try {
-      frames = this.decoder.push(p);
-    } catch (e) {
-      if (!(e instanceof DecodeError)) throw e;
-      this.errors += 1;
+    for (const { packet, frames, error } of this.decoder.push(p)) {
+      if (error) this.errors += 1;
+      if (frames && frames.length) this.#decoded(packet, frames, arrivalS);
     }
-    if (!frames || !frames.length) return;
+  }
+
+  #decoded(p, frames, arrivalS) {
     const C = this.skeleton.numChannels;
     for (let k = 0; k < frames.length / C; k++) {
       this.decoded.set(p.firstFrame + k, frames.slice(k * C, (k + 1) * C));
@@ -67,6 +68,7 @@ export class RelayClient {
     this.avatars = new Map();
     this.others = new Map();
     this.reader = new Reader();
+    this.asked = new Map(); // "stream sequence" -> when last asked for (s)
     this.queue = Promise.resolve();
     this.errors = 0;
     this.closed = null;
@@ -109,6 +111,23 @@ export class RelayClient {
     this.ws?.close();
   }
 
+  // Ask the relay for the packets the avatars' decoders wait for, each again every REPAIR_AGAIN_S.
+  #repair(nowS) {
+    const wanted = new Set();
+    const due = [];
+    for (const [stream, avatar] of this.avatars) {
+      for (const sequence of avatar.decoder.wanted()) {
+        const key = `${stream} ${sequence}`;
+        wanted.add(key);
+        if (!(nowS - (this.asked.get(key) ?? -Infinity) >= REPAIR_AGAIN_S)) continue;
+        this.asked.set(key, nowS);
+        due.push([stream, sequence]);
+      }
+    }
+    for (const key of this.asked.keys()) if (!wanted.has(key)) this.asked.delete(key);
+    if (due.length && this.ws?.readyState === 1) this.ws.send(JSON.stringify({ repair: due.slice(0, 256) }));
+  }
+
   async #batch(data, arrival) {
     for (const raw of splitBatch(data)) {
       let p;
@@ -136,5 +155,6 @@ export class RelayClient {
         else this.avatars.get(p.stream)?.take(p, arrival);
       }
     }
+    this.#repair(now());
   }
 }

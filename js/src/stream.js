@@ -3,7 +3,7 @@
 // codec restarts its layers, and frames counted from the packets' first frames.
 import { DecodeError, OutOfStepError } from './errors.js';
 import { KinwaveLiveDecoder } from './kinwave-live.js';
-import { DATA, END, KEYFRAME, codecPayload } from './packets.js';
+import { DATA, END, KEYFRAME, RESTART, codecPayload } from './packets.js';
 
 const DECODERS = { 'kinwave-live': KinwaveLiveDecoder };
 
@@ -73,5 +73,80 @@ export class StreamDecoder {
       if (this.decoder && !this.decoder.lost()) this.decoder = null;
       throw e;
     }
+  }
+}
+
+export const MAX_MISSING = 64; // stream/live.py's: a gap waited for, and packets held behind it
+export const MAX_HELD = 256;
+
+// A StreamDecoder that, in step, waits for the packets of a gap in the sequence (the relay resends
+// them on request, `wanted()`): it holds the packets after the gap for up to `holdS` of frames
+// and decodes them in order once it is filled (stream/live.LiveDecoder's hold_s). `push(p)`
+// returns the packets decoded now, each as {packet, frames} (frames null: not decodable).
+export class HoldingDecoder {
+  constructor(info, holdS) {
+    this.stream = new StreamDecoder(info);
+    this.holdFrames = Math.ceil(holdS * info.fps);
+    this.missing = new Set();
+    this.held = new Map(); // sequence -> packet
+    this.nextFrame = null; // the frame after the last one decoded
+    this.repaired = 0;
+  }
+
+  #ahead(sequence) {
+    return (sequence - (this.stream.expected ?? 0)) >>> 0;
+  }
+
+  // The sequence numbers waited for, oldest first.
+  wanted() {
+    return [...this.missing].sort((a, b) => this.#ahead(a) - this.#ahead(b));
+  }
+
+  push(p) {
+    const { stream } = this;
+    if (!this.holdFrames || p.kind !== DATA || stream.expected === null) return this.#decode([p]);
+    const ahead = this.#ahead(p.sequence);
+    if (ahead >= 2 ** 31 && !this.missing.has(p.sequence)) return this.#decode([p]);
+    if (!this.missing.size) {
+      if (ahead === 0 || ahead > MAX_MISSING || !stream.inStep) return this.#decode([p]);
+      for (let k = 0; k < ahead; k++) this.missing.add((stream.expected + k) >>> 0);
+    } else if (p.flags & (KEYFRAME | RESTART)) {
+      this.held.set(p.sequence, p);
+      return this.#release();
+    } else if (this.missing.delete(p.sequence)) {
+      this.repaired += 1;
+    } else {
+      const last = [...this.held.keys()].reduce((a, b) => (this.#ahead(b) > this.#ahead(a) ? b : a));
+      const beyond = this.#ahead(p.sequence) - this.#ahead(last);
+      for (let k = 1; k < Math.min(beyond, MAX_MISSING + 1); k++) this.missing.add((last + k) >>> 0);
+    }
+    this.held.set(p.sequence, p);
+    if (!this.missing.size) return this.#release();
+    const newest = [...this.held.values()].reduce((a, b) => (this.#ahead(b.sequence) > this.#ahead(a.sequence) ? b : a));
+    const late = newest.firstFrame + newest.frames - (this.nextFrame ?? 0) > this.holdFrames;
+    if (late || this.held.size > MAX_HELD || this.missing.size > MAX_MISSING) return this.#release();
+    return [];
+  }
+
+  #release() {
+    const held = [...this.held.values()].sort((a, b) => this.#ahead(a.sequence) - this.#ahead(b.sequence));
+    this.held.clear();
+    this.missing.clear();
+    return this.#decode(held);
+  }
+
+  // Each packet through the StreamDecoder in turn; a damaged one is given as frames null with
+  // its error, and the rest still decode.
+  #decode(packets) {
+    return packets.map((packet) => {
+      try {
+        const frames = this.stream.push(packet);
+        if (frames) this.nextFrame = packet.firstFrame + packet.frames;
+        return { packet, frames };
+      } catch (error) {
+        if (!(error instanceof DecodeError)) throw error;
+        return { packet, frames: null, error };
+      }
+    });
   }
 }

@@ -6,7 +6,7 @@ import assert from 'node:assert/strict';
 import { readFile } from 'node:fs/promises';
 import { deflateSync, gunzipSync, inflateSync } from 'node:zlib';
 import {
-  DecodeError, Reader, StreamDecoder, forwardKinematics, parseStreamHeader, splitBatch,
+  DecodeError, HoldingDecoder, Reader, StreamDecoder, forwardKinematics, parseStreamHeader, splitBatch,
 } from '../../js/src/index.js';
 import { seeded } from './seeded.mjs';
 
@@ -71,6 +71,24 @@ for (const name of CASES) {
     }
   });
 }
+
+test('a holding decoder decodes reordered packets as the stream in order, and gives a lost one up', async () => {
+  const { stream } = await fixture('walk-layers');
+  const { frames } = await decodeAll(stream);
+  const reader = new Reader();
+  const packets = splitBatch(stream).map((raw) => reader.read(raw));
+  const info = await parseStreamHeader(packets[0].payload);
+  const order = packets.slice(1);
+  for (let k = 3; k + 1 < order.length; k += 5) [order[k], order[k + 1]] = [order[k + 1], order[k]];
+  const holding = new HoldingDecoder(info, 0.1);
+  const out = order.flatMap((p) => holding.push(p)).filter((x) => x.frames?.length).map((x) => x.frames);
+  assert.deepEqual(out, frames.filter((f) => f.length));
+  assert.ok(holding.repaired > 0 && holding.stream.lost === 0);
+  const lossy = new HoldingDecoder(info, 0.1); // packet 5 never comes: held, then given up
+  const lens = packets.slice(1).filter((_, k) => k !== 4).map((p) => lossy.push(p).length);
+  assert.deepEqual(lens.slice(3, 6), [1, 0, 2]); // 12 frames held: the next packet is past them
+  assert.ok(lossy.stream.lost === 1 && lossy.wanted().length === 0);
+});
 
 test('damaged streams end in DecodeError, never another error or a hang', async () => {
   const { stream } = await fixture('walk-layers');

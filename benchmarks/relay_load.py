@@ -154,15 +154,16 @@ def publisher(url: str, token: str, streams: list[int], seconds: float, template
 class Follower:
     """What a receiver does with flags only: after a loss it is out of step until a keyframe or
     a restart point (where a self-refreshing codec stream's base layer restarts); with
-    ``hold_s`` it first waits that long (in stream frames) for the missing packets to be resent,
-    as :class:`~mocodec.stream.live.LiveDecoder` does, and is in step again once they are in."""
+    ``hold_s`` it first waits that long (in stream frames, from its oldest gap) for the missing
+    packets to be resent, as :class:`~mocodec.stream.live.LiveDecoder` does, and is in step
+    again once they are all in."""
 
     def __init__(self, fps: float, hold_s: float = 0.0):
         self.fps, self.hold_frames = fps, hold_s * fps
         self.expected: dict[int, int] = {}
         self.last_end: dict[int, int] = {}  # stream -> the frame after the last one received
         self.lost_at: dict[int, int] = {}  # stream -> first frame lost
-        self.gaps: dict[int, set[int]] = {}  # stream -> the sequence numbers waited for
+        self.gaps: dict[int, dict[int, int]] = {}  # stream -> the sequence numbers waited for -> their first frames
         self.resync_s: list[float] = []
 
     def see(self, stream: int, seq: int, resumes: bool, first: int, frames: int) -> None:
@@ -170,22 +171,24 @@ class Follower:
         if exp is not None and seq < exp:  # resent
             gap = self.gaps.get(stream)
             if gap is not None and seq in gap:
-                gap.discard(seq)
+                del gap[seq]
                 if not gap:
                     del self.gaps[stream]
                     self._back(stream, self.last_end[stream])
             return
         if exp is not None and seq > exp:
+            end = self.last_end.get(stream, first)
+            missing = {m: end + (m - exp) * frames for m in range(exp, seq)}
             if stream not in self.lost_at:
-                self.lost_at[stream] = self.last_end.get(stream, first)
+                self.lost_at[stream] = end
                 if self.hold_frames:
-                    self.gaps[stream] = set(range(exp, seq))
+                    self.gaps[stream] = missing
             elif stream in self.gaps:
-                self.gaps[stream] |= set(range(exp, seq))
+                self.gaps[stream].update(missing)
         self.expected[stream] = seq + 1
         self.last_end[stream] = first + frames
         if stream in self.gaps and not resumes:
-            if first + frames - self.lost_at[stream] > self.hold_frames:  # given up
+            if first + frames - min(self.gaps[stream].values()) > self.hold_frames:  # the oldest gap given up
                 del self.gaps[stream]
             return
         self.gaps.pop(stream, None)  # a packet to start from: the gap does not matter now

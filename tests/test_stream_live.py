@@ -131,6 +131,21 @@ def test_a_receiver_that_holds_decodes_a_late_packet_in_step(walk_bvh):
     assert (dec.stats.lost, dec.stats.repaired, dec.stats.concealed_frames) == (0, 1, 0)
 
 
+def test_a_receiver_that_holds_goes_on_to_the_next_gap_as_each_is_filled(walk_bvh):
+    packets = stream_clip(walk_bvh, get_codec("kinwave-live"), keyframe_s=60.0)
+    clean = receive_clip(packets).channels
+    dec = LiveDecoder(StreamInfo.from_payload(packets[0].payload), hold_s=0.25)  # 30 frames, five packets
+    out = [dec.push(p) for p in packets[1:10]]
+    assert [len(dec.push(p)) for p in (packets[11], packets[13])] == [0, 0]
+    assert dec.wanted() == [packets[10].sequence, packets[12].sequence]
+    out.append(dec.push(packets[10]))  # the first gap filled: out up to the second
+    assert len(out[-1]) == packets[10].frames + packets[11].frames and dec.wanted() == [packets[12].sequence]
+    out.append(dec.push(packets[12]))
+    out += [dec.push(p) for p in packets[14:]]
+    np.testing.assert_array_equal(np.vstack(out), clean)
+    assert (dec.stats.lost, dec.stats.repaired) == (0, 2)
+
+
 def test_a_receiver_that_holds_gives_a_gap_up_after_hold_s(walk_bvh):
     packets = stream_clip(walk_bvh, get_codec("kinwave-live"), keyframe_s=0.5)
     late = 10

@@ -81,7 +81,7 @@ export const MAX_HELD = 256;
 
 // A StreamDecoder that, in step, waits for the packets of a gap in the sequence (the relay resends
 // them on request, `wanted()`): it holds the packets after the gap for up to `holdS` of frames
-// and decodes them in order once it is filled (stream/live.LiveDecoder's hold_s). `push(p)`
+// and decodes them in order up to the next gap as each is filled (stream/live.LiveDecoder's hold_s). `push(p)`
 // returns the packets decoded now, each as {packet, frames} (frames null: not decodable).
 export class HoldingDecoder {
   constructor(info, holdS) {
@@ -121,11 +121,17 @@ export class HoldingDecoder {
       for (let k = 1; k < Math.min(beyond, MAX_MISSING + 1); k++) this.missing.add((last + k) >>> 0);
     }
     this.held.set(p.sequence, p);
-    if (!this.missing.size) return this.#release();
+    const out = [];
+    while (this.held.has(stream.expected)) { // the packets up to the next gap, once the first is filled
+      const next = this.held.get(stream.expected);
+      this.held.delete(stream.expected);
+      out.push(...this.#decode([next]));
+    }
+    if (!this.held.size) return out;
     const newest = [...this.held.values()].reduce((a, b) => (this.#ahead(b.sequence) > this.#ahead(a.sequence) ? b : a));
     const late = newest.firstFrame + newest.frames - (this.nextFrame ?? 0) > this.holdFrames;
-    if (late || this.held.size > MAX_HELD || this.missing.size > MAX_MISSING) return this.#release();
-    return [];
+    if (late || this.held.size > MAX_HELD || this.missing.size > MAX_MISSING) out.push(...this.#release());
+    return out;
   }
 
   #release() {

@@ -242,8 +242,8 @@ class LiveDecoder:
     With ``hold_s`` > 0 a decoder in step that sees a gap in the sequence first waits for the
     missing packets (:meth:`wanted`: a relay resends them on request, docs/streaming.md): it
     holds the packets after the gap, up to ``hold_s`` of frames past the last frame out, and
-    decodes them in order once the gap is filled, so nothing is concealed and the decoder
-    stays in step. Past ``hold_s``, or at a keyframe or restart point after the gap, it gives the
+    decodes them in order up to the next gap as each gap is filled, so nothing is concealed
+    and the decoder stays in step. Past ``hold_s``, or at a keyframe or restart point after the gap, it gives the
     gap up and goes on as without it."""
 
     def __init__(self, info: StreamInfo, conceal: str = "hold", local_files: dict | None = None, hold_s: float = 0.0):
@@ -302,13 +302,15 @@ class LiveDecoder:
             if beyond > 1:  # another gap behind the first
                 self.missing |= {(last + k) & 0xFFFFFFFF for k in range(1, min(beyond, MAX_MISSING + 1))}
         self.held[packet.sequence] = packet
-        if not self.missing:
-            return self._release()
-        newest = max(self.held.values(), key=lambda p: self._ahead(p.sequence))
-        late = newest.first_frame + newest.frames - (self.next_frame or 0) > self.hold_frames
-        if late or len(self.held) > MAX_HELD or len(self.missing) > MAX_MISSING:
-            return self._release()
-        return np.zeros((0, self.info.skeleton.num_channels))
+        out = [np.zeros((0, self.info.skeleton.num_channels))]
+        while self.expected in self.held:  # the packets up to the next gap, once the first is filled
+            out.append(self._push_safely(self.held.pop(self.expected)))
+        if self.held:
+            newest = max(self.held.values(), key=lambda p: self._ahead(p.sequence))
+            late = newest.first_frame + newest.frames - (self.next_frame or 0) > self.hold_frames
+            if late or len(self.held) > MAX_HELD or len(self.missing) > MAX_MISSING:
+                out.append(self._release())
+        return np.vstack(out)
 
     def _release(self) -> np.ndarray:
         """Every held packet in sequence order (the gaps left, if any, given up)."""

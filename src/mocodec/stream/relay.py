@@ -571,9 +571,10 @@ class Relay:
 
     async def _send_loop(self, viewer: Viewer) -> None:
         while True:
-            batch = await viewer.queue.get()
+            message = await viewer.queue.get()
             try:
-                await viewer.ws.send_bytes(batch)
+                for batch in message if isinstance(message, tuple) else (message,):
+                    await viewer.ws.send_bytes(batch)
             except (ConnectionError, RuntimeError):
                 return
 
@@ -600,6 +601,7 @@ class Relay:
         viewers = [v for v in room.viewers if not v.dropped]
         shares: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         scalable = any(f.scalable for f in fresh)
+        batch: bytes | tuple[bytes, ...]
         for viewer in viewers:
             pending, viewer.pending = viewer.pending, []
             items = pending + fresh
@@ -611,24 +613,29 @@ class Relay:
                     shares = self._shares(crowd, [v for v in viewers if v.budget > 0])
                 cut = self._cut(room, crowd, viewer, *shares[id(viewer)], items, len(items) - len(fresh), cut_cache)
                 batch = pack_batch(*cut)
-            elif len(items) == len(fresh):
-                shared = shared or pack_batch([f.data for f in fresh])
-                batch = shared
-            else:  # what it asked for, or joined late, before the tick's packets
-                if joined is None:
-                    joined = (
-                        np.fromiter((len(f.data) for f in fresh), dtype=np.int64, count=len(fresh)),
-                        b"".join(f.data for f in fresh),
-                    )
-                batch = pack_batch_before([f.data for f in pending], joined)
+            else:  # resent packets go in a message of their own, so that the tick's batch is shared
+                own = [f for f in pending if not f.resent]
+                if not own:
+                    shared = shared or pack_batch([f.data for f in fresh])
+                    batch = shared
+                else:  # joined late: its streams' last packets before the tick's
+                    if joined is None:
+                        joined = (
+                            np.fromiter((len(f.data) for f in fresh), dtype=np.int64, count=len(fresh)),
+                            b"".join(f.data for f in fresh),
+                        )
+                    batch = pack_batch_before([f.data for f in own], joined)
+                if len(own) < len(pending):
+                    resent = pack_batch([f.data for f in pending if f.resent])
+                    batch = (resent, batch) if fresh or own else (resent,)
             self._offer(viewer, batch, items)
         for key in [k for k, state in room.streams.items() if state.ended]:
             del room.streams[key]  # over: late joiners will not see it
             for viewer in room.viewers:
                 viewer.layers.pop(key, None)
 
-    def _offer(self, viewer: Viewer, batch: bytes, items: list[Forward]) -> None:
-        """Queue a viewer's batch, or miss the tick if the last is still on its way: it keeps
+    def _offer(self, viewer: Viewer, batch: bytes | tuple[bytes, ...], items: list[Forward]) -> None:
+        """Queue a viewer's batch (or batches), or miss the tick if the last is still on its way: it keeps
         the stream headers for the next tick and drops the rest (its receivers resynchronise at
         the next keyframe)."""
         try:

@@ -98,7 +98,8 @@ def test_late_joiner_gets_the_header_and_the_last_keyframe(walk_bvh):
     np.testing.assert_array_equal(got.channels, clean[start:])
 
 
-def test_a_viewer_that_lost_a_packet_gets_it_again_and_stays_exact(walk_bvh):
+@pytest.mark.parametrize("budget", [0, 1e6])  # whole, or cut to the layers that fit (all)
+def test_a_viewer_that_lost_a_packet_gets_it_again_and_stays_exact(walk_bvh, budget):
     from mocodec.stream.client import Watcher
 
     codec = get_codec("kinwave-live", layers=2)
@@ -107,6 +108,7 @@ def test_a_viewer_that_lost_a_packet_gets_it_again_and_stays_exact(walk_bvh):
         watcher = Watcher(hold_s=0.5)  # beyond the relay's round trip on a busy test machine
         async with serving() as url:
             async with connect(url, "lobby", token(), "subscribe") as ws:
+                await ws.send_str(json.dumps({"budget": budget, "camera": [0, 1.6, 3]}))
                 sender = asyncio.create_task(publish_clip(url, "lobby", token(), walk_bvh, codec, speed=2.0))
                 seen, lost, asked, link = 0, None, [], Reader()
                 while not (watcher.decoders and watcher.decoders[0].ended):
@@ -145,7 +147,7 @@ def test_repair_requests_are_checked_and_limited(walk_bvh):
     bucket = Bucket(rate=1.0, burst_s=3.0)  # three packets
     relay._resend(viewer, room, [[0, kept[1]], [0, kept[0] - 1], [7, kept[1]], [0, kept[2]], [0, kept[3]]], bucket)
     relay._resend(viewer, room, [[0, kept[4]]], bucket)  # the bucket is empty: ignored
-    assert [f.packet.sequence for f in viewer.pending] == [kept[1], kept[2]] and all(f.resent for f in viewer.pending)
+    assert [f.packet.sequence for f in viewer.resends] == [kept[1], kept[2]] and not viewer.pending
     assert relay.counters["repairs"] == 2 and relay.counters["repairs_missed"] == 4
     for bad in ([[0, -1]], [[0]], [[0, 1.5]], [["0", 1]], [[0, 1]] * 257, {"0": 1}):
         with pytest.raises(Closing, match="repair"):

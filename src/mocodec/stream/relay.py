@@ -267,6 +267,7 @@ class Viewer:
     camera: tuple[float, float, float] = (0.0, 0.0, 0.0)
     layers: dict[int, int] = field(default_factory=dict)  # layered stream -> the layers it gets now
     pending: list[Forward] = field(default_factory=list)
+    resends: list[Forward] = field(default_factory=list)  # packets it asked for again
     queue: asyncio.Queue = field(default_factory=lambda: asyncio.Queue(maxsize=1))
     missed_since: float | None = None
     missed: int = 0
@@ -566,7 +567,7 @@ class Relay:
             if at >= len(state.recent) or state.recent[at].packet.sequence != pair[1]:
                 self.counters["repairs_missed"] += 1
                 continue
-            viewer.pending.append(replace(state.recent[at], resent=True))
+            viewer.resends.append(state.recent[at])
             self.counters["repairs"] += 1
 
     async def _send_loop(self, viewer: Viewer) -> None:
@@ -604,18 +605,20 @@ class Relay:
         batch: bytes | tuple[bytes, ...]
         for viewer in viewers:
             pending, viewer.pending = viewer.pending, []
+            resends, viewer.resends = viewer.resends, []
             items = pending + fresh
-            if not items:
+            if not (items or resends):
                 continue
-            if viewer.budget > 0 and (scalable or any(f.scalable for f in pending)):
+            if viewer.budget > 0 and (scalable or any(f.scalable for f in pending + resends)):
+                pending += [replace(f, resent=True) for f in resends]  # cut to the layers it gets now
+                items = pending + fresh
                 if crowd is None:
                     crowd = self._crowd(room, fresh)
                     shares = self._shares(crowd, [v for v in viewers if v.budget > 0])
                 cut = self._cut(room, crowd, viewer, *shares[id(viewer)], items, len(items) - len(fresh), cut_cache)
                 batch = pack_batch(*cut)
             else:  # resent packets go in a message of their own, so that the tick's batch is shared
-                own = [f for f in pending if not f.resent]
-                if not own:
+                if not pending:
                     shared = shared or pack_batch([f.data for f in fresh])
                     batch = shared
                 else:  # joined late: its streams' last packets before the tick's
@@ -624,10 +627,10 @@ class Relay:
                             np.fromiter((len(f.data) for f in fresh), dtype=np.int64, count=len(fresh)),
                             b"".join(f.data for f in fresh),
                         )
-                    batch = pack_batch_before([f.data for f in own], joined)
-                if len(own) < len(pending):
-                    resent = pack_batch([f.data for f in pending if f.resent])
-                    batch = (resent, batch) if fresh or own else (resent,)
+                    batch = pack_batch_before([f.data for f in pending], joined)
+                if resends:
+                    resent = pack_batch([f.data for f in resends])
+                    batch = (resent, batch) if items else (resent,)
             self._offer(viewer, batch, items)
         for key in [k for k, state in room.streams.items() if state.ended]:
             del room.streams[key]  # over: late joiners will not see it

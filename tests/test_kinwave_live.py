@@ -38,6 +38,15 @@ def test_the_bound_holds_on_every_decoded_frame(clip, bound, measure, request):
     assert np.median(errors) > 0.3 * bound  # the budget is used, not wasted
 
 
+@pytest.mark.parametrize("bound", [1.0, 16.0])
+def test_the_bound_holds_when_an_avatar_moves_after_standing_still(walk_bvh, bound):
+    still = np.repeat(walk_bvh.channels[:1], 800, axis=0)  # 6.7 s: the scale drifts far coarser
+    motion = walk_bvh.with_channels(np.vstack((still, walk_bvh.channels)))
+    codec = get_codec("kinwave-live", max_error_cm=bound)
+    decoded = codec.decode(codec.encode(motion), motion.skeleton, motion.num_frames, motion.fps)
+    assert _frame_errors(motion, decoded.channels).max() <= bound + 1e-9
+
+
 def test_a_stream_pushed_in_any_pieces_gives_the_same_packets_and_frames(walk_bvh):
     codec = get_codec("kinwave-live")
     whole = codec.encoder(walk_bvh.skeleton, walk_bvh.fps)

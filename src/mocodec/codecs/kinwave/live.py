@@ -734,14 +734,16 @@ class _LiveEncoder(StreamEncoder):
         """(integers, coded frames, cells, offset, worst error) of layer ``k`` of the packet at
         ``stride``, from the layer's current offset and finer until its bound holds, or None."""
         offset = self.offsets[k]
-        for _ in range(retries):
+        for tried in range(retries if stride > 1 else MAX_OFFSET):
             ints, coded, coded_cells, frames = self._code(self.layers[k], values, goal, retarget, offset, stride, cells)
             worst = self._error(goal, frames)
             if worst <= self.bounds[k]:
                 return ints, coded, coded_cells, offset, worst
             if offset <= -MAX_OFFSET:
                 return None
-            offset = max(offset - FINER, -MAX_OFFSET)
+            # 1/2 octave finer a try; past ``retries`` (a scale that quiet motion let drift far
+            # coarser), twice as far each time
+            offset = max(offset - FINER * 2 ** max(tried + 1 - retries, 0), -MAX_OFFSET)
         return None
 
     def _bytes(self, layer: _Layer, ints, frames, offset, stride, restart: int, trial: bool) -> bytes:

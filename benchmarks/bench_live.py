@@ -2,7 +2,7 @@
 deadreckoning, per source (CMU BVH and ASF/AMC at 120 fps, Bandai Namco at 30 fps).
 
     python benchmarks/bench_live.py [--clips N] [--bound 1.0] [--keyframe-s 1] [--refresh-s 0] [--loss 0.1]
-                                    [--layers 3] [--jobs 2]
+                                    [--layers 3] [--layer-ratio 2] [--round-trip-s 0.05] [--hold-s 0.2] [--jobs 2]
 
 Per clip: kbit/s of one codec stream's packets alone, and of the live stream as a sender sends
 it (stream/live.py: keyframes every second, each restarting the codec stream, and the compact
@@ -15,7 +15,7 @@ until the receiver decodes the stream exactly again (the next keyframe it gets),
 for a receiver that asks a relay to resend what it lost (``--round-trip-s``, ``--hold-s``). With
 ``--refresh-s`` the codec stream refreshes itself instead (kinwave-live's ``refresh_s``: each
 layer restarts on its own, spread over that time) and keyframes come only every minute. Then the
-layered stream (``--layers``, each layer twice the bound of the next, the top one at the bound):
+layered stream (``--layers``, each layer ``--layer-ratio`` times the bound of the next, the top one at the bound):
 per layer, kbit/s of the live stream a relay sends a viewer that gets that layer and those below
 it (framing included), and the max and mean joint error of its decoding. Prints the medians per
 source, and the 99th percentile of the resync times.
@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 from concurrent.futures import ProcessPoolExecutor
+from functools import partial
 
 import numpy as np
 
@@ -119,10 +120,12 @@ def repaired_resync_times(
     return times + [end - f / motion.fps for f in waiting]
 
 
-def layer_rows(motion, bound: float, layers: int, keyframe_s: float, refresh_s: float, loss: float, seed: int) -> dict:
+def layer_rows(
+    motion, bound: float, layers: int, ratio: float, keyframe_s: float, refresh_s: float, loss: float, seed: int
+) -> dict:
     """Per layer kept (1..layers): the live stream's kbit/s cut to it, the max and mean
     joint error of the clip's packets cut to it, and the resync times under loss."""
-    codec = get_codec("kinwave-live", max_error_cm=bound, layers=layers, refresh_s=refresh_s)
+    codec = get_codec("kinwave-live", max_error_cm=bound, layers=layers, layer_ratio=ratio, refresh_s=refresh_s)
     enc = codec.encoder(motion.skeleton, motion.fps)
     packets = enc.push(motion.channels) + enc.flush()
     sent = stream_clip(motion, codec, keyframe_s=keyframe_s)
@@ -156,6 +159,7 @@ def measure(
     keyframe_s: float = 1.0,
     loss: float = 0.1,
     layers: int = 3,
+    layer_ratio: float = 2.0,
     refresh_s: float = 0.0,
     round_trip_s: float = 0.05,
     hold_s: float = REPAIR_HOLD_S,
@@ -190,7 +194,7 @@ def measure(
         "dr_max_cm": dr.max_error_cm,
         "resync_s": resync_times(motion, sent, loss, seed),
         "repaired_resync_s": repaired_resync_times(motion, sent, loss, seed, round_trip_s, hold_s),
-        **(layer_rows(motion, bound, layers, keyframe_s, refresh_s, loss, seed) if layers > 1 else {}),
+        **(layer_rows(motion, bound, layers, layer_ratio, keyframe_s, refresh_s, loss, seed) if layers > 1 else {}),
     }
 
 
@@ -214,25 +218,24 @@ def main() -> None:
         default=REPAIR_HOLD_S,
         help=f"how long the receiver waits for a resent packet (default {REPAIR_HOLD_S:g})",
     )
+    ap.add_argument("--layer-ratio", type=float, default=2.0, help="each layer's bound over the next's (default 2)")
     ap.add_argument("--jobs", type=int, default=2)
     args = ap.parse_args()
     with ProcessPoolExecutor(args.jobs) as pool:
         for name, paths in shared_sources().items():
             paths = paths[:: max(1, len(paths) // args.clips)][: args.clips] if args.clips else paths
-            n = len(paths)
-            rows = list(
-                pool.map(
-                    measure,
-                    map(str, paths),
-                    [args.bound] * n,
-                    [args.keyframe_s] * n,
-                    [args.loss] * n,
-                    [args.layers] * n,
-                    [args.refresh_s] * n,
-                    [args.round_trip_s] * n,
-                    [args.hold_s] * n,
-                )
+            one = partial(
+                measure,
+                bound=args.bound,
+                keyframe_s=args.keyframe_s,
+                loss=args.loss,
+                layers=args.layers,
+                layer_ratio=args.layer_ratio,
+                refresh_s=args.refresh_s,
+                round_trip_s=args.round_trip_s,
+                hold_s=args.hold_s,
             )
+            rows = list(pool.map(one, map(str, paths)))
             resync = np.concatenate([r["resync_s"] for r in rows])
             repaired = np.concatenate([r["repaired_resync_s"] for r in rows])
 
@@ -260,11 +263,10 @@ def main() -> None:
                 flush=True,
             )
             if args.layers > 1:
-                print_layers(name, rows, args.bound, args.layers)
+                print_layers(name, rows, live.layer_bounds(args.bound, args.layers, args.layer_ratio))
 
 
-def print_layers(name: str, rows: list[dict], bound: float, layers: int) -> None:
-    bounds = [bound * 2.0 ** (layers - 1 - k) for k in range(layers)]
+def print_layers(name: str, rows: list[dict], bounds: list[float]) -> None:
     kbps = np.median([r["layer_kbps"] for r in rows], axis=0)
     base_share = np.median([r["layer_kbps"][0] / r["layer_kbps"][-1] for r in rows])
     over_single = np.median([r["layer_kbps"][-1] / r["framed_kbps"] for r in rows])

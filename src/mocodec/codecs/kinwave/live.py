@@ -24,7 +24,7 @@ they are in, with the pose representation of offline kinwave:
    integer. The contexts carry over from packet to packet (a codec stream's packets depend on
    each other; the live stream restarts the codec at each keyframe, docs/streaming.md).
 5. **Layers** (knob ``layers``): the stream may carry up to four layers, base first, each at
-   twice the bound of the next (``layers=3`` at 1 cm: 4, 2 and 1 cm). Each layer is coded as
+   ``layer_ratio`` (2) times the bound of the next (``layers=3`` at 1 cm: 4, 2 and 1 cm). Each layer is coded as
    above with its own history, steps and contexts, and closed-loop on the layers below: its
    prediction is clamped to the interval the nearest layer below that coded the frame puts the
    target in (the quantiser cell of that layer's integer), for the channels whose decoded values
@@ -359,9 +359,10 @@ class _Cells:
         self.lo[stride - 1 :: stride], self.hi[stride - 1 :: stride] = lo, hi
 
 
-def layer_bounds(max_error_cm: float, layers: int) -> list[float]:
-    """The bounds of a stream's layers, base first: each twice the next, the last ``max_error_cm``."""
-    return [max_error_cm * 2.0 ** (layers - 1 - k) for k in range(layers)]
+def layer_bounds(max_error_cm: float, layers: int, ratio: float = 2.0) -> list[float]:
+    """The bounds of a stream's layers, base first: each ``ratio`` times the next, the last
+    ``max_error_cm``."""
+    return [max_error_cm * ratio ** (layers - 1 - k) for k in range(layers)]
 
 
 def _spans(packet: bytes, layers: int) -> list[tuple[int, int]]:
@@ -445,9 +446,19 @@ class KinwaveLiveCodec(Codec):
             "layers",
             int,
             1,
-            "layers of the stream, each at twice the bound of the next (3: 4, 2 and 1 cm at max_error_cm 1)",
+            "layers of the stream, each at layer_ratio times the bound of the next (3: 4, 2 and 1 cm at "
+            "max_error_cm 1)",
             1,
             MAX_LAYERS,
+        ),
+        Knob(
+            "layer_ratio",
+            float,
+            2.0,
+            "each layer's bound over the next one's: a coarser base is a smaller share of the stream "
+            "(2 layers at 16: 16 and 1 cm)",
+            1.0,
+            1000.0,
         ),
         Knob(
             "refresh_s",
@@ -472,7 +483,7 @@ class KinwaveLiveCodec(Codec):
     @property
     def layer_bounds(self) -> list[float]:
         """Each layer's bound in cm, base first (the :class:`~mocodec.codecs.base.Layered` protocol)."""
-        return layer_bounds(self.config["max_error_cm"], self.config["layers"])
+        return layer_bounds(self.config["max_error_cm"], self.config["layers"], self.config["layer_ratio"])
 
     def layer_ends(self, packet: bytes) -> list[int]:
         return section_ends(packet, self.config["layers"])

@@ -67,13 +67,13 @@ def wait_port(port: int, seconds: float = 20.0) -> None:
     raise SystemExit(f"nothing listens on port {port} after {seconds} s")
 
 
-def codec_of(codec_id: str, bits_per_second: float, layers: int, refresh_s: float):
+def codec_of(codec_id: str, bits_per_second: float, layers: int, refresh_s: float, layer_ratio: float = 2.0):
     from mocodec.codecs import get_codec
 
     if codec_id == "spiht":
         return get_codec("spiht", bits_per_second=bits_per_second)
     if codec_id == "kinwave-live":
-        return get_codec("kinwave-live", layers=layers, refresh_s=refresh_s)
+        return get_codec("kinwave-live", layers=layers, refresh_s=refresh_s, layer_ratio=layer_ratio)
     return get_codec(codec_id)
 
 
@@ -352,7 +352,7 @@ def drive(args, token: str, relays: list) -> tuple[list, list, list]:
     out = mp.Queue()
     total = args.seconds + 3.0
     ids = list(range(args.avatars))
-    codec = (args.codec, args.bits_per_second, args.layers, args.refresh_s)
+    codec = (args.codec, args.bits_per_second, args.layers, args.refresh_s, args.layer_ratio)
     template = templates(codec, args.keyframe_s)  # coded once, here: the publishers only restamp it
     workers = [
         mp.Process(
@@ -431,6 +431,7 @@ def main() -> None:
     )
     ap.add_argument("--layers", type=int, default=3, help="kinwave-live's layers (default 3: 4, 2 and 1 cm)")
     ap.add_argument("--refresh-s", type=float, default=0.0, help="kinwave-live's refresh_s (default 0)")
+    ap.add_argument("--layer-ratio", type=float, default=2.0, help="kinwave-live's layer_ratio (default 2)")
     ap.add_argument("--bits-per-second", type=float, default=16000, help="spiht's rate as sent (default 16000)")
     ap.add_argument(
         "--budget",
@@ -507,7 +508,7 @@ def main() -> None:
     resync = np.array([s for r in results if r[0] == "viewers" for s in r[3]])
     setup = (
         f"{args.avatars} {args.codec}"
-        + (f" ({args.layers} layers)" if args.codec == "kinwave-live" else "")
+        + (f" ({args.layers} layers, ratio {args.layer_ratio:g})" if args.codec == "kinwave-live" else "")
         + f" avatars at 30 Hz -> {args.viewers} viewers"
         + (f" of {args.budget:g} bit/s each" if args.budget else "")
         + (", two relays over NATS" if args.nats else "")

@@ -243,8 +243,8 @@ class LiveDecoder:
     missing packets (:meth:`wanted`: a relay resends them on request, docs/streaming.md): it
     holds the packets after the gap, up to ``hold_s`` of frames past the last frame out, and
     decodes them in order up to the next gap as each gap is filled, so nothing is concealed
-    and the decoder stays in step. Past ``hold_s``, or at a keyframe or restart point after the gap, it gives the
-    gap up and goes on as without it."""
+    and the decoder stays in step. Past ``hold_s``, or at a keyframe or restart point after
+    the gap, it gives the gap up and goes on as without it."""
 
     def __init__(self, info: StreamInfo, conceal: str = "hold", local_files: dict | None = None, hold_s: float = 0.0):
         if conceal not in ("hold", "extrapolate"):

@@ -7,9 +7,9 @@ anything else the static files of the viewer. The relay greets an accepted conne
 sender's message is a batch of packets (:mod:`mocodec.stream.packets`); a viewer's messages
 are JSON: settings, ``{"budget": bit/s, "camera": [x, y, z] (metres)}``, and requests to
 resend packets it lost, ``{"repair": [[stream, sequence], ...]}``: the relay resends those it
-still has (the packets since each stream's last keyframe or restart point) in the viewer's
-next batch, with the layers the viewer gets now, so a receiver that holds the packets after a
-gap decodes on in step instead of waiting for the next restart.
+still has (each stream's last REPAIR_PACKETS) at its next tick, in a message before the
+viewer's batch, with the layers the viewer gets now, so a receiver that holds the packets
+after a gap decodes on in step instead of waiting for the next restart.
 
 Every tick (TICK_HZ, 60 a second: a packet waits 17 ms at most) each viewer gets one batch with
 everything new in its room. A viewer that declared a budget gets the scalable streams cut to

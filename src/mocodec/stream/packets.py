@@ -407,20 +407,6 @@ def pack_batch(packets: list[bytes], lengths: np.ndarray | None = None) -> bytes
     return BATCH_MAGIC + varint.pack(len(packets)) + varint.pack_array(lengths) + b"".join(packets)
 
 
-def pack_batch_before(packets: list[bytes], joined: tuple[np.ndarray, bytes]) -> bytes:
-    """The batch of ``packets`` followed by packets already joined (``joined``: their lengths
-    and bytes), which many batches share."""
-    lengths = np.fromiter(map(len, packets), dtype=np.int64, count=len(packets))
-    count = len(packets) + len(joined[0])
-    return (
-        BATCH_MAGIC
-        + varint.pack(count)
-        + varint.pack_array(np.concatenate((lengths, joined[0])))
-        + b"".join(packets)
-        + joined[1]
-    )
-
-
 def is_batch(data: bytes | memoryview) -> bool:
     """Whether a message is a batch (of either format: a format 1 batch is refused as such)."""
     return bytes(data[:2]) in (BATCH_MAGIC, OLD_BATCH_MAGIC)

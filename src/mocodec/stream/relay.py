@@ -76,7 +76,6 @@ from mocodec.stream.packets import (
     StreamInfo,
     is_batch,
     pack_batch,
-    pack_batch_before,
     parse,
     split_batch,
     truncated,
@@ -596,7 +595,6 @@ class Relay:
     def _dispatch(self, room: Room) -> None:
         fresh, room.fresh = room.fresh, []
         shared: bytes | None = None  # the batch of every viewer with nothing of its own
-        joined: tuple[np.ndarray, bytes] | None = None  # the fresh packets' lengths and bytes, joined
         cut_cache: dict[tuple[int, float], bytes] = {}
         crowd = None  # the scalable streams and where they are, this tick
         viewers = [v for v in room.viewers if not v.dropped]
@@ -622,12 +620,7 @@ class Relay:
                     shared = shared or pack_batch([f.data for f in fresh])
                     batch = shared
                 else:  # joined late: its streams' last packets before the tick's
-                    if joined is None:
-                        joined = (
-                            np.fromiter((len(f.data) for f in fresh), dtype=np.int64, count=len(fresh)),
-                            b"".join(f.data for f in fresh),
-                        )
-                    batch = pack_batch_before([f.data for f in pending], joined)
+                    batch = pack_batch([f.data for f in items])
                 if resends:
                     resent = pack_batch([f.data for f in resends])
                     batch = (resent, batch) if items else (resent,)
@@ -638,9 +631,9 @@ class Relay:
                 viewer.layers.pop(key, None)
 
     def _offer(self, viewer: Viewer, batch: bytes | tuple[bytes, ...], items: list[Forward]) -> None:
-        """Queue a viewer's batch (or batches), or miss the tick if the last is still on its way: it keeps
-        the stream headers for the next tick and drops the rest (its receivers resynchronise at
-        the next keyframe)."""
+        """Queue a viewer's batch (or batches), or miss the tick if the last is still on its way:
+        it keeps the stream headers for the next tick and drops the rest (its receivers
+        resynchronise at the next keyframe)."""
         try:
             viewer.queue.put_nowait(batch)
             viewer.missed_since = None

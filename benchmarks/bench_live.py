@@ -85,8 +85,8 @@ def repaired_resync_times(
 ) -> list[float]:
     """As :func:`resync_times`, for a receiver that asks for what it lost (a relay's repair,
     docs/streaming.md): a packet arrives when its last frame is in (its first frame plus its
-    frames); a lost one is asked for when the next arrives, resent ``round_trip_s`` later and
-    every REPAIR_AGAIN_S after that while the resent one is lost too, until ``hold_s``; the
+    frames); a lost one is asked for when the next arrives and resent ``round_trip_s`` later,
+    and asked for again while the resent one is lost too (as the Watcher does), until ``hold_s``; the
     receiver holds the packets after a gap that long (:class:`LiveDecoder` ``hold_s``). Seconds
     from each lost packet's first frame until the receiver decodes the stream exactly again."""
     rng = np.random.default_rng(seed)
@@ -98,12 +98,12 @@ def repaired_resync_times(
         after = next((j for j in range(i + 1, len(data)) if not lost[j]), None)
         if after is None:
             continue
-        t = sent_at[after] + round_trip_s
-        while t - sent_at[after] <= hold_s:
+        ask, wait = 0.0, REPAIR_AGAIN_S
+        while ask <= hold_s:  # asked for again after REPAIR_AGAIN_S, then twice as long each time
             if rng.random() >= loss:
-                arrivals.append((t, i))
+                arrivals.append((sent_at[after] + ask + round_trip_s, i))
                 break
-            t += REPAIR_AGAIN_S
+            ask, wait = ask + wait, 2 * wait
     arrivals.sort()
     dec = LiveDecoder(StreamInfo.from_payload(packets[0].payload), hold_s=hold_s)
     pending = [i for i in range(len(data)) if lost[i]]

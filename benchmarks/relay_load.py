@@ -201,11 +201,12 @@ class Follower:
 
 class Repairs:
     """What a lossy viewer asks the relay to resend: every gap in a stream's sequence, asked
-    for again each REPAIR_AGAIN_S until it is filled or REPAIR_HOLD_S has passed."""
+    for again as :meth:`~mocodec.stream.client.Watcher.repairs` does (after REPAIR_AGAIN_S,
+    then twice as long each time) until it is filled or REPAIR_HOLD_S has passed."""
 
     def __init__(self):
         self.expected = np.full(1 << 12, -1, dtype=np.int64)
-        self.asked: dict[tuple[int, int], tuple[float, float]] = {}  # -> (first asked, last asked)
+        self.asked: dict[tuple[int, int], tuple[float, float, float]] = {}  # -> (first asked, last, wait)
 
     def resent(self, streams: np.ndarray, seqs: np.ndarray) -> np.ndarray:
         """Which packets of a batch are behind their stream's newest (resent ones)."""
@@ -221,14 +222,14 @@ class Repairs:
             exp = int(self.expected[s])
             if exp >= 0:
                 for m in range(exp, min(q, exp + 64)):
-                    self.asked.setdefault((s, m), (now, -np.inf))
+                    self.asked.setdefault((s, m), (now, -np.inf, REPAIR_AGAIN_S / 2))
             self.expected[s] = max(exp, q + 1)
         due = []
-        for key, (first, last) in list(self.asked.items()):
+        for key, (first, last, wait) in list(self.asked.items()):
             if now - first > REPAIR_HOLD_S:
                 del self.asked[key]
-            elif now - last >= REPAIR_AGAIN_S:
-                self.asked[key] = (first, now)
+            elif now - last >= wait:
+                self.asked[key] = (first, now, 2 * wait)
                 due.append(list(key))
         return due[:MAX_REPAIRS]
 

@@ -12,7 +12,7 @@ import { HoldingDecoder, hasDecoder } from './stream.js';
 
 const now = () => performance.now() / 1000;
 export const REPAIR_HOLD_S = 0.2; // stream/client.py's: how long a gap is waited for
-export const REPAIR_AGAIN_S = 0.05; // and how often a missing packet is asked for again
+export const REPAIR_AGAIN_S = 0.05; // a missing packet is asked for again after this, then twice as long
 
 export class Avatar {
   constructor(stream, info) {
@@ -68,7 +68,7 @@ export class RelayClient {
     this.avatars = new Map();
     this.others = new Map();
     this.reader = new Reader();
-    this.asked = new Map(); // "stream sequence" -> when last asked for (s)
+    this.asked = new Map(); // "stream sequence" -> [when last asked for (s), the wait before the next]
     this.queue = Promise.resolve();
     this.errors = 0;
     this.closed = null;
@@ -111,7 +111,8 @@ export class RelayClient {
     this.ws?.close();
   }
 
-  // Ask the relay for the packets the avatars' decoders wait for, each again every REPAIR_AGAIN_S.
+  // Ask the relay for the packets the avatars' decoders wait for, each again after REPAIR_AGAIN_S,
+  // then after twice as long each time (stream/client.Watcher.repairs).
   #repair(nowS) {
     const wanted = new Set();
     const due = [];
@@ -119,8 +120,9 @@ export class RelayClient {
       for (const sequence of avatar.decoder.wanted()) {
         const key = `${stream} ${sequence}`;
         wanted.add(key);
-        if (!(nowS - (this.asked.get(key) ?? -Infinity) >= REPAIR_AGAIN_S)) continue;
-        this.asked.set(key, nowS);
+        const [at, wait] = this.asked.get(key) ?? [-Infinity, REPAIR_AGAIN_S / 2];
+        if (!(nowS - at >= wait)) continue;
+        this.asked.set(key, [nowS, 2 * wait]);
         due.push([stream, sequence]);
       }
     }

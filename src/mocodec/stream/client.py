@@ -128,7 +128,7 @@ async def _drain(ws) -> None:
 
 
 REPAIR_HOLD_S = 0.2  # how long a watcher's decoder waits for a missing packet (four requests)
-REPAIR_AGAIN_S = 0.05  # a request not answered in this time is made again (the resent packet was lost too)
+REPAIR_AGAIN_S = 0.05  # a request not answered in this time is made again, then after twice as long
 
 
 class Watcher:
@@ -140,7 +140,7 @@ class Watcher:
 
     def __init__(self, conceal: str = "hold", keep: bool = True, hold_s: float = REPAIR_HOLD_S):
         self.conceal, self.keep, self.hold_s = conceal, keep, hold_s
-        self.asked: dict[tuple[int, int], float] = {}  # (stream, sequence) -> when last asked for
+        self.asked: dict[tuple[int, int], tuple[float, float]] = {}  # (stream, sequence) -> (when asked, wait)
         self.decoders: dict[int, LiveDecoder] = {}
         self.frames: dict[int, list[np.ndarray]] = {}
         self.counts: dict[int, int] = {}
@@ -184,13 +184,18 @@ class Watcher:
 
     def repairs(self, now_s: float | None = None) -> list[list[int]]:
         """The ``[stream, sequence]`` pairs to ask the relay for now (its ``repair`` request):
-        the packets the decoders wait for, not asked for in the last REPAIR_AGAIN_S."""
+        the packets the decoders wait for, each asked for again after REPAIR_AGAIN_S, then
+        after twice as long each time (a slow round trip is not answered with a flood)."""
         now = time.monotonic() if now_s is None else now_s
         wanted = {(stream, seq) for stream, dec in self.decoders.items() for seq in dec.wanted()}
-        self.asked = {key: at for key, at in self.asked.items() if key in wanted}
-        due = sorted(key for key in wanted if now - self.asked.get(key, -math.inf) >= REPAIR_AGAIN_S)
-        self.asked.update(dict.fromkeys(due, now))
-        return [list(key) for key in due]
+        self.asked = {key: asked for key, asked in self.asked.items() if key in wanted}
+        due = []
+        for key in sorted(wanted):
+            at, wait = self.asked.get(key, (-math.inf, REPAIR_AGAIN_S / 2))
+            if now - at >= wait:
+                self.asked[key] = (now, 2 * wait)
+                due.append(list(key))
+        return due
 
     def pose(self, stream: int, now_s: float | None = None) -> np.ndarray | None:
         """The channels of ``stream`` to show now: played out smoothly at the stream's frame rate

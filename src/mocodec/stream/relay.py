@@ -51,7 +51,7 @@ import resource
 import time
 from collections import Counter, deque
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from itertools import repeat
 from pathlib import Path
 from typing import Any
@@ -149,7 +149,6 @@ class Forward:
     cutter: Callable[[float], bytes] | None = None  # the codec's packet cutter, made at the first cut
     layer_ends: list[int] | None = None  # a layered stream's data packet: where each layer ends
     layer_starts: list[bool] | None = None  # ... and which restart in it (read when a viewer may gain one)
-    resent: bool = False  # a viewer asked for it again: its layers are the viewer's now, unchanged
 
     @property
     def scalable(self) -> bool:
@@ -607,23 +606,20 @@ class Relay:
             items = pending + fresh
             if not (items or resends):
                 continue
-            if viewer.budget > 0 and (scalable or any(f.scalable for f in pending + resends)):
-                pending += [replace(f, resent=True) for f in resends]  # cut to the layers it gets now
-                items = pending + fresh
+            if viewer.budget > 0 and (scalable or any(f.scalable for f in pending)):
                 if crowd is None:
                     crowd = self._crowd(room, fresh)
                     shares = self._shares(crowd, [v for v in viewers if v.budget > 0])
                 cut = self._cut(room, crowd, viewer, *shares[id(viewer)], items, len(items) - len(fresh), cut_cache)
                 batch = pack_batch(*cut)
-            else:  # resent packets go in a message of their own, so that the tick's batch is shared
-                if not pending:
-                    shared = shared or pack_batch([f.data for f in fresh])
-                    batch = shared
-                else:  # joined late: its streams' last packets before the tick's
-                    batch = pack_batch([f.data for f in items])
-                if resends:
-                    resent = pack_batch([f.data for f in resends])
-                    batch = (resent, batch) if items else (resent,)
+            elif not pending:
+                shared = shared or pack_batch([f.data for f in fresh])
+                batch = shared
+            else:  # joined late: its streams' last packets before the tick's
+                batch = pack_batch([f.data for f in items])
+            if resends:  # a message of their own, so that the tick's batch is still shared
+                resent = pack_batch([self._resent(viewer, f) for f in resends])
+                batch = (resent, batch) if items else (resent,)
             self._offer(viewer, batch, items)
         for key in [k for k, state in room.streams.items() if state.ended]:
             del room.streams[key]  # over: late joiners will not see it
@@ -722,10 +718,7 @@ class Relay:
             if r is None or (f.cuts is None and f.layer_ends is None):
                 out.append(f.data)
             elif f.layer_ends is not None:
-                if f.resent:
-                    keep = min(viewer.layers.get(f.packet.stream, 1), len(f.layer_ends))
-                else:
-                    keep = self._layers_for(viewer, f, room.streams[f.packet.stream], int(fits[r]))
+                keep = self._layers_for(viewer, f, room.streams[f.packet.stream], int(fits[r]))
                 key: tuple[int, float] = (id(f), -keep)
                 if key not in cache:
                     cache[key] = self._drop_layers(f, keep)
@@ -774,6 +767,14 @@ class Relay:
                 keep += 1
         viewer.layers[stream] = keep
         return keep
+
+    @staticmethod
+    def _resent(viewer: Viewer, f: Forward) -> bytes:
+        """A packet a viewer asked for again: a layered one with the layers the viewer gets now
+        (all, without a budget), anything else whole."""
+        if f.layer_ends is None or viewer.budget <= 0:
+            return f.data
+        return Relay._drop_layers(f, min(viewer.layers.get(f.packet.stream, 1), len(f.layer_ends)))
 
     @staticmethod
     def _drop_layers(f: Forward, keep: int) -> bytes:

@@ -146,6 +146,16 @@ def test_a_receiver_that_holds_goes_on_to_the_next_gap_as_each_is_filled(walk_bv
     assert (dec.stats.lost, dec.stats.repaired) == (0, 2)
 
 
+def test_a_resent_restart_point_fills_its_gap_like_any_packet(walk_bvh):
+    packets = stream_clip(walk_bvh, get_codec("kinwave-live", refresh_s=0.25), keyframe_s=60.0)
+    clean = receive_clip(packets).channels
+    late = next(k for k, p in enumerate(packets) if p.restart and not p.keyframe)
+    dec = LiveDecoder(StreamInfo.from_payload(packets[0].payload), hold_s=0.1)
+    order = packets[1:late] + [packets[late + 1], packets[late]] + packets[late + 2 :]
+    np.testing.assert_array_equal(np.vstack([dec.push(p) for p in order]), clean)
+    assert (dec.stats.lost, dec.stats.repaired) == (0, 1)
+
+
 def test_a_receiver_that_holds_gives_a_gap_up_after_hold_s(walk_bvh):
     packets = stream_clip(walk_bvh, get_codec("kinwave-live"), keyframe_s=0.5)
     late = 10
@@ -182,6 +192,20 @@ def test_a_receiver_that_holds_takes_reordered_and_hostile_sequences(walk_bvh):
         hostile = Packet(p.stream, seq, 0, p.codec, p.first_frame + 6 * k, p.frames, p.payload)
         out = dec.push(hostile)
         assert len(dec.held) <= MAX_HELD and len(dec.wanted()) <= 2 * 64 and np.isfinite(out).all()
+
+
+def test_a_watcher_asks_for_a_missing_packet_again_after_doubling_waits(walk_bvh):
+    from mocodec.stream.client import REPAIR_AGAIN_S, Watcher
+
+    packets = stream_clip(walk_bvh, get_codec("kinwave-live"), keyframe_s=60.0)
+    watcher = Watcher(hold_s=1.0)
+    watcher.take(pack_batch([p.to_bytes() for p in packets[:10] + packets[11:12]]))
+    want = [[0, packets[10].sequence]]
+    times = [k / 100 + 1e-6 * k for k in range(40)]  # a clock a little ahead of the 10 ms grid
+    asked = [t for t in times if watcher.repairs(now_s=t) == want]
+    assert np.allclose(asked, [0.0, REPAIR_AGAIN_S, 3 * REPAIR_AGAIN_S, 7 * REPAIR_AGAIN_S], atol=1e-3)
+    watcher.take(pack_batch([packets[10].to_bytes()]))
+    assert watcher.repairs(now_s=1.0) == [] and not watcher.asked
 
 
 def test_late_joiner_starts_at_a_keyframe(walk_bvh):

@@ -110,11 +110,11 @@ export class HoldingDecoder {
     if (!this.missing.size) {
       if (ahead === 0 || ahead > MAX_MISSING || !stream.inStep) return this.#decode([p]);
       for (let k = 0; k < ahead; k++) this.missing.add((stream.expected + k) >>> 0);
-    } else if (p.flags & (KEYFRAME | RESTART)) {
-      this.held.set(p.sequence, p);
-      return this.#release();
     } else if (this.missing.delete(p.sequence)) {
       this.repaired += 1;
+    } else if (p.flags & (KEYFRAME | RESTART)) { // decodable without the gap: wait no more
+      this.held.set(p.sequence, p);
+      return this.#release();
     } else {
       const last = [...this.held.keys()].reduce((a, b) => (this.#ahead(b) > this.#ahead(a) ? b : a));
       const beyond = this.#ahead(p.sequence) - this.#ahead(last);

@@ -6,7 +6,7 @@ import assert from 'node:assert/strict';
 import { readFile } from 'node:fs/promises';
 import { deflateSync, gunzipSync, inflateSync } from 'node:zlib';
 import {
-  DecodeError, HoldingDecoder, Reader, StreamDecoder, forwardKinematics, parseStreamHeader, splitBatch,
+  DecodeError, HoldingDecoder, Reader, RelayClient, StreamDecoder, forwardKinematics, parseStreamHeader, splitBatch,
 } from '../../js/src/index.js';
 import { seeded } from './seeded.mjs';
 
@@ -88,6 +88,41 @@ test('a holding decoder decodes reordered packets as the stream in order, and gi
   const lens = packets.slice(1).filter((_, k) => k !== 4).map((p) => lossy.push(p).length);
   assert.deepEqual(lens.slice(3, 6), [1, 0, 2]); // 12 frames held: the next packet is past them
   assert.ok(lossy.stream.lost === 1 && lossy.wanted().length === 0);
+});
+
+test('a relay client asks for a packet its link lost and decodes the stream whole', async () => {
+  const { stream } = await fixture('walk-layers');
+  const { frames } = await decodeAll(stream);
+  const raws = splitBatch(stream);
+  const reader = new Reader();
+  const { stream: id, sequence: lost } = raws.map((raw) => reader.read(raw))[11];
+  const batchOf = (raw) => { // "Mb", one packet, its length (a varint)
+    const length = [];
+    for (let n = raw.length; ; n >>>= 7) { if (n < 128) { length.push(n); break; } length.push((n & 127) | 128); }
+    return Uint8Array.from([0x4d, 0x62, 1, ...length, ...raw]);
+  };
+  class FakeSocket {
+    constructor() { this.sent = []; this.readyState = 1; FakeSocket.last = this; }
+    send(text) { this.sent.push(JSON.parse(text)); }
+    close() {}
+  }
+  const client = new RelayClient('ws://relay', { room: 'r', token: 't', WebSocketClass: FakeSocket });
+  const connected = client.connect();
+  const ws = FakeSocket.last;
+  ws.onmessage({ data: JSON.stringify({ welcome: 'r', role: 'subscribe' }) });
+  await connected;
+  const deliver = async (raw) => { ws.onmessage({ data: batchOf(raw).buffer }); await client.queue; };
+  for (let k = 0; k < raws.length; k++) {
+    if (k === 11) continue; // the link drops it
+    await deliver(raws[k]);
+    if (k === 12) {
+      assert.deepEqual(ws.sent.at(-1), { repair: [[id, lost]] });
+      await deliver(raws[11]); // the relay resends it
+    }
+  }
+  const avatar = client.avatars.get(id);
+  assert.equal(avatar.decoder.repaired, 1);
+  assert.equal(avatar.frames * avatar.skeleton.numChannels, frames.reduce((n, f) => n + f.length, 0));
 });
 
 test('damaged streams end in DecodeError, never another error or a hang', async () => {

@@ -290,12 +290,12 @@ class LiveDecoder:
             if ahead == 0 or ahead > MAX_MISSING or not self.in_sync:
                 return self._push_safely(packet)
             self.missing = {(self.expected + k) & 0xFFFFFFFF for k in range(ahead)}
-        elif packet.keyframe or packet.restart:  # decodable without the gap: wait no more
-            self.held[packet.sequence] = packet
-            return self._release()
         elif packet.sequence in self.missing:
             self.missing.discard(packet.sequence)
             self.stats.repaired += 1
+        elif packet.keyframe or packet.restart:  # decodable without the gap: wait no more
+            self.held[packet.sequence] = packet
+            return self._release()
         else:
             last = max(self.held, key=self._ahead)
             beyond = self._ahead(packet.sequence) - self._ahead(last)

@@ -13,6 +13,7 @@ import { HoldingDecoder, hasDecoder } from './stream.js';
 const now = () => performance.now() / 1000;
 export const REPAIR_HOLD_S = 0.2; // stream/client.py's: how long a gap is waited for
 export const REPAIR_AGAIN_S = 0.05; // a missing packet is asked for again after this, then twice as long
+const MAX_REPAIRS = 256; // stream/packets.py's: the packets one request may name
 
 export class Avatar {
   constructor(stream, info) {
@@ -121,13 +122,13 @@ export class RelayClient {
         const key = `${stream} ${sequence}`;
         wanted.add(key);
         const [at, wait] = this.asked.get(key) ?? [-Infinity, REPAIR_AGAIN_S / 2];
-        if (!(nowS - at >= wait)) continue;
+        if (!(nowS - at >= wait) || due.length >= MAX_REPAIRS) continue;
         this.asked.set(key, [nowS, 2 * wait]);
         due.push([stream, sequence]);
       }
     }
     for (const key of this.asked.keys()) if (!wanted.has(key)) this.asked.delete(key);
-    if (due.length && this.ws?.readyState === 1) this.ws.send(JSON.stringify({ repair: due.slice(0, 256) }));
+    if (due.length && this.ws?.readyState === 1) this.ws.send(JSON.stringify({ repair: due }));
   }
 
   async #batch(data, arrival) {

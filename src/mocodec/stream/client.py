@@ -185,14 +185,15 @@ class Watcher:
     def repairs(self, now_s: float | None = None) -> list[list[int]]:
         """The ``[stream, sequence]`` pairs to ask the relay for now (its ``repair`` request):
         the packets the decoders wait for, each asked for again after REPAIR_AGAIN_S, then
-        after twice as long each time (a slow round trip is not answered with a flood)."""
+        after twice as long each time (a slow round trip is not answered with a flood); at most
+        MAX_REPAIRS (by stream, then sequence), so that none is taken for asked that was not."""
         now = time.monotonic() if now_s is None else now_s
         wanted = {(stream, seq) for stream, dec in self.decoders.items() for seq in dec.wanted()}
         self.asked = {key: asked for key, asked in self.asked.items() if key in wanted}
-        due = []
+        due: list[list[int]] = []
         for key in sorted(wanted):
             at, wait = self.asked.get(key, (-math.inf, REPAIR_AGAIN_S / 2))
-            if now - at >= wait:
+            if now - at >= wait and len(due) < MAX_REPAIRS:
                 self.asked[key] = (now, 2 * wait)
                 due.append(list(key))
         return due
@@ -244,7 +245,7 @@ async def record(
                 continue
             watcher.take(msg.data)
             if asks := watcher.repairs():
-                await ws.send_str(json.dumps({"repair": asks[:MAX_REPAIRS]}))
+                await ws.send_str(json.dumps({"repair": asks}))
             target = stream if stream is not None else next(iter(watcher.decoders), None)
             if target is None or target not in watcher.decoders:
                 continue

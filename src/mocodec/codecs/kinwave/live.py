@@ -24,13 +24,13 @@ they are in, with the pose representation of offline kinwave:
    integer. The contexts carry over from packet to packet (a codec stream's packets depend on
    each other; the live stream restarts the codec at each keyframe, docs/streaming.md).
 5. **Layers** (knob ``layers``): the stream may carry up to four layers, base first, each at
-   ``layer_ratio`` (2) times the bound of the next (``layers=3`` at 1 cm: 4, 2 and 1 cm). Each layer is coded as
-   above with its own history, steps and contexts, and closed-loop on the layers below: its
-   prediction is clamped to the interval the nearest layer below that coded the frame puts the
-   target in (the quantiser cell of that layer's integer), for the channels whose decoded values
-   fell in those cells in the last packet (both ends judge this alike, nothing is sent). Its
-   bound is checked on the decoding of it and the layers below. A relay serves a viewer the
-   lowest layers by cutting a packet after one (:func:`section_ends`).
+   ``layer_ratio`` (2) times the bound of the next (``layers=3`` at 1 cm: 4, 2 and 1 cm). Each
+   layer is coded as above with its own history, steps and contexts, and closed-loop on the
+   layers below: its prediction is clamped to the interval the nearest layer below that coded
+   the frame puts the target in (the quantiser cell of that layer's integer), for the channels
+   whose decoded values fell in those cells in the last packet (both ends judge this alike,
+   nothing is sent). Its bound is checked on the decoding of it and the layers below. A relay
+   serves a viewer the lowest layers by cutting a packet after one (:func:`section_ends`).
 
 A layer's section: the arithmetic-coded stream alone (:func:`~mocodec.coding.entropy.binarycoder.finish_short`,
 its always-zero first byte left out): whether the packet is full (else its frame count), the

@@ -42,6 +42,7 @@ import numpy as np
 
 from common import DATA
 from mocodec.stream.client import REPAIR_AGAIN_S, REPAIR_HOLD_S
+from mocodec.stream.live import MAX_MISSING
 from mocodec.stream.packets import KEYFRAME, MAX_REPAIRS, RESTART
 from mocodec.stream.relay import TICK_HZ
 
@@ -221,17 +222,17 @@ class Repairs:
         for s, q in zip(fresh_streams.tolist(), fresh_seqs.tolist()):
             exp = int(self.expected[s])
             if exp >= 0:
-                for m in range(exp, min(q, exp + 64)):
+                for m in range(exp, min(q, exp + MAX_MISSING)):
                     self.asked.setdefault((s, m), (now, -np.inf, REPAIR_AGAIN_S / 2))
             self.expected[s] = max(exp, q + 1)
         due = []
         for key, (first, last, wait) in list(self.asked.items()):
             if now - first > REPAIR_HOLD_S:
                 del self.asked[key]
-            elif now - last >= wait:
+            elif now - last >= wait and len(due) < MAX_REPAIRS:
                 self.asked[key] = (first, now, 2 * wait)
                 due.append(list(key))
-        return due[:MAX_REPAIRS]
+        return due
 
 
 def viewers(

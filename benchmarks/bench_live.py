@@ -86,15 +86,16 @@ def repaired_resync_times(
     """As :func:`resync_times`, for a receiver that asks for what it lost (a relay's repair,
     docs/streaming.md): a packet arrives when its last frame is in (its first frame plus its
     frames); a lost one is asked for when the next arrives and resent ``round_trip_s`` later,
-    and asked for again while the resent one is lost too (as the Watcher does), until ``hold_s``; the
-    receiver holds the packets after a gap that long (:class:`LiveDecoder` ``hold_s``). Seconds
+    and asked for again while the resent one is lost too (as the Watcher does), until
+    ``hold_s``; the receiver holds the packets after a gap that long (:class:`LiveDecoder` ``hold_s``). Seconds
     from each lost packet's first frame until the receiver decodes the stream exactly again."""
     rng = np.random.default_rng(seed)
     data = packets[1:]
     sent_at = [(p.first_frame + p.frames) / motion.fps for p in data]
     lost = rng.random(len(data)) < loss
     arrivals = [(sent_at[i], i) for i in range(len(data)) if not lost[i]]
-    for i in np.nonzero(lost)[0].tolist():
+    pending = np.nonzero(lost)[0].tolist()
+    for i in pending:
         after = next((j for j in range(i + 1, len(data)) if not lost[j]), None)
         if after is None:
             continue
@@ -106,7 +107,6 @@ def repaired_resync_times(
             ask, wait = ask + wait, 2 * wait
     arrivals.sort()
     dec = LiveDecoder(StreamInfo.from_payload(packets[0].payload), hold_s=hold_s)
-    pending = [i for i in range(len(data)) if lost[i]]
     times, waiting, k = [], [], 0
     for t, i in arrivals:
         while k < len(pending) and sent_at[pending[k]] <= t:

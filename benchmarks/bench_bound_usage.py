@@ -23,6 +23,7 @@ import numpy as np
 from common import shared_sources
 from mocodec import load, moc
 from mocodec.codecs import get_codec
+from mocodec.formats.fileio import atomic_write
 from mocodec.kinematics import forward_kinematics
 from mocodec.metrics.pose import shell_errors
 
@@ -83,8 +84,7 @@ def main() -> None:
             f"{one_cm:,} bytes at shell 1 cm, {tenth:,} at 0.1 cm"
         )
     if args.save:
-        with open(args.save, "w") as f:
-            json.dump(sizes_by_clip, f)
+        atomic_write(args.save, json.dumps(sizes_by_clip))
     if args.against:
         with open(args.against) as f:
             compare(sizes_by_clip, json.load(f))

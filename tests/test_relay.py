@@ -325,14 +325,14 @@ def test_a_slow_viewer_misses_ticks_keeps_headers_and_is_dropped():
     async def go():
         relay = Relay(SECRET, Limits(slow_viewer_s=0.05))
         viewer = Viewer(None, StubTransport())
-        viewer.queue.put_nowait(b"a batch still on its way")
+        viewer.queue.put_nowait((b"a batch still on its way",))
         header = type("F", (), {"packet": type("P", (), {"kind": 0})()})()
         data = type("F", (), {"packet": type("P", (), {"kind": 1})()})()
-        relay._offer(viewer, b"next", [header, data])
+        relay._offer(viewer, (b"next",), [header, data])
         assert viewer.missed == 1 and viewer.pending == [header]  # memory stays one batch
         await asyncio.sleep(0.1)
-        relay._offer(viewer, b"next", [data])
-        relay._offer(viewer, b"next", [data])
+        relay._offer(viewer, (b"next",), [data])
+        relay._offer(viewer, (b"next",), [data])
         assert viewer.transport.aborted and viewer.dropped and relay.counters["dropped_slow"] == 1
 
     asyncio.run(go())

@@ -570,9 +570,9 @@ class Relay:
 
     async def _send_loop(self, viewer: Viewer) -> None:
         while True:
-            message = await viewer.queue.get()
+            batches = await viewer.queue.get()
             try:
-                for batch in message if isinstance(message, tuple) else (message,):
+                for batch in batches:
                     await viewer.ws.send_bytes(batch)
             except (ConnectionError, RuntimeError):
                 return
@@ -599,39 +599,36 @@ class Relay:
         viewers = [v for v in room.viewers if not v.dropped]
         shares: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         scalable = any(f.scalable for f in fresh)
-        batch: bytes | tuple[bytes, ...]
         for viewer in viewers:
             pending, viewer.pending = viewer.pending, []
             resends, viewer.resends = viewer.resends, []
             items = pending + fresh
-            if not (items or resends):
-                continue
+            # what it asked for again goes first, in a message of its own: the tick's batch stays shared
+            batches = [pack_batch([self._resent(viewer, f) for f in resends])] if resends else []
             if viewer.budget > 0 and (scalable or any(f.scalable for f in pending)):
                 if crowd is None:
                     crowd = self._crowd(room, fresh)
                     shares = self._shares(crowd, [v for v in viewers if v.budget > 0])
                 cut = self._cut(room, crowd, viewer, *shares[id(viewer)], items, len(items) - len(fresh), cut_cache)
-                batch = pack_batch(*cut)
-            elif not pending:
+                batches.append(pack_batch(*cut))
+            elif pending:  # joined late: its streams' last packets before the tick's
+                batches.append(pack_batch([f.data for f in items]))
+            elif fresh:
                 shared = shared or pack_batch([f.data for f in fresh])
-                batch = shared
-            else:  # joined late: its streams' last packets before the tick's
-                batch = pack_batch([f.data for f in items])
-            if resends:  # a message of their own, so that the tick's batch is still shared
-                resent = pack_batch([self._resent(viewer, f) for f in resends])
-                batch = (resent, batch) if items else (resent,)
-            self._offer(viewer, batch, items)
+                batches.append(shared)
+            if batches:
+                self._offer(viewer, tuple(batches), items)
         for key in [k for k, state in room.streams.items() if state.ended]:
             del room.streams[key]  # over: late joiners will not see it
             for viewer in room.viewers:
                 viewer.layers.pop(key, None)
 
-    def _offer(self, viewer: Viewer, batch: bytes | tuple[bytes, ...], items: list[Forward]) -> None:
-        """Queue a viewer's batch (or batches), or miss the tick if the last is still on its way:
+    def _offer(self, viewer: Viewer, batches: tuple[bytes, ...], items: list[Forward]) -> None:
+        """Queue a viewer's batches, or miss the tick if the last are still on their way:
         it keeps the stream headers for the next tick and drops the rest (its receivers
         resynchronise at the next keyframe)."""
         try:
-            viewer.queue.put_nowait(batch)
+            viewer.queue.put_nowait(batches)
             viewer.missed_since = None
             viewer.sent += 1
             self.counters["batches_out"] += 1

@@ -283,8 +283,8 @@ def test_data_of_another_format_revision_is_refused():
     from mocodec.codecs import codec_from_untrusted
 
     config = get_codec("kinwave-live").get_config()
-    assert config["revision"] == 2
-    for revision in (None, 1, 3):
+    assert config["revision"] == 3
+    for revision in (None, 2, 4):
         older = {k: v for k, v in config.items() if k != "revision"}
         if revision is not None:
             older["revision"] = revision

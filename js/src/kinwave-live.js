@@ -2,7 +2,7 @@
 // from the binary arithmetic decoder (contexts carried across packets), then closed-loop
 // reconstruction with the encoder's arithmetic (order-2 or order-1 prediction, each channel's
 // order chosen from its decoded frames, clamped to the quantiser cell of the layer below, plus
-// the integer times the channel's step). Format revision 2 only. Step tables come
+// the integer times the channel's step). Format revision 3 only. Step tables come
 // from the stream header (`extra.decoder.base_codes`), as the convex allocation that makes them
 // cannot be redone bit for bit here; so does the reference pose a codec stream's first frame is
 // predicted from, where the header gives one (`extra.decoder.reference`).
@@ -21,7 +21,8 @@ const MAX_LAYERS = 4;
 const MAX_REFERENCE = 1e9; // live.MAX_REFERENCE
 const RESTART_ZERO = 65536 - 65536 / 16; // the restart flag's fixed probability of a 0
 const MISS_DECAY = 0.5;
-export const REVISION = 2; // the format revision this decoder reads (live.KinwaveLiveCodec.revision)
+const DRIFT = 1; // live.DRIFT: the usual change of the scale offset
+export const REVISION = 3; // the format revision this decoder reads (live.KinwaveLiveCodec.revision)
 
 
 // Frames per packet: as many as fit in 50 ms, at least one (live.packet_frames).
@@ -218,11 +219,12 @@ export class KinwaveLiveDecoder {
     const C = this.tables.channels;
     const st = layer.state;
     let frames = this.size;
-    if (dec.get(st, 0) === 0) frames = dec.getInt(st, 2, 9, ULEN, 9 + ULEN, 8);
+    if (dec.get(st, 0) === 1) frames = dec.getInt(st, 2, 9, ULEN, 9 + ULEN, 8);
     let b = 2 + PER_CHANNEL;
-    const change = dec.getInt(st, b, b + 7, ULEN, b + 7 + ULEN, b + 6);
+    const change = DRIFT + dec.getInt(st, b, b + 7, ULEN, b + 7 + ULEN, b + 6);
     b = 2 + 2 * PER_CHANNEL;
-    const stride = 1 + dec.getInt(st, b, b + 7, ULEN, b + 7 + ULEN, b + 6);
+    const index = dec.getInt(st, b, b + 7, ULEN, b + 7 + ULEN, b + 6);
+    const stride = frames >= 1 && frames <= this.size ? strideAt(frames, index) : 0;
     const offset = layer.offset + change;
     if (!(frames >= 1 && frames <= this.size && Math.abs(offset) <= MAX_OFFSET && stride >= 1 && stride <= frames
       && frames % stride === 0 && (stride === 1 || layer.started) && (cells === null || cells.frames === frames))) {
@@ -362,6 +364,17 @@ function updateMisses(layer, decoded, coded, stride) {
     n = Math.min(n + 1, 2);
     g = stride;
   }
+}
+
+// The stride at ``index`` among the divisors of ``frames``, sparsest first (live._stride_at); 0 if none.
+function strideAt(frames, index) {
+  for (let d = frames; d > 0; d--) {
+    if (frames % d === 0) {
+      if (index === 0) return d;
+      index--;
+    }
+  }
+  return 0;
 }
 
 // All frames of a packet from its coded ones (every stride-th, the last included) and the frame

@@ -73,6 +73,7 @@ MAX_LAYERS = 4
 MAX_REFERENCE = 1e9  # the largest reference value a stream header may give
 ROUNDING = 0.25  # the quantiser's rounding offset (0.5: to the nearest; less: a dead zone)
 MISS_DECAY = 0.5  # what a predictor's miss weighs one coded frame later (exact in binary)
+DRIFT = 1  # the usual change of the scale offset: a packet under its bound lets the next go coarser
 STILL_CM = 1e-3  # a translation that moves less than this in a packet stands still
 
 
@@ -178,26 +179,49 @@ def _contexts(channels: int, joints: int) -> int:
 @numba.njit(inline="always")
 def _put_head(st, buf, state, frames, full, offset_change, stride):
     per = PER_CHANNEL
-    bc.put(st, buf, state, 0, 1 if frames == full else 0)
+    bc.put(st, buf, state, 0, 0 if frames == full else 1)
     if frames != full:
         bc.put_int(st, buf, state, frames, 2, 9, ULEN, 9 + ULEN, 8)
     b = 2 + per
-    bc.put_int(st, buf, state, offset_change, b, b + 7, ULEN, b + 7 + ULEN, b + 6)
+    bc.put_int(st, buf, state, offset_change - DRIFT, b, b + 7, ULEN, b + 7 + ULEN, b + 6)
     b = 2 + 2 * per
-    bc.put_int(st, buf, state, stride - 1, b, b + 7, ULEN, b + 7 + ULEN, b + 6)
+    bc.put_int(st, buf, state, _stride_index(frames, stride), b, b + 7, ULEN, b + 7 + ULEN, b + 6)
 
 
 @numba.njit(inline="always")
 def _get_head(st, data, state, full):
     per = PER_CHANNEL
     frames = full
-    if bc.get(st, data, state, 0) == 0:
+    if bc.get(st, data, state, 0) == 1:
         frames = bc.get_int(st, data, state, 2, 9, ULEN, 9 + ULEN, 8)
     b = 2 + per
-    change = bc.get_int(st, data, state, b, b + 7, ULEN, b + 7 + ULEN, b + 6)
+    change = DRIFT + bc.get_int(st, data, state, b, b + 7, ULEN, b + 7 + ULEN, b + 6)
     b = 2 + 2 * per
-    stride = 1 + bc.get_int(st, data, state, b, b + 7, ULEN, b + 7 + ULEN, b + 6)
+    index = bc.get_int(st, data, state, b, b + 7, ULEN, b + 7 + ULEN, b + 6)
+    stride = _stride_at(frames, index) if 1 <= frames <= full else 0  # damaged: refused by the caller
     return frames, change, stride
+
+
+@numba.njit(inline="always")
+def _stride_index(frames, stride):
+    """A stride's place among the divisors of ``frames``, sparsest first (the one a still
+    avatar's packet codes at is 0, which costs least)."""
+    index = 0
+    for d in range(frames, stride, -1):
+        if frames % d == 0:
+            index += 1
+    return index
+
+
+@numba.njit(inline="always")
+def _stride_at(frames, index):
+    """The inverse of :func:`_stride_index`; 0 if ``frames`` has no such divisor."""
+    for d in range(frames, 0, -1):
+        if frames % d == 0:
+            if index == 0:
+                return d
+            index -= 1
+    return 0
 
 
 @numba.njit(inline="always")
@@ -472,7 +496,9 @@ class KinwaveLiveCodec(Codec):
     )
     quality = QualityKnob("max_error_cm", higher_is_better=False, log_scale=True)
     streaming = True
-    revision = 2  # 2: the predictor orders are no longer sent (both ends choose them, _update_misses)
+    # 2: the predictor orders are no longer sent (both ends choose them, _update_misses);
+    # 3: the head codes a still packet's usual values as zeros (full flag, drift, stride index)
+    revision = 3
     reference: np.ndarray | None = None  # the stream's reference pose (for_stream)
     codes: np.ndarray | None = None  # the stream's base step codes per layer (for_stream)
 

@@ -33,11 +33,12 @@ from common import shared_sources
 from mocodec import load, ratecontrol
 from mocodec.codecs import get_codec
 from mocodec.codecs.kinwave import live
+from mocodec.coding.entropy.rangecoder import decode_ints
 from mocodec.formats import varint
 from mocodec.kinematics import forward_kinematics
 from mocodec.stream.client import REPAIR_AGAIN_S, REPAIR_HOLD_S
 from mocodec.stream.live import LiveDecoder, stream_clip
-from mocodec.stream.packets import HEADER, StreamInfo
+from mocodec.stream.packets import CUTS, HEADER, StreamInfo
 
 
 def joint_errors(motion, channels) -> np.ndarray:
@@ -128,16 +129,18 @@ def layer_rows(
     codec = get_codec("kinwave-live", max_error_cm=bound, layers=layers, layer_ratio=ratio, refresh_s=refresh_s)
     enc = codec.encoder(motion.skeleton, motion.fps)
     packets = enc.push(motion.channels) + enc.flush()
+    ends = decoded_ends(codec, motion, packets)
     sent = stream_clip(motion, codec, keyframe_s=keyframe_s)
-    stream = [p for p in sent if p.kind != HEADER]
+    stream = [p.without_cuts() for p in sent if p.kind != HEADER]
+    sent_ends = [layer_ends(p, layers) for p in sent if p.kind != HEADER]
     framing = sum(map(framing_bytes, stream))
     kbps, max_cm, mean_cm = [], [], []
     for keep in range(1, layers + 1):
         dec = codec.decoder(motion.skeleton, motion.fps)
-        err = joint_errors(motion, np.concatenate([dec.push(p[: cut_size(codec, p, keep)]) for p in packets]))
+        err = joint_errors(motion, np.concatenate([dec.push(p[: e[keep - 1]], keep) for p, e in zip(packets, ends)]))
         max_cm.append(float(err.max()))
         mean_cm.append(float(err.mean()))
-        size = framing + sum(cut_size(codec, p.payload, keep) for p in stream)
+        size = framing + sum(e[keep - 1] for e in sent_ends)
         kbps.append(size * 8 / motion.duration / 1000)
     return {
         "layer_kbps": kbps,
@@ -147,10 +150,20 @@ def layer_rows(
     }
 
 
-def cut_size(codec, payload: bytes, keep: int) -> int:
-    """The bytes of a kinwave-live packet with its ``keep`` lowest layers."""
-    ends = codec.layer_ends(payload) if payload else [0]
-    return ends[min(keep, len(ends)) - 1]
+def decoded_ends(codec, motion, packets: list[bytes]) -> list[list[int]]:
+    """Where each layer of each packet of a kinwave-live codec stream ends, as its decoder finds."""
+    dec, out = codec.decoder(motion.skeleton, motion.fps), []
+    for p in packets:
+        dec.push(p)
+        out.append(dec.layer_ends)
+    return out
+
+
+def layer_ends(p, layers: int) -> list[int]:
+    """Where each layer of a sent kinwave-live packet ends: its cut table, then its end (a
+    packet without frames has no table: every layer ends at its end)."""
+    size = len(p.codec_payload)
+    return [int(e) for e in decode_ints(p.cuts)] + [size] if p.flags & CUTS else [size] * layers
 
 
 def measure(

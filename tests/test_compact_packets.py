@@ -109,12 +109,23 @@ def test_damage_and_strangers_are_refused(packets):
 
 @pytest.mark.parametrize("compact", [True, False])
 def test_a_packet_cut_from_its_bytes_is_the_packet_with_the_shorter_payload(packets, compact):
+    """... and the layers cut off it read back from its check, which names no other count."""
     from dataclasses import replace
 
     from mocodec.stream.packets import truncated
 
+    reader = Reader()
+    reader.read(packets[0].to_bytes())
     for p in [q for q in packets if q.kind != HEADER][:20]:
         p = replace(p, compact=compact)
         data = p.to_bytes()
-        for size in (0, 1, len(p.payload) // 2, len(p.payload)):
-            assert truncated(p, data, size) == p.with_payload(p.payload[:size]).to_bytes()
+        reader.read(data)
+        for size, dropped in ((0, 3), (1, 2), (len(p.payload) // 2, 1), (len(p.payload), 0)):
+            cut = truncated(p, data, size, dropped)
+            assert cut == replace(p, payload=p.payload[:size], dropped=dropped).to_bytes()
+            back = parse(cut, "cut", reader.cursors.get)
+            assert (back.dropped, back.payload, back.sequence) == (dropped, p.payload[:size], p.sequence)
+    header = packets[0].to_bytes()  # a header is never cut: a check from another start is damage
+    with pytest.raises(CorruptStreamError, match="CRC"):
+        parse(replace(packets[0], dropped=1).to_bytes())
+    assert parse(header).dropped == 0

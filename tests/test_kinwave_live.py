@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import pytest
 
@@ -102,20 +104,25 @@ def test_damaged_packets_raise_only_our_error(walk_bvh, layers):
 
 
 # ----- layers ------------------------------------------------------------------------------------
-def _layered_packets(motion, layers=3, bound=1.0):
-    codec = get_codec("kinwave-live", max_error_cm=bound, layers=layers)
+def _layered_packets(motion, layers=3, bound=1.0, **knobs):
+    """The codec and its packets of ``motion``, each as the relay may send it: cut to 1, 2, ...
+    layers (the last whole), at the ends a decoder of the whole stream finds."""
+    codec = get_codec("kinwave-live", max_error_cm=bound, layers=layers, **knobs)
     enc = codec.encoder(motion.skeleton, motion.fps)
-    return codec, enc.push(motion.channels) + enc.flush()
+    return codec, _variants(codec, motion, enc.push(motion.channels) + enc.flush())
 
 
-def _cut(codec, packet, keep):
-    ends = codec.layer_ends(packet)
-    return packet[: ends[keep - 1]] if keep < len(ends) else packet
+def _variants(codec, motion, packets):
+    dec, out = codec.decoder(motion.skeleton, motion.fps), []
+    for p in packets:
+        dec.push(p)
+        out.append([p[:end] for end in dec.layer_ends])
+    return out
 
 
-def _decoded(codec, motion, packets, keeps):
+def _decoded(codec, motion, variants, keeps):
     dec = codec.decoder(motion.skeleton, motion.fps)
-    return np.concatenate([dec.push(_cut(codec, p, k)) for p, k in zip(packets, keeps)])
+    return np.concatenate([dec.push(v[k - 1], k) for v, k in zip(variants, keeps)])
 
 
 @pytest.mark.parametrize("clip,fps", [("walk_bvh", None), ("walk_amc", None), ("walk_amc", 30.0)])
@@ -128,7 +135,7 @@ def test_each_layer_holds_its_bound_on_every_frame_with_the_layers_below(clip, f
         errors = _frame_errors(motion, _decoded(codec, motion, packets, [keep] * len(packets)))
         assert errors.max() <= bound + 1e-9
         assert np.median(errors) > 0.3 * bound
-    sizes = [sum(len(_cut(codec, p, k)) for p in packets) for k in (1, 2, 3)]
+    sizes = [sum(len(v[k - 1]) for v in packets) for k in (1, 2, 3)]
     assert sizes[0] < sizes[1] < sizes[2]
 
 
@@ -149,18 +156,28 @@ def test_a_dropped_layer_stays_out_until_the_stream_restarts(walk_amc):
     assert _frame_errors(walk_amc[:240], got).max() <= 2.0 + 1e-9
 
 
-def test_layer_sections_split_and_join():
-    for sections in ([b"ab", b"", b"c"], [b"", b"x" * 200, b""], [b"q"]):
-        packet = live.join_layers(sections)
-        top = sections[-1] or (b"\0" if len(sections) > 1 else b"")
-        assert live.split_layers(packet, len(sections)) == sections[:-1] + [top]
-        for keep in range(1, len(sections)):
-            cut = packet[: live.section_ends(packet, len(sections))[keep - 1]]
-            assert live.split_layers(cut, len(sections)) == sections[:keep]
-    with pytest.raises(CorruptStreamError, match="layer 1's 9 bytes at byte 4 run past"):
-        live.section_ends(bytes([2, 1, 1, 9, 1]), 3)
-    with pytest.raises(CorruptStreamError, match="layer 0's length at byte 0"):
-        live.section_ends(b"", 3)
+def test_a_packet_cut_at_a_layer_end_decodes_that_layer_and_those_below_as_the_whole_packet(walk_bvh, walk_amc):
+    """The layers are one arithmetic-coded stream, base first: a relay cuts it where the
+    decoder of the whole stream says each layer ends (the sender's cut table). Each end is the
+    shortest such prefix: one byte less decodes something else."""
+    for motion in (walk_bvh[:480], walk_amc[:480].resample(30.0)):
+        codec, variants = _layered_packets(motion, layers=3, refresh_s=0.5)
+        ends = np.array([[len(x) for x in v] for v in variants])
+        assert (np.diff(ends, axis=1) >= 0).all() and ends[:, 0].mean() < 0.5 * ends[:, 2].mean()
+        for keep in (1, 2, 3):
+            whole, cut = codec.decoder(motion.skeleton, motion.fps), codec.decoder(motion.skeleton, motion.fps)
+            for v in variants:
+                if len(v[keep - 1]):
+                    assert not _decodes_alike(copy.deepcopy(whole), v[keep - 1][:-1], v[-1], keep)
+                assert np.array_equal(cut.push(v[keep - 1], keep), whole.push(v[-1], keep))
+
+
+def _decodes_alike(dec, short, whole, keep):
+    try:
+        got = copy.deepcopy(dec).push(short, keep)
+    except CorruptStreamError:
+        return False
+    return np.array_equal(got, dec.push(whole, keep))
 
 
 def test_the_layered_format_is_pinned():
@@ -190,9 +207,10 @@ def test_layers_restart_on_their_own_spread_over_the_refresh_period(walk_bvh):
         expected = [a > 0 and (phase - a) % period < size for a in range(0, walk_bvh.num_frames, size)]
         assert starts[:, k].tolist() == expected
     assert starts.sum(axis=1).max() == 1  # never two layers at once: no bursts
-    assert not np.array(codec.layer_starts(packets[3])).any()  # without refresh_s: no flags
+    assert not np.array(codec.layer_starts(packets[3][-1])).any()  # without refresh_s: no flags
+    variants = _variants(refreshing, walk_bvh, again)
     for keep, bound in zip((1, 2, 3), refreshing.layer_bounds):
-        errors = _frame_errors(walk_bvh, _decoded(refreshing, walk_bvh, again, [keep] * len(again)))
+        errors = _frame_errors(walk_bvh, _decoded(refreshing, walk_bvh, variants, [keep] * len(again)))
         assert errors.max() <= bound + 1e-9
 
 

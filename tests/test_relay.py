@@ -18,11 +18,12 @@ import pytest
 from conftest import DATA, free_port
 from mocodec.cli import main
 from mocodec.codecs import get_codec
+from mocodec.coding.entropy.rangecoder import encode_ints
 from mocodec.stream import tokens
 from mocodec.stream.bus import NatsBus
 from mocodec.stream.client import RelayRefused, connect, publish_clip, record
 from mocodec.stream.live import receive_clip, stream_clip
-from mocodec.stream.packets import Reader, pack_batch, split_batch
+from mocodec.stream.packets import CUTS, Reader, pack_batch, split_batch, with_cuts
 from mocodec.stream.relay import BAD_MESSAGE, RATE_LIMIT, Limits, Relay, Viewer, on_ladder, start
 
 pytestmark = pytest.mark.network  # a relay (and NATS) on loopback sockets
@@ -275,9 +276,24 @@ def test_a_late_joiner_of_a_refreshing_stream_starts_at_its_last_restart(walk_bv
     assert [f.packet.sequence for f in gop] == [p.sequence for p in packets[last:]]
 
 
-def test_a_layered_packet_whose_sections_overrun_closes_its_sender(walk_bvh):
+@pytest.mark.parametrize(
+    "cuts,expected",
+    [
+        (lambda size: [1, size + 1], "a cut table of 2 ends in order, within its"),
+        (lambda size: [5, 1], "a cut table of 2 ends in order"),
+        (lambda size: [1], "a cut table of 2 ends"),
+        (None, "needs a cut table"),  # the relay could not cut it
+    ],
+    ids=["past the end", "out of order", "one short", "none"],
+)
+def test_a_layered_packet_without_a_cut_table_that_fits_closes_its_sender(walk_bvh, cuts, expected):
     packets = stream_clip(walk_bvh[:120], get_codec("kinwave-live", layers=3))
-    bad = packets[2].with_payload(bytes([100, 1, 2]))  # layer 0 says 100 bytes, 2 follow
+    payload = packets[2].codec_payload
+    cuts = None if cuts is None else cuts(len(payload))
+    bad = packets[2].with_payload(
+        payload if cuts is None else with_cuts(payload, encode_ints(np.array(cuts))),
+        packets[2].flags & ~CUTS if cuts is None else packets[2].flags,
+    )
 
     async def go():
         async with serving() as url:
@@ -287,7 +303,7 @@ def test_a_layered_packet_whose_sections_overrun_closes_its_sender(walk_bvh):
                 return rogue.close_code, msg.extra
 
     code, reason = asyncio.run(go())
-    assert code == BAD_MESSAGE and "layer 0's 100 bytes at byte 1 run past" in reason
+    assert code == BAD_MESSAGE and "stream 0: packet 1:" in reason and expected in reason
 
 
 def test_message_size_and_rate_limits_close_the_connection(walk_bvh):

@@ -347,7 +347,7 @@ def test_restart_points_are_flagged_and_a_late_joiner_reads_from_one(walk_bvh):
     packets = stream_clip(walk_bvh, codec, keyframe_s=60.0)
     data = [p for p in packets if p.kind == DATA and p.frames]
     flagged = [bool(p.flags & RESTART) for p in data]
-    assert flagged == [not p.keyframe and codec.layer_starts(p.payload)[0] for p in data]
+    assert flagged == [not p.keyframe and codec.layer_starts(p.codec_payload)[0] for p in data]
     assert sum(flagged) >= 10 and all(p.compact for p in data)
     k = flagged.index(True, 5)
     reader = Reader()

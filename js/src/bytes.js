@@ -43,15 +43,15 @@ for (let n = 0; n < 256; n++) {
 }
 
 // CRC-16/CCITT, initial value 0xFFFF (Python's binascii.crc_hqx(data, 0xFFFF)).
-export function crc16(data, start, end) {
-  let crc = 0xffff;
+export function crc16(data, start, end, init = 0xffff) {
+  let crc = init;
   for (let k = start; k < end; k++) crc = ((crc << 8) & 0xffff) ^ CRC16[((crc >> 8) ^ data[k]) & 0xff];
   return crc;
 }
 
 // CRC-32 as zlib computes it.
-export function crc32(data, start, end) {
-  let crc = 0xffffffff;
+export function crc32(data, start, end, seed = 0) {
+  let crc = (seed ^ 0xffffffff) >>> 0;
   for (let k = start; k < end; k++) crc = CRC32[(crc ^ data[k]) & 0xff] ^ (crc >>> 8);
   return (crc ^ 0xffffffff) >>> 0;
 }

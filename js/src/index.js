@@ -5,7 +5,7 @@ export { BinaryDecoder } from './binarycoder.js';
 export { Reader, splitBatch, codecPayload, HEADER, DATA, KEYFRAME, END, RESTART } from './packets.js';
 export { parseStreamHeader } from './header.js';
 export { Skeleton } from './skeleton.js';
-export { KinwaveLiveDecoder, layerSpans, packetFrames } from './kinwave-live.js';
+export { KinwaveLiveDecoder, packetFrames } from './kinwave-live.js';
 export { forwardKinematics } from './kinematics.js';
 export { decodeMoc, openMoc } from './moc.js';
 export { unpackSkeleton } from './compact-skeleton.js';

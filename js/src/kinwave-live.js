@@ -7,7 +7,6 @@
 // cannot be redone bit for bit here; so does the reference pose a codec stream's first frame is
 // predicted from, where the header gives one (`extra.decoder.reference`).
 import { BinaryDecoder, MAX_CLASS, fixedState, newState } from './binarycoder.js';
-import { readVarint } from './bytes.js';
 import { DecodeError, OutOfStepError } from './errors.js';
 import { MAX_DECODED_VALUES } from './limits.js';
 import { CODE_STEP } from './steps.js';
@@ -30,25 +29,10 @@ export function packetFrames(fps) {
   return Math.max(Math.floor(fps * 0.05 + 1e-9), 1);
 }
 
-// Where each layer section of a packet starts and ends (live._spans).
-export function layerSpans(packet, layers) {
-  if (layers === 1) return [[0, packet.length]];
-  const spans = [];
-  let pos = 0;
-  for (let k = 0; k < layers - 1; k++) {
-    if (k > 0 && pos === packet.length) return spans;
-    const [size, start] = readVarint(packet, pos, 4, `layer ${k}'s length`);
-    if (start + size > packet.length) throw new DecodeError(`layer ${k}'s ${size} bytes run past the packet's end`, start);
-    pos = start + size;
-    spans.push([start, pos]);
-  }
-  return pos < packet.length ? [...spans, [pos, packet.length]] : spans;
-}
-
-// A section as the arithmetic decoder reads it: its always-zero first byte put back.
-function sectionData(packet, start, end) {
-  const data = new Uint8Array(end - start + 1);
-  data.set(packet.subarray(start, end), 1);
+// A packet as the arithmetic decoder reads it: its always-zero first byte put back.
+function packetData(packet) {
+  const data = new Uint8Array(packet.length + 1);
+  data.set(packet, 1);
   return data;
 }
 
@@ -183,23 +167,28 @@ export class KinwaveLiveDecoder {
     return this.refresh;
   }
 
-  // The packet's frames, (frames x channels) row-major, from the top layer it decodes.
-  push(packet) {
-    const spans = layerSpans(packet, this.layers.length);
+  get layerCount() {
+    return this.layers.length;
+  }
+
+  // The packet's frames, (frames x channels) row-major, from the top layer it decodes: its
+  // layers are one arithmetic-coded stream, base first, after every layer's restart flag
+  // (with refresh); a relay may have cut off the `dropped` top ones.
+  push(packet, dropped = 0) {
+    const carried = this.layers.length - dropped;
+    if (!(Number.isInteger(dropped) && carried >= 1 && dropped >= 0)) throw new DecodeError(`kinwave-live: ${dropped} layers cut off a stream of ${this.layers.length}`);
+    const decoder = new BinaryDecoder(packetData(packet));
+    const restarts = this.layers.map(() => (this.refresh ? decoder.get(fixedState(RESTART_ZERO), 0) : 0));
     let cells = null;
     let out = null;
     let below = true;
     this.lastInts = [];
     for (let k = 0; k < this.layers.length; k++) {
-      let decoder = null;
-      if (below && k < spans.length) {
-        decoder = new BinaryDecoder(sectionData(packet, spans[k][0], spans[k][1]));
-        if (this.refresh && decoder.get(fixedState(RESTART_ZERO), 0) === 1) {
-          this.layers[k].restart();
-          this.layerInStep[k] = true;
-        }
+      if (below && k < carried && restarts[k] === 1) {
+        this.layers[k].restart();
+        this.layerInStep[k] = true;
       }
-      below = below && k < spans.length && this.layerInStep[k];
+      below = below && k < carried && this.layerInStep[k];
       if (!below) {
         this.layerInStep[k] = false;
         continue;

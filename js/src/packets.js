@@ -21,6 +21,16 @@ const C_RESTART = 32;
 const C_SHORT = 64; // an ongoing packet of the usual frame count, the sequence's low 6 bits in the tag
 const SHORT_SEQUENCE = 63;
 const VERSION = 2;
+// A packet's check starts from one of these: the top layers a relay cut off it (packets.CRC16_STARTS).
+const CRC16_STARTS = [0xffff, 0x5a5a, 0xa5a5, 0x0f0f];
+const CRC32_STARTS = [0, 0x5a5a5a5a, 0xa5a5a5a5, 0x0f0f0f0f];
+
+// Which start the packet's check was computed from (the layers cut off it); a damaged packet matches none.
+function droppedLayers(crcOf, starts, stored, end) {
+  const dropped = starts.findIndex((start) => crcOf(start) === stored);
+  if (dropped < 0) throw new DecodeError('CRC mismatch (damaged packet)', end);
+  return dropped;
+}
 
 // The packets of a batch message ("Mb", the packet count and each packet's length as varints,
 // then the packets: format 2), as views into `data`.
@@ -77,7 +87,8 @@ function parseFull(data) {
     throw new DecodeError(`payload of ${length} bytes announced, ${data.length - FIELDS - 4} present`, FIELDS - 4);
   }
   const end = FIELDS + length;
-  if (crc32(data, 0, end) !== u32(data, end)) throw new DecodeError('CRC mismatch (damaged packet)', end);
+  const dropped = droppedLayers((start) => crc32(data, 0, end, start), CRC32_STARTS, u32(data, end), end);
+  if (dropped && kind !== DATA) throw new DecodeError('CRC mismatch (damaged packet)', end);
   const view = new DataView(data.buffer, data.byteOffset, data.byteLength);
   return {
     stream: u32(data, 6),
@@ -90,13 +101,14 @@ function parseFull(data) {
     payload: data.subarray(FIELDS, end),
     kind,
     flags,
+    dropped,
   };
 }
 
 function parseCompact(data, cursorOf) {
   if (data.length < 4) throw new DecodeError(`${data.length} bytes, shorter than a compact packet`, 0);
   const end = data.length - 2;
-  if (crc16(data, 0, end) !== u16(data, end)) throw new DecodeError('CRC mismatch (damaged packet)', end);
+  const dropped = droppedLayers((start) => crc16(data, 0, end, start), CRC16_STARTS, u16(data, end), end);
   const tag = data[0];
   const short = (tag & C_SHORT) !== 0;
   const flags = short ? 0 : tag; // a short tag's low bits are the sequence number's
@@ -138,7 +150,7 @@ function parseCompact(data, cursorOf) {
   if (frames > MAX_PAYLOAD_FRAMES || first > 2 ** 40) throw new DecodeError(`${frames} frames from frame ${first} is not plausible`, 0);
   return {
     stream, sequence, timestampUs: 0, codec: cursor.codec, firstFrame: first, frames, position,
-    payload: body.subarray(pos), kind: DATA, flags: (flags & 7) | (flags & C_RESTART ? RESTART : 0),
+    payload: body.subarray(pos), kind: DATA, flags: (flags & 7) | (flags & C_RESTART ? RESTART : 0), dropped,
   };
 }
 

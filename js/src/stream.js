@@ -61,7 +61,9 @@ export class StreamDecoder {
       const payload = codecPayload(p);
       let frames = new Float64Array(0);
       if (payload.length || p.frames) {
-        frames = this.decoder.push(payload);
+        const dropped = p.dropped ?? 0; // the top layers a relay cut off a layered stream's packet
+        if (dropped >= (this.decoder.layerCount ?? 1)) throw new DecodeError(`packet ${p.sequence}: ${dropped} layers cut off a stream of ${this.decoder.layerCount ?? 1}`);
+        frames = dropped ? this.decoder.push(payload, dropped) : this.decoder.push(payload);
         this.lastInts = this.decoder.lastInts ?? [];
       }
       const C = this.info.skeleton.numChannels;

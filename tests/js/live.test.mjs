@@ -11,7 +11,7 @@ import {
 import { seeded } from './seeded.mjs';
 
 const LIVE = new URL('../data/live/', import.meta.url);
-const CASES = ['walk', 'walk-layers', 'asf-30fps-shell', 'run-refresh'];
+const CASES = ['walk', 'walk-layers', 'walk-layers-cut', 'asf-30fps-shell', 'run-refresh'];
 
 async function fixture(name) {
   const stream = new Uint8Array(await readFile(new URL(`${name}.stream`, LIVE)));

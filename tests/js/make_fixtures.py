@@ -38,17 +38,28 @@ def fixture() -> tuple[bytes, str]:
     return to_gltf_bytes(motion, binary=True), json.dumps(expected, indent=1) + "\n"
 
 
-#: Live stream cases: (name, clip, frames, fps or None, codec knobs, keyframe seconds).
+#: Live stream cases: (name, clip, frames, fps or None, codec knobs, keyframe seconds), and for a
+#: layered stream as a relay forwards it to a viewer whose layers change, from which data packet
+#: on it keeps how many layers.
 LIVE_CASES = (
     ("walk", "07_03.bvh", 240, None, {}, 1.0),
     ("walk-layers", "07_03.bvh", 240, None, {"layers": 3, "refresh_s": 0.5}, 1.0),
+    (
+        "walk-layers-cut",
+        "07_03.bvh",
+        240,
+        None,
+        {"layers": 3, "refresh_s": 0.5},
+        60.0,
+        ((0, 3), (8, 1), (20, 2), (30, 3)),
+    ),
     ("asf-30fps-shell", "07_03.amc", 360, 30.0, {"layers": 2, "max_error_cm": 0.5, "error_measure": "shell"}, 2.0),
     ("run-refresh", "09_02.bvh", 240, None, {"refresh_s": 0.25}, 60.0),
 )
 POSE_FRAMES = (0, 61, -1)
 
 
-def live_fixture(name, clip, frames, fps, knobs, keyframe_s) -> dict[str, bytes]:
+def live_fixture(name, clip, frames, fps, knobs, keyframe_s, keeps=()) -> dict[str, bytes]:
     """The files of one live case: ``<name>.stream`` (header and data packets as one batch),
     ``<name>.json`` (per packet its frames and the integers' count per layer, and joint
     positions at a few frames), ``<name>.f64.gz`` (the decoded channels, float64) and
@@ -72,6 +83,8 @@ def live_fixture(name, clip, frames, fps, knobs, keyframe_s) -> dict[str, bytes]
     for k in range(0, motion.num_frames, step):
         packets += enc.push(motion.channels[k : k + step], 0)
     packets += [p for p in enc.close(0) if p.frames or p.end]
+    if keeps:
+        packets = packets[:1] + [relayed(p, keep_at(keeps, k), codec) for k, p in enumerate(packets[1:])]
     read: list[np.ndarray] = []
     original = kinwave_live._decode_ints
 
@@ -107,6 +120,23 @@ def live_fixture(name, clip, frames, fps, knobs, keyframe_s) -> dict[str, bytes]
         f"{name}.f64.gz": gzip.compress(channels.astype("<f8").tobytes(), mtime=0),
         f"{name}.ints.gz": gzip.compress(ints.tobytes(), mtime=0),
     }
+
+
+def keep_at(keeps, k: int) -> int:
+    return [keep for first, keep in keeps if first <= k][-1]
+
+
+def relayed(p, keep: int, codec):
+    """Packet ``p`` of a layered stream as a relay forwards it with its ``keep`` lowest layers."""
+    from dataclasses import replace
+
+    from mocodec.coding.entropy.rangecoder import decode_ints
+
+    plain = p.without_cuts()
+    if not p.frames:
+        return plain
+    ends = [int(e) for e in decode_ints(p.cuts)] + [len(plain.payload)]
+    return replace(plain, payload=plain.payload[: ends[keep - 1]], dropped=len(ends) - keep)
 
 
 def live_fixtures() -> dict[str, bytes]:

@@ -117,17 +117,15 @@ class Embedded(Protocol):
 class Layered(Protocol):
     """A codec whose stream packets carry layers, base first, each with an error bound that
     holds on its own with the layers below it (``kinwave-live``): a relay serves a viewer the
-    lowest layers by cutting a packet after one, never decoding. A layer dropped from one
-    packet stays useless to the receiver until it restarts (a keyframe, or its own restart:
-    :meth:`layer_starts`)."""
+    lowest layers by cutting a packet after one, never decoding. Its stream decoder's
+    ``push(packet, layers)`` takes the number of layers a packet carries (None: all), and after
+    a whole packet its ``layer_ends`` say where each layer ends (the sender sends them to the
+    relay as the packet's cut table). A layer dropped from one packet stays useless to the
+    receiver until it restarts (a keyframe, or its own restart: :meth:`layer_starts`)."""
 
     @property
     def layer_bounds(self) -> list[float]:
         """Each layer's bound in cm, base first (one entry: the stream has no layers)."""
-        ...
-
-    def layer_ends(self, packet: bytes) -> list[int]:
-        """Where each layer a stream packet carries ends; CorruptStreamError if it does not parse."""
         ...
 
     def layer_starts(self, packet: bytes) -> list[bool]:
@@ -178,6 +176,20 @@ class StreamDecoder:
         :class:`~mocodec.errors.OutOfStepError` until it can decode again), False if it must be
         replaced at the next keyframe."""
         return False
+
+
+@runtime_checkable
+class LayeredDecoder(Protocol):
+    """The stream decoder of a :class:`Layered` codec."""
+
+    def push(self, packet: bytes, layers: int | None = None) -> np.ndarray:
+        """The frames of ``packet``, which carries its stream's ``layers`` lowest layers (None: all)."""
+        ...
+
+    @property
+    def layer_ends(self) -> list[int]:
+        """Where each layer the last packet pushed decoded ends in it (a relay's cut points)."""
+        ...
 
 
 class Codec:

@@ -18,10 +18,11 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 
-from mocodec.codecs.base import Codec, Embedded, Layered, StreamDecoder, StreamEncoder, checked_frames
+from mocodec.codecs.base import Codec, Embedded, Layered, LayeredDecoder, StreamDecoder, StreamEncoder, checked_frames
 from mocodec.coding.entropy.rangecoder import encode_ints
 from mocodec.errors import CodecError, OutOfStepError
 from mocodec.motion import Motion
@@ -181,11 +182,15 @@ class LiveEncoder:
         cut_table = self.codec.packet_cuts if isinstance(self.codec, Embedded) else None  # cut by relays
         decoder = self.decoder
         assert decoder is not None, "a codec stream was started"
+        layered = isinstance(self.codec, Layered) and len(self.codec.layer_bounds) > 1
         for payload in payloads:
             n = len(decoder.push(payload))
             flags = KEYFRAME if self.keyframe_due else (RESTART if self._restarts(payload) else 0)
             if cut_table is not None:
                 payload, flags = with_cuts(payload, encode_ints(cut_table(payload, self.skeleton))), flags | CUTS
+            elif layered:  # where the relay may cut the layers off
+                ends = np.array(cast(LayeredDecoder, decoder).layer_ends[:-1], dtype=np.int64)
+                payload, flags = with_cuts(payload, encode_ints(ends)), flags | CUTS
             out.append(self._packet(payload, n, ts, flags))
             self.keyframe_due = False
         return out
@@ -353,8 +358,7 @@ class LiveDecoder:
                 return self._concealed(packet.first_frame + packet.frames)
         head = self._concealed(packet.first_frame)
         try:
-            payload = packet.codec_payload
-            frames = np.asarray(self.decoder.push(payload), dtype=np.float64) if payload or packet.frames else empty
+            frames = self._decode(packet) if packet.payload or packet.frames else empty
             if len(frames) != packet.frames:
                 raise CodecError(
                     f"packet {packet.sequence} decodes to {len(frames)} frames, its header says {packet.frames}"
@@ -374,6 +378,17 @@ class LiveDecoder:
         if packet.end:
             self.decoder = None
         return np.vstack((head, self._emit(frames)))
+
+    def _decode(self, packet: Packet) -> np.ndarray:
+        """The frames of a packet: of a layered stream's, those of the layers it carries (the
+        relay may have cut some off); a cut packet of another stream is damaged."""
+        assert self.decoder is not None
+        if isinstance(self.codec, Layered):
+            layers = len(self.codec.layer_bounds) - packet.dropped
+            return np.asarray(cast(LayeredDecoder, self.decoder).push(packet.codec_payload, layers), dtype=np.float64)
+        if packet.dropped:
+            raise CodecError(f"packet {packet.sequence}: cut by layers, of a stream without layers")
+        return np.asarray(self.decoder.push(packet.codec_payload), dtype=np.float64)
 
     def _resyncing_decoder(self) -> StreamDecoder | None:
         """A decoder that finds its way into a codec stream already under way (one whose

@@ -6,7 +6,8 @@ A packet is one codec packet with what a network needs around it::
     4 cut table: the payload starts with a u16 length and the table),
     codec u8, stream id u32, sequence u32, timestamp u64 (µs since the epoch),
     first frame u32, frames u16, position 3 x f32 (the avatar's root, for crowd allocation),
-    payload length u32, payload, CRC32 over everything before it
+    payload length u32, payload, CRC32 over everything before it (started from a value that
+    says how many top layers a relay cut off a layered stream's packet: CRC32_STARTS)
 
 All integers little-endian; 48 bytes around the payload. A *stream header* packet (kind 0)
 carries the skeleton, frame rate and codec configuration as compressed JSON, so a receiver
@@ -15,7 +16,8 @@ packet's length as varints, then the packets: the relay sends each viewer one pe
 
 An embedded (truncatable) codec's packets travel from the sender to the relay with a *cut
 table*: where each channel's stream ends, so the relay cuts every viewer's share by slicing,
-without decoding. The relay strips the table before it forwards a packet.
+without decoding; a layered codec's, where each layer ends. The relay strips the table before
+it forwards a packet.
 
 Parsing never trusts a length: a short, oversized or damaged packet raises
 :class:`~mocodec.errors.CorruptStreamError` naming the byte offset and what was expected.
@@ -73,6 +75,10 @@ COMPACT = 0x80  # the tag bit of a compact data packet (a full packet starts wit
 C_EXPLICIT, C_POSITION, C_RESTART, C_SHORT = 8, 16, 32, 64
 SHORT_SEQUENCE = 63  # the sequence bits a short tag carries
 COMPACT_MIN = 4
+#: A packet's check starts from one of these, the top layers a relay cut off it (0 to 3): a cut
+#: costs no byte, and the receiver learns it with the check (docs/formats.md).
+CRC16_STARTS = (0xFFFF, 0x5A5A, 0xA5A5, 0x0F0F)
+CRC32_STARTS = (0, 0x5A5A5A5A, 0xA5A5A5A5, 0x0F0F0F0F)
 OVERHEAD = _FIELDS.size + _CRC.size
 MAX_REPAIRS = 256  # packets a viewer's repair request may name (docs/streaming.md)
 #: Where the timestamp, stream id and sequence number sit in a packet (read in bulk by the load test).
@@ -94,6 +100,7 @@ class Packet:
     compact: bool = False  # a data packet's wire form: compact (to_compact) or full
     sends_position: bool = True  # a compact packet carries ``position`` (else the receiver keeps the last)
     usual_frames: int = 0  # a data packet: its stream's usual frame count, which its header gives
+    dropped: int = 0  # a layered stream's data packet: the top layers a relay cut off it
 
     @property
     def keyframe(self) -> bool:
@@ -146,7 +153,7 @@ class Packet:
             *self.position,
             len(self.payload),
         )
-        return head + self.payload + _CRC.pack(zlib.crc32(self.payload, zlib.crc32(head)))
+        return head + self.payload + _CRC.pack(zlib.crc32(self.payload, zlib.crc32(head, CRC32_STARTS[self.dropped])))
 
     def to_compact(self) -> bytes:
         """The compact wire form of a data packet (docs/formats.md). An ongoing packet that
@@ -163,7 +170,7 @@ class Packet:
         if usual and not (explicit or self.sends_position or self.flags):
             out = bytearray([COMPACT | C_SHORT | (self.sequence & SHORT_SEQUENCE)]) + varint.pack(self.stream)
             out += self.payload
-            return bytes(out) + _U16.pack(binascii.crc_hqx(out, 0xFFFF))
+            return bytes(out) + _U16.pack(binascii.crc_hqx(out, CRC16_STARTS[self.dropped]))
         tag = COMPACT | (self.flags & 7) | (C_EXPLICIT if explicit else 0) | (C_POSITION if self.sends_position else 0)
         tag |= C_RESTART if self.flags & RESTART else 0
         out = bytearray([tag]) + varint.pack(self.stream) + bytes([self.sequence & 0xFF]) + varint.pack(self.frames)
@@ -172,7 +179,7 @@ class Packet:
         if self.sends_position:
             out += _POSITION.pack(*(int(np.clip(round(v * 100.0), -32768, 32767)) for v in self.position))
         out += self.payload
-        return bytes(out) + _U16.pack(binascii.crc_hqx(out, 0xFFFF))
+        return bytes(out) + _U16.pack(binascii.crc_hqx(out, CRC16_STARTS[self.dropped]))
 
 
 @dataclass
@@ -209,7 +216,9 @@ class OutOfSync(CorruptStreamError):
 def _parse_compact(data: bytes, where: str, cursor_of: Callable[[int], Cursor | None] | None) -> Packet:
     if len(data) < COMPACT_MIN:
         raise CorruptStreamError(f"{where}: {len(data)} bytes, shorter than a compact packet")
-    if binascii.crc_hqx(data[:-2], 0xFFFF) != _U16.unpack_from(data, len(data) - 2)[0]:
+    (crc,) = _U16.unpack_from(data, len(data) - 2)
+    dropped = next((k for k, start in enumerate(CRC16_STARTS) if binascii.crc_hqx(data[:-2], start) == crc), None)
+    if dropped is None:
         raise CorruptStreamError(f"{where}: byte {len(data) - 2}: CRC mismatch (damaged packet)")
     tag, body = data[0], data[:-2]
     short = bool(tag & C_SHORT)
@@ -267,6 +276,7 @@ def _parse_compact(data: bytes, where: str, cursor_of: Callable[[int], Cursor | 
         compact=True,
         sends_position=bool(flags & C_POSITION),
         usual_frames=cursor.usual_frames,
+        dropped=dropped,
     )
 
 
@@ -307,10 +317,21 @@ def parse(
         )
     end = _FIELDS.size + length
     (crc,) = _CRC.unpack_from(data, end)
-    if crc != zlib.crc32(data[:end]):
+    dropped = next((k for k, start in enumerate(CRC32_STARTS) if crc == zlib.crc32(data[:end], start)), None)
+    if dropped is None or (dropped and kind != DATA):
         raise CorruptStreamError(f"{where}: byte {end}: CRC mismatch (damaged packet)")
     return Packet(
-        stream, seq, ts, CODEC_NUMBERS[number], first, frames, data[_FIELDS.size : end], kind, flags, (x, y, z)
+        stream,
+        seq,
+        ts,
+        CODEC_NUMBERS[number],
+        first,
+        frames,
+        data[_FIELDS.size : end],
+        kind,
+        flags,
+        (x, y, z),
+        dropped=dropped,
     )
 
 
@@ -412,19 +433,20 @@ def is_batch(data: bytes | memoryview) -> bool:
     return bytes(data[:2]) in (BATCH_MAGIC, OLD_BATCH_MAGIC)
 
 
-def truncated(p: Packet, data: bytes, size: int) -> bytes:
+def truncated(p: Packet, data: bytes, size: int, dropped: int) -> bytes:
     """The wire bytes ``data`` of packet ``p`` with its payload cut to its first ``size``
-    bytes (a layered packet cut after a section): the same as
-    ``p.with_payload(p.payload[:size]).to_bytes()``, made from the bytes as they came, the
-    header kept (the full form's payload length set anew) and the check recomputed."""
+    bytes (a layered packet cut after its ``dropped`` top layers): the same as
+    ``replace(p, payload=p.payload[:size], dropped=dropped).to_bytes()``, made from the bytes as
+    they came, the header kept (the full form's payload length set anew) and the check
+    recomputed from the start that says the cut."""
     body = p.payload[:size]
     if data[0] & COMPACT:
         head = data[: len(data) - _U16.size - len(p.payload)]
         out = head + body
-        return out + _U16.pack(binascii.crc_hqx(out, 0xFFFF))
+        return out + _U16.pack(binascii.crc_hqx(out, CRC16_STARTS[dropped]))
     fields = bytearray(data[: _FIELDS.size])
     struct.pack_into("<I", fields, _FIELDS.size - 4, len(body))
-    return bytes(fields) + body + _CRC.pack(zlib.crc32(body, zlib.crc32(fields)))
+    return bytes(fields) + body + _CRC.pack(zlib.crc32(body, zlib.crc32(fields, CRC32_STARTS[dropped])))
 
 
 def split_batch(data: bytes | memoryview, where: str = "batch") -> list[memoryview]:

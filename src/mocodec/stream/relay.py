@@ -473,11 +473,10 @@ class Relay:
             if state is None:
                 raise Closing(BAD_MESSAGE, f"stream {p.stream}: data before its header")
             forward = self._forward(p, r)
+            if p.dropped:
+                raise Closing(BAD_MESSAGE, f"stream {p.stream}: packet {p.sequence}: a sender's packet is whole")
             if state.layered and p.frames:
-                try:
-                    forward.layer_ends = state.codec.layer_ends(p.codec_payload)
-                except MocodecError as e:
-                    raise Closing(BAD_MESSAGE, f"stream {p.stream}: packet {p.sequence}: {e}") from None
+                forward.layer_ends = self._layer_ends(forward, state.layers)
                 state.measure_layers(p, forward.layer_ends)
             state.position = p.position
             state.next_sequence, state.next_frame = (p.sequence + 1) & 0xFFFFFFFF, p.first_frame + p.frames
@@ -489,6 +488,20 @@ class Relay:
                 del state.gop[0]
             room.fresh.append(forward)
             state.ended = state.ended or p.end  # removed after this tick's dispatch
+
+    @staticmethod
+    def _layer_ends(f: Forward, layers: int) -> list[int]:
+        """Where each layer of a layered stream's packet ends, from its cut table (which the
+        forwarded packet no longer carries); Closing if it has none or it does not fit."""
+        ends, size = ([] if f.cuts is None else f.cuts.tolist()), len(f.packet.payload)
+        if f.cuts is None or len(ends) != layers - 1 or any(b < a for a, b in zip([0, *ends], [*ends, size])):
+            raise Closing(
+                BAD_MESSAGE,
+                f"stream {f.packet.stream}: packet {f.packet.sequence}: a layered stream's packet needs a cut "
+                f"table of {layers - 1} ends in order, within its {size} bytes",
+            )
+        f.cuts = None
+        return ends + [size]
 
     @staticmethod
     def _forward(p: Packet, raw: memoryview) -> Forward:
@@ -778,7 +791,7 @@ class Relay:
         assert f.layer_ends is not None
         if keep >= len(f.layer_ends):
             return f.data
-        return truncated(f.packet, f.data, f.layer_ends[keep - 1])
+        return truncated(f.packet, f.data, f.layer_ends[keep - 1], len(f.layer_ends) - keep)
 
     @staticmethod
     def _layer_variants(f: Forward) -> list[bytes]:

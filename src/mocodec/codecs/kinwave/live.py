@@ -29,15 +29,16 @@ they are in, with the pose representation of offline kinwave:
    layers below: its prediction is clamped to the interval the nearest layer below that coded
    the frame puts the target in (the quantiser cell of that layer's integer), for the channels
    whose decoded values fell in those cells in the last packet (both ends judge this alike,
-   nothing is sent). Its bound is checked on the decoding of it and the layers below. A relay
-   serves a viewer the lowest layers by cutting a packet after one (:func:`section_ends`).
+   nothing is sent). Its bound is checked on the decoding of it and the layers below.
 
-A layer's section: the arithmetic-coded stream alone (:func:`~mocodec.coding.entropy.binarycoder.finish_short`,
-its always-zero first byte left out): whether the packet is full (else its frame count), the
+A packet is one arithmetic-coded stream (:func:`~mocodec.coding.entropy.binarycoder.finish_short`,
+its always-zero first byte left out): with ``refresh_s``, each layer's restart flag in a fixed
+context; then per layer, base first, whether the packet is short (and its frame count), the
 change of the scale offset, the stride, then per joint its "any nonzero" flag and its
-integers. A packet of one layer is its section; of several, each section but the top one after
-its length (a varint), and a top section that is empty is one zero byte, so that a packet cut
-after a lower section is told apart.
+integers. The layers are not delimited: a decoder of the whole packet finds where each ends,
+the shortest prefix that decodes it and those below as the whole does (:func:`prefix_end`),
+which the sender gives the relay as the packet's cut table; a relay serves a viewer the lowest
+layers by cutting there, and says how many it cut off in the packet's frame.
 """
 
 from __future__ import annotations
@@ -226,8 +227,8 @@ def _stride_at(frames, index):
 
 @numba.njit(inline="always")
 def _restart_context():
-    """The context of a section's restart flag, 1 in 16, made afresh for each flag (never
-    adapted), so that a decoder that lost the stream's contexts reads it."""
+    """The context of a layer's restart flag, 1 in 16, made afresh for each flag (never
+    adapted), so that a decoder that lost the stream's contexts, or a relay, reads it."""
     state = np.empty((3, 1), dtype=np.int64)
     state[0, 0] = state[1, 0] = 65536 - 65536 // 16
     state[2, 0] = bc.WARM_DONE
@@ -235,15 +236,25 @@ def _restart_context():
 
 
 @numba.njit(cache=True)
-def _code_packet(ints, frames, full, offset_change, stride, first, count, state, buf, last_nonzero, restart):
-    """Arithmetic-code one packet: whether the layer restarts here (``restart`` 0 or 1, in a
-    fixed context, so that a decoder out of step reads it; -1: the stream has no refresh and no
-    flag), its head (:func:`_put_head`), then per joint (channels ``first[j]`` to
-    ``first[j] + count[j]``) an "any nonzero" flag, then the integers
-    ``(T, C)`` of its coded frames. Returns the bytes written."""
-    st = bc.encoder_state()
-    if restart >= 0:
-        bc.put(st, buf, _restart_context(), 0, restart)
+def _code_restarts(st, buf, restarts):
+    """Each layer's restart flag (0 or 1) at the head of a packet, in the fixed context."""
+    for flag in restarts:
+        bc.put(st, buf, _restart_context(), 0, flag)
+
+
+@numba.njit(cache=True)
+def _read_restarts(st, data, layers):
+    out = np.zeros(layers, dtype=np.int64)
+    for k in range(layers):
+        out[k] = bc.get(st, data, _restart_context(), 0)
+    return out
+
+
+@numba.njit(cache=True)
+def _code_layer(st, buf, ints, frames, full, offset_change, stride, first, count, state, last_nonzero):
+    """Arithmetic-code one layer of a packet: its head (:func:`_put_head`), then per joint
+    (channels ``first[j]`` to ``first[j] + count[j]``) an "any nonzero" flag, then the integers
+    ``(T, C)`` of its coded frames."""
     T, C = ints.shape
     J = first.size
     per = PER_CHANNEL
@@ -268,14 +279,11 @@ def _code_packet(ints, frames, full, offset_change, stride, first, count, state,
         else:
             for c in range(first[j], first[j] + count[j]):
                 last_nonzero[c] = 0
-    return bc.finish_short(st, buf)
 
 
 @numba.njit(cache=True)
-def _restarts(data):
-    """The decoder after a section's restart flag, and the flag."""
-    st = bc.start_decoder(data)
-    return st, bc.get(st, data, _restart_context(), 0)
+def _finish(st, buf):
+    return bc.finish_short(st, buf)
 
 
 @numba.njit(cache=True)
@@ -389,48 +397,23 @@ def layer_bounds(max_error_cm: float, layers: int, ratio: float = 2.0) -> list[f
     return [max_error_cm * ratio ** (layers - 1 - k) for k in range(layers)]
 
 
-def _spans(packet: bytes, layers: int) -> list[tuple[int, int]]:
-    """Where each layer section of a packet starts and ends; each but the last of a full
-    packet follows its length (a varint), so a relay drops the top layers by cutting after a
-    section. CorruptStreamError if a length does not parse or runs past the end."""
-    if layers == 1:
-        return [(0, len(packet))]
-    spans: list[tuple[int, int]] = []
-    pos = 0
-    for k in range(layers - 1):
-        if k > 0 and pos == len(packet):
-            return spans  # the top layers were dropped
-        try:
-            size, start = varint.unpack(packet, pos, 4)
-        except ValueError as e:
-            raise CorruptStreamError(f"kinwave-live packet: layer {k}'s length at byte {pos}: {e}") from None
-        if start + size > len(packet):
-            raise CorruptStreamError(
-                f"kinwave-live packet: layer {k}'s {size} bytes at byte {start} run past its end ({len(packet)} bytes)"
-            )
-        pos = start + size
-        spans.append((start, pos))
-    return spans + [(pos, len(packet))] if pos < len(packet) else spans
-
-
-def section_ends(packet: bytes, layers: int) -> list[int]:
-    """Where each layer section of a packet ends (a relay cuts a packet there)."""
-    return [end for _, end in _spans(packet, layers)]
-
-
-def split_layers(packet: bytes, layers: int) -> list[bytes]:
-    """A packet's layer sections, base first (those the relay left in it)."""
-    return [packet[start:end] for start, end in _spans(packet, layers)]
-
-
-def join_layers(sections: list[bytes]) -> bytes:
-    """The packet of ``sections`` (every layer of the stream): the inverse of
-    :func:`split_layers`. A top section that is empty is sent as one zero byte (the same to
-    its decoder, which reads zeros past the end), so that it is not taken for a dropped layer."""
-    if len(sections) == 1:
-        return sections[0]
-    *lower, top = sections
-    return b"".join(varint.pack(len(x)) + x for x in lower) + (top or b"\0")
+def prefix_end(data: np.ndarray, read: int, code: int) -> int:
+    """The shortest prefix of a packet from which an arithmetic decoder, reading zeros past its
+    end, decodes what it decoded from the whole up to where it has read ``read`` bytes of
+    ``data`` (the packet after its dropped first byte, :func:`_packet_data`) with ``code`` in
+    its register: the first ``n`` bytes whose value is at least the coder's interval's low end
+    then, ``data[:read]`` less ``code`` (every value from there up to the whole packet's lies in
+    that interval). Returns ``n`` less the dropped byte."""
+    window = bytes(data[:read]).ljust(read, b"\0")
+    low = int.from_bytes(window, "big") - code
+    short, long = 1, read  # data[:1] (the zero byte) may fall short, data[:read] does not
+    while short < long:
+        mid = (short + long) // 2
+        if int.from_bytes(window[:mid].ljust(read, b"\0"), "big") >= low:
+            long = mid
+        else:
+            short = mid + 1
+    return short - 1
 
 
 def base_codes(skeleton: Skeleton, bound_cm: float, measure: str) -> np.ndarray:
@@ -511,13 +494,12 @@ class KinwaveLiveCodec(Codec):
         """Each layer's bound in cm, base first (the :class:`~mocodec.codecs.base.Layered` protocol)."""
         return layer_bounds(self.config["max_error_cm"], self.config["layers"], self.config["layer_ratio"])
 
-    def layer_ends(self, packet: bytes) -> list[int]:
-        return section_ends(packet, self.config["layers"])
-
     def layer_starts(self, packet: bytes) -> list[bool]:
+        layers = self.config["layers"]
         if not self.config["refresh_s"]:
-            return [False] * len(section_ends(packet, self.config["layers"]))
-        return [bool(_restarts(_section_data(x))[1]) for x in split_layers(packet, self.config["layers"])]
+            return [False] * layers
+        data = _packet_data(packet)
+        return [bool(flag) for flag in _read_restarts(bc.start_decoder(data), data, layers)]
 
     def restart_frames(self, fps: float) -> tuple[int, list[int]]:
         """(period, phase of each layer) in frames of the layers' restarts inside a codec stream:
@@ -634,9 +616,9 @@ def _layers(codec: KinwaveLiveCodec, skeleton: Skeleton) -> list[_Layer]:
     return [_Layer(skeleton, codes, codec.reference) for codes in codec.layer_codes(skeleton)]
 
 
-def _section_data(section: bytes) -> np.ndarray:
-    """A section as the arithmetic decoder reads it: its always-zero first byte put back."""
-    return np.frombuffer(b"\0" + bytes(section), dtype=np.uint8)
+def _packet_data(packet: bytes) -> np.ndarray:
+    """A packet as the arithmetic decoder reads it: its always-zero first byte put back."""
+    return np.frombuffer(b"\0" + bytes(packet), dtype=np.uint8)
 
 
 def _reconstruct(layer: _Layer, ints: np.ndarray, offset: int, stride: int, cells: _Cells):
@@ -783,23 +765,14 @@ class _LiveEncoder(StreamEncoder):
             offset = max(offset - FINER * 2 ** max(tried + 1 - retries, 0), -MAX_OFFSET)
         return None
 
-    def _bytes(self, layer: _Layer, ints, frames, offset, stride, restart: int, trial: bool) -> bytes:
-        state, last = (layer.state.copy(), layer.last_nonzero.copy()) if trial else (layer.state, layer.last_nonzero)
+    def _trial_size(self, layer: _Layer, ints: np.ndarray, frames: int, change: int, stride: int) -> int:
+        """The bytes layer ``layer``'s part of a packet would take coded on its own (its
+        contexts left as they are): what a stride is chosen by."""
         buf = bc.buffer_for(bc.int_decisions(ints) + 2 * layer.first.size + 64)
-        n = _code_packet(
-            ints,
-            frames,
-            self.size,
-            offset - layer.offset,
-            stride,
-            layer.first,
-            layer.count,
-            state,
-            buf,
-            last,
-            restart,
-        )
-        return buf[1:n].tobytes()  # the first byte is always 0
+        st = bc.encoder_state()
+        state, last = layer.state.copy(), layer.last_nonzero.copy()
+        _code_layer(st, buf, ints, frames, self.size, change, stride, layer.first, layer.count, state, last)
+        return int(_finish(st, buf))
 
     def _retarget(self, values: np.ndarray) -> np.ndarray:
         """The channels whose targets the closed loop sets: every one but the translations below
@@ -816,10 +789,18 @@ class _LiveEncoder(StreamEncoder):
         goal = forward_kinematics(self.skeleton, values)
         retarget = self._retarget(values)
         cells = _Cells(len(values), values.shape[1])
-        sections = [self._layer_packet(k, values, goal, retarget, cells) for k in range(len(self.layers))]
+        restarts = [self._restart_flag(k, len(values)) for k in range(len(self.layers))]
+        coded = [self._layer_packet(k, values, goal, retarget, cells, restarts[k]) for k in range(len(self.layers))]
         self.frame += len(values)
         self.last_values = values[-1]
-        return join_layers(sections)
+        decisions = sum(bc.int_decisions(ints) + 2 * layer.first.size for layer, (ints, *_) in zip(self.layers, coded))
+        buf, st = bc.buffer_for(decisions + 64), bc.encoder_state()
+        if self.period:
+            _code_restarts(st, buf, np.array(restarts, dtype=np.int64))
+        for layer, (ints, change, stride) in zip(self.layers, coded):
+            first, count, state, last = layer.first, layer.count, layer.state, layer.last_nonzero
+            _code_layer(st, buf, ints, len(values), self.size, change, stride, first, count, state, last)
+        return buf[1 : _finish(st, buf)].tobytes()  # the first byte is always 0
 
     def _restart_flag(self, k: int, frames: int) -> int:
         """-1 without refresh; else 1 if layer ``k`` restarts in the packet of ``frames`` frames
@@ -829,11 +810,11 @@ class _LiveEncoder(StreamEncoder):
         first = (self.phases[k] - self.frame) % self.period  # the packet's first restart frame
         return int(self.frame > 0 and first < frames)
 
-    def _layer_packet(self, k: int, values: np.ndarray, goal, retarget, cells: _Cells) -> bytes:
-        """Layer ``k`` of a packet: the cheapest stride that holds its bound on every frame,
-        predicted within the cells of the layers below; the cells become its own. A layer that
-        restarts here starts again from nothing: its history, contexts and scale offset."""
-        restart = self._restart_flag(k, len(values))
+    def _layer_packet(self, k: int, values: np.ndarray, goal, retarget, cells: _Cells, restart: int):
+        """Layer ``k`` of a packet, (integers, scale offset change, stride) to code: the
+        cheapest stride that holds its bound on every frame, predicted within the cells of the
+        layers below; the cells become its own. A layer that restarts here starts again from
+        nothing: its history, contexts and scale offset."""
         layer = self.layers[k]
         if restart == 1:
             layer.restart()
@@ -844,23 +825,23 @@ class _LiveEncoder(StreamEncoder):
             if fit is None:
                 continue
             ints, coded, coded_cells, offset, worst = fit
-            size = len(self._bytes(layer, ints, len(values), offset, stride, restart, trial=True))
+            size = self._trial_size(layer, ints, len(values), offset - layer.offset, stride)
             if best is None or size < best[0]:
                 best = (size, stride, ints, coded, coded_cells, offset, worst)
         if best is None:
             raise CodecError(f"kinwave-live cannot hold {self.bounds[k]:g} cm on a packet")
         _, stride, ints, coded, coded_cells, offset, worst = best
-        self.offsets[k] = min(offset + 1, MAX_OFFSET) if worst < COARSER_BELOW * self.bounds[k] else offset
-        data = self._bytes(layer, ints, len(values), offset, stride, restart, trial=False)
+        self.offsets[k] = min(offset + DRIFT, MAX_OFFSET) if worst < COARSER_BELOW * self.bounds[k] else offset
+        change = offset - layer.offset
         _advance(layer, coded, stride, offset, cells)
         cells.update(stride, *coded_cells)
-        return data
+        return ints, change, stride
 
 
 class _LiveDecoder(StreamDecoder):
     """Decodes every layer a packet carries that it is in step with: a layer the packet lacks
     (a relay dropped it) or that followed a loss is out of step until it restarts (a packet
-    whose section says so, with ``refresh_s``, or the next codec stream), and so are the
+    whose head says so, with ``refresh_s``, or the next codec stream), and so are the
     layers above it, whose predictions lean on it."""
 
     def __init__(self, codec: KinwaveLiveCodec, skeleton: Skeleton, fps: float):
@@ -869,6 +850,8 @@ class _LiveDecoder(StreamDecoder):
         self.layer_in_step = [True] * len(self.layers)
         self.refresh = bool(codec.config["refresh_s"])
         self.size = packet_frames(fps)
+        self.data = _packet_data(b"")  # the last packet, and where the decoder stood after each layer of it
+        self.read: list[tuple[int, int]] = []
 
     @property
     def in_step(self) -> bool:
@@ -883,18 +866,25 @@ class _LiveDecoder(StreamDecoder):
         self.layer_in_step = [False] * len(self.layers)
         return self.refresh
 
-    def push(self, packet: bytes) -> np.ndarray:
-        sections = split_layers(bytes(packet), len(self.layers))
+    def push(self, packet: bytes, layers: int | None = None) -> np.ndarray:
+        """The frames of ``packet``, which carries its stream's ``layers`` lowest layers (None:
+        all; a relay's cut is said by the packet's frame, :attr:`mocodec.stream.packets.Packet.dropped`)."""
+        count = len(self.layers) if layers is None else layers
+        if not 1 <= count <= len(self.layers):
+            raise CorruptStreamError(f"kinwave-live packet: {count} layers of a stream of {len(self.layers)}")
+        data = _packet_data(packet)
+        st = bc.start_decoder(data)
+        restarts = (
+            _read_restarts(st, data, len(self.layers)) if self.refresh else np.zeros(len(self.layers), dtype=np.int64)
+        )
+        self.data, self.read = data, []
         cells = out = None
         below = True  # every layer below this one decoded this packet
         for k in range(len(self.layers)):
-            if below and k < len(sections):
-                data = _section_data(sections[k])
-                st, restart = _restarts(data) if self.refresh else (bc.start_decoder(data), 0)
-                if restart:
-                    self.layers[k].restart()
-                    self.layer_in_step[k] = True
-            below = below and k < len(sections) and self.layer_in_step[k]
+            if below and k < count and restarts[k]:
+                self.layers[k].restart()
+                self.layer_in_step[k] = True
+            below = below and k < count and self.layer_in_step[k]
             if not below:
                 self.layer_in_step[k] = False
                 continue
@@ -903,9 +893,17 @@ class _LiveDecoder(StreamDecoder):
             except CorruptStreamError:
                 self.layer_in_step[k:] = [False] * (len(self.layers) - k)
                 raise
+            self.read.append((int(st[2]), int(st[0])))
         if out is None:
             raise OutOfStepError("kinwave-live: waiting for the base layer to restart")
         return out
+
+    @property
+    def layer_ends(self) -> list[int]:
+        """Where each layer the last packet pushed decoded ends in it: the shortest prefix that
+        decodes that layer and those below as the whole packet does (:func:`prefix_end`); the
+        sender's cut table, by which a relay drops the top layers without decoding."""
+        return [prefix_end(self.data, read, code) for read, code in self.read]
 
     def _layer(self, layer: _Layer, st: np.ndarray, data: np.ndarray, cells: _Cells | None):
         frames, change, stride = _decode_head(st, data, self.size, layer.state)

@@ -33,7 +33,6 @@ from common import shared_sources
 from mocodec import load, ratecontrol
 from mocodec.codecs import get_codec
 from mocodec.codecs.kinwave import live
-from mocodec.coding.entropy.rangecoder import decode_ints
 from mocodec.formats import varint
 from mocodec.kinematics import forward_kinematics
 from mocodec.stream.client import REPAIR_AGAIN_S, REPAIR_HOLD_S
@@ -163,7 +162,7 @@ def layer_ends(p, layers: int) -> list[int]:
     """Where each layer of a sent kinwave-live packet ends: its cut table, then its end (a
     packet without frames has no table: every layer ends at its end)."""
     size = len(p.codec_payload)
-    return [int(e) for e in decode_ints(p.cuts)] + [size] if p.flags & CUTS else [size] * layers
+    return varint.unpack_array(p.cuts, 0, layers - 1)[0].tolist() + [size] if p.flags & CUTS else [size] * layers
 
 
 def measure(

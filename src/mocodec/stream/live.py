@@ -25,6 +25,7 @@ import numpy as np
 from mocodec.codecs.base import Codec, Embedded, Layered, LayeredDecoder, StreamDecoder, StreamEncoder, checked_frames
 from mocodec.coding.entropy.rangecoder import encode_ints
 from mocodec.errors import CodecError, OutOfStepError
+from mocodec.formats import varint
 from mocodec.motion import Motion
 from mocodec.skeleton import POSITION_CHANNELS, Skeleton
 from mocodec.stream.packets import (
@@ -189,8 +190,8 @@ class LiveEncoder:
             if cut_table is not None:
                 payload, flags = with_cuts(payload, encode_ints(cut_table(payload, self.skeleton))), flags | CUTS
             elif layered:  # where the relay may cut the layers off
-                ends = np.array(cast(LayeredDecoder, decoder).layer_ends[:-1], dtype=np.int64)
-                payload, flags = with_cuts(payload, encode_ints(ends)), flags | CUTS
+                ends = cast(LayeredDecoder, decoder).layer_ends[:-1]
+                payload, flags = with_cuts(payload, b"".join(map(varint.pack, ends))), flags | CUTS
             out.append(self._packet(payload, n, ts, flags))
             self.keyframe_due = False
         return out

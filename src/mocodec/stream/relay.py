@@ -63,6 +63,7 @@ from aiohttp.abc import AbstractAccessLogger
 from mocodec.codecs.base import Embedded, Layered
 from mocodec.coding.entropy.rangecoder import decode_ints
 from mocodec.errors import MocodecError
+from mocodec.formats import varint
 from mocodec.scene import bandwidth_scores, split_budget
 from mocodec.stream import tokens
 from mocodec.stream.packets import (
@@ -472,11 +473,11 @@ class Relay:
                 continue
             if state is None:
                 raise Closing(BAD_MESSAGE, f"stream {p.stream}: data before its header")
-            forward = self._forward(p, r)
+            forward = self._forward(p, r, state.layered)
             if p.dropped:
                 raise Closing(BAD_MESSAGE, f"stream {p.stream}: packet {p.sequence}: a sender's packet is whole")
             if state.layered and p.frames:
-                forward.layer_ends = self._layer_ends(forward, state.layers)
+                forward.layer_ends = self._layer_ends(p, state.layers)
                 state.measure_layers(p, forward.layer_ends)
             state.position = p.position
             state.next_sequence, state.next_frame = (p.sequence + 1) & 0xFFFFFFFF, p.first_frame + p.frames
@@ -490,28 +491,38 @@ class Relay:
             state.ended = state.ended or p.end  # removed after this tick's dispatch
 
     @staticmethod
-    def _layer_ends(f: Forward, layers: int) -> list[int]:
-        """Where each layer of a layered stream's packet ends, from its cut table (which the
-        forwarded packet no longer carries); Closing if it has none or it does not fit."""
-        ends, size = ([] if f.cuts is None else f.cuts.tolist()), len(f.packet.payload)
-        if f.cuts is None or len(ends) != layers - 1 or any(b < a for a, b in zip([0, *ends], [*ends, size])):
+    def _layer_ends(p: Packet, layers: int) -> list[int]:
+        """Where each layer of a layered stream's packet ends, from its cut table (varints: the
+        end of each layer but the top one); Closing if it has none or it does not fit."""
+        table, size, pos = p.cuts, len(p.codec_payload), 0
+        ends: list[int] = []
+        try:
+            while p.flags & CUTS and pos < len(table) and len(ends) < layers:
+                end, pos = varint.unpack(table, pos, 4)
+                ends.append(end)
+        except ValueError:
+            pass
+        if pos != len(table) or len(ends) != layers - 1 or any(b < a for a, b in zip([0, *ends], [*ends, size])):
             raise Closing(
                 BAD_MESSAGE,
-                f"stream {f.packet.stream}: packet {f.packet.sequence}: a layered stream's packet needs a cut "
-                f"table of {layers - 1} ends in order, within its {size} bytes",
+                f"stream {p.stream}: packet {p.sequence}: a layered stream's packet needs a cut table of "
+                f"{layers - 1} ends in order, within its {size} bytes",
             )
-        f.cuts = None
         return ends + [size]
 
     @staticmethod
-    def _forward(p: Packet, raw: memoryview) -> Forward:
+    def _forward(p: Packet, raw: memoryview, layered: bool) -> Forward:
+        """The packet as forwarded, its cut table stripped: an embedded codec's read here, a
+        layered one's by :meth:`_layer_ends`."""
         if not p.flags & CUTS:
             return Forward(p, bytes(raw))
+        plain = p.without_cuts()
+        if layered:
+            return Forward(plain, plain.to_bytes())
         try:
             cuts = decode_ints(p.cuts)
         except Exception:  # noqa: BLE001 - a cut table that does not parse
             raise Closing(BAD_MESSAGE, f"stream {p.stream}: packet {p.sequence}: bad cut table") from None
-        plain = p.without_cuts()
         return Forward(plain, plain.to_bytes(), cuts)
 
     async def _from_bus(self, room_name: str, data: bytes) -> None:

@@ -462,8 +462,8 @@ class KinwaveLiveCodec(Codec):
             "layer_ratio",
             float,
             2.0,
-            "each layer's bound over the next one's: a coarser base is a smaller share of the stream "
-            "(2 layers at 16: 16 and 1 cm)",
+            "each layer's bound over the next one's: a coarser base costs the full stream less "
+            "(2 layers at 32: 32 and 1 cm, about 1.1x one layer at 1 cm; at 2, about 1.4x)",
             1.0,
             1000.0,
         ),

@@ -359,3 +359,20 @@ def test_restart_points_are_flagged_and_a_late_joiner_reads_from_one(walk_bvh):
     late = receive_clip(packets[:1] + data[k:])
     clean = receive_clip(packets).channels
     np.testing.assert_array_equal(late.channels[-60:], clean[-60:])
+
+
+@pytest.mark.parametrize("layers", [1, 3])
+def test_a_packet_cut_by_more_layers_than_its_stream_has_is_concealed(walk_bvh, layers):
+    """A relay's cut is said by the packet's check (Packet.dropped); the receiver decodes the
+    layers left and conceals a packet that claims a cut its stream cannot have had."""
+    from dataclasses import replace
+
+    clip = walk_bvh[:240]
+    packets = [p.without_cuts() for p in stream_clip(clip, get_codec("kinwave-live", layers=layers))]
+    whole = LiveDecoder(StreamInfo.from_payload(packets[0].payload))
+    for p in packets[1:6]:
+        whole.push(p)
+    cut = replace(packets[6], dropped=1)
+    frames = whole.push(cut)
+    assert len(frames) == packets[6].frames and np.isfinite(frames).all()
+    assert whole.stats.dropped == (1 if layers == 1 else 0)

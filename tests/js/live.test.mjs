@@ -9,6 +9,7 @@ import {
   DecodeError, HoldingDecoder, Reader, RelayClient, StreamDecoder, forwardKinematics, parseStreamHeader, splitBatch,
 } from '../../js/src/index.js';
 import { seeded } from './seeded.mjs';
+import { crc16 } from '../../js/src/bytes.js';
 
 const LIVE = new URL('../data/live/', import.meta.url);
 const CASES = ['walk', 'walk-layers', 'walk-layers-cut', 'asf-30fps-shell', 'run-refresh'];
@@ -222,4 +223,34 @@ test('a batch of format 1 (u32 lengths) is refused as such', () => {
   const old = Uint8Array.from([0x4d, 0x42, 1, 0, 0, 0, 3, 0, 0, 0, 1, 2, 3]);
   assert.throws(() => splitBatch(old), (e) => e instanceof DecodeError && /format 1/.test(e.message));
   assert.deepEqual(splitBatch(Uint8Array.from([0x4d, 0x62, 2, 1, 2, 9, 8, 7])).map((p) => [...p]), [[9], [8, 7]]);
+});
+
+test('a packet says by its check how many layers a relay cut off; more than its stream has is damage', async () => {
+  const recheck = (raw, start) => { // the packet with its CRC-16 computed from another start
+    const out = Uint8Array.from(raw);
+    const crc = crc16(out, 0, out.length - 2, start);
+    out[out.length - 2] = crc & 0xff;
+    out[out.length - 1] = crc >> 8;
+    return out;
+  };
+  for (const [name, layers] of [['walk', 1], ['walk-layers', 3]]) {
+    const { stream } = await fixture(name);
+    const raws = splitBatch(stream);
+    const reader = new Reader();
+    const packets = raws.map((raw) => reader.read(raw));
+    const decoder = new StreamDecoder(await parseStreamHeader(packets[0].payload));
+    decoder.push(packets[1]);
+    const again = new Reader();
+    again.read(raws[0]);
+    again.read(raws[1]);
+    const cut = again.read(recheck(raws[2], 0x5a5a)); // "one layer cut off", nothing cut in fact
+    assert.equal(cut.dropped, 1);
+    if (layers === 1) assert.throws(() => decoder.push(cut), (e) => e instanceof DecodeError && /cut off a stream of 1/.test(e.message));
+    else assert.equal(decoder.push(cut).length, packets[2].frames * decoder.info.skeleton.numChannels);
+  }
+  const raws = splitBatch((await fixture('walk')).stream);
+  const reader = new Reader();
+  reader.read(raws[0]);
+  reader.read(raws[1]);
+  assert.throws(() => reader.read(recheck(raws[2], 0x1234)), (e) => e instanceof DecodeError && /CRC/.test(e.message));
 });

@@ -37,7 +37,7 @@ from mocodec.formats import varint
 from mocodec.kinematics import forward_kinematics
 from mocodec.stream.client import REPAIR_AGAIN_S, REPAIR_HOLD_S
 from mocodec.stream.live import LiveDecoder, stream_clip
-from mocodec.stream.packets import CUTS, HEADER, StreamInfo
+from mocodec.stream.packets import CUTS, HEADER, StreamInfo, layer_ends
 
 
 def joint_errors(motion, channels) -> np.ndarray:
@@ -131,7 +131,7 @@ def layer_rows(
     ends = decoded_ends(codec, motion, packets)
     sent = stream_clip(motion, codec, keyframe_s=keyframe_s)
     stream = [p.without_cuts() for p in sent if p.kind != HEADER]
-    sent_ends = [layer_ends(p, layers) for p in sent if p.kind != HEADER]
+    sent_ends = [sent_layer_ends(p, layers) for p in sent if p.kind != HEADER]
     framing = sum(map(framing_bytes, stream))
     kbps, max_cm, mean_cm = [], [], []
     for keep in range(1, layers + 1):
@@ -158,11 +158,10 @@ def decoded_ends(codec, motion, packets: list[bytes]) -> list[list[int]]:
     return out
 
 
-def layer_ends(p, layers: int) -> list[int]:
-    """Where each layer of a sent kinwave-live packet ends: its cut table, then its end (a
-    packet without frames has no table: every layer ends at its end)."""
-    size = len(p.codec_payload)
-    return varint.unpack_array(p.cuts, 0, layers - 1)[0].tolist() + [size] if p.flags & CUTS else [size] * layers
+def sent_layer_ends(p, layers: int) -> list[int]:
+    """Where each layer of a sent kinwave-live packet ends: its cut table (a packet without
+    frames has none: every layer ends at its end)."""
+    return layer_ends(p, layers) if p.flags & CUTS else [len(p.codec_payload)] * layers
 
 
 def measure(

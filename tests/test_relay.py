@@ -18,12 +18,11 @@ import pytest
 from conftest import DATA, free_port
 from mocodec.cli import main
 from mocodec.codecs import get_codec
-from mocodec.formats import varint
 from mocodec.stream import tokens
 from mocodec.stream.bus import NatsBus
 from mocodec.stream.client import RelayRefused, connect, publish_clip, record
 from mocodec.stream.live import receive_clip, stream_clip
-from mocodec.stream.packets import CUTS, Reader, pack_batch, split_batch, with_cuts
+from mocodec.stream.packets import CUTS, Reader, pack_batch, split_batch, with_layer_ends
 from mocodec.stream.relay import BAD_MESSAGE, RATE_LIMIT, Limits, Relay, Viewer, on_ladder, start
 
 pytestmark = pytest.mark.network  # a relay (and NATS) on loopback sockets
@@ -291,7 +290,7 @@ def test_a_layered_packet_without_a_cut_table_that_fits_closes_its_sender(walk_b
     payload = packets[2].codec_payload
     cuts = None if cuts is None else cuts(len(payload))
     bad = packets[2].with_payload(
-        payload if cuts is None else with_cuts(payload, b"".join(map(varint.pack, cuts))),
+        payload if cuts is None else with_layer_ends(payload, cuts),
         packets[2].flags & ~CUTS if cuts is None else packets[2].flags,
     )
 

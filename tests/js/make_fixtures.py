@@ -130,12 +130,12 @@ def relayed(p, keep: int, codec):
     """Packet ``p`` of a layered stream as a relay forwards it with its ``keep`` lowest layers."""
     from dataclasses import replace
 
-    from mocodec.formats import varint
+    from mocodec.stream.packets import layer_ends
 
     plain = p.without_cuts()
     if not p.frames:
         return plain
-    ends = varint.unpack_array(p.cuts, 0, codec.config["layers"] - 1)[0].tolist() + [len(plain.payload)]
+    ends = layer_ends(p, codec.config["layers"])
     return replace(plain, payload=plain.payload[: ends[keep - 1]], dropped=len(ends) - keep)
 
 

@@ -25,7 +25,6 @@ import numpy as np
 from mocodec.codecs.base import Codec, Embedded, Layered, LayeredDecoder, StreamDecoder, StreamEncoder, checked_frames
 from mocodec.coding.entropy.rangecoder import encode_ints
 from mocodec.errors import CodecError, OutOfStepError
-from mocodec.formats import varint
 from mocodec.motion import Motion
 from mocodec.skeleton import POSITION_CHANNELS, Skeleton
 from mocodec.stream.packets import (
@@ -39,6 +38,7 @@ from mocodec.stream.packets import (
     StreamInfo,
     header_packet,
     with_cuts,
+    with_layer_ends,
 )
 
 #: A sender's tick (Hz): frames are pushed, and packets sent, this often.
@@ -190,8 +190,8 @@ class LiveEncoder:
             if cut_table is not None:
                 payload, flags = with_cuts(payload, encode_ints(cut_table(payload, self.skeleton))), flags | CUTS
             elif layered:  # where the relay may cut the layers off
-                ends = cast(LayeredDecoder, decoder).layer_ends[:-1]
-                payload, flags = with_cuts(payload, b"".join(map(varint.pack, ends))), flags | CUTS
+                payload = with_layer_ends(payload, cast(LayeredDecoder, decoder).layer_ends[:-1])
+                flags |= CUTS
             out.append(self._packet(payload, n, ts, flags))
             self.keyframe_due = False
         return out
@@ -359,7 +359,8 @@ class LiveDecoder:
                 return self._concealed(packet.first_frame + packet.frames)
         head = self._concealed(packet.first_frame)
         try:
-            frames = self._decode(packet) if packet.payload or packet.frames else empty
+            payload = packet.codec_payload
+            frames = self._decode(packet, payload) if payload or packet.frames else empty
             if len(frames) != packet.frames:
                 raise CodecError(
                     f"packet {packet.sequence} decodes to {len(frames)} frames, its header says {packet.frames}"
@@ -380,16 +381,17 @@ class LiveDecoder:
             self.decoder = None
         return np.vstack((head, self._emit(frames)))
 
-    def _decode(self, packet: Packet) -> np.ndarray:
-        """The frames of a packet: of a layered stream's, those of the layers it carries (the
-        relay may have cut some off); a cut packet of another stream is damaged."""
+    def _decode(self, packet: Packet, payload: bytes) -> np.ndarray:
+        """The frames of a packet's codec ``payload``: of a layered stream's, those of the
+        layers it carries (the relay may have cut some off); a cut packet of another stream is
+        damaged."""
         assert self.decoder is not None
         if isinstance(self.codec, Layered):
             layers = len(self.codec.layer_bounds) - packet.dropped
-            return np.asarray(cast(LayeredDecoder, self.decoder).push(packet.codec_payload, layers), dtype=np.float64)
+            return np.asarray(cast(LayeredDecoder, self.decoder).push(payload, layers), dtype=np.float64)
         if packet.dropped:
             raise CodecError(f"packet {packet.sequence}: cut by layers, of a stream without layers")
-        return np.asarray(self.decoder.push(packet.codec_payload), dtype=np.float64)
+        return np.asarray(self.decoder.push(payload), dtype=np.float64)
 
     def _resyncing_decoder(self) -> StreamDecoder | None:
         """A decoder that finds its way into a codec stream already under way (one whose

@@ -285,6 +285,31 @@ def with_cuts(payload: bytes, cuts: bytes) -> bytes:
     return _U16.pack(len(cuts)) + cuts + payload
 
 
+def with_layer_ends(payload: bytes, ends: list[int]) -> bytes:
+    """A layered codec's payload carrying its cut table: where each layer but the top one ends,
+    as varints (read by :func:`layer_ends`)."""
+    return with_cuts(payload, b"".join(map(varint.pack, ends)))
+
+
+def layer_ends(p: Packet, layers: int) -> list[int]:
+    """Where each of the ``layers`` layers of a layered stream's packet ends, from its cut table
+    (:func:`with_layer_ends`), the top one at the codec payload's end; CorruptStreamError if it
+    has no table or the table does not fit (read a varint at a time: a relay reads every one)."""
+    table, size, pos = p.cuts, len(p.codec_payload), 0
+    ends: list[int] = []
+    try:
+        while p.flags & CUTS and pos < len(table) and len(ends) < layers:
+            end, pos = varint.unpack(table, pos, 4)
+            ends.append(end)
+    except ValueError:
+        pass
+    if pos != len(table) or len(ends) != layers - 1 or any(b < a for a, b in zip([0, *ends], [*ends, size])):
+        raise CorruptStreamError(
+            f"a layered stream's packet needs a cut table of {layers - 1} ends in order, within its {size} bytes"
+        )
+    return ends + [size]
+
+
 def codec_number(codec_id: str) -> int:
     try:
         return CODEC_NUMBERS.index(codec_id)

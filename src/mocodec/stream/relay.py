@@ -62,8 +62,7 @@ from aiohttp.abc import AbstractAccessLogger
 
 from mocodec.codecs.base import Embedded, Layered
 from mocodec.coding.entropy.rangecoder import decode_ints
-from mocodec.errors import MocodecError
-from mocodec.formats import varint
+from mocodec.errors import CorruptStreamError, MocodecError
 from mocodec.scene import bandwidth_scores, split_budget
 from mocodec.stream import tokens
 from mocodec.stream.packets import (
@@ -76,6 +75,7 @@ from mocodec.stream.packets import (
     Packet,
     StreamInfo,
     is_batch,
+    layer_ends,
     pack_batch,
     parse,
     split_batch,
@@ -477,7 +477,10 @@ class Relay:
             if p.dropped:
                 raise Closing(BAD_MESSAGE, f"stream {p.stream}: packet {p.sequence}: a sender's packet is whole")
             if state.layered and p.frames:
-                forward.layer_ends = self._layer_ends(p, state.layers)
+                try:
+                    forward.layer_ends = layer_ends(p, state.layers)
+                except CorruptStreamError as e:
+                    raise Closing(BAD_MESSAGE, f"stream {p.stream}: packet {p.sequence}: {e}") from None
                 state.measure_layers(p, forward.layer_ends)
             state.position = p.position
             state.next_sequence, state.next_frame = (p.sequence + 1) & 0xFFFFFFFF, p.first_frame + p.frames
@@ -491,29 +494,9 @@ class Relay:
             state.ended = state.ended or p.end  # removed after this tick's dispatch
 
     @staticmethod
-    def _layer_ends(p: Packet, layers: int) -> list[int]:
-        """Where each layer of a layered stream's packet ends, from its cut table (varints: the
-        end of each layer but the top one); Closing if it has none or it does not fit."""
-        table, size, pos = p.cuts, len(p.codec_payload), 0
-        ends: list[int] = []
-        try:
-            while p.flags & CUTS and pos < len(table) and len(ends) < layers:
-                end, pos = varint.unpack(table, pos, 4)
-                ends.append(end)
-        except ValueError:
-            pass
-        if pos != len(table) or len(ends) != layers - 1 or any(b < a for a, b in zip([0, *ends], [*ends, size])):
-            raise Closing(
-                BAD_MESSAGE,
-                f"stream {p.stream}: packet {p.sequence}: a layered stream's packet needs a cut table of "
-                f"{layers - 1} ends in order, within its {size} bytes",
-            )
-        return ends + [size]
-
-    @staticmethod
     def _forward(p: Packet, raw: memoryview, layered: bool) -> Forward:
         """The packet as forwarded, its cut table stripped: an embedded codec's read here, a
-        layered one's by :meth:`_layer_ends`."""
+        layered one's by :func:`~mocodec.stream.packets.layer_ends`."""
         if not p.flags & CUTS:
             return Forward(p, bytes(raw))
         plain = p.without_cuts()

@@ -283,7 +283,14 @@ def _code_layer(st, buf, ints, frames, full, offset_change, stride, first, count
 
 @numba.njit(cache=True)
 def _finish(st, buf):
+    """:func:`~mocodec.coding.entropy.binarycoder.finish_short`, compiled once and cached."""
     return bc.finish_short(st, buf)
+
+
+def _buffer(layers: list[tuple[_Layer, np.ndarray]]) -> np.ndarray:
+    """A coder buffer that holds the packet of these layers' integers (head, flags and ends
+    included)."""
+    return bc.buffer_for(sum(bc.int_decisions(ints) + 2 * layer.first.size for layer, ints in layers) + 64)
 
 
 @numba.njit(cache=True)
@@ -768,8 +775,7 @@ class _LiveEncoder(StreamEncoder):
     def _trial_size(self, layer: _Layer, ints: np.ndarray, frames: int, change: int, stride: int) -> int:
         """The bytes layer ``layer``'s part of a packet would take coded on its own (its
         contexts left as they are): what a stride is chosen by."""
-        buf = bc.buffer_for(bc.int_decisions(ints) + 2 * layer.first.size + 64)
-        st = bc.encoder_state()
+        buf, st = _buffer([(layer, ints)]), bc.encoder_state()
         state, last = layer.state.copy(), layer.last_nonzero.copy()
         _code_layer(st, buf, ints, frames, self.size, change, stride, layer.first, layer.count, state, last)
         return int(_finish(st, buf))
@@ -793,8 +799,7 @@ class _LiveEncoder(StreamEncoder):
         coded = [self._layer_packet(k, values, goal, retarget, cells, restarts[k]) for k in range(len(self.layers))]
         self.frame += len(values)
         self.last_values = values[-1]
-        decisions = sum(bc.int_decisions(ints) + 2 * layer.first.size for layer, (ints, *_) in zip(self.layers, coded))
-        buf, st = bc.buffer_for(decisions + 64), bc.encoder_state()
+        buf, st = _buffer([(layer, ints) for layer, (ints, *_) in zip(self.layers, coded)]), bc.encoder_state()
         if self.period:
             _code_restarts(st, buf, np.array(restarts, dtype=np.int64))
         for layer, (ints, change, stride) in zip(self.layers, coded):
@@ -803,10 +808,11 @@ class _LiveEncoder(StreamEncoder):
         return buf[1 : _finish(st, buf)].tobytes()  # the first byte is always 0
 
     def _restart_flag(self, k: int, frames: int) -> int:
-        """-1 without refresh; else 1 if layer ``k`` restarts in the packet of ``frames`` frames
-        starting at ``self.frame`` (never in the stream's first: every layer starts there)."""
+        """1 if layer ``k`` restarts in the packet of ``frames`` frames starting at
+        ``self.frame`` (never without refresh, nor in the stream's first: every layer starts
+        there), else 0."""
         if not self.period:
-            return -1
+            return 0
         first = (self.phases[k] - self.frame) % self.period  # the packet's first restart frame
         return int(self.frame > 0 and first < frames)
 
@@ -816,7 +822,7 @@ class _LiveEncoder(StreamEncoder):
         layers below; the cells become its own. A layer that restarts here starts again from
         nothing: its history, contexts and scale offset."""
         layer = self.layers[k]
-        if restart == 1:
+        if restart:
             layer.restart()
         sparse = layer.started and len(values) == self.size
         best = None

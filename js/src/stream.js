@@ -63,7 +63,7 @@ export class StreamDecoder {
       if (payload.length || p.frames) {
         const dropped = p.dropped ?? 0; // the top layers a relay cut off a layered stream's packet
         if (dropped >= (this.decoder.layerCount ?? 1)) throw new DecodeError(`packet ${p.sequence}: ${dropped} layers cut off a stream of ${this.decoder.layerCount ?? 1}`);
-        frames = dropped ? this.decoder.push(payload, dropped) : this.decoder.push(payload);
+        frames = this.decoder.push(payload, dropped);
         this.lastInts = this.decoder.lastInts ?? [];
       }
       const C = this.info.skeleton.numChannels;

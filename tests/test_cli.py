@@ -11,7 +11,7 @@ from mocodec.cli import main
 def test_info(capsys):
     assert main(["info", str(DATA / "07_03.amc"), "--joints"]) == 0
     out = capsys.readouterr().out
-    assert "415 at 120 fps = 3.46 s" in out and "62 channels" in out and "238.1 kbit/s" in out
+    assert "415 at 120 fps, spanning 3.450 s" in out and "62 channels" in out and "238.1 kbit/s" in out
     assert "lfemur" in out and "left_leg" in out
 
 

@@ -53,6 +53,12 @@ class Motion:
         return self.num_frames / self.fps
 
     @property
+    def time_span(self) -> float:
+        """Seconds from the first frame to the last (``(frames - 1) / fps``): the length of the
+        animation the frames sample."""
+        return max(self.num_frames - 1, 0) / self.fps
+
+    @property
     def raw_bits(self) -> int:
         """Size at 32-bit floats for every channel of every frame: the compression reference."""
         return 32 * self.channels.size

@@ -23,6 +23,14 @@ CHILD_MEMORY_BYTES = 2 << 30
 CHILD_TIMEOUT_S = 60.0
 
 
+class NativeCrash(CorruptStreamError):
+    """The child died (a signal or an exit code) before it answered: ``how``."""
+
+    def __init__(self, message: str, how: str):
+        super().__init__(message)
+        self.how = how
+
+
 def _mapped_bytes() -> int:
     """This process's virtual size (what RLIMIT_AS counts)."""
     try:
@@ -80,7 +88,7 @@ def call_isolated(func, *args, what: str, memory_bytes: int = CHILD_MEMORY_BYTES
             proc.join(5.0)
             code = proc.exitcode
             how = _exit_reason(code)
-            raise CorruptStreamError(f"{what}: the native decoder crashed ({how}): the data is damaged") from None
+            raise NativeCrash(f"{what}: the native decoder crashed ({how}): the data is damaged", how) from None
     finally:
         receive.close()
         proc.join(5.0)

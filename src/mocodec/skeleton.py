@@ -242,6 +242,19 @@ class Skeleton:
         y = self.rest_positions[:, 1]
         return float(y.max() - y.min())
 
+    def span(self) -> float:
+        """The longest path along bones between two joints (skeleton units): fingertip to toe
+        on a person, whatever the pose, so it tells the skeleton's size where its rest pose
+        (lying down, folded) does not."""
+        down = np.zeros(len(self))  # the longest path from each joint down to a descendant
+        longest = 0.0
+        norms = np.linalg.norm(self.offsets, axis=1)
+        for i in range(len(self) - 1, 0, -1):  # children before parents
+            parent, reach = self.joints[i].parent, down[i] + norms[i]
+            longest = max(longest, down[parent] + reach)
+            down[parent] = max(down[parent], reach)
+        return float(longest)
+
     # ----- comparison and editing --------------------------------------------------------
     def isclose(self, other: Skeleton, atol: float = 1e-6) -> bool:
         """Same structure, names, channels, orders and limits; offsets and axes within ``atol``."""

@@ -28,16 +28,23 @@ def describe(motion: Motion, path: str) -> str:
         parts[part] = parts.get(part, 0) + len(sk.joints[i].channels)
     root = motion.root_positions() / sk.units_per_metre
     height = float(np.ptp(sk.rest_positions[:, 1])) / sk.units_per_metre
+    span = sk.span() / sk.units_per_metre
     lines = [
         f"file        {path}",
         f"skeleton    {len(sk)} joints ({int(sk.end_sites.sum())} end sites), {sk.num_channels} channels "
         f"({int(sk.rotation_mask.sum())} rotation, {int((~sk.rotation_mask).sum())} translation)",
-        f"units       {sk.units_per_metre:.6g} per metre; rest-pose height {height:.2f} m",
-        f"frames      {motion.num_frames} at {motion.fps:g} fps = {motion.duration:.2f} s",
+        f"units       {sk.units_per_metre:.6g} per metre; rest-pose height {height:.2f} m, span {span:.2f} m",
+        f"frames      {motion.num_frames} at {motion.fps:g} fps, spanning {motion.time_span:.3f} s",
         f"raw size    {_human_bytes(motion.raw_bits / 8)} at 32-bit floats, {motion.raw_bitrate / 1000:.1f} kbit/s",
         f"root path   {np.linalg.norm(np.diff(root[:, [0, 2]], axis=0), axis=1).sum():.2f} m horizontal",
         "body parts  " + ", ".join(f"{p} {n}" for p, n in parts.items() if n),
     ]
+    if "dropped_m" in sk.metadata:
+        lines.insert(
+            4,
+            f"precision   {sk.metadata['precision_m'] * 100:.1e} cm (float32): motion within it is taken as "
+            f"still, which moves joints by at most {sk.metadata['dropped_m'] * 100:.1e} cm",
+        )
     return "\n".join(lines)
 
 
@@ -98,7 +105,9 @@ def cmd_compare(args) -> int:
     from mocodec.metrics import compare
 
     original = load_input(args.original, args)
-    decoded = load(args.decoded, asf=args.decoded_asf or args.asf, fps=args.fps, animation=args.animation)
+    decoded = load(
+        args.decoded, asf=args.decoded_asf or args.asf, fps=args.fps, animation=args.animation, units_per_metre=args.units
+    )
     result = compare(original, decoded, shell_cm=args.shell_cm)
     if args.json:
         print(json.dumps(result.as_dict(per_joint=args.per_joint), indent=2, allow_nan=False))

@@ -32,13 +32,47 @@ def add_input_options(p) -> None:
     p.add_argument(
         "--animation", metavar="NAME|INDEX", help="the glTF animation or FBX take to read (default: the first)"
     )
+    p.add_argument(
+        "--units",
+        type=units_per_metre,
+        metavar="UNIT",
+        help="length unit of a .bvh input: m, cm, mm, in, or units per metre "
+        "(default: the unit the file states, else guessed from the skeleton's size)",
+    )
+
+
+#: Names of length units, as units per metre.
+UNIT_NAMES = {"m": 1.0, "cm": 100.0, "mm": 1000.0, "in": 1.0 / 0.0254}
+
+
+def units_per_metre(text: str) -> float:
+    """``--units``: a unit's name or a positive number of units per metre."""
+    import argparse
+    import math
+
+    if text.lower() in UNIT_NAMES:
+        return UNIT_NAMES[text.lower()]
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        names = ", ".join(UNIT_NAMES)
+        raise argparse.ArgumentTypeError(f"{text!r} is not a unit ({names}) or a positive number of units per metre")
+    return value
 
 
 def load_input(path, args):
     """The motion file ``path`` read with the input options of ``args``."""
     from mocodec.formats import load
 
-    return load(path, asf=args.asf, fps=args.fps, animation=getattr(args, "animation", None))
+    return load(
+        path,
+        asf=args.asf,
+        fps=args.fps,
+        animation=getattr(args, "animation", None),
+        units_per_metre=getattr(args, "units", None),
+    )
 
 
 TARGET_OPTIONS = (

@@ -31,7 +31,7 @@ def load(
 
     ``fps`` sets the rate of an AMC (default 120, the CMU rate), overrides a BVH's ``Frame
     Time``, and is the rate a glTF or FBX animation is sampled at (default: the file's own);
-    ``units_per_metre`` overrides a BVH's guessed unit; ``animation`` picks a glTF animation or
+    ``units_per_metre`` overrides a BVH's stated or guessed unit; ``animation`` picks a glTF animation or
     an FBX take by name or index (the first by default).
     """
     path = Path(path)
@@ -56,14 +56,15 @@ def save(motion: Motion, path: str | os.PathLike, *, asf: str | os.PathLike | No
     same stem) or ``.gltf``/``.glb``, converting the skeleton form as needed; returns the files
     written.
 
-    BVH does not state its unit, so a skeleton whose unit would not be recognised when read
-    back (e.g. CMU ASF units) is written in centimetres."""
+    A BVH is written in the skeleton's unit when a reader would guess it from the skeleton's
+    size, else in centimetres (e.g. CMU ASF units), stating the unit when even that would be
+    misread (:mod:`mocodec.formats.bvh`)."""
     path = Path(path)
     ext = path.suffix.lower()
     if ext == ".bvh":
         bvh_motion = to_bvh_form(motion)
-        if guess_units_per_metre(bvh_motion.skeleton.height()) != bvh_motion.skeleton.units_per_metre:
-            bvh_motion = with_units(bvh_motion, 100.0)  # BVH cannot state its unit: write centimetres
+        if guess_units_per_metre(bvh_motion.skeleton.span()) != bvh_motion.skeleton.units_per_metre:
+            bvh_motion = with_units(bvh_motion, 100.0)  # the unit most readers assume
         write_bvh(bvh_motion, path)
         return [path]
     if ext == ".amc":

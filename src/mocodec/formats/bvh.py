@@ -1,13 +1,21 @@
 """BVH (Biovision hierarchy) reader and writer.
 
 Any channel order per joint, position channels on any joint, ``End Site`` blocks (read as
-channel-less joints named ``<parent>_end``), tabs or spaces, CRLF or LF. ``Frame Time`` gives
-the frame rate; a rate within 1e-4 of a whole number is taken as that number (0.00833333 s is
-120 fps). The frame block is parsed by numpy in one pass, so big files load at tens of MB/s.
+channel-less joints named ``<parent>_end``), tabs or spaces, CRLF or LF, ``#`` comment lines
+in the hierarchy. ``Frame Time`` gives the frame rate; a rate within 1e-4 of a whole number is
+taken as that number (0.00833333 s is 120 fps). The frame block is parsed by numpy in one pass,
+so big files load at tens of MB/s.
+
+BVH states no unit of length. The writer states it in a comment line after ``HIERARCHY``
+(``# unit: 100 per metre``) when a reader's guess from the skeleton's size
+(:func:`guess_units_per_metre`) would get it wrong; Blender's importer skips such a line,
+three.js's BVHLoader does not, which is why it is written only then. The motion rows follow
+the hierarchy as written (depth first), whatever the order of the motion's joints.
 """
 
 from __future__ import annotations
 
+import math
 import os
 import re
 from dataclasses import replace
@@ -22,6 +30,8 @@ from mocodec.skeleton import CHANNEL_NAMES, Joint, Skeleton
 
 _CHANNEL_LOOKUP = {c.lower(): c for c in CHANNEL_NAMES}
 _HIERARCHY_KEYWORDS = "ROOT, JOINT, End Site, OFFSET, CHANNELS, { or }"
+#: The comment line that states a file's unit of length.
+_UNIT_LINE = re.compile(r"^#\s*unit:\s*(\S+)\s+per\s+metre\b", re.IGNORECASE)
 
 
 def _snap_fps(frame_time: float) -> float:
@@ -35,6 +45,7 @@ class _HierarchyParser:
         self.lines = lines
         self.path = path
         self.joints: list[dict] = []
+        self.stated_units: float | None = None  # from a '# unit: N per metre' line
 
     def error(self, lineno: int, message: str) -> FormatError:
         return FormatError(self.path, lineno + 1, message)
@@ -54,6 +65,10 @@ class _HierarchyParser:
         pending: tuple[str | None, int, bool] | None = None  # (name, parent, is_end) awaiting '{'
         root_seen = False
         while n < len(self.lines):
+            if self.lines[n].lstrip().startswith("#"):
+                self._comment(n)
+                n += 1
+                continue
             toks = self.tokens(n)
             while toks:
                 word = toks[0]
@@ -116,6 +131,15 @@ class _HierarchyParser:
             n += 1
         raise self.error(len(self.lines) - 1, "file ends before the MOTION section")
 
+    def _comment(self, n: int) -> None:
+        """A comment line: the file's unit when it states one."""
+        m = _UNIT_LINE.match(self.lines[n].strip())
+        if m:
+            units = parse_number(m.group(1), self.path, n + 1, "the units per metre")
+            if not 0 < units <= 1e9:
+                raise self.error(n, f"unit {m.group(1)} per metre out of range (0, 1e9]")
+            self.stated_units = units
+
     def _channels(self, n: int, toks: list[str], stack: list[int]) -> list[str]:
         if not stack:
             raise self.error(n, "CHANNELS outside a joint block")
@@ -172,13 +196,13 @@ class _HierarchyParser:
 
 
 def read_bvh(path: str | os.PathLike, units_per_metre: float | None = None) -> Motion:
-    """Read a BVH file; ``units_per_metre`` is guessed from the skeleton's size unless given
-    (see :func:`guess_units_per_metre`)."""
+    """Read a BVH file; ``units_per_metre`` is the file's stated unit, or guessed from the
+    skeleton's size (see :func:`guess_units_per_metre`), unless given."""
     text = read_text(path)
     lines = text.split("\n")
     parser = _HierarchyParser(lines, path)
     motion_line = parser.parse()
-    skeleton_units = units_per_metre
+    skeleton_units = units_per_metre or parser.stated_units
     n = motion_line + 1
     header: dict[str, tuple[str, int]] = {}
     while n < len(lines) and len(header) < 2:
@@ -210,7 +234,7 @@ def read_bvh(path: str | os.PathLike, units_per_metre: float | None = None) -> M
     except ValueError as e:
         raise FormatError(path, None, str(e)) from None
     if skeleton_units is None:
-        skeleton_units = guess_units_per_metre(skeleton.height())
+        skeleton_units = guess_units_per_metre(skeleton.span())
     skeleton = replace(skeleton, units_per_metre=skeleton_units)
     width = skeleton.num_channels
     block = "\n".join(lines[n:])
@@ -223,49 +247,36 @@ def read_bvh(path: str | os.PathLike, units_per_metre: float | None = None) -> M
 
 
 _UNIT_CANDIDATES = (("metres", 1.0), ("inches", 1.0 / 0.0254), ("centimetres", 100.0), ("millimetres", 1000.0))
+#: The span (metres, :meth:`~mocodec.skeleton.Skeleton.span`) a person's skeleton has:
+#: fingertip or toe to fingertip or toe along the bones, 1.2 m for a child to 2.6 m for a
+#: tall adult with fingers; the range is narrower than one unit's ratio to the next (2.54).
+PERSON_SPAN_M = (1.1, 2.8)
 
 
-def guess_units_per_metre(rest_height: float) -> float:
-    """Units per metre of a BVH skeleton, which the format does not state.
+def guess_units_per_metre(span: float) -> float:
+    """Units per metre of a BVH skeleton whose file does not state it, from its span (the
+    longest path along its bones, in file units).
 
-    The rest pose's vertical pivot extent (feet to head, no skull top) of an adult is 1.2 to
-    2.2 m; we pick the unit among metres, inches, centimetres and millimetres that puts it
-    there, centimetres when none or several do. On the CMU BVH set (152.7 units) this gives
-    centimetres, which the same takes in ASF/AMC confirm: root travel 96-101 BVH units per
-    metre on the walks, leg length 99-102 units per metre (``docs/units.md``).
+    We pick the unit among metres, inches, centimetres and millimetres that puts the span in
+    :data:`PERSON_SPAN_M`, centimetres when none or several do. The span does not depend on
+    the rest pose, which is not always upright. On the CMU BVH set (236 units) this gives
+    centimetres, which the same takes in ASF/AMC confirm (``docs/units.md``).
     """
-    fits = [upm for _, upm in _UNIT_CANDIDATES if 1.2 <= rest_height / upm <= 2.2]
+    low, high = PERSON_SPAN_M
+    fits = [upm for _, upm in _UNIT_CANDIDATES if low <= span / upm <= high]
     return fits[0] if len(fits) == 1 else 100.0
 
 
-def write_bvh(motion: Motion, path: str | os.PathLike, decimals: int = 6) -> None:
-    """Write ``motion`` as BVH, atomically. Channel-less leaf joints become End Sites."""
+def write_bvh(motion: Motion, path: str | os.PathLike, decimals: int | None = None) -> None:
+    """Write ``motion`` as BVH, atomically (see :func:`bvh_text`)."""
     atomic_write(path, bvh_text(motion, decimals))
 
 
-def bvh_text(motion: Motion, decimals: int = 6) -> str:
+def bvh_text(motion: Motion, decimals: int | None = None) -> str:
+    """``motion`` as BVH text. Channel-less leaf joints become End Sites; the hierarchy and the
+    motion rows go depth first; the unit is stated when a reader would guess another. Values
+    have ``decimals`` places, by default enough for 1e-8 m (at least 6)."""
     sk = motion.skeleton
-    out = ["HIERARCHY"]
-    kids = sk.children
-
-    def fmt(v: float) -> str:
-        s = f"{v:.{decimals}f}".rstrip("0").rstrip(".")
-        return "0" if s in ("-0", "") else s
-
-    def emit(i: int, indent: str) -> None:
-        j = sk.joints[i]
-        if i != 0 and sk.end_sites[i]:
-            out.append(f"{indent}End Site")
-        else:
-            out.append(f"{indent}{'ROOT' if i == 0 else 'JOINT'} {j.name}")
-        out.append(f"{indent}{{")
-        out.append(f"{indent}  OFFSET {' '.join(fmt(v) for v in j.offset)}")
-        if i == 0 or not sk.end_sites[i]:
-            out.append(f"{indent}  CHANNELS {len(j.channels)}{''.join(' ' + c for c in j.channels)}")
-        for k in kids[i]:
-            emit(k, indent + "  ")
-        out.append(f"{indent}}}")
-
     for j in sk.joints:
         if j.rotation_order != "".join(c[0] for c in j.channels if c.endswith("rotation")):
             raise ValueError(
@@ -274,8 +285,38 @@ def bvh_text(motion: Motion, decimals: int = 6) -> str:
             )
         if j.has_axis:
             raise ValueError(f"joint {j.name!r} has an ASF axis; convert the motion to BVH form first")
-    emit(0, "")
+    if decimals is None:
+        decimals = max(6, math.ceil(8.0 - math.log10(sk.units_per_metre) - 1e-9))
+    out = ["HIERARCHY"]
+    if guess_units_per_metre(sk.span()) != sk.units_per_metre:
+        out.append(f"# unit: {sk.units_per_metre!r} per metre")
+    order: list[int] = []
+    kids = sk.children
+    stack: list[tuple[int, int]] = [(0, 0)]  # (joint, depth); (-1, depth) closes a block
+    while stack:
+        i, depth = stack.pop()
+        indent = "  " * depth
+        if i < 0:
+            out.append(f"{indent}}}")
+            continue
+        j = sk.joints[i]
+        order.append(i)
+        end_site = i != 0 and sk.end_sites[i]
+        out.append(f"{indent}End Site" if end_site else f"{indent}{'ROOT' if i == 0 else 'JOINT'} {j.name}")
+        out.append(f"{indent}{{")
+        out.append(f"{indent}  OFFSET {' '.join(_number(v, decimals) for v in j.offset)}")
+        if not end_site:
+            out.append(f"{indent}  CHANNELS {len(j.channels)}{''.join(' ' + c for c in j.channels)}")
+        stack.append((-1, depth))
+        stack.extend((k, depth + 1) for k in reversed(kids[i]))
     out.append("MOTION")
     out.append(f"Frames: {motion.num_frames}")
     out.append(f"Frame Time: {1.0 / motion.fps:.10g}")
-    return "\n".join(out) + "\n" + format_rows(motion.channels, decimals)
+    offsets = sk.channel_offsets
+    columns = np.concatenate([np.arange(offsets[i], offsets[i + 1]) for i in order]).astype(np.int64)
+    return "\n".join(out) + "\n" + format_rows(motion.channels[:, columns], decimals)
+
+
+def _number(value: float, decimals: int) -> str:
+    text = f"{value:.{decimals}f}".rstrip("0").rstrip(".")
+    return "0" if text in ("-0", "") else text

@@ -7,7 +7,8 @@
 * :func:`to_asf_form`: ASF bones start at their parent's end and only rotate. Rotation orders
   that the standard ``dof rx ry rz`` (order ``ZYX``) or a subset of it can express are kept;
   others are converted to ``ZYX``. A joint whose children start at different points (a BVH
-  pelvis, chest or head) gets one dof-less link bone per child, which moves with it.
+  pelvis, chest or head) gets one dof-less link bone per child, which moves with it. A root
+  without channels gets three that hold zero (an ASF root states its dofs).
   Translation channels below the root cannot be expressed: ConversionError.
 """
 
@@ -121,7 +122,12 @@ def to_asf_form(motion: Motion) -> Motion:
                 parent = b.add(Joint(link, parent, (0.0, 0.0, 0.0)), np.zeros((len(motion.channels), 0)))
         positions = [c for c in j.channels if c in POSITION_CHANNELS]
         order = j.rotation_order
-        if _is_subsequence(order, _ASF_ORDER):
+        if i == 0 and not j.channels:  # an ASF root states at least one dof: still rotations
+            order = _ASF_ORDER
+            rot = [f"{a}rotation" for a in reversed(order)]
+            values = np.zeros((len(motion.channels), len(rot)))
+            limits = tuple((-np.inf, np.inf) for _ in rot)
+        elif _is_subsequence(order, _ASF_ORDER):
             rot = [f"{a}rotation" for a in reversed(order)]
             values = b.old_columns(i, positions + rot)
             limits = _limits_for(j, positions + rot)

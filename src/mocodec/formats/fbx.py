@@ -23,6 +23,10 @@ from mocodec.extras import require
 from mocodec.formats import nodetree
 from mocodec.motion import Motion
 
+#: The ufbx objects a loader's child never frees: the binding (0.0.5) can crash while it frees
+#: a scene, and the child exits without freeing anything.
+_HELD: list = []
+
 #: How long the loader's child may take: ufbx evaluates the whole scene at each frame, so the
 #: longest take the frame limit lets through needs tens of seconds (docs/formats.md).
 READ_TIMEOUT_S = 300.0
@@ -77,6 +81,10 @@ def read_fbx(path: str | os.PathLike, *, animation: str | int | None = None, fps
         kind, value = sandbox.call_isolated(
             _read_outcome, path, animation, fps, what=str(path), timeout_s=READ_TIMEOUT_S
         )
+    except sandbox.NativeCrash as e:
+        raise FormatError(
+            path, None, f"the FBX loader (ufbx) crashed on it ({e.how}): a damaged file, or one its binding cannot read"
+        ) from None
     except CorruptStreamError as e:
         raise FormatError(path, None, f"the FBX loader failed on it: {str(e).removeprefix(f'{path}: ')}") from None
     if kind == "error":
@@ -99,6 +107,7 @@ def _read(path: Path, animation: str | int | None, fps: float | None) -> Motion:
     nodes = list(scene.nodes)
     stacks = list(scene.anim_stacks)
     settings = scene.settings
+    _HELD.extend((scene, nodes, stacks, settings))
     parents = np.array([n.parent.typed_id if n.parent is not None else -1 for n in nodes], dtype=np.int64)
     if any(n.typed_id != k for k, n in enumerate(nodes)) or (parents >= np.arange(len(nodes))).any():
         raise FormatError(path, None, "the node list is not in parents-first order")

@@ -3,7 +3,8 @@
 Writing: one node per joint (its rest offset as the node's translation, in metres as glTF
 requires), one skin over all joints (so loaders such as three.js make them bones), and one
 animation sampling every frame: a rotation channel (quaternions) for each joint that rotates, a
-translation channel for each joint that translates, LINEAR between frames. Each node's
+translation channel for each joint that translates (a still pose: the root's rotation), LINEAR
+between frames. Each node's
 ``extras.mocodec`` keeps the joint's channel layout (channels, Euler order, ASF axis, exact
 offset) and the asset's ``extras.mocodec`` the unit and frame rate, so a file read back has the
 same skeleton; other readers ignore them. Values are 32-bit floats, as glTF stores them.
@@ -11,8 +12,9 @@ same skeleton; other readers ignore them. Values are 32-bit floats, as glTF stor
 Reading: the skeleton is the first skin's joints (or, without a skin, the nodes the animation
 moves and the nodes between them), with the transforms above them composed into the root;
 the animation (``animation``: a name or an index, the first by default) is sampled at ``fps``
-(by default the file's own, from its key spacing), with STEP, LINEAR (slerp) and CUBICSPLINE
-interpolation. Buffers must be inside the file (a ``.glb`` chunk or a ``data:`` URI): a buffer
+from its first key to its last, with STEP, LINEAR (slerp) and CUBICSPLINE interpolation. By
+default the rate is the grid the key times sit on (a baked animation's), else 30 fps (adjusted
+so the last key falls on a frame; :func:`_frame_rate`). Buffers must be inside the file (a ``.glb`` chunk or a ``data:`` URI): a buffer
 naming another file is refused, as mocodec never opens a path a file names.
 """
 
@@ -46,8 +48,15 @@ _NORMALISE = {5120: 127.0, 5121: 255.0, 5122: 32767.0, 5123: 65535.0}
 _WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
 #: Bytes a glTF file may have: its buffers are read into memory whole.
 MAX_FILE_BYTES = 1 << 31
-#: Frame rate of a clip whose keys do not tell one (a single key).
+#: Frame rate of a clip whose keys do not sit on a grid of at least MIN_GRID_FPS (a few
+#: authored keys, or keys at irregular times): adjusted so the last key falls on a frame.
 FALLBACK_FPS = 30.0
+#: The lowest key rate taken for a sampling grid: sparser keys are an animator's keyframes,
+#: played back interpolated, not samples.
+MIN_GRID_FPS = 10.0
+#: How far (in frames) a key time may be from the grid and still sit on it (key times are
+#: 32-bit floats).
+_GRID_SLACK_FRAMES = 1e-2
 
 
 def _pygltflib():
@@ -122,8 +131,12 @@ def to_gltf_bytes(motion: Motion, binary: bool, animation_name: str = "") -> byt
             animation.samplers.append(g.AnimationSampler(input=times, output=blob.add(values, kind)))
             target = g.AnimationChannelTarget(node=i, path=path)
             animation.channels.append(g.AnimationChannel(sampler=len(animation.samplers) - 1, target=target))
-    if animation.channels:
-        gltf.animations = [animation]
+    if not animation.channels:  # a still pose: the root's rotation keeps its frames
+        xyzw = np.tile(rotation[0, 0, [1, 2, 3, 0]], (motion.num_frames, 1))
+        animation.samplers.append(g.AnimationSampler(input=times, output=blob.add(xyzw, "VEC4")))
+        target = g.AnimationChannelTarget(node=0, path="rotation")
+        animation.channels.append(g.AnimationChannel(sampler=0, target=target))
+    gltf.animations = [animation]
     data = bytes(blob.data) + b"\0" * (-len(blob.data) % 4)
     if binary:
         gltf.buffers = [g.Buffer(byteLength=len(data))]
@@ -487,15 +500,22 @@ class _Track:
         return rotations.quat_normalize(out) if self.path == "rotation" else out
 
 
-def _frame_rate(tracks: list[_Track]) -> float:
-    """The rate of the densest track's keys (whole numbers kept whole), or FALLBACK_FPS."""
-    densest = max(tracks, key=lambda tr: len(tr.times))
-    steps = np.diff(densest.times)
-    steps = steps[steps > 0]
-    if not len(steps):
-        return FALLBACK_FPS
-    fps = 1.0 / float(np.median(steps))
-    return float(round(fps)) if abs(fps - round(fps)) < 1e-3 * fps else round(fps, 3)
+def _frame_rate(tracks: list[_Track], start: float, end: float) -> float:
+    """The rate of the grid the key times sit on (the closest spacing between two keys of any
+    tracks, whole numbers kept whole) when every key is on it and it is at least MIN_GRID_FPS;
+    otherwise FALLBACK_FPS, adjusted so that ``end`` falls on a frame."""
+    times = np.unique(np.concatenate([tr.times for tr in tracks])) - start
+    steps = np.diff(times)
+    steps = steps[steps > 0.25 / limits.MAX_FPS]  # keys of two tracks at one time, in float32
+    if len(steps):
+        rate = 1.0 / float(steps.min())
+        if abs(rate - round(rate)) < 1e-3 * rate:
+            rate = float(round(rate))
+        grid = times * rate
+        if rate >= MIN_GRID_FPS and np.abs(grid - np.rint(grid)).max() <= _GRID_SLACK_FRAMES:
+            return min(rate, limits.MAX_FPS)
+    frames = round((end - start) * FALLBACK_FPS)
+    return frames / (end - start) if frames > 0 else FALLBACK_FPS
 
 
 def _joint_nodes(doc: _Document, parents: np.ndarray, moved: set[int]) -> list[int]:
@@ -557,12 +577,12 @@ def read_gltf(path: str | os.PathLike, *, animation: str | int | None = None, fp
         tracks[(target.node, target.path)] = _Track(doc, chosen, channel, k)
     if not tracks:
         raise doc.fail(f"animation {chosen.name or 0!r} moves no node")
-    stated = _mocodec_extras(doc.gltf.asset)
-    rate = fps or _positive(stated.get("fps"), limits.MAX_FPS) or _frame_rate(list(tracks.values()))
-    if not 0 < rate <= limits.MAX_FPS:
-        raise doc.fail(f"frame rate {rate} out of range (0, {limits.MAX_FPS:g}]")
     start = min(tr.times[0] for tr in tracks.values())
     end = max(tr.times[-1] for tr in tracks.values())
+    stated = _mocodec_extras(doc.gltf.asset)
+    rate = fps or _positive(stated.get("fps"), limits.MAX_FPS) or _frame_rate(list(tracks.values()), start, end)
+    if not 0 < rate <= limits.MAX_FPS:
+        raise doc.fail(f"frame rate {rate} out of range (0, {limits.MAX_FPS:g}]")
     frames = int(round((end - start) * rate)) + 1
     if frames * len(nodes) * 10 > limits.MAX_DECODED_VALUES:
         raise doc.fail(f"{frames} frames of {len(nodes)} nodes: more than one read may decode")

@@ -8,7 +8,11 @@ out exactly whatever the file's scales and scale-inheritance rules were: a scale
 where the nodes are, and that is what the world positions hold.
 
 Each joint takes only the channels its node needs: translation channels where its offset from
-the parent moves, Euler rotation channels where its rotation is not always the identity. A
+the parent moves, Euler rotation channels where its rotation is not always the identity. "Moves"
+knows the input's precision: exporters write 32-bit floats, so an offset that wobbles by a few
+float32 steps is a constant (:func:`precision_m`). What dropping that wobble changes is measured
+(the joint positions against the file's, by forward kinematics) and kept within the precision,
+and recorded on the skeleton (``metadata["precision_m"]``, ``metadata["dropped_m"]``). A
 node that carries the layout a :class:`~mocodec.skeleton.Joint` had when it was written (the
 ``mocodec`` extras of a glTF mocodec wrote) gets that layout back: channels, rotation order,
 ASF axis and exact offset.
@@ -28,10 +32,20 @@ from mocodec.skeleton import CHANNEL_NAMES, POSITION_CHANNELS, Joint, Skeleton
 #: The Euler order of rotation channels made for a node that states none (glTF and FBX keep
 #: quaternions or their own orders): ``ZYX``, the order ASF files can hold as they are.
 DEFAULT_ORDER = "ZYX"
-#: A translation that moves less than this (metres) over the clip is a constant offset.
-STILL_M = 1e-8
-#: A rotation within this angle (radians) of the identity on every frame is no rotation.
-STILL_RAD = 1e-9
+#: The finest precision a file's joint positions are taken to have (metres): 1e-4 cm.
+STILL_M = 1e-6
+#: How many float32 steps at the skeleton's largest coordinate the precision is at least:
+#: exporters compose and store transforms in 32-bit floats, a few rounding steps each.
+FLOAT32_STEPS = 8
+#: A rotation within this angle (radians) of the identity on every frame is no rotation
+#: (eight float32 steps of a unit quaternion's components).
+STILL_RAD = 1e-6
+#: The stillness thresholds of a motion kept exact (metres, radians): what composing and
+#: inverting float64 transforms leaves of a node that does not move.
+EXACT_M, EXACT_RAD = 1e-8, 1e-9
+#: Rounds of keeping the motion of the joints that moved beyond the precision and of their
+#: parents, before every joint keeps all of its motion.
+_TRIES = 8
 #: The farthest a node may be from the origin (metres; the diameter of the Earth's orbit),
 #: so that no composed transform overflows.
 MAX_COORDINATE_M = 3e11
@@ -50,15 +64,42 @@ class NodeSamples:
     layouts: list[dict | None] = field(default_factory=list)
 
 
+def precision_m(position: np.ndarray) -> float:
+    """The precision (metres) of joint world positions ``position``: :data:`FLOAT32_STEPS`
+    float32 steps at their largest coordinate, and at least :data:`STILL_M`."""
+    extent = float(np.abs(position).max(initial=0.0))
+    return max(STILL_M, FLOAT32_STEPS * float(np.spacing(np.float32(extent))))
+
+
 def to_motion(samples: NodeSamples, fps: float, units_per_metre: float, name: str = "") -> Motion:
-    """The motion of the joint nodes: node 0 is the root joint."""
-    n = len(samples.names)
-    layouts = samples.layouts or [None] * n
-    joints: list[Joint] = []
-    columns: list[np.ndarray] = []
+    """The motion of the joint nodes: node 0 is the root joint (see the module docstring)."""
     if not (np.isfinite(samples.position).all() and np.abs(samples.position).max(initial=0.0) <= MAX_COORDINATE_M):
         raise ConversionError(f"a node lies beyond {MAX_COORDINATE_M:g} m of the origin")
-    for i in range(n):
+    local = _local_transforms(samples, units_per_metre)
+    precision = precision_m(samples.position)
+    target = samples.position * units_per_metre
+    exact: set[int] = set()  # joints whose every motion is kept
+    for _ in range(_TRIES):
+        motion = _build(samples, local, fps, units_per_metre, name, precision, exact)
+        error = np.abs(motion.positions() - target).max(axis=(0, 2), initial=0.0) / units_per_metre
+        over = np.flatnonzero(error > precision)
+        if not len(over):
+            break
+        # these joints and their parents keep their motion: a round up each joint's chain
+        exact.update(int(j) for j in over)
+        exact.update(int(samples.parents[j]) for j in over if samples.parents[j] >= 0)
+    else:
+        motion = _build(samples, local, fps, units_per_metre, name, precision, set(range(len(samples.names))))
+        error = np.abs(motion.positions() - target).max(axis=(0, 2), initial=0.0) / units_per_metre
+    motion.skeleton.metadata.update(precision_m=precision, dropped_m=float(error.max(initial=0.0)))
+    return motion
+
+
+def _local_transforms(samples: NodeSamples, unit: float) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Each joint's translation from its parent (``unit``s, in the parent's frame) and its
+    rotation relative to its parent, every frame: ``G_p^T (x_i - x_p)`` and ``G_p^T G_i``."""
+    local = []
+    for i in range(len(samples.names)):
         parent = int(samples.parents[i])
         if parent < 0:
             translation, rotation = samples.position[:, i], samples.rotation[:, i]
@@ -66,14 +107,36 @@ def to_motion(samples: NodeSamples, fps: float, units_per_metre: float, name: st
             inverse = rotations.quat_conjugate(samples.rotation[:, parent])
             translation = rotations.quat_rotate(inverse, samples.position[:, i] - samples.position[:, parent])
             rotation = rotations.quat_multiply(inverse, samples.rotation[:, i])
-        translation = translation * units_per_metre
-        rotation = rotations.quat_normalize(rotation)
-        joint, values = _layout_joint(samples.names[i], parent, translation, rotation, layouts[i], units_per_metre)
+        local.append((translation * unit, rotations.quat_normalize(rotation)))
+    return local
+
+
+def _build(
+    samples: NodeSamples,
+    local: list[tuple[np.ndarray, np.ndarray]],
+    fps: float,
+    unit: float,
+    name: str,
+    precision: float,
+    exact: set[int],
+) -> Motion:
+    """The motion whose translations moving at most ``precision`` metres, and rotations within
+    :data:`STILL_RAD` of the identity, are constants, except on the joints ``exact``."""
+    n = len(samples.names)
+    layouts = samples.layouts or [None] * n
+    joints: list[Joint] = []
+    columns: list[np.ndarray] = []
+    for i, (translation, rotation) in enumerate(local):
+        parent = int(samples.parents[i])
+        still_m, still_rad = (EXACT_M, EXACT_RAD) if i in exact else (precision, STILL_RAD)
+        joint, values = _layout_joint(
+            samples.names[i], parent, translation, rotation, layouts[i], still_m * unit, still_rad
+        )
         if joint is None:
-            joint, values = _plain_joint(samples.names[i], parent, translation, rotation, units_per_metre)
+            joint, values = _plain_joint(samples.names[i], parent, translation, rotation, still_m * unit, still_rad)
         joints.append(joint)
         columns.append(values)
-    skeleton = Skeleton(tuple(joints), units_per_metre, name)
+    skeleton = Skeleton(tuple(joints), unit, name)
     frames = samples.position.shape[0]
     values = np.concatenate(columns, axis=1) if columns else np.zeros((frames, 0))
     if not np.isfinite(values).all():
@@ -83,33 +146,40 @@ def to_motion(samples: NodeSamples, fps: float, units_per_metre: float, name: st
 
 def closure(parents: np.ndarray, wanted: set[int]) -> list[int] | None:
     """The nodes ``wanted`` with every node between them and their lowest common ancestor,
-    parents first (in node order when that is parents first, else depth first); None when
-    they have no common ancestor."""
-    chains = []
-    for node in sorted(wanted):
-        chain = [node]
-        while parents[chain[-1]] >= 0:
-            chain.append(int(parents[chain[-1]]))
-        chains.append(chain[::-1])
-    common = 0
-    while all(len(c) > common and c[common] == chains[0][common] for c in chains):
-        common += 1
-    if common == 0:
+    depth first (children in node order); None when they have no common ancestor. Linear in
+    the number of nodes, however deep the tree (``parents`` holds no cycle)."""
+    n = len(parents)
+    children: list[list[int]] = [[] for _ in range(n)]
+    for node in range(n):
+        if parents[node] >= 0:
+            children[int(parents[node])].append(node)
+    order = _depth_first(children, [node for node in range(n) if parents[node] < 0])
+    below = np.zeros(n, dtype=np.int64)  # wanted nodes in each node's subtree
+    for node in reversed(order):
+        below[node] += node in wanted
+        if parents[node] >= 0:
+            below[int(parents[node])] += below[node]
+    if not wanted:
         return None
-    keep = {n for c in chains for n in c[common - 1 :]}
-    top = chains[0][common - 1]
-    by_index = sorted(keep)
-    if by_index[0] == top and all(parents[n] in keep and parents[n] < n for n in by_index[1:]):
-        return by_index
-    children: dict[int, list[int]] = {}
-    for n in by_index[1:]:
-        children.setdefault(int(parents[n]), []).append(n)
+    top = next((node for node in order if below[node] == len(wanted)), None)
+    if top is None:
+        return None
+    while True:  # down to the lowest node holding every wanted node
+        inside = [child for child in children[top] if below[child] == len(wanted)]
+        if not inside or top in wanted:
+            break
+        top = inside[0]
+    return [node for node in _depth_first(children, [top]) if below[node] > 0]
+
+
+def _depth_first(children: list[list[int]], roots: list[int]) -> list[int]:
+    """The nodes below ``roots`` depth first, children in node order (iterative)."""
     order: list[int] = []
-    stack = [top]
+    stack = list(reversed(roots))
     while stack:
         node = stack.pop()
         order.append(node)
-        stack.extend(reversed(children.get(node, [])))
+        stack.extend(reversed(children[node]))
     return order
 
 
@@ -199,17 +269,19 @@ def _euler(rotation: np.ndarray, order: str) -> np.ndarray:
 
 
 def _plain_joint(
-    name: str, parent: int, translation: np.ndarray, rotation: np.ndarray, unit: float
+    name: str, parent: int, translation: np.ndarray, rotation: np.ndarray, still: float, still_rad: float
 ) -> tuple[Joint, np.ndarray]:
     """A joint with the channels its node needs (see the module docstring): a moving root
-    translates from the origin, any other moving joint from where it starts."""
-    moves = np.abs(translation - translation[0]).max() > STILL_M * unit
-    offset = np.zeros(3) if moves and parent < 0 else translation[0]
+    translates from the origin, any other moving joint from where it starts; a translation
+    moving at most ``still`` units is the constant midway in its range."""
+    low, high = translation.min(axis=0), translation.max(axis=0)
+    moves = (high - low).max() > still
+    offset = np.zeros(3) if moves and parent < 0 else translation[0] if moves else (low + high) / 2
     channels: list[str] = list(POSITION_CHANNELS) if moves else []
     values = [translation - offset] if moves else []
     angle = 2.0 * np.arccos(np.clip(np.abs(rotation[:, 0]), 0.0, 1.0))
     order = ""
-    if angle.max() > STILL_RAD:
+    if angle.max() > still_rad:
         order = DEFAULT_ORDER
         channels += [f"{a}rotation" for a in order]
         values.append(_euler(rotation, order))
@@ -218,10 +290,17 @@ def _plain_joint(
 
 
 def _layout_joint(
-    name: str, parent: int, translation: np.ndarray, rotation: np.ndarray, layout: dict | None, unit: float
+    name: str,
+    parent: int,
+    translation: np.ndarray,
+    rotation: np.ndarray,
+    layout: dict | None,
+    still: float,
+    still_rad: float,
 ) -> tuple[Joint | None, np.ndarray]:
     """The joint in the layout it was written with, or (None, ...) when there is no layout or
-    the node's motion does not fit it (a file edited since)."""
+    the node's motion does not fit it (a file edited since): a translation it has no channel
+    for moves more than ``still`` units, or a rotation it has none for turns over ``still_rad``."""
     if not isinstance(layout, dict):
         return None, np.zeros(0)
     try:
@@ -247,13 +326,13 @@ def _layout_joint(
         channel = f"{axis_name}position"
         if channel in channels:
             values[:, channels.index(channel)] = moved[:, k]
-        elif np.abs(moved[:, k]).max() > STILL_M * unit:
+        elif np.abs(moved[:, k]).max() > still:
             return None, np.zeros(0)
     if order:
         c = rotations.euler_to_quat(np.array(axis), axis_order)
         inner = rotations.quat_multiply(rotations.quat_multiply(rotations.quat_conjugate(c), rotation), c)
         values[:, joint.rotation_channel_indices()] = _euler(inner, order)
-    elif (2.0 * np.arccos(np.clip(np.abs(rotation[:, 0]), 0.0, 1.0))).max() > STILL_RAD:
+    elif (2.0 * np.arccos(np.clip(np.abs(rotation[:, 0]), 0.0, 1.0))).max() > still_rad:
         return None, np.zeros(0)
     return joint, values
 

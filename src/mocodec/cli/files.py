@@ -105,9 +105,8 @@ def cmd_compare(args) -> int:
     from mocodec.metrics import compare
 
     original = load_input(args.original, args)
-    decoded = load(
-        args.decoded, asf=args.decoded_asf or args.asf, fps=args.fps, animation=args.animation, units_per_metre=args.units
-    )
+    asf = args.decoded_asf or args.asf
+    decoded = load(args.decoded, asf=asf, fps=args.fps, animation=args.animation, units_per_metre=args.units)
     result = compare(original, decoded, shell_cm=args.shell_cm)
     if args.json:
         print(json.dumps(result.as_dict(per_joint=args.per_joint), indent=2, allow_nan=False))

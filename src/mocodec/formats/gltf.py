@@ -14,8 +14,9 @@ moves and the nodes between them), with the transforms above them composed into 
 the animation (``animation``: a name or an index, the first by default) is sampled at ``fps``
 from its first key to its last, with STEP, LINEAR (slerp) and CUBICSPLINE interpolation. By
 default the rate is the grid the key times sit on (a baked animation's), else 30 fps (adjusted
-so the last key falls on a frame; :func:`_frame_rate`). Buffers must be inside the file (a ``.glb`` chunk or a ``data:`` URI): a buffer
-naming another file is refused, as mocodec never opens a path a file names.
+so the last key falls on a frame; :func:`_frame_rate`). Buffers must be inside the file (a
+``.glb`` chunk or a ``data:`` URI): a buffer naming another file is refused, as mocodec never
+opens a path a file names.
 """
 
 from __future__ import annotations

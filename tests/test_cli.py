@@ -15,6 +15,30 @@ def test_info(capsys):
     assert "lfemur" in out and "left_leg" in out
 
 
+def test_info_reads_a_bvh_in_the_unit_given(capsys):
+    assert main(["info", str(DATA / "07_03.bvh"), "--units", "in"]) == 0
+    assert "39.3701 per metre" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as exit_:
+        main(["info", str(DATA / "07_03.bvh"), "--units", "furlongs"])
+    assert exit_.value.code == 2
+    assert "'furlongs' is not a unit (m, cm, mm, in)" in capsys.readouterr().err
+
+
+def test_convert_refuses_to_leave_a_file_whose_motion_differs_from_what_it_read(tmp_path, capsys, monkeypatch):
+    from mocodec.formats import bvh
+
+    format_rows = bvh.format_rows
+    monkeypatch.setattr(bvh, "format_rows", lambda values, decimals: format_rows(values[:, ::-1], decimals))
+    out = tmp_path / "walk.bvh"
+    assert main(["convert", str(DATA / "07_03.amc"), str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "reads back" in err and "not written" in err and err.count("\n") == 1
+    assert not out.exists()
+    monkeypatch.undo()
+    assert main(["convert", str(DATA / "07_03.amc"), str(out)]) == 0
+    assert "joints within" in capsys.readouterr().out and out.exists()
+
+
 def test_info_on_a_moc_file_reads_its_header_only(tmp_path, capsys):
     path = tmp_path / "w.moc"
     assert main(["encode", str(DATA / "07_03.amc"), "-o", str(path), "--codec", "raw"]) == 0

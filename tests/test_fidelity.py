@@ -12,14 +12,19 @@ import re
 import numpy as np
 import pytest
 
-from conftest import SHARED
+from conftest import DATA, SHARED
 from mocodec import load, sandbox, save
 from mocodec.errors import ConversionError
 
-pytestmark = pytest.mark.shared_data
-
-FBX_FILES = sorted((SHARED / "fbx").glob("*.fbx")) if SHARED else []
+#: Files of real exporters in the repository (tests/formats/fbx/exporters/README.md): fast tier.
+EXPORTERS = sorted((DATA.parent / "formats" / "fbx" / "exporters").glob("*.fbx"))
+#: The shared files: the slow tier.
+SHARED_FBX = sorted((SHARED / "fbx").glob("*.fbx")) if SHARED else []
 GLTF_FILES = sorted([*(SHARED / "gltf").glob("*.glb"), *(SHARED / "gltf").glob("*.gltf")]) if SHARED else []
+FBX_FILES = [
+    *(pytest.param(path, id=path.name) for path in EXPORTERS),
+    *(pytest.param(path, id=path.name, marks=pytest.mark.shared_data) for path in SHARED_FBX),
+]
 
 
 def _tolerance_cm(reference_m: np.ndarray) -> float:
@@ -121,7 +126,7 @@ def _fbx_take_start(path, take: int) -> float:
     return float(stack.time_begin)
 
 
-@pytest.mark.parametrize("path", FBX_FILES, ids=lambda p: p.name)
+@pytest.mark.parametrize("path", FBX_FILES)
 def test_every_fbx_take_matches_ufbx_at_every_frame_and_after_every_writer(path, tmp_path):
     pytest.importorskip("ufbx")
     for take in range(_ufbx_takes(path)):
@@ -228,6 +233,7 @@ def _gltf_positions(path, animation: int, times: np.ndarray, joints: list[str]) 
     return out
 
 
+@pytest.mark.shared_data
 @pytest.mark.parametrize("path", GLTF_FILES, ids=lambda p: p.name)
 def test_every_gltf_animation_matches_its_keys_at_every_frame_and_after_every_writer(path, tmp_path):
     pygltflib = pytest.importorskip("pygltflib")

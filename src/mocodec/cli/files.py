@@ -93,9 +93,24 @@ def cmd_info(args) -> int:
 
 
 def cmd_convert(args) -> int:
+    """Convert, then read the written file back: motion other than what was read is an error,
+    and the file does not stay (formats/verify.py)."""
+    from mocodec.errors import ConversionError
+    from mocodec.formats import verify
+
     motion = load_input(args.input, args)
     written = save(motion, args.output, asf=args.out_asf)
-    print(f"wrote {', '.join(str(p) for p in written)} ({motion.num_frames} frames)")
+    asf = next((p for p in written if p.suffix.lower() == ".asf"), None)
+    back = load(args.output, asf=asf, fps=motion.fps if asf else None)
+    error, tolerance = verify.joint_error_m(motion, back), verify.tolerance_m(motion)
+    if not error <= tolerance:
+        for path in written:
+            path.unlink(missing_ok=True)
+        raise ConversionError(
+            f"{args.output}: the written motion reads back {error * 100:.2g} cm from what {args.input} holds "
+            f"(more than {tolerance * 100:.2g} cm): not written; please report it"
+        )
+    print(f"wrote {', '.join(str(p) for p in written)} ({motion.num_frames} frames, joints within {error * 100:.1e} cm)")
     return 0
 
 

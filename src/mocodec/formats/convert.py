@@ -106,6 +106,8 @@ def to_bvh_form(motion: Motion) -> Motion:
 def to_asf_form(motion: Motion) -> Motion:
     """The same poses with ASF-expressible bones (see the module docstring)."""
     sk = motion.skeleton
+    if len(sk) == 1:
+        raise ConversionError(f"joint {sk.names[0]!r} alone: an ASF skeleton needs a bone below its root")
     b = _Builder(motion)
     names = set(sk.names)
     for i, j in enumerate(sk.joints):

@@ -132,13 +132,30 @@ def test_units_given_override_the_stated_and_the_guessed_unit(tmp_path):
     assert load(tmp_path / "m.bvh", units_per_metre=39.37).skeleton.units_per_metre == 39.37
 
 
-def test_a_bvh_in_metres_keeps_a_hundredth_of_a_millimetre(tmp_path):
+def test_a_bvh_in_metres_keeps_a_millionth_of_a_centimetre(tmp_path):
     motion = _lying_figure(1.0)
     motion = motion.with_channels(np.full((3, 6), 0.123456789))
     save(motion, tmp_path / "m.bvh")
     back = read_bvh(tmp_path / "m.bvh")
     assert back.skeleton.units_per_metre == 1.0
-    assert np.abs(back.channels - motion.channels).max() < 1e-8
+    assert np.abs(back.positions() - motion.positions()).max() < 1e-8
+
+
+def test_bvh_position_channels_hold_the_joints_position_in_place_of_its_offset(tmp_path):
+    """As MotionBuilder writes them and Blender reads them: a joint whose position channels equal
+    its offset is where its offset puts it, not twice as far."""
+    text = (
+        "HIERARCHY\nROOT r\n{\n OFFSET 0 0 0\n CHANNELS 3 Xposition Yposition Zposition\n"
+        " JOINT a\n {\n  OFFSET 0 10 0\n  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"
+        "  End Site\n  {\n   OFFSET 0 5 0\n  }\n }\n}\nMOTION\nFrames: 2\nFrame Time: 0.1\n"
+        "0 0 0 0 10 0 0 0 0\n0 0 0 1 12 0 90 0 0\n"
+    )
+    motion = read_bvh_text(text, tmp_name="mobu")
+    assert np.allclose(motion.positions()[0, 1], [0, 10, 0]) and np.allclose(motion.positions()[1, 1], [1, 12, 0])
+    assert np.allclose(motion.positions()[1, 2], [-4, 12, 0])  # the end site, turned 90 degrees about Z
+    assert bvh_text(motion).endswith(
+        "0 0 0 0 10 0 0 0 0\n0 0 0 1 12 0 90 0 0\n".replace(" ", ".000000 ").replace("\n", ".000000\n")
+    )
 
 
 # ----- glTF time -------------------------------------------------------------------------------

@@ -110,7 +110,9 @@ def cmd_convert(args) -> int:
             f"{args.output}: the written motion reads back {error * 100:.2g} cm from what {args.input} holds "
             f"(more than {tolerance * 100:.2g} cm): not written; please report it"
         )
-    print(f"wrote {', '.join(str(p) for p in written)} ({motion.num_frames} frames, joints within {error * 100:.1e} cm)")
+    print(
+        f"wrote {', '.join(str(p) for p in written)} ({motion.num_frames} frames, joints within {error * 100:.1e} cm)"
+    )
     return 0
 
 

@@ -11,6 +11,13 @@ BVH states no unit of length. The writer states it in a comment line after ``HIE
 (:func:`guess_units_per_metre`) would get it wrong; Blender's importer skips such a line,
 three.js's BVHLoader does not, which is why it is written only then. The motion rows follow
 the hierarchy as written (depth first), whatever the order of the motion's joints.
+
+A position channel holds the joint's position in its parent's frame, in place of its OFFSET
+(as MotionBuilder writes them, every joint's position channels equal to its offset, and as
+Blender's importer reads them); a :class:`~mocodec.motion.Motion` holds the change from the
+offset, so the reader subtracts the offset and the writer adds it back (:func:`_positions_from_offsets`).
+three.js's BVHLoader adds the offset to the channel instead, which doubles such a skeleton's
+bones; the two agree on a root at offset 0, as most files have.
 """
 
 from __future__ import annotations
@@ -243,7 +250,7 @@ def read_bvh(path: str | os.PathLike, units_per_metre: float | None = None) -> M
         values = np.zeros((frames, 0))
     if values.shape[0] != frames:
         raise FormatError(path, header["frames"][1], f"'Frames: {frames}' but {values.shape[0]} frame lines follow")
-    return Motion(skeleton, _snap_fps(frame_time), values)
+    return Motion(skeleton, _snap_fps(frame_time), values - _positions_from_offsets(skeleton))
 
 
 _UNIT_CANDIDATES = (("metres", 1.0), ("inches", 1.0 / 0.0254), ("centimetres", 100.0), ("millimetres", 1000.0))
@@ -314,7 +321,19 @@ def bvh_text(motion: Motion, decimals: int | None = None) -> str:
     out.append(f"Frame Time: {1.0 / motion.fps:.10g}")
     offsets = sk.channel_offsets
     columns = np.concatenate([np.arange(offsets[i], offsets[i + 1]) for i in order]).astype(np.int64)
-    return "\n".join(out) + "\n" + format_rows(motion.channels[:, columns], decimals)
+    values = motion.channels + _positions_from_offsets(sk)
+    return "\n".join(out) + "\n" + format_rows(values[:, columns], decimals)
+
+
+def _positions_from_offsets(skeleton: Skeleton) -> np.ndarray:
+    """``(channels,)``: each position channel's joint offset on its axis, 0 elsewhere: what a
+    BVH position channel holds beyond a Motion's (see the module docstring)."""
+    shift = np.zeros(skeleton.num_channels)
+    for i, joint in enumerate(skeleton.joints):
+        for k, channel in enumerate(joint.channels):
+            if channel.endswith("position"):
+                shift[skeleton.channel_offsets[i] + k] = joint.offset["XYZ".index(channel[0])]
+    return shift
 
 
 def _number(value: float, decimals: int) -> str:

@@ -4,6 +4,7 @@
   whose rotation order differs from their channel order get their channels reordered; joints
   with an ASF axis ``C`` or a repeated axis (``YZY``) get three rotation channels (``ZYX``)
   holding ``C M C^-1``, with angles unwrapped over time. Limits of re-expressed joints are dropped (their axes changed).
+  A joint with one or two rotation channels gets the other axes, at zero, after them.
 * :func:`to_asf_form`: ASF bones start at their parent's end and only rotate. Rotation orders
   that the standard ``dof rx ry rz`` (order ``ZYX``) or a subset of it can express are kept;
   others are converted to ``ZYX``. A joint whose children start at different points (a BVH
@@ -88,17 +89,16 @@ def to_bvh_form(motion: Motion) -> Motion:
             values = np.concatenate((b.old_columns(i, positions), euler), axis=1)
             new = Joint(j.name, parent, j.offset, channels, _ASF_ORDER, body_part=j.body_part)
         else:
-            channels = tuple(positions) + tuple(f"{a}rotation" for a in j.rotation_order)
-            values = b.old_columns(i, channels)
-            new = Joint(
-                j.name,
-                parent,
-                j.offset,
-                channels,
-                j.rotation_order,
-                limits=_limits_for(j, channels),
-                body_part=j.body_part,
+            kept = tuple(positions) + tuple(f"{a}rotation" for a in j.rotation_order)
+            # one or two rotation channels get the others at zero (the identity, wherever it
+            # stands in the order): Blender's importer reads only joints with three or none
+            order = j.rotation_order + "".join(a for a in "XYZ" if j.rotation_order and a not in j.rotation_order)
+            channels = tuple(positions) + tuple(f"{a}rotation" for a in order)
+            values = np.concatenate(
+                (b.old_columns(i, kept), np.zeros((len(motion.channels), len(channels) - len(kept)))), axis=1
             )
+            limits = _limits_for(j, kept) + ((-np.inf, np.inf),) * (len(channels) - len(kept))
+            new = Joint(j.name, parent, j.offset, channels, order, limits=limits, body_part=j.body_part)
         b.index[i] = b.add(new, values)
     return b.motion_out()
 

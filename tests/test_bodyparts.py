@@ -56,3 +56,15 @@ def test_topology_gives_the_same_chains_without_names(fixture, request):
 )
 def test_name_sides(name, side):
     assert name_side(name) == side
+
+
+def test_arms_named_without_a_side_take_the_side_they_lie_on():
+    """As in RiggedFigure: 'arm_joint_L_1' names no side the names rule reads, and the raised
+    arm holds the top of the figure, so the rest pose alone would call it the spine."""
+    from mocodec.skeleton import Joint
+
+    joints = [Joint("pelvis", -1, (0, 100, 0)), Joint("spine", 0, (0, 30, 0)), Joint("head", 1, (0, 30, 0))]
+    joints += [Joint("arm_a", 1, (20, 0, 0)), Joint("arm_a_2", 3, (0, 80, 0))]
+    joints += [Joint("arm_b", 1, (-20, 0, 0)), Joint("arm_b_2", 5, (-25, 0, 0))]
+    p = parts(Skeleton(tuple(joints), 100.0))
+    assert p["arm_a"] == p["arm_a_2"] == "left_arm" and p["arm_b"] == p["arm_b_2"] == "right_arm"

@@ -133,8 +133,7 @@ def _topology_chain(skeleton, joint: int) -> tuple[str, str | None]:
     height = max(skeleton.height(), 1e-9)
     sub = _subtree(skeleton, joint)
     leaves = [j for j in sub if not skeleton.children[j]]
-    mean_x = float(rest[sub, 0].mean())
-    side = "left" if mean_x > 0 else "right"
+    side = _side_of(skeleton, joint)
     if rest[leaves, 1].mean() < -0.15 * height:
         return "leg", side
     if int(np.argmax(rest[:, 1])) in sub:  # the spine carries the top of the figure
@@ -142,6 +141,12 @@ def _topology_chain(skeleton, joint: int) -> tuple[str, str | None]:
     if np.abs(rest[sub, 0]).max() > 0.12 * height:
         return "arm", side
     return "torso", None
+
+
+def _side_of(skeleton, joint: int) -> str:
+    """The side (+X is left) the subtree at ``joint`` lies on in the rest pose."""
+    rest = skeleton.rest_positions - skeleton.rest_positions[0]
+    return "left" if float(rest[_subtree(skeleton, joint), 0].mean()) > 0 else "right"
 
 
 def label_body_parts(skeleton) -> tuple[tuple[str, ...], np.ndarray]:
@@ -171,7 +176,7 @@ def label_body_parts(skeleton) -> tuple[tuple[str, ...], np.ndarray]:
             else:
                 c = chain[parent]
         if c in ("arm", "hand", "leg") and s is None:
-            s = side[parent] or _topology_chain(skeleton, i)[1]
+            s = side[parent] or _side_of(skeleton, i)
         if c == "torso" and chain[parent] == "head":
             c = "head"
         chain[i], side[i] = c, (s if c in ("arm", "hand", "leg") else None)

@@ -352,6 +352,8 @@ def _split_glb(path: Path, data: bytes) -> tuple[str, bytes | None]:
 def _parse(path: Path) -> _Document:
     g = _pygltflib()
     data = read_bytes(path, MAX_FILE_BYTES)
+    if not data:
+        raise FormatError(path, None, "empty file (0 bytes): not a glTF file")
     if data[:4] == _GLB_MAGIC:
         text, binary = _split_glb(path, data)
     else:

@@ -103,7 +103,11 @@ def _rig(tmp_path, scale=(0.01, 0.01, 0.01)):
     return path, hips_at, turns
 
 
-@pytest.mark.parametrize("scale", [(0.01, 0.01, 0.01), (0.01, 0.02, 0.015)], ids=["uniform", "non-uniform"])
+@pytest.mark.parametrize(
+    "scale",
+    [(0.01, 0.01, 0.01), (0.01, 0.02, 0.015), (-0.01, 0.01, 0.01)],
+    ids=["uniform", "non-uniform", "mirrored"],
+)
 def test_a_foreign_rig_reads_with_its_parents_scale_rest_rotations_and_interpolation(scale, tmp_path):
     path, hips_at, turns = _rig(tmp_path, scale)
     motion = load(path, fps=4)
@@ -120,6 +124,25 @@ def test_a_foreign_rig_reads_with_its_parents_scale_rest_rotations_and_interpola
         world.append(world[-1] @ _matrix((0, 15, 0)))
         expected = np.array([m[:3, 3] for m in world])
         assert np.abs(motion.positions_m()[frame] - expected).max() < 1e-6, frame
+
+
+def test_a_mirroring_node_matrix_keeps_the_joint_positions(tmp_path):
+    g = GltfBuilder()
+    mirror = np.diag([-2.0, 2.0, 2.0, 1.0])
+    mirror[:3, 3] = [0, 1, 0]
+    g.doc["nodes"] = [
+        {"name": "mirror", "matrix": mirror.T.ravel().tolist(), "children": [1]},
+        {"name": "hip", "children": [2]},
+        {"name": "tip", "translation": [1, 0, 0]},
+    ]
+    g.animation(
+        "turn", [(1, "rotation", [0, 1.0], [_axis_quat_xyzw((0, 0, 1), 0), _axis_quat_xyzw((0, 0, 1), 90)], "LINEAR")]
+    )
+    (tmp_path / "m.glb").write_bytes(g.glb())
+    motion = load(tmp_path / "m.glb", fps=2)
+    angle = np.radians([0, 45, 90])
+    tip = np.stack([-2 * np.cos(angle), 1 + 2 * np.sin(angle), 0 * angle], axis=1)
+    assert np.abs(motion.positions_m()[:, motion.skeleton.index("tip")] - tip).max() < 1e-9
 
 
 def test_an_animation_is_chosen_by_name_or_index(tmp_path):

@@ -400,8 +400,9 @@ def _rest(doc: _Document, k: int, node) -> tuple[np.ndarray, np.ndarray, np.ndar
     if node.matrix is not None:
         m = _vector(doc, node.matrix, 16, (), f"node {k} matrix").reshape(4, 4).T  # column-major
         scale = np.linalg.norm(m[:3, :3], axis=0)
-        if (scale < 1e-12).any() or abs(np.linalg.det(m[:3, :3] / scale) - 1.0) > 1e-4:
-            raise doc.fail(f"node {k} matrix is not a rotation with a positive scale")
+        scale[0] *= np.sign(np.linalg.det(m[:3, :3]))  # a mirror: a negative scale on x
+        if (np.abs(scale) < 1e-12).any() or abs(np.linalg.det(m[:3, :3] / scale) - 1.0) > 1e-4:
+            raise doc.fail(f"node {k} matrix is not a rotation with a scale")
         return m[:3, 3], rotations.matrix_to_quat(m[:3, :3] / scale), scale
     translation = _vector(doc, node.translation, 3, (0.0, 0.0, 0.0), f"node {k} translation")
     xyzw = _vector(doc, node.rotation, 4, (0.0, 0.0, 0.0, 1.0), f"node {k} rotation")

@@ -189,7 +189,9 @@ def world_transforms(
     """World positions ``(F, n, 3)`` and rotations ``(F, n, 4)`` of nodes given parents first
     with local translations, rotations ``(w, x, y, z)`` and scales: ``M = M_p T R S``. With
     uniform scales (the usual case) composed as quaternions and scale factors; otherwise as
-    matrices, the rotation then the nearest one to ``M``'s 3x3 part (its polar factor)."""
+    matrices, the rotation then the nearest one to ``M``'s 3x3 part (its polar factor, or for a
+    node a negative scale mirrors, the nearest rotation to it: joint positions stay exact, as
+    they come from the matrices)."""
     with np.errstate(all="ignore"):
         if np.all(np.abs(scale - scale[..., :1]) <= 1e-12 * np.abs(scale[..., :1])):
             position, turn = _compose_uniform(parents, translation, rotation, scale[..., 0])
@@ -231,10 +233,8 @@ def _compose_matrices(parents, translation, rotation, scale) -> tuple[np.ndarray
     if not np.isfinite(world).all():
         raise ConversionError(f"node transforms compose to a position beyond {MAX_COORDINATE_M:g} m")
     u, _, vt = np.linalg.svd(world[..., :3, :3])
-    polar = u @ vt
-    if (np.linalg.det(polar) < 0).any():
-        raise ConversionError("a node's scale mirrors it (a negative scale), which a joint rotation cannot hold")
-    return world[..., :3, 3], rotations.matrix_to_quat(polar)
+    u[..., :, 2] *= np.sign(np.linalg.det(u @ vt))[..., None]  # a mirrored node: the nearest rotation
+    return world[..., :3, 3], rotations.matrix_to_quat(u @ vt)
 
 
 def ancestors(parents: np.ndarray, node: int) -> list[int]:

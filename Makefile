@@ -15,11 +15,17 @@ $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
-# every extra, then the numerical kernels compiled once (numba caches them)
+# every extra, then the kernels of the demo's codec compiled once (numba caches them)
 $(STAMP): $(BIN)/python pyproject.toml $(THREE)
 	$(BIN)/python -m pip install --quiet -e ".[test,plot,bench,stream,view,lint,formats,zarr]"
-	$(BIN)/mocodec warmup
+	$(BIN)/mocodec warmup kinwave
 	touch $(STAMP)
+
+# every codec's kernels, for the tests and benchmarks
+WARM := $(VENV)/.warm
+$(WARM): $(STAMP)
+	$(BIN)/mocodec warmup
+	touch $(WARM)
 
 # the viewer's three.js (and the glTF loader the format tests load our files with), fetched from
 # npm once (pinned; npm checks its integrity) and served from the package, so the viewer works
@@ -44,13 +50,13 @@ demo: $(STAMP)
 # the JavaScript tests (Node's own runner; tests/js/register.mjs resolves 'three' to the vendored copy)
 JS_TESTS := node --import ./tests/js/register.mjs --test tests/js/
 
-test: $(STAMP)
+test: $(WARM)
 	$(JS_TESTS)
 	$(BIN)/python -m pytest
 
 # the edit-test loop: everything but the slow tier (fuzzing, corruption sweeps, every shared
 # clip), the browser and the network (relay, NATS) tests
-test-fast: $(STAMP)
+test-fast: $(WARM)
 	$(JS_TESTS)
 	$(BIN)/python -m pytest -n auto -m "not slow and not browser and not network"
 
@@ -61,7 +67,7 @@ lint: $(STAMP)
 	$(BIN)/mypy
 
 # every benchmark script of benchmarks/ (speed and rate-distortion of each issue), one after another
-bench: $(STAMP)
+bench: $(WARM)
 	for script in foundation measures coding lossless codec_speed seams ratecontrol kinwave kinwave_ablation invariance bound_usage live formats relay_tick js_moc \
 	              primitives rhythmic model_based hostile; do \
 		$(BIN)/python benchmarks/bench_$$script.py || exit 1; done
@@ -73,7 +79,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/relay_load.py
 
 # the whole comparison on the shared clips: report in bench-out/report.html (docs/benchmarks.md)
-bench-suite: $(STAMP)
+bench-suite: $(WARM)
 	$(BIN)/mocodec bench ../shared/data --out bench-out
 
 clean:

@@ -1,6 +1,7 @@
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from conftest import DATA
@@ -218,3 +219,20 @@ def test_skeleton_reference_on_the_command_line(tmp_path, capsys):
     assert "--skeleton" in capsys.readouterr().err
     assert main(["decode", str(out), "-o", str(tmp_path / "x.bvh"), "--skeleton", str(DATA / "07.asf")]) == 0
     assert load(tmp_path / "x.bvh").num_frames == 415
+
+
+@pytest.mark.parametrize("codec", ["kinwave", "kinwave-live"])
+def test_a_bound_the_codec_guarantees_sets_its_knob_with_no_search(codec, tmp_path, monkeypatch, capsys):
+    from mocodec import moc, ratecontrol
+
+    def no_search(*args, **kwargs):
+        raise AssertionError("rate control searched a codec that guarantees the bound itself")
+
+    monkeypatch.setattr(ratecontrol, "tune", no_search)
+    out = tmp_path / "w.moc"
+    assert main(["encode", str(DATA / "07_03.amc"), "-o", str(out), "--codec", codec, "--max-error-cm", "2"]) == 0
+    assert moc.info(out).header["codec"]["knobs"]["max_error_cm"] == 2.0
+    decoded = moc.decode(out)
+    motion = load(DATA / "07_03.amc")
+    error_cm = np.linalg.norm(decoded.positions_m() - motion.positions_m(), axis=2).max() * 100
+    assert error_cm <= 2.0 + 1e-6

@@ -90,6 +90,20 @@ def _achieved(m: Measurement, target: str) -> float:
     return getattr(m, target)
 
 
+def guaranteed(codec: Codec, target: str, value: float) -> Codec | None:
+    """``codec`` set to meet an error target by itself (:meth:`Codec.bound_knobs`: its encoder
+    verifies the bound on the bytes it returns), with no search and nothing measured; None when
+    the target needs rate control."""
+    knobs = codec.bound_knobs(target, value)
+    return None if knobs is None else type(codec)(**{**codec.config, **knobs})
+
+
+def configure(codec: Codec, motion: Motion, target: str, value: float) -> Codec:
+    """``codec`` set for a target: by its own knob where it guarantees it (:func:`guaranteed`),
+    else by :func:`tune`."""
+    return guaranteed(codec, target, value) or tune(codec, motion, target, value).codec
+
+
 def tune(
     codec: Codec,
     motion: Motion,
@@ -109,6 +123,9 @@ def tune(
     if not (math.isfinite(value) and value > 0):
         raise CodecError(f"target {target} needs a positive number, got {value}")
     positions = forward_kinematics(motion.skeleton, motion.channels)[0] * (100.0 / motion.skeleton.units_per_metre)
+    bound = guaranteed(codec, target, value)
+    if bound is not None:
+        return measure(bound, motion, positions, whole_file)
     if hasattr(codec, "target_knobs"):
         direct = _direct(codec, motion, target, value, tolerance, whole_file, positions)
         if direct is not None:

@@ -24,11 +24,15 @@ from mocodec.motion import Motion
 
 def configured(args, motion: Motion):
     """The codec of the command line, tuned by rate control if a target was given:
-    (codec, measurement or None)."""
+    (codec, measurement or None). A target the codec guarantees itself sets its knob: nothing is
+    searched or measured."""
     codec = get_codec(args.codec, **args.knobs)
     target = target_of(args)
     if target is None:
         return codec, None
+    bound = ratecontrol.guaranteed(codec, *target)
+    if bound is not None:
+        return bound, None
     m = ratecontrol.tune(codec, motion, *target)
     return m.codec, m
 

@@ -179,9 +179,9 @@ def cmd_demo(args) -> int:
 
 
 def cmd_warmup(args) -> int:
-    """Code one second of the bundled clip with every built-in codec that needs no trained
-    model or optional library: numba compiles each kernel once and caches it (beside the
-    package, or in the user's cache directory when the package is read-only)."""
+    """Code one second of the bundled clip with the codecs named, by default every built-in
+    codec that needs no trained model or optional library: numba compiles each kernel once and
+    caches it (beside the package, or in the user's cache directory when it is read-only)."""
     import time
 
     from mocodec import moc
@@ -192,8 +192,8 @@ def cmd_warmup(args) -> int:
     clip = motion[: int(motion.fps)]
     t0 = time.perf_counter()
     warmed, skipped = [], []
-    for cid in codec_ids():
-        if codec_class(cid).baseline or any(k.path for k in codec_class(cid).knobs):
+    for cid in args.codecs or codec_ids():
+        if not args.codecs and (codec_class(cid).baseline or any(k.path for k in codec_class(cid).knobs)):
             continue
         try:
             moc.round_trip(clip, get_codec(cid))
@@ -273,7 +273,8 @@ def add_commands(sub) -> None:
     p = sub.add_parser(
         "warmup",
         description="Compile and cache the numerical kernels of every codec that needs "
-        "no trained model (a minute once after install; `make demo` and "
-        "`make test` run it), so no later command pays for it.",
+        "no trained model, or of the codecs named (a minute once after install for all of them; "
+        "`make demo` warms the demo's codec, `make test` all), so no later command pays for it.",
     )
+    p.add_argument("codecs", nargs="*", metavar="CODEC", help="the codecs to warm up (default: every one)")
     p.set_defaults(func=cmd_warmup)

@@ -244,6 +244,12 @@ class Codec:
     def with_knob(self, name: str, value) -> Codec:
         return type(self)(**{**self.config, name: value})
 
+    def bound_knobs(self, target: str, value: float) -> dict | None:
+        """Knobs with which the encoder itself guarantees an error target (``max_error_cm`` or
+        ``mean_error_cm``), verifying it on the bytes it returns; None where it does not, and
+        rate control must search (:func:`mocodec.ratecontrol.guaranteed`)."""
+        return None
+
     # ----- whole clips ------------------------------------------------------------------
     def encode(self, motion: Motion, output_skeleton: Skeleton | None = None) -> bytes:
         """The body of ``motion`` (its frame count and rate are the framing's: the container's

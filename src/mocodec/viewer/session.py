@@ -59,7 +59,7 @@ class ViewSession:
             kind, value = target
             if kind not in ratecontrol.TARGETS:
                 raise CodecError(f"unknown target {kind!r} (targets: {', '.join(ratecontrol.TARGETS)})")
-            codec = ratecontrol.tune(codec, self.motion, kind, float(value)).codec
+            codec = ratecontrol.configure(codec, self.motion, kind, float(value))
         trip = moc.round_trip(self.motion, codec)
         s = compare(self.motion, trip.decoded).summary()
         m = self.motion

@@ -166,7 +166,7 @@ class Dscqs(Study):
         codec = get_codec(case["codec"], **case.get("knobs", {}))
         target = next(((t, case[t]) for t in ratecontrol.TARGETS if t in case), None)
         if target is not None:
-            codec = ratecontrol.tune(codec, motion, target[0], float(target[1])).codec
+            codec = ratecontrol.configure(codec, motion, target[0], float(target[1]))
         trip = moc.round_trip(motion, codec)
         ref, cod = _positions(motion), _positions(trip.decoded)
         a_is_ref = bool(self.reference_first[k])

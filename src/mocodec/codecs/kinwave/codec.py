@@ -154,8 +154,7 @@ class KinwaveCodec(Codec):
     def delay_frames(self) -> int:  # type: ignore[override]
         return self.config["window"]
 
-    def target_knobs(self, target: str, value: float, motion: Motion, overhead_bytes: int = 0) -> dict | None:
-        """Knobs that make the encoder itself meet a rate-control target (:mod:`ratecontrol`)."""
+    def bound_knobs(self, target: str, value: float) -> dict | None:
         if target == "max_error_cm":
             measure = self.config["error_measure"]
             return {
@@ -165,6 +164,12 @@ class KinwaveCodec(Codec):
             }
         if target == "mean_error_cm":
             return {"max_error_cm": value, "bits_per_second": 0.0, "error_measure": "mean"}
+        return None
+
+    def target_knobs(self, target: str, value: float, motion: Motion, overhead_bytes: int = 0) -> dict | None:
+        """Knobs that make the encoder itself meet a rate-control target (:mod:`ratecontrol`)."""
+        if target in ("max_error_cm", "mean_error_cm"):
+            return self.bound_knobs(target, value)
         if target in ("ratio", "bitrate"):
             bits = motion.raw_bits / value if target == "ratio" else value * motion.duration
             return {"bits_per_second": max((bits - 8 * overhead_bytes) / max(motion.duration, 1e-9), 1.0)}

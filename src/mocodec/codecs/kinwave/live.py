@@ -496,6 +496,10 @@ class KinwaveLiveCodec(Codec):
     def delay_frames(self) -> int:  # type: ignore[override]
         return 0  # plus the packet's own frames: packet_frames(fps) - 1 at most
 
+    def bound_knobs(self, target: str, value: float) -> dict | None:
+        """Its bound holds on every decoded frame of the full stream (the finest layer)."""
+        return {"max_error_cm": value} if target == "max_error_cm" else None
+
     @property
     def layer_bounds(self) -> list[float]:
         """Each layer's bound in cm, base first (the :class:`~mocodec.codecs.base.Layered` protocol)."""

@@ -41,3 +41,19 @@ class GltfBuilder:
         blob = bytes(self.blob) + b"\0" * (-len(self.blob) % 4)
         body = struct.pack("<II", len(text), 0x4E4F534A) + text + struct.pack("<II", len(blob), 0x004E4942) + blob
         return struct.pack("<4sII", b"glTF", 2, 12 + len(body)) + body
+
+
+def trs_matrix(t=(0, 0, 0), q=(0, 0, 0, 1), s=(1, 1, 1)) -> np.ndarray:
+    """The 4x4 matrix of a glTF node's translation, rotation ``(x, y, z, w)`` and scale: T R S."""
+    x, y, z, w = q
+    r = np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+    m = np.eye(4)
+    m[:3, :3] = r * np.asarray(s, float)
+    m[:3, 3] = t
+    return m

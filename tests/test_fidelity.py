@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from conftest import DATA, SHARED
+from gltf_builder import trs_matrix
 from mocodec import load, sandbox, save
 from mocodec.errors import ConversionError
 
@@ -151,21 +152,6 @@ def _slerp(a: np.ndarray, b: np.ndarray, u: float) -> np.ndarray:
     return (np.sin((1 - u) * angle) * a + np.sin(u * angle) * b) / np.sin(angle)
 
 
-def _matrix(translation, xyzw, scale) -> np.ndarray:
-    x, y, z, w = np.asarray(xyzw, float) / np.linalg.norm(xyzw)
-    rotation = np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-    m = np.eye(4)
-    m[:3, :3] = rotation * np.asarray(scale, float)
-    m[:3, 3] = translation
-    return m
-
-
 def _gltf_positions(path, animation: int, times: np.ndarray, joints: list[str]) -> np.ndarray:
     """World positions (metres) of the nodes behind ``joints`` at ``times``: each node's key
     values interpolated linearly (slerp for rotations), node matrices composed from the root.
@@ -221,9 +207,10 @@ def _gltf_positions(path, animation: int, times: np.ndarray, joints: list[str]) 
                 if node.matrix is not None:
                     local = np.array(node.matrix, float).reshape(4, 4).T
                 else:
-                    local = _matrix(
+                    xyzw = value(k, "rotation", t, node.rotation or [0, 0, 0, 1])
+                    local = trs_matrix(
                         value(k, "translation", t, node.translation or [0, 0, 0]),
-                        value(k, "rotation", t, node.rotation or [0, 0, 0, 1]),
+                        np.asarray(xyzw, float) / np.linalg.norm(xyzw),
                         value(k, "scale", t, node.scale or [1, 1, 1]),
                     )
                 world[k] = world_of(parents[k]) @ local if k in parents else local

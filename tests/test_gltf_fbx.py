@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from conftest import DATA, SHARED
-from gltf_builder import GltfBuilder
+from gltf_builder import GltfBuilder, trs_matrix as _matrix
 from mocodec import load, save
 from mocodec.errors import FormatError, MocodecError
 from mocodec.formats.gltf import to_gltf_bytes
@@ -62,21 +62,6 @@ def test_the_same_motion_gives_the_same_bytes(walk_bvh):
 def _axis_quat_xyzw(axis, degrees) -> list[float]:
     half = math.radians(degrees) / 2
     return [*(math.sin(half) * np.asarray(axis, float)), math.cos(half)]
-
-
-def _matrix(t=(0, 0, 0), q=(0, 0, 0, 1), s=(1, 1, 1)) -> np.ndarray:
-    x, y, z, w = q
-    r = np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-    m = np.eye(4)
-    m[:3, :3] = r * np.asarray(s, float)
-    m[:3, 3] = t
-    return m
 
 
 def _rig(tmp_path, scale=(0.01, 0.01, 0.01)):

@@ -68,7 +68,7 @@ lint: $(STAMP)
 
 # every benchmark script of benchmarks/ (speed and rate-distortion of each issue), one after another
 bench: $(WARM)
-	for script in foundation measures coding lossless codec_speed seams ratecontrol kinwave kinwave_ablation invariance bound_usage live formats relay_tick js_moc \
+	for script in foundation measures coding lossless codec_speed speed seams ratecontrol kinwave kinwave_ablation invariance bound_usage live formats relay_tick js_moc \
 	              primitives rhythmic model_based hostile; do \
 		$(BIN)/python benchmarks/bench_$$script.py || exit 1; done
 	$(BIN)/python benchmarks/bench_perceptual.py --set amc

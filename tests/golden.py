@@ -30,7 +30,7 @@ CONFIGS: dict[str, dict] = {
     "fpzip": {},
     "gesture": {},
     "hybrid": {},
-    "kinwave": {"max_error_cm": 0.5, "error_measure": "shell"},
+    "kinwave": {"max_error_cm": 0.5, "error_measure": "shell", "effort": 3},
     "kinwave-live": {"max_error_cm": 1.0},
     "lossless": {},
     "posture": {},
@@ -49,7 +49,10 @@ CONFIGS: dict[str, dict] = {
 }
 # further configurations pinned beside a codec's fixture: name -> knobs (files NAME.bin and
 # NAME_decoded.npy), checked by the codec's own tests
-VARIANTS: dict[str, dict[str, dict]] = {"kinwave-live": {"layers3": {"layers": 3}}}
+VARIANTS: dict[str, dict[str, dict]] = {
+    "kinwave": {"effort1": {"effort": 1}, "effort2": {"effort": 2}},
+    "kinwave-live": {"layers3": {"layers": 3}},
+}
 MODEL_KNOB = {
     "gesture": "tables",
     "posture": "tables",

@@ -623,3 +623,28 @@ def test_a_pass_far_under_the_bound_gives_single_codes_their_slack(walk_bvh):
     assert (filled.steps >= start.steps).all() and (filled.steps > start.steps).any()
     assert len(enc.body(filled)) < len(enc.body(start))
     assert enc._fill(filled, bound) is filled or enc.error(filled.decoded) < FILL_BELOW * bound
+
+
+def test_every_effort_level_is_pinned_and_keeps_the_bound():
+    """Like the golden fixtures (tests/golden.py): each effort level's bytes and decoding; a
+    lower level never makes the file smaller than a higher one on this clip, and all hold the
+    bound."""
+    import golden
+
+    from mocodec.kinematics import forward_kinematics
+    from mocodec.metrics.pose import shell_errors
+
+    clip, folder = golden.clip(), golden.FIXTURES / "kinwave"
+    sizes = {3: len((folder / "encoded.bin").read_bytes())}
+    for name, knobs in golden.VARIANTS["kinwave"].items():
+        codec = get_codec("kinwave", **{**golden.CONFIGS["kinwave"], **knobs})
+        stored = (folder / f"{name}.bin").read_bytes()
+        assert codec.encode(clip) == stored
+        decoded = codec.decode(stored, clip.skeleton, clip.num_frames, clip.fps).channels
+        assert np.array_equal(decoded, np.load(folder / f"{name}_decoded.npy"))
+        sk, cm = clip.skeleton, 100.0 / clip.skeleton.units_per_metre
+        p0, q0 = forward_kinematics(sk, clip.channels)
+        p1, q1 = forward_kinematics(sk, decoded)
+        assert shell_errors(sk, p0 * cm, q0, p1 * cm, q1).max <= golden.CONFIGS["kinwave"]["max_error_cm"]
+        sizes[knobs["effort"]] = len(stored)
+    assert sizes[1] >= sizes[2] >= sizes[3]

@@ -134,6 +134,17 @@ class KinwaveCodec(Codec):
             "Euler angles always; ASF skeletons under a max bound: the root and joints near gimbal lock only)",
         ),
         Knob(
+            "effort",
+            int,
+            2,
+            "how hard a max-error bound's search works: 1 one search aiming at 85-100% of the bound, "
+            "no slack rounds (fastest); 2 one search at 95-100% and the slack rounds; 3 also three "
+            "landings of a short payload's joint feedback, the smallest kept (smallest files; "
+            "bytes and speed per level: docs/kinwave.md)",
+            1,
+            3,
+        ),
+        Knob(
             "keyframes",
             bool,
             True,

@@ -29,6 +29,7 @@ SLACK_PASSES = 1  # rounds in which a max bound's final pass gives its slack awa
 SLACK_TRIES = 3  # passes a round tries, halving the codes that move the points over the bound
 SEGMENT_SLACK_BELOW = 0.9  # ... with time-adaptive steps only when its worst error is under this share
 ACCEPT = 0.95  # a max-error bound is met well enough at 95-100% of it
+LOW_EFFORT_ACCEPT = 0.85  # ... at effort 1, which stops its search sooner and skips the slack rounds
 MEAN_ACCEPT = 0.97  # a mean-error bound (smooth in the scale, so the search can aim closer)
 SEGMENT_PASSES = 2  # passes of the per-segment search before the combination is fixed
 MARGIN = 0.95  # a segment whose error was this close to the bound goes a code finer when combined
@@ -81,7 +82,12 @@ class BoundSearch(Encoder):
             and np.count_nonzero(self.lay.padded) >= ADAPTIVE_SEGMENTS
         ):
             return self._to_bound_by_segment(self.cfg["max_error_cm"])
-        if self.frames <= SHORT_FRAMES and self.cfg["error_measure"] != "mean" and self.cfg["joint_feedback"]:
+        if (
+            self.frames <= SHORT_FRAMES
+            and self.cfg["error_measure"] != "mean"
+            and self.cfg["joint_feedback"]
+            and self.cfg["effort"] >= 3
+        ):
             return min(map(self._to_bound_with_share, SHORT_SHARES), key=len)
         return self._to_bound(self.cfg["max_error_cm"])
 
@@ -221,10 +227,12 @@ class BoundSearch(Encoder):
         if self.cfg["error_measure"] != "mean" and self.cfg["joint_feedback"] and not self.joint_offsets.any():
             guess *= self._adapt_joints(self.joint_errors(self.starting_pass().decoded), bound)
         accept = MEAN_ACCEPT if self.cfg["error_measure"] == "mean" else ACCEPT
+        if self.cfg["effort"] <= 1:
+            accept = min(accept, LOW_EFFORT_ACCEPT)
         best, x = self._search(lambda ps: self.error(ps.decoded), bound, accept, guess, 1.0)
         for _ in range(60):
             if best is not None:
-                body = self.body(self._use_slack(best, bound))
+                body = self.body(self._use_slack(best, bound) if self.cfg["effort"] >= 2 else best)
                 if self.error(self.decoded_body(body)) <= bound:  # the guarantee, on the real decoder
                     return body
             x -= math.log(2.0)

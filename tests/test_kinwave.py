@@ -631,9 +631,6 @@ def test_every_effort_level_is_pinned_and_keeps_the_bound():
     bound."""
     import golden
 
-    from mocodec.kinematics import forward_kinematics
-    from mocodec.metrics.pose import shell_errors
-
     clip, folder = golden.clip(), golden.FIXTURES / "kinwave"
     sizes = {3: len((folder / "encoded.bin").read_bytes())}
     for name, knobs in golden.VARIANTS["kinwave"].items():

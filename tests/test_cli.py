@@ -236,3 +236,13 @@ def test_a_bound_the_codec_guarantees_sets_its_knob_with_no_search(codec, tmp_pa
     motion = load(DATA / "07_03.amc")
     error_cm = np.linalg.norm(decoded.positions_m() - motion.positions_m(), axis=2).max() * 100
     assert error_cm <= 2.0 + 1e-6
+
+
+def test_encode_codes_a_files_chunks_in_several_processes_to_the_same_bytes(tmp_path, capsys):
+    one, two = tmp_path / "one.moc", tmp_path / "two.moc"
+    common = ["--chunk-frames", "100", "--max-error-cm", "1"]
+    assert main(["encode", str(DATA / "07_03.amc"), "-o", str(one), *common]) == 0
+    assert main(["encode", str(DATA / "07_03.amc"), "-o", str(two), *common, "--jobs", "2"]) == 0
+    assert one.read_bytes() == two.read_bytes()
+    assert main(["encode", str(DATA / "07_03.amc"), "-o", str(two), "--jobs", "0"]) == 2
+    assert "jobs must be at least 1" in capsys.readouterr().err

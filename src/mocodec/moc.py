@@ -59,18 +59,23 @@ def pack(
     chunk_frames: int = CHUNK_FRAMES,
     embed_skeleton: bool = True,
     exact_skeleton: bool = False,
+    jobs: int = 1,
 ) -> bytes:
     """The .moc bytes of ``motion`` coded by ``codec`` (default: the default codec); with
     ``embed_skeleton=False`` the file holds only the skeleton's id. The codec is told the
-    :func:`stored_skeleton`, so an error bound it verifies holds on what the file decodes to."""
+    :func:`stored_skeleton`, so an error bound it verifies holds on what the file decodes to.
+    ``jobs`` processes code the chunks at once: the same bytes as one, as each chunk is coded
+    on its own."""
     codec = codec or get_codec(DEFAULT_CODEC)
     if chunk_frames < 1:
         raise CodecError(f"chunk_frames must be at least 1, got {chunk_frames}")
+    if jobs < 1:
+        raise CodecError(f"jobs must be at least 1, got {jobs}")
     skeleton = stored_skeleton(motion, codec, embed_skeleton, exact_skeleton)
     output = None if skeleton is motion.skeleton else skeleton
-    chunks = [
-        container.Chunk(a, b - a, codec.encode(motion[a:b], output)) for a, b in chunk_spans(motion, chunk_frames)
-    ]
+    spans = chunk_spans(motion, chunk_frames)
+    bodies = _encode_chunks(codec, [motion[a:b] for a, b in spans], output, jobs)
+    chunks = [container.Chunk(a, b - a, body) for (a, b), body in zip(spans, bodies)]
     header = {
         "codec": codec.get_config(),
         "fps": float(motion.fps),
@@ -81,6 +86,25 @@ def pack(
     return container.pack(header, chunks, embed_skeleton)
 
 
+def _encode_chunks(codec: Codec, parts: list[Motion], output: Skeleton | None, jobs: int) -> list[bytes]:
+    """Each part's body, in order; with ``jobs`` > 1 (and more than one part) in that many
+    worker processes."""
+    jobs = min(jobs, len(parts))
+    if jobs <= 1:
+        return [codec.encode(part, output) for part in parts]
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
+    with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context(method)) as pool:
+        return list(pool.map(_encode_part, [(codec, part, output) for part in parts]))
+
+
+def _encode_part(task: tuple[Codec, Motion, Skeleton | None]) -> bytes:
+    codec, part, output = task
+    return codec.encode(part, output)
+
+
 def encode(
     motion: Motion,
     path: str | os.PathLike,
@@ -88,9 +112,11 @@ def encode(
     chunk_frames: int = CHUNK_FRAMES,
     embed_skeleton: bool = True,
     exact_skeleton: bool = False,
+    jobs: int = 1,
 ) -> int:
-    """Write ``motion`` to ``path`` (atomically); return the file size in bytes."""
-    data = pack(motion, codec, chunk_frames, embed_skeleton, exact_skeleton)
+    """Write ``motion`` to ``path`` (atomically), its chunks coded by ``jobs`` processes; return
+    the file size in bytes."""
+    data = pack(motion, codec, chunk_frames, embed_skeleton, exact_skeleton, jobs)
     atomic_write_bytes(path, data)
     return len(data)
 

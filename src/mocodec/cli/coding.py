@@ -59,6 +59,7 @@ def cmd_encode(args) -> int:
             chunk_frames=args.chunk_frames,
             embed_skeleton=not args.skeleton_ref,
             exact_skeleton=args.exact_skeleton,
+            jobs=args.jobs,
         )
         line = (
             f"{target}: {motion.num_frames} frames, {size:,} bytes, ratio {motion.raw_bits / 8 / size:.2f} "
@@ -205,6 +206,12 @@ def add_commands(sub) -> None:
         action="store_true",
         help="keep the skeleton's offsets bit for bit (a lossy codec's file rounds them to "
         f"{moc.SKELETON_PRECISION_CM:g} cm, which saves 130-360 bytes on CMU skeletons)",
+    )
+    p.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        help="processes coding a file's chunks at once (default 1; the same bytes whatever the number)",
     )
     add_codec_options(p)
     add_input_options(p)

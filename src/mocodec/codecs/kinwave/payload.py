@@ -72,6 +72,10 @@ def code_step(code: int) -> float:
     return 2.0 ** (code / 8.0 - 20.0)
 
 
+#: :func:`code_step` of every step code, for looking up many at once with the same values.
+_CODE_STEPS = np.array([code_step(code) for code in range(256)])
+
+
 @dataclass(frozen=True)
 class StepGroup:
     """Channels coded together with one step: a joint's rotation steps, or its translations."""
@@ -100,12 +104,17 @@ def group_step(g: StepGroup, codes: np.ndarray, skeleton: Skeleton) -> float:
     """A group's quantiser step from the payload's step codes (one per rotation joint, then
     the translation code in cm): degrees, or skeleton units for translations."""
     if g.rotation:
-        return code_step(codes[rotation_joints(skeleton).index(g.joint)])
+        return code_step(codes[_rotation_joints(skeleton).index(g.joint)])
     return code_step(codes[-1]) * skeleton.units_per_metre / 100.0
 
 
 def rotation_joints(skeleton: Skeleton) -> list[int]:
-    return [g.joint for g in step_groups(skeleton) if g.rotation]
+    return list(_rotation_joints(skeleton))
+
+
+@lru_cache(maxsize=64)
+def _rotation_joints(skeleton: Skeleton) -> tuple[int, ...]:
+    return tuple(g.joint for g in step_groups(skeleton) if g.rotation)
 
 
 def code_channels(skeleton: Skeleton) -> list[np.ndarray]:
@@ -348,11 +357,25 @@ def with_more(body: bytes, more: int) -> bytes:
 
 
 def channel_steps(skeleton: Skeleton, codes: np.ndarray) -> np.ndarray:
-    """``(C, 1)``: every channel's quantiser step from the payload's step codes."""
-    steps = np.empty((skeleton.num_channels, 1))
+    """``(C, 1)``: every channel's quantiser step from the payload's step codes (the values of
+    :func:`group_step`, looked up at once)."""
+    code_of, translation = _channel_codes(skeleton)
+    steps = _CODE_STEPS[np.asarray(codes, dtype=np.int64)[code_of]]
+    steps[translation] = steps[translation] * skeleton.units_per_metre / 100.0  # as group_step rounds
+    return steps[:, None]
+
+
+@lru_cache(maxsize=64)
+def _channel_codes(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
+    """Each channel's index into the step codes (its rotation joint's, or the last for a
+    translation), and which channels are translations."""
+    code_of = np.zeros(skeleton.num_channels, dtype=np.int64)
+    translation = np.zeros(skeleton.num_channels, dtype=bool)
+    joints = _rotation_joints(skeleton)
     for g in step_groups(skeleton):
-        steps[g.channels] = group_step(g, codes, skeleton)
-    return steps
+        code_of[g.channels] = joints.index(g.joint) if g.rotation else -1
+        translation[g.channels] = not g.rotation
+    return code_of, translation
 
 
 def decode_body(body: bytes, skeleton: Skeleton, frames: int) -> np.ndarray:

@@ -17,6 +17,7 @@ Quaternions are (w, x, y, z), Hamilton products, the conventions of
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numba
@@ -188,6 +189,43 @@ def depth_levels(skeleton: Skeleton) -> tuple[tuple[int, ...], ...]:
     return tuple(tuple(int(j) for j in np.flatnonzero(depths == d)) for d in range(int(depths.max(initial=-1)) + 1))
 
 
+@dataclass(frozen=True)
+class _JointPlan:
+    """What closed-loop coding reads of one joint, prepared once per skeleton: its translation
+    channels and their axes, its rotation channels (in rotation-order steps) and their axes, its
+    axis pre-rotation and offset."""
+
+    moves: np.ndarray
+    move_axes: np.ndarray
+    chans: np.ndarray
+    axes: np.ndarray
+    axis_quat: np.ndarray
+    has_axis: bool
+    offset: np.ndarray
+    has_children: bool
+
+
+@lru_cache(maxsize=64)
+def _joint_plans(skeleton: Skeleton) -> tuple[_JointPlan, ...]:
+    plan = channel_plan(skeleton)
+    out = []
+    for j in range(len(skeleton)):
+        k = int((plan.rot_index[j] >= 0).sum())
+        out.append(
+            _JointPlan(
+                plan.pos_index[j][plan.pos_index[j] >= 0],
+                np.flatnonzero(plan.pos_index[j] >= 0),
+                plan.rot_index[j, :k],
+                np.ascontiguousarray(plan.rot_axis[j, :k], dtype=np.int64),
+                np.ascontiguousarray(plan.axis_quat[j], dtype=np.float64),
+                bool(plan.has_axis[j]),
+                plan.offsets[j],
+                bool(skeleton.children[j]),
+            )
+        )
+    return tuple(out)
+
+
 def _placing(skeleton: Skeleton, active: np.ndarray) -> np.ndarray:
     """Joints whose decoded position closed-loop translations need: the ancestors of every
     non-root joint with an active translation channel."""
@@ -243,7 +281,7 @@ def code_down_tree(
     active) it is called as ``code(channels, targets, rotations)``, where ``rotations`` maps
     each flagged joint of the depth to its :func:`exact_rotation`, its target instead of the
     (then meaningless) angles in ``targets``."""
-    plan = channel_plan(skeleton)
+    plans = _joint_plans(skeleton)
     frames = start.shape[0]
     glob = np.empty((len(skeleton), frames, 4))
     identity = np.tile([1.0, 0.0, 0.0, 0.0], (frames, 1))
@@ -252,50 +290,34 @@ def code_down_tree(
     for depth in depth_levels(skeleton):
         channels, targets, exact_targets = [], [], {}
         for j in depth:
-            p = skeleton.parents[j]
+            jp, p = plans[j], skeleton.parents[j]
             glob[j] = glob[p] if p >= 0 else identity
-            moves = plan.pos_index[j][plan.pos_index[j] >= 0]
-            k = int((plan.rot_index[j] >= 0).sum())
-            chans = plan.rot_index[j, :k]
-            angles = start[:, chans]
+            angles = start[:, jp.chans]
             if closed_loop and p >= 0 and exact is not None and exact[j]:
-                exact_targets[j] = exact_rotation(plan.axis_quat[j], plan.has_axis[j], glob[j], goal[:, j])
-            elif closed_loop and p >= 0 and active[chans].any():
+                exact_targets[j] = exact_rotation(jp.axis_quat, jp.has_axis, glob[j], goal[:, j])
+            elif closed_loop and p >= 0 and active[jp.chans].any():
                 angles = target_angles(
-                    angles,
-                    plan.rot_axis[j, :k],
-                    active[chans],
-                    plan.axis_quat[j],
-                    plan.has_axis[j],
-                    glob[j],
-                    goal[:, j],
+                    angles, jp.axes, active[jp.chans], jp.axis_quat, jp.has_axis, glob[j], goal[:, j]
                 )
-            shifts = start[:, moves]
-            if where is not None and goal_positions is not None and p >= 0 and active[moves].any():
-                wanted = _rotate_back(glob[p], goal_positions[:, j] - where[p]) - plan.offsets[j]
-                axes = np.flatnonzero(plan.pos_index[j] >= 0)
-                shifts = np.where(active[moves], wanted[:, axes], shifts)
-            channels += [moves, chans]
+            shifts = start[:, jp.moves]
+            if where is not None and goal_positions is not None and p >= 0 and active[jp.moves].any():
+                wanted = _rotate_back(glob[p], goal_positions[:, j] - where[p]) - jp.offset
+                shifts = np.where(active[jp.moves], wanted[:, jp.move_axes], shifts)
+            channels += [jp.moves, jp.chans]
             targets += [shifts, angles]
         coded = np.concatenate(channels)
         if not coded.size:
             continue
         decoded = code(coded, np.hstack(targets)) if exact is None else code(coded, np.hstack(targets), exact_targets)
-        column = {c: i for i, c in enumerate(coded)}
+        column = {c: i for i, c in enumerate(coded.tolist())}
         for j in depth:
-            k = int((plan.rot_index[j] >= 0).sum())
-            if k and skeleton.children[j]:
-                glob[j] = compose(
-                    decoded[:, [column[c] for c in plan.rot_index[j, :k]]],
-                    plan.rot_axis[j, :k],
-                    plan.axis_quat[j],
-                    plan.has_axis[j],
-                    glob[j],
-                )
+            jp = plans[j]
+            if jp.chans.size and jp.has_children:
+                rotated = np.ascontiguousarray(decoded[:, [column[c] for c in jp.chans.tolist()]])
+                glob[j] = compose(rotated, jp.axes, jp.axis_quat, jp.has_axis, glob[j])
             if where is not None and placing[j]:
-                bone = np.tile(plan.offsets[j], (frames, 1))
-                for axis, c in enumerate(plan.pos_index[j]):
-                    if c >= 0:
-                        bone[:, axis] += decoded[:, column[c]]
+                bone = np.tile(jp.offset, (frames, 1))
+                for axis, c in zip(jp.move_axes.tolist(), jp.moves.tolist()):
+                    bone[:, axis] += decoded[:, column[c]]
                 p = skeleton.parents[j]
                 where[j] = bone if p < 0 else where[p] + rotations.quat_rotate(glob[p], bone)

@@ -92,7 +92,7 @@ def main() -> None:
     parser.add_argument("--clips", type=int, default=0, help="clips per source (0: all)")
     parser.add_argument("--bound", type=float, default=0.5, help="max error bound, cm (default 0.5)")
     parser.add_argument("--measure", default="joint", choices=("joint", "shell"))
-    parser.add_argument("--live-clips", type=int, default=8, help="clips per source for kinwave-live (default 8)")
+    parser.add_argument("--live-clips", type=int, default=8, help="kinwave-live's clips per source (8; 0: none)")
     args = parser.parse_args()
     motions = _sources(args.clips)
     warm = get_codec("kinwave")
@@ -108,8 +108,9 @@ def main() -> None:
             total, line = _row(name, level, clips, codec, top)
             top = top or total
             print(line, flush=True)
-    print("\n| source | kinwave-live, 1 layer, f/s | 3 layers, f/s |\n|---|---|---|")
-    for name, clips in motions.items():
+    if args.live_clips:
+        print("\n| source | kinwave-live, 1 layer, f/s | 3 layers, f/s |\n|---|---|---|")
+    for name, clips in motions.items() if args.live_clips else ():
         some = clips[: args.live_clips]
         print(f"| {name} ({len(some)} clips) | {_live(some, 1):,.0f} | {_live(some, 3):,.0f} |", flush=True)
     print(f"\nfirst use (a fresh process, kernels compiled anew): {_first_use():.1f} s")

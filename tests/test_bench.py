@@ -304,3 +304,15 @@ def test_bench_command_writes_tables_and_refuses_unknown_codecs(tmp_path, capsys
     assert (tmp_path / "results.csv").read_text().count("\n") == 7
     assert main(["bench", str(SMALL), "--out", str(tmp_path), "--codecs", "nope"]) == 2
     assert "unknown codec 'nope'" in capsys.readouterr().err
+
+
+def test_codec_knobs_configure_the_codecs_that_have_them(tmp_path):
+    run = suite.run(
+        [SMALL], tmp_path, ["kinwave", "zstd"], ("error",), errors=(1.0,), report=False, jobs=1, knobs={"effort": "1"}
+    )
+    kin = next(r for r in run.rows if r["codec"] == "kinwave")
+    assert run.meta["knobs"] == {"kinwave": {"effort": "1"}} and kin["max_joint_error_cm"] <= 1.0
+    again = suite.run([SMALL], tmp_path, ["kinwave"], ("error",), errors=(1.0,), report=False, jobs=1)
+    assert again.meta["tasks_run"] == 1  # other knobs: another task
+    with pytest.raises(MocodecError, match="no codec of this run has the knob 'effort'"):
+        suite.run([SMALL], tmp_path, ["zstd"], report=False, jobs=1, knobs={"effort": "1"})

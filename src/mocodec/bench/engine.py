@@ -75,11 +75,16 @@ class Task:
     name: str
     codec: str
     points: tuple[Point, ...]
+    knobs: tuple[tuple[str, str], ...] = ()  # (name, value) the codec is configured with
 
     @property
     def key(self) -> str:
-        spec = json.dumps([self.name, self.codec, [p.label for p in self.points]])
-        return hashlib.sha1(spec.encode()).hexdigest()[:16]
+        spec = [self.name, self.codec, [p.label for p in self.points]] + ([list(self.knobs)] if self.knobs else [])
+        return hashlib.sha1(json.dumps(spec).encode()).hexdigest()[:16]
+
+    def configured(self):
+        """The task's codec with its knobs."""
+        return get_codec(self.codec, **dict(self.knobs))
 
 
 def find_clips(paths) -> list[tuple[str, str]]:
@@ -108,12 +113,12 @@ def clip_source(name: str) -> str:
     return f"{path.parts[0]} {fmt}" if len(path.parts) > 1 else fmt
 
 
-def _warm(codec_id: str, motion: Motion) -> None:
+def _warm(task: Task, motion: Motion) -> None:
     """Code a few frames once per process, so compile time is not counted as coding time."""
-    if codec_id not in _warmed:
-        _warmed.add(codec_id)
+    if task.codec not in _warmed:
+        _warmed.add(task.codec)
         try:
-            moc.unpack(moc.pack(motion[:WARM_FRAMES], get_codec(codec_id)))
+            moc.unpack(moc.pack(motion[:WARM_FRAMES], task.configured()))
         except MocodecError:
             pass
 
@@ -139,7 +144,7 @@ def _base_row(task: Task, motion: Motion | None, point: Point) -> dict:
 
 def _measured(task: Task, motion: Motion, point: Point) -> dict:
     row = _base_row(task, motion, point)
-    codec = get_codec(task.codec)
+    codec = task.configured()
     if point.kind == "knob" and row["knob"]:
         codec = codec.with_knob(row["knob"], point.value)
     elif point.kind != "knob":
@@ -186,7 +191,7 @@ def run_task(task: Task) -> list[dict]:
         motion = load(task.path)
     except Exception as e:  # noqa: BLE001 - the clip is reported and the run goes on
         return [failed_row(task, None, Point("knob", math.nan), "failed", e)]
-    _warm(task.codec, motion)
+    _warm(task, motion)
     rows = []
     for point in task.points:
         try:

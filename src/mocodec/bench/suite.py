@@ -82,9 +82,11 @@ def run(
     progress: bool = False,
     report: bool = True,
     command: str | None = None,
+    knobs: dict | None = None,
 ) -> BenchResult:
-    """Benchmark ``codecs`` (default: all but ``raw``) on every clip under ``paths``; skip the
-    tasks ``out_dir`` already holds from an earlier run with the same points."""
+    """Benchmark ``codecs`` (default: all but ``raw``) on every clip under ``paths``, each
+    configured with those of ``knobs`` it has (e.g. kinwave's ``effort``); skip the tasks
+    ``out_dir`` already holds from an earlier run with the same points and knobs."""
     codecs = list(codecs or default_codecs())
     plan = {c: tuple(points_for(c, kinds, errors, ratios, bitrates)) for c in codecs}
     clips = engine.find_clips(paths)
@@ -93,7 +95,11 @@ def run(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     store = engine.Store(out)
-    tasks = [engine.Task(p, n, c, plan[c]) for p, n in clips for c in codecs]
+    given = {c: tuple(sorted((k, str(v)) for k, v in (knobs or {}).items() if k in _knob_names(c))) for c in codecs}
+    unused = sorted(set(knobs or {}) - {k for c in codecs for k in _knob_names(c)})
+    if unused:
+        raise MocodecError(f"no codec of this run has the knob {unused[0]!r}")
+    tasks = [engine.Task(p, n, c, plan[c], given[c]) for p, n in clips for c in codecs]
     todo = [t for t in tasks if t.key not in store.done]
     started = time.time()
     t0 = time.perf_counter()
@@ -115,6 +121,7 @@ def run(
         "scheduler": scheduler or ("dask local" if dask else "local"),
         "clips": len(clips),
         "codecs": codecs,
+        "knobs": {c: dict(k) for c, k in given.items() if k},
         "tasks": len(tasks),
         "tasks_run": len(todo),
         "tasks_resumed": len(tasks) - len(todo),
@@ -135,6 +142,10 @@ def run(
 
         write_report(rows, meta, out)
     return result
+
+
+def _knob_names(codec_id: str) -> set[str]:
+    return {k.name for k in codec_class(codec_id).knobs}
 
 
 def _earlier_wall(out: Path) -> float:

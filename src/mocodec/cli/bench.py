@@ -45,6 +45,7 @@ def cmd_bench(args) -> int:
         progress=_bar(args),
         report=not args.no_report,
         command="mocodec " + " ".join(sys.argv[1:]),
+        knobs=args.knobs,
     )
     m = result.meta
     print(
@@ -88,7 +89,8 @@ def add_commands(sub) -> None:
         description="For every clip and codec: a sweep of the codec's quality knob and/or "
         "rate-controlled targets, each measured (size, ratio, bit rate, PSNR, VPSNR, "
         "joint, shell and foot errors, speed). Writes results.csv, meta.json, "
-        "rows.jsonl (resumes a stopped run) and report.html / report.md.",
+        "rows.jsonl (resumes a stopped run) and report.html / report.md. Codec knobs as --name "
+        "value apply to the codecs that have them (e.g. --effort 1 for kinwave).",
     )
     p.add_argument("data", nargs="+", metavar="DATA", help=".bvh/.amc files or folders (searched recursively)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
@@ -127,7 +129,7 @@ def add_commands(sub) -> None:
     )
     p.add_argument("--no-report", action="store_true", help="only the tables, no plots or report")
     _where(p)
-    p.set_defaults(func=cmd_bench)
+    p.set_defaults(func=cmd_bench, takes_knobs=True)
 
     p = sub.add_parser(
         "compress-dir",

@@ -246,3 +246,16 @@ def test_encode_codes_a_files_chunks_in_several_processes_to_the_same_bytes(tmp_
     assert one.read_bytes() == two.read_bytes()
     assert main(["encode", str(DATA / "07_03.amc"), "-o", str(two), "--jobs", "0"]) == 2
     assert "jobs must be at least 1" in capsys.readouterr().err
+
+
+def test_compare_reads_a_converted_file_in_its_own_unit(tmp_path, capsys):
+    """A BVH written in centimetres of a motion in another unit compares with it as it is."""
+    from mocodec import save
+    from mocodec.formats import with_units
+
+    out = tmp_path / "m.bvh"
+    save(with_units(load(DATA / "07_03.bvh")[:60], 0.4), tmp_path / "metres.glb")  # a unit no guess finds
+    assert main(["convert", str(tmp_path / "metres.glb"), str(out)]) == 0
+    capsys.readouterr()
+    assert main(["compare", str(tmp_path / "metres.glb"), str(out), "--json"]) == 0
+    assert '"max_joint_error_cm"' in capsys.readouterr().out

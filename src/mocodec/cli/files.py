@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from mocodec.cli.options import add_codec_options, add_input_options, load_input, skeleton_from
-from mocodec.formats import load, save
+from mocodec.formats import load, save, with_units
 from mocodec.motion import Motion
 
 
@@ -124,6 +124,8 @@ def cmd_compare(args) -> int:
     original = load_input(args.original, args)
     asf = args.decoded_asf or args.asf
     decoded = load(args.decoded, asf=asf, fps=args.fps, animation=args.animation, units_per_metre=args.units)
+    if decoded.skeleton.units_per_metre != original.skeleton.units_per_metre:  # e.g. a BVH written in cm
+        decoded = with_units(decoded, original.skeleton.units_per_metre)
     result = compare(original, decoded, shell_cm=args.shell_cm)
     if args.json:
         print(json.dumps(result.as_dict(per_joint=args.per_joint), indent=2, allow_nan=False))

@@ -221,7 +221,7 @@ def test_motion_above_the_precision_is_kept_exactly():
 def test_noise_that_adds_up_along_a_chain_is_kept_where_it_would_pass_the_precision():
     samples = _samples(0.9e-6, frames=200)  # each under the precision, a chain of four over it
     motion = nodetree.to_motion(samples, 30.0, 100.0)
-    error = np.abs(motion.positions() / 100.0 - samples.position).max()
+    error = np.linalg.norm(motion.positions() / 100.0 - samples.position, axis=2).max()
     assert error <= nodetree.STILL_M and motion.skeleton.metadata["dropped_m"] == pytest.approx(error)
     assert 3 < motion.skeleton.num_channels < 3 + 3 * 4
 

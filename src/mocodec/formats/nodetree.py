@@ -81,7 +81,7 @@ def to_motion(samples: NodeSamples, fps: float, units_per_metre: float, name: st
     exact: set[int] = set()  # joints whose every motion is kept
     for _ in range(_TRIES):
         motion = _build(samples, local, fps, units_per_metre, name, precision, exact)
-        error = np.abs(motion.positions() - target).max(axis=(0, 2), initial=0.0) / units_per_metre
+        error = _joint_errors_m(motion, target)
         over = np.flatnonzero(error > precision)
         if not len(over):
             break
@@ -90,9 +90,16 @@ def to_motion(samples: NodeSamples, fps: float, units_per_metre: float, name: st
         exact.update(int(samples.parents[j]) for j in over if samples.parents[j] >= 0)
     else:
         motion = _build(samples, local, fps, units_per_metre, name, precision, set(range(len(samples.names))))
-        error = np.abs(motion.positions() - target).max(axis=(0, 2), initial=0.0) / units_per_metre
+        error = _joint_errors_m(motion, target)
     motion.skeleton.metadata.update(precision_m=precision, dropped_m=float(error.max(initial=0.0)))
     return motion
+
+
+def _joint_errors_m(motion: Motion, target: np.ndarray) -> np.ndarray:
+    """``(joints,)``: how far (metres) each joint of ``motion`` comes from ``target`` (its
+    positions in the motion's units) at worst over the frames."""
+    distance = np.linalg.norm(motion.positions() - target, axis=2)
+    return distance.max(axis=0, initial=0.0) / motion.skeleton.units_per_metre
 
 
 def _local_transforms(samples: NodeSamples, unit: float) -> list[tuple[np.ndarray, np.ndarray]]:

@@ -26,12 +26,9 @@ def joint_error_m(original: Motion, written: Motion) -> float:
     names = {name: k for k, name in enumerate(written.skeleton.names)}
     worst = 0.0
     for k, name in enumerate(original.skeleton.names):
-        path = ours[:, k : k + 1]
-        if name in names:
-            error = float(np.abs(theirs[:, names[name]] - path[:, 0]).max(initial=0.0))
-        else:
-            error = float(np.abs(theirs - path).max(axis=(0, 2), initial=0.0).min(initial=np.inf))
-        worst = max(worst, error)
+        candidates = theirs[:, [names[name]]] if name in names else theirs
+        distance = np.linalg.norm(candidates - ours[:, k : k + 1], axis=2).max(axis=0, initial=0.0)
+        worst = max(worst, float(distance.min(initial=np.inf)))
     return worst
 
 

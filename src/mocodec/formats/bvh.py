@@ -32,6 +32,7 @@ import numpy as np
 from mocodec import limits
 from mocodec.errors import FormatError
 from mocodec.formats.fileio import atomic_write, format_rows, parse_number, parse_number_block, read_text
+from mocodec.kinematics import channel_plan
 from mocodec.motion import Motion
 from mocodec.skeleton import CHANNEL_NAMES, Joint, Skeleton
 
@@ -328,11 +329,11 @@ def bvh_text(motion: Motion, decimals: int | None = None) -> str:
 def _positions_from_offsets(skeleton: Skeleton) -> np.ndarray:
     """``(channels,)``: each position channel's joint offset on its axis, 0 elsewhere: what a
     BVH position channel holds beyond a Motion's (see the module docstring)."""
+    plan = channel_plan(skeleton)
     shift = np.zeros(skeleton.num_channels)
-    for i, joint in enumerate(skeleton.joints):
-        for k, channel in enumerate(joint.channels):
-            if channel.endswith("position"):
-                shift[skeleton.channel_offsets[i] + k] = joint.offset["XYZ".index(channel[0])]
+    for k in range(3):
+        has = plan.pos_index[:, k] >= 0
+        shift[plan.pos_index[has, k]] = skeleton.offsets[has, k]
     return shift
 
 

@@ -125,7 +125,9 @@ def tune(
     positions = forward_kinematics(motion.skeleton, motion.channels)[0] * (100.0 / motion.skeleton.units_per_metre)
     bound = guaranteed(codec, target, value)
     if bound is not None:
-        return measure(bound, motion, positions, whole_file)
+        m = measure(bound, motion, positions, whole_file)
+        if _meets(m, target, value):
+            return m
     if hasattr(codec, "target_knobs"):
         direct = _direct(codec, motion, target, value, tolerance, whole_file, positions)
         if direct is not None:
@@ -191,9 +193,9 @@ DIRECT_PASSES = 5
 def _direct(
     codec: Codec, motion: Motion, target: str, value: float, tolerance: float, whole_file: bool, positions: np.ndarray
 ) -> Measurement | None:
-    """For a codec that meets targets itself (``target_knobs``: kinwave's error bound and
-    bit-rate knobs), one encoding for an error bound, or a few corrected ones for a size, instead
-    of a bisection; None if it does not get there (the caller bisects)."""
+    """For a codec that meets a size target itself (``target_knobs``: kinwave's bit-rate knob),
+    a few corrected encodings instead of a bisection; None if it does not get there (the caller
+    bisects). Error targets a codec guarantees go through :func:`guaranteed`."""
     overhead = 0.0
     best = None
     for _ in range(DIRECT_PASSES):
@@ -201,8 +203,6 @@ def _direct(
         if knobs is None:
             return None
         m = measure(type(codec)(**{**codec.config, **knobs}), motion, positions, whole_file)
-        if target not in ("ratio", "bitrate"):
-            return m if _meets(m, target, value) else None
         if _meets(m, target, value):
             if abs(_achieved(m, target) - value) <= tolerance * value:
                 return m

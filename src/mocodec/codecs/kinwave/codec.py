@@ -178,9 +178,8 @@ class KinwaveCodec(Codec):
         return None
 
     def target_knobs(self, target: str, value: float, motion: Motion, overhead_bytes: int = 0) -> dict | None:
-        """Knobs that make the encoder itself meet a rate-control target (:mod:`ratecontrol`)."""
-        if target in ("max_error_cm", "mean_error_cm"):
-            return self.bound_knobs(target, value)
+        """Knobs that make the encoder itself meet a size target (:mod:`ratecontrol`; error
+        targets: :meth:`bound_knobs`)."""
         if target in ("ratio", "bitrate"):
             bits = motion.raw_bits / value if target == "ratio" else value * motion.duration
             return {"bits_per_second": max((bits - 8 * overhead_bytes) / max(motion.duration, 1e-9), 1.0)}

@@ -102,8 +102,10 @@ def steps(
     useful = mean > 0
     u = np.where(useful, weight / (weight[useful].sum() * np.where(useful, mean, 1.0)), 1.0)
     if useful.any():
-        program = _mean_program if mode == "mean" else _max_program
-        u[useful] = program(weight[useful], lever2[useful], u[useful])
+        if mode == "mean":
+            u[useful] = _mean_program(weight[useful], lever2[useful], u[useful])
+        else:
+            u[useful] = _max_program(weight[useful], lever2[useful])
     s = np.sqrt(u)
     rot = np.full(len(m), np.nan)
     rot[coded] = s[: coded.size]
@@ -139,13 +141,12 @@ def _mean_program(weight: np.ndarray, lever2: np.ndarray, start: np.ndarray) -> 
     return u / np.sqrt(lever2.T @ u).mean() ** 2  # the bound met whatever SLSQP returned
 
 
-def _max_program(weight: np.ndarray, lever2: np.ndarray, start: np.ndarray) -> np.ndarray:
+def _max_program(weight: np.ndarray, lever2: np.ndarray) -> np.ndarray:
     """maximise sum w log u subject to lever2^T u <= 1 (every point), by its dual: with a price
     ``lam_p >= 0`` per point, ``u_j = w_j / (lever2 lam)_j`` (the optimality condition), and
     each price scaled by how far its point's constraint is from tight, ``lam_p *= (lever2^T
-    u)_p``, until every priced constraint is tight and no other is broken (to MAX_GAP). Each
-    round costs two small products, where SLSQP took 5-85 ms on the shared skeletons for the
-    same optimum (docs/kinwave.md). ``start`` is not needed: the prices start equal."""
+    u)_p``, from equal prices until every priced constraint is tight and no other is broken (to
+    MAX_GAP). Each round costs two small products (time against SLSQP: docs/kinwave.md)."""
     prices = np.full(lever2.shape[1], weight.sum() / lever2.shape[1])
     for _ in range(MAX_ROUNDS):
         u = weight / np.maximum(lever2 @ prices, 1e-300)

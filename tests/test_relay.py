@@ -136,19 +136,26 @@ def test_a_viewer_that_lost_a_packet_gets_it_again_and_stays_exact(walk_bvh, bud
 
 
 def test_repair_requests_are_checked_and_limited(walk_bvh):
-    from mocodec.stream.relay import REPAIR_PACKETS, Bucket, Closing, Room
+    from mocodec.stream.relay import Bucket, Closing, Room
+    from mocodec.stream.retention import REPAIR_PACKETS
 
     packets = stream_clip(walk_bvh, get_codec("kinwave-live", refresh_s=0.5), keyframe_s=60.0)[:-1]
     relay, room, viewer = Relay(SECRET), Room(), Viewer(ws=None, transport=None)
     for p in packets:
         relay._ingest(room, pack_batch([p.to_bytes()]), owner=1)
-    kept = [f.packet.sequence for f in room.streams[0].recent]  # the last REPAIR_PACKETS, restarts or not
-    assert kept == [p.sequence for p in packets[-REPAIR_PACKETS:]] and len(packets) > REPAIR_PACKETS
+    history = room.streams[0].history
+    kept = [p.sequence for p in packets[-REPAIR_PACKETS:]]  # the last REPAIR_PACKETS, restarts or not
+    assert len(packets) > REPAIR_PACKETS and history.find(kept[0] - 1) is None
+    assert [history.find(s).packet.sequence for s in kept] == kept
     bucket = Bucket(rate=1.0, burst_s=3.0)  # three packets
     relay._resend(viewer, room, [[0, kept[1]], [0, kept[0] - 1], [7, kept[1]], [0, kept[2]], [0, kept[3]]], bucket)
     relay._resend(viewer, room, [[0, kept[4]]], bucket)  # the bucket is empty: ignored
-    assert [f.packet.sequence for f in viewer.resends] == [kept[1], kept[2]] and not viewer.pending
-    assert relay.counters["repairs"] == 2 and relay.counters["repairs_missed"] == 4
+    assert [f.packet.sequence for f in viewer.resends] == kept[1:4] and not viewer.pending  # misses cost nothing
+    assert relay.counters["repairs"] == 3 and relay.counters["repairs_missed"] == 3
+    sizes = [len(history.find(s).data) for s in kept[5:8]]
+    viewer.repair_volume = Bucket(rate=sum(sizes[:2]), burst_s=1.0)  # the bytes of two packets
+    relay._resend(viewer, room, [[0, s] for s in kept[5:8]], Bucket(100.0, 1.0))
+    assert [f.packet.sequence for f in viewer.resends[3:]] == kept[5:7]
     for bad in ([[0, -1]], [[0]], [[0, 1.5]], [["0", 1]], [[0, 1]] * 257, {"0": 1}):
         with pytest.raises(Closing, match="repair"):
             relay._resend(viewer, room, bad, Bucket(100.0, 1.0))
@@ -241,10 +248,10 @@ def test_a_malformed_message_closes_that_connection_only(walk_bvh):
 
 
 def test_a_viewer_gains_a_layer_only_where_it_restarts(walk_bvh):
-    from mocodec.stream.relay import Forward, StreamState
+    from mocodec.stream.relay import Forward, Room, StreamState
 
     codec = get_codec("kinwave-live", layers=3, refresh_s=0.5)
-    state = StreamState(None, None, None, codec)
+    state = StreamState(None, None, None, codec, Room().history.stream())
     viewer = Viewer(ws=None, transport=None)
 
     def kept(fits, starts, keyframe=False):
@@ -269,7 +276,8 @@ def test_a_late_joiner_of_a_refreshing_stream_starts_at_its_last_restart(walk_bv
     relay, room = Relay(SECRET), Room()
     for p in packets:
         relay._ingest(room, pack_batch([p.to_bytes()]), owner=1)
-    gop = room.streams[0].gop
+    history = room.streams[0].history
+    gop, _ = history.since(history.restart, float("inf"))
     last = max(i for i, p in enumerate(packets) if p.restart)
     assert gop[0].packet.restart and not gop[0].packet.keyframe
     assert [f.packet.sequence for f in gop] == [p.sequence for p in packets[last:]]
@@ -548,3 +556,76 @@ def test_a_sender_that_vanishes_ends_its_stream_for_viewers(walk_bvh):
     (got, waited) = asyncio.run(go())
     half = packets[len(packets) // 2 - 1]
     assert got[0].num_frames == half.first_frame + half.frames and waited < 5  # ended, not timed out
+
+
+def _ticks(relay: Relay, room, viewer: Viewer, packets, per_tick: int = 1, extra_ticks: int = 400):
+    """Ingest ``packets`` ``per_tick`` a tick and dispatch each tick; then ticks without packets
+    until ``viewer`` has caught up: per tick, the bytes it got and the tick's fresh bytes."""
+    got = []
+    for k in range(0, len(packets) + per_tick * extra_ticks, per_tick):
+        chunk = packets[k : k + per_tick]
+        if chunk:
+            relay._ingest(room, pack_batch([p.to_bytes() for p in chunk]), owner=1)
+        elif not viewer.behind:
+            break
+        relay._dispatch(room)
+        batches = viewer.queue.get_nowait() if not viewer.queue.empty() else ()
+        got.append((batches, sum(len(p.to_bytes()) for p in chunk)))
+    return got
+
+
+def test_a_late_viewer_catches_up_paced_and_decodes_exactly(walk_bvh):
+    """A viewer joining a stream half way catches up from its keyframe at the catch-up pace
+    beyond the live packets (it once got everything kept in one message), and gets every
+    packet once, in order: it decodes what a viewer from the start decodes."""
+    from mocodec.stream.relay import Room
+
+    packets = stream_clip(walk_bvh, get_codec("dpcm"), keyframe_s=60.0)
+    pace, tick_hz = 40_000.0, 60.0
+    relay, room = Relay(SECRET, Limits(catchup_bytes_per_s=pace), tick_hz=tick_hz), Room()
+    half = len(packets) // 2
+    for p in packets[:half]:
+        relay._ingest(room, pack_batch([p.to_bytes()]), owner=1)
+    relay._dispatch(room)
+    viewer = Viewer(ws=None, transport=None, queue=asyncio.Queue(maxsize=1000))
+    relay._join(viewer, room)
+    ticks = _ticks(relay, room, viewer, packets[half:])
+    largest = max(len(p.to_bytes()) for p in packets)
+    received = []
+    header = len(packets[0].to_bytes())  # in the first tick's batch
+    for k, (batches, live) in enumerate(ticks):
+        sent = sum(len(b) for b in batches) - (header if k == 0 else 0)
+        assert sent <= live + pace / tick_hz + largest + 64  # the pace, and the packet that crosses it
+        received += [bytes(r) for b in batches for r in split_batch(b)]
+    kept = sum(len(p.to_bytes()) for p in packets[1:half])
+    assert len([t for t in ticks if t[0]]) > kept / (pace / tick_hz) / 2  # paced over many ticks
+    assert received == [p.to_bytes() for p in packets]
+    assert not viewer.behind and not viewer.notes
+
+
+def test_what_the_relay_keeps_is_capped_per_stream_and_per_room():
+    from mocodec.stream.retention import Caps, RoomHistory
+
+    class F:
+        def __init__(self, size: int, sequence: int):
+            self.data, self.packet = b"x" * size, type("P", (), {"sequence": sequence})()
+
+    room = RoomHistory(Caps(stream_bytes=1000, room_bytes=2500, stream_packets=100))
+    a, b, c = room.stream(), room.stream(), room.stream()
+    for k in range(50):  # a restart point at the start only
+        a.add(F(100, k), restart=k == 0)
+    assert a.bytes == 1000 and a.partial and a.first == 40 and room.bytes == 1000
+    for k in range(10):
+        b.add(F(300, k), restart=True)
+    assert b.bytes == 900 and room.bytes == 1900  # the last packets for repairs, within its cap
+    for k in range(20):
+        c.add(F(150, k), restart=k % 5 == 0)
+    assert room.bytes <= 2500 and c.bytes <= 1000 and all(h.bytes >= 0 for h in (a, b, c))
+    assert a.bytes < 1000  # the room's cap took the oldest first: a's
+    got, after = c.since(c.restart, 200)
+    assert len(got) == 2 and after == c.first + (c.restart - c.first) + 2  # past the budget by one packet
+    c.close()
+    assert room.bytes == a.bytes + b.bytes and room.packets == len(a.kept) + len(b.kept)
+    for k in range(10_000):  # stale entries are compacted: the queue stays in proportion
+        a.add(F(10, 100 + k), restart=False)
+    assert len(room.arrivals) <= 2 * room.packets + 65

@@ -8,6 +8,7 @@ import asyncio
 import json
 import logging
 import socket
+import time
 import zlib
 
 import aiohttp
@@ -20,7 +21,7 @@ from mocodec.coding.entropy.parts import join_parts, split_parts
 from mocodec.stream import tokens
 from mocodec.stream.client import Watcher, connect, publish_clip, record
 from mocodec.stream.live import receive_clip, stream_clip
-from mocodec.stream.packets import CUTS, END, HEADER, Packet, pack_batch, with_cuts
+from mocodec.stream.packets import CUTS, END, HEADER, Packet, pack_batch, split_batch, with_cuts
 from mocodec.stream.relay import BAD_MESSAGE, BAD_TOKEN, Limits, Relay, on_ladder
 from test_relay import SECRET, serving, token
 
@@ -216,3 +217,85 @@ def test_a_header_with_a_hostile_reference_pose_closes_its_connection(walk_bvh):
 
     code, reason = asyncio.run(go())
     assert code == BAD_MESSAGE and "reference" in reason
+
+
+def test_late_viewers_of_big_streams_without_restarts_stall_nothing(walk_bvh):
+    """A publisher of 4 streams of 60 KB packets that never restart (within the publish
+    limits), then 10 late viewers: each starts those streams live, told so in a status message,
+    and no message it gets is larger than a few ticks of live packets (each once got everything
+    since the streams' start in one message, 117 MB, and every room stalled); the room keeps at
+    most its cap, and a viewer of another room keeps its packet rate."""
+    limits = Limits(max_stream_kept_bytes=1 << 20, max_room_kept_bytes=3 << 20)
+    size, per_s, streams = 60_000, 10, 4
+    header = stream_clip(walk_bvh[:10], get_codec("dpcm"))[0]
+    kept: list[int] = []
+
+    async def hostile(url, relay, seconds):
+        rng = np.random.default_rng(1)
+        async with connect(url, "big", token("big"), "publish") as ws:
+            heads = [Packet(s, 0, 0, "dpcm", 0, 0, header.payload, kind=HEADER).to_bytes() for s in range(streams)]
+            await ws.send_bytes(pack_batch(heads))
+            start, k = time.monotonic(), 0
+            while time.monotonic() - start < seconds:
+                k += 1
+                payload = rng.bytes(size)
+                batch = [Packet(s, k, 0, "dpcm", 4 * k, 4, payload).to_bytes() for s in range(streams)]
+                await ws.send_bytes(pack_batch(batch))
+                kept.append(relay.rooms["big"].history.bytes)
+                await asyncio.sleep(1 / per_s)
+
+    async def late(url, seconds):
+        largest, notes = 0, []
+        async with connect(url, "big", token("big"), "subscribe") as ws:
+            end = time.monotonic() + seconds
+            while (left := end - time.monotonic()) > 0:
+                try:
+                    msg = await ws.receive(timeout=left)
+                except TimeoutError:
+                    break
+                if msg.type == aiohttp.WSMsgType.TEXT:
+                    notes.append(json.loads(msg.data)["status"])
+                elif msg.type == aiohttp.WSMsgType.BINARY:
+                    largest = max(largest, len(msg.data))
+                else:
+                    break
+        return largest, notes
+
+    async def calm(url, seconds):
+        arrivals = []
+        async with connect(url, "calm", token("calm"), "subscribe") as ws:
+            end = time.monotonic() + seconds
+            while (left := end - time.monotonic()) > 0:
+                try:
+                    msg = await ws.receive(timeout=left)
+                except TimeoutError:
+                    break
+                if msg.type == aiohttp.WSMsgType.BINARY:
+                    arrivals += [time.monotonic()] * len(split_batch(msg.data))
+        return arrivals
+
+    async def go():
+        relay = Relay(SECRET, limits)
+        async with serving(relay) as url:
+            watcher = asyncio.create_task(calm(url, 7.0))
+            await asyncio.sleep(0.2)
+            t0 = time.monotonic()
+            steady = asyncio.create_task(
+                publish_clip(url, "calm", token("calm"), walk_bvh, get_codec("dpcm"), speed=0.5)
+            )
+            attack = asyncio.create_task(hostile(url, relay, 5.5))
+            await asyncio.sleep(3.0)
+            joined = time.monotonic()
+            viewers = await asyncio.gather(*(late(url, 2.0) for _ in range(10)))
+            await asyncio.gather(attack, steady)
+            return t0, joined, await watcher, viewers, relay
+
+    t0, joined, arrivals, viewers, relay = asyncio.run(go())
+    arrivals = np.array(arrivals)
+    before = ((arrivals >= t0 + 1.0) & (arrivals < joined)).sum() / (joined - t0 - 1.0)
+    during = ((arrivals >= joined) & (arrivals < joined + 2.0)).sum() / 2.0
+    assert before > 10 and during >= 0.9 * before
+    assert max(kept) <= limits.max_room_kept_bytes and relay.counters["catchups_partial"] == 10 * streams
+    for largest, notes in viewers:
+        assert largest <= 3 * streams * (size + 100)  # a few ticks' live packets at most
+        assert len(notes) == streams and all("restart point" in n for n in notes)

@@ -7,7 +7,8 @@ anything else the static files of the viewer. The relay greets an accepted conne
 sender's message is a batch of packets (:mod:`mocodec.stream.packets`); a viewer's messages
 are JSON: settings, ``{"budget": bit/s, "camera": [x, y, z] (metres)}``, and requests to
 resend packets it lost, ``{"repair": [[stream, sequence], ...]}``: the relay resends those it
-still has (each stream's last REPAIR_PACKETS) at its next tick, in a message before the
+still has (each stream's last REPAIR_PACKETS), up to ``repair_bytes_per_s`` (or the viewer's
+budget), at its next tick, in a message before the
 viewer's batch, with the layers the viewer gets now, so a receiver that holds the packets
 after a gap decodes on in step instead of waiting for the next restart.
 
@@ -20,8 +21,11 @@ share one cut; a layered (``kinwave-live`` with layers) stream keeps the most la
 measured rate fits the share (the base layer always), more only from a keyframe or a packet
 where the layer restarts, since a layer's prediction needs its history: the share by distance is
 spent as error bounds. Other streams pass whole. A viewer that joins late gets every stream
-header and the packets since each stream's last keyframe (or restart point, where the codec
-stream restarts its base layer on its own). A stream ends with its END packet; if its sender
+header and catches up from each stream's last keyframe (or restart point, where the codec
+stream restarts its base layer on its own), paced at ``catchup_bytes_per_s`` (or its budget)
+beyond the live packets (:mod:`mocodec.stream.retention` keeps them, capped in bytes per stream
+and per room); a stream whose restart point is no longer kept starts live, and the viewer gets
+a ``{"status": ...}`` message saying so. A stream ends with its END packet; if its sender
 goes without one, the relay sends the END for it (and over the bus), so no viewer waits for a
 stream that will not come back.
 
@@ -49,7 +53,7 @@ import logging
 import math
 import resource
 import time
-from collections import Counter, deque
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from itertools import repeat
@@ -81,6 +85,7 @@ from mocodec.stream.packets import (
     split_batch,
     truncated,
 )
+from mocodec.stream.retention import Caps, RoomHistory, StreamHistory
 
 log = logging.getLogger("mocodec.relay")
 
@@ -93,8 +98,6 @@ VENDOR = Path(__file__).parent.parent / "viewer" / "static" / "vendor"  # the pi
 LADDER_STEPS = 4
 #: A layered stream's rate per layer is measured over about this long (an exponential average).
 LAYER_RATE_S = 1.0
-#: The packets of each stream the relay keeps to resend on a viewer's request (a second at 60 a second).
-REPAIR_PACKETS = 64
 
 
 @dataclass
@@ -105,6 +108,10 @@ class Limits:
     control_messages_per_s: float = 120.0  # settings and repair requests (one a tick, and some)
     max_control_bytes: int = 16384  # a viewer's message (MAX_REPAIRS pairs fit)
     repair_packets_per_s: float = 2000.0  # packets resent to one viewer; past it requests are ignored
+    repair_bytes_per_s: float = 1e6  # bytes resent to one viewer (at most its budget)
+    catchup_bytes_per_s: float = 2e6  # a late viewer's catch-up beyond the live packets (at most its budget)
+    max_stream_kept_bytes: int = 4 << 20  # kept per stream for late viewers and repairs
+    max_room_kept_bytes: int = 32 << 20  # kept per room
     burst_s: float = 2.0  # a bucket holds this many seconds of its rate
     slow_viewer_s: float = 5.0
     max_gop_packets: int = 512
@@ -119,8 +126,12 @@ class Bucket:
     """A token bucket: ``rate`` per second, up to ``rate * burst_s`` saved."""
 
     def __init__(self, rate: float, burst_s: float):
-        self.rate, self.capacity = rate, rate * burst_s
+        self.rate, self.burst_s, self.capacity = rate, burst_s, rate * burst_s
         self.level, self.at = self.capacity, time.monotonic()
+
+    def set_rate(self, rate: float) -> None:
+        self.rate, self.capacity = rate, rate * self.burst_s
+        self.level = min(self.level, self.capacity)
 
     def take(self, amount: float = 1.0) -> bool:
         now = time.monotonic()
@@ -191,8 +202,7 @@ class StreamState:
     header: Forward
     info: StreamInfo
     codec: Any  # the stream's codec (an embedded one offers packet_cutter)
-    gop: list[Forward] = field(default_factory=list)
-    recent: deque[Forward] = field(default_factory=lambda: deque(maxlen=REPAIR_PACKETS))  # resent on request
+    history: StreamHistory  # what a late viewer catches up from and a repair resends
     position: tuple[float, float, float] = (0.0, 0.0, 0.0)
     next_sequence: int = 0
     next_frame: int = 0
@@ -265,8 +275,12 @@ class Viewer:
     budget: float = 0.0  # bit/s for the scalable streams; 0: everything whole
     camera: tuple[float, float, float] = (0.0, 0.0, 0.0)
     layers: dict[int, int] = field(default_factory=dict)  # layered stream -> the layers it gets now
-    pending: list[Forward] = field(default_factory=list)
+    pending: list[Forward] = field(default_factory=list)  # stream headers it has still to get
+    behind: dict[int, tuple[StreamState, int]] = field(default_factory=dict)  # catching up: the next ordinal
+    credit: float = 0.0  # bytes of catch-up it may get now
+    notes: list[str] = field(default_factory=list)  # status messages it has still to get
     resends: list[Forward] = field(default_factory=list)  # packets it asked for again
+    repair_volume: Bucket = field(default_factory=lambda: Bucket(Limits.repair_bytes_per_s, Limits.burst_s))
     queue: asyncio.Queue = field(default_factory=lambda: asyncio.Queue(maxsize=1))
     missed_since: float | None = None
     missed: int = 0
@@ -276,6 +290,7 @@ class Viewer:
 
 @dataclass
 class Room:
+    history: RoomHistory = field(default_factory=lambda: RoomHistory(caps_of(Limits())))
     streams: dict[int, StreamState] = field(default_factory=dict)
     viewers: list[Viewer] = field(default_factory=list)
     fresh: list[Forward] = field(default_factory=list)
@@ -284,6 +299,10 @@ class Room:
     @property
     def idle(self) -> bool:
         return not (self.streams or self.viewers or self.publishers)
+
+
+def caps_of(limits: Limits) -> Caps:
+    return Caps(limits.max_stream_kept_bytes, limits.max_room_kept_bytes, limits.max_gop_packets)
 
 
 async def messages_of(ws: web.WebSocketResponse, kind: WSMsgType, refusal: str):
@@ -329,6 +348,7 @@ class Relay:
             "dropped_slow": 0,
             "repairs": 0,
             "repairs_missed": 0,
+            "catchups_partial": 0,
         }
 
     # ----- the application -------------------------------------------------------------------
@@ -399,7 +419,7 @@ class Relay:
                 claims = tokens.verify(self.secret, token, room_name, role)
             except tokens.TokenError as e:
                 raise Closing(BAD_TOKEN, str(e)) from None
-            room = self.rooms.setdefault(room_name, Room())
+            room = self._room(room_name)
             expiry = asyncio.get_running_loop().call_later(
                 max(float(claims["exp"]) - time.time(), 0.0), self._expire, ws
             )
@@ -416,6 +436,12 @@ class Relay:
             log.info("closing a connection: %s", c.reason)
             await ws.close(code=c.code, message=c.reason[:120].encode())
         return ws
+
+    def _room(self, name: str) -> Room:
+        room = self.rooms.get(name)
+        if room is None:
+            room = self.rooms[name] = Room(RoomHistory(caps_of(self.limits)))
+        return room
 
     def _expire(self, ws: web.WebSocketResponse) -> None:
         """A connection's token has expired: close it (a viewer stops receiving, a sender's
@@ -468,7 +494,9 @@ class Relay:
                     raise Closing(BAD_MESSAGE, f"stream {p.stream}: {e}") from None
                 if state is None and len(room.streams) >= self.limits.max_streams_per_room:
                     raise Closing(RATE_LIMIT, f"room is full ({self.limits.max_streams_per_room} streams)")
-                room.streams[p.stream] = StreamState(owner, Forward(p, bytes(r)), info, codec)
+                if state is not None:
+                    state.history.close()
+                room.streams[p.stream] = StreamState(owner, Forward(p, bytes(r)), info, codec, room.history.stream())
                 room.fresh.append(room.streams[p.stream].header)
                 continue
             if state is None:
@@ -484,12 +512,7 @@ class Relay:
                 state.measure_layers(p, forward.layer_ends)
             state.position = p.position
             state.next_sequence, state.next_frame = (p.sequence + 1) & 0xFFFFFFFF, p.first_frame + p.frames
-            if p.restart:  # a late joiner starts at the last keyframe or restart
-                state.gop.clear()
-            state.gop.append(forward)
-            state.recent.append(forward)
-            if len(state.gop) > self.limits.max_gop_packets:
-                del state.gop[0]
+            state.history.add(forward, p.restart)  # a late joiner starts at the last keyframe or restart
             room.fresh.append(forward)
             state.ended = state.ended or p.end  # removed after this tick's dispatch
 
@@ -510,17 +533,14 @@ class Relay:
 
     async def _from_bus(self, room_name: str, data: bytes) -> None:
         try:
-            self._ingest(self.rooms.setdefault(room_name, Room()), data, owner=self.bus)
+            self._ingest(self._room(room_name), data, owner=self.bus)
         except Closing as c:
             log.warning("a bus message for room %s was refused: %s", room_name, c.reason)
 
     # ----- viewers -----------------------------------------------------------------------------
     async def _viewer(self, ws: web.WebSocketResponse, room: Room, transport) -> None:
         viewer = Viewer(ws, transport, queue=asyncio.Queue(maxsize=self.queued))
-        for state in room.streams.values():  # a late joiner starts at the last keyframes
-            if not state.ended:
-                viewer.pending += [state.header, *state.gop]
-        room.viewers.append(viewer)
+        self._join(viewer, room)
         sender = asyncio.create_task(self._send_loop(viewer))
         control = Bucket(self.limits.control_messages_per_s, self.limits.burst_s)
         repairs = Bucket(self.limits.repair_packets_per_s, self.limits.burst_s)
@@ -533,11 +553,26 @@ class Relay:
                 if len(text) > self.limits.max_control_bytes:
                     raise Closing(BAD_MESSAGE, f"a viewer's message is at most {self.limits.max_control_bytes} bytes")
                 doc = self._settings(viewer, text)
+                viewer.repair_volume.set_rate(self._pace(viewer, self.limits.repair_bytes_per_s))
                 if "repair" in doc:
                     self._resend(viewer, room, doc["repair"], repairs)
         finally:
             room.viewers.remove(viewer)
             sender.cancel()
+
+    def _join(self, viewer: Viewer, room: Room) -> None:
+        """A viewer joins: it gets every stream's header and catches up from its last restart
+        point (:meth:`_catch_up`), or starts a stream live where that point is no longer kept."""
+        viewer.repair_volume = Bucket(self.limits.repair_bytes_per_s, self.limits.burst_s)
+        for key, state in room.streams.items():
+            if state.ended:
+                continue
+            viewer.pending.append(state.header)
+            if state.history.partial:
+                self._starts_live(viewer, key, "its last restart point is no longer kept")
+            else:
+                viewer.behind[key] = (state, state.history.restart)
+        room.viewers.append(viewer)
 
     @staticmethod
     def _settings(viewer: Viewer, text: str) -> dict:
@@ -553,10 +588,22 @@ class Relay:
         viewer.budget, viewer.camera = budget, camera
         return doc
 
+    def _pace(self, viewer: Viewer, rate: float) -> float:
+        """Bytes a second of catch-up or repairs for a viewer: ``rate``, or its budget if lower."""
+        return rate if viewer.budget <= 0 else min(rate, viewer.budget / 8.0)
+
+    def _starts_live(self, viewer: Viewer, stream: int, why: str) -> None:
+        """A late viewer gets ``stream`` from its latest packets on, decodable from its next
+        restart point; it is told so in a status message."""
+        self.counters["catchups_partial"] += 1
+        status = f"stream {stream}: {why}; live from its latest packets, decoded from its next restart"
+        viewer.notes.append(json.dumps({"status": status}))
+
     def _resend(self, viewer: Viewer, room: Room, pairs: object, bucket: Bucket) -> None:
         """Queue the packets a viewer asks for again (``[[stream, sequence], ...]``) that the
-        relay still has (the last REPAIR_PACKETS of each stream), while its repair bucket lasts
-        (past it, requests are ignored: the viewer's receivers wait for the next restart)."""
+        relay still has (the last REPAIR_PACKETS of each stream), while its repair buckets last,
+        ``bucket`` in packets and the viewer's own in bytes (past them, requests are ignored:
+        the viewer's receivers wait for the next restart)."""
         if not (isinstance(pairs, list) and len(pairs) <= MAX_REPAIRS):
             raise Closing(BAD_MESSAGE, f"repair must be a list of at most {MAX_REPAIRS} [stream, sequence] pairs")
         for pair in pairs:
@@ -565,14 +612,11 @@ class Relay:
             ):
                 raise Closing(BAD_MESSAGE, "a repair pair is [stream, sequence], two integers 0 to 2**32 - 1")
             state = room.streams.get(pair[0])
-            if state is None or not state.recent or not bucket.take():
+            found = None if state is None else state.history.find(pair[1])
+            if found is None or not bucket.take() or not viewer.repair_volume.take(len(found.data)):
                 self.counters["repairs_missed"] += 1
                 continue
-            at = (pair[1] - state.recent[0].packet.sequence) & 0xFFFFFFFF
-            if at >= len(state.recent) or state.recent[at].packet.sequence != pair[1]:
-                self.counters["repairs_missed"] += 1
-                continue
-            viewer.resends.append(state.recent[at])
+            viewer.resends.append(found)
             self.counters["repairs"] += 1
 
     async def _send_loop(self, viewer: Viewer) -> None:
@@ -580,7 +624,7 @@ class Relay:
             batches = await viewer.queue.get()
             try:
                 for batch in batches:
-                    await viewer.ws.send_bytes(batch)
+                    await (viewer.ws.send_str(batch) if isinstance(batch, str) else viewer.ws.send_bytes(batch))
             except (ConnectionError, RuntimeError):
                 return
 
@@ -609,28 +653,65 @@ class Relay:
         for viewer in viewers:
             pending, viewer.pending = viewer.pending, []
             resends, viewer.resends = viewer.resends, []
-            items = pending + fresh
-            # what it asked for again goes first, in a message of its own: the tick's batch stays shared
-            batches = [pack_batch([self._resent(viewer, f) for f in resends])] if resends else []
+            notes, viewer.notes = viewer.notes, []
+            live = self._catch_up(room, viewer, fresh, pending) if viewer.behind else fresh
+            items = pending + live
+            # status, and what it asked for again, go first, in messages of their own: the tick's batch stays shared
+            batches: list[bytes | str] = [*notes]
+            if resends:
+                batches.append(pack_batch([self._resent(viewer, f) for f in resends]))
             if viewer.budget > 0 and (scalable or any(f.scalable for f in pending)):
                 if crowd is None:
                     crowd = self._crowd(room, fresh)
                     shares = self._shares(crowd, [v for v in viewers if v.budget > 0])
-                cut = self._cut(room, crowd, viewer, *shares[id(viewer)], items, len(items) - len(fresh), cut_cache)
+                own = len(items) - len(fresh) if live is fresh else len(items)  # the tick's fresh packets go together
+                cut = self._cut(room, crowd, viewer, *shares[id(viewer)], items, own, cut_cache)
                 batches.append(pack_batch(*cut))
-            elif pending:  # joined late: its streams' last packets before the tick's
-                batches.append(pack_batch([f.data for f in items]))
+            elif pending or live is not fresh:  # joined late: its streams' last packets before the tick's
+                if items:
+                    batches.append(pack_batch([f.data for f in items]))
             elif fresh:
                 shared = shared or pack_batch([f.data for f in fresh])
                 batches.append(shared)
             if batches:
                 self._offer(viewer, tuple(batches), items)
         for key in [k for k, state in room.streams.items() if state.ended]:
-            del room.streams[key]  # over: late joiners will not see it
+            room.streams.pop(key).history.close()  # over: late joiners will not see it
             for viewer in room.viewers:
                 viewer.layers.pop(key, None)
 
-    def _offer(self, viewer: Viewer, batches: tuple[bytes, ...], items: list[Forward]) -> None:
+    def _catch_up(self, room: Room, viewer: Viewer, fresh: list[Forward], out: list[Forward]) -> list[Forward]:
+        """A late viewer's catch-up this tick, added to ``out``: the kept packets of each stream
+        it is behind on, from where it got to, paced at :meth:`_pace` beyond the live packets of
+        those streams (which the history holds too, in order); the tick's fresh packets it gets
+        as they are (the other streams', and new streams' headers)."""
+        for key, (state, _) in list(viewer.behind.items()):
+            if room.streams.get(key) is not state:  # ended, or a new header: that comes fresh
+                del viewer.behind[key]
+        live = [f for f in fresh if f.packet.kind == HEADER or f.packet.stream not in viewer.behind]
+        owed = sum(len(f.data) for f in fresh) - sum(len(f.data) for f in live)
+        rate = self._pace(viewer, self.limits.catchup_bytes_per_s)
+        viewer.credit = min(viewer.credit + rate * self.tick_s, rate * self.limits.burst_s) + owed
+        for key, (state, at) in list(viewer.behind.items()):
+            history = state.history
+            if at < history.first:  # dropped before it got there (it was too slow)
+                del viewer.behind[key]
+                self._starts_live(viewer, key, "its catch-up fell out of what the relay keeps")
+                continue
+            if viewer.credit <= 0 and not state.ended:
+                continue
+            got, at = history.since(at, math.inf if state.ended else viewer.credit)
+            viewer.credit -= sum(len(f.data) for f in got)
+            out += got
+            if at >= history.end:
+                del viewer.behind[key]
+            else:
+                viewer.behind[key] = (state, at)
+        if not viewer.behind:
+            viewer.credit = 0.0
+        return live
+
+    def _offer(self, viewer: Viewer, batches: tuple[bytes | str, ...], items: list[Forward]) -> None:
         """Queue a viewer's batches, or miss the tick if the last are still on their way:
         it keeps the stream headers for the next tick and drops the rest (its receivers
         resynchronise at the next keyframe)."""

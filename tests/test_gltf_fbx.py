@@ -342,12 +342,17 @@ def test_a_crash_while_ufbx_frees_a_scene_is_no_error(monkeypatch):
 
 
 @pytest.mark.parametrize(
-    "module, path", [("pygltflib", DATA.parent / "formats" / "walk.glb"), ("ufbx", FBX_DATA / "nod.fbx")]
+    "module, action",
+    [
+        ("pygltflib", f"mocodec.save(mocodec.load({str(DATA.parent / 'formats' / 'walk.glb')!r}), 'x.glb')"),
+        ("ufbx", f"mocodec.load({str(FBX_DATA / 'nod.fbx')!r})"),
+    ],
 )
-def test_without_the_formats_extra_the_error_names_it(module, path):
-    script = f"import sys; sys.modules[{module!r}] = None\nimport mocodec\ntry:\n    mocodec.load({str(path)!r})\n"
+def test_without_the_formats_extra_the_error_names_it(module, action, tmp_path):
+    """glTF is read without the extra (the reader parses the JSON itself) and written with it."""
+    script = f"import sys; sys.modules[{module!r}] = None\nimport mocodec\ntry:\n    {action}\n"
     script += "except mocodec.MocodecError as e:\n    print(e)"
-    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=tmp_path)
     assert "pip install 'mocodec[formats]'" in done.stdout, done.stderr
 
 

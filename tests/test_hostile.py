@@ -294,7 +294,8 @@ def chain_asf(bones: int) -> str:
 @pytest.mark.parametrize(
     "name, text, why",
     [
-        ("ft.bvh", re.sub(r"Frame Time:\s*\S+", "Frame Time: 1e-320", BVH), "frames per second"),
+        ("ft.bvh", re.sub(r"Frame Time:\s*\S+", "Frame Time: 1e-320", BVH), "a frame rate outside"),
+        ("slow.bvh", re.sub(r"Frame Time:\s*\S+", "Frame Time: 1e300", BVH), "a frame rate outside"),
         ("cycle.asf", chain_asf(3).replace("    b1 b2", "    b1 b2 root"), "root cannot be the child"),
         ("dof.asf", ASF.replace("dof rx ry rz", "dof rx rx rz", 1), "listed twice"),
         ("doft.asf", ASF.replace("dof rx ry rz", "dof tx tx", 1), "listed twice"),

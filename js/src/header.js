@@ -2,7 +2,7 @@
 // codec config, name and extra, inflated to at most MAX_HEADER_TEXT bytes and checked.
 import { DecodeError } from './errors.js';
 import { inflate } from './inflate.js';
-import { MAX_FPS, MAX_HEADER_TEXT } from './limits.js';
+import { MAX_FPS, MAX_HEADER_TEXT, MIN_FPS } from './limits.js';
 import { Skeleton } from './skeleton.js';
 
 
@@ -18,7 +18,7 @@ export async function parseStreamHeader(payload) {
     throw new DecodeError('stream header: expected an object with a codec config naming a codec');
   }
   const fps = doc.fps;
-  if (typeof fps !== 'number' || !(fps > 0 && fps <= MAX_FPS)) throw new DecodeError(`stream header: frame rate ${fps} is outside (0, ${MAX_FPS}]`);
+  if (typeof fps !== 'number' || !(fps >= MIN_FPS && fps <= MAX_FPS)) throw new DecodeError(`stream header: frame rate ${fps} is outside [${MIN_FPS}, ${MAX_FPS}]`);
   const extra = doc.extra && typeof doc.extra === 'object' ? doc.extra : {};
   return { skeleton: new Skeleton(doc.skeleton), fps, codec: doc.codec, name: String(doc.name ?? ''), extra };
 }

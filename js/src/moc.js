@@ -9,7 +9,7 @@ import { DecodeError } from './errors.js';
 import { HEADER_DICTIONARY } from './header-dict.js';
 import { inflate } from './inflate.js';
 import { decodeKinwave } from './kinwave.js';
-import { MAX_DECODED_VALUES, MAX_FPS, MAX_HEADER_TEXT, MAX_PAYLOAD_FRAMES } from './limits.js';
+import { MAX_DECODED_VALUES, MAX_FPS, MAX_HEADER_TEXT, MAX_PAYLOAD_FRAMES, MIN_FPS } from './limits.js';
 
 const MAGIC = 'MOC1';
 const FOOTER_MAGIC = 'MOCX';
@@ -54,7 +54,7 @@ export async function openMoc(data) {
   }
   const skeleton = unpackSkeleton(text.subarray(split + 1));
   const { frames, fps } = header;
-  if (!Number.isSafeInteger(frames) || frames < 0 || typeof fps !== 'number' || !(fps > 0 && fps <= MAX_FPS)) {
+  if (!Number.isSafeInteger(frames) || frames < 0 || typeof fps !== 'number' || !(fps >= MIN_FPS && fps <= MAX_FPS)) {
     throw new DecodeError(`header says ${frames} frames at ${fps} fps`, START);
   }
   const chunks = index(data, START + headLength + 4);

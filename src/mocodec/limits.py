@@ -21,3 +21,18 @@ MAX_FPS = 10_000.0
 MAX_HEADER_TEXT = 8 << 20
 #: Joints a skeleton from a file or a stream may have.
 MAX_JOINTS = 1 << 16
+#: How deep a glTF or FBX node tree may nest (a real skeleton is tens deep; a chain of
+#: thousands is an attack on the time a reader spends per level).
+MAX_DEPTH = 4096
+#: Nodes x frames a reader may evaluate: an FBX take is sampled by evaluating every node of the
+#: scene at each frame (about 4 us each, so at most about 30 s); give a lower fps for more.
+MAX_NODE_FRAMES = 1 << 23
+#: The lowest frame rate a file or stream may declare (Hz): a frame every 17 minutes.
+MIN_FPS = 1e-3
+#: The frame rates a file or stream may declare, as a message says it.
+FPS_RANGE = f"[{MIN_FPS:g}, {MAX_FPS:g}]"
+
+
+def fps_ok(fps: float) -> bool:
+    """Whether a declared frame rate is within [MIN_FPS, MAX_FPS] (finite)."""
+    return MIN_FPS <= fps <= MAX_FPS

@@ -51,8 +51,8 @@ class Kinwave(Codec):
         self.dtype = np.dtype(dtype).str
         self.knobs = dict(knobs or {})
         where = f"{self.codec_id} config"
-        if not (np.isfinite(self.fps) and 0 < self.fps <= limits.MAX_FPS):
-            raise CorruptStreamError(f"{where}: fps {fps!r} out of range (0, {limits.MAX_FPS:g}]")
+        if not limits.fps_ok(self.fps):
+            raise CorruptStreamError(f"{where}: fps {fps!r} out of range {limits.FPS_RANGE}")
         if np.dtype(self.dtype).kind != "f":
             raise CorruptStreamError(f"{where}: dtype {dtype!r} is not a float type")
         self.skeleton = _skeleton(skeleton, where)

@@ -283,7 +283,7 @@ class Codec:
         anything is allocated; decoded values are finite or the body is refused. ``trusted``:
         the body was encoded by this process, so a native decoder may run here rather than in
         a child (:mod:`mocodec.sandbox`)."""
-        if not 0 <= frames <= MAX_FRAMES or not (np.isfinite(fps) and 0 < fps <= limits.MAX_FPS):
+        if not 0 <= frames <= MAX_FRAMES or not limits.fps_ok(fps):
             raise CorruptStreamError(f"{self.id} body: {frames} frames at {fps} fps is not plausible")
         if frames * skeleton.num_channels > max_values:
             raise CorruptStreamError(

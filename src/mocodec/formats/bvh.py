@@ -235,8 +235,8 @@ def read_bvh(path: str | os.PathLike, units_per_metre: float | None = None) -> M
     frame_time = parse_number(token, path, at, "the frame time in seconds")
     if frame_time <= 0:
         raise FormatError(path, at, f"frame time {token} must be positive")
-    if frame_time < 1.0 / limits.MAX_FPS:
-        raise FormatError(path, at, f"frame time {token} s is over {limits.MAX_FPS:g} frames per second")
+    if not limits.fps_ok(1.0 / frame_time):
+        raise FormatError(path, at, f"frame time {token} s: a frame rate outside {limits.FPS_RANGE} per second")
     try:
         skeleton = parser.skeleton(1.0)
     except ValueError as e:

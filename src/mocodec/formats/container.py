@@ -275,7 +275,7 @@ def open_container(source: BinaryIO, size: int, name: str, skeleton: Skeleton | 
             )
     skeleton = embedded or skeleton
     assert skeleton is not None  # a file without its skeleton was given one above
-    if frames < 0 or not (math.isfinite(fps) and 0 < fps <= limits.MAX_FPS):
+    if frames < 0 or not limits.fps_ok(fps):
         raise CorruptStreamError(f"{name}: header says {frames} frames at {fps} fps")
     chunks_at = _START.size + head_len + 4
     index = _index(source, size, name, chunks_at)

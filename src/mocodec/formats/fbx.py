@@ -30,6 +30,8 @@ _HELD: list = []
 #: How long the loader's child may take: ufbx evaluates the whole scene at each frame, so the
 #: longest take the frame limit lets through needs tens of seconds (docs/formats.md).
 READ_TIMEOUT_S = 300.0
+#: Frames sampled together (their matrices, then the rotations in them).
+SAMPLE_BLOCK = 4096
 
 
 def _ufbx():
@@ -111,6 +113,9 @@ def _read(path: Path, animation: str | int | None, fps: float | None) -> Motion:
     parents = np.array([n.parent.typed_id if n.parent is not None else -1 for n in nodes], dtype=np.int64)
     if any(n.typed_id != k for k, n in enumerate(nodes)) or (parents >= np.arange(len(nodes))).any():
         raise FormatError(path, None, "the node list is not in parents-first order")
+    depth = nodetree.depths(parents)
+    if depth.max(initial=0) >= limits.MAX_DEPTH:
+        raise FormatError(path, None, f"node {int(np.argmax(depth))} is {int(depth.max())} deep, past {limits.MAX_DEPTH}")
     bones = {k for k, n in enumerate(nodes) if n.bone is not None}
     if not bones:
         raise FormatError(path, None, "no skeleton: the file has no bone nodes")
@@ -119,12 +124,19 @@ def _read(path: Path, animation: str | int | None, fps: float | None) -> Motion:
     if keep is None:  # pragma: no cover - every FBX node hangs below the scene's root node
         raise FormatError(path, None, "the bones have no common ancestor node")
     rate = float(fps or settings.frames_per_second)
-    if not (np.isfinite(rate) and 0 < rate <= limits.MAX_FPS):
-        raise FormatError(path, None, f"frame rate {rate} out of range (0, {limits.MAX_FPS:g}]; give fps")
+    if not limits.fps_ok(rate):
+        raise FormatError(path, None, f"frame rate {rate} out of range {limits.FPS_RANGE}; give fps")
     begin, end = float(stack.time_begin), float(stack.time_end)
     frames = int(round((end - begin) * rate)) + 1 if np.isfinite(end - begin) else 0
     if not 0 < frames <= limits.MAX_DECODED_VALUES // (7 * len(keep)):
         raise FormatError(path, None, f"take {stack.name!r} spans {frames} frames: out of range")
+    if frames * len(nodes) > limits.MAX_NODE_FRAMES:
+        raise FormatError(
+            path,
+            None,
+            f"take {stack.name!r}: {frames} frames of {len(nodes)} nodes, past {limits.MAX_NODE_FRAMES} to evaluate; "
+            "give a lower fps",
+        )
     position, rotation = _world(scene, stack.anim, keep, begin + np.arange(frames) / rate)
     unit = float(settings.unit_meters)
     units_per_metre = 1.0 / unit if np.isfinite(unit) and unit > 0 else 100.0
@@ -138,14 +150,21 @@ def _read(path: Path, animation: str | int | None, fps: float | None) -> Motion:
 
 def _world(scene, anim, keep: list[int], times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """World positions (file units) and rotations ``(w, x, y, z)`` of the nodes ``keep`` at
-    ``times``, from the scene ufbx evaluates at each time."""
-    matrices = np.empty((len(times), len(keep), 3, 4))
-    for f, t in enumerate(times):
-        evaluated = scene.evaluate(anim, float(t))
-        evaluated_nodes = list(evaluated.nodes)
-        for k, node in enumerate(keep):
-            matrices[f, k] = np.array(evaluated_nodes[node].node_to_world).T
-        del evaluated_nodes  # before the scene they belong to
-        del evaluated
-    u, _, vt = np.linalg.svd(matrices[..., :3])
-    return matrices[..., 3], rotations.matrix_to_quat(u @ vt)
+    ``times``, from the scene ufbx evaluates at each time; SAMPLE_BLOCK frames of matrices at
+    a time, so memory is that of the result."""
+    position = np.empty((len(times), len(keep), 3))
+    rotation = np.empty((len(times), len(keep), 4))
+    for first in range(0, len(times), SAMPLE_BLOCK):
+        block = times[first : first + SAMPLE_BLOCK]
+        matrices = np.empty((len(block), len(keep), 3, 4))
+        for f, t in enumerate(block):
+            evaluated = scene.evaluate(anim, float(t))
+            evaluated_nodes = list(evaluated.nodes)
+            for k, node in enumerate(keep):
+                matrices[f, k] = np.array(evaluated_nodes[node].node_to_world).T
+            del evaluated_nodes  # before the scene they belong to
+            del evaluated
+        u, _, vt = np.linalg.svd(matrices[..., :3])
+        position[first : first + len(block)] = matrices[..., 3]
+        rotation[first : first + len(block)] = rotations.matrix_to_quat(u @ vt)
+    return position, rotation

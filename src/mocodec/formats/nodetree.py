@@ -179,6 +179,20 @@ def closure(parents: np.ndarray, wanted: set[int]) -> list[int] | None:
     return [node for node in _depth_first(children, [top]) if below[node] > 0]
 
 
+def depths(parents: np.ndarray) -> np.ndarray:
+    """Each node's depth (a root: 0), or -1 for a node no root reaches (each node has at most
+    one parent, so it is on a cycle of parents or below one): linear, however deep the tree."""
+    n = len(parents)
+    children: list[list[int]] = [[] for _ in range(n)]
+    for node in range(n):
+        if parents[node] >= 0:
+            children[int(parents[node])].append(node)
+    depth = -np.ones(n, dtype=np.int64)
+    for node in _depth_first(children, [node for node in range(n) if parents[node] < 0]):
+        depth[node] = depth[parents[node]] + 1 if parents[node] >= 0 else 0
+    return depth
+
+
 def _depth_first(children: list[list[int]], roots: list[int]) -> list[int]:
     """The nodes below ``roots`` depth first, children in node order (iterative)."""
     order: list[int] = []

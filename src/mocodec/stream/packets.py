@@ -416,8 +416,8 @@ class StreamInfo:
             if not isinstance(doc.get("skeleton"), dict) or len(doc["skeleton"].get("joints", ())) > limits.MAX_JOINTS:
                 raise ValueError(f"expected a skeleton of at most {limits.MAX_JOINTS} joints")
             fps = float(doc["fps"])
-            if not 0 < fps <= limits.MAX_FPS:
-                raise ValueError(f"frame rate {fps} is outside (0, {limits.MAX_FPS:g}]")
+            if not limits.fps_ok(fps):
+                raise ValueError(f"frame rate {fps} is outside {limits.FPS_RANGE}")
             extra = doc.get("extra", {})
             return cls(
                 skeleton_from_dict(doc["skeleton"]),

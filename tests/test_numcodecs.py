@@ -128,3 +128,41 @@ def test_without_numcodecs_the_import_names_the_extra():
     )
     done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
     assert "pip install 'mocodec[zarr]'" in done.stdout
+
+
+@pytest.mark.parametrize(
+    "key, value",
+    [
+        ("fps", [120]),
+        ("fps", 10**400),
+        ("fps", 1e-300),
+        ("dtype", "zz"),
+        ("dtype", "(2,)<f4"),
+        ("dtype", ["<f4"]),
+        ("knobs", "max_error_cm=1"),
+        ("knobs", {"effort": 2**70}),
+        ("chunk_frames", -1),
+        ("chunk_frames", 1.5),
+        ("frames", 64),
+    ],
+)
+def test_a_config_of_a_wrong_type_is_a_mocodec_error(walk_bvh, key, value):
+    config = Kinwave.for_motion(walk_bvh, max_error_cm=1.0).get_config()
+    with pytest.raises(CorruptStreamError, match="mocodec.kinwave config"):
+        numcodecs.get_codec({**config, key: value})
+
+
+def test_a_chunk_decodes_to_its_arrays_chunk_shape_or_is_refused(walk_bvh):
+    """A 341-byte chunk could say 254,000 frames and decode to 1.56 GB for a chunk of 128; now
+    the frame count is checked against the chunk's before anything is decoded."""
+    codec = Kinwave.for_motion(walk_bvh, max_error_cm=1.0, chunk_frames=128)
+    assert Kinwave.from_config(codec.get_config()).chunk_frames == 128
+    long = codec.encode(walk_bvh.channels[:256])
+    with pytest.raises(CorruptStreamError, match="256 frames, but its array's chunks have 128"):
+        codec.decode(long)
+    with pytest.raises(CorruptStreamError, match="256 frames, but its array's chunks have 64"):
+        codec.decode(long, out=np.zeros((64, walk_bvh.num_channels), dtype="f4"))
+    plain = Kinwave.for_motion(walk_bvh, max_error_cm=1.0)
+    with pytest.raises(CorruptStreamError, match="256 frames, but its array's chunks have 100"):
+        plain.decode(long, frames=100)  # a zarr format 3 chunk's shape
+    assert plain.decode(long, out=np.zeros((256, walk_bvh.num_channels), dtype="f4")).shape == (256, 132)

@@ -19,6 +19,7 @@ const START = 12;
 const FOOTER = 8;
 const MAX_HEADER = 1 << 24;
 const MAX_CHUNKS = 1 << 20;
+const MIN_CHUNK_BYTES = 5; // a one-byte length, no body, a CRC-32
 
 function ascii(data, pos) {
   return String.fromCharCode(...data.subarray(pos, pos + 4));
@@ -72,7 +73,9 @@ function index(data, chunksAt) {
   const raw = data.subarray(at, footAt);
   if (crc32(raw, 0, length - 4) !== u32(raw, length - 4)) throw new DecodeError('index CRC mismatch, the index is damaged', at);
   let [n, pos] = readVarint(raw, 0, 10, 'the chunk count');
-  if (n > MAX_CHUNKS) throw new DecodeError(`${n} chunks is implausible`, at);
+  if (n > Math.min(MAX_CHUNKS, Math.floor((at - chunksAt) / MIN_CHUNK_BYTES))) {
+    throw new DecodeError(`${n} chunks do not fit in ${at - chunksAt} bytes of chunks`, at);
+  }
   const chunks = [];
   let offset = chunksAt;
   let first = 0;

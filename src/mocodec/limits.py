@@ -25,8 +25,8 @@ MAX_JOINTS = 1 << 16
 #: thousands is an attack on the time a reader spends per level).
 MAX_DEPTH = 4096
 #: Nodes x frames a reader may evaluate: an FBX take is sampled by evaluating every node of the
-#: scene at each frame (about 4 us each, so at most about 30 s); give a lower fps for more.
-MAX_NODE_FRAMES = 1 << 23
+#: scene at each frame (about 4 us each, so at most about 17 s); give a lower fps for more.
+MAX_NODE_FRAMES = 1 << 22
 #: The lowest frame rate a file or stream may declare (Hz): a frame every 17 minutes.
 MIN_FPS = 1e-3
 #: The frame rates a file or stream may declare, as a message says it.

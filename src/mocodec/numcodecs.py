@@ -41,41 +41,73 @@ class Kinwave(Codec):
 
     ``skeleton``: the compact skeleton, base64 (:meth:`for_motion` makes it); ``fps``: the
     frame rate; ``dtype``: the zarr array's dtype, which decoded chunks take; ``knobs``:
-    kinwave's knobs (``max_error_cm``, ``error_measure``, ...)."""
+    kinwave's knobs (``max_error_cm``, ``error_measure``, ...); ``chunk_frames``: the array's
+    chunk length in frames, which a chunk must have (a zarr format 2 array tells its compressor
+    nothing else; format 3 and an ``out`` buffer give the chunk's shape anyway). Every field is
+    checked as hostile (zarr metadata is a file): a wrong type or value is a CorruptStreamError."""
 
     codec_id = "mocodec.kinwave"
 
-    def __init__(self, skeleton: str, fps: float, dtype: str = "<f4", knobs: dict | None = None):
-        self.skeleton_text = skeleton
-        self.fps = float(fps)
-        self.dtype = np.dtype(dtype).str
-        self.knobs = dict(knobs or {})
+    def __init__(
+        self,
+        skeleton: str,
+        fps: float,
+        dtype: str = "<f4",
+        knobs: dict | None = None,
+        chunk_frames: int | None = None,
+    ):
         where = f"{self.codec_id} config"
+        self.skeleton_text = skeleton
+        self.fps = _number(fps, f"{where}: fps")
         if not limits.fps_ok(self.fps):
-            raise CorruptStreamError(f"{where}: fps {fps!r} out of range {limits.FPS_RANGE}")
-        if np.dtype(self.dtype).kind != "f":
-            raise CorruptStreamError(f"{where}: dtype {dtype!r} is not a float type")
+            raise CorruptStreamError(f"{where}: fps {self.fps!r} out of range {limits.FPS_RANGE}")
+        self.dtype = _float_dtype(dtype, where)
+        if knobs is not None and not isinstance(knobs, dict):
+            raise CorruptStreamError(f"{where}: knobs must be an object, got {type(knobs).__name__}")
+        self.knobs = dict(knobs or {})
+        if chunk_frames is not None and not (
+            type(chunk_frames) is int and 0 < chunk_frames <= limits.MAX_PAYLOAD_FRAMES
+        ):
+            raise CorruptStreamError(f"{where}: chunk_frames must be an integer 1 to {limits.MAX_PAYLOAD_FRAMES}")
+        self.chunk_frames = chunk_frames
         self.skeleton = _skeleton(skeleton, where)
         self.codec = codec_from_untrusted({"codec": "kinwave", "knobs": self.knobs}, where)
 
     @classmethod
-    def for_motion(cls, motion: Motion | Skeleton, fps: float | None = None, dtype: str = "<f4", **knobs) -> Kinwave:
+    def from_config(cls, config: dict) -> Kinwave:
+        """The codec of a config from an array's metadata: unknown fields are refused."""
+        fields = {k: v for k, v in dict(config).items() if k != "id"}
+        unknown = sorted(set(fields) - {"skeleton", "fps", "dtype", "knobs", "chunk_frames"})
+        if unknown or not {"skeleton", "fps"} <= set(fields):
+            raise CorruptStreamError(f"{cls.codec_id} config: needs skeleton and fps, and has no field {unknown}")
+        return cls(**fields)
+
+    @classmethod
+    def for_motion(
+        cls,
+        motion: Motion | Skeleton,
+        fps: float | None = None,
+        dtype: str = "<f4",
+        chunk_frames: int | None = None,
+        **knobs,
+    ) -> Kinwave:
         """The codec for chunks of ``motion``'s channels (or of a skeleton's, at ``fps``)."""
         skeleton = motion.skeleton if isinstance(motion, Motion) else motion
         rate = fps if fps is not None else getattr(motion, "fps", None)
         if rate is None:
             raise ValueError("give the frame rate (fps) with a skeleton")
         text = base64.b64encode(pack_skeleton(skeleton)).decode("ascii")
-        return cls(text, rate, dtype, knobs)
+        return cls(text, rate, dtype, knobs, chunk_frames)
 
     def get_config(self) -> dict:
-        return {
+        config = {
             "id": self.codec_id,
             "skeleton": self.skeleton_text,
             "fps": self.fps,
             "dtype": self.dtype,
             "knobs": dict(self.knobs),
         }
+        return config | ({"chunk_frames": self.chunk_frames} if self.chunk_frames else {})
 
     def __repr__(self) -> str:
         return f"Kinwave({len(self.skeleton)} joints, {self.fps:g} fps, {self.dtype}, knobs={self.knobs})"
@@ -98,7 +130,9 @@ class Kinwave(Codec):
         framed = varint.pack(len(channels)) + body
         return framed + zlib.crc32(framed).to_bytes(4, "little")
 
-    def decode(self, buf, out=None):
+    def decode(self, buf, out=None, *, frames: int | None = None):
+        """A chunk's ``(frames, channels)``; ``frames``: the chunk shape's (else ``out``'s, else
+        ``chunk_frames``), which the chunk must declare before anything is decoded."""
         data = ensure_bytes(buf)
         if len(data) < 5:
             raise CorruptStreamError(f"{self.codec_id} chunk of {len(data)} bytes: too short")
@@ -106,12 +140,43 @@ class Kinwave(Codec):
         if zlib.crc32(framed) != crc:
             raise CorruptStreamError(f"{self.codec_id} chunk: CRC-32 mismatch (the data is damaged)")
         try:
-            frames, start = varint.unpack(framed, 0)
+            declared, start = varint.unpack(framed, 0)
         except ValueError as e:
             raise CorruptStreamError(f"{self.codec_id} chunk: frame count {e}") from None
-        motion = self.codec.decode(framed[start:], self.skeleton, frames, self.fps)
+        expected = self._chunk_frames(out) if frames is None else frames
+        if expected is not None and declared != expected:
+            raise CorruptStreamError(
+                f"{self.codec_id} chunk: {declared} frames, but its array's chunks have {expected}"
+            )
+        motion = self.codec.decode(framed[start:], self.skeleton, declared, self.fps)
         decoded = np.ascontiguousarray(motion.channels, dtype=self.dtype)  # C order: zarr flattens in "A" order
         return ndarray_copy(decoded, out) if out is not None else decoded
+
+    def _chunk_frames(self, out) -> int | None:
+        if out is None:
+            return self.chunk_frames
+        size, channels = ensure_ndarray_like(out).size, self.skeleton.num_channels
+        return size // channels if channels else 0
+
+
+def _number(value: object, where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise CorruptStreamError(f"{where} must be a number, got {type(value).__name__}")
+    try:
+        return float(value)
+    except OverflowError:
+        raise CorruptStreamError(f"{where} is out of range") from None
+
+
+def _float_dtype(value: object, where: str) -> str:
+    try:
+        plain = isinstance(value, (str, np.dtype)) or isinstance(value, type) and issubclass(value, np.generic)
+        dtype = np.dtype(value) if plain else None
+    except (TypeError, ValueError):
+        dtype = None
+    if dtype is None or dtype.kind != "f" or dtype.subdtype is not None:
+        raise CorruptStreamError(f"{where}: dtype {str(value)[:40]!r} is not a float type")
+    return dtype.str
 
 
 def _skeleton(text: object, where: str) -> Skeleton:

@@ -41,7 +41,7 @@ class Kinwave(ArrayBytesCodec):
 
     @cached_property
     def codec(self) -> NumcodecsKinwave:
-        return NumcodecsKinwave(**self.configuration)
+        return NumcodecsKinwave.from_config(self.configuration)
 
     @classmethod
     def from_dict(cls, data: dict) -> Kinwave:
@@ -52,7 +52,7 @@ class Kinwave(ArrayBytesCodec):
         return {"name": NAME, "configuration": dict(self.configuration)}
 
     async def _decode_single(self, chunk_bytes, chunk_spec):
-        decoded = self.codec.decode(chunk_bytes.as_array_like())
+        decoded = self.codec.decode(chunk_bytes.as_array_like(), frames=chunk_spec.shape[0])
         array = np.ascontiguousarray(decoded, dtype=chunk_spec.dtype.to_native_dtype()).reshape(chunk_spec.shape)
         return chunk_spec.prototype.nd_buffer.from_ndarray_like(array)
 

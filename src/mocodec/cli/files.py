@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from mocodec.cli.options import add_codec_options, add_input_options, load_input, skeleton_from
+from mocodec.codecs import checked_config
 from mocodec.formats import load, save, with_units
 from mocodec.motion import Motion
 
@@ -55,7 +56,7 @@ def describe_moc(path: str, skeleton_path: str | None = None) -> str:
 
     c = moc.info(path, skeleton_from(skeleton_path))
     sk, codec = c.skeleton, c.header["codec"]
-    knobs = ", ".join(f"{k}={v}" for k, v in codec.get("knobs", {}).items())
+    knobs = ", ".join(f"{k}={str(v)[:40]}" for k, v in checked_config(codec, f"{path}: header").items())
     seconds = c.frames / c.fps
     raw_bytes = c.frames * sk.num_channels * 4
     lines = [

@@ -3,6 +3,7 @@ registered by id: ``get_codec(id, **knobs)`` imports the one asked for."""
 
 from mocodec.codecs.registry import (
     DEFAULT_CODEC,
+    checked_config,
     codec_class,
     codec_from_config,
     codec_from_untrusted,
@@ -25,6 +26,7 @@ def __getattr__(name: str):
 __all__ = [
     *_BASE,
     "DEFAULT_CODEC",
+    "checked_config",
     "codec_class",
     "codec_from_config",
     "codec_from_untrusted",

@@ -44,12 +44,12 @@ class Knob:
                 v = value.lower() in ("1", "true", "yes", "on")
             else:
                 v = self.kind(value)
-        except (TypeError, ValueError):
-            raise CodecError(f"knob {self.name}: expected {self.kind.__name__}, got {value!r}") from None
-        if self.kind in (int, float) and not np.isfinite(v):
+        except (TypeError, ValueError, OverflowError):
+            raise CodecError(f"knob {self.name}: expected {self.kind.__name__}, got {str(value)[:40]!r}") from None
+        if self.kind is float and not np.isfinite(v):
             raise CodecError(f"knob {self.name}: {value!r} is not a finite number")
         if self.low is not None and v < self.low or self.high is not None and v > self.high:
-            raise CodecError(f"knob {self.name}: {v} is outside {self.low}..{self.high}")
+            raise CodecError(f"knob {self.name}: {str(v)[:40]} is outside {self.low}..{self.high}")
         if self.choices is not None and v not in self.choices:
             raise CodecError(f"knob {self.name}: {v!r} is not one of {', '.join(map(str, self.choices))}")
         return v

@@ -56,13 +56,10 @@ def codec_from_config(config: dict) -> Codec:
     return codec_class(config.get("codec", "")).from_config(config)
 
 
-def codec_from_untrusted(config: object, where: str, local_files: dict[str, str] | None = None) -> Codec:
-    """A codec from the config a file or a stream carries, which may be hostile: it must be a
-    dict naming a codec, with knobs a dict of strings, numbers and booleans, each parsed by its
-    knob. A knob that names a local file (:attr:`Knob.path`) is never taken from the config
-    (a file could make the reader open ``/dev/zero``, or learn which paths exist): it is the
-    caller's ``local_files`` entry, or empty; the payload names the model it needs by content
-    hash, and the codec checks the one given against it. CorruptStreamError names ``where``."""
+def checked_config(config: object, where: str) -> dict:
+    """The knobs of a config from a file or a stream once its shape is checked: an object
+    naming a codec, its knobs an object of strings, numbers and booleans (CorruptStreamError
+    naming ``where`` otherwise)."""
     if not isinstance(config, dict) or not isinstance(config.get("codec"), str):
         raise CorruptStreamError(f"{where}: the codec config must be an object naming a codec")
     knobs = config.get("knobs", {})
@@ -70,6 +67,17 @@ def codec_from_untrusted(config: object, where: str, local_files: dict[str, str]
         isinstance(k, str) and isinstance(v, (str, int, float, bool)) for k, v in knobs.items()
     ):
         raise CorruptStreamError(f"{where}: the codec's knobs must be an object of strings, numbers and booleans")
+    return knobs
+
+
+def codec_from_untrusted(config: object, where: str, local_files: dict[str, str] | None = None) -> Codec:
+    """A codec from the config a file or a stream carries, which may be hostile: it must be a
+    dict naming a codec, with knobs a dict of strings, numbers and booleans, each parsed by its
+    knob. A knob that names a local file (:attr:`Knob.path`) is never taken from the config
+    (a file could make the reader open ``/dev/zero``, or learn which paths exist): it is the
+    caller's ``local_files`` entry, or empty; the payload names the model it needs by content
+    hash, and the codec checks the one given against it. CorruptStreamError names ``where``."""
+    knobs = checked_config(config, where)
     try:
         cls = codec_class(config["codec"])
         cls.check_revision(config)

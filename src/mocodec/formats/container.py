@@ -52,6 +52,8 @@ FOOTER_MAGIC = b"MOCX"
 VERSION = 1
 MAX_HEADER = 1 << 24
 MAX_CHUNKS = 1 << 20
+#: The smallest chunk: a one-byte length, no body, a CRC-32.
+MIN_CHUNK_BYTES = 5
 FLAG_SKELETON = 1
 _START = struct.Struct("<4sHHI")
 _FOOTER = struct.Struct("<I4s")
@@ -261,7 +263,7 @@ def open_container(source: BinaryIO, size: int, name: str, skeleton: Skeleton | 
         frames, fps = int(header["frames"]), float(header["fps"])
         if not isinstance(header["codec"], dict):
             raise ValueError("the codec config is not an object")
-    except (ValueError, KeyError, TypeError, AttributeError, zlib.error) as e:
+    except (ValueError, KeyError, TypeError, AttributeError, OverflowError, RecursionError, zlib.error) as e:
         raise CorruptStreamError(f"{name}: header at byte {_START.size} does not parse ({e})") from None
     if embedded is None:
         if skeleton is None:
@@ -300,8 +302,8 @@ def _index(source: BinaryIO, size: int, name: str, chunks_at: int) -> tuple[Inde
     if zlib.crc32(raw[:-4]) != _U32.unpack(raw[-4:])[0]:
         raise CorruptStreamError(f"{where}: CRC mismatch, the index is damaged")
     n, pos = _read_varint(raw, 0, where)
-    if n > MAX_CHUNKS:
-        raise CorruptStreamError(f"{where}: {n} chunks is implausible")
+    if n > min(MAX_CHUNKS, (index_at - chunks_at) // MIN_CHUNK_BYTES):
+        raise CorruptStreamError(f"{where}: {n} chunks do not fit in {index_at - chunks_at} bytes of chunks")
     entries, offset, first = [], chunks_at, 0
     for k in range(n):
         count, pos = _read_varint(raw, pos, where)

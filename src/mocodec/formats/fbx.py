@@ -115,7 +115,8 @@ def _read(path: Path, animation: str | int | None, fps: float | None) -> Motion:
         raise FormatError(path, None, "the node list is not in parents-first order")
     depth = nodetree.depths(parents)
     if depth.max(initial=0) >= limits.MAX_DEPTH:
-        raise FormatError(path, None, f"node {int(np.argmax(depth))} is {int(depth.max())} deep, past {limits.MAX_DEPTH}")
+        deepest = int(np.argmax(depth))
+        raise FormatError(path, None, f"node {deepest} is {int(depth[deepest])} deep, past {limits.MAX_DEPTH}")
     bones = {k for k, n in enumerate(nodes) if n.bone is not None}
     if not bones:
         raise FormatError(path, None, "no skeleton: the file has no bone nodes")

@@ -48,6 +48,8 @@ _NORMALISE = {5120: 127.0, 5121: 255.0, 5122: 32767.0, 5123: 65535.0}
 _WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
 #: Bytes a glTF file may have: its buffers are read into memory whole.
 MAX_FILE_BYTES = 1 << 31
+#: Digits a JSON integer may have (a glTF index or count is far shorter).
+MAX_INT_DIGITS = 20
 #: Values all accessors together may convert, per byte of the file (float64: 8 bytes each).
 ACCESSOR_VALUES_PER_BYTE = 2
 #: Frame rate of a clip whose keys do not sit on a grid of at least MIN_GRID_FPS (a few
@@ -374,6 +376,13 @@ def _split_glb(path: Path, data: bytes) -> tuple[str, bytes | None]:
         raise FormatError(path, None, f"JSON chunk is not UTF-8 (byte {20 + e.start})") from None
 
 
+def _small_int(text: str) -> int:
+    """A JSON integer of at most MAX_INT_DIGITS digits (a longer one overflows every float)."""
+    if len(text) > MAX_INT_DIGITS:
+        raise ValueError(f"an integer of {len(text)} digits ({text[:12]}...): glTF holds none that long")
+    return int(text)
+
+
 def _parse(path: Path) -> _Document:
     """The document, its JSON checked against _SCHEMA and its node count against MAX_JOINTS
     before anything walks it (linear in the file: JSON objects become :class:`_Fields`)."""
@@ -389,11 +398,13 @@ def _parse(path: Path) -> _Document:
         except UnicodeDecodeError as e:
             raise FormatError(path, None, f"not a .glb and not UTF-8 JSON (byte {e.start})") from None
     try:
-        document = json.loads(text, object_hook=_Fields)
+        document = json.loads(text, object_hook=_Fields, parse_int=_small_int)
     except json.JSONDecodeError as e:
         raise FormatError(path, e.lineno, f"not JSON: {e.msg} (column {e.colno})") from None
     except RecursionError:
         raise FormatError(path, None, "JSON nested too deep") from None
+    except ValueError as e:  # from _small_int
+        raise FormatError(path, None, str(e)) from None
     if not isinstance(document, dict) or not isinstance(document.get("asset"), dict):
         raise FormatError(path, None, "not a glTF document (no asset object)")
     nodes = document.get("nodes")
@@ -413,7 +424,7 @@ def _vector(doc: _Document, values, size: int, default: tuple, what: str) -> np.
         return np.array(default, dtype=np.float64)
     try:
         array = np.array(values, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         array = np.zeros(0)
     if array.shape != (size,) or not np.isfinite(array).all():
         raise doc.fail(f"{what}: expected {size} finite numbers, got {str(values)[:60]}")

@@ -339,7 +339,8 @@ def _layout_joint(
             for lo, hi in layout.get("limits", [[None, None]] * len(channels))
         )
         joint = Joint(name, parent, tuple(float(v) for v in offset), channels, order, axis, axis_order, limits)
-    except (KeyError, TypeError, ValueError):
+        turn = rotations.euler_to_quat(np.array(axis), axis_order)
+    except (KeyError, TypeError, ValueError, OverflowError):  # a layout edited or forged: not used
         return None, np.zeros(0)
     values = np.zeros((len(translation), len(channels)))
     moved = translation - offset
@@ -350,8 +351,7 @@ def _layout_joint(
         elif np.abs(moved[:, k]).max() > still:
             return None, np.zeros(0)
     if order:
-        c = rotations.euler_to_quat(np.array(axis), axis_order)
-        inner = rotations.quat_multiply(rotations.quat_multiply(rotations.quat_conjugate(c), rotation), c)
+        inner = rotations.quat_multiply(rotations.quat_multiply(rotations.quat_conjugate(turn), rotation), turn)
         values[:, joint.rotation_channel_indices()] = _euler(inner, order)
     elif (2.0 * np.arccos(np.clip(np.abs(rotation[:, 0]), 0.0, 1.0))).max() > still_rad:
         return None, np.zeros(0)

@@ -581,7 +581,7 @@ class Relay:
             doc = json.loads(text)
             budget = float(doc.get("budget", viewer.budget))
             camera = tuple(float(x) for x in doc.get("camera", viewer.camera))
-        except (ValueError, TypeError, AttributeError):
+        except (ValueError, TypeError, AttributeError, OverflowError, RecursionError):
             raise Closing(BAD_MESSAGE, 'settings must be JSON like {"budget": 8000, "camera": [0, 1.6, 5]}') from None
         if not (math.isfinite(budget) and budget >= 0) or len(camera) != 3 or not all(map(math.isfinite, camera)):
             raise Closing(BAD_MESSAGE, "budget must be >= 0 bit/s and camera three finite numbers")

@@ -166,11 +166,20 @@ def parent_turns(skeleton: Skeleton, parents: np.ndarray) -> np.ndarray:
 def still_rotations(skeleton: Skeleton, const: np.ndarray) -> np.ndarray:
     """``(joints,)``: whether a joint and every joint above it hold constant rotations
     (``const (C,)`` per channel)."""
+    return _still_rotations(skeleton, np.asarray(const, dtype=bool).tobytes()).copy()
+
+
+@lru_cache(maxsize=256)
+def _still_rotations(skeleton: Skeleton, const_flags: bytes) -> np.ndarray:
+    const = np.frombuffer(const_flags, dtype=bool)
     plan = channel_plan(skeleton)
+    rotating = np.zeros(len(skeleton), dtype=bool)  # a joint with a moving rotation channel
+    rot = plan.rot_index
+    rotating[np.nonzero((rot >= 0) & ~const[np.maximum(rot, 0)])[0]] = True
     still = np.ones(len(skeleton), dtype=bool)
-    for j in range(len(skeleton)):
+    for j in range(len(skeleton)):  # a parent comes before its children
         p = skeleton.parents[j]
-        still[j] = bool(const[plan.rot_index[j][plan.rot_index[j] >= 0]].all()) and (p < 0 or still[p])
+        still[j] = not rotating[j] and (p < 0 or still[p])
     return still
 
 
@@ -182,12 +191,18 @@ def world_translations(skeleton: Skeleton, const: np.ndarray) -> list[tuple[int,
     ``G_p`` is the identity and nothing changes). Implied by the constant flags: no side data."""
     if not const.size:
         return []
-    plan, still, out = channel_plan(skeleton), still_rotations(skeleton, const), []
+    return [(j, pos.copy()) for j, pos in _world_translations(skeleton, np.asarray(const, dtype=bool).tobytes())]
+
+
+@lru_cache(maxsize=256)
+def _world_translations(skeleton: Skeleton, const_flags: bytes) -> tuple[tuple[int, np.ndarray], ...]:
+    const = np.frombuffer(const_flags, dtype=bool)
+    plan, still, out = channel_plan(skeleton), _still_rotations(skeleton, const_flags), []
     for j in range(1, len(skeleton)):
         pos = plan.pos_index[j]
         if still[skeleton.parents[j]] and (pos >= 0).all() and not const[pos].any():
-            out.append((j, pos.copy()))
-    return out
+            out.append((j, pos))
+    return tuple(out)
 
 
 def on_axes(rows: np.ndarray, turn: np.ndarray, inverse: bool = False) -> np.ndarray:
@@ -241,7 +256,9 @@ def turns_over_translations(skeleton: Skeleton) -> np.ndarray:
     return out
 
 
+@lru_cache(maxsize=64)
 def constant_coding(skeleton: Skeleton, fine: bool = False, fine_turns: bool = False) -> ConstantCoding:
+    """The coding of ``skeleton``'s constant channels (shared: its arrays are read-only)."""
     base = np.zeros(skeleton.num_channels)
     fraction = np.full(skeleton.num_channels, CONST_FRACTION)
     if fine_turns:
@@ -252,6 +269,8 @@ def constant_coding(skeleton: Skeleton, fine: bool = False, fine_turns: bool = F
             if c >= 0:
                 base[c] = plan.offsets[j, axis]
                 fraction[c] = FINE_CONST_FRACTION if fine else CONST_FRACTION
+    fraction.setflags(write=False)
+    base.setflags(write=False)
     return ConstantCoding(fraction, base, fine, fine_turns)
 
 

@@ -42,7 +42,7 @@ def unpack(data: bytes, magic: bytes, version: int, what: str, where: str) -> tu
         raise CodecError(f"{where}: checksum mismatch (the file is damaged or truncated)")
     try:
         return json.loads(data[head : head + size]), head + size
-    except ValueError as e:
+    except (ValueError, RecursionError) as e:
         raise CodecError(f"{where}: {what} description does not parse ({e})") from None
 
 

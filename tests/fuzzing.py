@@ -27,7 +27,7 @@ import numpy as np
 HERE = Path(__file__).parent
 sys.path.insert(0, str(HERE))
 
-from mocodec import load, moc, reexpress  # noqa: E402
+from mocodec import limits, load, moc, reexpress  # noqa: E402
 from mocodec.codecs import Codec, codec_ids, get_codec  # noqa: E402
 from mocodec.errors import CorruptStreamError, MocodecError  # noqa: E402
 from mocodec.formats import container  # noqa: E402
@@ -36,12 +36,16 @@ from mocodec.formats.asf import read_asf  # noqa: E402
 from mocodec.formats.header_dict import DICTIONARY  # noqa: E402
 from mocodec.stream.live import LiveDecoder, stream_clip  # noqa: E402
 from mocodec.stream.packets import HEADER, Packet, Reader, StreamInfo, pack_batch, parse, split_batch  # noqa: E402
-from mocodec.stream.relay import Closing, Relay, Room, Viewer  # noqa: E402
+from mocodec.stream.relay import Bucket, Closing, Limits, Relay, Room, Viewer, caps_of  # noqa: E402
+from mocodec.stream.retention import RoomHistory  # noqa: E402
 
 DATA = HERE / "data"
 #: Codecs whose decoders need a model file the fuzzer has not got; their payloads still go
 #: through the container and the stream checks.
 NEEDS_FILES = {"rhythmic", "posture", "gesture", "hybrid"}
+#: Seconds a structure case may take: far above what a linear reader needs, far below what a
+#: quadratic one took (docs/security.md).
+BOUND_S = 20.0
 
 
 def mutate(data: bytes, rng: np.random.Generator) -> bytes:
@@ -280,13 +284,42 @@ class _Socket:
         pass
 
 
+def _big_stream(rng, packets: int) -> list[Packet]:
+    """A stream of 60 KB packets that never restarts (a header, then data)."""
+    header = stream_clip(_walk()[:10], get_codec("dpcm"))[0]
+    out = [Packet(5, 0, 0, "dpcm", 0, 0, header.payload, kind=HEADER)]
+    return out + [Packet(5, k, 0, "dpcm", 4 * k, 4, rng.bytes(60_000)) for k in range(1, packets)]
+
+
+def _late_viewers_and_repairs(relay: Relay, room: Room, rng) -> None:
+    """A late viewer joins, another asks for random packets again; what the room keeps and
+    what any viewer is sent in one tick stay within the caps (an AssertionError otherwise)."""
+    viewer = Viewer(_Socket(), _Transport(), budget=float(rng.choice([0, 4000])))
+    relay._join(viewer, room)
+    pairs = [
+        [int(rng.choice(list(room.streams) or [0])), int(rng.integers(0, 64))] for _ in range(int(rng.integers(1, 40)))
+    ]
+    try:
+        relay._resend(viewer, room, pairs, Bucket(1e9, 1.0))
+    except Closing:
+        pass
+    relay._dispatch(room)
+    assert room.history.bytes <= relay.limits.max_room_kept_bytes, "the room keeps more than its cap"
+    for v in room.viewers:
+        while not v.queue.empty():
+            sent = sum(len(b) for b in v.queue.get_nowait())
+            assert sent <= 2 * relay.limits.max_message_bytes + 2 * relay.limits.max_stream_kept_bytes, sent
+    room.viewers.remove(viewer)
+
+
 def fuzz_relay(run: Run) -> None:
     """The relay's message handler and its tick on mutated batches from publishers, with a
-    viewer that has a budget (so packets are cut)."""
-    streams = _packets()
-    relay = Relay("fuzz")
+    viewer that has a budget (so packets are cut); late viewers joining and repair requests,
+    with streams of large packets that never restart among them."""
+    streams = _packets() + [_big_stream(run.rng, 40)]
+    relay = Relay("fuzz", Limits(max_stream_kept_bytes=1 << 20, max_room_kept_bytes=2 << 20))
     while run.more():
-        room = Room()
+        room = Room(RoomHistory(caps_of(relay.limits)))
         room.viewers.append(Viewer(_Socket(), _Transport(), budget=float(run.rng.choice([0, 2000, 9000]))))
         packets = streams[int(run.rng.integers(len(streams)))]
         owner = object()
@@ -306,6 +339,8 @@ def fuzz_relay(run: Run) -> None:
                 relay._dispatch(room)
                 while not room.viewers[0].queue.empty():
                     room.viewers[0].queue.get_nowait()
+                if run.rng.random() < 0.3:
+                    _late_viewers_and_repairs(relay, room, run.rng)
 
             run.check("relay", ingest)
 
@@ -390,6 +425,56 @@ def _json_mutation(value, rng):
     return value
 
 
+def _gltf_structure(path: Path, rng) -> None:
+    """A glTF of hostile structure: a node chain of random depth (past MAX_DEPTH too), many
+    nodes, channels sharing one accessor, accessors declaring huge counts with or without
+    data, JSON nested deep in extras; read within BOUND_S (an AssertionError otherwise)."""
+    from gltf_builder import GltfBuilder
+
+    depth = int(rng.choice([2, 50, 3000, limits.MAX_DEPTH + 10]))
+    g = GltfBuilder()
+    g.doc["nodes"] = [{"name": f"n{k}", "children": [k + 1], "translation": [0, 0.01, 0]} for k in range(depth - 1)]
+    g.doc["nodes"].append({"name": "end"})
+    g.animation("a", [(0, "rotation", [0, 1], [[0, 0, 0, 1], [0, 0, 0.1, 0.995]], "LINEAR")])
+    animation = g.doc["animations"][0]
+    if rng.random() < 0.3:  # many channels, one accessor
+        animation["channels"] *= int(rng.integers(2, 2000))
+    if rng.random() < 0.3:  # a count from nowhere, or past its data
+        accessor = g.doc["accessors"][int(rng.integers(len(g.doc["accessors"])))]
+        accessor["count"] = int(rng.choice([2**20, 2**24, 2**31]))
+        if rng.random() < 0.5:
+            accessor.pop("bufferView", None)
+    if rng.random() < 0.2:
+        g.doc["nodes"] += [{"name": "x"}] * int(rng.choice([1000, 70_000]))
+    g.glb()  # the buffer's length into the document
+    text = json.dumps(g.doc)
+    if rng.random() < 0.2:
+        nesting = int(rng.choice([500, 5000, 50_000]))
+        text = text.replace('"asset": {', '"asset": {"extras": ' + "[" * nesting + "]" * nesting + ", ", 1)
+    data = _glb_of_text(text, g.blob)
+    path.write_bytes(data)
+    start = time.monotonic()
+    try:
+        load(path)
+    finally:
+        assert time.monotonic() - start < BOUND_S, f"a {len(data)}-byte glTF took over {BOUND_S} s"
+
+
+def _glb_of_text(text: str, blob: bytes) -> bytes:
+    body = text.encode()
+    body += b" " * (-len(body) % 4)
+    blob = bytes(blob) + b"\0" * (-len(blob) % 4)
+    chunks = struct.pack("<I", len(body)) + b"JSON" + body + struct.pack("<I", len(blob)) + b"BIN\0" + blob
+    return struct.pack("<4sII", b"glTF", 2, 12 + len(chunks)) + chunks
+
+
+def _fbx_take(rng) -> str:
+    """An ASCII FBX chain of random depth whose take lasts from a second to 50,000 s."""
+    from fbx_chain import chain_fbx
+
+    return chain_fbx(int(rng.choice([2, 40, limits.MAX_DEPTH + 10])), float(rng.choice([1, 600, 50_000])))
+
+
 def fuzz_formats(run: Run, folder: Path) -> None:
     """The glTF reader (mutated .glb bytes, and mutated values in its JSON), the FBX reader
     (mutated ASCII FBX) and the numcodecs codec's chunks (mutated, CRC recomputed)."""
@@ -423,10 +508,18 @@ def fuzz_formats(run: Run, folder: Path) -> None:
         if run.rng.random() < 0.1:  # each FBX read forks the loader's child
             (folder / "x.fbx").write_bytes(mutate(fbx, run.rng))
             run.check("fbx", lambda: load(folder / "x.fbx", fps=8))
+        run.check("glTF structure", lambda: _gltf_structure(folder / "s.glb", run.rng))
+        if run.rng.random() < 0.03:  # each FBX read forks the loader's child
+            (folder / "t.fbx").write_text(_fbx_take(run.rng))
+            run.check("FBX take", lambda: load(folder / "t.fbx"))
         if chunk_codec is not None:
             framed = mutate(chunk[:-4], run.rng)
             damaged = framed + zlib.crc32(framed).to_bytes(4, "little")
             run.check("numcodecs chunk", lambda: chunk_codec.decode(damaged))
+            shape = (int(run.rng.choice([1, 47, 48, 49, 4096])), chunk_codec.skeleton.num_channels)
+            run.check("numcodecs chunk shape", lambda: chunk_codec.decode(chunk, out=np.zeros(shape, "f4")))
+            config = _json_mutation(chunk_codec.get_config(), run.rng)
+            run.check("numcodecs config", lambda: Kinwave.from_config(config))
 
 
 TARGETS = {

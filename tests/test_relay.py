@@ -629,3 +629,13 @@ def test_what_the_relay_keeps_is_capped_per_stream_and_per_room():
     for k in range(10_000):  # stale entries are compacted: the queue stays in proportion
         a.add(F(10, 100 + k), restart=False)
     assert len(room.arrivals) <= 2 * room.packets + 65
+
+
+@pytest.mark.parametrize("text", ["[" * 8000, '{"budget": 1e999}', '{"budget": ' + "9" * 5000 + "}"])
+def test_a_viewer_message_nested_deep_or_too_large_closes_with_4400(text):
+    """``'[' * 8000`` once raised RecursionError out of the handler (close code 1006)."""
+    from mocodec.stream.relay import Closing
+
+    with pytest.raises(Closing) as caught:
+        Relay._settings(Viewer(ws=None, transport=None), text)
+    assert caught.value.code == BAD_MESSAGE

@@ -67,6 +67,7 @@ export class RelayClient {
     this.settings = { budget, camera };
     this.WebSocketClass = WebSocketClass;
     this.avatars = new Map();
+    this.statuses = []; // the relay's status messages (a stream that starts live, without its history)
     this.others = new Map();
     this.reader = new Reader();
     this.asked = new Map(); // "stream sequence" -> [when last asked for (s), the wait before the next]
@@ -87,6 +88,8 @@ export class RelayClient {
           if (message.welcome !== undefined) {
             this.send(this.settings);
             resolve(this);
+          } else if (typeof message.status === 'string') {
+            this.statuses.push(message.status);
           }
           return;
         }

@@ -112,6 +112,8 @@ test('a relay client asks for a packet its link lost and decodes the stream whol
   const ws = FakeSocket.last;
   ws.onmessage({ data: JSON.stringify({ welcome: 'r', role: 'subscribe' }) });
   await connected;
+  ws.onmessage({ data: JSON.stringify({ status: 'stream 4: its last restart point is no longer kept' }) });
+  assert.deepEqual(client.statuses, ['stream 4: its last restart point is no longer kept']);
   const deliver = async (raw) => { ws.onmessage({ data: batchOf(raw).buffer }); await client.queue; };
   for (let k = 0; k < raws.length; k++) {
     if (k === 11) continue; // the link drops it

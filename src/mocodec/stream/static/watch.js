@@ -44,7 +44,8 @@ function draw() {
     lines.geometry.attributes.position.needsUpdate = true;
   }
   renderer.render(scene, camera);
-  status.textContent = `${client.avatars.size} avatars, decoded in this page`;
+  const note = client.statuses.at(-1);
+  status.textContent = `${client.avatars.size} avatars, decoded in this page${note ? ` (${note})` : ''}`;
 }
 
 window.watch = {

@@ -226,9 +226,120 @@ def _joint_plans(skeleton: Skeleton) -> tuple[_JointPlan, ...]:
     return tuple(out)
 
 
+@dataclass(frozen=True)
+class _DepthPlan:
+    """One depth's joints as the batched kernels read them: the channels coded together (each
+    joint's translations, then its rotations, joint by joint), and per joint its parent, its
+    rotation channels padded to three (-1) with their columns among the coded ones, its steps'
+    axes, axis pre-rotation and whether it has children."""
+
+    joints: np.ndarray
+    parents: np.ndarray
+    coded: np.ndarray
+    move_columns: tuple[np.ndarray, ...]  # per joint: its translations' columns among the coded
+    chans: np.ndarray  # (n, 3)
+    columns: np.ndarray  # (n, 3)
+    steps: np.ndarray  # (n,) rotation steps
+    axes: np.ndarray  # (n, 3)
+    axis_quats: np.ndarray  # (n, 4)
+    has_axis: np.ndarray
+    has_children: np.ndarray
+
+
+@lru_cache(maxsize=64)
+def _depth_plans(skeleton: Skeleton) -> tuple[_DepthPlan, ...]:
+    plans, out = _joint_plans(skeleton), []
+    for depth in depth_levels(skeleton):
+        n = len(depth)
+        chans, columns, axes = -np.ones((n, 3), np.int64), -np.ones((n, 3), np.int64), np.zeros((n, 3), np.int64)
+        coded: list[int] = []
+        move_columns = []
+        for i, j in enumerate(depth):
+            jp = plans[j]
+            move_columns.append(np.arange(len(coded), len(coded) + jp.moves.size))
+            coded += jp.moves.tolist()
+            k = jp.chans.size
+            chans[i, :k], axes[i, :k] = jp.chans, jp.axes
+            columns[i, :k] = np.arange(len(coded), len(coded) + k)
+            coded += jp.chans.tolist()
+        out.append(
+            _DepthPlan(
+                np.array(depth, dtype=np.int64),
+                np.array([skeleton.parents[j] for j in depth], dtype=np.int64),
+                np.array(coded, dtype=np.int64),
+                tuple(move_columns),
+                chans,
+                columns,
+                np.array([plans[j].chans.size for j in depth], dtype=np.int64),
+                axes,
+                np.array([plans[j].axis_quat for j in depth], dtype=np.float64).reshape(n, 4),
+                np.array([plans[j].has_axis for j in depth], dtype=np.bool_),
+                np.array([plans[j].has_children for j in depth], dtype=np.bool_),
+            )
+        )
+    return tuple(out)
+
+
+@numba.njit(cache=True)
+def _depth_targets(
+    start, active, goal, glob, d_joints, d_parents, chans, columns, steps, axes, quats, has_axis, skip, out
+):
+    """A depth's joints at once: each joint's orientation starts as its parent's decoded one
+    (``glob``), and the rotation columns of ``out`` (the start values of the coded channels)
+    of a non-root joint with an active channel, not ``skip``-ped, become :func:`target_angles`."""
+    frames = start.shape[0]
+    for i in range(d_joints.size):
+        j, p, k = d_joints[i], d_parents[i], steps[i]
+        for f in range(frames):
+            for m in range(4):
+                glob[j, f, m] = glob[p, f, m] if p >= 0 else (1.0 if m == 0 else 0.0)
+        if p < 0 or k == 0 or skip[j]:
+            continue
+        act = np.zeros(k, dtype=np.bool_)
+        any_active = False
+        for m in range(k):
+            act[m] = active[chans[i, m]]
+            any_active = any_active or act[m]
+        if not any_active:
+            continue
+        angles = np.empty((frames, k))
+        for f in range(frames):
+            for m in range(k):
+                angles[f, m] = start[f, chans[i, m]]
+        target = np.empty((frames, k))
+        _targets(angles, axes[i, :k], act, quats[i], has_axis[i], glob[p], goal[:, j], target)
+        for f in range(frames):
+            for m in range(k):
+                out[f, columns[i, m]] = target[f, m]
+
+
+@numba.njit(cache=True)
+def _depth_compose(decoded, glob, d_joints, columns, steps, axes, quats, has_axis, has_children):
+    """The decoded orientation of each of a depth's joints with rotations and children, from
+    the depth's decoded columns on top of its parent's (already in ``glob``)."""
+    frames = decoded.shape[0]
+    for i in range(d_joints.size):
+        k = steps[i]
+        if k == 0 or not has_children[i]:
+            continue
+        j = d_joints[i]
+        angles = np.empty((frames, k))
+        for f in range(frames):
+            for m in range(k):
+                angles[f, m] = decoded[f, columns[i, m]]
+        parent = glob[j].copy()
+        _compose(angles, axes[i, :k], quats[i], has_axis[i], parent, glob[j])
+
+
 def _placing(skeleton: Skeleton, active: np.ndarray) -> np.ndarray:
     """Joints whose decoded position closed-loop translations need: the ancestors of every
     non-root joint with an active translation channel."""
+    return _placing_of(skeleton, active.tobytes())
+
+
+@lru_cache(maxsize=256)
+def _placing_of(skeleton: Skeleton, active_flags: bytes) -> np.ndarray:
+    active = np.frombuffer(active_flags, dtype=np.bool_)
     plan = channel_plan(skeleton)
     out = np.zeros(len(skeleton), dtype=bool)
     for j in range(1, len(skeleton)):
@@ -237,6 +348,7 @@ def _placing(skeleton: Skeleton, active: np.ndarray) -> np.ndarray:
         while active[moves].any() and p >= 0 and not out[p]:
             out[p] = True
             p = skeleton.parents[p]
+    out.setflags(write=False)
     return out
 
 
@@ -284,40 +396,41 @@ def code_down_tree(
     plans = _joint_plans(skeleton)
     frames = start.shape[0]
     glob = np.empty((len(skeleton), frames, 4))
-    identity = np.tile([1.0, 0.0, 0.0, 0.0], (frames, 1))
+    start = np.ascontiguousarray(start, dtype=np.float64)
+    goal = np.ascontiguousarray(goal, dtype=np.float64)
+    active = np.ascontiguousarray(active, dtype=np.bool_)
+    flagged = np.zeros(len(skeleton), dtype=np.bool_) if exact is None else np.asarray(exact, dtype=np.bool_)
+    skip = flagged if closed_loop else np.ones(len(skeleton), dtype=np.bool_)  # no target angles
     placing = _placing(skeleton, active) if closed_loop and goal_positions is not None else np.zeros(0, bool)
     where = np.zeros((len(skeleton), frames, 3)) if placing.any() else None
-    for depth in depth_levels(skeleton):
-        channels, targets, exact_targets = [], [], {}
-        for j in depth:
-            jp, p = plans[j], skeleton.parents[j]
-            glob[j] = glob[p] if p >= 0 else identity
-            angles = start[:, jp.chans]
-            if closed_loop and p >= 0 and exact is not None and exact[j]:
+    for dp in _depth_plans(skeleton):
+        targets = start[:, dp.coded]
+        _depth_targets(
+            start, active, goal, glob, dp.joints, dp.parents, dp.chans, dp.columns, dp.steps, dp.axes,
+            dp.axis_quats, dp.has_axis, skip, targets,
+        )  # fmt: skip
+        exact_targets = {}
+        for i, (j, p) in enumerate(zip(dp.joints.tolist(), dp.parents.tolist())):
+            jp = plans[j]
+            if closed_loop and p >= 0 and flagged[j]:
                 exact_targets[j] = exact_rotation(jp.axis_quat, jp.has_axis, glob[j], goal[:, j])
-            elif closed_loop and p >= 0 and active[jp.chans].any():
-                angles = target_angles(
-                    angles, jp.axes, active[jp.chans], jp.axis_quat, jp.has_axis, glob[j], goal[:, j]
-                )
-            shifts = start[:, jp.moves]
             if where is not None and goal_positions is not None and p >= 0 and active[jp.moves].any():
                 wanted = _rotate_back(glob[p], goal_positions[:, j] - where[p]) - jp.offset
-                shifts = np.where(active[jp.moves], wanted[:, jp.move_axes], shifts)
-            channels += [jp.moves, jp.chans]
-            targets += [shifts, angles]
-        coded = np.concatenate(channels)
-        if not coded.size:
+                cols = dp.move_columns[i]
+                targets[:, cols] = np.where(active[jp.moves], wanted[:, jp.move_axes], targets[:, cols])
+        if not dp.coded.size:
             continue
-        decoded = code(coded, np.hstack(targets)) if exact is None else code(coded, np.hstack(targets), exact_targets)
-        column = {c: i for i, c in enumerate(coded.tolist())}
-        for j in depth:
-            jp = plans[j]
-            if jp.chans.size and jp.has_children:
-                rotated = np.ascontiguousarray(decoded[:, [column[c] for c in jp.chans.tolist()]])
-                glob[j] = compose(rotated, jp.axes, jp.axis_quat, jp.has_axis, glob[j])
-            if where is not None and placing[j]:
+        decoded = code(dp.coded, targets) if exact is None else code(dp.coded, targets, exact_targets)
+        _depth_compose(
+            np.ascontiguousarray(decoded, dtype=np.float64), glob, dp.joints, dp.columns, dp.steps, dp.axes,
+            dp.axis_quats, dp.has_axis, dp.has_children,
+        )  # fmt: skip
+        if where is None:
+            continue
+        for i, (j, p) in enumerate(zip(dp.joints.tolist(), dp.parents.tolist())):
+            if placing[j]:
+                jp = plans[j]
                 bone = np.tile(jp.offset, (frames, 1))
-                for axis, c in zip(jp.move_axes.tolist(), jp.moves.tolist()):
-                    bone[:, axis] += decoded[:, column[c]]
-                p = skeleton.parents[j]
+                for axis, column in zip(jp.move_axes.tolist(), dp.move_columns[i].tolist()):
+                    bone[:, axis] += decoded[:, column]
                 where[j] = bone if p < 0 else where[p] + rotations.quat_rotate(glob[p], bone)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import lru_cache
 
 import numba
 import numpy as np
@@ -169,21 +170,12 @@ class Motion:
         other rotation channels are unwrapped. Forward kinematics is unchanged, but the 180
         and 360 degree jumps of captured data (gimbal flips, wraps at +-180) are gone, which
         is what transform and predictive coders need."""
-        sk = self.skeleton
         out = self.channels.copy()
         if self.num_frames < 2:
             return replace(self, channels=out)
-        followed = {
-            j: sk.channel_offsets[j] + np.array(joint.rotation_channel_indices())
-            for j, joint in enumerate(sk.joints)
-            if len(joint.rotation_order) == 3 and len(set(joint.rotation_order)) >= 2
-        }
-        unwrapped = sk.rotation_mask.copy()
-        for idx in followed.values():
-            unwrapped[idx] = False  # follow_nearest sets these below
+        followed, proper, unwrapped = _followed_triples(self.skeleton)
         out[:, unwrapped] = np.unwrap(out[:, unwrapped], period=360.0, axis=0)
-        for j, idx in followed.items():
-            out[:, idx] = continuous_triples(self.channels[:, idx], sk.joints[j].rotation_order)
+        _follow_all(np.ascontiguousarray(self.channels, dtype=np.float64), followed, proper, out)
         return replace(self, channels=out)
 
     def aligned_to(self, reference: Motion) -> Motion:
@@ -237,6 +229,37 @@ class Motion:
                 rotations.quat_to_euler(qs, joint.rotation_order), joint.rotation_order, linear[:, idx]
             )
         return Motion(sk, float(fps), out)
+
+
+@lru_cache(maxsize=64)
+def _followed_triples(sk: Skeleton) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The channels ``(n, 3)`` of the joints :meth:`Motion.continuous` follows as triples (three
+    rotation channels, two axes or more), whether each order is proper, and the other rotation
+    channels, which it unwraps."""
+    followed = [
+        (sk.channel_offsets[j] + np.array(joint.rotation_channel_indices()), joint.rotation_order)
+        for j, joint in enumerate(sk.joints)
+        if len(joint.rotation_order) == 3 and len(set(joint.rotation_order)) >= 2
+    ]
+    idx = np.array([i for i, _ in followed], dtype=np.int64).reshape(-1, 3)
+    proper = np.array([order[0] == order[2] for _, order in followed], dtype=np.bool_)
+    unwrapped = sk.rotation_mask.copy()
+    unwrapped[idx.ravel()] = False
+    for array in (idx, proper, unwrapped):
+        array.setflags(write=False)
+    return idx, proper, unwrapped
+
+
+@numba.njit(cache=True)
+def _follow_all(channels, idx, proper, out):
+    """:func:`follow_nearest` of each joint's triple ``channels[:, idx[j]]`` into ``out``."""
+    for j in range(idx.shape[0]):
+        triple = np.empty((channels.shape[0], 3))
+        for m in range(3):
+            triple[:, m] = channels[:, idx[j, m]]
+        followed = follow_nearest(triple, proper[j])
+        for m in range(3):
+            out[:, idx[j, m]] = followed[:, m]
 
 
 def continuous_triples(angles: np.ndarray, order: str) -> np.ndarray:

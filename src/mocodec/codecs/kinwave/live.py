@@ -125,6 +125,50 @@ def _predict(targets, history, count, gap, stride, steps, order, trust, lo, hi, 
 
 
 @numba.njit(cache=True)
+def _predict_columns(
+    channels, targets, history, count, gap, stride, steps, order, trust, lo, hi, ints, decoded, cell_lo, cell_hi
+):
+    """:func:`_predict` (quantising) of the ``channels`` of a packet's coded frames, whose
+    ``targets (T, k)`` are given, reading and writing the whole packet's arrays ``(T, C)``
+    (``history (2, C)``, ``steps``, ``order``, ``trust (C,)``); returns the decoded ``(T, k)``."""
+    T, k = targets.shape
+    sub_history = np.empty((2, k))
+    sub_steps, sub_order, sub_trust = np.empty(k), np.empty(k, order.dtype), np.empty(k, trust.dtype)
+    sub_lo, sub_hi = np.empty((T, k)), np.empty((T, k))
+    for i in range(k):
+        c = channels[i]
+        sub_history[0, i], sub_history[1, i] = history[0, c], history[1, c]
+        sub_steps[i], sub_order[i], sub_trust[i] = steps[c], order[c], trust[c]
+        for t in range(T):
+            sub_lo[t, i], sub_hi[t, i] = lo[t, c], hi[t, c]
+    out, sub = np.empty((T, k)), np.zeros((T, k), dtype=np.int64)
+    c_lo, c_hi = np.empty((T, k)), np.empty((T, k))
+    _predict(
+        targets,
+        sub_history,
+        count,
+        gap,
+        stride,
+        sub_steps,
+        sub_order,
+        sub_trust,
+        sub_lo,
+        sub_hi,
+        out,
+        sub,
+        c_lo,
+        c_hi,
+        True,
+    )
+    for i in range(k):
+        c = channels[i]
+        for t in range(T):
+            ints[t, c], decoded[t, c] = sub[t, i], out[t, i]
+            cell_lo[t, c], cell_hi[t, c] = c_lo[t, i], c_hi[t, i]
+    return out
+
+
+@numba.njit(cache=True)
 def _update_misses(misses, history, count, gap, stride, coded):
     """After a layer's packet, on both ends: each channel's recent miss of the order-1 and the
     order-2 prediction (``misses (2, C)``) of its decoded coded frames ``coded (T, C)``,
@@ -728,29 +772,27 @@ class _LiveEncoder(StreamEncoder):
         lo, hi = cells.at(stride)
         pos, quats = (np.ascontiguousarray(g[stride - 1 :: stride]) for g in goal)
 
+        history, trust = np.ascontiguousarray(layer.history), np.ascontiguousarray(layer.trust)
+        lo, hi = np.ascontiguousarray(lo), np.ascontiguousarray(hi)
+
         def code(channels: np.ndarray, targets: np.ndarray) -> np.ndarray:
-            shape = targets.shape
-            out, sub, c_lo, c_hi = np.empty(shape), np.zeros(shape, dtype=np.int64), np.empty(shape), np.empty(shape)
-            _predict(
+            return _predict_columns(
+                channels,
                 np.ascontiguousarray(targets),
-                np.ascontiguousarray(layer.history[:, channels]),
+                history,
                 layer.count_history,
                 layer.gap,
                 stride,
-                steps[channels],
-                order[channels],
-                layer.trust[channels],
-                np.ascontiguousarray(lo[:, channels]),
-                np.ascontiguousarray(hi[:, channels]),
-                out,
-                sub,
-                c_lo,
-                c_hi,
-                True,
+                steps,
+                order,
+                trust,
+                lo,
+                hi,
+                ints,
+                decoded,
+                cell_lo,
+                cell_hi,
             )
-            ints[:, channels], decoded[:, channels] = sub, out
-            cell_lo[:, channels], cell_hi[:, channels] = c_lo, c_hi
-            return out
 
         closedloop.code_down_tree(self.skeleton, coded, retarget, quats, code, True, pos)
         return ints, decoded, (cell_lo, cell_hi), _fill(layer.history[1], decoded, stride)

@@ -410,7 +410,8 @@ def code_down_tree(
             dp.axis_quats, dp.has_axis, skip, targets,
         )  # fmt: skip
         exact_targets = {}
-        for i, (j, p) in enumerate(zip(dp.joints.tolist(), dp.parents.tolist())):
+        per_joint = where is not None or (closed_loop and exact is not None and flagged[dp.joints].any())
+        for i, (j, p) in enumerate(zip(dp.joints.tolist(), dp.parents.tolist()) if per_joint else ()):
             jp = plans[j]
             if closed_loop and p >= 0 and flagged[j]:
                 exact_targets[j] = exact_rotation(jp.axis_quat, jp.has_axis, glob[j], goal[:, j])

@@ -402,6 +402,7 @@ class _Layer:
         if reference is not None:
             self.guess = reference
         self.base_codes = codes
+        self._steps: dict[int, np.ndarray] = {}
         self.restart()
 
     def restart(self) -> None:
@@ -422,8 +423,14 @@ class _Layer:
         return np.where(self.misses[1] < self.misses[0], 2, 1)
 
     def steps(self, offset: int) -> np.ndarray:
-        codes = np.clip(self.base_codes.astype(np.int64) + offset, 0, 255).astype(np.uint8)
-        return channel_steps(self.skeleton, codes)[:, 0]
+        """Each channel's step at a scale ``offset`` (1/8 octaves) from the base codes (kept: a
+        stream goes back and forth between a few offsets)."""
+        if offset not in self._steps:
+            codes = np.clip(self.base_codes.astype(np.int64) + offset, 0, 255).astype(np.uint8)
+            steps = np.ascontiguousarray(channel_steps(self.skeleton, codes)[:, 0])
+            steps.setflags(write=False)
+            self._steps[offset] = steps
+        return self._steps[offset]
 
 
 class _Cells:

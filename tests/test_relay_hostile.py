@@ -219,6 +219,20 @@ def test_a_header_with_a_hostile_reference_pose_closes_its_connection(walk_bvh):
     assert code == BAD_MESSAGE and "reference" in reason
 
 
+async def messages_for(url: str, room: str, seconds: float):
+    """A viewer's text and binary messages in ``room`` for ``seconds`` (or until it is closed)."""
+    async with connect(url, room, token(room), "subscribe") as ws:
+        end = time.monotonic() + seconds
+        while (left := end - time.monotonic()) > 0:
+            try:
+                msg = await ws.receive(timeout=left)
+            except TimeoutError:
+                return
+            if msg.type not in (aiohttp.WSMsgType.TEXT, aiohttp.WSMsgType.BINARY):
+                return
+            yield msg
+
+
 def test_late_viewers_of_big_streams_without_restarts_stall_nothing(walk_bvh):
     """A publisher of 4 streams of 60 KB packets that never restart (within the publish
     limits), then 10 late viewers: each starts those streams live, told so in a status message,
@@ -246,32 +260,18 @@ def test_late_viewers_of_big_streams_without_restarts_stall_nothing(walk_bvh):
 
     async def late(url, seconds):
         largest, notes = 0, []
-        async with connect(url, "big", token("big"), "subscribe") as ws:
-            end = time.monotonic() + seconds
-            while (left := end - time.monotonic()) > 0:
-                try:
-                    msg = await ws.receive(timeout=left)
-                except TimeoutError:
-                    break
-                if msg.type == aiohttp.WSMsgType.TEXT:
-                    notes.append(json.loads(msg.data)["status"])
-                elif msg.type == aiohttp.WSMsgType.BINARY:
-                    largest = max(largest, len(msg.data))
-                else:
-                    break
+        async for msg in messages_for(url, "big", seconds):
+            if msg.type == aiohttp.WSMsgType.TEXT:
+                notes.append(json.loads(msg.data)["status"])
+            else:
+                largest = max(largest, len(msg.data))
         return largest, notes
 
     async def calm(url, seconds):
         arrivals = []
-        async with connect(url, "calm", token("calm"), "subscribe") as ws:
-            end = time.monotonic() + seconds
-            while (left := end - time.monotonic()) > 0:
-                try:
-                    msg = await ws.receive(timeout=left)
-                except TimeoutError:
-                    break
-                if msg.type == aiohttp.WSMsgType.BINARY:
-                    arrivals += [time.monotonic()] * len(split_batch(msg.data))
+        async for msg in messages_for(url, "calm", seconds):
+            if msg.type == aiohttp.WSMsgType.BINARY:
+                arrivals += [time.monotonic()] * len(split_batch(msg.data))
         return arrivals
 
     async def go():

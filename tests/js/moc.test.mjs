@@ -145,11 +145,28 @@ test('hostile headers: clear errors naming what is wrong', async () => {
   await expectDecodeError(withHeader(data, (h) => ({ ...h, codec: { codec: 'spiht', knobs: {} } })), /kinwave files only/);
   await expectDecodeError(withHeader(data, (h) => ({ ...h, frames: h.frames + 1 })), /cover/);
   await expectDecodeError(withHeader(data, (h) => ({ ...h, fps: -1 })), /fps/);
+  await expectDecodeError(withHeader(data, (h) => ({ ...h, fps: 1e-300 })), /fps/); // once a 300-digit duration
   await expectDecodeError(withHeader(data, (h) => ({ ...h, codec: 3 })), /codec/);
   const decoded = await decodeMoc(withHeader(data, (h) => h));
   assert.equal(decoded.frames, (await decodeMoc(data)).frames);
   await expectDecodeError(data.subarray(0, 10), /not a .moc file/);
   await expectDecodeError(Uint8Array.from(data, (b, i) => (i === 4 ? 2 : b)), /version 2/);
+});
+
+test('an index claiming more chunks than its bytes hold is refused before it is read', async () => {
+  const { data } = await fixture('asf-30fps-shell');
+  const file = await openMoc(data);
+  const last = file.chunks.at(-1);
+  const indexAt = last.offset + last.size;
+  const raw = Uint8Array.from([0x80, 0x80, 0x04]); // 65,536 chunks
+  const out = new Uint8Array(indexAt + raw.length + 4 + 8);
+  out.set(data.subarray(0, indexAt));
+  out.set(raw, indexAt);
+  const view = new DataView(out.buffer);
+  view.setUint32(indexAt + raw.length, crc32(raw, 0, raw.length), true);
+  view.setUint32(indexAt + raw.length + 4, raw.length + 4, true);
+  out.set(new TextEncoder().encode('MOCX'), indexAt + raw.length + 8);
+  await expectDecodeError(out, /65536 chunks do not fit/);
 });
 
 test('damaged and truncated files end in DecodeError, never another error or a hang', async () => {

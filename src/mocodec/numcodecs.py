@@ -169,11 +169,12 @@ def _number(value: object, where: str) -> float:
 
 
 def _float_dtype(value: object, where: str) -> str:
-    try:
-        plain = isinstance(value, (str, np.dtype)) or isinstance(value, type) and issubclass(value, np.generic)
-        dtype = np.dtype(value) if plain else None
-    except (TypeError, ValueError):
-        dtype = None
+    dtype = None
+    if isinstance(value, (str, np.dtype)) or (isinstance(value, type) and issubclass(value, np.generic)):
+        try:
+            dtype = np.dtype(value)
+        except (TypeError, ValueError):
+            pass
     if dtype is None or dtype.kind != "f" or dtype.subdtype is not None:
         raise CorruptStreamError(f"{where}: dtype {str(value)[:40]!r} is not a float type")
     return dtype.str

@@ -78,6 +78,7 @@ def codec_from_untrusted(config: object, where: str, local_files: dict[str, str]
     caller's ``local_files`` entry, or empty; the payload names the model it needs by content
     hash, and the codec checks the one given against it. CorruptStreamError names ``where``."""
     knobs = checked_config(config, where)
+    assert isinstance(config, dict)  # checked_config refuses anything else
     try:
         cls = codec_class(config["codec"])
         cls.check_revision(config)

@@ -27,6 +27,7 @@ import json
 import os
 import struct
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -173,7 +174,7 @@ class _Document:
     file: memory in proportion to the file, however many channels share an accessor or how
     many values an accessor without data declares."""
 
-    def __init__(self, path: Path, gltf: _Fields, binary_chunk: bytes | None, file_bytes: int):
+    def __init__(self, path: Path, gltf: Any, binary_chunk: bytes | None, file_bytes: int):
         self.path = path
         self.gltf = gltf
         self.binary_chunk = binary_chunk

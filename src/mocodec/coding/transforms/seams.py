@@ -10,44 +10,21 @@ and a curve without a step is not changed at all.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 _EXTRAPOLATE = np.array([0.375, -1.25, 1.875])  # quadratic through 3 frames, half a frame on
-_PROBES = (-8, -6, -4, 4, 6, 8)
+_PROBES = np.array([-8, -6, -4, 4, 6, 8], dtype=np.int64)  # frames from a seam its motion's own step is read at
 CONTEXT = 11  # frames each side of a seam the estimates read
-
-
-def seam_steps(x: np.ndarray, seams) -> np.ndarray:
-    """The step at each of ``seams`` (first frame of the right block), per column
-    ``(seams, columns)``: the difference of each side's quadratic extrapolation to the midpoint
-    between the blocks (quadratic, so a smoothly accelerating curve shows no step). Elementwise,
-    so a column's floats do not depend on the other columns."""
-    s = np.asarray(seams)
-    a, b, c = _EXTRAPOLATE
-    left = a * x[s - 3] + b * x[s - 2] + c * x[s - 1]
-    right = a * x[s + 2] + b * x[s + 1] + c * x[s]
-    return right - left
-
-
-def natural_steps(x: np.ndarray, seams) -> np.ndarray:
-    """The same estimate at frames 4 to 8 away from each seam, inside the blocks: how big a
-    "step" the motion itself shows there (noise, sharp moves); the median per seam and column
-    over the probes that fit in ``x`` (0 where none does)."""
-    probes = np.asarray(seams)[:, None] + np.array(_PROBES)[None, :]
-    fits = (probes >= 3) & (probes <= len(x) - 3)
-    sizes = np.abs(seam_steps(x, np.where(fits, probes, 3).ravel())).reshape(*probes.shape, -1)
-    sizes[~fits] = np.inf  # sorted after every probe that fits
-    sizes.sort(axis=1)
-    count = fits.sum(axis=1)
-    rows = np.arange(len(count))
-    low = sizes[rows, np.maximum(count - 1, 0) // 2]  # the middle one, or the two middle ones
-    high = sizes[rows, np.minimum(count // 2, sizes.shape[1] - 1)]
-    return np.where((count > 0)[:, None], (low + high) / 2, 0.0)
 
 
 def smooth_seams(x: np.ndarray, seams, half_width: int, limits: np.ndarray | None = None) -> np.ndarray:
     """``x`` (frames, channels) with the step at every seam spread over 2 ``half_width`` frames.
-    Only the part of a step beyond four times the motion's own (:func:`natural_steps`) is
+    The step at a seam (the first frame of the right block) is the difference of each side's
+    quadratic extrapolation to the midpoint between the blocks (quadratic, so a smoothly
+    accelerating curve shows no step); the motion's own step is the median of the same estimate
+    at frames 4 to 8 away from the seam, inside the blocks (noise, sharp moves). Only the part
+    of a step beyond four times the motion's own is
     removed, and at most ``limits[k]`` per channel at the k-th seam (what the coder's error can
     explain there), so finely coded or naturally jerky motion keeps its detail. Steps are
     measured on ``x`` as given: seams closer than ``half_width`` plus :data:`CONTEXT` frames
@@ -58,15 +35,50 @@ def smooth_seams(x: np.ndarray, seams, half_width: int, limits: np.ndarray | Non
     if not inside.any():
         return out
     where = seams[inside]
-    step = seam_steps(out, where)
-    size = np.maximum(np.abs(step) - 4.0 * natural_steps(out, where), 0.0)
-    if limits is not None:
-        size = np.minimum(size, np.asarray(limits)[inside])
-    half = 0.5 * np.sign(step) * size  # (seams, channels)
+    bound = np.full((where.size, out.shape[1]), np.inf) if limits is None else np.asarray(limits)[inside]
     h = max(int(half_width), 1)
     weight = 0.5 * (1 + np.cos(np.pi * (np.arange(h) + 0.5) / h))  # 1 next to the seam -> 0
-    for side, rows in ((1.0, where[:, None] - 1 - np.arange(h)), (-1.0, where[:, None] + np.arange(h))):
-        ok = (rows >= 0) & (rows < len(out))
-        k, i = np.nonzero(ok)
-        np.add.at(out, rows[k, i], side * half[k] * weight[i][:, None])
+    _smooth(out, where, np.ascontiguousarray(bound, dtype=np.float64), weight, _EXTRAPOLATE, _PROBES)
     return out
+
+
+@numba.njit(inline="always")
+def _step_at(x, s, col, abc):
+    """The step at seam ``s`` in column ``col``: each side's extrapolation ``abc`` to the midpoint."""
+    left = abc[0] * x[s - 3, col] + abc[1] * x[s - 2, col] + abc[2] * x[s - 1, col]
+    right = abc[0] * x[s + 2, col] + abc[1] * x[s + 1, col] + abc[2] * x[s, col]
+    return right - left
+
+
+@numba.njit(cache=True)
+def _smooth(out, where, bound, weight, abc, probes):
+    """:func:`smooth_seams` on ``out`` in place, seams ``where`` all inside: every step measured
+    first, then the ramps added (every seam's left side, then every right side; the browser
+    decoder's order and floats, js/src/seams.js)."""
+    frames, channels = out.shape
+    halves = np.zeros((where.size, channels))
+    sizes = np.empty(probes.size)
+    for k in range(where.size):
+        s = where[k]
+        for col in range(channels):
+            step = _step_at(out, s, col, abc)
+            count = 0
+            for m in range(probes.size):
+                p = s + probes[m]
+                if p >= 3 and p <= frames - 3:
+                    sizes[count] = abs(_step_at(out, p, col, abc))
+                    count += 1
+            natural = 0.0
+            if count:
+                ordered = np.sort(sizes[:count])
+                natural = (ordered[(count - 1) // 2] + ordered[count // 2]) / 2
+            size = max(abs(step) - 4.0 * natural, 0.0)
+            size = min(size, bound[k, col])
+            halves[k, col] = 0.5 * np.sign(step) * size
+    for side in (1.0, -1.0):
+        for k in range(where.size):
+            for i in range(weight.size):
+                row = where[k] - 1 - i if side > 0 else where[k] + i
+                if 0 <= row < frames:
+                    for col in range(channels):
+                        out[row, col] += side * halves[k, col] * weight[i]

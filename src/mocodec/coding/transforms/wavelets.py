@@ -20,19 +20,27 @@ import pywt
 WAVELETS = {"d4": "db2", "cdf97": "bior4.4", "haar": "haar"}
 
 
+@lru_cache(maxsize=16)
+def _wavelet(name: str) -> pywt.Wavelet:
+    """PyWavelets' wavelet of one of our names (or its own), made once: a transform given the
+    object skips the lookup a name costs on every call."""
+    return pywt.Wavelet(WAVELETS.get(name, name))
+
+
 def max_levels(frames: int, wavelet: str) -> int:
     """The deepest decomposition PyWavelets does without boundary warnings (0 for tiny segments)."""
-    return pywt.dwt_max_level(frames, pywt.Wavelet(WAVELETS.get(wavelet, wavelet)).dec_len)
+    return pywt.dwt_max_level(frames, _wavelet(wavelet).dec_len)
 
 
-def band_lengths(frames: int, wavelet: str, levels: int, mode: str = "periodization") -> list[int]:
+@lru_cache(maxsize=1024)
+def band_lengths(frames: int, wavelet: str, levels: int, mode: str = "periodization") -> tuple[int, ...]:
     """Lengths of the bands of a ``frames``-long signal, coarsest first."""
-    taps = pywt.Wavelet(WAVELETS.get(wavelet, wavelet)).dec_len
+    taps = _wavelet(wavelet).dec_len
     lengths, n = [], frames
     for _ in range(levels):
         n = pywt.dwt_coeff_len(n, taps, mode)
         lengths.append(n)
-    return [lengths[-1], *lengths[::-1]] if levels else [frames]
+    return (lengths[-1], *lengths[::-1]) if levels else (frames,)
 
 
 def forward(x: np.ndarray, wavelet: str, levels: int, mode: str = "periodization") -> np.ndarray:
@@ -42,7 +50,7 @@ def forward(x: np.ndarray, wavelet: str, levels: int, mode: str = "periodization
         return x.copy()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # deep levels on short segments
-        bands = pywt.wavedec(x, WAVELETS.get(wavelet, wavelet), mode=mode, level=levels, axis=-1)
+        bands = pywt.wavedec(x, _wavelet(wavelet), mode=mode, level=levels, axis=-1)
     return np.concatenate(bands, axis=-1)
 
 
@@ -53,7 +61,7 @@ def inverse(coeffs: np.ndarray, frames: int, wavelet: str, levels: int, mode: st
         return coeffs.copy()
     bounds = np.cumsum(band_lengths(frames, wavelet, levels, mode))[:-1]
     bands = np.split(coeffs, bounds, axis=-1)
-    out = pywt.waverec(bands, WAVELETS.get(wavelet, wavelet), mode=mode, axis=-1)
+    out = pywt.waverec(bands, _wavelet(wavelet), mode=mode, axis=-1)
     return out[..., :frames]
 
 

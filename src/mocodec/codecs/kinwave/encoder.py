@@ -41,7 +41,7 @@ from mocodec.codecs.kinwave.payload import (
     reconstruct,
     rotation_joints,
     segment_factors,
-    step_code,
+    step_codes,
     step_groups,
     still_rotations,
     three_angle_groups,
@@ -400,7 +400,7 @@ class Encoder:
     # ----- one pass -------------------------------------------------------------------------
     def codes(self, scale: float) -> np.ndarray:
         steps = np.append(self.shape_rot * scale, self.shape_trans * scale if self.trans else [])
-        return np.clip(np.array([step_code(s) for s in steps]) + self.joint_offsets, 0, 255).astype(np.uint8)
+        return np.clip(step_codes(steps) + self.joint_offsets, 0, 255).astype(np.uint8)
 
     def run_pass(self, codes: np.ndarray, offsets: np.ndarray | None = None) -> Pass:
         """Quantise and reconstruct every channel down the tree (:func:`closedloop.code_down_tree`):

@@ -52,7 +52,7 @@ import numpy as np
 from mocodec.codecs.base import Codec, Knob, QualityKnob, StreamDecoder, StreamEncoder, continuous_frames
 from mocodec.codecs.kinwave import kinalloc
 from mocodec.codecs.kinwave.encoder import bone_skeleton
-from mocodec.codecs.kinwave.payload import channel_steps, code_channels, rotation_joints, step_code, step_groups
+from mocodec.codecs.kinwave.payload import channel_steps, code_channels, rotation_joints, step_codes, step_groups
 from mocodec.codecs.registry import register
 from mocodec.codecs.shared import closedloop
 from mocodec.coding.entropy import binarycoder as bc
@@ -487,7 +487,7 @@ def base_codes(skeleton: Skeleton, bound_cm: float, measure: str) -> np.ndarray:
     rot, trans = kinalloc.steps(skeleton, tuple(counts), translations, "shell" if measure == "shell" else "joint", True)
     rot = np.where(np.isfinite(rot), rot, np.nanmin(rot) if np.isfinite(rot).any() else 1.0)
     steps = np.append(rot[rotation_joints(skeleton)], trans if translations else [])
-    return np.array([step_code(s * bound_cm) for s in steps], dtype=np.int64)
+    return step_codes(np.asarray(steps) * bound_cm)
 
 
 @register

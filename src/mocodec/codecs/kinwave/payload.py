@@ -64,8 +64,10 @@ SEAM_HALF_WIDTH = 8  # frames each side of a seam over which its step is spread
 SEAM_LIMIT = 1.0  # the largest step removed, in quantiser steps of the channel
 
 
-def step_code(step: float) -> int:
-    return int(np.clip(np.round((math.log2(step) + 20.0) * 8.0), 0, 255))
+def step_codes(steps) -> np.ndarray:
+    """The step code of each of ``steps`` (int64): 8 codes an octave, :func:`code_step`'s inverse."""
+    logs = np.fromiter(map(math.log2, steps), dtype=np.float64, count=len(steps))
+    return np.clip(np.round((logs + 20.0) * 8.0), 0, 255).astype(np.int64)
 
 
 def code_step(code: int) -> float:

@@ -357,17 +357,24 @@ def _rotate_back(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     return rotations.quat_rotate(rotations.quat_conjugate(q), v)
 
 
-def exact_rotation(axis_quat: np.ndarray, has_axis: bool, parent: np.ndarray, goal: np.ndarray) -> np.ndarray:
+@numba.njit(cache=True)
+def exact_rotation(axis_quat, has_axis, parent, goal):
     """Quaternions ``(T, 4)`` of exactly the local rotation (the one its Euler angles make,
     without the axis pre-rotation) that restores ``goal`` on top of ``parent``:
     ``C^-1 conj(G'_p) G_j C``. For joints coded in another form than their Euler angles, where
     a Gauss-Newton step in Euler angles near a gimbal lock (a proper order's rest pose) would
     not converge."""
-    local = rotations.quat_multiply(rotations.quat_conjugate(parent), goal)
-    if has_axis:
-        c = np.broadcast_to(axis_quat, local.shape)
-        local = rotations.quat_multiply(rotations.quat_multiply(rotations.quat_conjugate(c), local), c)
-    return local
+    out = np.empty((parent.shape[0], 4))
+    cw, cx, cy, cz = axis_quat[0], axis_quat[1], axis_quat[2], axis_quat[3]
+    for f in range(parent.shape[0]):
+        w, x, y, z = quat_product(
+            parent[f, 0], -parent[f, 1], -parent[f, 2], -parent[f, 3], goal[f, 0], goal[f, 1], goal[f, 2], goal[f, 3]
+        )
+        if has_axis:
+            w, x, y, z = quat_product(cw, -cx, -cy, -cz, w, x, y, z)
+            w, x, y, z = quat_product(w, x, y, z, cw, cx, cy, cz)
+        out[f, 0], out[f, 1], out[f, 2], out[f, 3] = w, x, y, z
+    return out
 
 
 def code_down_tree(

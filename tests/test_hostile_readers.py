@@ -75,9 +75,10 @@ def test_a_deep_fbx_chain_is_refused_before_sampling(tmp_path):
 def test_a_cycle_is_found_however_long():
     parents = np.arange(-1, 4999)
     parents[0] = 4999  # a ring of 5,000: no root
-    assert (nodetree.depths(parents) == -1).all()
+    assert nodetree.tree_problem(parents) == "node 0 is in a cycle of children"
     parents[0] = -1
-    assert nodetree.depths(parents).max() == 4999
+    assert nodetree.tree_problem(parents) == f"node 4999 is 4999 deep, past {limits.MAX_DEPTH}"
+    assert nodetree.tree_problem(parents[: limits.MAX_DEPTH]) is None
 
 
 # ----- 3, 5: glTF memory bounded by the file, counts checked before the parse ------------------------

@@ -113,10 +113,9 @@ def _read(path: Path, animation: str | int | None, fps: float | None) -> Motion:
     parents = np.array([n.parent.typed_id if n.parent is not None else -1 for n in nodes], dtype=np.int64)
     if any(n.typed_id != k for k, n in enumerate(nodes)) or (parents >= np.arange(len(nodes))).any():
         raise FormatError(path, None, "the node list is not in parents-first order")
-    depth = nodetree.depths(parents)
-    if depth.max(initial=0) >= limits.MAX_DEPTH:
-        deepest = int(np.argmax(depth))
-        raise FormatError(path, None, f"node {deepest} is {int(depth[deepest])} deep, past {limits.MAX_DEPTH}")
+    problem = nodetree.tree_problem(parents)
+    if problem:
+        raise FormatError(path, None, problem)
     bones = {k for k, n in enumerate(nodes) if n.bone is not None}
     if not bones:
         raise FormatError(path, None, "no skeleton: the file has no bone nodes")

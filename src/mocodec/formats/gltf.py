@@ -460,11 +460,9 @@ def _tree(doc: _Document) -> np.ndarray:
             if parents[child] >= 0 or child == k:
                 raise doc.fail(f"node {child} has two parents or is its own child (node {k})")
             parents[child] = k
-    depth = nodetree.depths(parents)
-    if (depth < 0).any():  # a cycle never reaches a root
-        raise doc.fail(f"node {int(np.argmin(depth))} is in a cycle of children")
-    if depth.max() >= limits.MAX_DEPTH:
-        raise doc.fail(f"node {int(np.argmax(depth))} is {int(depth.max())} deep, past {limits.MAX_DEPTH}")
+    problem = nodetree.tree_problem(parents)
+    if problem:
+        raise doc.fail(problem)
     return parents
 
 

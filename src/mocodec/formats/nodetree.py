@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mocodec import kinematics, rotations
+from mocodec import kinematics, limits, rotations
 from mocodec.errors import ConversionError
 from mocodec.motion import Motion
 from mocodec.skeleton import CHANNEL_NAMES, POSITION_CHANNELS, Joint, Skeleton
@@ -155,13 +155,8 @@ def closure(parents: np.ndarray, wanted: set[int]) -> list[int] | None:
     """The nodes ``wanted`` with every node between them and their lowest common ancestor,
     depth first (children in node order); None when they have no common ancestor. Linear in
     the number of nodes, however deep the tree (``parents`` holds no cycle)."""
-    n = len(parents)
-    children: list[list[int]] = [[] for _ in range(n)]
-    for node in range(n):
-        if parents[node] >= 0:
-            children[int(parents[node])].append(node)
-    order = _depth_first(children, [node for node in range(n) if parents[node] < 0])
-    below = np.zeros(n, dtype=np.int64)  # wanted nodes in each node's subtree
+    children, order = _walk(parents)
+    below = np.zeros(len(parents), dtype=np.int64)  # wanted nodes in each node's subtree
     for node in reversed(order):
         below[node] += node in wanted
         if parents[node] >= 0:
@@ -179,18 +174,29 @@ def closure(parents: np.ndarray, wanted: set[int]) -> list[int] | None:
     return [node for node in _depth_first(children, [top]) if below[node] > 0]
 
 
-def depths(parents: np.ndarray) -> np.ndarray:
-    """Each node's depth (a root: 0), or -1 for a node no root reaches (each node has at most
-    one parent, so it is on a cycle of parents or below one): linear, however deep the tree."""
+def tree_problem(parents: np.ndarray) -> str | None:
+    """What makes a node tree unreadable, or None: a node no root reaches (each node has at
+    most one parent, so it is on a cycle of parents or below one), or a node MAX_DEPTH deep or
+    deeper. Linear, however deep the tree."""
+    depth = -np.ones(len(parents), dtype=np.int64)
+    for node in _walk(parents)[1]:
+        depth[node] = depth[parents[node]] + 1 if parents[node] >= 0 else 0
+    if (depth < 0).any():
+        return f"node {int(np.argmin(depth))} is in a cycle of children"
+    deepest = int(np.argmax(depth)) if len(depth) else 0
+    if len(depth) and depth[deepest] >= limits.MAX_DEPTH:
+        return f"node {deepest} is {int(depth[deepest])} deep, past {limits.MAX_DEPTH}"
+    return None
+
+
+def _walk(parents: np.ndarray) -> tuple[list[list[int]], list[int]]:
+    """Each node's children (in node order), and the nodes the roots reach, depth first."""
     n = len(parents)
     children: list[list[int]] = [[] for _ in range(n)]
     for node in range(n):
         if parents[node] >= 0:
             children[int(parents[node])].append(node)
-    depth = -np.ones(n, dtype=np.int64)
-    for node in _depth_first(children, [node for node in range(n) if parents[node] < 0]):
-        depth[node] = depth[parents[node]] + 1 if parents[node] >= 0 else 0
-    return depth
+    return children, _depth_first(children, [node for node in range(n) if parents[node] < 0])
 
 
 def _depth_first(children: list[list[int]], roots: list[int]) -> list[int]:

@@ -425,7 +425,7 @@ def _vector(doc: _Document, values, size: int, default: tuple, what: str) -> np.
         return np.array(default, dtype=np.float64)
     try:
         array = np.array(values, dtype=np.float64)
-    except (TypeError, ValueError, OverflowError):
+    except (TypeError, ValueError):
         array = np.zeros(0)
     if array.shape != (size,) or not np.isfinite(array).all():
         raise doc.fail(f"{what}: expected {size} finite numbers, got {str(values)[:60]}")

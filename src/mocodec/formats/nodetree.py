@@ -346,7 +346,7 @@ def _layout_joint(
         )
         joint = Joint(name, parent, tuple(float(v) for v in offset), channels, order, axis, axis_order, limits)
         turn = rotations.euler_to_quat(np.array(axis), axis_order)
-    except (KeyError, TypeError, ValueError, OverflowError):  # a layout edited or forged: not used
+    except (KeyError, TypeError, ValueError):  # a layout edited or forged: not used
         return None, np.zeros(0)
     values = np.zeros((len(translation), len(channels)))
     moved = translation - offset

@@ -654,7 +654,8 @@ class Relay:
             pending, viewer.pending = viewer.pending, []
             resends, viewer.resends = viewer.resends, []
             notes, viewer.notes = viewer.notes, []
-            live = self._catch_up(room, viewer, fresh, pending) if viewer.behind else fresh
+            caught, live = self._catch_up(room, viewer, fresh) if viewer.behind else ([], fresh)
+            pending += caught
             items = pending + live
             # status, and what it asked for again, go first, in messages of their own: the tick's batch stays shared
             batches: list[bytes | str] = [*notes]
@@ -680,16 +681,22 @@ class Relay:
             for viewer in room.viewers:
                 viewer.layers.pop(key, None)
 
-    def _catch_up(self, room: Room, viewer: Viewer, fresh: list[Forward], out: list[Forward]) -> list[Forward]:
-        """A late viewer's catch-up this tick, added to ``out``: the kept packets of each stream
-        it is behind on, from where it got to, paced at :meth:`_pace` beyond the live packets of
-        those streams (which the history holds too, in order); the tick's fresh packets it gets
-        as they are (the other streams', and new streams' headers)."""
+    def _catch_up(self, room: Room, viewer: Viewer, fresh: list[Forward]) -> tuple[list[Forward], list[Forward]]:
+        """A late viewer's catch-up this tick: the kept packets of each stream it is behind on,
+        from where it got to, paced at :meth:`_pace` beyond the live packets of those streams
+        (which the history holds too, in order); and the tick's fresh packets it gets as they
+        are (the other streams', and new streams' headers)."""
         for key, (state, _) in list(viewer.behind.items()):
             if room.streams.get(key) is not state:  # ended, or a new header: that comes fresh
                 del viewer.behind[key]
-        live = [f for f in fresh if f.packet.kind == HEADER or f.packet.stream not in viewer.behind]
-        owed = sum(len(f.data) for f in fresh) - sum(len(f.data) for f in live)
+        live: list[Forward] = []
+        out: list[Forward] = []
+        owed = 0
+        for f in fresh:
+            if f.packet.kind == HEADER or f.packet.stream not in viewer.behind:
+                live.append(f)
+            else:
+                owed += len(f.data)
         rate = self._pace(viewer, self.limits.catchup_bytes_per_s)
         viewer.credit = min(viewer.credit + rate * self.tick_s, rate * self.limits.burst_s) + owed
         for key, (state, at) in list(viewer.behind.items()):
@@ -709,7 +716,7 @@ class Relay:
                 viewer.behind[key] = (state, at)
         if not viewer.behind:
             viewer.credit = 0.0
-        return live
+        return out, live
 
     def _offer(self, viewer: Viewer, batches: tuple[bytes | str, ...], items: list[Forward]) -> None:
         """Queue a viewer's batches, or miss the tick if the last are still on their way:

@@ -429,13 +429,9 @@ def _gltf_structure(path: Path, rng) -> None:
     """A glTF of hostile structure: a node chain of random depth (past MAX_DEPTH too), many
     nodes, channels sharing one accessor, accessors declaring huge counts with or without
     data, JSON nested deep in extras; read within BOUND_S (an AssertionError otherwise)."""
-    from gltf_builder import GltfBuilder
+    from gltf_builder import chain_glb, glb_bytes
 
-    depth = int(rng.choice([2, 50, 3000, limits.MAX_DEPTH + 10]))
-    g = GltfBuilder()
-    g.doc["nodes"] = [{"name": f"n{k}", "children": [k + 1], "translation": [0, 0.01, 0]} for k in range(depth - 1)]
-    g.doc["nodes"].append({"name": "end"})
-    g.animation("a", [(0, "rotation", [0, 1], [[0, 0, 0, 1], [0, 0, 0.1, 0.995]], "LINEAR")])
+    g = chain_glb(int(rng.choice([2, 50, 3000, limits.MAX_DEPTH + 10])))
     animation = g.doc["animations"][0]
     if rng.random() < 0.3:  # many channels, one accessor
         animation["channels"] *= int(rng.integers(2, 2000))
@@ -451,21 +447,13 @@ def _gltf_structure(path: Path, rng) -> None:
     if rng.random() < 0.2:
         nesting = int(rng.choice([500, 5000, 50_000]))
         text = text.replace('"asset": {', '"asset": {"extras": ' + "[" * nesting + "]" * nesting + ", ", 1)
-    data = _glb_of_text(text, g.blob)
+    data = glb_bytes(text.encode(), g.blob)
     path.write_bytes(data)
     start = time.monotonic()
     try:
         load(path)
     finally:
         assert time.monotonic() - start < BOUND_S, f"a {len(data)}-byte glTF took over {BOUND_S} s"
-
-
-def _glb_of_text(text: str, blob: bytes) -> bytes:
-    body = text.encode()
-    body += b" " * (-len(body) % 4)
-    blob = bytes(blob) + b"\0" * (-len(blob) % 4)
-    chunks = struct.pack("<I", len(body)) + b"JSON" + body + struct.pack("<I", len(blob)) + b"BIN\0" + blob
-    return struct.pack("<4sII", b"glTF", 2, 12 + len(chunks)) + chunks
 
 
 def _fbx_take(rng) -> str:

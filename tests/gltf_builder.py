@@ -36,11 +36,25 @@ class GltfBuilder:
 
     def glb(self) -> bytes:
         self.doc.setdefault("buffers", [{}])[0]["byteLength"] = len(self.blob)
-        text = json.dumps(self.doc).encode()
-        text += b" " * (-len(text) % 4)
-        blob = bytes(self.blob) + b"\0" * (-len(self.blob) % 4)
-        body = struct.pack("<II", len(text), 0x4E4F534A) + text + struct.pack("<II", len(blob), 0x004E4942) + blob
-        return struct.pack("<4sII", b"glTF", 2, 12 + len(body)) + body
+        return glb_bytes(json.dumps(self.doc).encode(), self.blob)
+
+
+def glb_bytes(text: bytes, blob: bytes) -> bytes:
+    """A .glb of the JSON ``text`` (written as it is: it may nest deeper than json.dumps can)
+    and the binary chunk ``blob``, each padded to 4 bytes."""
+    text += b" " * (-len(text) % 4)
+    blob = bytes(blob) + b"\0" * (-len(blob) % 4)
+    body = struct.pack("<II", len(text), 0x4E4F534A) + text + struct.pack("<II", len(blob), 0x004E4942) + blob
+    return struct.pack("<4sII", b"glTF", 2, 12 + len(body)) + body
+
+
+def chain_glb(nodes: int) -> GltfBuilder:
+    """A glTF of ``nodes`` nodes, each the child of the one before, the first one turning."""
+    g = GltfBuilder()
+    g.doc["nodes"] = [{"name": f"n{k}", "children": [k + 1], "translation": [0, 0.01, 0]} for k in range(nodes - 1)]
+    g.doc["nodes"].append({"name": "end"})
+    g.animation("turn", [(0, "rotation", [0, 1], [[0, 0, 0, 1], [0, 0, 0.1, 0.995]], "LINEAR")])
+    return g
 
 
 def trs_matrix(t=(0, 0, 0), q=(0, 0, 0, 1), s=(1, 1, 1)) -> np.ndarray:

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from fbx_chain import chain_fbx
-from gltf_builder import GltfBuilder
+from gltf_builder import chain_glb
 from mocodec import limits, load, moc, sandbox, save
 from mocodec.cli import main
 from mocodec.codecs import get_codec
@@ -40,15 +40,6 @@ def bounded(path, seconds: float = 60.0) -> str:
         return sandbox.call_isolated(_outcome, str(path), what=str(path), memory_bytes=LIMIT_BYTES, timeout_s=seconds)
     except CorruptStreamError as e:  # the child ran out of time or memory
         pytest.fail(f"{path}: {e}")
-
-
-def chain_glb(nodes: int) -> GltfBuilder:
-    """A glTF of ``nodes`` nodes, each the child of the one before, the first one turning."""
-    g = GltfBuilder()
-    g.doc["nodes"] = [{"name": f"n{k}", "children": [k + 1], "translation": [0, 0.01, 0]} for k in range(nodes - 1)]
-    g.doc["nodes"].append({"name": "end"})
-    g.animation("turn", [(0, "rotation", [0, 1], [[0, 0, 0, 1], [0, 0, 0.1, 0.995]], "LINEAR")])
-    return g
 
 
 # ----- 2: node chains: linear in time and memory, depth checked before the work ------------------

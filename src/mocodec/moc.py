@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mocodec import limits
+from mocodec import limits, sandbox
 from mocodec.codecs import DEFAULT_CODEC, Codec, codec_from_untrusted, get_codec
 from mocodec.codecs.base import Embedded
 from mocodec.errors import CodecError, CorruptStreamError
@@ -92,11 +92,9 @@ def _encode_chunks(codec: Codec, parts: list[Motion], output: Skeleton | None, j
     jobs = min(jobs, len(parts))
     if jobs <= 1:
         return [codec.encode(part, output) for part in parts]
-    import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
-    method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
-    with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context(method)) as pool:
+    with ProcessPoolExecutor(jobs, mp_context=sandbox.process_context()) as pool:
         return list(pool.map(_encode_part, [(codec, part, output) for part in parts]))
 
 

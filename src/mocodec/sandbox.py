@@ -69,11 +69,16 @@ def _exit_reason(code: int | None) -> str:
         return f"signal {-code}"
 
 
+def process_context() -> Any:
+    """The multiprocessing context for children: fork where the platform has it (a child starts
+    at once, with this process's imports and compiled kernels), else spawn."""
+    return multiprocessing.get_context("fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn")
+
+
 def call_isolated(func, *args, what: str, memory_bytes: int = CHILD_MEMORY_BYTES, timeout_s: float = CHILD_TIMEOUT_S):
     """``func(*args)`` in a child process; its result, or CorruptStreamError naming ``what``
     and how the child failed (a CodecError it raised is raised as such)."""
-    method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
-    ctx: Any = multiprocessing.get_context(method)
+    ctx = process_context()
     receive, send = ctx.Pipe(duplex=False)
     proc = ctx.Process(target=_child, args=(send, func, args, memory_bytes), daemon=True)
     proc.start()

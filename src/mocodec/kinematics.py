@@ -193,6 +193,18 @@ def _run(skeleton: Skeleton, channels: np.ndarray, want_local: bool) -> tuple[np
     return pos, quat, local
 
 
+def position_offsets(skeleton: Skeleton) -> np.ndarray:
+    """``(channels,)``: each position channel's joint offset on its axis, 0 elsewhere (a BVH
+    position channel holds the offset and the motion together; kinwave codes a constant
+    translation about it)."""
+    plan = channel_plan(skeleton)
+    out = np.zeros(skeleton.num_channels)
+    for k in range(3):
+        has = plan.pos_index[:, k] >= 0
+        out[plan.pos_index[has, k]] = plan.offsets[has, k]
+    return out
+
+
 def local_quaternions(skeleton: Skeleton, channels: np.ndarray) -> np.ndarray:
     """Each joint's rotation relative to its parent, ``(frames, joints, 4)``: ``C M C^-1``."""
     return _run(skeleton, channels, True)[2]

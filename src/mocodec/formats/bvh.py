@@ -15,7 +15,7 @@ the hierarchy as written (depth first), whatever the order of the motion's joint
 A position channel holds the joint's position in its parent's frame, in place of its OFFSET
 (as MotionBuilder writes them, every joint's position channels equal to its offset, and as
 Blender's importer reads them); a :class:`~mocodec.motion.Motion` holds the change from the
-offset, so the reader subtracts the offset and the writer adds it back (:func:`_positions_from_offsets`).
+offset, so the reader subtracts the offset and the writer adds it back (:func:`mocodec.kinematics.position_offsets`).
 three.js's BVHLoader adds the offset to the channel instead, which doubles such a skeleton's
 bones; the two agree on a root at offset 0, as most files have.
 """
@@ -32,7 +32,7 @@ import numpy as np
 from mocodec import limits
 from mocodec.errors import FormatError
 from mocodec.formats.fileio import atomic_write, format_rows, parse_number, parse_number_block, read_text
-from mocodec.kinematics import channel_plan
+from mocodec.kinematics import position_offsets
 from mocodec.motion import Motion
 from mocodec.skeleton import CHANNEL_NAMES, Joint, Skeleton
 
@@ -251,7 +251,7 @@ def read_bvh(path: str | os.PathLike, units_per_metre: float | None = None) -> M
         values = np.zeros((frames, 0))
     if values.shape[0] != frames:
         raise FormatError(path, header["frames"][1], f"'Frames: {frames}' but {values.shape[0]} frame lines follow")
-    return Motion(skeleton, _snap_fps(frame_time), values - _positions_from_offsets(skeleton))
+    return Motion(skeleton, _snap_fps(frame_time), values - position_offsets(skeleton))
 
 
 _UNIT_CANDIDATES = (("metres", 1.0), ("inches", 1.0 / 0.0254), ("centimetres", 100.0), ("millimetres", 1000.0))
@@ -322,19 +322,8 @@ def bvh_text(motion: Motion, decimals: int | None = None) -> str:
     out.append(f"Frame Time: {1.0 / motion.fps:.10g}")
     offsets = sk.channel_offsets
     columns = np.concatenate([np.arange(offsets[i], offsets[i + 1]) for i in order]).astype(np.int64)
-    values = motion.channels + _positions_from_offsets(sk)
+    values = motion.channels + position_offsets(sk)
     return "\n".join(out) + "\n" + format_rows(values[:, columns], decimals)
-
-
-def _positions_from_offsets(skeleton: Skeleton) -> np.ndarray:
-    """``(channels,)``: each position channel's joint offset on its axis, 0 elsewhere: what a
-    BVH position channel holds beyond a Motion's (see the module docstring)."""
-    plan = channel_plan(skeleton)
-    shift = np.zeros(skeleton.num_channels)
-    for k in range(3):
-        has = plan.pos_index[:, k] >= 0
-        shift[plan.pos_index[has, k]] = skeleton.offsets[has, k]
-    return shift
 
 
 def _number(value: float, decimals: int) -> str:

@@ -33,7 +33,7 @@ from mocodec.codecs.shared import rotvec
 from mocodec.coding.entropy import coefcoder
 from mocodec.coding.transforms import seams, trendwave
 from mocodec.errors import CorruptStreamError
-from mocodec.kinematics import channel_plan, forward_kinematics
+from mocodec.kinematics import channel_plan, forward_kinematics, position_offsets
 from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
@@ -261,16 +261,11 @@ def turns_over_translations(skeleton: Skeleton) -> np.ndarray:
 @lru_cache(maxsize=64)
 def constant_coding(skeleton: Skeleton, fine: bool = False, fine_turns: bool = False) -> ConstantCoding:
     """The coding of ``skeleton``'s constant channels (shared: its arrays are read-only)."""
-    base = np.zeros(skeleton.num_channels)
+    base = position_offsets(skeleton)
     fraction = np.full(skeleton.num_channels, CONST_FRACTION)
     if fine_turns:
         fraction[turns_over_translations(skeleton)] = FINE_CONST_FRACTION
-    plan = channel_plan(skeleton)
-    for j in range(len(skeleton)):
-        for axis, c in enumerate(plan.pos_index[j]):
-            if c >= 0:
-                base[c] = plan.offsets[j, axis]
-                fraction[c] = FINE_CONST_FRACTION if fine else CONST_FRACTION
+    fraction[~skeleton.rotation_mask] = FINE_CONST_FRACTION if fine else CONST_FRACTION
     fraction.setflags(write=False)
     base.setflags(write=False)
     return ConstantCoding(fraction, base, fine, fine_turns)

@@ -1,4 +1,4 @@
-"""The relay's tick in one process: how long ``Relay._dispatch`` takes to serve every viewer of
+"""The relay's tick in one process: how long ``RelayCore.dispatch`` takes to serve every viewer of
 a room of layered avatars, each viewer with its own budget and camera (no sockets, so the figure
 is the relay's own work, free of the load generators that share the machine in relay_load.py).
 
@@ -13,36 +13,31 @@ time to take in a tick's packets.
 from __future__ import annotations
 
 import argparse
-import asyncio
 import struct
 import time
 
 import numpy as np
 
 from mocodec.stream.packets import pack_batch
-from mocodec.stream.relay import Relay, Room, Viewer
+from mocodec.stream.relay import RelayCore, Viewer
 from relay_load import place, restamp, templates
 
 SEED = 29
 WARM_UP = 50
 
 
-class _Transport:
-    def abort(self) -> None:
-        pass
-
-
-async def run(avatars: int, viewers: int, budget: float, ticks: int) -> tuple[np.ndarray, np.ndarray]:
+def run(avatars: int, viewers: int, budget: float, ticks: int) -> tuple[np.ndarray, np.ndarray]:
     header, data, clip_ticks, clip_frames = templates(("kinwave-live", 0.0, 3, 0.0), 0.5)
     by_tick: dict[int, list[tuple[int, bytes, int]]] = {}
     for idx, (k, d) in enumerate(data):
         by_tick.setdefault(k, []).append((idx, d, struct.unpack_from("<I", d, 22)[0]))
-    relay, room, owner = Relay("bench"), Room(), object()
-    relay._ingest(room, pack_batch([restamp(header, s, 0, 0, 0, *place(s)) for s in range(avatars)]), owner)
+    relay, owner = RelayCore(), object()
+    room = relay.room("bench")
     rng = np.random.default_rng(SEED)
     for _ in range(viewers):
         camera = (float(rng.uniform(0, 48)), 1.6, float(rng.uniform(0, 2 * avatars / 25)))
-        room.viewers.append(Viewer(None, _Transport(), budget=budget, camera=camera))
+        relay.join(room, Viewer(budget=budget, camera=camera))
+    relay.ingest(room, pack_batch([restamp(header, s, 0, 0, 0, *place(s)) for s in range(avatars)]), owner)
     phase = rng.integers(clip_ticks, size=avatars)
     dispatch, ingest = [], []
     for tick in range(ticks):
@@ -52,15 +47,14 @@ async def run(avatars: int, viewers: int, budget: float, ticks: int) -> tuple[np
             for idx, d, first in by_tick.get(k, ()):
                 batch.append(restamp(d, s, loop * len(data) + idx + 1, 0, loop * clip_frames + first, *place(s)))
         t0 = time.perf_counter()
-        relay._ingest(room, pack_batch(batch), owner)
+        relay.ingest(room, pack_batch(batch), owner)
         t1 = time.perf_counter()
-        relay._dispatch(room)
+        relay.dispatch(room)
         t2 = time.perf_counter()
         ingest.append(t1 - t0)
         dispatch.append(t2 - t1)
         for viewer in room.viewers:
-            while not viewer.queue.empty():
-                viewer.queue.get_nowait()
+            viewer.outbox.clear()
     return np.array(dispatch[WARM_UP:]) * 1e3, np.array(ingest[WARM_UP:]) * 1e3
 
 
@@ -71,7 +65,7 @@ def main() -> None:
     parser.add_argument("--budget", type=float, default=3e6, help="bit/s per viewer (0: no budgets)")
     parser.add_argument("--ticks", type=int, default=200)
     args = parser.parse_args()
-    dispatch, ingest = asyncio.run(run(args.avatars, args.viewers, args.budget, args.ticks))
+    dispatch, ingest = run(args.avatars, args.viewers, args.budget, args.ticks)
     print(
         f"relay tick, {args.avatars} layered avatars, {args.viewers} viewers at {args.budget:g} bit/s: "
         f"dispatch median {np.median(dispatch):.2f} ms, p90 {np.percentile(dispatch, 90):.2f} ms, "

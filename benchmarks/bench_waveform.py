@@ -106,7 +106,7 @@ def main() -> None:
         per_dof = t_rate / APPENDIX_III_FPS / APPENDIX_III_DOFS if t_rate else 0.0
         thesis = f"{t_rate:.0f} | {per_dof:.2f} | {t_psnr:.1f}" if t_rate else "not printed | | "
         print(
-            f"| {cid} | {setting} | {1000 * codec.delay_frames / 30:.0f} | {med[0]:.0f} | {med[1]:.2f} | "
+            f"| {cid} | {setting} | {1000 * codec.delay_frames() / 30:.0f} | {med[0]:.0f} | {med[1]:.2f} | "
             f"{med[2]:.1f} | {med[3]:.1f} | {med[4]:.2f} | {thesis} |",
             flush=True,
         )

@@ -36,8 +36,7 @@ from mocodec.formats.asf import read_asf  # noqa: E402
 from mocodec.formats.header_dict import DICTIONARY  # noqa: E402
 from mocodec.stream.live import LiveDecoder, stream_clip  # noqa: E402
 from mocodec.stream.packets import HEADER, Packet, Reader, StreamInfo, pack_batch, parse, split_batch  # noqa: E402
-from mocodec.stream.relay import Bucket, Closing, Limits, Relay, Room, Viewer, caps_of  # noqa: E402
-from mocodec.stream.retention import RoomHistory  # noqa: E402
+from mocodec.stream.relay import Bucket, Closing, Limits, RelayCore, Room, Viewer  # noqa: E402
 
 DATA = HERE / "data"
 #: Codecs whose decoders need a model file the fuzzer has not got; their payloads still go
@@ -272,18 +271,6 @@ def fuzz_live(run: Run) -> None:
         run.check("LiveDecoder", play)
 
 
-class _Transport:
-    def abort(self) -> None:
-        pass
-
-
-class _Socket:
-    closed = False
-
-    async def send_bytes(self, data) -> None:
-        pass
-
-
 def _big_stream(rng, packets: int) -> list[Packet]:
     """A stream of 60 KB packets that never restarts (a header, then data)."""
     header = stream_clip(_walk()[:10], get_codec("dpcm"))[0]
@@ -291,25 +278,25 @@ def _big_stream(rng, packets: int) -> list[Packet]:
     return out + [Packet(5, k, 0, "dpcm", 4 * k, 4, rng.bytes(60_000)) for k in range(1, packets)]
 
 
-def _late_viewers_and_repairs(relay: Relay, room: Room, rng) -> None:
+def _late_viewers_and_repairs(relay: RelayCore, room: Room, rng) -> None:
     """A late viewer joins, another asks for random packets again; what the room keeps and
     what any viewer is sent in one tick stay within the caps (an AssertionError otherwise)."""
-    viewer = Viewer(_Socket(), _Transport(), budget=float(rng.choice([0, 4000])))
-    relay._join(viewer, room)
+    viewer = Viewer(budget=float(rng.choice([0, 4000])))
+    relay.join(room, viewer)
     pairs = [
         [int(rng.choice(list(room.streams) or [0])), int(rng.integers(0, 64))] for _ in range(int(rng.integers(1, 40)))
     ]
     try:
-        relay._resend(viewer, room, pairs, Bucket(1e9, 1.0))
+        relay.resend(room, viewer, pairs, Bucket(1e9, 1.0))
     except Closing:
         pass
-    relay._dispatch(room)
+    relay.dispatch(room)
     assert room.history.bytes <= relay.limits.max_room_kept_bytes, "the room keeps more than its cap"
     for v in room.viewers:
-        while not v.queue.empty():
-            sent = sum(len(b) for b in v.queue.get_nowait())
+        while v.outbox:
+            sent = sum(len(b) for b in v.outbox.popleft())
             assert sent <= 2 * relay.limits.max_message_bytes + 2 * relay.limits.max_stream_kept_bytes, sent
-    room.viewers.remove(viewer)
+    relay.leave(room, viewer)
 
 
 def fuzz_relay(run: Run) -> None:
@@ -317,10 +304,11 @@ def fuzz_relay(run: Run) -> None:
     viewer that has a budget (so packets are cut); late viewers joining and repair requests,
     with streams of large packets that never restart among them."""
     streams = _packets() + [_big_stream(run.rng, 40)]
-    relay = Relay("fuzz", Limits(max_stream_kept_bytes=1 << 20, max_room_kept_bytes=2 << 20))
+    relay = RelayCore(Limits(max_stream_kept_bytes=1 << 20, max_room_kept_bytes=2 << 20))
     while run.more():
-        room = Room(RoomHistory(caps_of(relay.limits)))
-        room.viewers.append(Viewer(_Socket(), _Transport(), budget=float(run.rng.choice([0, 2000, 9000]))))
+        relay.rooms.pop("fuzz", None)
+        room = relay.room("fuzz")
+        relay.join(room, Viewer(budget=float(run.rng.choice([0, 2000, 9000]))))
         packets = streams[int(run.rng.integers(len(streams)))]
         owner = object()
         for k in range(0, len(packets), 3):
@@ -333,12 +321,11 @@ def fuzz_relay(run: Run) -> None:
 
             def ingest():
                 try:
-                    relay._ingest(room, data, owner)
+                    relay.ingest(room, data, owner)
                 except Closing:
                     pass
-                relay._dispatch(room)
-                while not room.viewers[0].queue.empty():
-                    room.viewers[0].queue.get_nowait()
+                relay.dispatch(room)
+                room.viewers[0].outbox.clear()
                 if run.rng.random() < 0.3:
                     _late_viewers_and_repairs(relay, room, run.rng)
 

@@ -15,7 +15,7 @@ PACKAGE = Path(__file__).parent.parent / "src" / "mocodec"
 # (a top-level module or package of mocodec) or from areas of lower layers
 LAYERS = [
     {"version", "errors", "limits", "jsonable", "data"},
-    {"extras", "sandbox", "rotations", "bodyparts"},
+    {"extras", "sandbox", "rotations", "bodyparts", "crowd"},
     {"skeleton"},
     {"kinematics"},
     {"motion", "perception"},
@@ -110,3 +110,25 @@ def test_no_private_names_across_modules(name, path, tree):
             and not node.attr.startswith("__")
         ):
             pytest.fail(f"{name}:{node.lineno} uses the private {node.value.id}.{node.attr}")
+
+
+NETWORK = {"asyncio", "aiohttp", "nats", "socket"}
+
+
+@pytest.mark.parametrize("name,path,tree", MODULES, ids=[m[0] for m in MODULES])
+def test_the_relay_core_has_no_network_code(name, path, tree):
+    """Only the relay's server speaks to the network: its core, state, cutting and retention
+    are plain code that tests, the fuzzer and the tick benchmark drive directly."""
+    if not name.startswith("mocodec.stream.relay") or name == "mocodec.stream.relay.server":
+        return
+    for node in ast.walk(tree):
+        names = (
+            [alias.name for alias in node.names]
+            if isinstance(node, ast.Import)
+            else [node.module or ""]
+            if isinstance(node, ast.ImportFrom)
+            else []
+        )
+        for imported in names:
+            assert imported.split(".")[0] not in NETWORK, f"{name} imports {imported}"
+            assert imported != "mocodec.stream.relay.server", f"{name} imports the server"

@@ -126,7 +126,7 @@ def test_streaming_sends_one_payload_per_window_within_the_bound(walk_amc):
     out = np.vstack([dec.push(p) for p in packets])
     assert out.shape == walk_amc.channels.shape
     assert _errors(walk_amc, walk_amc.with_channels(out))["joint"] <= 0.5
-    assert codec.delay_frames == 64
+    assert codec.delay_frames() == 64
 
 
 def test_frame_range_decoding(walk_bvh):

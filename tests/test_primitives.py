@@ -176,7 +176,7 @@ def test_streaming_decodes_like_the_whole_clip_within_the_delay(walk_bvh, smooth
     for k in range(0, walk_bvh.num_frames, 7):
         out += [dec.push(p) for p in enc.push(walk_bvh.channels[k : k + 7])]
         pushed = min(k + 7, walk_bvh.num_frames)
-        assert pushed - sum(len(o) for o in out) <= codec.delay_frames == 16 + smooth
+        assert pushed - sum(len(o) for o in out) <= codec.delay_frames() == 16 + smooth
     last = enc.flush()
     out += [dec.push(p) for p in last]
     assert np.abs(np.concatenate(out) - whole).max() < 1e-9

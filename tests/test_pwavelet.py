@@ -55,7 +55,7 @@ def test_slices_and_short_clips(walk_bvh):
         codec = get_codec("pwavelet", window=window, alpha=1.0, qp=16)
         decoded = codec.decode(codec.encode(clip), clip.skeleton, clip.num_frames, clip.fps)
         assert compare(clip, decoded).joints.max < 0.5
-    assert get_codec("pwavelet", window=128).delay_frames == 128
+    assert get_codec("pwavelet", window=128).delay_frames() == 128
 
 
 def test_twenty_five_to_one_on_a_short_walk(walk_amc):

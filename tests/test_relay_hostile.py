@@ -18,12 +18,14 @@ import pytest
 from mocodec.codecs import get_codec
 from mocodec.codecs.perceptual.spiht import _PACKET
 from mocodec.coding.entropy.parts import join_parts, split_parts
+from mocodec.crowd import on_ladder
 from mocodec.stream import tokens
 from mocodec.stream.client import Watcher, connect, publish_clip, record
 from mocodec.stream.live import receive_clip, stream_clip
 from mocodec.stream.packets import CUTS, END, HEADER, Packet, pack_batch, split_batch, with_cuts
-from mocodec.stream.relay import BAD_MESSAGE, BAD_TOKEN, Limits, Relay, on_ladder
-from test_relay import SECRET, serving, token
+from mocodec.stream.relay import BAD_MESSAGE, BAD_TOKEN, Limits
+from mocodec.stream.relay.server import Relay
+from test_relay import SECRET, serving, token, viewers
 
 pytestmark = pytest.mark.network  # a relay (and NATS) on loopback sockets
 
@@ -73,14 +75,16 @@ def test_a_publisher_that_waits_before_its_first_packet_keeps_its_room(walk_bvh)
     packets = stream_clip(walk_bvh[:240], codec)
 
     async def go():
-        async with serving() as url:
+        relay = Relay(SECRET)
+        async with serving(relay) as url:
             async with connect(url, "lobby", token(), "publish") as ws:
-                await asyncio.sleep(0.3)
+                connected = relay.core.ticks
+                await relay.until(lambda: relay.core.ticks >= connected + 18)  # 0.3 s of ticks
                 viewer = asyncio.create_task(record(url, "lobby", token(), timeout_s=20))
-                await asyncio.sleep(0.2)
+                await relay.until(viewers(relay))
                 for k in range(0, len(packets), 4):
                     await ws.send_bytes(pack_batch([p.to_bytes() for p in packets[k : k + 4]]))
-                    await asyncio.sleep(1 / 30)
+                    await asyncio.sleep(1 / 30)  # a sender's clock: 4 frames a tick
                 return await viewer
 
     got = asyncio.run(go())
@@ -126,11 +130,12 @@ def test_slow_openers_are_cut_and_cannot_exhaust_the_relay(walk_bvh):
         async with serving(relay) as url:
             port = int(url.rsplit(":", 1)[1])
             idle = [socket.create_connection(("127.0.0.1", port)) for _ in range(8)]
-            await asyncio.sleep(0.2)
-            held = relay.guard.per_host.get("127.0.0.1", 0)
-            refused_early = relay.guard.refused
-            await asyncio.sleep(0.8)  # past the request timeout: all cut
-            after = relay.guard.per_host.get("127.0.0.1", 0)
+            guard = relay.guard
+            await relay.until(lambda: guard.per_host.get("127.0.0.1", 0) + guard.refused == 8)
+            held = guard.per_host.get("127.0.0.1", 0)
+            refused_early = guard.refused
+            await relay.until(lambda: not guard.per_host)  # past the request timeout: all cut
+            after = guard.per_host.get("127.0.0.1", 0)
             for s in idle:
                 s.close()
             got = await record(url, "lobby", token(), timeout_s=0.5)  # a real viewer still gets in
@@ -166,12 +171,15 @@ def test_a_hostile_publisher_does_not_disturb_a_viewer(walk_bvh, caplog):
         relay = Relay(SECRET)
         async with serving(relay) as url:
             viewer = asyncio.create_task(record(url, "lobby", token(), timeout_s=30, stream=0, budget=3000))
-            await asyncio.sleep(0.2)
+            await relay.until(viewers(relay))
             async with connect(url, "lobby", token(), "publish") as ws:  # a stream that ends at once (it
+                sent = relay.core.counters["packets_in"] + len(rogue_stream)
                 await ws.send_bytes(pack_batch(rogue_stream))  # would take a share of the budget)
-                await asyncio.sleep(0.3)
+                await relay.until(lambda: relay.core.counters["packets_in"] >= sent)
+                dispatched = relay.core.ticks
+                await relay.until(lambda: relay.core.ticks > dispatched + 1)  # cut for the viewer
             await asyncio.gather(attack(url), publish_clip(url, "lobby", token(), walk_bvh[:360], codec, speed=2.0))
-            return await viewer, relay.counters
+            return await viewer, relay.core.counters
 
     with caplog.at_level(logging.WARNING, logger="mocodec.relay"):
         got, counters = asyncio.run(go())
@@ -255,8 +263,8 @@ def test_late_viewers_of_big_streams_without_restarts_stall_nothing(walk_bvh):
                 payload = rng.bytes(size)
                 batch = [Packet(s, k, 0, "dpcm", 4 * k, 4, payload).to_bytes() for s in range(streams)]
                 await ws.send_bytes(pack_batch(batch))
-                kept.append(relay.rooms["big"].history.bytes)
-                await asyncio.sleep(1 / per_s)
+                kept.append(relay.core.rooms["big"].history.bytes)
+                await asyncio.sleep(1 / per_s)  # a sender's clock
 
     async def late(url, seconds):
         largest, notes = 0, []
@@ -278,24 +286,35 @@ def test_late_viewers_of_big_streams_without_restarts_stall_nothing(walk_bvh):
         relay = Relay(SECRET, limits)
         async with serving(relay) as url:
             watcher = asyncio.create_task(calm(url, 7.0))
-            await asyncio.sleep(0.2)
+            await relay.until(viewers(relay, room="calm"))
             t0 = time.monotonic()
             steady = asyncio.create_task(
                 publish_clip(url, "calm", token("calm"), walk_bvh, get_codec("dpcm"), speed=0.5)
             )
             attack = asyncio.create_task(hostile(url, relay, 5.5))
-            await asyncio.sleep(3.0)
-            joined = time.monotonic()
-            viewers = await asyncio.gather(*(late(url, 2.0) for _ in range(10)))
-            await asyncio.gather(attack, steady)
-            return t0, joined, await watcher, viewers, relay
+            started = relay.core.ticks
 
-    t0, joined, arrivals, viewers, relay = asyncio.run(go())
+            def past_what_is_kept():  # 3 s of the attack, and no restart point of it kept
+                big = relay.core.rooms.get("big")
+                states = [] if big is None else list(big.streams.values())
+                return (
+                    relay.core.ticks >= started + 180
+                    and len(states) == streams
+                    and all(s.history.partial for s in states)
+                )
+
+            await relay.until(past_what_is_kept, timeout_s=20)
+            joined = time.monotonic()
+            latecomers = await asyncio.gather(*(late(url, 2.0) for _ in range(10)))
+            await asyncio.gather(attack, steady)
+            return t0, joined, await watcher, latecomers, relay
+
+    t0, joined, arrivals, latecomers, relay = asyncio.run(go())
     arrivals = np.array(arrivals)
     before = ((arrivals >= t0 + 1.0) & (arrivals < joined)).sum() / (joined - t0 - 1.0)
     during = ((arrivals >= joined) & (arrivals < joined + 2.0)).sum() / 2.0
     assert before > 10 and during >= 0.9 * before
-    assert max(kept) <= limits.max_room_kept_bytes and relay.counters["catchups_partial"] == 10 * streams
-    for largest, notes in viewers:
+    assert max(kept) <= limits.max_room_kept_bytes and relay.core.counters["catchups_partial"] == 10 * streams
+    for largest, notes in latecomers:
         assert largest <= 3 * streams * (size + 100)  # a few ticks' live packets at most
         assert len(notes) == streams and all("restart point" in n for n in notes)

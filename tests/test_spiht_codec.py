@@ -79,7 +79,7 @@ def test_anchors_pin_the_root(walk_amc):
 def test_knob_checks():
     with pytest.raises(CodecError, match="power of two"):
         get_codec("spiht", window=100)
-    assert get_codec("spiht", window=64).delay_frames == 64 + 1 + 11
+    assert get_codec("spiht", window=64).delay_frames() == 64 + 1 + 11
     assert get_codec("spiht").n_levels == 6
 
 
@@ -124,7 +124,7 @@ def test_streaming_decodes_exactly_like_the_whole_clip(walk_amc, closed_loop):
         for packet in enc.push(walk_amc.channels[k : k + 37]):
             out.append(dec.push(packet))
         pushed = min(k + 37, walk_amc.num_frames)
-        assert pushed - sum(len(o) for o in out) <= codec.delay_frames
+        assert pushed - sum(len(o) for o in out) <= codec.delay_frames()
     out += [dec.push(p) for p in enc.flush()]
     assert np.abs(np.concatenate(out) - whole).max() < 1e-9
     fresh = codec.decoder(walk_amc.skeleton, walk_amc.fps)
@@ -170,7 +170,7 @@ def test_seam_smoothing_can_be_switched_off(walk_amc):
         off.decode(payload, walk_amc.skeleton, walk_amc.num_frames, walk_amc.fps).channels,
     )
     assert not np.allclose(a, b) and np.allclose(a[:100], b[:100])
-    assert off.delay_frames == 129
+    assert off.delay_frames() == 129
 
 
 def test_stream_decoder_survives_garbage(walk_amc):

@@ -275,7 +275,7 @@ def test_streams_frame_by_frame_within_the_delay(cid, walk_amc, codebooks):
         for packet in enc.push(clip.channels[k : k + 40]):
             out.append(dec.push(packet))
         pushed = min(k + 40, clip.num_frames)
-        assert pushed - sum(len(o) for o in out) <= codec.delay_frames
+        assert pushed - sum(len(o) for o in out) <= codec.delay_frames()
     out += [dec.push(p) for p in enc.flush()]
     streamed = Motion(clip.skeleton, clip.fps, np.concatenate(out))
     assert streamed.num_frames == clip.num_frames

@@ -20,7 +20,6 @@ import numpy as np
 
 from mocodec import limits, sandbox
 from mocodec.codecs import DEFAULT_CODEC, Codec, codec_from_untrusted, get_codec
-from mocodec.codecs.base import Embedded
 from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.formats import container
 from mocodec.formats.fileio import atomic_write_bytes
@@ -233,7 +232,7 @@ def truncate(
     c = container.open_container(io.BytesIO(data), len(data), name, skeleton)
     embedded = "skeleton_id" not in c.header
     codec = codec_from_untrusted(c.header["codec"], f"{name}: header")
-    if not isinstance(codec, Embedded):
+    if not codec.embedded:
         raise CodecError(f"{name}: codec {codec.id} is not embedded; encode again with a smaller target")
     cutters = [codec.truncator(c.read_chunk(k), c.skeleton, e.count, c.fps) for k, e in enumerate(c.index)]
     duration = c.frames / c.fps

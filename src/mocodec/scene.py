@@ -20,6 +20,7 @@ import numpy as np
 from mocodec import moc
 from mocodec.codecs.perceptual.spiht import SpihtCodec
 from mocodec.coding.entropy.parts import join_parts, split_parts
+from mocodec.crowd import bandwidth_scores, split_budget
 from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.formats import container
 from mocodec.motion import Motion
@@ -28,31 +29,6 @@ MAGIC = b"MOCS"
 VERSION = 1
 _HEAD = struct.Struct("<4sHI")
 _U32 = struct.Struct("<I")
-
-
-def bandwidth_scores(distances: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
-    """S_C = d_m / d_C (6.4) times the weights, for ``distances`` of shape (characters,) or
-    (characters, segments); d_m is the smallest distance (per segment). NaN marks a character
-    absent from a segment and scores 0."""
-    d = np.asarray(distances, dtype=np.float64)
-    if np.any(d[~np.isnan(d)] <= 0):
-        raise CodecError("camera distances must be positive")
-    nearest = np.nanmin(d, axis=0)
-    scores = np.where(np.isnan(d), 0.0, nearest / np.where(np.isnan(d), 1.0, d))
-    if weights is not None:
-        w = np.asarray(weights, dtype=np.float64)
-        scores = scores * (w[:, None] if scores.ndim == 2 else w)
-    return scores
-
-
-def split_budget(total, scores: np.ndarray) -> np.ndarray:
-    """B_k = floor(S_k B / sum S) (6.5). With ``scores`` of shape (characters, columns) and a
-    ``total`` per column, each column on its own (a column whose scores are all 0 gets 0)."""
-    scores = np.asarray(scores, dtype=np.float64)
-    s = scores.sum(axis=0)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        shares = np.floor(scores * np.asarray(total, dtype=np.float64) / s)
-    return np.where(s > 0, shares, 0.0).astype(np.int64)
 
 
 def allocate(motions: list[Motion], bits_per_second: float, distances, weights=None, window: int = 128) -> np.ndarray:

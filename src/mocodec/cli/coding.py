@@ -176,7 +176,7 @@ def cmd_codecs(args) -> int:
         knobs = " ".join(k.describe() for k in cls.knobs) or "-"
         quality = f"; quality knob {cls.quality.name}" if cls.quality else ""
         print(f"{cid:<12}{cls.description}")
-        delay = "variable (per frame: codec.delays(motion))" if cls.variable_delay else f"{cls().delay_frames} frames"
+        delay = "variable (per frame: codec.delays(motion))" if cls.variable_delay else f"{cls().delay_frames()} frames"
         print(f"{'':<12}knobs: {knobs}{quality}; delay {delay}{'; ' + flags if flags else ''}")
     return 0
 

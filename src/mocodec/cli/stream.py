@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import os
+import sys
 from pathlib import Path
 
 from mocodec.extras import require
@@ -17,7 +18,8 @@ from mocodec.cli.options import add_codec_options, add_input_options, load_input
 from mocodec.errors import MocodecError  # noqa: E402
 from mocodec.formats import save  # noqa: E402
 from mocodec.stream import client, tokens  # noqa: E402
-from mocodec.stream.relay import TICK_HZ, Limits, run  # noqa: E402
+from mocodec.stream.relay import TICK_HZ, Limits  # noqa: E402
+from mocodec.stream.relay.server import run  # noqa: E402
 
 PUBLISH_CODEC = "kinwave-live"  # guaranteed error, 50 ms of coding delay, decodes in the browser
 
@@ -105,8 +107,14 @@ def cmd_subscribe(args) -> int:
     if args.frames is not None and args.frames < 1:
         raise MocodecError(f"--frames must be at least 1, got {args.frames}")
     camera = _camera(args.camera)
+
+    def joined() -> None:
+        print(f"watching room {args.room!r} at {args.url}", file=sys.stderr, flush=True)
+
     motions = asyncio.run(
-        client.record(args.url, args.room, args.token, args.frames, args.stream, args.budget, camera, args.timeout)
+        client.record(
+            args.url, args.room, args.token, args.frames, args.stream, args.budget, camera, args.timeout, joined=joined
+        )
     )
     if not motions:
         raise MocodecError(

@@ -9,10 +9,11 @@ from mocodec.codecs.registry import (
     codec_from_untrusted,
     codec_ids,
     get_codec,
+    packet_codecs,
     register,
 )
 
-_BASE = ("Codec", "Knob", "QualityKnob", "StreamDecoder", "StreamEncoder")
+_BASE = ("Codec", "Coded", "Knob", "QualityKnob", "StreamDecoder", "StreamEncoder")
 
 
 def __getattr__(name: str):
@@ -32,5 +33,6 @@ __all__ = [
     "codec_from_untrusted",
     "codec_ids",
     "get_codec",
+    "packet_codecs",
     "register",
 ]

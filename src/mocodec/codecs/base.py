@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, ClassVar, Protocol, runtime_checkable
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -69,14 +69,50 @@ class QualityKnob:
     log_scale: bool = False
 
 
-class StreamEncoder:
-    """Frames in, packets out (for codecs the theses call real-time)."""
+@dataclass(frozen=True)
+class Coded:
+    """One stream packet as its encoder made it, with what a sender tells a relay of it."""
 
-    def push(self, frames: np.ndarray) -> list[bytes]:
+    payload: bytes
+    frames: int  # the frames a receiver's decoder gives out for it (what it completes)
+    # where a relay may cut it: an embedded codec's channel streams' lengths, or a layered
+    # codec's layer ends but the top one (empty for others)
+    cuts: tuple[int, ...] = ()
+    restart: bool = False  # the codec stream's base restarts in it (a receiver may join here)
+
+
+class HeldFrames:
+    """The frames out per packet of a decoder that holds back its newest ``hold`` frames until
+    the next packet (a seam or block edge it smooths) and gives out everything with the last:
+    what a stream encoder says of each packet it makes (:attr:`Coded.frames`)."""
+
+    def __init__(self, hold: int):
+        self.hold, self.held = hold, 0
+
+    def out(self, frames: int, last: bool) -> int:
+        total = self.held + frames
+        self.held = 0 if last else min(self.hold, total)
+        return total - self.held
+
+
+class StreamEncoder:
+    """Frames in, packets out (for codecs the theses call real-time). A codec's encoder
+    implements :meth:`code` and :meth:`finish`; :meth:`push` and :meth:`flush` give the
+    payloads alone."""
+
+    def code(self, frames: np.ndarray) -> list[Coded]:
+        """The packets ``frames`` complete, each with what it decodes to."""
         raise NotImplementedError
 
-    def flush(self) -> list[bytes]:
+    def finish(self) -> list[Coded]:
+        """The packets of whatever is left: the codec stream ends."""
         return []
+
+    def push(self, frames: np.ndarray) -> list[bytes]:
+        return [c.payload for c in self.code(frames)]
+
+    def flush(self) -> list[bytes]:
+        return [c.payload for c in self.finish()]
 
     def prime(self, frames: np.ndarray) -> None:
         """Frames from before the stream starts, which are not coded: a coder that picks its
@@ -88,50 +124,6 @@ class StreamEncoder:
         keyframe: take over what the sender learned that the receiver does not need (an
         encoder's rate or scale settings), never what the decoder would have to know. Call
         before the first push."""
-
-
-@runtime_checkable
-class Embedded(Protocol):
-    """A codec with an embedded code (``spiht``): its bodies and stream packets cut to a lower
-    rate by dropping bytes, never decoding, so a file is truncated (:func:`mocodec.moc.truncate`)
-    and a relay serves each viewer the rate its budget allows."""
-
-    def truncator(
-        self, body: bytes, skeleton: Skeleton, frames: int, fps: float
-    ) -> Callable[[float], tuple[Codec, bytes]]:
-        """bits_per_second -> (the codec of that rate, the body cut to it)."""
-        ...
-
-    def packet_cuts(self, packet: bytes, skeleton: Skeleton) -> np.ndarray:
-        """Where each channel's stream of a stream packet ends (the sender works it out once)."""
-        ...
-
-    def packet_cutter(
-        self, packet: bytes, skeleton: Skeleton, cuts: np.ndarray, fps: float
-    ) -> Callable[[float], bytes]:
-        """bits_per_second -> the packet cut to that rate (parsed once, cut for many viewers)."""
-        ...
-
-
-@runtime_checkable
-class Layered(Protocol):
-    """A codec whose stream packets carry layers, base first, each with an error bound that
-    holds on its own with the layers below it (``kinwave-live``): a relay serves a viewer the
-    lowest layers by cutting a packet after one, never decoding. Its stream decoder's
-    ``push(packet, layers)`` takes the number of layers a packet carries (None: all), and after
-    a whole packet its ``layer_ends`` say where each layer ends (the sender sends them to the
-    relay as the packet's cut table). A layer dropped from one packet stays useless to the
-    receiver until it restarts (a keyframe, or its own restart: :meth:`layer_starts`)."""
-
-    @property
-    def layer_bounds(self) -> list[float]:
-        """Each layer's bound in cm, base first (one entry: the stream has no layers)."""
-        ...
-
-    def layer_starts(self, packet: bytes) -> list[bool]:
-        """For each layer a stream packet carries, whether the layer restarts in it (a receiver
-        that did not have the layer may take it from this packet on)."""
-        ...
 
 
 def checked_frames(codec_id: str, skeleton: Skeleton, frames: np.ndarray) -> np.ndarray:
@@ -164,6 +156,11 @@ class StreamDecoder:
     def push(self, packet: bytes) -> np.ndarray:
         raise NotImplementedError
 
+    def push_layers(self, packet: bytes, layers: int) -> np.ndarray:
+        """The frames of a layered stream's ``packet`` that carries only its ``layers`` lowest
+        layers (a relay cut the others off); CodecError for a codec without layers."""
+        raise CodecError("a packet cut by layers, of a stream without layers")
+
     @property
     def in_step(self) -> bool:
         """Whether the next packet can decode (after :meth:`lost`, not until the codec stream
@@ -178,20 +175,6 @@ class StreamDecoder:
         return False
 
 
-@runtime_checkable
-class LayeredDecoder(Protocol):
-    """The stream decoder of a :class:`Layered` codec."""
-
-    def push(self, packet: bytes, layers: int | None = None) -> np.ndarray:
-        """The frames of ``packet``, which carries its stream's ``layers`` lowest layers (None: all)."""
-        ...
-
-    @property
-    def layer_ends(self) -> list[int]:
-        """Where each layer the last packet pushed decoded ends in it (a relay's cut points)."""
-        ...
-
-
 class Codec:
     """Base of every codec. Construct with knobs: ``get_codec("raw")``, ``Codec(**knobs)``."""
 
@@ -200,14 +183,23 @@ class Codec:
     knobs: ClassVar[tuple[Knob, ...]] = ()
     quality: ClassVar[QualityKnob | None] = None
     lossless: ClassVar[bool] = False
-    streaming: ClassVar[bool] = False
-    delay_frames: ClassVar[int] = 0
+    # the codec's number in stream packets (part of the wire format: a new codec takes the next
+    # free one, docs/streaming.md); None: it does not stream live
+    packet_number: ClassVar[int | None] = None
+    streaming: ClassVar[bool] = False  # it has a packet number (set from it: never by hand)
+    # bodies and stream packets cut to a lower rate by dropping bytes, never decoding
+    # (truncator, packet_cuts, packet_cutter): a file is truncated, a relay cuts each viewer's rate
+    embedded: ClassVar[bool] = False
     variable_delay: ClassVar[bool] = False  # the delay depends on the motion (000 ch. 8)
     baseline: ClassVar[bool] = False  # a generic float compressor, for comparison
     native_decoder: ClassVar[bool] = False  # hands the body to a C library: untrusted bodies decode in a child
     # the revision of the codec's body and packet format; a config above 1 says it, and a reader
     # refuses another (docs/formats.md)
     revision: ClassVar[int] = 1
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        cls.streaming = cls.packet_number is not None
 
     def __init__(self, **knobs):
         specs = {k.name: k for k in self.knobs}
@@ -219,6 +211,55 @@ class Codec:
 
     def __repr__(self) -> str:
         return f"{self.id}({', '.join(f'{k}={v!r}' for k, v in self.config.items())})"
+
+    def __eq__(self, other: object) -> bool:
+        """Codecs are equal when their configs are (the same id, revision and knobs)."""
+        return isinstance(other, Codec) and self.get_config() == other.get_config()
+
+    def __hash__(self) -> int:
+        return hash((self.id, tuple(sorted(self.config.items()))))
+
+    # ----- what it can do ---------------------------------------------------------------
+    def delay_frames(self) -> int:
+        """Frames between one going into the stream encoder and coming out of the decoder."""
+        return 0
+
+    @property
+    def layers(self) -> int:
+        """How many layers its stream packets carry, base first (1: no layers). A relay serves a
+        viewer the lowest layers by cutting a packet after one (:attr:`Coded.cuts`); a
+        receiver decodes them with :meth:`StreamDecoder.push_layers`."""
+        return 1
+
+    def layer_starts(self, payload: bytes) -> list[bool]:
+        """For each layer a stream packet carries, whether the layer restarts in it (a receiver
+        that did not have the layer may take it from this packet on); empty for a codec whose
+        streams restart only at keyframes."""
+        return []
+
+    def segment_frames(self) -> int:
+        """Frames a live stream's refresh is rounded up to: the codec's segment or block, so a
+        keyframe does not cut one short (1: any frame)."""
+        return 1
+
+    def truncator(
+        self, body: bytes, skeleton: Skeleton, frames: int, fps: float
+    ) -> Callable[[float], tuple[Codec, bytes]]:
+        """An embedded codec's body cut: bits_per_second -> (the codec of that rate, the body cut
+        to it)."""
+        raise CodecError(f"codec {self.id} is not embedded: its files cannot be truncated")
+
+    def packet_cuts(self, packet: bytes, skeleton: Skeleton) -> np.ndarray:
+        """An embedded codec's stream packet: where each channel's stream ends (the sender works
+        it out once)."""
+        raise CodecError(f"codec {self.id} is not embedded")
+
+    def packet_cutter(
+        self, packet: bytes, skeleton: Skeleton, cuts: np.ndarray, fps: float
+    ) -> Callable[[float], bytes]:
+        """An embedded codec's stream packet cut: bits_per_second -> the packet cut to that rate
+        (parsed once, cut for many viewers)."""
+        raise CodecError(f"codec {self.id} is not embedded")
 
     # ----- configuration ----------------------------------------------------------------
     def get_config(self) -> dict:

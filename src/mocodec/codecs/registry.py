@@ -7,6 +7,7 @@ any other codec class.
 
 from __future__ import annotations
 
+import functools
 import importlib
 from typing import TYPE_CHECKING
 
@@ -35,6 +36,7 @@ def register(cls: type[Codec]) -> type[Codec]:
     if not cls.id or cls.id in _CODECS:
         raise ValueError(f"codec id {cls.id!r} is empty or taken")
     _CODECS[cls.id] = cls
+    packet_codecs.cache_clear()
     return cls
 
 
@@ -45,6 +47,21 @@ def codec_class(codec_id: str) -> type[Codec]:
         return _CODECS[codec_id]
     except KeyError:
         raise CodecError(f"unknown codec {codec_id!r} (available: {', '.join(codec_ids())})") from None
+
+
+@functools.cache
+def packet_codecs() -> tuple[str, ...]:
+    """The ids of the codecs that stream live, by their packet number (each class's
+    ``packet_number``; the table is part of the wire format). Imports every built-in codec the
+    first time."""
+    for codec_id in BUILT_IN:
+        codec_class(codec_id)
+    numbered = {cls.packet_number: cls.id for cls in _CODECS.values() if cls.packet_number is not None}
+    if len(numbered) != sum(cls.packet_number is not None for cls in _CODECS.values()):
+        raise CodecError("two codecs have the same packet number")
+    if sorted(numbered) != list(range(len(numbered))):
+        raise CodecError(f"packet numbers must run from 0 without gaps, got {sorted(numbered)}")
+    return tuple(numbered[n] for n in range(len(numbered)))
 
 
 def get_codec(codec_id: str = DEFAULT_CODEC, **knobs) -> Codec:

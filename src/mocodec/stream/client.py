@@ -15,6 +15,7 @@ import contextlib
 import json
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import aiohttp
@@ -221,14 +222,18 @@ async def record(
     camera=(0.0, 0.0, 0.0),
     timeout_s: float | None = None,
     conceal: str = "hold",
+    joined: Callable[[], None] | None = None,
 ) -> dict[int, Motion]:
     """Watch ``room`` and return what each stream delivered: until ``stream`` (or, without it,
-    the first stream seen) has ``frames`` frames or ends, or ``timeout_s`` passes."""
+    the first stream seen) has ``frames`` frames or ends, or ``timeout_s`` passes. ``joined``
+    is called once the relay has let the viewer in."""
     watcher = Watcher(conceal)
     deadline = None if timeout_s is None else time.monotonic() + timeout_s
     async with connect(url, room, token, "subscribe") as ws:
         if budget or any(camera):
             await ws.send_str(json.dumps({"budget": budget, "camera": list(camera)}))
+        if joined is not None:
+            joined()
         while True:
             left = None if deadline is None else deadline - time.monotonic()
             if left is not None and left <= 0:

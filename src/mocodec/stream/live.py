@@ -9,8 +9,9 @@ A receiver that joins late, or loses a packet, drops what it cannot decode until
 keyframe and conceals the frames in between, so it is back in step within one refresh period.
 
 Each packet says which frames it completes at the receiver (``first_frame``, ``frames``): the
-sender runs a decoder of its own beside the encoder, so the numbers are exact for every codec,
-whatever it holds back, and a receiver knows how many frames to conceal for a lost packet.
+codec's stream encoder says how many its decoder gives out for each packet
+(:class:`~mocodec.codecs.base.Coded`), whatever it holds back, so a receiver knows how many
+frames to conceal for a lost packet.
 """
 
 from __future__ import annotations
@@ -18,12 +19,11 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
-from typing import cast
 
 import numpy as np
 
-from mocodec.codecs.base import Codec, Embedded, Layered, LayeredDecoder, StreamDecoder, StreamEncoder, checked_frames
-from mocodec.coding.entropy.rangecoder import encode_ints
+from mocodec.codecs import packet_codecs
+from mocodec.codecs.base import Codec, Coded, StreamDecoder, StreamEncoder, checked_frames
 from mocodec.errors import CodecError, OutOfStepError
 from mocodec.motion import Motion
 from mocodec.skeleton import POSITION_CHANNELS, Skeleton
@@ -37,8 +37,7 @@ from mocodec.stream.packets import (
     Packet,
     StreamInfo,
     header_packet,
-    with_cuts,
-    with_layer_ends,
+    with_cut_table,
 )
 
 #: A sender's tick (Hz): frames are pushed, and packets sent, this often.
@@ -85,7 +84,7 @@ def tick_frames(fps: float) -> int:
 
 def refresh_frames(codec: Codec, fps: float, keyframe_s: float) -> int:
     """Frames between keyframes: ``keyframe_s`` rounded up to the codec's segment or block."""
-    block = int(codec.config.get("window", codec.config.get("block", 1)))
+    block = codec.segment_frames()
     n = max(int(round(keyframe_s * fps)), 1)
     return -(-n // block) * block
 
@@ -109,8 +108,8 @@ class LiveEncoder:
     ):
         if not codec.streaming:
             raise CodecError(
-                f"codec {codec.id} does not stream (streaming codecs: dpcm, adpcm, deadreckoning, "
-                "dct, spiht, primitives, ...)"
+                f"codec {codec.id} has no packet number: it does not stream live (streaming codecs: "
+                f"{', '.join(packet_codecs())})"
             )
         if not keyframe_s > 0:
             raise CodecError(f"keyframe interval must be positive, got {keyframe_s}")
@@ -128,7 +127,7 @@ class LiveEncoder:
         self.in_group = 0  # input frames in the current codec stream
         self.encoder: StreamEncoder | None = None
         self.ended: StreamEncoder | None = None  # the last codec stream's encoder
-        self.decoder: StreamDecoder | None = None
+        self.cuttable = codec.embedded or codec.layers > 1  # its packets carry a cut table for relays
         self.keyframe_due = True
         self.position = (0.0, 0.0, 0.0)
         self.compact = compact  # data packets in the compact wire form (packets.Packet.to_compact)
@@ -147,18 +146,18 @@ class LiveEncoder:
             take = min(len(frames), self.refresh - self.in_group)
             chunk, frames = frames[:take], frames[take:]
             self.position = root_position(self.skeleton, chunk[-1])
-            out += self._wrap(encoder.push(chunk), ts)
+            out += self._wrap(encoder.code(chunk), ts)
             self.in_group += take
             self.recent = np.vstack((self.recent, chunk))[-self.primer_frames :]
             if self.in_group == self.refresh:
-                out += self._wrap(encoder.flush(), ts)
+                out += self._wrap(encoder.finish(), ts)
                 self.ended, self.encoder = encoder, None
         return out
 
     def close(self, timestamp_us: int | None = None) -> list[Packet]:
         """The stream's last packets (the last one flagged END)."""
         ts = now_us() if timestamp_us is None else timestamp_us
-        out = self._wrap(self.encoder.flush(), ts) if self.encoder is not None else []
+        out = self._wrap(self.encoder.finish(), ts) if self.encoder is not None else []
         self.encoder = None
         if out:
             out[-1] = out[-1].with_payload(out[-1].payload, out[-1].flags | END)
@@ -169,7 +168,6 @@ class LiveEncoder:
     def _start(self) -> StreamEncoder:
         """A new codec stream (intra refresh): its encoder, primed with the recent frames."""
         encoder = self.encoder = self.codec.encoder(self.skeleton, self.fps)
-        self.decoder = self.codec.decoder(self.skeleton, self.fps)
         if len(self.recent):
             encoder.prime(self.recent)
         if self.ended is not None:
@@ -178,27 +176,18 @@ class LiveEncoder:
         self.keyframe_due = True
         return encoder
 
-    def _wrap(self, payloads: list[bytes], ts: int) -> list[Packet]:
+    def _wrap(self, coded: list[Coded], ts: int) -> list[Packet]:
+        """Packets of what the codec stream coded: the first of a codec stream a keyframe, one
+        where its base restarts flagged so, and a cut table where a relay may cut."""
         out = []
-        cut_table = self.codec.packet_cuts if isinstance(self.codec, Embedded) else None  # cut by relays
-        decoder = self.decoder
-        assert decoder is not None, "a codec stream was started"
-        layered = isinstance(self.codec, Layered) and len(self.codec.layer_bounds) > 1
-        for payload in payloads:
-            n = len(decoder.push(payload))
-            flags = KEYFRAME if self.keyframe_due else (RESTART if self._restarts(payload) else 0)
-            if cut_table is not None:
-                payload, flags = with_cuts(payload, encode_ints(cut_table(payload, self.skeleton))), flags | CUTS
-            elif layered:  # where the relay may cut the layers off
-                payload = with_layer_ends(payload, cast(LayeredDecoder, decoder).layer_ends[:-1])
-                flags |= CUTS
-            out.append(self._packet(payload, n, ts, flags))
+        for c in coded:
+            flags = KEYFRAME if self.keyframe_due else (RESTART if c.restart else 0)
+            payload = c.payload
+            if self.cuttable:
+                payload, flags = with_cut_table(payload, c.cuts), flags | CUTS
+            out.append(self._packet(payload, c.frames, ts, flags))
             self.keyframe_due = False
         return out
-
-    def _restarts(self, payload: bytes) -> bool:
-        """The codec stream restarts its base layer in ``payload`` (a receiver may join here)."""
-        return isinstance(self.codec, Layered) and bool(payload) and self.codec.layer_starts(payload)[0]
 
     def _packet(self, payload: bytes, frames: int, ts: int, flags: int) -> Packet:
         sends = (
@@ -386,11 +375,12 @@ class LiveDecoder:
         layers it carries (the relay may have cut some off); a cut packet of another stream is
         damaged."""
         assert self.decoder is not None
-        if isinstance(self.codec, Layered):
-            layers = len(self.codec.layer_bounds) - packet.dropped
-            return np.asarray(cast(LayeredDecoder, self.decoder).push(payload, layers), dtype=np.float64)
         if packet.dropped:
-            raise CodecError(f"packet {packet.sequence}: cut by layers, of a stream without layers")
+            if packet.dropped >= self.codec.layers:
+                raise CodecError(
+                    f"packet {packet.sequence}: {packet.dropped} layers cut off a stream of {self.codec.layers}"
+                )
+            return np.asarray(self.decoder.push_layers(payload, self.codec.layers - packet.dropped), dtype=np.float64)
         return np.asarray(self.decoder.push(payload), dtype=np.float64)
 
     def _resyncing_decoder(self) -> StreamDecoder | None:

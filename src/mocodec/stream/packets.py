@@ -35,7 +35,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from mocodec import limits
-from mocodec.codecs import codec_from_untrusted
+from mocodec.codecs import codec_from_untrusted, packet_codecs
 from mocodec.codecs.base import Codec
 from mocodec.errors import CorruptStreamError
 from mocodec.formats import varint
@@ -48,21 +48,6 @@ OLD_BATCH_MAGIC = b"MB"  # format 1 (u32 lengths), no longer read
 VERSION = 2  # 2: compact packets of an ongoing stream carry their sequence number in the tag
 HEADER, DATA = 0, 1
 KEYFRAME, END, CUTS, RESTART = 1, 2, 4, 8  # RESTART: the codec stream's base restarts here
-
-#: The codecs a packet can name, by number (the numbering is part of the format: append only).
-CODEC_NUMBERS = (  # a streaming codec's number in packets: append only
-    "raw",
-    "quant",
-    "dpcm",
-    "adpcm",
-    "deadreckoning",
-    "dct",
-    "subband",
-    "spiht",
-    "primitives",
-    "kinwave",
-    "kinwave-live",
-)
 
 _FIELDS = struct.Struct("<2sBBBBIIQIH3fI")
 _CRC = struct.Struct("<I")
@@ -285,15 +270,29 @@ def with_cuts(payload: bytes, cuts: bytes) -> bytes:
     return _U16.pack(len(cuts)) + cuts + payload
 
 
-def with_layer_ends(payload: bytes, ends: list[int]) -> bytes:
-    """A layered codec's payload carrying its cut table: where each layer but the top one ends,
-    as varints (read by :func:`layer_ends`)."""
-    return with_cuts(payload, b"".join(map(varint.pack, ends)))
+def with_cut_table(payload: bytes, ends) -> bytes:
+    """A payload carrying its cut table (flag CUTS): where a relay may cut it, as varints (an
+    embedded codec's: where each channel's stream ends; a layered codec's: where each layer
+    but the top one ends). Read by :func:`cut_table` and :func:`layer_ends`."""
+    return with_cuts(payload, varint.pack_array(np.asarray(ends, dtype=np.int64)))
+
+
+def cut_table(p: Packet) -> np.ndarray:
+    """The ends in a packet's cut table (:func:`with_cut_table`); CorruptStreamError if it
+    does not parse."""
+    table = p.cuts
+    try:
+        values, end = varint.unpack_array(table, 0, int(np.count_nonzero(np.frombuffer(table, np.uint8) < 0x80)))
+    except ValueError as e:
+        raise CorruptStreamError(f"bad cut table: {e}") from None
+    if end != len(table):
+        raise CorruptStreamError("bad cut table: it ends inside a number")
+    return values
 
 
 def layer_ends(p: Packet, layers: int) -> list[int]:
     """Where each of the ``layers`` layers of a layered stream's packet ends, from its cut table
-    (:func:`with_layer_ends`), the top one at the codec payload's end; CorruptStreamError if it
+    (:func:`with_cut_table`), the top one at the codec payload's end; CorruptStreamError if it
     has no table or the table does not fit (read a varint at a time: a relay reads every one)."""
     table, size, pos = p.cuts, len(p.codec_payload), 0
     ends: list[int] = []
@@ -311,11 +310,12 @@ def layer_ends(p: Packet, layers: int) -> list[int]:
 
 
 def codec_number(codec_id: str) -> int:
+    """A streaming codec's number in packets (its class's ``packet_number``)."""
     try:
-        return CODEC_NUMBERS.index(codec_id)
+        return packet_codecs().index(codec_id)
     except ValueError:
         raise CorruptStreamError(
-            f"codec {codec_id!r} has no packet number (streaming codecs: {', '.join(CODEC_NUMBERS)})"
+            f"codec {codec_id!r} has no packet number (streaming codecs: {', '.join(packet_codecs())})"
         ) from None
 
 
@@ -334,7 +334,7 @@ def parse(
         raise CorruptStreamError(f"{where}: byte 0: expected the packet magic {MAGIC!r}, got {magic!r}")
     if version != VERSION:
         raise CorruptStreamError(f"{where}: byte 2: packet version {version}, this mocodec reads {VERSION}")
-    if kind not in (HEADER, DATA) or number >= len(CODEC_NUMBERS):
+    if kind not in (HEADER, DATA) or number >= len(packet_codecs()):
         raise CorruptStreamError(f"{where}: bytes 3-5: unknown packet kind {kind} or codec number {number}")
     if len(data) != OVERHEAD + length:
         raise CorruptStreamError(
@@ -349,7 +349,7 @@ def parse(
         stream,
         seq,
         ts,
-        CODEC_NUMBERS[number],
+        packet_codecs()[number],
         first,
         frames,
         data[_FIELDS.size : end],

@@ -44,7 +44,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mocodec.codecs.base import Codec, Knob, QualityKnob, StreamDecoder, StreamEncoder
+from mocodec.codecs.base import Codec, Coded, Knob, QualityKnob, StreamDecoder, StreamEncoder
 from mocodec.codecs.kinwave import kinalloc
 from mocodec.codecs.kinwave.payload import (
     REST,
@@ -67,6 +67,7 @@ from mocodec.skeleton import Skeleton
 @register
 class KinwaveCodec(Codec):
     id = "kinwave"
+    packet_number = 9
     description = (
         "project codec: closed-loop wavelet coding down the kinematic tree, convex step allocation, "
         "context-adaptive arithmetic coding, guaranteed error bound (kinwave.md)"
@@ -153,7 +154,6 @@ class KinwaveCodec(Codec):
         ),
     )
     quality = QualityKnob("max_error_cm", higher_is_better=False, log_scale=True)
-    streaming = True
 
     def __init__(self, **knobs):
         super().__init__(**knobs)
@@ -161,8 +161,10 @@ class KinwaveCodec(Codec):
         if w & (w - 1):
             raise CodecError(f"codec kinwave: window must be a power of two, got {w}")
 
-    @property
-    def delay_frames(self) -> int:  # type: ignore[override]
+    def delay_frames(self) -> int:
+        return self.config["window"]
+
+    def segment_frames(self) -> int:
         return self.config["window"]
 
     def bound_knobs(self, target: str, value: float) -> dict | None:
@@ -233,10 +235,11 @@ class _SegmentEncoder(StreamEncoder):
         self.codec, self.skeleton, self.fps = codec, skeleton, fps
         self.pending = np.zeros((0, skeleton.num_channels))
 
-    def _packet(self, frames: np.ndarray) -> bytes:
-        return varint.pack(len(frames)) + self.codec.encode(Motion(self.skeleton, self.fps, frames))
+    def _packet(self, frames: np.ndarray) -> Coded:
+        body = varint.pack(len(frames)) + self.codec.encode(Motion(self.skeleton, self.fps, frames))
+        return Coded(body, len(frames))
 
-    def push(self, frames: np.ndarray) -> list[bytes]:
+    def code(self, frames: np.ndarray) -> list[Coded]:
         self.pending = np.vstack([self.pending, np.atleast_2d(frames)])
         w = self.codec.config["window"]
         out = []
@@ -245,7 +248,7 @@ class _SegmentEncoder(StreamEncoder):
             self.pending = self.pending[w:]
         return out
 
-    def flush(self) -> list[bytes]:
+    def finish(self) -> list[Coded]:
         if not len(self.pending):
             return []
         out = [self._packet(self.pending)]

@@ -49,7 +49,7 @@ from functools import lru_cache
 import numba
 import numpy as np
 
-from mocodec.codecs.base import Codec, Knob, QualityKnob, StreamDecoder, StreamEncoder, continuous_frames
+from mocodec.codecs.base import Codec, Coded, Knob, QualityKnob, StreamDecoder, StreamEncoder, continuous_frames
 from mocodec.codecs.kinwave import kinalloc
 from mocodec.codecs.kinwave.encoder import bone_skeleton
 from mocodec.codecs.kinwave.payload import channel_steps, code_channels, rotation_joints, step_codes, step_groups
@@ -493,6 +493,7 @@ def base_codes(skeleton: Skeleton, bound_cm: float, measure: str) -> np.ndarray:
 @register
 class KinwaveLiveCodec(Codec):
     id = "kinwave-live"
+    packet_number = 10
     description = (
         "kinwave for live avatars: closed-loop prediction down the kinematic tree, packets of at most "
         "50 ms, context-adaptive arithmetic coding across packets, guaranteed max error on every frame, "
@@ -536,15 +537,13 @@ class KinwaveLiveCodec(Codec):
         ),
     )
     quality = QualityKnob("max_error_cm", higher_is_better=False, log_scale=True)
-    streaming = True
     # 2: the predictor orders are no longer sent (both ends choose them, _update_misses);
     # 3: the head codes a still packet's usual values as zeros (full flag, drift, stride index)
     revision = 3
     reference: np.ndarray | None = None  # the stream's reference pose (for_stream)
     codes: np.ndarray | None = None  # the stream's base step codes per layer (for_stream)
 
-    @property
-    def delay_frames(self) -> int:  # type: ignore[override]
+    def delay_frames(self) -> int:
         return 0  # plus the packet's own frames: packet_frames(fps) - 1 at most
 
     def bound_knobs(self, target: str, value: float) -> dict | None:
@@ -552,15 +551,19 @@ class KinwaveLiveCodec(Codec):
         return {"max_error_cm": value} if target == "max_error_cm" else None
 
     @property
+    def layers(self) -> int:
+        return self.config["layers"]
+
+    @property
     def layer_bounds(self) -> list[float]:
-        """Each layer's bound in cm, base first (the :class:`~mocodec.codecs.base.Layered` protocol)."""
+        """Each layer's bound in cm, base first."""
         return layer_bounds(self.config["max_error_cm"], self.config["layers"], self.config["layer_ratio"])
 
-    def layer_starts(self, packet: bytes) -> list[bool]:
+    def layer_starts(self, payload: bytes) -> list[bool]:
         layers = self.config["layers"]
         if not self.config["refresh_s"]:
             return [False] * layers
-        data = _packet_data(packet)
+        data = _packet_data(payload)
         return [bool(flag) for flag in _read_restarts(bc.start_decoder(data), data, layers)]
 
     def restart_frames(self, fps: float) -> tuple[int, list[int]]:
@@ -728,6 +731,24 @@ def _advance(layer: _Layer, coded: np.ndarray, stride: int, offset: int, cells: 
     layer.offset = offset
 
 
+def layer_ends(payload: bytes, layers: list[_Layer], contexts: list, full: int, refresh: bool) -> list[int]:
+    """Where each layer of a packet ends (:func:`prefix_end`), read from its arithmetic code
+    alone with each layer's contexts as they were before it (``contexts``: a copy of each
+    layer's state and last nonzero flags, consumed): the integers are read, no motion is
+    reconstructed."""
+    data = _packet_data(payload)
+    st = bc.start_decoder(data)
+    if refresh:
+        _read_restarts(st, data, len(layers))
+    ends = []
+    for layer, (state, last_nonzero) in zip(layers, contexts):
+        frames, _, stride = _decode_head(st, data, full, state)
+        ints = np.zeros((frames // stride, last_nonzero.size), dtype=np.int64)
+        _decode_ints(st, data, frames // stride, layer.first, layer.count, state, last_nonzero, ints)
+        ends.append(prefix_end(data, int(st[2]), int(st[0])))
+    return ends
+
+
 class _LiveEncoder(StreamEncoder):
     def __init__(self, codec: KinwaveLiveCodec, skeleton: Skeleton, fps: float):
         self.codec, self.skeleton, self.fps = codec, skeleton, fps
@@ -741,6 +762,7 @@ class _LiveEncoder(StreamEncoder):
         self.period, self.phases = codec.restart_frames(fps)
         self.frame = 0  # the first frame of the next packet
         self.last_values: np.ndarray | None = None  # the last packet's last original frame
+        self.cut = len(self.layers) > 1  # a relay may cut its packets by layers
 
     def follow(self, previous: StreamEncoder) -> None:
         """Each layer's scale offset goes on from where the last stream left it (a restart codes
@@ -748,7 +770,7 @@ class _LiveEncoder(StreamEncoder):
         if isinstance(previous, _LiveEncoder) and len(previous.offsets) == len(self.offsets):
             self.offsets = list(previous.offsets)
 
-    def push(self, frames: np.ndarray) -> list[bytes]:
+    def code(self, frames: np.ndarray) -> list[Coded]:
         cont = continuous_frames(self.codec.id, self.skeleton, self.fps, frames, self.previous)
         if len(cont):
             self.previous = cont[-1]
@@ -759,7 +781,7 @@ class _LiveEncoder(StreamEncoder):
             self.pending = self.pending[self.size :]
         return out
 
-    def flush(self) -> list[bytes]:
+    def finish(self) -> list[Coded]:
         if not len(self.pending):
             return []
         packet = self._packet(self.pending)
@@ -844,7 +866,9 @@ class _LiveEncoder(StreamEncoder):
         moved = np.abs(values - since).max(axis=0) > STILL_CM / self.cm
         return ~self.layers[0].shifts | moved
 
-    def _packet(self, values: np.ndarray) -> bytes:
+    def _packet(self, values: np.ndarray) -> Coded:
+        """One packet of every layer, with where each layer but the top one ends in it (read
+        back from the arithmetic code, :func:`layer_ends`) and whether the base restarts."""
         goal = forward_kinematics(self.skeleton, values)
         retarget = self._retarget(values)
         cells = _Cells(len(values), values.shape[1])
@@ -852,13 +876,16 @@ class _LiveEncoder(StreamEncoder):
         coded = [self._layer_packet(k, values, goal, retarget, cells, restarts[k]) for k in range(len(self.layers))]
         self.frame += len(values)
         self.last_values = values[-1]
+        contexts = [(layer.state.copy(), layer.last_nonzero.copy()) for layer in self.layers] if self.cut else []
         buf, st = _buffer([(layer, ints) for layer, (ints, *_) in zip(self.layers, coded)]), bc.encoder_state()
         if self.period:
             _code_restarts(st, buf, np.array(restarts, dtype=np.int64))
         for layer, (ints, change, stride) in zip(self.layers, coded):
             first, count, state, last = layer.first, layer.count, layer.state, layer.last_nonzero
             _code_layer(st, buf, ints, len(values), self.size, change, stride, first, count, state, last)
-        return buf[1 : _finish(st, buf)].tobytes()  # the first byte is always 0
+        payload = buf[1 : _finish(st, buf)].tobytes()  # the first byte is always 0
+        ends = layer_ends(payload, self.layers, contexts, self.size, bool(self.period))[:-1] if self.cut else []
+        return Coded(payload, len(values), tuple(ends), bool(restarts[0]))
 
     def _restart_flag(self, k: int, frames: int) -> int:
         """1 if layer ``k`` restarts in the packet of ``frames`` frames starting at
@@ -925,9 +952,13 @@ class _LiveDecoder(StreamDecoder):
         self.layer_in_step = [False] * len(self.layers)
         return self.refresh
 
+    def push_layers(self, packet: bytes, layers: int) -> np.ndarray:
+        """The frames of ``packet``, which carries its stream's ``layers`` lowest layers (a
+        relay's cut is said by the packet's frame, :attr:`mocodec.stream.packets.Packet.dropped`)."""
+        return self.push(packet, layers)
+
     def push(self, packet: bytes, layers: int | None = None) -> np.ndarray:
-        """The frames of ``packet``, which carries its stream's ``layers`` lowest layers (None:
-        all; a relay's cut is said by the packet's frame, :attr:`mocodec.stream.packets.Packet.dropped`)."""
+        """The frames of ``packet``, which carries its stream's ``layers`` lowest layers (None: all)."""
         count = len(self.layers) if layers is None else layers
         if not 1 <= count <= len(self.layers):
             raise CorruptStreamError(f"kinwave-live packet: {count} layers of a stream of {len(self.layers)}")

@@ -40,6 +40,7 @@ import numpy as np
 
 from mocodec.codecs.base import (
     Codec,
+    Coded,
     Knob,
     QualityKnob,
     StreamDecoder,
@@ -63,6 +64,7 @@ _PARTS = 12
 @register
 class PrimitivesCodec(Codec):
     id = "primitives"
+    packet_number = 8
     description = "motion primitives: quaternion segments replaced by database primitives, CDF 9/7 residuals"
     knobs = (
         Knob(
@@ -102,10 +104,8 @@ class PrimitivesCodec(Codec):
         ),
     )
     quality = QualityKnob("t_lower", higher_is_better=False, log_scale=True)
-    streaming = True
 
-    @property
-    def delay_frames(self) -> int:  # type: ignore[override]
+    def delay_frames(self) -> int:
         return self.config["max_segment"] + self.config["smooth"]
 
     def encoder(self, skeleton: Skeleton, fps: float) -> StreamEncoder:
@@ -117,7 +117,7 @@ class PrimitivesCodec(Codec):
     def _encode(self, motion) -> bytes:
         enc = _Encoder(self, motion.skeleton, motion.fps)
         enc.append(motion.channels)
-        return enc.packet(final=True)
+        return enc.packet(final=True)[0].payload
 
     def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:
         out = _Decoder(self, skeleton, fps).push(body)
@@ -237,6 +237,9 @@ class _Encoder(StreamEncoder, _Shared):
         self.t = np.zeros((0, len(self.lay.translation)))  # translations from `t_base` on
         self.base = self.t_base = 0
         self.starts = np.zeros(self.lay.count, dtype=np.int64)  # open segment start, absolute
+        self.decided = np.zeros(self.lay.count, dtype=np.int64)  # frames each joint's segments reach
+        self.t_decided = 0  # frames the translation windows reach
+        self.given = 0  # frames the decoder has given out
 
     def append(self, frames: np.ndarray) -> None:
         frames = checked_frames(PrimitivesCodec.id, self.skeleton, frames)
@@ -246,16 +249,18 @@ class _Encoder(StreamEncoder, _Shared):
         self.q = np.concatenate((self.q, q))
         self.t = np.concatenate((self.t, frames[:, self.lay.translation]))
 
-    def push(self, frames: np.ndarray) -> list[bytes]:
+    def code(self, frames: np.ndarray) -> list[Coded]:
         self.append(frames)
-        body = self.packet(final=False)
-        return [body] if body else []
+        return self.packet(final=False)
 
-    def flush(self) -> list[bytes]:
-        return [self.packet(final=True)]
+    def finish(self) -> list[Coded]:
+        return self.packet(final=True)
 
-    def packet(self, final: bool) -> bytes:
-        """The segments and translation windows the frames so far decide (all, if ``final``)."""
+    def packet(self, final: bool) -> list[Coded]:
+        """The packet of the segments and translation windows the frames so far decide (all, if
+        ``final``; none if nothing is decided), and the frames the decoder gives out for it:
+        those every joint's segments and the translation windows have reached, less the
+        ``smooth`` frames a later seam may still change."""
         g = quatseg.speed_change(self.q, self.fps)
         local = self.starts - self.base
         segs = np.array(quatseg.chop(g, local, self.cfg["max_segment"], final), dtype=np.int64).reshape(-1, 3)
@@ -264,8 +269,13 @@ class _Encoder(StreamEncoder, _Shared):
         keep = max(int(self.starts.min()) - self.base - 2, 0)
         self.q, self.base = self.q[keep:], self.base + keep
         if not final and not len(segs) and not parts[-1] and not parts[5]:  # nothing decided, no start
-            return b""
-        return join_parts([*parts[:-1], encode_ints(parts[-1]), b"\x01" if final else b""])
+            return []
+        self.decided += np.bincount(segs[:, 0], segs[:, 2] - segs[:, 1], self.lay.count).astype(np.int64)
+        self.t_decided += sum(parts[-1])
+        reached = [*self.decided.tolist(), *([self.t_decided] if len(self.lay.translation) else [])]
+        out = max(min(reached) - self.given - (0 if final else self.cfg["smooth"]), 0) if reached else 0
+        self.given += out
+        return [Coded(join_parts([*parts[:-1], encode_ints(parts[-1]), b"\x01" if final else b""]), out)]
 
     def _segments(self, segs: np.ndarray) -> list[bytes]:
         joints = segs[:, 0]

@@ -108,8 +108,10 @@ class PWaveletCodec(Codec):
     )
     quality = QualityKnob("alpha", higher_is_better=True, log_scale=True)
 
-    @property
-    def delay_frames(self) -> int:  # type: ignore[override]
+    def delay_frames(self) -> int:
+        return self.config["window"]
+
+    def segment_frames(self) -> int:
         return self.config["window"]
 
     def _slices(self, frames: int):

@@ -51,7 +51,16 @@ import struct
 import numpy as np
 
 from mocodec import perception
-from mocodec.codecs.base import Codec, Knob, QualityKnob, StreamDecoder, StreamEncoder, continuous_frames
+from mocodec.codecs.base import (
+    Codec,
+    Coded,
+    HeldFrames,
+    Knob,
+    QualityKnob,
+    StreamDecoder,
+    StreamEncoder,
+    continuous_frames,
+)
 from mocodec.codecs.registry import register
 from mocodec.codecs.shared import closedloop
 from mocodec.coding.entropy import spiht
@@ -97,6 +106,8 @@ def anchor_frames(frames: int, window: int) -> np.ndarray:
 @register
 class SpihtCodec(Codec):
     id = "spiht"
+    packet_number = 7
+    embedded = True
     description = "embedded wavelet coding: 1-D SPIHT per channel, perceptual bit allocation, truncatable streams"
     knobs = (
         Knob("bits_per_second", float, 8000.0, "SPIHT bits per second for the whole figure", low=1.0, high=1e8),
@@ -116,7 +127,6 @@ class SpihtCodec(Codec):
         ),
     )
     quality = QualityKnob("bits_per_second", higher_is_better=True, log_scale=True)
-    streaming = True
 
     def __init__(self, **knobs):
         super().__init__(**knobs)
@@ -133,11 +143,13 @@ class SpihtCodec(Codec):
         """Half width of the seam smoothing: W / 16 (8 frames for W = 128); 0 when it is off."""
         return max(self.config["window"] // 16, 1) if self.config["smooth_seams"] else 0
 
-    @property
-    def delay_frames(self) -> int:  # type: ignore[override]
+    def delay_frames(self) -> int:
         """A segment goes out when the first frame of the next one (its end anchor) is in, and
         its last frames once the next segment has smoothed the seam."""
         return self.config["window"] + 1 + (max(self.seam_frames, seams.CONTEXT) if self.seam_frames else 0)
+
+    def segment_frames(self) -> int:
+        return self.config["window"]
 
     def encoder(self, skeleton: Skeleton, fps: float) -> StreamEncoder:
         return _StreamEncoder(self, skeleton, fps)
@@ -489,8 +501,9 @@ class _StreamEncoder(StreamEncoder):
         self.buffer = np.zeros((0, skeleton.num_channels))
         self.previous: np.ndarray | None = None  # last continuous frame seen
         self.start: np.ndarray | None = None  # the current segment's start anchor (ints)
+        self.out = HeldFrames(max(codec.seam_frames, seams.CONTEXT) if codec.seam_frames else 0)
 
-    def push(self, frames: np.ndarray) -> list[bytes]:
+    def code(self, frames: np.ndarray) -> list[Coded]:
         cont = continuous_frames("spiht", self.skeleton, self.fps, frames, self.previous)
         if not len(cont):
             return []
@@ -498,16 +511,23 @@ class _StreamEncoder(StreamEncoder):
         self.buffer = np.vstack((self.buffer, cont))
         packets = []
         while len(self.buffer) > self.window:
-            packets.append(self._packet(self.buffer[: self.window + 1], last=False))
+            packets.append(self._coded(self.buffer[: self.window + 1], last=False))
             self.buffer = self.buffer[self.window :]
         return packets
 
-    def flush(self) -> list[bytes]:
+    def finish(self) -> list[Coded]:
         if not len(self.buffer):
             return []
-        packet = self._packet(self.buffer, last=True)
+        packet = self._coded(self.buffer, last=True)
         self.buffer = self.buffer[:0]
         return [packet]
+
+    def _coded(self, values: np.ndarray, last: bool) -> Coded:
+        """A packet, the frames the decoder gives out for it (it holds the seam's context back)
+        and its cut table (each channel stream's length: :meth:`SpihtCodec.packet_cuts`)."""
+        packet = self._packet(values, last)
+        frames = self.out.out(len(values) if last else self.window, last)
+        return Coded(packet, frames, tuple(self.codec.packet_cuts(packet, self.skeleton).tolist()))
 
     def _packet(self, values: np.ndarray, last: bool) -> bytes:
         n = len(values) if last else self.window

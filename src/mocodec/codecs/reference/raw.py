@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from mocodec.codecs.base import Codec, StreamDecoder, StreamEncoder
+from mocodec.codecs.base import Codec, Coded, StreamDecoder, StreamEncoder
 from mocodec.codecs.registry import register
-from mocodec.errors import CorruptStreamError
+from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.skeleton import Skeleton
 
 
@@ -16,11 +16,11 @@ class _RawEncoder(StreamEncoder):
     def __init__(self, channels: int):
         self.channels = channels
 
-    def push(self, frames: np.ndarray) -> list[bytes]:
+    def code(self, frames: np.ndarray) -> list[Coded]:
         frames = np.atleast_2d(np.asarray(frames, dtype=np.float64))
         if frames.shape[1] != self.channels or not np.isfinite(frames).all():
-            raise ValueError(f"raw stream: frames must be finite (n, {self.channels}) arrays")
-        return [frames.astype("<f4").tobytes()] if len(frames) else []
+            raise CodecError(f"raw stream: frames must be finite (n, {self.channels}) arrays")
+        return [Coded(frames.astype("<f4").tobytes(), len(frames))] if len(frames) else []
 
 
 class _RawDecoder(StreamDecoder):
@@ -36,9 +36,9 @@ class _RawDecoder(StreamDecoder):
 @register
 class RawCodec(Codec):
     id = "raw"
+    packet_number = 0
     description = "32-bit floats, uncompressed: the reference for compression ratios"
     lossless = True
-    streaming = True
 
     def _encode(self, motion) -> bytes:
         return motion.channels.astype("<f4").tobytes()

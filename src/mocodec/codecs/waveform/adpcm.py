@@ -25,6 +25,7 @@ from mocodec.coding.quantisation.quantizers import even_levels, multipliers
 @register
 class AdpcmCodec(FramewiseCodec):
     id = "adpcm"
+    packet_number = 3
     description = "adaptive predictive coding: backward-adaptive order-2 LPC, feedback-adaptive quantiser, range coded"
     knobs = (
         Knob("levels", int, 8, "adaptive quantiser levels N (the thesis: 4-256; rounded to even)", low=2, high=1 << 16),

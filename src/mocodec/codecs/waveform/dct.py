@@ -60,6 +60,7 @@ class _State:
 @register
 class DctCodec(BlockwiseCodec):
     id = "dct"
+    packet_number = 5
     description = "block DCT (N=16) with fixed bit tables, speed-adaptive steps, block-edge smoothing"
     knobs = (
         Knob("table", int, 1, "bit table and speed thresholds (0 finest .. 4 coarsest)", low=0, high=4),

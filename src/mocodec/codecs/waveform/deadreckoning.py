@@ -102,6 +102,7 @@ def _groups(skeleton: Skeleton, active: np.ndarray, measure: str) -> list[np.nda
 @register
 class DeadReckoningCodec(FramewiseCodec):
     id = "deadreckoning"
+    packet_number = 4
     description = "dead reckoning: a ghost model with threshold updates of quantised difference and velocity"
     knobs = (
         Knob(

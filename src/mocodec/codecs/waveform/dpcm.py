@@ -25,6 +25,7 @@ from mocodec.coding.quantisation.quantizers import table
 @register
 class DpcmCodec(FramewiseCodec):
     id = "dpcm"
+    packet_number = 2
     description = "closed-loop first-order predictive coding (DPCM), quantised difference, range coded"
     knobs = (
         Knob(

@@ -28,7 +28,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from mocodec import limits
-from mocodec.codecs.base import Codec, StreamDecoder, StreamEncoder, continuous_frames
+from mocodec.codecs.base import Codec, Coded, HeldFrames, StreamDecoder, StreamEncoder, continuous_frames
 from mocodec.coding.entropy import intcoder
 from mocodec.coding.entropy.parts import join_parts, split_parts
 from mocodec.errors import CodecError, CorruptStreamError
@@ -40,13 +40,11 @@ Reader = Callable[[int, int], np.ndarray]
 
 
 class FramewiseCodec(Codec):
-    streaming = True
     lookahead: ClassVar[int] = 0  # frames the encoder must see past the ones it codes
     bounded_codes: ClassVar[bool] = False  # the sample coder's codes are coded as its N levels
     holds_frames: ClassVar[bool] = False  # the decoder keeps frames back until the next packet or the end
 
-    @property
-    def delay_frames(self) -> int:  # type: ignore[override]
+    def delay_frames(self) -> int:
         return self.lookahead
 
     # ----- what a coder provides -----------------------------------------------------------
@@ -114,9 +112,11 @@ class BlockwiseCodec(FramewiseCodec):
     def holds_frames(self) -> bool:  # type: ignore[override]
         return self.config["smooth"]
 
-    @property
-    def delay_frames(self) -> int:  # type: ignore[override]
+    def delay_frames(self) -> int:
         return self.config["block"] - 1 + int(self.config["smooth"])
+
+    def segment_frames(self) -> int:
+        return self.config["block"]
 
     def _ready(self, pending: int) -> int:
         return pending - pending % self.config["block"]
@@ -130,6 +130,7 @@ class _FrameEncoder(StreamEncoder):
         self.state: Any = None
         self.models: list[intcoder.Model] = []
         self.primer = np.zeros((0, skeleton.num_channels))
+        self.out = HeldFrames(1 if codec.holds_frames else 0)  # the decoder's edge smoothing holds one
 
     def prime(self, frames: np.ndarray) -> None:
         if self.state is not None or len(self.pending):
@@ -137,7 +138,7 @@ class _FrameEncoder(StreamEncoder):
         self.primer = continuous_frames(self.codec.id, self.skeleton, self.fps, frames, None)
         self.last = self.primer[-1] if len(self.primer) else None
 
-    def push(self, frames: np.ndarray) -> list[bytes]:
+    def code(self, frames: np.ndarray) -> list[Coded]:
         cont = continuous_frames(self.codec.id, self.skeleton, self.fps, frames, self.last)
         if not len(cont):
             return []
@@ -148,14 +149,15 @@ class _FrameEncoder(StreamEncoder):
             return []
         packet = self._packet(self.pending[:n], self.pending[n:])
         self.pending = self.pending[n:]
-        return [packet]
+        return [Coded(packet, self.out.out(n, last=False))]
 
-    def flush(self) -> list[bytes]:
+    def finish(self) -> list[Coded]:
         if not len(self.pending) and not (self.codec.holds_frames and self.state is not None):
             return []
+        n = len(self.pending)
         packet = self._packet(self.pending, self.pending[:0], last=True)
         self.pending = self.pending[:0]
-        return [packet]
+        return [Coded(packet, self.out.out(n, last=True))]
 
     def _packet(self, frames: np.ndarray, ahead: np.ndarray, last: bool = False) -> bytes:
         header = []

@@ -31,6 +31,7 @@ LAWS = ("uniform", "mulaw", "adaptive")
 @register
 class QuantCodec(FramewiseCodec):
     id = "quant"
+    packet_number = 1
     description = "direct quantisation per DOF: uniform, mu-law or feedback-adaptive, range coded"
     knobs = (
         Knob(

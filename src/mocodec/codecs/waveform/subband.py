@@ -88,6 +88,7 @@ class _State:
 @register
 class SubbandCodec(BlockwiseCodec):
     id = "subband"
+    packet_number = 6
     description = "subband (VMSE bands) or wavelet (M largest) split of 16-frame blocks, a predictive coder per band"
     knobs = (
         Knob(

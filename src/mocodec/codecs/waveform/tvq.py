@@ -46,8 +46,7 @@ class TvqCodec(FramewiseCodec):
     )
     quality = QualityKnob("size", higher_is_better=True, log_scale=True)
 
-    @property
-    def delay_frames(self) -> int:  # type: ignore[override]
+    def delay_frames(self) -> int:
         return self.config["length"] - 1
 
     def _ready(self, pending: int) -> int:

@@ -52,7 +52,7 @@ class RoomHistory:
 
 
 class StreamHistory:
-    """One stream's kept packets (:class:`~mocodec.stream.relay.Forward`), oldest first."""
+    """One stream's kept packets (:class:`~mocodec.stream.relay.rooms.Forward`), oldest first."""
 
     def __init__(self, room: RoomHistory):
         self.room = room

@@ -21,7 +21,7 @@ from conftest import DATA
 from mocodec import limits, load, moc
 from mocodec.cli import main
 from mocodec.codecs import codec_from_untrusted, get_codec
-from mocodec.codecs.perceptual.spiht import _PACKET
+from mocodec.codecs.perceptual.spihtlayout import PACKET
 from mocodec.coding.entropy.parts import join_parts, split_parts
 from mocodec.errors import CorruptStreamError, FormatError, MocodecError
 from mocodec.formats import container
@@ -148,8 +148,8 @@ def test_a_spiht_packet_with_a_short_last_part_raises_a_mocodec_error(walk_bvh):
     codec = get_codec("spiht", bits_per_second=8000)
     packet = next(p for p in stream_clip(walk_bvh[:120], codec)[1:] if p.codec_payload)
     payload = packet.codec_payload
-    parts = split_parts(payload, None, "spiht packet", start=_PACKET.size)
-    short = payload[: _PACKET.size] + join_parts([*parts[:-1], b"\1\2"])
+    parts = split_parts(payload, None, "spiht packet", start=PACKET.size)
+    short = payload[: PACKET.size] + join_parts([*parts[:-1], b"\1\2"])
     with pytest.raises(CorruptStreamError, match="bit stream part"):
         codec.packet_cutter(short, walk_bvh.skeleton, np.zeros(0, np.int64), 120.0)(1000.0)
 

@@ -9,6 +9,7 @@ import pytest
 
 from mocodec.codecs import get_codec
 from mocodec.codecs.kinwave import live
+from mocodec.codecs.kinwave.live.predict import Layer, update_misses
 from mocodec.errors import CorruptStreamError, OutOfStepError
 from mocodec.kinematics import forward_kinematics
 from mocodec.metrics.pose import shell_errors
@@ -270,10 +271,10 @@ def test_each_channel_takes_the_predictor_that_missed_its_decoded_frames_less(wa
     # and each miss counts half as much one frame later
     ramp = np.array([[0.0, 5.0], [2.0, 5.0], [4.0, 5.0], [6.0, 5.0]])
     misses = np.zeros((2, 2))
-    live._update_misses(misses, ramp[:2].copy(), 2, 1, 1, ramp[2:].copy())
+    update_misses(misses, ramp[:2].copy(), 2, 1, 1, ramp[2:].copy())
     assert misses[:, 0].tolist() == [2.0 * 0.5 + 2.0, 0.0]
     assert misses[:, 1].tolist() == [0.0, 0.0]  # a constant channel: both exact
-    layer = live._Layer(walk_amc.skeleton, get_codec("kinwave-live").layer_codes(walk_amc.skeleton)[0])
+    layer = Layer(walk_amc.skeleton, get_codec("kinwave-live").layer_codes(walk_amc.skeleton)[0])
     layer.misses[:, :2] = misses
     orders = layer.orders()
     assert orders[:2].tolist() == [2, 1]  # a tie goes to the last value

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from mocodec.codecs import get_codec
-from mocodec.codecs.perceptual.spiht import _PACKET
+from mocodec.codecs.perceptual.spihtlayout import PACKET
 from mocodec.coding.entropy.parts import join_parts, split_parts
 from mocodec.crowd import on_ladder
 from mocodec.stream import tokens
@@ -153,8 +153,8 @@ def test_a_hostile_publisher_does_not_disturb_a_viewer(walk_bvh, caplog):
     codec = get_codec("spiht", bits_per_second=8000)
     spiht = stream_clip(walk_bvh[:360], codec)
     cut = next(p for p in spiht[1:] if p.flags & CUTS)
-    parts = split_parts(cut.codec_payload, None, "spiht packet", start=_PACKET.size)
-    short = cut.codec_payload[: _PACKET.size] + join_parts([*parts[:-1], b"\1\2"])
+    parts = split_parts(cut.codec_payload, None, "spiht packet", start=PACKET.size)
+    short = cut.codec_payload[: PACKET.size] + join_parts([*parts[:-1], b"\1\2"])
     bad_cut = cut.with_payload(with_cuts(short, cut.cuts))
     header = spiht[0]
     rogue_stream = [

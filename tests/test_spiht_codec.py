@@ -39,7 +39,7 @@ def test_each_segment_spends_its_budget_exactly(walk_amc):
     codec = get_codec("spiht", bits_per_second=3000, allocation="uniform")
     payload = codec.encode(walk_amc)
     budgets = 0
-    for a, b in codec._segments(walk_amc.num_frames):
+    for a, b in codec.segments(walk_amc.num_frames):
         budgets += perception.allocate(np.ones(walk_amc.num_channels - 6), int(3000 * (b - a) / 120)).sum()
     used = _spiht_bits(payload)
     assert used <= budgets and used >= budgets - 6 * walk_amc.num_channels  # only all-zero channels stop early

@@ -70,7 +70,7 @@ def live_fixture(name, clip, frames, fps, knobs, keyframe_s, keeps=()) -> dict[s
 
     from mocodec import load
     from mocodec.codecs import get_codec
-    from mocodec.codecs.kinwave import live as kinwave_live
+    from mocodec.codecs.kinwave.live import decoder as live_decoder
     from mocodec.stream.live import LiveDecoder, clip_encoder, tick_frames
     from mocodec.stream.packets import StreamInfo, pack_batch
 
@@ -86,14 +86,14 @@ def live_fixture(name, clip, frames, fps, knobs, keyframe_s, keeps=()) -> dict[s
     if keeps:
         packets = packets[:1] + [relayed(p, keep_at(keeps, k), codec) for k, p in enumerate(packets[1:])]
     read: list[np.ndarray] = []
-    original = kinwave_live._decode_ints
+    original = live_decoder.decode_ints
 
     def recording(st, data, coded, first, count, state, last_nonzero, ints):
         result = original(st, data, coded, first, count, state, last_nonzero, ints)
         read.append(ints.copy())
         return result
 
-    kinwave_live._decode_ints = recording
+    live_decoder.decode_ints = recording
     try:
         decoder = LiveDecoder(StreamInfo.from_payload(packets[0].payload))
         decoded, described = [], []
@@ -102,7 +102,7 @@ def live_fixture(name, clip, frames, fps, knobs, keyframe_s, keeps=()) -> dict[s
             decoded.append(decoder.push(p))
             described.append({"frames": p.frames, "ints": [int(x.size) for x in read[before:]]})
     finally:
-        kinwave_live._decode_ints = original
+        live_decoder.decode_ints = original
     channels = np.concatenate(decoded)
     positions = motion.with_channels(channels).positions()
     meta = {

@@ -46,20 +46,28 @@ valid, coarser file without re-encoding. Angles are made continuous first
 
 from __future__ import annotations
 
-import struct
-
 import numpy as np
 
 from mocodec import perception
 from mocodec.codecs.base import (
     Codec,
-    Coded,
-    HeldFrames,
     Knob,
     QualityKnob,
     StreamDecoder,
     StreamEncoder,
-    continuous_frames,
+)
+from mocodec.codecs.perceptual import spihtcut, spihtstream
+from mocodec.codecs.perceptual.spihtlayout import (
+    ANCHOR_QUANTUM,
+    F_LEVELS,
+    N0_BITS,
+    QUANTUM,
+    SEAM_LIMIT,
+    U32,
+    anchor_frames,
+    channel_scale,
+    importance_levels,
+    level_weights,
 )
 from mocodec.codecs.registry import register
 from mocodec.codecs.shared import closedloop
@@ -70,37 +78,6 @@ from mocodec.coding.transforms import seams, wavelets
 from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.kinematics import forward_kinematics
 from mocodec.skeleton import Skeleton
-
-QUANTUM = 1.0 / 256  # degrees, or cm for translations: the finest SPIHT plane
-ANCHOR_QUANTUM = 0.1  # degrees, or cm: the root is pinned to within 0.05 cm
-N0_BITS = 6  # each channel stream starts with its top plane + 1 (0: all zero)
-SEAM_LIMIT = 2.0  # a seam step is removed up to twice the two sides' coding uncertainty
-F_LEVELS = 16  # importance sent as half-octave levels 1..15 below the segment's top; 0 = none
-_U32 = struct.Struct("<I")
-
-
-def channel_scale(skeleton: Skeleton) -> np.ndarray:
-    """Per channel, skeleton units (or degrees) per cm (or degree)."""
-    return np.where(skeleton.rotation_mask, 1.0, skeleton.units_per_metre / 100.0)
-
-
-def importance_levels(f: np.ndarray) -> np.ndarray:
-    """F as levels: 15 for the largest, one less per half octave below it, 1 at least; 0 for 0."""
-    top = f.max() if f.size else 0.0
-    if top <= 0:
-        return np.zeros(f.size, dtype=np.int64)
-    with np.errstate(divide="ignore"):
-        level = F_LEVELS - 1 + np.round(2 * np.log2(f / top))
-    return np.where(f > 0, np.clip(level, 1, F_LEVELS - 1), 0).astype(np.int64)
-
-
-def level_weights(levels: np.ndarray) -> np.ndarray:
-    return np.where(levels > 0, 2.0 ** ((levels - (F_LEVELS - 1)) / 2.0), 0.0)
-
-
-def anchor_frames(frames: int, window: int) -> np.ndarray:
-    starts = np.arange(0, frames, window)
-    return starts if frames - 1 in starts else np.append(starts, frames - 1)
 
 
 @register
@@ -152,20 +129,20 @@ class SpihtCodec(Codec):
         return self.config["window"]
 
     def encoder(self, skeleton: Skeleton, fps: float) -> StreamEncoder:
-        return _StreamEncoder(self, skeleton, fps)
+        return spihtstream.SpihtStreamEncoder(self, skeleton, fps)
 
     def decoder(self, skeleton: Skeleton, fps: float) -> StreamDecoder:
-        return _StreamDecoder(self, skeleton, fps)
+        return spihtstream.SpihtStreamDecoder(self, skeleton, fps)
 
     def _scores(self) -> dict[str, float]:
         legs, upper = self.config["leg_score"], self.config["upper_score"]
         return {p: (legs if p.endswith("_leg") else upper) for p in perception.DEFAULT_SCORES}
 
-    def _segments(self, frames: int) -> list[tuple[int, int]]:
+    def segments(self, frames: int) -> list[tuple[int, int]]:
         w = self.config["window"]
         return [(a, min(a + w, frames)) for a in range(0, frames, w)]
 
-    def _lines(self, anchors: np.ndarray, frames: int) -> np.ndarray:
+    def lines(self, anchors: np.ndarray, frames: int) -> np.ndarray:
         """The anchor-to-anchor lines for every frame ``(frames, channels)``."""
         idx = anchor_frames(frames, self.config["window"])
         t = np.arange(frames)
@@ -174,7 +151,7 @@ class SpihtCodec(Codec):
     def segment_budgets(self, frames: int, fps: float) -> np.ndarray:
         """B_T of every segment at the codec's bit rate."""
         return np.array(
-            [int(np.floor(self.config["bits_per_second"] * (b - a) / fps)) for a, b in self._segments(frames)],
+            [int(np.floor(self.config["bits_per_second"] * (b - a) / fps)) for a, b in self.segments(frames)],
             dtype=np.int64,
         )
 
@@ -185,8 +162,8 @@ class SpihtCodec(Codec):
         """A payload whose segments get the given SPIHT budgets B_T (crowd allocation, 6.5),
         instead of the codec's constant bit rate."""
         segment_bits = np.asarray(segment_bits, dtype=np.int64)
-        if segment_bits.shape != (len(self._segments(motion.num_frames)),) or segment_bits.min(initial=0) < 0:
-            raise CodecError(f"need {len(self._segments(motion.num_frames))} non-negative segment budgets")
+        if segment_bits.shape != (len(self.segments(motion.num_frames)),) or segment_bits.min(initial=0) < 0:
+            raise CodecError(f"need {len(self.segments(motion.num_frames))} non-negative segment budgets")
         return self.encode_body(motion, segment_bits)
 
     def encode_body(self, motion, segment_bits: np.ndarray) -> bytes:
@@ -198,10 +175,10 @@ class SpihtCodec(Codec):
         scale = channel_scale(sk)
         anchor_q = ANCHOR_QUANTUM * scale
         a_int = np.round(ch[anchor_frames(frames, cfg["window"])] / anchor_q).astype(np.int64)
-        residual = ch - self._lines(a_int * anchor_q, frames)
+        residual = ch - self.lines(a_int * anchor_q, frames)
         levels_f, streams = [], []
-        for (a, b), total in zip(self._segments(frames), segment_bits):
-            lv, bits = self._code_segment(sk, ch[a:b], residual[a:b], int(total))
+        for (a, b), total in zip(self.segments(frames), segment_bits):
+            lv, bits = self.code_segment(sk, ch[a:b], residual[a:b], int(total))
             levels_f.append(lv)
             streams += bits
         bits = np.concatenate(streams) if streams else np.zeros(0, dtype=np.uint8)
@@ -210,11 +187,11 @@ class SpihtCodec(Codec):
             encode_ints(np.diff(a_int, axis=0, prepend=0).T),
             encode_ints(np.diff(levels, axis=0, prepend=0).T),
             encode_ints(np.diff(segment_bits, prepend=0)),
-            _U32.pack(bits.size) + np.packbits(bits).tobytes(),
+            U32.pack(bits.size) + np.packbits(bits).tobytes(),
         ]
         return join_parts(parts)
 
-    def _code_segment(self, sk: Skeleton, values: np.ndarray, residual: np.ndarray, total: int):
+    def code_segment(self, sk: Skeleton, values: np.ndarray, residual: np.ndarray, total: int):
         """(importance levels, bit arrays) of one segment: its values and their residual from
         the anchor line, ``(frames, channels)``, under a budget of ``total`` bits."""
         cfg = self.config
@@ -277,7 +254,7 @@ class SpihtCodec(Codec):
 
         closedloop.code_down_tree(sk, np.where(active, values, line), active, forward_kinematics(sk, values)[1], code)
 
-    def _segment_streams(self, levels: np.ndarray, total: int, bits: np.ndarray, cursor: int, where: str):
+    def segment_streams(self, levels: np.ndarray, total: int, bits: np.ndarray, cursor: int, where: str):
         """Decode one segment's channel streams from ``bits[cursor:]``: yields (channel, start
         bit, bits used, coefficients, the bit plane it stopped in or -1)."""
         w, approx = self.config["window"], self.config["window"] >> self.n_levels
@@ -292,7 +269,7 @@ class SpihtCodec(Codec):
             yield c, cursor, N0_BITS + used, coeffs, plane
             cursor += N0_BITS + used
 
-    def _residual(self, coeffs: np.ndarray, skeleton: Skeleton, frames: int) -> np.ndarray:
+    def residual(self, coeffs: np.ndarray, skeleton: Skeleton, frames: int) -> np.ndarray:
         """The decoded residual of one segment ``(frames, channels)`` from its coefficients."""
         scale = channel_scale(skeleton)
         seg = wavelets.inverse(
@@ -300,14 +277,14 @@ class SpihtCodec(Codec):
         )
         return seg.T[:frames]
 
-    def _parse(self, body: bytes, skeleton: Skeleton, frames: int):
+    def parse_body(self, body: bytes, skeleton: Skeleton, frames: int):
         """(parts, anchor deltas, importance levels, segment budgets, bits) of a body, checked
         against the frames."""
         n_ch = skeleton.num_channels
         parts = split_parts(body, 4, "spiht payload")
         deltas = decode_ints(parts[0])
         level_changes = decode_ints(parts[1])
-        n_seg = len(self._segments(frames))
+        n_seg = len(self.segments(frames))
         if (
             deltas.size != anchor_frames(frames, self.config["window"]).size * n_ch
             or level_changes.size != n_seg * n_ch
@@ -319,18 +296,18 @@ class SpihtCodec(Codec):
         totals = np.cumsum(decode_ints(parts[2]))
         if totals.size != n_seg or totals.min(initial=0) < 0:
             raise CorruptStreamError("spiht payload: segment budgets do not match the frames")
-        (n_bits,) = _U32.unpack_from(parts[3])
+        (n_bits,) = U32.unpack_from(parts[3])
         bits = np.unpackbits(np.frombuffer(parts[3], dtype=np.uint8, offset=4))[:n_bits]
         if bits.size != n_bits or n_bits > totals.sum():
             raise CorruptStreamError(f"spiht payload: {n_bits} bits announced, {bits.size} present")
         return parts, deltas, levels_f, totals, bits
 
-    def _walk(self, levels_f, totals, bits, n_ch: int):
+    def walk_streams(self, levels_f, totals, bits, n_ch: int):
         """Decode every channel stream: yields (segment, channel, start bit, bits used, coeffs,
         stop plane)."""
         cursor = 0
         for k, total in enumerate(totals):
-            for c, start, used, coeffs, plane in self._segment_streams(
+            for c, start, used, coeffs, plane in self.segment_streams(
                 levels_f[k * n_ch : (k + 1) * n_ch], total, bits, cursor, f"segment {k}"
             ):
                 yield k, c, start, used, coeffs, plane
@@ -343,279 +320,43 @@ class SpihtCodec(Codec):
         n_ch = skeleton.num_channels
         if frames == 0:
             return np.zeros((0, n_ch))
-        _, deltas, levels_f, totals, bits = self._parse(body, skeleton, frames)
+        _, deltas, levels_f, totals, bits = self.parse_body(body, skeleton, frames)
         scale = channel_scale(skeleton)
         idx = anchor_frames(frames, cfg["window"])
         anchors = np.cumsum(deltas.reshape(n_ch, idx.size).T, axis=0) * (ANCHOR_QUANTUM * scale)
-        out = self._lines(anchors, frames)
-        segments = self._segments(frames)
+        out = self.lines(anchors, frames)
+        segments = self.segments(frames)
         coeffs = np.zeros((len(segments), n_ch, cfg["window"]))
         uncertainty = np.stack(
-            [self._uncertainty(levels_f[k * n_ch : (k + 1) * n_ch], skeleton) for k in range(len(segments))]
+            [self.uncertainty(levels_f[k * n_ch : (k + 1) * n_ch], skeleton) for k in range(len(segments))]
         )
-        for k, c, _, _, values, plane in self._walk(levels_f, totals, bits, n_ch):
+        for k, c, _, _, values, plane in self.walk_streams(levels_f, totals, bits, n_ch):
             coeffs[k, c] = values
             uncertainty[k, c] = 2.0 ** (plane + 1) * QUANTUM * scale[c]
         for k, (a, b) in enumerate(segments):
-            out[a:b] += self._residual(coeffs[k], skeleton, b - a)
+            out[a:b] += self.residual(coeffs[k], skeleton, b - a)
         if not self.seam_frames:
             return out
         limits = SEAM_LIMIT * (uncertainty[:-1] + uncertainty[1:])
         return seams.smooth_seams(out, [a for a, _ in segments[1:]], self.seam_frames, limits)
 
-    def _uncertainty(self, levels: np.ndarray, skeleton: Skeleton) -> np.ndarray:
+    def uncertainty(self, levels: np.ndarray, skeleton: Skeleton) -> np.ndarray:
         """How far each channel's decoded residual may be off before its stream is read: half
         an anchor step for a channel with no budget by choice (level 0), unknown otherwise."""
         return np.where(levels == 0, 0.5 * ANCHOR_QUANTUM * channel_scale(skeleton), np.inf)
 
     def truncator(self, body: bytes, skeleton: Skeleton, frames: int, fps: float):
-        """A function bits_per_second -> (the codec of that rate, the body cut to it, without
-        re-encoding: every segment budget shrinks by bits_per_second / the codec's rate, and
-        every channel stream keeps the prefix its new budget allows). The streams are
-        decoded once to find where each ends, so a rate search cuts many times cheaply."""
-        if frames == 0:
-            return lambda bps: (self._smaller(bps), body)
-        parts, _, levels_f, totals, bits = self._parse(body, skeleton, frames)
-        n_ch = skeleton.num_channels
-        streams = [(k, c, start, used) for k, c, start, used, _, _ in self._walk(levels_f, totals, bits, n_ch)]
-        rate_coded = np.array_equal(totals, self.segment_budgets(frames, fps))
-
-        def cut(bits_per_second: float) -> tuple[SpihtCodec, bytes]:
-            smaller = self._smaller(bits_per_second)
-            if rate_coded:
-                new_totals = smaller.segment_budgets(frames, fps)  # as if encoded at the new rate
-            else:  # explicit (crowd) budgets scale
-                new_totals = np.floor(totals * (bits_per_second / self.config["bits_per_second"])).astype(np.int64)
-            budgets = [
-                perception.allocate(level_weights(levels_f[k * n_ch : (k + 1) * n_ch]), int(t))
-                for k, t in enumerate(new_totals)
-            ]
-            keep = [
-                bits[start : start + min(used, int(budgets[k][c]))]
-                for k, c, start, used in streams
-                if budgets[k][c] > N0_BITS
-            ]
-            new_bits = np.concatenate(keep) if keep else np.zeros(0, dtype=np.uint8)
-            new_parts = [
-                parts[0],
-                parts[1],
-                encode_ints(np.diff(new_totals, prepend=0)),
-                _U32.pack(new_bits.size) + np.packbits(new_bits).tobytes(),
-            ]
-            return smaller, join_parts(new_parts)
-
-        return cut
+        return spihtcut.truncator(self, body, skeleton, frames, fps)
 
     def packet_cuts(self, packet: bytes, skeleton: Skeleton) -> np.ndarray:
-        """The bits each channel stream of a stream packet uses, in stream order: what
-        :meth:`packet_cutter` needs to cut the packet without decoding it (a sender works it
-        out once, a relay then cuts for every viewer)."""
-        _, _, levels, total, bits = self._packet_fields(packet, skeleton)
-        return np.array(
-            [used for _, _, used, _, _ in self._segment_streams(levels, total, bits, 0, "the packet")], dtype=np.int64
-        )
+        return spihtcut.packet_cuts(self, packet, skeleton)
 
     def packet_cutter(self, packet: bytes, skeleton: Skeleton, cuts: np.ndarray, fps: float):
-        """A function bits_per_second -> the packet cut to that rate (if below its own): every
-        channel keeps the prefix of its embedded stream its new share allows, so it decodes to a
-        coarser segment with no re-encoding, the same bytes as coding at that rate;
-        the packet is parsed once, so cutting it for many viewers costs a few array operations
-        each."""
-        head, parts, levels, total, bits = self._packet_fields(packet, skeleton)
-        frames = _PACKET.unpack_from(head)[1]
-        weights = level_weights(levels)
-        present = np.flatnonzero(perception.allocate(weights, total) > N0_BITS)
-        if cuts.size != present.size or cuts.min(initial=0) < 0 or cuts.sum() != bits.size:
-            raise CorruptStreamError("spiht packet: the cut table does not match the packet's streams")
-        starts = np.cumsum(cuts) - cuts
+        return spihtcut.packet_cutter(self, packet, skeleton, cuts, fps)
 
-        def cut(bits_per_second: float) -> bytes:
-            total_bits = max(int(np.floor(bits_per_second * frames / fps)), 0)
-            if total_bits >= total:
-                return packet
-            new = perception.allocate(weights, total_bits)[present]
-            keep = np.where(new > N0_BITS, np.minimum(cuts, new), 0)
-            # the kept prefixes, gathered in one indexing: work in proportion to what is kept
-            kept = bits[np.arange(keep.sum()) + np.repeat(starts - (np.cumsum(keep) - keep), keep)]
-            return head + join_parts(
-                [*parts[:-2], _U32.pack(total_bits), _U32.pack(kept.size) + np.packbits(kept).tobytes()]
-            )
-
-        return cut
-
-    def _packet_fields(self, packet: bytes, skeleton: Skeleton):
-        """(packet header bytes, parts, levels, segment budget, bits) of a stream packet."""
-        if len(packet) < _PACKET.size:
-            raise CorruptStreamError(f"spiht packet of {len(packet)} bytes is shorter than its header")
-        parts = split_parts(packet, None, "spiht packet", start=_PACKET.size)
-        if len(parts) not in (4, 5):
-            raise CorruptStreamError(f"spiht packet: {len(parts)} parts, expected 4 or 5")
-        levels = decode_ints(parts[-3])
-        total = _packet_total(parts[-2])
-        if len(parts[-1]) < _U32.size:
-            raise CorruptStreamError(
-                f"spiht packet: its bit stream part is {len(parts[-1])} bytes, shorter than its 4-byte length"
-            )
-        (n_bits,) = _U32.unpack_from(parts[-1])
-        bits = np.unpackbits(np.frombuffer(parts[-1], dtype=np.uint8, offset=4))[:n_bits]
-        if (
-            levels.size != skeleton.num_channels
-            or bits.size != n_bits
-            or levels.min(initial=0) < 0
-            or levels.max(initial=0) >= F_LEVELS
-        ):
-            raise CorruptStreamError("spiht packet: levels or bits do not fit the skeleton")
-        return packet[: _PACKET.size], parts, levels, int(total), bits
-
-    def _smaller(self, bits_per_second: float) -> SpihtCodec:
+    def smaller(self, bits_per_second: float) -> SpihtCodec:
         if bits_per_second > self.config["bits_per_second"]:
             raise CodecError(
                 f"cannot truncate to {bits_per_second:g} bit/s, above the coded {self.config['bits_per_second']:g}"
             )
         return SpihtCodec(**{**self.config, "bits_per_second": bits_per_second})
-
-
-_PACKET = struct.Struct("<BI")  # flags (1: carries the start anchors, 2: last segment), frames
-
-
-def _packet_total(part: bytes) -> int:
-    """A stream packet's segment budget B_T (a plain u32, so a relay rewrites it cheaply)."""
-    if len(part) != _U32.size:
-        raise CorruptStreamError(f"spiht packet: a {len(part)}-byte segment budget, expected {_U32.size}")
-    return _U32.unpack(part)[0]
-
-
-def _line(start: np.ndarray, end: np.ndarray, frames: int, span: int) -> np.ndarray:
-    t = np.arange(frames)[:, None] / max(span, 1)
-    return start + (end - start) * t
-
-
-class _StreamEncoder(StreamEncoder):
-    """Frames in, one packet per segment out, W + 1 frames behind (the batch coder's anchors,
-    lines and budgets, so the frames decode exactly as the whole clip would)."""
-
-    def __init__(self, codec: SpihtCodec, skeleton: Skeleton, fps: float):
-        self.codec, self.skeleton, self.fps = codec, skeleton, fps
-        self.window = codec.config["window"]
-        self.anchor_q = ANCHOR_QUANTUM * channel_scale(skeleton)
-        self.buffer = np.zeros((0, skeleton.num_channels))
-        self.previous: np.ndarray | None = None  # last continuous frame seen
-        self.start: np.ndarray | None = None  # the current segment's start anchor (ints)
-        self.out = HeldFrames(max(codec.seam_frames, seams.CONTEXT) if codec.seam_frames else 0)
-
-    def code(self, frames: np.ndarray) -> list[Coded]:
-        cont = continuous_frames("spiht", self.skeleton, self.fps, frames, self.previous)
-        if not len(cont):
-            return []
-        self.previous = cont[-1]
-        self.buffer = np.vstack((self.buffer, cont))
-        packets = []
-        while len(self.buffer) > self.window:
-            packets.append(self._coded(self.buffer[: self.window + 1], last=False))
-            self.buffer = self.buffer[self.window :]
-        return packets
-
-    def finish(self) -> list[Coded]:
-        if not len(self.buffer):
-            return []
-        packet = self._coded(self.buffer, last=True)
-        self.buffer = self.buffer[:0]
-        return [packet]
-
-    def _coded(self, values: np.ndarray, last: bool) -> Coded:
-        """A packet, the frames the decoder gives out for it (it holds the seam's context back)
-        and its cut table (each channel stream's length: :meth:`SpihtCodec.packet_cuts`)."""
-        packet = self._packet(values, last)
-        frames = self.out.out(len(values) if last else self.window, last)
-        return Coded(packet, frames, tuple(self.codec.packet_cuts(packet, self.skeleton).tolist()))
-
-    def _packet(self, values: np.ndarray, last: bool) -> bytes:
-        n = len(values) if last else self.window
-        first = self.start is None
-        start = np.round(values[0] / self.anchor_q).astype(np.int64) if self.start is None else self.start
-        self.start = start
-        end = np.round(values[-1] / self.anchor_q).astype(np.int64)
-        residual = values[:n] - _line(start * self.anchor_q, end * self.anchor_q, n, n - 1 if last else n)
-        total = int(np.floor(self.codec.config["bits_per_second"] * n / self.fps))
-        levels, streams = self.codec._code_segment(self.skeleton, values[:n], residual, total)
-        bits = np.concatenate(streams) if streams else np.zeros(0, dtype=np.uint8)
-        parts = ([encode_ints(start)] if first else []) + [
-            encode_ints(end - start),
-            encode_ints(levels),
-            _U32.pack(total),
-            _U32.pack(bits.size) + np.packbits(bits).tobytes(),
-        ]
-        self.start = end
-        return _PACKET.pack(int(first) | 2 * int(last), n) + join_parts(parts)
-
-
-class _StreamDecoder(StreamDecoder):
-    """Packets in, frames out, exactly as the whole clip decodes; a damaged or out-of-order
-    packet raises CorruptStreamError and leaves the decoder as it was."""
-
-    def __init__(self, codec: SpihtCodec, skeleton: Skeleton, fps: float):
-        self.codec, self.skeleton, self.fps = codec, skeleton, fps
-        self.anchor_q = ANCHOR_QUANTUM * channel_scale(skeleton)
-        self.start: np.ndarray | None = None
-        self.held = np.zeros((0, skeleton.num_channels))  # last frames, until their seam is smoothed
-        self.held_uncertainty = np.zeros(skeleton.num_channels)
-
-    def push(self, packet: bytes) -> np.ndarray:
-        """The frames this packet completes: the previous segment's held tail and this
-        segment but its own last frames, which wait for the next seam (all of it for the last
-        segment)."""
-        try:
-            frames, last, uncertainty = self._push(packet)
-        except CorruptStreamError:
-            raise
-        except Exception as e:  # noqa: BLE001 - a packet that does not parse
-            raise CorruptStreamError(f"spiht packet does not decode ({type(e).__name__}: {e})") from None
-        joined = np.vstack((self.held, frames))
-        if len(self.held):
-            limits = SEAM_LIMIT * (self.held_uncertainty + uncertainty)[None, :]
-            joined = seams.smooth_seams(joined, [len(self.held)], self.codec.seam_frames, limits)
-        self.held_uncertainty = uncertainty
-        hold = max(self.codec.seam_frames, seams.CONTEXT) if self.codec.seam_frames else 0
-        keep = 0 if last else min(hold, len(joined))
-        self.held = joined[len(joined) - keep :]
-        return joined[: len(joined) - keep]
-
-    def _push(self, packet: bytes) -> tuple[np.ndarray, bool, np.ndarray]:
-        flags, n = _PACKET.unpack_from(packet)
-        n_ch = self.skeleton.num_channels
-        if not 0 < n <= self.codec.config["window"]:
-            raise CorruptStreamError(f"spiht packet: {n} frames in a segment of {self.codec.config['window']}")
-        parts = split_parts(packet, None, "spiht packet", start=_PACKET.size)
-        start = self.start
-        if flags & 1:
-            start = decode_ints(parts.pop(0))
-        if start is None or len(parts) != 4 or start.size != n_ch:
-            raise CorruptStreamError("spiht packet: no start anchors (a packet is missing) or wrong layout")
-        end = start + decode_ints(parts[0])
-        levels = decode_ints(parts[1])
-        total = _packet_total(parts[2])
-        (n_bits,) = _U32.unpack_from(parts[3])
-        bits = np.unpackbits(np.frombuffer(parts[3], dtype=np.uint8, offset=4))[:n_bits]
-        if (
-            end.size != n_ch
-            or levels.size != n_ch
-            or bits.size != n_bits
-            or n_bits > total
-            or levels.min(initial=0) < 0
-            or levels.max(initial=0) >= F_LEVELS
-        ):
-            raise CorruptStreamError("spiht packet: anchors, levels or bits do not fit the skeleton")
-        coeffs = np.zeros((n_ch, self.codec.config["window"]))
-        uncertainty = self.codec._uncertainty(levels, self.skeleton)
-        scale = channel_scale(self.skeleton)
-        cursor = 0
-        for c, first, used, values, plane in self.codec._segment_streams(levels, total, bits, 0, "the packet"):
-            coeffs[c] = values
-            uncertainty[c] = 2.0 ** (plane + 1) * QUANTUM * scale[c]
-            cursor = first + used
-        if cursor != n_bits:
-            raise CorruptStreamError(f"spiht packet: {n_bits - cursor} bits left over")
-        out = _line(start * self.anchor_q, end * self.anchor_q, n, n - 1 if flags & 2 else n)
-        out += self.codec._residual(coeffs, self.skeleton, n)
-        self.start = end
-        return out, bool(flags & 2), uncertainty

@@ -30,7 +30,10 @@ class _RawDecoder(StreamDecoder):
     def push(self, packet: bytes) -> np.ndarray:
         if len(packet) % (4 * self.channels):
             raise CorruptStreamError(f"raw packet of {len(packet)} bytes is not whole frames of {self.channels} floats")
-        return np.frombuffer(packet, dtype="<f4").reshape(-1, self.channels).astype(np.float64)
+        values = np.frombuffer(packet, dtype="<f4").reshape(-1, self.channels)
+        if not np.isfinite(values).all():
+            raise CorruptStreamError("raw packet holds a value that is not a finite number")
+        return values.astype(np.float64)
 
 
 @register

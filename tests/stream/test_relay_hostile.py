@@ -14,6 +14,7 @@ import zlib
 import aiohttp
 import numpy as np
 import pytest
+from test_relay import SECRET, serving, token, viewers
 
 from mocodec.codecs import get_codec
 from mocodec.codecs.perceptual.spihtlayout import PACKET
@@ -25,7 +26,6 @@ from mocodec.stream.live import receive_clip, stream_clip
 from mocodec.stream.packets import CUTS, END, HEADER, Packet, pack_batch, split_batch, with_cuts
 from mocodec.stream.relay import BAD_MESSAGE, BAD_TOKEN, Limits
 from mocodec.stream.relay.server import Relay
-from test_relay import SECRET, serving, token, viewers
 
 pytestmark = pytest.mark.network  # a relay (and NATS) on loopback sockets
 

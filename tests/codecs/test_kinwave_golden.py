@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import hashlib
 import io
-from pathlib import Path
 
 import numpy as np
 
+from conftest import DATA  # noqa: E402
 from mocodec import load, moc, reexpress
 from mocodec.codecs import get_codec
 from mocodec.codecs.kinwave.payload import FINE_TURNS, LEAD_SHIFT, REST
@@ -22,7 +22,6 @@ from mocodec.formats import container
 from mocodec.kinematics import forward_kinematics
 from mocodec.metrics.pose import shell_errors
 
-DATA = Path(__file__).parent / "data"
 GOLDEN = DATA / "kinwave_reexpressed.moc"
 KNOBS = {"max_error_cm": 0.5, "error_measure": "shell", "effort": 3}
 DECODED_SHA256 = "0684696289745eb8300ebf4f11afd5dcd84adef2459b49ad2c3abfa33431f5b2"

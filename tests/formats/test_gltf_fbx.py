@@ -209,12 +209,24 @@ def test_a_damaged_gltf_gets_a_one_line_error(case, tmp_path):
     assert "\n" not in str(caught.value) and str(path) in str(caught.value)
 
 
-@pytest.mark.parametrize("cut", [0, 4, 11, 19, 30, 200])
-def test_a_truncated_glb_gets_a_one_line_error(cut, tmp_path):
+@pytest.mark.parametrize(
+    "cut, expected",
+    [
+        (0, "empty file"),
+        (4, "4 bytes: too short"),
+        (11, "11 bytes: too short"),
+        (19, "19 bytes: too short"),
+        (30, "bytes at byte 8, the file has 30"),
+        (200, "bytes at byte 8, the file has 200"),
+    ],
+)
+def test_a_truncated_glb_gets_a_one_line_error(cut, expected, tmp_path):
+    """How the file falls short: its size, or where its header says more."""
     data = _damaged(tmp_path, lambda g: None).read_bytes()
     (tmp_path / "cut.glb").write_bytes(data[:cut])
-    with pytest.raises(FormatError, match="empty file" if cut == 0 else ""):
+    with pytest.raises(FormatError, match=expected) as caught:
         load(tmp_path / "cut.glb")
+    assert "\n" not in str(caught.value) and "cut.glb" in str(caught.value)
 
 
 @pytest.mark.slow

@@ -3,12 +3,11 @@ where it was, and kinwave codes it in about the same bytes with its bound held."
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
+from conftest import DATA  # noqa: E402
 from mocodec import load, moc, reexpress
 from mocodec.codecs import get_codec
 from mocodec.kinematics import forward_kinematics
@@ -16,7 +15,6 @@ from mocodec.metrics.pose import shell_errors
 from mocodec.motion import Motion
 from mocodec.skeleton import Joint, Skeleton
 
-DATA = Path(__file__).parent / "data"
 BOUND = 1.0
 GROWTH = 0.15  # any one re-expression of one short test clip (the search lands anywhere in 90-100%
 # of the bound, a few percent of bytes either way)

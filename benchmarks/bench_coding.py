@@ -10,7 +10,7 @@ import numpy as np
 
 from mocodec.coding.entropy import huffman, rangecoder, rle
 from mocodec.coding.entropy.bitio import BitReader, BitWriter, zigzag
-from mocodec.coding.quantisation.quantizers import AdaptiveQuantizer, MuLawQuantizer, UniformQuantizer
+from mocodec.coding.quantisation.quantisers import AdaptiveQuantiser, MuLawQuantiser, UniformQuantiser
 
 N = 1_000_000
 
@@ -56,13 +56,13 @@ def main() -> None:
     )
     f = rng.laplace(0, 3, N)
     for name, q in (
-        ("uniform quantiser 256", UniformQuantizer(-30, 30, 256)),
-        ("mu-law quantiser 256", MuLawQuantizer(255, 30, 256)),
+        ("uniform quantiser 256", UniformQuantiser(-30, 30, 256)),
+        ("mu-law quantiser 256", MuLawQuantiser(255, 30, 256)),
     ):
-        e, _ = rate(lambda: q.reconstruct(q.quantize(f)))
+        e, _ = rate(lambda: q.reconstruct(q.quantise(f)))
         print(f"{name + ' (q + r)':<34}{e:>8.2f}")
-    aq = AdaptiveQuantizer(16, 1.0, 1e-3, 1e3)
-    e, _ = rate(lambda: aq.quantize(f))
+    aq = AdaptiveQuantiser(16, 1.0, 1e-3, 1e3)
+    e, _ = rate(lambda: aq.quantise(f))
     print(f"{'adaptive quantiser 16 (7-7)':<34}{e:>8.2f}")
     zeros = np.where(rng.random(N) < 0.9, 0, x)
     e, runs = rate(lambda: rle.encode_zero_runs(zeros))

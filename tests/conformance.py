@@ -16,7 +16,7 @@ import stepcodec  # noqa: F401  (registers test-step)
 from mocodec import moc
 from mocodec.codecs import codec_class, codec_from_config, codec_ids, get_codec, packet_codecs
 from mocodec.errors import CodecError, CorruptStreamError
-from mocodec.stream.live import LiveEncoder, receive_clip, refresh_frames, stream_clip
+from mocodec.stream.live import LiveEncoder, keyframe_frames, receive_clip, stream_clip
 from mocodec.stream.packets import HEADER
 
 CODECS = codec_ids()
@@ -181,7 +181,7 @@ def test_every_streaming_codec_goes_through_live_packets(walk_bvh, cid):
     codec = get_codec(cid)
     packets = stream_clip(walk_bvh, codec)
     assert packets[0].kind == HEADER and packets[-1].end
-    assert sum(p.keyframe for p in packets) >= walk_bvh.num_frames // refresh_frames(codec, 120, 1.0)
+    assert sum(p.keyframe for p in packets) >= walk_bvh.num_frames // keyframe_frames(codec, 120, 1.0)
     frames = [(p.first_frame, p.frames) for p in packets[1:]]
     assert all(a + n == b for (a, n), (b, _) in zip(frames, frames[1:]))  # ranges tile the clip
     got = receive_clip(packets)
@@ -189,7 +189,7 @@ def test_every_streaming_codec_goes_through_live_packets(walk_bvh, cid):
     batch = codec.decode(codec.encode(walk_bvh), walk_bvh.skeleton, walk_bvh.num_frames, walk_bvh.fps)
     if cid in RANGE_FROM_FIRST_FRAMES:
         return
-    # intra refresh costs some quality against one uninterrupted stream, within a small factor
+    # a keyframe every second costs some quality against one uninterrupted stream, within a small factor
     assert wrapped_error(got.channels, walk_bvh.channels) < 3 * wrapped_error(batch.channels, walk_bvh.channels) + 1
 
 

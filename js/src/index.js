@@ -9,6 +9,6 @@ export { KinwaveLiveDecoder, packetFrames } from './kinwave-live.js';
 export { forwardKinematics } from './kinematics.js';
 export { decodeMoc, openMoc } from './moc.js';
 export { unpackSkeleton } from './compact-skeleton.js';
-export { HoldingDecoder, StreamDecoder, hasDecoder } from './stream.js';
+export { HoldingDecoder, LiveDecoder, hasDecoder } from './stream.js';
 export { JitterBuffer } from './jitter.js';
 export { Avatar, RelayClient } from './relay-client.js';

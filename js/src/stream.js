@@ -12,7 +12,7 @@ export function hasDecoder(id) {
   return Object.hasOwn(DECODERS, id);
 }
 
-export class StreamDecoder {
+export class LiveDecoder {
   // `info`: a parsed stream header (parseStreamHeader).
   constructor(info) {
     const Decoder = DECODERS[info.codec.codec];
@@ -81,13 +81,13 @@ export class StreamDecoder {
 export const MAX_MISSING = 64; // stream/live.py's: a gap waited for, and packets held behind it
 export const MAX_HELD = 256;
 
-// A StreamDecoder that, in step, waits for the packets of a gap in the sequence (the relay resends
+// A LiveDecoder that, in step, waits for the packets of a gap in the sequence (the relay resends
 // them on request, `wanted()`): it holds the packets after the gap for up to `holdS` of frames
 // and decodes them in order up to the next gap as each is filled (stream/live.LiveDecoder's hold_s). `push(p)`
 // returns the packets decoded now, each as {packet, frames} (frames null: not decodable).
 export class HoldingDecoder {
   constructor(info, holdS) {
-    this.stream = new StreamDecoder(info);
+    this.stream = new LiveDecoder(info);
     this.holdFrames = Math.ceil(holdS * info.fps);
     this.missing = new Set();
     this.held = new Map(); // sequence -> packet
@@ -143,7 +143,7 @@ export class HoldingDecoder {
     return this.#decode(held);
   }
 
-  // Each packet through the StreamDecoder in turn; a damaged one is given as frames null with
+  // Each packet through the LiveDecoder in turn; a damaged one is given as frames null with
   // its error, and the rest still decode.
   #decode(packets) {
     return packets.map((packet) => {

@@ -34,5 +34,7 @@ class CodecError(MocodecError):
     """A codec cannot do what was asked: unknown id, bad knob, unencodable input, unmet target."""
 
 
-class OutOfStepError(MocodecError):
-    """A stream decoder that lost packets has not yet reached a packet it can decode from."""
+class OutOfStepError(CorruptStreamError):
+    """A stream packet that cannot be decoded yet: its receiver lost packets, or joined after
+    the stream's start, and has not reached a packet it can go on from (a keyframe or a
+    restart point)."""

@@ -42,7 +42,7 @@ class Measurement:
 
 
 def coded_size(data: bytes, whole_file: bool = True) -> int:
-    """Bytes of a .moc file, or only of its chunk payloads (the coded motion without the
+    """Bytes of a .moc file, or only of its chunk bodies (the coded motion without the
     skeleton and header, the convention of the theses' ratios)."""
     if whole_file:
         return len(data)
@@ -209,7 +209,7 @@ def _direct(
             if best is None or m.ratio < best.ratio:
                 best = m
         # the file came out (size - wanted) bytes off: take that much more (or less) off the
-        # payloads, aiming at the middle of the tolerance
+        # bodies, aiming at the middle of the tolerance
         wanted = motion.raw_bits / 8 / value if target == "ratio" else value * motion.duration / 8
         overhead += coded_size(m.data, whole_file) - wanted * (1 - tolerance / 2)
     return best

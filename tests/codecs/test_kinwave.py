@@ -170,7 +170,7 @@ def test_time_adaptive_steps_hold_the_bound(walk_amc):
     (window 128: 4 segments), flagged in the payload, and the bound still holds. Off by
     default: since far-off frames round their coefficients plainly, one scale gives smaller
     files on every source (docs/kinwave.md)."""
-    from mocodec.codecs.kinwave.payload import FLAG_OFFSETS
+    from mocodec.codecs.kinwave.body import FLAG_OFFSETS
 
     assert not get_codec("kinwave").config["segment_steps"]
     for measure in ("shell", "joint"):
@@ -187,8 +187,8 @@ def test_frames_far_off_round_their_coefficients_plainly(walk_amc):
     target by more than FAR_STEPS steps, the coefficients reaching that frame go from the dead
     zone's rounding to the nearest integer (one more in magnitude, nothing else changes),
     those frames come closer, and the output is what the decoder's reconstruction gives."""
+    from mocodec.codecs.kinwave.body import ConstantCoding, reconstruct, segment_factors
     from mocodec.codecs.kinwave.encoder import FAR_STEPS
-    from mocodec.codecs.kinwave.payload import ConstantCoding, reconstruct, segment_factors
 
     enc = BoundSearch(get_codec("kinwave", max_error_cm=0.5, error_measure="shell"), walk_amc)
     target = np.cumsum(np.random.default_rng(7).normal(0.0, 1.0, (8, enc.frames)), axis=1)
@@ -280,7 +280,7 @@ def test_coding_forms_shrink_files_within_the_bound(walk_amc):
     Euler angles under a max bound, and may change form under a mean bound."""
     from conftest import DATA
     from mocodec import load
-    from mocodec.codecs.kinwave.payload import FLAG_FORMS, three_angle_groups
+    from mocodec.codecs.kinwave.body import FLAG_FORMS, three_angle_groups
 
     run = load(DATA / "09_02.bvh")
     for measure in ("mean", "joint"):
@@ -321,7 +321,7 @@ def test_an_isolated_glitch_frame_is_coded_apart(walk_bvh):
     """One frame 25 degrees off on every angle (a glitch) is found, coded apart (flag 128),
     and costs 4-16% (where the search lands on the clip without it) instead of the wavelet's 60%;
     the bound holds on the glitch too."""
-    from mocodec.codecs.kinwave.payload import FLAG_ISOLATED
+    from mocodec.codecs.kinwave.body import FLAG_ISOLATED
 
     glitch = walk_bvh.channels.copy()
     glitch[200] += np.where(walk_bvh.skeleton.rotation_mask, 25.0, 5.0)
@@ -356,7 +356,7 @@ def test_a_leading_rest_pose_costs_a_flag(walk_bvh, walk_amc, measure, at_zero):
     """A rest pose in frame 0 (every rotation 0; the translations frame 1's, or all 0) is not
     coded: the body is the rest of the clip's, in format 2 with one byte more, and decodes to
     that pose exactly (the copied translations within the bound)."""
-    from mocodec.codecs.kinwave.payload import REST, REST_AT_ZERO, with_more
+    from mocodec.codecs.kinwave.body import REST, REST_AT_ZERO, with_more
     from mocodec.reexpress import with_bind_frame
 
     for motion in (walk_bvh, walk_amc):
@@ -382,7 +382,7 @@ def test_a_rest_pose_leaves_the_chunks_of_a_file_as_they_were(walk_bvh):
     chunk's flag byte."""
     import io
 
-    from mocodec.codecs.kinwave.payload import REST, with_more
+    from mocodec.codecs.kinwave.body import REST, with_more
     from mocodec.formats import container
     from mocodec.reexpress import with_bind_frame
 
@@ -421,7 +421,7 @@ def test_a_clip_cut_off_its_grid_is_coded_on_it(walk_bvh, trim):
     (:func:`trendwave.grid_phase`): cut ``trim`` frames later, the layout's lead puts the
     wavelet grid back on those frames (format 2, the lead in the more flags). At the same steps
     the bytes are within 3% of the uncut clip's, and without the lead 5% more; the bound holds."""
-    from mocodec.codecs.kinwave.payload import LEAD_SHIFT
+    from mocodec.codecs.kinwave.body import LEAD_SHIFT
 
     codec = get_codec("kinwave", max_error_cm=0.2, keyframes=False)
     clip = walk_bvh[trim:]
@@ -443,7 +443,7 @@ def test_bones_in_position_channels_cost_only_their_constants(walk_amc):
     error is within 2% of the clip's own, so the bound's search lands where it does for the
     clip, and it costs at most two bytes more a constant (12 bits for a 20 cm bone at a
     64th of a 0.3 cm step); the clip itself does not take them."""
-    from mocodec.codecs.kinwave.payload import FINE_CONSTANTS
+    from mocodec.codecs.kinwave.body import FINE_CONSTANTS
     from mocodec.reexpress import with_position_channels
 
     codec = get_codec("kinwave", max_error_cm=1.0, error_measure="shell")
@@ -469,7 +469,7 @@ def test_a_turned_dummy_root_takes_fine_turns(walk_bvh):
     (0, 90, 0) above the body's root) is coded at a 64th of its step (more flags bit 5): its
     error turns that translation, which may be metres long. Every other constant rotation keeps
     the 8th, and a clip without such a joint does not set the flag."""
-    from mocodec.codecs.kinwave.payload import (
+    from mocodec.codecs.kinwave.body import (
         CONST_FRACTION,
         FINE_CONST_FRACTION,
         FINE_TURNS,

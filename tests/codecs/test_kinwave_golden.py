@@ -17,7 +17,7 @@ import numpy as np
 from conftest import DATA  # noqa: E402
 from mocodec import load, moc, reexpress
 from mocodec.codecs import get_codec
-from mocodec.codecs.kinwave.payload import FINE_TURNS, LEAD_SHIFT, REST
+from mocodec.codecs.kinwave.body import FINE_TURNS, LEAD_SHIFT, REST
 from mocodec.formats import container
 from mocodec.kinematics import forward_kinematics
 from mocodec.metrics.pose import shell_errors

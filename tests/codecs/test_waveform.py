@@ -10,7 +10,7 @@ from mocodec.codecs import get_codec
 from mocodec.codecs.waveform.deadreckoning import update_intervals
 from mocodec.coding.entropy import intcoder
 from mocodec.coding.quantisation import predictive
-from mocodec.coding.quantisation.quantizers import MuLawQuantizer, UniformQuantizer
+from mocodec.coding.quantisation.quantisers import MuLawQuantiser, UniformQuantiser
 from mocodec.coding.transforms import blockdct, blocks, subbands
 from mocodec.metrics import compare
 from mocodec.motion import Motion
@@ -65,13 +65,13 @@ def test_intcoder_bounded_codes_round_trip_across_packets_near_their_conditional
 
 
 @pytest.mark.parametrize(
-    "quantizer", [UniformQuantizer(-1.0, 1.0, 8), UniformQuantizer(-1.0, 1.0, 5), MuLawQuantizer(8.0, 1.0, 16)]
+    "quantiser", [UniformQuantiser(-1.0, 1.0, 8), UniformQuantiser(-1.0, 1.0, 5), MuLawQuantiser(8.0, 1.0, 16)]
 )
-def test_quantiser_tables_agree_with_the_quantisers(quantizer):
-    decisions, levels = quantizer.table()
+def test_quantiser_tables_agree_with_the_quantisers(quantiser):
+    decisions, levels = quantiser.table()
     x = np.linspace(-1.3, 1.3, 1001)
-    assert np.array_equal(np.searchsorted(decisions, x, side="right"), quantizer.quantize(x))
-    assert np.allclose(levels, quantizer.reconstruct(np.arange(quantizer.levels)))
+    assert np.array_equal(np.searchsorted(decisions, x, side="right"), quantiser.quantise(x))
+    assert np.allclose(levels, quantiser.reconstruct(np.arange(quantiser.levels)))
 
 
 def test_closed_loop_does_not_accumulate_error():
@@ -79,7 +79,7 @@ def test_closed_loop_does_not_accumulate_error():
     # keeps every sample within half a step of the input while the steps are not overloaded
     rng = np.random.default_rng(2)
     x = np.cumsum(rng.uniform(-0.9, 0.9, (5000, 3)), axis=0)  # |d| <= 0.9 + 1/16: no overload
-    decisions, levels = UniformQuantizer(-1.0, 1.0, 16).table()
+    decisions, levels = UniformQuantiser(-1.0, 1.0, 16).table()
     codes = np.zeros(x.shape, dtype=np.int64)
     centre = np.zeros(3)
     out = predictive.run_table(x, codes, False, centre.copy(), centre, np.ones(3), np.ones(3), decisions, levels)

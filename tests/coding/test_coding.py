@@ -10,7 +10,7 @@ from hypothesis.extra import numpy as hnp
 
 from mocodec.coding.entropy import huffman, rangecoder, rle
 from mocodec.coding.entropy.bitio import BitReader, BitWriter, unzigzag, zigzag
-from mocodec.coding.quantisation.quantizers import AdaptiveQuantizer, MuLawQuantizer, UniformQuantizer, multipliers
+from mocodec.coding.quantisation.quantisers import AdaptiveQuantiser, MuLawQuantiser, UniformQuantiser, multipliers
 from mocodec.errors import CorruptStreamError
 
 small_ints = hnp.arrays(np.int64, st.integers(0, 300), elements=st.integers(-50, 50))
@@ -53,24 +53,24 @@ def test_zigzag_round_trip(x):
 
 # ----- quantisers (7-3) to (7-7) -----------------------------------------------------------
 def test_uniform_quantiser_levels_and_midpoints():
-    q = UniformQuantizer(-10.0, 10.0, 8)
+    q = UniformQuantiser(-10.0, 10.0, 8)
     assert q.decision_levels().tolist() == [-10, -7.5, -5, -2.5, 0, 2.5, 5, 7.5, 10]
-    assert q.reconstruct(q.quantize([-10.0, -9.9, 0.1, 9.99, 99.0])).tolist() == [-8.75, -8.75, 1.25, 8.75, 8.75]
+    assert q.reconstruct(q.quantise([-10.0, -9.9, 0.1, 9.99, 99.0])).tolist() == [-8.75, -8.75, 1.25, 8.75, 8.75]
 
 
 @given(hnp.arrays(np.float64, st.integers(1, 100), elements=st.floats(-10, 10)), st.sampled_from([4, 16, 64, 256]))
 def test_uniform_error_is_at_most_half_a_step(x, levels):
-    q = UniformQuantizer(-10.0, 10.0, levels)
-    assert np.abs(q.reconstruct(q.quantize(x)) - x).max() <= q.step / 2 + 1e-12
+    q = UniformQuantiser(-10.0, 10.0, levels)
+    assert np.abs(q.reconstruct(q.quantise(x)) - x).max() <= q.step / 2 + 1e-12
 
 
 def test_mu_law_levels_follow_7_5():
-    q = MuLawQuantizer(mu=255.0, limit=10.0, levels=8)
+    q = MuLawQuantiser(mu=255.0, limit=10.0, levels=8)
     d = q.decision_levels()
     assert d[0] == 0 and d[-1] == pytest.approx(10.0)
     assert d[1] == pytest.approx(10 * (256**0.25 - 1) / 255)  # i = 1 of N/2 = 4
     assert np.all(np.diff(d, 2) > 0)  # levels widen outwards
-    codes = q.quantize([-12.0, -0.01, 0.01, 12.0])
+    codes = q.quantise([-12.0, -0.01, 0.01, 12.0])
     assert codes.tolist() == [0, 3, 4, 7]
     r = q.reconstruct(codes)
     assert r[1] == -r[2] and r[0] == -r[3]
@@ -78,17 +78,17 @@ def test_mu_law_levels_follow_7_5():
 
 @given(hnp.arrays(np.float64, st.integers(1, 200), elements=st.floats(-1e3, 1e3)), st.sampled_from([4, 8, 16, 32]))
 def test_adaptive_quantiser_decoder_follows_the_encoder(x, levels):
-    q = AdaptiveQuantizer(levels, step=1.0, step_min=1e-3, step_max=1e3)
-    codes, recon = q.quantize(x)
+    q = AdaptiveQuantiser(levels, step=1.0, step_min=1e-3, step_max=1e3)
+    codes, recon = q.quantise(x)
     assert codes.min() >= -levels // 2 and codes.max() < levels // 2
     assert np.array_equal(q.reconstruct(codes), recon)
 
 
 def test_adaptive_step_grows_on_large_codes_and_shrinks_on_small():
-    q = AdaptiveQuantizer(8, step=1.0, step_min=1e-3, step_max=1e3)
-    _, big = q.quantize(np.full(10, 500.0))
+    q = AdaptiveQuantiser(8, step=1.0, step_min=1e-3, step_max=1e3)
+    _, big = q.quantise(np.full(10, 500.0))
     assert big[-1] > 100  # tracked the jump
-    codes, small = q.quantize(np.full(40, 0.001))
+    codes, small = q.quantise(np.full(40, 0.001))
     assert np.all(np.abs(codes) <= 1) and abs(small[-1]) < 0.01
     assert multipliers(8).tolist() == [0.9, 0.9, 1.25, 1.75]  # Jayant's 3-bit table
 

@@ -6,7 +6,7 @@ import assert from 'node:assert/strict';
 import { readFile } from 'node:fs/promises';
 import { deflateSync, gunzipSync, inflateSync } from 'node:zlib';
 import {
-  DecodeError, HoldingDecoder, Reader, RelayClient, StreamDecoder, forwardKinematics, parseStreamHeader, splitBatch,
+  DecodeError, HoldingDecoder, Reader, RelayClient, LiveDecoder, forwardKinematics, parseStreamHeader, splitBatch,
 } from '../../js/src/index.js';
 import { seeded } from './seeded.mjs';
 import { crc16 } from '../../js/src/bytes.js';
@@ -30,7 +30,7 @@ async function decodeAll(stream) {
   const reader = new Reader();
   const packets = splitBatch(stream).map((raw) => reader.read(raw));
   const info = await parseStreamHeader(packets[0].payload);
-  const decoder = new StreamDecoder(info);
+  const decoder = new LiveDecoder(info);
   const frames = [];
   const ints = [];
   for (const p of packets.slice(1)) {
@@ -136,7 +136,7 @@ test('damaged streams end in DecodeError, never another error or a hang', async 
   const info = await parseStreamHeader(packets[0].payload);
   let errors = 0;
   for (let trial = 0; trial < 300; trial++) {
-    const decoder = new StreamDecoder(info);
+    const decoder = new LiveDecoder(info);
     for (const p of packets.slice(1)) {
       const payload = Uint8Array.from(p.payload);
       if (payload.length && random() < 0.3) {
@@ -201,7 +201,7 @@ test('stream headers with hostile values end in DecodeError or decode', async ()
     const [holder, key] = holders[Math.floor(random() * holders.length)];
     holder[key] = hostile[Math.floor(random() * hostile.length)];
     try {
-      const decoder = new StreamDecoder(await headerOf(doc));
+      const decoder = new LiveDecoder(await headerOf(doc));
       for (const p of packets.slice(1, 12)) decoder.push(p);
     } catch (e) {
       if (!(e instanceof DecodeError)) throw new Error(`${key} = ${JSON.stringify(holder[key])}: ${e.stack}`);
@@ -216,7 +216,7 @@ test('a stream of another format revision is refused with a DecodeError that say
     const older = structuredClone(doc);
     if (revision === undefined) delete older.codec.revision;
     else older.codec.revision = revision;
-    const decoder = new StreamDecoder(await headerOf(older));
+    const decoder = new LiveDecoder(await headerOf(older));
     assert.throws(() => decoder.push(packets[1]), (e) => e instanceof DecodeError && /format revision/.test(e.message));
   }
 });
@@ -240,7 +240,7 @@ test('a packet says by its check how many layers a relay cut off; more than its 
     const raws = splitBatch(stream);
     const reader = new Reader();
     const packets = raws.map((raw) => reader.read(raw));
-    const decoder = new StreamDecoder(await parseStreamHeader(packets[0].payload));
+    const decoder = new LiveDecoder(await parseStreamHeader(packets[0].payload));
     decoder.push(packets[1]);
     const again = new Reader();
     again.read(raws[0]);

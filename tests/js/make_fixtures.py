@@ -266,7 +266,7 @@ def moc_fixtures() -> dict[str, bytes]:
 def steps_table() -> bytes:
     """Python's quantiser steps of every kinwave step code and segment offset factors, which the
     JavaScript decoder makes from eight constants (js/src/steps.js)."""
-    from mocodec.codecs.kinwave.payload import code_step
+    from mocodec.codecs.kinwave.body import code_step
 
     table = {
         "code_steps": [code_step(c) for c in range(256)],

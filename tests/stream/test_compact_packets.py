@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from mocodec.codecs import get_codec
-from mocodec.errors import CorruptStreamError
+from mocodec.errors import CorruptStreamError, OutOfStepError
 from mocodec.stream.live import stream_clip
-from mocodec.stream.packets import HEADER, OutOfSync, Reader, parse
+from mocodec.stream.packets import HEADER, Reader, parse
 
 
 @pytest.fixture(scope="module")
@@ -88,7 +88,7 @@ def test_a_joiner_waits_for_a_keyframe(packets):
     reader = Reader()
     reader.read(packets[0].to_bytes())
     key = next(k for k, p in enumerate(packets) if k > 2 and p.keyframe)
-    with pytest.raises(OutOfSync):
+    with pytest.raises(OutOfStepError):
         reader.read(packets[key - 1].to_bytes())
     assert _same(reader.read(packets[key].to_bytes()), packets[key])
     assert _same(reader.read(packets[key + 1].to_bytes()), packets[key + 1])

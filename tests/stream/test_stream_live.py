@@ -1,4 +1,4 @@
-"""Live streams: the packet format, intra refresh, loss concealment, tokens."""
+"""Live streams: the packet format, keyframes, loss concealment, tokens."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import pytest
 from mocodec.codecs import get_codec
 from mocodec.errors import CorruptStreamError
 from mocodec.stream import tokens
-from mocodec.stream.live import LiveDecoder, receive_clip, refresh_frames, stream_clip
+from mocodec.stream.live import LiveDecoder, keyframe_frames, receive_clip, stream_clip
 from mocodec.stream.packets import (
     DATA,
     SEQUENCE_OFFSET,
@@ -91,7 +91,7 @@ def test_a_lost_packet_is_concealed_and_the_receiver_resyncs_at_the_next_keyfram
     held = got[first_lost:resync]
     assert np.all(held == got[first_lost - 1])  # held, not garbage
     np.testing.assert_array_equal(got[resync:], clean[resync:])  # exact again after the keyframe
-    assert resync - first_lost <= refresh_frames(get_codec("dpcm"), 120, 0.5)
+    assert resync - first_lost <= keyframe_frames(get_codec("dpcm"), 120, 0.5)
 
 
 def test_a_receiver_that_holds_decodes_a_late_packet_in_step(walk_bvh):

@@ -380,7 +380,7 @@ def _published_tables(rows) -> list:
             "001 table 5.1: primitives at t_L = 0.01",
             ["clip", "thesis ratio", "our ratio", "our mean cm"],
             body,
-            "The thesis counts the payload and keeps its primitive database outside; our files carry everything.",
+            "The thesis counts the body and keeps its primitive database outside; our files carry everything.",
         )
     )
     pw = defaultdict(list)

@@ -226,7 +226,7 @@ def add_commands(sub) -> None:
     p.add_argument(
         "--codebook",
         help="the VQ codebook file (svq, tvq) the file was coded with; a file never "
-        "names what is opened, the payload's fingerprint is checked against it",
+        "names what is opened, the body's fingerprint is checked against it",
     )
     p.add_argument("--db", help="the primitive or rhythm database (primitives, rhythmic) the file was coded with")
     p.add_argument("--tables", help="the motion tables (posture, gesture) the file was coded with")

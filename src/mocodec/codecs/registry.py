@@ -92,7 +92,7 @@ def codec_from_untrusted(config: object, where: str, local_files: dict[str, str]
     dict naming a codec, with knobs a dict of strings, numbers and booleans, each parsed by its
     knob. A knob that names a local file (:attr:`Knob.path`) is never taken from the config
     (a file could make the reader open ``/dev/zero``, or learn which paths exist): it is the
-    caller's ``local_files`` entry, or empty; the payload names the model it needs by content
+    caller's ``local_files`` entry, or empty; the body names the model it needs by content
     hash, and the codec checks the one given against it. CorruptStreamError names ``where``."""
     knobs = checked_config(config, where)
     assert isinstance(config, dict)  # checked_config refuses anything else

@@ -121,7 +121,7 @@ def skeleton_from_dict(data: dict) -> Skeleton:
 class Chunk:
     first: int
     count: int
-    payload: bytes
+    body: bytes
 
 
 def pack(header: dict, chunks: list[Chunk], embed_skeleton: bool = True) -> bytes:
@@ -145,9 +145,9 @@ def pack(header: dict, chunks: list[Chunk], embed_skeleton: bool = True) -> byte
         if chunk.first != expected or chunk.count < 1:
             raise ValueError(f"chunk of frames {chunk.first}+{chunk.count} does not follow frame {expected}")
         expected += chunk.count
-        body = varint.pack(len(chunk.payload)) + chunk.payload
-        index += varint.pack(chunk.count) + varint.pack(len(body) + 4)
-        out += body + _U32.pack(zlib.crc32(body))
+        framed = varint.pack(len(chunk.body)) + chunk.body
+        index += varint.pack(chunk.count) + varint.pack(len(framed) + 4)
+        out += framed + _U32.pack(zlib.crc32(framed))
     index += _U32.pack(zlib.crc32(index))
     out += index + _FOOTER.pack(len(index), FOOTER_MAGIC)
     return bytes(out)

@@ -199,11 +199,11 @@ class _Document:
                     raise self.fail(f"buffer {index} has no data (no uri and no .glb binary chunk)")
                 data = self.binary_chunk
             elif isinstance(uri, str) and uri.startswith("data:"):
-                head, _, payload = uri.partition(",")
+                head, _, body = uri.partition(",")
                 if not head.endswith(";base64"):
                     raise self.fail(f"buffer {index}: data URI is not base64")
                 try:
-                    data = base64.b64decode(payload, validate=True)
+                    data = base64.b64decode(body, validate=True)
                 except (binascii.Error, ValueError):
                     raise self.fail(f"buffer {index}: data URI is not valid base64") from None
             else:

@@ -22,11 +22,11 @@ import aiohttp
 import numpy as np
 
 from mocodec.codecs.base import Codec
-from mocodec.errors import MocodecError
+from mocodec.errors import MocodecError, OutOfStepError
 from mocodec.motion import Motion
 from mocodec.stream.jitter import JitterBuffer
 from mocodec.stream.live import TICK_HZ, LiveDecoder, clip_encoder, tick_frames
-from mocodec.stream.packets import HEADER, MAX_REPAIRS, OutOfSync, Packet, Reader, StreamInfo, pack_batch, split_batch
+from mocodec.stream.packets import HEADER, MAX_REPAIRS, Packet, Reader, StreamInfo, pack_batch, split_batch
 
 
 class RelayRefused(MocodecError):
@@ -163,7 +163,7 @@ class Watcher:
                     decoder = LiveDecoder(StreamInfo.from_payload(p.payload), self.conceal, hold_s=self.hold_s)
                     self.decoders[p.stream] = decoder
                     self.frames[p.stream], self.counts[p.stream], self.bytes[p.stream] = [], 0, 0
-            except OutOfSync:  # joined mid-stream: the stream starts for us at its next keyframe
+            except OutOfStepError:  # joined mid-stream: the stream starts for us at its next keyframe
                 continue
             except MocodecError:
                 self.refused += 1

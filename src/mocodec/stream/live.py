@@ -1,12 +1,12 @@
-"""Live streams: a codec's stream encoder and decoder wrapped in packets, with intra refresh
-and loss concealment.
+"""Live streams: a codec's stream encoder and decoder wrapped in packets, with keyframes and
+loss concealment.
 
 Every ``keyframe_s`` seconds (rounded up to the codec's block, so a segment coder is not cut
 short) the sender ends the codec stream and starts a new one; the first packet of each is a
 *keyframe*, decodable with nothing before it. A frame-recursive coder's new stream is primed
 with the last second of input so its parameters fit the motion (:meth:`StreamEncoder.prime`).
 A receiver that joins late, or loses a packet, drops what it cannot decode until the next
-keyframe and conceals the frames in between, so it is back in step within one refresh period.
+keyframe and conceals the frames in between, so it is back in step within one keyframe interval.
 
 Each packet says which frames it completes at the receiver (``first_frame``, ``frames``): the
 codec's stream encoder says how many its decoder gives out for each packet
@@ -82,7 +82,7 @@ def tick_frames(fps: float) -> int:
     return max(int(round(fps / TICK_HZ)), 1)
 
 
-def refresh_frames(codec: Codec, fps: float, keyframe_s: float) -> int:
+def keyframe_frames(codec: Codec, fps: float, keyframe_s: float) -> int:
     """Frames between keyframes: ``keyframe_s`` rounded up to the codec's segment or block."""
     block = codec.segment_frames()
     n = max(int(round(keyframe_s * fps)), 1)
@@ -93,7 +93,7 @@ class LiveEncoder:
     """Frames in, packets out, for one stream (one avatar). ``primer``: frames like the ones
     to come (a calibration take, or a clip's first second), which the first stream's
     parameters may look at; without it a frame-recursive coder fits its first stream to the
-    first push alone, and is coarse until the first refresh."""
+    first push alone, and is coarse until the first keyframe."""
 
     def __init__(
         self,
@@ -118,7 +118,7 @@ class LiveEncoder:
         self.codec = codec.for_stream(skeleton, tables)
         self.skeleton, self.fps, self.stream = skeleton, fps, stream
         self.info = StreamInfo(skeleton, fps, codec.get_config(), name, {"decoder": tables} if tables else {})
-        self.refresh = refresh_frames(codec, fps, keyframe_s)
+        self.keyframe_every = keyframe_frames(codec, fps, keyframe_s)
         self.usual_frames = codec.packet_frames(fps)  # the header says it once
         self.primer_frames = max(int(round(PRIMER_S * fps)), 1)
         self.recent = np.zeros((0, skeleton.num_channels)) if primer is None else primer[-self.primer_frames :]
@@ -143,13 +143,13 @@ class LiveEncoder:
         out: list[Packet] = []
         while len(frames):
             encoder = self.encoder or self._start()
-            take = min(len(frames), self.refresh - self.in_group)
+            take = min(len(frames), self.keyframe_every - self.in_group)
             chunk, frames = frames[:take], frames[take:]
             self.position = root_position(self.skeleton, chunk[-1])
             out += self._wrap(encoder.code(chunk), ts)
             self.in_group += take
             self.recent = np.vstack((self.recent, chunk))[-self.primer_frames :]
-            if self.in_group == self.refresh:
+            if self.in_group == self.keyframe_every:
                 out += self._wrap(encoder.finish(), ts)
                 self.ended, self.encoder = encoder, None
         return out
@@ -166,7 +166,7 @@ class LiveEncoder:
         return out
 
     def _start(self) -> StreamEncoder:
-        """A new codec stream (intra refresh): its encoder, primed with the recent frames."""
+        """A new codec stream (at a keyframe): its encoder, primed with the recent frames."""
         encoder = self.encoder = self.codec.encoder(self.skeleton, self.fps)
         if len(self.recent):
             encoder.prime(self.recent)

@@ -37,7 +37,7 @@ import numpy as np
 from mocodec import limits
 from mocodec.codecs import codec_from_untrusted, packet_codecs
 from mocodec.codecs.base import Codec
-from mocodec.errors import CorruptStreamError
+from mocodec.errors import CorruptStreamError, OutOfStepError
 from mocodec.formats import varint
 from mocodec.formats.container import inflate_capped, skeleton_from_dict, skeleton_to_dict
 from mocodec.skeleton import Skeleton
@@ -193,11 +193,6 @@ class Cursor:
         self.position, self.synced = p.position, True
 
 
-class OutOfSync(CorruptStreamError):
-    """A compact packet that cannot be placed yet: its receiver joined the stream after its
-    start and has not seen a keyframe (which carries the full sequence number and frame)."""
-
-
 def _parse_compact(data: bytes, where: str, cursor_of: Callable[[int], Cursor | None] | None) -> Packet:
     if len(data) < COMPACT_MIN:
         raise CorruptStreamError(f"{where}: {len(data)} bytes, shorter than a compact packet")
@@ -230,7 +225,7 @@ def _parse_compact(data: bytes, where: str, cursor_of: Callable[[int], Cursor | 
     except ValueError as e:
         raise CorruptStreamError(f"{where}: {e}") from None
     if not flags & C_EXPLICIT and not cursor.synced:
-        raise OutOfSync(f"{where}: stream {stream}: a packet before the first keyframe received")
+        raise OutOfStepError(f"{where}: stream {stream}: a packet before the first keyframe received")
     if flags & C_EXPLICIT:
         if sequence & 0xFF != low or sequence > 0xFFFFFFFF:
             raise CorruptStreamError(f"{where}: sequence {sequence} does not end in byte {low}")

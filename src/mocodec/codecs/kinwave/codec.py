@@ -1,6 +1,6 @@
 """``kinwave``: the project's own error-bounded, skeleton-aware wavelet codec (kinwave.md).
 
-Per payload of T frames:
+Per body of T frames:
 
 1. Angles are made continuous (:meth:`Motion.continuous`); channels constant to 1e-6 are
    collapsed to one knot (1/8 of a step; a translation about its joint's offset); leading
@@ -28,15 +28,15 @@ Per payload of T frames:
    ``max_error_cm`` the scale is predicted from the model and corrected by a secant in log-log
    space on the *decoded* output (the encoder reconstructs through the decoder's own
    functions), so the bound holds on what the decoder will produce, verified on the final bytes;
-   with ``bits_per_second`` the same search aims at the payload's byte budget within 2%.
+   with ``bits_per_second`` the same search aims at the body's byte budget within 2%.
 5. Under a max-error bound a first pass corrects the model's step per joint by the slack it
    measured at the points the joint moves (the model overstates quiet joints' errors), and
    the coefficients that reach a frame far off its target round to the nearest integer
    instead of through the dead zone (the few frames that set a max bound). With the knob
-   ``segment_steps`` a payload of 4 segments or more gets time-adaptive steps: each segment a
+   ``segment_steps`` a body of 4 segments or more gets time-adaptive steps: each segment a
    step offset of its own (1/8 octave), searched on its own worst error.
 
-The payload format is :mod:`.payload`'s, the encoder :mod:`.encoder`'s and the search of
+The body format is :mod:`.body`'s, the encoder :mod:`.encoder`'s and the search of
 the steps :mod:`.search`'s.
 """
 
@@ -46,7 +46,7 @@ import numpy as np
 
 from mocodec.codecs.base import Codec, Coded, Knob, QualityKnob, StreamDecoder, StreamEncoder
 from mocodec.codecs.kinwave import kinalloc
-from mocodec.codecs.kinwave.payload import (
+from mocodec.codecs.kinwave.body import (
     REST,
     WAVELET_IDS,
     decode_body,
@@ -140,7 +140,7 @@ class KinwaveCodec(Codec):
             2,
             "how hard a max-error bound's search works: 1 one search aiming at 85-100% of the bound, "
             "no slack rounds (fastest); 2 one search at 95-100% and the slack rounds; 3 also three "
-            "landings of a short payload's joint feedback, the smallest kept (smallest files; "
+            "landings of a short body's joint feedback, the smallest kept (smallest files; "
             "bytes and speed per level: docs/kinwave.md)",
             1,
             3,
@@ -192,7 +192,7 @@ class KinwaveCodec(Codec):
         return self._encode_for(motion, motion.skeleton)
 
     def _encode_for(self, motion: Motion, output_skeleton: Skeleton) -> bytes:
-        """A leading rest pose (:func:`.payload.rest_kind`) is a flag, the other frames the
+        """A leading rest pose (:func:`.body.rest_kind`) is a flag, the other frames the
         body, where frame 0 then holds the bound; else the whole motion is the body."""
         kind = rest_kind(motion) if self.config["keyframes"] else 0
         if kind:

@@ -1,6 +1,6 @@
-"""One kinwave payload's encoder: the coding form of every joint, the step shape, the
+"""One kinwave body's encoder: the coding form of every joint, the step shape, the
 leading keyframes and isolated frames, one closed-loop pass down the kinematic tree at given
-steps, and the payload bytes of a pass (:mod:`.payload`). :mod:`.search` finds the steps."""
+steps, and the body bytes of a pass (:mod:`.body`). :mod:`.search` finds the steps."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import numpy as np
 from mocodec import rotations
 from mocodec.codecs.base import Codec
 from mocodec.codecs.kinwave import kinalloc
-from mocodec.codecs.kinwave.payload import (
+from mocodec.codecs.kinwave.body import (
     CODER_REVISION,
     FINE_CONSTANTS,
     FINE_TURNS,
@@ -152,7 +152,7 @@ def bone_skeleton(skeleton: Skeleton, values: np.ndarray, const: np.ndarray) -> 
 
 
 class Encoder:
-    """One payload: the passes of the scale search and the final bytes."""
+    """One body: the passes of the scale search and the final bytes."""
 
     def __init__(self, codec: Codec, motion: Motion, output_skeleton: Skeleton | None = None):
         self.cfg = codec.config
@@ -489,7 +489,7 @@ class Encoder:
     ):
         """Knots and dead-zone quantised coefficients of ``target (k, T)`` with steps ``(k, 1)``,
         the segments' step :func:`segment_factors` and the rows' :class:`ConstantCoding`, laid out as
-        ``lay`` (default: the payload's), and the coefficients in steps before rounding."""
+        ``lay`` (default: the body's), and the coefficients in steps before rounding."""
         lay = lay or self.lay
         knot_f, coeff_f, _ = factors
         quantum = step * lay.knot_quantum * knot_f

@@ -10,20 +10,20 @@ from functools import cached_property
 
 import numpy as np
 
+from mocodec.codecs.kinwave.body import (
+    code_channels,
+    decode_body,
+)
 from mocodec.codecs.kinwave.encoder import (
     Encoder,
     Pass,
     influence,
 )
-from mocodec.codecs.kinwave.payload import (
-    code_channels,
-    decode_body,
-)
 from mocodec.errors import CodecError
 
 MAX_PASSES = 8  # secant passes before falling back to halving
 JOINT_FEEDBACK = 1.0  # share of a joint's measured slack (in octaves) its steps take on
-SHORT_FRAMES = 512  # a payload this short searches once per share of SHORT_SHARES, the smallest wins
+SHORT_FRAMES = 512  # a body this short searches once per share of SHORT_SHARES, the smallest wins
 SHORT_SHARES = (JOINT_FEEDBACK, 0.5, 0.0)
 SLACK_PASSES = 1  # rounds in which a max bound's final pass gives its slack away (_use_slack)
 SLACK_TRIES = 3  # passes a round tries, halving the codes that move the points over the bound
@@ -93,9 +93,9 @@ class BoundSearch(Encoder):
 
     def _to_bound_with_share(self, share: float) -> bytes:
         """:meth:`_to_bound` with the joint feedback taking ``share`` of the slack. Where a max
-        bound's search lands moves a short payload a lot (its worst error is a handful of
+        bound's search lands moves a short body a lot (its worst error is a handful of
         frames, and the first pass's slack sets every joint's step); three landings cost little
-        on a short payload, and the smallest wins (what it buys: docs/kinwave.md)."""
+        on a short body, and the smallest wins (what it buys: docs/kinwave.md)."""
         self.feedback_share, self.joint_offsets = share, np.zeros_like(self.joint_offsets)
         return self._to_bound(self.cfg["max_error_cm"])
 
@@ -175,7 +175,7 @@ class BoundSearch(Encoder):
         breaks the bound: the worst error jumps with single codes at a few frames) gives the
         codes their slack one at a time (FILL_TRIES codes at most): each code coarser by the
         1/8 octaves between the bound and the worst error among the points it moves, halved
-        while that breaks the bound, kept if the payload shrinks. Codes go in order of the
+        while that breaks the bound, kept if the body shrinks. Codes go in order of the
         slack times the nonzero coefficients of their channels (a joint that barely moves saves
         nothing)."""
         errors = self.joint_errors(best.decoded).max(axis=0)

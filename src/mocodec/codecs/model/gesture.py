@@ -88,7 +88,7 @@ class GestureCodec(TabledCodec):
         return self._payload(named, x, groups, motion.fps, frames, codes)
 
     def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:
-        where = "gesture payload"
+        where = "gesture body"
         groups, tables, samples, codes, out = self._read(body, skeleton, frames, where)
         blend = round(self.config["blend"] * fps)
         for k, g in enumerate(groups.parts):

@@ -107,7 +107,7 @@ class HybridCodec(SegmentedCodec):
         )
 
     def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:
-        where = "hybrid payload"
+        where = "hybrid body"
         parts = split_parts(body, 5, where)
         low, code = decode_ints(parts[0]), np.cumsum(decode_ints(parts[1]))
         width = skeleton.num_channels

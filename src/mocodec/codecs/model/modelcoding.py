@@ -5,8 +5,8 @@ The root (translation in centimetres, rotation in degrees) is segmented by postu
 (8-1) every ``d`` units, its samples quantised to ``step`` units, delta coded and Hermite
 interpolated (8-5 to 8-8) on decoding.
 
-Tables are a file both ends load (named in the payload by fingerprint) or, without one, are
-trained on the clip itself and carried in the payload in compact form, so the payload stands
+Tables are a file both ends load (named in the body by fingerprint) or, without one, are
+trained on the clip itself and carried in the body in compact form, so the body stands
 alone (and pays for its tables).
 """
 
@@ -77,7 +77,7 @@ def tables_for(
     discard_deg: float,
     params: segmentation.GestureParams | None,
 ) -> tuple[motiontables.Tables, bytes]:
-    """(the tables, the payload part naming or carrying them) for coding ``motion``; tables
+    """(the tables, the body part naming or carrying them) for coding ``motion``; tables
     trained on the clip hold gestures only if ``params`` (the gesture segmentation) is given."""
     if path:
         tables = load_tables(path, motion.skeleton, groups)
@@ -105,7 +105,7 @@ def _load_cached(path: str, mtime_ns: int, size: int) -> motiontables.Tables:
 
 
 def read_tables(part: bytes, path: str, skeleton: Skeleton, groups: Groups, where: str) -> motiontables.Tables:
-    """The tables a payload's tables part carries or names (then loaded from ``path``)."""
+    """The tables a body's tables part carries or names (then loaded from ``path``)."""
     kind, rest = part[:1], part[1:]
     if kind == CARRIED:
         if path:

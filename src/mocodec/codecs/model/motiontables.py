@@ -19,7 +19,7 @@ gesture coder's fit threshold e) are in degrees whatever the segment length and 
 of DOFs. (8-13) weighs the ends ``a`` = 1 and the middle ``b`` <= 1.
 
 File layout: :mod:`mocodec.codecs.shared.modelfile` with magic ``MOCTB``; the JSON names every
-group's channels and the training parameters; the numbers are the compact form a payload
+group's channels and the training parameters; the numbers are the compact form a body
 carries (angles in steps of :data:`ANGLE_STEP` degrees, range coded).
 """
 
@@ -153,7 +153,7 @@ class Tables(modelfile.Model):
                 f"{len(names)} groups, first {names[0][:2] if names else []})"
             )
 
-    # ----- the compact form (the file's numbers, or what a payload carries) -------------
+    # ----- the compact form (the file's numbers, or what a body carries) -------------
     def compact(self) -> bytes:
         counts = [len(p) for p in self.postures] + [len(g) for g in self.gestures]
         parts = [encode_ints(np.array(counts + [self.norm]))]

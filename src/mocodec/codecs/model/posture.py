@@ -9,7 +9,7 @@ Lags and codes are range coded. The root is sent as quantised samples of its own
 
 The tables come from ``tables`` (a file from ``mocodec model train tables``, which both ends load)
 or, with ``tables`` empty, are trained on the clip (posture entries ``spacing`` cm apart) and
-carried in the payload. ``d`` is the quality knob: the thesis swept 80 to 10 (Appendix III)
+carried in the body. ``d`` is the quality knob: the thesis swept 80 to 10 (Appendix III)
 and shows d = 20 on its dance at about 450 bit/s.
 
 A frame waits for the sample after its segment's end (the slope (8-7) needs it): the coding
@@ -59,7 +59,7 @@ class PostureCodec(TabledCodec):
         return self._payload(named, x, groups, motion.fps, frames, codes)
 
     def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:
-        where = "posture payload"
+        where = "posture body"
         groups, tables, samples, codes, out = self._read(body, skeleton, frames, where)
         for g, at, mine, table in zip(groups.parts, samples, codes, tables.postures):
             if mine.size and (mine.min() < 0 or mine.max() >= len(table)):

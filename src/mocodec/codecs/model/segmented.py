@@ -1,7 +1,7 @@
 """What the model-based codecs of 000 ch. 8 (``posture``, ``gesture``, ``hybrid``) share as
 codecs: the gesture segmentation knobs (Appendix III's nWin, beta, nMin, nMax, in seconds),
 the variable coding delay they report, and for the two that code with tables
-(:class:`TabledCodec`) the tables, the root and the payload layout: the tables part, the
+(:class:`TabledCodec`) the tables, the root and the body layout: the tables part, the
 lags of the root and of every group, one stream of codes, the root's samples.
 
 These coders wait for samples that lie an unknown time ahead (8.1: "as high as two

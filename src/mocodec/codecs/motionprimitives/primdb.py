@@ -14,7 +14,7 @@ The file both ends load (little-endian): ``MOCPD``, a version byte, the length o
 description (joint names with their primitive counts, clustering errors and segment counts,
 the training settings and clips), the JSON, the primitives as float32 ``(K, 16, 4)`` per joint
 in that order, and a CRC-32 of everything before it, which is also the database's
-fingerprint that a payload coded with it carries. Training is deterministic for a seed.
+fingerprint that a body coded with it carries. Training is deterministic for a seed.
 """
 
 from __future__ import annotations

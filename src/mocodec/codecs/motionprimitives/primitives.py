@@ -17,7 +17,7 @@ the translation coefficients).
 The candidates of a joint's segment are:
 
 * the primitives of a database trained offline (``db``: a file from ``mocodec primitives
-  train``, which both ends load; the payload names it by fingerprint): the thesis's coder;
+  train``, which both ends load; the body names it by fingerprint): the thesis's coder;
 * beyond the thesis, the last ``history`` segments of the same joint as the decoder rebuilt
   them, and the last decoded pose held still. A repeated beat then refers to the one before
   it, so rhythmic motion codes well without a database, and joints a database does not know
@@ -122,7 +122,7 @@ class PrimitivesCodec(Codec):
     def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:
         out = _Decoder(self, skeleton, fps).push(body)
         if len(out) != frames:
-            raise CorruptStreamError(f"primitives payload holds {len(out)} frames, its header says {frames}")
+            raise CorruptStreamError(f"primitives body holds {len(out)} frames, its header says {frames}")
         return out
 
     def database(self) -> PrimitiveDB | None:

@@ -25,7 +25,7 @@ import numpy as np
 from mocodec import rotations
 from mocodec.codecs.motionprimitives import quatseg
 from mocodec.coding.entropy import coefcoder
-from mocodec.coding.quantisation.quantizers import step_exponents, steps
+from mocodec.coding.quantisation.quantisers import step_exponents, steps
 from mocodec.coding.transforms import wavelets
 
 LEVELS = 4

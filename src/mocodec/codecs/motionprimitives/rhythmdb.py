@@ -17,7 +17,7 @@ animation consists of 20 primitives", each a basic move of the dance), chosen as
 distance (5.4). Each primitive keeps its mean length in frames.
 
 Two files: the ``MOCRD`` model file both ends load (:mod:`mocodec.codecs.shared.modelfile`, float32),
-and a compact form a payload can carry when the database is made from the clip itself
+and a compact form a body can carry when the database is made from the clip itself
 (quaternions and root trajectories quantised, differenced along time, range coded).
 """
 
@@ -182,7 +182,7 @@ class RhythmDB(modelfile.Model):
         if abs(self.fps - fps) > 1e-6 * fps:
             raise CodecError(f"{where} was trained at {self.fps:g} Hz, the motion is {fps:g} Hz")
 
-    # ----- the compact form a payload carries -------------------------------------------
+    # ----- the compact form a body carries -------------------------------------------
     def compact(self) -> bytes:
         rot = np.round(self.rotations / QUAT_STEP).astype(np.int64)
         root = np.round(self.root / ROOT_STEP).astype(np.int64)

@@ -9,10 +9,10 @@ those lengths and blends them at the seams (slerp over a transition found by a d
 the root re-placed by blended velocity: :mod:`mocodec.codecs.motionprimitives.blend`, 4.2.2).
 
 The primitives come from a database both ends hold (``db``: a file from ``mocodec rhythm
-train``, named in the payload by fingerprint) or, with ``db`` empty, are ``primitives``
-k-medoids of the clip's own segments, carried in the payload in compact form: the setting of
+train``, named in the body by fingerprint) or, with ``db`` empty, are ``primitives``
+k-medoids of the clip's own segments, carried in the body in compact form: the setting of
 the thesis's table 4.1, whose ratios count the database. More primitives is better quality
-and a larger payload: ``primitives`` is the quality knob.
+and a larger body: ``primitives`` is the quality knob.
 
 Ch. 4 is a storage framework for long sequences; it does not claim real time, and the
 database made from the clip needs the whole clip: the codec does not stream.
@@ -93,7 +93,7 @@ class RhythmicCodec(Codec):
         return join_parts([encode_ints(cuts[:, 1] - cuts[:, 0]), encode_ints(index), placed, carried])
 
     def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:
-        where = "rhythmic payload"
+        where = "rhythmic body"
         lay = quatseg.layout(skeleton)
         parts = split_parts(body, _PARTS, where)
         lengths, index = decode_ints(parts[0]), decode_ints(parts[1])

@@ -37,7 +37,7 @@ from mocodec.codecs.registry import register
 from mocodec.coding.entropy.parts import join_parts, split_parts
 from mocodec.coding.entropy.rangecoder import decode_ints, encode_ints
 from mocodec.coding.entropy.rle import ZeroRuns, decode_zero_runs, encode_zero_runs
-from mocodec.coding.quantisation.quantizers import step_exponents, steps
+from mocodec.coding.quantisation.quantisers import step_exponents, steps
 from mocodec.coding.transforms import wavelets
 from mocodec.errors import CorruptStreamError
 from mocodec.skeleton import Skeleton
@@ -148,16 +148,16 @@ class PWaveletCodec(Codec):
         return join_parts(parts)
 
     def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:
-        exps, run_lengths, values, tail = (decode_ints(p) for p in split_parts(body, 4, "pwavelet payload"))
+        exps, run_lengths, values, tail = (decode_ints(p) for p in split_parts(body, 4, "pwavelet body"))
         if tail.size != 1 or run_lengths.size != values.size:
-            raise CorruptStreamError("pwavelet payload: run and value streams do not pair up")
+            raise CorruptStreamError("pwavelet body: run and value streams do not pair up")
         n_ch = skeleton.num_channels
         slices = self._slices(frames)
         levels = [wavelets.max_levels(b - a, WAVELET) for a, b in slices]
         sizes = [sum(wavelets.band_lengths(b - a, WAVELET, lv, MODE)) for (a, b), lv in zip(slices, levels)]
         runs = ZeroRuns(run_lengths, values, int(tail[0]))
         if runs.length != n_ch * sum(sizes) or exps.size != n_ch * len(slices):
-            raise CorruptStreamError("pwavelet payload: coefficient count does not match the frames")
+            raise CorruptStreamError("pwavelet body: coefficient count does not match the frames")
         q = decode_zero_runs(runs).astype(np.float64)
         out = np.empty((frames, n_ch))
         pos = 0

@@ -159,7 +159,7 @@ class SpihtCodec(Codec):
         return self.encode_body(motion, self.segment_budgets(motion.num_frames, motion.fps))
 
     def encode_with_budgets(self, motion, segment_bits: np.ndarray) -> bytes:
-        """A payload whose segments get the given SPIHT budgets B_T (crowd allocation, 6.5),
+        """A body whose segments get the given SPIHT budgets B_T (crowd allocation, 6.5),
         instead of the codec's constant bit rate."""
         segment_bits = np.asarray(segment_bits, dtype=np.int64)
         if segment_bits.shape != (len(self.segments(motion.num_frames)),) or segment_bits.min(initial=0) < 0:
@@ -263,7 +263,7 @@ class SpihtCodec(Codec):
             if budgets[c] <= N0_BITS:
                 continue
             if cursor + N0_BITS > bits.size:
-                raise CorruptStreamError(f"spiht payload: bits end in {where}, channel {c}")
+                raise CorruptStreamError(f"spiht body: bits end in {where}, channel {c}")
             n0 = int(np.dot(bits[cursor : cursor + N0_BITS], 1 << np.arange(N0_BITS - 1, -1, -1))) - 1
             coeffs, used, plane = spiht.decode(bits, cursor + N0_BITS, int(budgets[c]) - N0_BITS, w, approx, n0)
             yield c, cursor, N0_BITS + used, coeffs, plane
@@ -281,7 +281,7 @@ class SpihtCodec(Codec):
         """(parts, anchor deltas, importance levels, segment budgets, bits) of a body, checked
         against the frames."""
         n_ch = skeleton.num_channels
-        parts = split_parts(body, 4, "spiht payload")
+        parts = split_parts(body, 4, "spiht body")
         deltas = decode_ints(parts[0])
         level_changes = decode_ints(parts[1])
         n_seg = len(self.segments(frames))
@@ -289,17 +289,17 @@ class SpihtCodec(Codec):
             deltas.size != anchor_frames(frames, self.config["window"]).size * n_ch
             or level_changes.size != n_seg * n_ch
         ):
-            raise CorruptStreamError("spiht payload: anchor or allocation streams do not match the frames")
+            raise CorruptStreamError("spiht body: anchor or allocation streams do not match the frames")
         levels_f = np.cumsum(level_changes.reshape(n_ch, n_seg).T, axis=0).ravel()
         if levels_f.size != n_seg * n_ch or levels_f.min(initial=0) < 0 or levels_f.max(initial=0) >= F_LEVELS:
-            raise CorruptStreamError("spiht payload: anchor or allocation streams do not match the frames")
+            raise CorruptStreamError("spiht body: anchor or allocation streams do not match the frames")
         totals = np.cumsum(decode_ints(parts[2]))
         if totals.size != n_seg or totals.min(initial=0) < 0:
-            raise CorruptStreamError("spiht payload: segment budgets do not match the frames")
+            raise CorruptStreamError("spiht body: segment budgets do not match the frames")
         (n_bits,) = U32.unpack_from(parts[3])
         bits = np.unpackbits(np.frombuffer(parts[3], dtype=np.uint8, offset=4))[:n_bits]
         if bits.size != n_bits or n_bits > totals.sum():
-            raise CorruptStreamError(f"spiht payload: {n_bits} bits announced, {bits.size} present")
+            raise CorruptStreamError(f"spiht body: {n_bits} bits announced, {bits.size} present")
         return parts, deltas, levels_f, totals, bits
 
     def walk_streams(self, levels_f, totals, bits, n_ch: int):
@@ -313,7 +313,7 @@ class SpihtCodec(Codec):
                 yield k, c, start, used, coeffs, plane
                 cursor = start + used
         if cursor != bits.size:
-            raise CorruptStreamError(f"spiht payload: {bits.size - cursor} bits left over after the last segment")
+            raise CorruptStreamError(f"spiht body: {bits.size - cursor} bits left over after the last segment")
 
     def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:
         cfg = self.config

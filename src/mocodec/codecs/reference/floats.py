@@ -49,7 +49,7 @@ def _frames_from(values: np.ndarray, skeleton: Skeleton, frames: int, what: str)
     values = np.asarray(values, dtype=np.float32).reshape(-1)
     if values.size != frames * skeleton.num_channels:
         raise CorruptStreamError(
-            f"{what} payload holds {values.size} values, {frames} frames of "
+            f"{what} body holds {values.size} values, {frames} frames of "
             f"{skeleton.num_channels} channels need {frames * skeleton.num_channels}"
         )
     return values.reshape(skeleton.num_channels, frames).T.astype(np.float64)
@@ -72,7 +72,7 @@ class _PerChannel(Codec):
 
     def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:
         lib = _module(self.package)
-        parts = split_parts(body, skeleton.num_channels, f"{self.id} payload")
+        parts = split_parts(body, skeleton.num_channels, f"{self.id} body")
         return _frames_from(
             np.concatenate([self._decompress(lib, p, frames) for p in parts]) if parts else np.zeros(0),
             skeleton,

@@ -150,7 +150,7 @@ def _float_bits(block: np.ndarray) -> bytes:
 def _from_float_bits(data: bytes, frames: int, count: int) -> np.ndarray:
     raw = zstandard.ZstdDecompressor().decompress(data, max_output_size=8 * frames * count)
     if len(raw) != 8 * frames * count:
-        raise CorruptStreamError("lossless payload: float channels have the wrong size")
+        raise CorruptStreamError("lossless body: float channels have the wrong size")
     planes = np.frombuffer(raw, dtype=np.uint8).reshape(8, count, frames).transpose(2, 1, 0)
     return np.cumsum(np.ascontiguousarray(planes).view(np.int64).reshape(frames, count), axis=0).view(np.float64)
 
@@ -180,18 +180,18 @@ class LosslessCodec(Codec):
         n = skeleton.num_channels
         (count,) = _U32.unpack_from(body)
         if count != n:
-            raise CorruptStreamError(f"lossless payload has {count} channels, the skeleton {n}")
+            raise CorruptStreamError(f"lossless body has {count} channels, the skeleton {n}")
         modes = body[4 : 4 + n]
         out = np.zeros((frames, n))
         if frames == 0:
             return out
-        parts = iter(split_parts(body, None, "lossless payload", start=4 + n))
+        parts = iter(split_parts(body, None, "lossless body", start=4 + n))
         floats = [c for c, mode in enumerate(modes) if mode == FLOAT_CHANNEL]
         for c, mode in enumerate(modes):
             if mode == 0:
                 out[:, c] = _decode_channel(next(parts), frames)
             elif mode != FLOAT_CHANNEL:
-                raise CorruptStreamError(f"lossless payload: channel {c} has an invalid mode {mode}")
+                raise CorruptStreamError(f"lossless body: channel {c} has an invalid mode {mode}")
         if floats:
             out[:, floats] = _from_float_bits(next(parts), frames, len(floats))
         return out

@@ -49,7 +49,7 @@ class RawCodec(Codec):
     def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:
         need = 4 * frames * skeleton.num_channels
         if len(body) != need:
-            raise CorruptStreamError(f"raw payload holds {len(body)} bytes, {frames} frames need {need}")
+            raise CorruptStreamError(f"raw body holds {len(body)} bytes, {frames} frames need {need}")
         return np.frombuffer(body, dtype="<f4").reshape(frames, skeleton.num_channels).astype(np.float64)
 
     def encoder(self, skeleton: Skeleton, fps: float) -> StreamEncoder:

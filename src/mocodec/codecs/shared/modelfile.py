@@ -1,7 +1,7 @@
 """The file layout of trained models that encoder and decoder share (VQ codebooks, primitive
 databases): a magic, a version byte, the length of a JSON description, the JSON, the model's
 numbers, and a CRC-32 of everything before it. The CRC is also the model's fingerprint, which
-a payload coded with it carries.
+a body coded with it carries.
 """
 
 from __future__ import annotations

@@ -12,7 +12,7 @@ decoded sample (temporal) or frame (spatial); plain ones hold the values themsel
 File layout (little-endian): ``MOCVQ``, a version byte, the length of a JSON description
 (kind, predictive, length, fps, sizes, groups with their channels, entries per size and group,
 the training clips), the JSON, then per size and group the code vectors as float32, then a
-CRC-32 of everything before it. The CRC is also the codebook's fingerprint, which a payload
+CRC-32 of everything before it. The CRC is also the codebook's fingerprint, which a body
 coded with it carries.
 """
 
@@ -192,13 +192,13 @@ def read_books(part: bytes, dims: list[int], path: str, where: str) -> list[np.n
     if mode == 1 and len(part) == _SOURCE.size:
         if not path:
             raise CodecError(
-                f"{where}: the payload was coded with a shared codebook (fingerprint {fingerprint:08x}); "
+                f"{where}: the body was coded with a shared codebook (fingerprint {fingerprint:08x}); "
                 "give the file with --codebook FILE"
             )
         book = Codebook.load(path)
         if book.fingerprint != fingerprint:
             raise CodecError(
-                f"{where}: the payload was coded with codebook {fingerprint:08x}, {path} is {book.fingerprint:08x}"
+                f"{where}: the body was coded with codebook {fingerprint:08x}, {path} is {book.fingerprint:08x}"
             )
         books = book.book(size)
         if [b.shape[1] for b in books] != dims:

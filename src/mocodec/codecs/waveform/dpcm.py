@@ -19,7 +19,7 @@ from mocodec.codecs.base import Knob, QualityKnob
 from mocodec.codecs.registry import register
 from mocodec.codecs.waveform.framewise import FramewiseCodec
 from mocodec.coding.quantisation.predictive import ChannelParams, TableCoder, best_range, difference_range, first_order
-from mocodec.coding.quantisation.quantizers import table
+from mocodec.coding.quantisation.quantisers import table
 
 
 @register

@@ -14,7 +14,7 @@ across pushes), as predictive coders need.
 Parameters come from the first push: a live sender should push a representative first block
 (a second or more), or the coder works with the ranges that block showed (the closed loop
 recovers from overload, at the cost of error while it lasts). A stream restarted in mid-motion
-(a live stream's intra refresh) is *primed* with the frames before it, which the parameters see
+(a live stream's keyframe) is *primed* with the frames before it, which the parameters see
 too (time-reversed behind the first block, so the first frame stays the centre).
 """
 
@@ -87,7 +87,7 @@ class FramewiseCodec(Codec):
 
     def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:
         dec = self.decoder(skeleton, fps)
-        out = [dec.push(p) for p in split_parts(body, None, f"{self.id} payload")]
+        out = [dec.push(p) for p in split_parts(body, None, f"{self.id} body")]
         return np.concatenate(out) if out else np.zeros((0, skeleton.num_channels))
 
     def encoder(self, skeleton: Skeleton, fps: float) -> StreamEncoder:

@@ -23,7 +23,7 @@ from mocodec.codecs.base import Knob, QualityKnob
 from mocodec.codecs.registry import register
 from mocodec.codecs.waveform.framewise import FramewiseCodec
 from mocodec.coding.quantisation.predictive import AdaptiveCoder, ChannelParams, TableCoder
-from mocodec.coding.quantisation.quantizers import even_levels, multipliers, table
+from mocodec.coding.quantisation.quantisers import even_levels, multipliers, table
 
 LAWS = ("uniform", "mulaw", "adaptive")
 

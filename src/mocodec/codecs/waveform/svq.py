@@ -9,7 +9,7 @@ itself is quantised, as the thesis did (whose PSNR was a few dB: a few hundred p
 cover a body's). Indices are sorted by training use and range coded per group.
 
 The codebook is ``codebook`` = a file made by ``mocodec model train codebook --vectors spatial`` on clips
-with the same channel layout (encoder and decoder load the same file; the payload names it by
+with the same channel layout (encoder and decoder load the same file; the body names it by
 fingerprint), or, by default, trained on the first frames coded and sent in the header as
 float16 (self-contained, but the header costs ``size`` x channels x 2 bytes). No delay.
 """

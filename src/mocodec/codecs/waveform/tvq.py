@@ -10,7 +10,7 @@ absolute 6-sample vectors cannot cover every channel's range). Indices are sorte
 use and range coded per channel.
 
 The codebook is ``codebook`` = a file made by ``mocodec model train codebook --vectors temporal``
-(trained on other clips; encoder and decoder load the same file, the payload names it by
+(trained on other clips; encoder and decoder load the same file, the body names it by
 fingerprint), or, by default, trained on the first frames coded and sent in the header as
 float16 (self-contained, but the header costs ``size`` x ``length`` x 2 bytes). Delay:
 ``length`` - 1 frames.

@@ -47,12 +47,12 @@ import numpy as np
 
 from mocodec.codecs.base import Codec, Knob, QualityKnob, StreamDecoder, StreamEncoder
 from mocodec.codecs.kinwave import kinalloc
+from mocodec.codecs.kinwave.body import code_channels, rotation_joints, step_codes, step_groups
 from mocodec.codecs.kinwave.encoder import bone_skeleton
 from mocodec.codecs.kinwave.live.decoder import LiveDecoder
 from mocodec.codecs.kinwave.live.encoder import LiveEncoder
 from mocodec.codecs.kinwave.live.predict import joint_tables
 from mocodec.codecs.kinwave.live.syntax import MAX_LAYERS, packet_data, packet_frames, read_restarts
-from mocodec.codecs.kinwave.payload import code_channels, rotation_joints, step_codes, step_groups
 from mocodec.codecs.registry import register
 from mocodec.coding.entropy import binarycoder as bc
 from mocodec.errors import CorruptStreamError

@@ -10,8 +10,8 @@ from typing import TYPE_CHECKING
 import numba
 import numpy as np
 
+from mocodec.codecs.kinwave.body import channel_steps
 from mocodec.codecs.kinwave.live.syntax import contexts
-from mocodec.codecs.kinwave.payload import channel_steps
 from mocodec.coding.entropy import binarycoder as bc
 from mocodec.kinematics import channel_plan
 from mocodec.skeleton import Skeleton

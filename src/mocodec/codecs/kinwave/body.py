@@ -1,10 +1,10 @@
-"""kinwave's payload, formats 1 and 2: what encoder and decoder share (the step codes, the
+"""kinwave's body, formats 1 and 2: what encoder and decoder share (the step codes, the
 reconstruction of channels from their integers, the coding forms and world-axis translations)
 and the decoder of a body.
 
-Payload body: u8 format (1), u8 flags (bits 0 and 5: one or two leading keyframes, bits 1-2
+Body body: u8 format (1), u8 flags (bits 0 and 5: one or two leading keyframes, bits 1-2
 wavelet, bit 3 segment offsets, bit 4 coding forms, bit 6 mean rotations, bit 7 isolated
-frames), u8 log2 window, u8 levels, u16 channels (a payload for another skeleton is refused),
+frames), u8 log2 window, u8 levels, u16 channels (a body for another skeleton is refused),
 with bit 7 a u8 count of isolated frames (glitches coded apart: their positions and one patch
 per channel follow in the stream's side sequences), then the arithmetic-coded
 stream (:mod:`mocodec.coding.entropy.coefcoder`, revision 2), which opens with one step code per joint
@@ -37,7 +37,7 @@ from mocodec.kinematics import channel_plan, forward_kinematics, position_offset
 from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
-FORMAT = 1  # the payload format (docs/formats.md), pinned by the golden fixtures
+FORMAT = 1  # the body format (docs/formats.md), pinned by the golden fixtures
 FORMAT_MORE = 2  # format 1 with a byte of more flags after the header
 REST = 1  # more flags bit 0: frame 0 is the rest pose, its translations frame 1's (not coded)
 REST_AT_ZERO = 2  # more flags bit 1: frame 0 is the rest pose with every translation 0 (not coded)
@@ -53,7 +53,7 @@ FLAG_FORMS = 16  # flags bit 4: per 3-angle joint its coding form (rotvec: 0 the
 FLAG_MEANS = 64  # flags bit 6: three integers per 3-angle joint, a vector joint's mean rotation
 MEAN_QUANTUM = 2.0  # degrees: a vector joint's mean rotation, as a rotation vector in these steps
 FLAG_ISOLATED = 128  # flags bit 7: a byte n after the header; n isolated frames coded apart (format 3)
-MAX_ISOLATED = 32  # isolated frames a payload codes apart at most
+MAX_ISOLATED = 32  # isolated frames a body codes apart at most
 FLAG_KEYFRAME = 1  # flags bit 0: frame 0 is a keyframe (a one-frame segment)
 FLAG_SECOND_KEYFRAME = 32  # flags bit 5 (with bit 0): frame 1 is one too
 WAVELET_IDS = ("cdf97", "d4", "haar")
@@ -103,7 +103,7 @@ def step_groups(skeleton: Skeleton) -> tuple[StepGroup, ...]:
 
 
 def group_step(g: StepGroup, codes: np.ndarray, skeleton: Skeleton) -> float:
-    """A group's quantiser step from the payload's step codes (one per rotation joint, then
+    """A group's quantiser step from the body's step codes (one per rotation joint, then
     the translation code in cm): degrees, or skeleton units for translations."""
     if g.rotation:
         return code_step(codes[_rotation_joints(skeleton).index(g.joint)])
@@ -359,7 +359,7 @@ def rest_kind(motion: Motion) -> int:
 
 
 def rest_pose(skeleton: Skeleton, kind: int, frame1: np.ndarray) -> np.ndarray:
-    """Frame 0 of a payload whose more flags say ``kind``, from its decoded frame 1 ``(C,)``."""
+    """Frame 0 of a body whose more flags say ``kind``, from its decoded frame 1 ``(C,)``."""
     return np.where(skeleton.rotation_mask, 0.0, frame1) if kind == REST else np.zeros_like(frame1)
 
 
@@ -373,7 +373,7 @@ def with_more(body: bytes, more: int) -> bytes:
 
 
 def channel_steps(skeleton: Skeleton, codes: np.ndarray) -> np.ndarray:
-    """``(C, 1)``: every channel's quantiser step from the payload's step codes (the values of
+    """``(C, 1)``: every channel's quantiser step from the body's step codes (the values of
     :func:`group_step`, looked up at once)."""
     code_of, translation = _channel_codes(skeleton)
     steps = _CODE_STEPS[np.asarray(codes, dtype=np.int64)[code_of]]
@@ -400,14 +400,12 @@ def decode_body(body: bytes, skeleton: Skeleton, frames: int) -> np.ndarray:
     if body[:1] != bytes([FORMAT_MORE]):
         return _decode_frames(body, skeleton, frames, 0, constant_coding(skeleton))
     if len(body) <= HEAD.size:
-        raise CorruptStreamError(
-            f"kinwave payload of {len(body)} bytes is shorter than its {HEAD.size + 1}-byte header"
-        )
+        raise CorruptStreamError(f"kinwave body of {len(body)} bytes is shorter than its {HEAD.size + 1}-byte header")
     more = body[HEAD.size]
     kind, lead = more & 3, (more >> LEAD_SHIFT) & 3
     if not more or more >> 6 or kind not in (0, REST, REST_AT_ZERO) or frames < 1 + bool(kind):
         raise CorruptStreamError(
-            f"kinwave payload's more flags at byte {HEAD.size} are damaged ({more} for {frames} frames)"
+            f"kinwave body's more flags at byte {HEAD.size} are damaged ({more} for {frames} frames)"
         )
     constants = constant_coding(skeleton, bool(more & FINE_CONSTANTS), bool(more & FINE_TURNS))
     inner = bytes([FORMAT]) + body[1 : HEAD.size] + body[HEAD.size + 1 :]
@@ -424,16 +422,16 @@ def _decode_frames(body: bytes, skeleton: Skeleton, frames: int, lead: int, cons
     trans = has_translation(skeleton)
     num_codes = len(rot_joints) + trans
     if len(body) < HEAD.size:
-        raise CorruptStreamError(f"kinwave payload of {len(body)} bytes is shorter than its {HEAD.size}-byte header")
+        raise CorruptStreamError(f"kinwave body of {len(body)} bytes is shorter than its {HEAD.size}-byte header")
     version, flags, log_w, levels, channels = HEAD.unpack_from(body)
     if version != FORMAT:
-        raise CorruptStreamError(f"kinwave payload format {version}, this mocodec reads {FORMAT} and {FORMAT_MORE}")
+        raise CorruptStreamError(f"kinwave body format {version}, this mocodec reads {FORMAT} and {FORMAT_MORE}")
     if channels != skeleton.num_channels:
         raise CorruptStreamError(
-            f"kinwave payload has {channels} channels, the skeleton {skeleton.num_channels}: wrong skeleton?"
+            f"kinwave body has {channels} channels, the skeleton {skeleton.num_channels}: wrong skeleton?"
         )
     if log_w > 16 or not 1 <= levels <= 10 or (flags >> 1) & 3 >= len(WAVELET_IDS):
-        raise CorruptStreamError(f"kinwave payload header is damaged (window 2^{log_w}, levels {levels})")
+        raise CorruptStreamError(f"kinwave body header is damaged (window 2^{log_w}, levels {levels})")
     keyframes = int(bool(flags & FLAG_KEYFRAME)) * (2 if flags & FLAG_SECOND_KEYFRAME else 1)
     lay = trendwave.layout(frames, 1 << log_w, levels, keyframes, WAVELET_IDS[(flags >> 1) & 3], lead)
     num_offsets = lay.starts.size if flags & FLAG_OFFSETS else 0
@@ -442,7 +440,7 @@ def _decode_frames(body: bytes, skeleton: Skeleton, frames: int, lead: int, cons
     start, num_isolated = HEAD.size, 0
     if flags & FLAG_ISOLATED:
         if len(body) <= start or not 1 <= body[start] <= MAX_ISOLATED:
-            raise CorruptStreamError(f"kinwave payload's isolated frame count at byte {start} is damaged")
+            raise CorruptStreamError(f"kinwave body's isolated frame count at byte {start} is damaged")
         start, num_isolated = start + 1, body[start]
     coded = coefcoder.decode(
         body[start:],
@@ -457,14 +455,14 @@ def _decode_frames(body: bytes, skeleton: Skeleton, frames: int, lead: int, cons
     means = np.diff(running, prepend=0).reshape(-1, 3)
     patches = np.diff(patched, prepend=0).reshape(skeleton.num_channels, num_isolated)
     if num_isolated and not (1 <= isolated[0] and (np.diff(isolated) > 1).all() and isolated[-1] < frames - 1):
-        raise CorruptStreamError("kinwave payload's isolated frames are damaged")
+        raise CorruptStreamError("kinwave body's isolated frames are damaged")
     if (
         (codes.size and not 0 <= codes.min() <= codes.max() <= 255)
         or np.abs(offsets).max(initial=0) > 128
         or not rotvec.valid_forms(forms)
         or np.abs(means).max(initial=0) * MEAN_QUANTUM > 360.0
     ):
-        raise CorruptStreamError("kinwave payload's step codes are damaged")
+        raise CorruptStreamError("kinwave body's step codes are damaged")
     if not num_offsets:
         offsets = np.zeros(lay.starts.size, dtype=np.int8)
     if not frames:

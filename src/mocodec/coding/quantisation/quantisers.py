@@ -1,12 +1,12 @@
 """Scalar quantisers of 000 §7.2-7.3.
 
-- :class:`UniformQuantizer`: N levels between the limits theta_L and theta_U, decision levels
+- :class:`UniformQuantiser`: N levels between the limits theta_L and theta_U, decision levels
   d_i = theta_L + i (theta_U - theta_L) / N (7-4), reconstruction at the midpoints (7-3).
-- :class:`MuLawQuantizer`: bipolar mu-law, positive-half decision levels
+- :class:`MuLawQuantiser`: bipolar mu-law, positive-half decision levels
   d_i = theta_MAX ((1 + mu)^(i / (N/2)) - 1) / mu, the inverse of the mu-law compressor
   log(1 + mu |x| / theta_MAX) / log(1 + mu) read off (7-5), mirrored for negative inputs,
   midpoint reconstruction (7-3); indices found by binary search as in the thesis.
-- :class:`AdaptiveQuantizer`: the feedback quantiser (7-7), Delta(n) = beta(c(n-1)) Delta(n-1),
+- :class:`AdaptiveQuantiser`: the feedback quantiser (7-7), Delta(n) = beta(c(n-1)) Delta(n-1),
   a uniform mid-rise quantiser whose step follows the previous code through a multiplier
   table. The thesis's table is heuristic and not printed; we use Jayant's multipliers for
   2- to 4-bit adaptive quantisers (small codes shrink the step, large ones grow it), and
@@ -40,7 +40,7 @@ def _check_levels(levels: int) -> int:
 
 
 @dataclass(frozen=True)
-class UniformQuantizer:
+class UniformQuantiser:
     low: float
     high: float
     levels: int
@@ -58,7 +58,7 @@ class UniformQuantizer:
         """d_0..d_N (7-4)."""
         return self.low + np.arange(self.levels + 1) * self.step
 
-    def quantize(self, x: np.ndarray) -> np.ndarray:
+    def quantise(self, x: np.ndarray) -> np.ndarray:
         i = np.floor((np.asarray(x, dtype=np.float64) - self.low) / self.step)
         return np.clip(i, 0, self.levels - 1).astype(np.int64)
 
@@ -73,7 +73,7 @@ class UniformQuantizer:
 
 
 @dataclass(frozen=True)
-class MuLawQuantizer:
+class MuLawQuantiser:
     mu: float
     limit: float  # theta_MAX: inputs beyond +-limit land in the outer levels
     levels: int  # N, even: N/2 levels each side of zero
@@ -90,7 +90,7 @@ class MuLawQuantizer:
         half = self.levels // 2
         return self.limit * ((1.0 + self.mu) ** (np.arange(half + 1) / half) - 1.0) / self.mu
 
-    def quantize(self, x: np.ndarray) -> np.ndarray:
+    def quantise(self, x: np.ndarray) -> np.ndarray:
         x = np.asarray(x, dtype=np.float64)
         half = self.levels // 2
         mag = np.clip(np.searchsorted(self.decision_levels(), np.abs(x), side="right") - 1, 0, half - 1)
@@ -121,8 +121,8 @@ def table(law: str, levels: int, mu: float) -> tuple[np.ndarray, np.ndarray]:
     """The normalised table (inner decision levels, reconstruction levels) over [-1, 1] of a
     ``uniform`` quantiser with N levels or a ``mulaw`` one with N rounded up to even."""
     if law == "uniform":
-        return UniformQuantizer(-1.0, 1.0, levels).table()
-    return MuLawQuantizer(mu, 1.0, even_levels(levels)).table()
+        return UniformQuantiser(-1.0, 1.0, levels).table()
+    return MuLawQuantiser(mu, 1.0, even_levels(levels)).table()
 
 
 def multipliers(levels: int) -> np.ndarray:
@@ -161,7 +161,7 @@ def _adaptive(x, levels, step0, step_min, step_max, beta, decode_codes):
 
 
 @dataclass(frozen=True)
-class AdaptiveQuantizer:
+class AdaptiveQuantiser:
     """Feedback-adaptive uniform mid-rise quantiser (7-7) for zero-mean inputs (differences,
     prediction errors). Codes are -N/2..N/2-1; the step starts at ``step`` and stays within
     [step_min, step_max]."""
@@ -178,7 +178,7 @@ class AdaptiveQuantizer:
         if not 0 < self.step_min <= self.step <= self.step_max:
             raise ValueError("need 0 < step_min <= step <= step_max")
 
-    def quantize(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def quantise(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(codes, reconstruction) of a sequence, the step adapting as it goes."""
         return _adaptive(
             np.ascontiguousarray(x, dtype=np.float64),

@@ -453,7 +453,7 @@ def _fbx_take(rng) -> str:
 def fuzz_formats(run: Run, folder: Path) -> None:
     """The glTF reader (mutated .glb bytes, and mutated values in its JSON), the FBX reader
     (mutated ASCII FBX) and the numcodecs codec's chunks (mutated, CRC recomputed)."""
-    from mocodec.formats.gltf import to_gltf_bytes
+    from mocodec.formats.gltfwrite import to_gltf_bytes
 
     glb = to_gltf_bytes(_walk()[:8], binary=True)
     json_size = struct.unpack_from("<I", glb, 12)[0]

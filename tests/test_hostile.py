@@ -27,7 +27,7 @@ from mocodec.errors import CorruptStreamError, FormatError, MocodecError
 from mocodec.formats import container
 from mocodec.formats.asf import read_asf
 from mocodec.formats.fileio import STALE_TEMP_S, atomic_write_bytes
-from mocodec.formats.skeleton_bin import _mirrors, pack_skeleton, unpack_skeleton
+from mocodec.formats.skeleton_bin import mirrors, pack_skeleton, unpack_skeleton
 from mocodec.skeleton import Joint, Skeleton
 from mocodec.stream.live import LiveDecoder, stream_clip
 from mocodec.stream.packets import DATA as DATA_PACKET, Packet, StreamInfo
@@ -354,6 +354,6 @@ def test_offset_mirrors_match_the_pairwise_search():
                     return (i - k) << 3 | signs
         return 0
 
-    assert _mirrors(offsets) == [pairwise(i) for i in range(len(offsets))]
+    assert mirrors(offsets) == [pairwise(i) for i in range(len(offsets))]
     sk = Skeleton([Joint(f"j{i}", i - 1, o) for i, o in enumerate(offsets)])
     assert unpack_skeleton(pack_skeleton(sk)).joints == sk.joints

@@ -195,9 +195,9 @@ def test_frames_far_off_round_their_coefficients_plainly(walk_amc):
     step, const = np.full((8, 1), 2.0), np.zeros(8, dtype=bool)
     factors = segment_factors(np.zeros(enc.lay.starts.size), enc.lay)
     constants = ConstantCoding(np.ones(8), np.zeros(8))
-    knots, coeffs, scaled = enc._quantise(target, const, step, factors, constants)
+    knots, coeffs, scaled = enc.quantise(target, const, step, factors, constants)
     out = reconstruct(knots, coeffs, const, step, enc.lay, factors, constants)
-    rounded, closer = enc._round_where_far(target, out, scaled, (knots, coeffs, const), step, factors, constants)
+    rounded, closer = enc.round_where_far(target, out, scaled, (knots, coeffs, const), step, factors, constants)
     changed = rounded != coeffs
     assert changed.sum() > 10
     assert (np.abs(rounded[changed]) == np.abs(coeffs[changed]) + 1).all()
@@ -265,7 +265,7 @@ def test_a_slack_try_over_the_bound_halves_only_the_codes_moving_the_points_over
         return ps
 
     enc.run_pass = recording
-    enc._use_slack(best, bound)
+    enc.use_slack(best, bound)
     (first, errors), (second, _) = tries[:2]
     assert errors.max() > bound
     moving_over = influence(walk_amc.skeleton, "shell")[:, errors > bound].any(axis=1)
@@ -427,7 +427,7 @@ def test_a_clip_cut_off_its_grid_is_coded_on_it(walk_bvh, trim):
     clip = walk_bvh[trim:]
     uncut, cut, plain = BoundSearch(codec, walk_bvh), BoundSearch(codec, clip), BoundSearch(codec, clip)
     plain.grid = None  # the layout without a lead
-    plain._set_layout(0)
+    plain.set_layout(0)
     assert (uncut.grid, uncut.lead, cut.grid, cut.lead, plain.lead) == (0, 0, -trim % 4, trim, 0)
     codes = uncut.codes(uncut.first_scale())
     sizes = [len(enc.body(enc.run_pass(codes))) for enc in (uncut, cut, plain)]
@@ -580,7 +580,7 @@ def test_a_final_pass_far_under_its_bound_is_scaled_up(walk_bvh):
     fine = enc.run_pass(enc.codes(enc.first_scale() / 4.0))
     worst = enc.error(fine.decoded)
     assert worst < 0.5
-    up = enc._scale_up(fine, worst, 1.0)
+    up = enc.scale_up(fine, worst, 1.0)
     assert (up.steps > fine.steps).all() and (up.steps - fine.steps == (up.steps - fine.steps)[0]).all()
     after = enc.error(up.decoded)
     assert after <= 1.0 and len(enc.body(up)) < len(enc.body(fine))
@@ -618,11 +618,11 @@ def test_a_pass_far_under_the_bound_gives_single_codes_their_slack(walk_bvh):
     while enc.error(start.decoded) > 0.4 * bound:
         scale *= 0.8
         start = enc.run_pass(enc.codes(scale))
-    filled = enc._fill(start, bound)
+    filled = enc.fill(start, bound)
     assert enc.error(filled.decoded) <= bound
     assert (filled.steps >= start.steps).all() and (filled.steps > start.steps).any()
     assert len(enc.body(filled)) < len(enc.body(start))
-    assert enc._fill(filled, bound) is filled or enc.error(filled.decoded) < FILL_BELOW * bound
+    assert enc.fill(filled, bound) is filled or enc.error(filled.decoded) < FILL_BELOW * bound
 
 
 def test_every_effort_level_is_pinned_and_keeps_the_bound():

@@ -226,7 +226,7 @@ def test_allocation_meets_its_model_bound_and_favours_long_levers(walk_amc, mode
     coded = np.array(angles) > 0
     assert np.isfinite(rot[coded]).all() and np.isnan(rot[~coded]).all() and trans > 0
     # modelled error of every point (or the mean of its norm) is at most 1
-    lev2 = kinalloc._points(sk, True, mode)
+    lev2 = kinalloc.points(sk, True, mode)
     u = np.where(coded, np.array(angles) * np.radians(np.nan_to_num(rot)) ** 2, 0.0)
     err2 = u @ lev2 + 3 * trans**2
     worst = np.sqrt(err2).mean() if mode == "mean" else err2.max()
@@ -279,8 +279,8 @@ def test_rounded_offsets_are_written_in_fixed_point(walk_bvh, walk_amc):
         data = pack_skeleton(rounded)
         assert container.skeleton_id(unpack_skeleton(data)) == container.skeleton_id(rounded)
         offsets = [tuple(map(float, j.offset)) for j in rounded.joints]
-        tagged = skeleton_bin._offset_column(offsets, None)
-        fixed = skeleton_bin._offset_column(offsets, skeleton_bin._fixed_places(offsets))
+        tagged = skeleton_bin.offset_column(offsets, None)
+        fixed = skeleton_bin.offset_column(offsets, skeleton_bin.fixed_places(offsets))
         assert fixed[0] > 0 and fixed in data and len(zlib.compress(fixed)) < 6 / 7 * len(zlib.compress(tagged))
 
 

@@ -16,7 +16,7 @@ from conftest import DATA, SHARED
 from gltf_builder import GltfBuilder, trs_matrix as _matrix
 from mocodec import load, save
 from mocodec.errors import FormatError, MocodecError
-from mocodec.formats.gltf import to_gltf_bytes
+from mocodec.formats.gltfwrite import to_gltf_bytes
 
 pytest.importorskip("pygltflib")
 

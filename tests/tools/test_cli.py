@@ -259,3 +259,17 @@ def test_compare_reads_a_converted_file_in_its_own_unit(tmp_path, capsys):
     capsys.readouterr()
     assert main(["compare", str(tmp_path / "metres.glb"), str(out), "--json"]) == 0
     assert '"max_joint_error_cm"' in capsys.readouterr().out
+
+
+def test_codecs_lists_each_id_in_a_column_of_its_own(capsys):
+    """The first column of ``mocodec codecs`` is the ids, whatever their length (a script reads
+    it); the knob lines start with spaces."""
+    from mocodec.codecs import codec_ids
+
+    assert main(["codecs"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    heads = [line for line in lines if not line.startswith(" ")]
+    width = max(map(len, codec_ids())) + 2
+    assert [line[:width].rstrip() for line in heads] == codec_ids()
+    assert all(line[width] != " " for line in heads)  # the description starts in one column
+    assert len(lines) == 2 * len(heads)

@@ -28,7 +28,7 @@ MOC = DATA / "moc"
 def _assert_current(path, made: bytes) -> None:
     """The stored fixture is what the code makes now: bytes and integers exactly; decoded floats
     and joint positions to the last bits the platform's sin, cos and arctan2 leave open (they
-    differ by an ulp between CPUs: tests/test_golden.py)."""
+    differ by an ulp between CPUs: tests/codecs/test_golden.py)."""
     import gzip
     import json
 

@@ -46,7 +46,7 @@ def test_encode_api_re_encodes_and_reports_bad_requests(session):
         await runner.setup()
         site = web.TCPSite(runner, "127.0.0.1", 0)
         await site.start()
-        port = site._server.sockets[0].getsockname()[1]
+        port = runner.addresses[0][1]
         import aiohttp
 
         try:

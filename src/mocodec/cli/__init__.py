@@ -17,7 +17,7 @@ from mocodec.version import __version__
 # command -> (its module in this package, one line of help), in the order --help lists them
 COMMANDS = {
     "info": ("files", "summarise motion files"),
-    "convert": ("files", "convert between BVH and ASF/AMC"),
+    "convert": ("files", "convert motion files (BVH, ASF/AMC, glTF, FBX in; BVH, ASF/AMC, glTF out)"),
     "compare": ("files", "every error measure of a decoded motion against its original"),
     "analyze": ("files", "statistics, spectra and bit-rate estimates of a motion"),
     "encode": ("coding", "code motion files into .moc files"),
@@ -54,7 +54,13 @@ class _Commands:
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The parser, with the arguments of ``command`` (of every command with "all"); the other
     commands are listed by name and help only."""
-    parser = argparse.ArgumentParser(prog="mocodec", description="Coding of human motion capture (BVH, ASF/AMC).")
+    parser = argparse.ArgumentParser(
+        prog="mocodec",
+        description=(
+            "Coding of human motion capture: motion files (BVH, ASF/AMC, glTF, FBX) to .moc files, "
+            "live streams through a relay, and a viewer."
+        ),
+    )
     parser.add_argument("--version", action="version", version=f"mocodec {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     wanted = {module for name, (module, _) in COMMANDS.items() if command in ("all", name)}

@@ -162,22 +162,27 @@ def cmd_eval(args) -> int:
 
 
 def cmd_codecs(args) -> int:
-    for cid in codec_ids():
+    """One codec a line, its id in the first column (padded to the longest), then its
+    description; its knobs, quality knob, delay and flags on the next line, indented."""
+    ids = codec_ids()
+    width = max(map(len, ids)) + 2
+    for cid in ids:
         cls = codec_class(cid)
         flags = ", ".join(
             f
             for f, on in (
                 ("lossless", cls.lossless),
                 ("streaming", cls.streaming),
+                ("embedded", cls.embedded),
                 ("baseline for comparison", cls.baseline),
             )
             if on
         )
         knobs = " ".join(k.describe() for k in cls.knobs) or "-"
         quality = f"; quality knob {cls.quality.name}" if cls.quality else ""
-        print(f"{cid:<12}{cls.description}")
+        print(f"{cid:<{width}}{cls.description}")
         delay = "variable (per frame: codec.delays(motion))" if cls.variable_delay else f"{cls().delay_frames()} frames"
-        print(f"{'':<12}knobs: {knobs}{quality}; delay {delay}{'; ' + flags if flags else ''}")
+        print(f"{'':<{width}}knobs: {knobs}{quality}; delay {delay}{'; ' + flags if flags else ''}")
     return 0
 
 

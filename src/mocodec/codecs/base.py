@@ -1,4 +1,4 @@
-"""The codec interface (design.md): knobs, bodies, streaming pair.
+"""The codec interface (docs/architecture.md): knobs, bodies, capabilities, the streaming pair.
 
 Every codec subclasses :class:`Codec`, names its ``id``, ``description`` and ``knobs`` and
 implements ``_encode(motion) -> body`` and ``_decode(body, skeleton, frames, fps) ->

@@ -11,7 +11,8 @@ from mocodec.formats.asf import read_asf, write_asf
 from mocodec.formats.bvh import guess_units_per_metre, read_bvh, write_bvh
 from mocodec.formats.convert import to_asf_form, to_bvh_form, with_units
 from mocodec.formats.fbx import read_fbx
-from mocodec.formats.gltf import read_gltf, write_gltf
+from mocodec.formats.gltf import read_gltf
+from mocodec.formats.gltfwrite import write_gltf
 from mocodec.motion import Motion
 
 READABLE = (".bvh", ".amc", ".gltf", ".glb", ".fbx")

@@ -1,15 +1,7 @@
-"""glTF 2.0 (``.gltf``, ``.glb``) animations: a skeleton as a node hierarchy, sampled motion.
+"""Reading glTF 2.0 (``.gltf``, ``.glb``) animations: a skeleton as a node hierarchy, sampled
+motion (writing: :mod:`.gltfwrite`; what the document must look like: :mod:`.gltfschema`).
 
-Writing: one node per joint (its rest offset as the node's translation, in metres as glTF
-requires), one skin over all joints (so loaders such as three.js make them bones), and one
-animation sampling every frame: a rotation channel (quaternions) for each joint that rotates, a
-translation channel for each joint that translates (a still pose: the root's rotation), LINEAR
-between frames. Each node's
-``extras.mocodec`` keeps the joint's channel layout (channels, Euler order, ASF axis, exact
-offset) and the asset's ``extras.mocodec`` the unit and frame rate, so a file read back has the
-same skeleton; other readers ignore them. Values are 32-bit floats, as glTF stores them.
-
-Reading: the skeleton is the first skin's joints (or, without a skin, the nodes the animation
+The skeleton is the first skin's joints (or, without a skin, the nodes the animation
 moves and the nodes between them), with the transforms above them composed into the root;
 the animation (``animation``: a name or an index, the first by default) is sampled at ``fps``
 from its first key to its last, with STEP, LINEAR (slerp) and CUBICSPLINE interpolation. By
@@ -33,12 +25,10 @@ import numpy as np
 
 from mocodec import limits, rotations
 from mocodec.errors import ConversionError, FormatError
-from mocodec.extras import require
 from mocodec.formats import nodetree
-from mocodec.formats.fileio import atomic_write_bytes, read_bytes
+from mocodec.formats.fileio import read_bytes
+from mocodec.formats.gltfschema import SCHEMA, Fields, schema_error, small_int
 from mocodec.motion import Motion
-from mocodec.skeleton import POSITION_CHANNELS
-from mocodec.version import __version__
 
 _GLB_MAGIC = b"glTF"
 _CHUNK_JSON = 0x4E4F534A
@@ -49,8 +39,6 @@ _NORMALISE = {5120: 127.0, 5121: 255.0, 5122: 32767.0, 5123: 65535.0}
 _WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
 #: Bytes a glTF file may have: its buffers are read into memory whole.
 MAX_FILE_BYTES = 1 << 31
-#: Digits a JSON integer may have (a glTF index or count is far shorter).
-MAX_INT_DIGITS = 20
 #: Values all accessors together may convert, per byte of the file (float64: 8 bytes each).
 ACCESSOR_VALUES_PER_BYTE = 2
 #: Frame rate of a clip whose keys do not sit on a grid of at least MIN_GRID_FPS (a few
@@ -62,110 +50,6 @@ MIN_GRID_FPS = 10.0
 #: How far (in frames) a key time may be from the grid and still sit on it (key times are
 #: 32-bit floats).
 _GRID_SLACK_FRAMES = 1e-2
-
-
-def _pygltflib():
-    return require("pygltflib", "formats", "glTF export")
-
-
-# ----- writing -------------------------------------------------------------------------------
-
-
-class _Blob:
-    """The binary buffer and its views and accessors, built up one array at a time."""
-
-    def __init__(self, gltf):
-        self.gltf = gltf
-        self.data = bytearray()
-
-    def add(self, values: np.ndarray, kind: str, with_bounds: bool = False) -> int:
-        g = _pygltflib()
-        array = np.ascontiguousarray(values, dtype="<f4")
-        self.data += b"\0" * (-len(self.data) % 4)
-        view = g.BufferView(buffer=0, byteOffset=len(self.data), byteLength=array.nbytes)
-        self.data += array.tobytes()
-        self.gltf.bufferViews.append(view)
-        count = array.shape[0]
-        accessor = g.Accessor(bufferView=len(self.gltf.bufferViews) - 1, componentType=_FLOAT, count=count, type=kind)
-        if with_bounds:
-            flat = array.reshape(count, -1)
-            accessor.min = [float(v) for v in flat.min(axis=0)]
-            accessor.max = [float(v) for v in flat.max(axis=0)]
-        self.gltf.accessors.append(accessor)
-        return len(self.gltf.accessors) - 1
-
-
-def to_gltf_bytes(motion: Motion, binary: bool, animation_name: str = "") -> bytes:
-    """``motion`` as a ``.glb`` (``binary``) or a self-contained ``.gltf`` (buffer as a data URI)."""
-    g = _pygltflib()
-    if motion.num_frames == 0:
-        raise ConversionError("a glTF animation needs at least one frame; the motion has none")
-    sk = motion.skeleton
-    translation, rotation = nodetree.from_motion(motion)
-    gltf = g.GLTF2(asset=g.Asset(version="2.0", generator=f"mocodec {__version__}"))
-    gltf.asset.extras = {"mocodec": {"units_per_metre": sk.units_per_metre, "fps": motion.fps}}
-    blob = _Blob(gltf)
-    for i, joint in enumerate(sk.joints):
-        node = g.Node(name=joint.name, children=list(sk.children[i]) or [])
-        node.translation = [float(v) for v in sk.offsets[i] / sk.units_per_metre]
-        node.extras = {"mocodec": nodetree.layout_of(joint)}
-        gltf.nodes.append(node)
-    gltf.scenes = [g.Scene(nodes=[0])]
-    gltf.scene = 0
-    rest = sk.rest_positions / sk.units_per_metre
-    inverse_bind = np.tile(np.eye(4), (len(sk), 1, 1))
-    inverse_bind[:, :3, 3] = -rest
-    # glTF matrices are column-major: the transpose's rows are the columns
-    gltf.skins = [
-        g.Skin(
-            joints=list(range(len(sk))),
-            skeleton=0,
-            inverseBindMatrices=blob.add(inverse_bind.transpose(0, 2, 1).reshape(len(sk), 16), "MAT4"),
-        )
-    ]
-    times = blob.add(np.arange(motion.num_frames) / motion.fps, "SCALAR", with_bounds=True)
-    animation = g.Animation(name=animation_name or sk.name or "motion")
-    for i, joint in enumerate(sk.joints):
-        paths = []
-        if any(c in POSITION_CHANNELS for c in joint.channels):
-            paths.append(("translation", translation[:, i], "VEC3"))
-        if joint.rotation_order:
-            xyzw = rotations.quat_continuous(rotation[:, i])[:, [1, 2, 3, 0]]
-            paths.append(("rotation", xyzw, "VEC4"))
-        for path, values, kind in paths:
-            animation.samplers.append(g.AnimationSampler(input=times, output=blob.add(values, kind)))
-            target = g.AnimationChannelTarget(node=i, path=path)
-            animation.channels.append(g.AnimationChannel(sampler=len(animation.samplers) - 1, target=target))
-    if not animation.channels:  # a still pose: the root's rotation keeps its frames
-        xyzw = np.tile(rotation[0, 0, [1, 2, 3, 0]], (motion.num_frames, 1))
-        animation.samplers.append(g.AnimationSampler(input=times, output=blob.add(xyzw, "VEC4")))
-        target = g.AnimationChannelTarget(node=0, path="rotation")
-        animation.channels.append(g.AnimationChannel(sampler=0, target=target))
-    gltf.animations = [animation]
-    data = bytes(blob.data) + b"\0" * (-len(blob.data) % 4)
-    if binary:
-        gltf.buffers = [g.Buffer(byteLength=len(data))]
-        gltf.set_binary_blob(data)
-        return b"".join(gltf.save_to_bytes())
-    uri = "data:application/octet-stream;base64," + base64.b64encode(data).decode("ascii")
-    gltf.buffers = [g.Buffer(byteLength=len(data), uri=uri)]
-    return gltf.gltf_to_json().encode("utf-8")
-
-
-def write_gltf(motion: Motion, path: str | os.PathLike, animation_name: str = "") -> None:
-    """Write ``motion`` as ``.glb`` or ``.gltf`` (by extension), atomically."""
-    binary = Path(path).suffix.lower() == ".glb"
-    atomic_write_bytes(path, to_gltf_bytes(motion, binary, animation_name))
-
-
-# ----- reading -------------------------------------------------------------------------------
-
-
-class _Fields(dict):
-    """A JSON object whose fields read as attributes, None where left out (``node.children``)."""
-
-    def __getattr__(self, name: str):
-        return self.get(name)
 
 
 class _Document:
@@ -268,87 +152,6 @@ class _Document:
         return values
 
 
-_INDEX = "index"
-_NUMBER = "number"
-_ANY = "any"
-_INDICES = [_INDEX]
-_NUMBERS = [_NUMBER]
-#: The parts of a glTF document mocodec reads, and the JSON type each must have: a field
-#: left out is fine, one of another type is refused before the document is used.
-_SCHEMA = {
-    "asset": {"version": str, "extras": _ANY},
-    "scene": _INDEX,
-    "scenes": [{"nodes": _INDICES}],
-    "nodes": [
-        {
-            "name": str,
-            "children": _INDICES,
-            "translation": _NUMBERS,
-            "rotation": _NUMBERS,
-            "scale": _NUMBERS,
-            "matrix": _NUMBERS,
-            "mesh": _INDEX,
-            "camera": _INDEX,
-            "skin": _INDEX,
-            "extras": _ANY,
-        }
-    ],
-    "skins": [{"joints": _INDICES, "skeleton": _INDEX, "inverseBindMatrices": _INDEX}],
-    "animations": [
-        {
-            "name": str,
-            "channels": [{"sampler": _INDEX, "target": {"node": _INDEX, "path": str}}],
-            "samplers": [{"input": _INDEX, "output": _INDEX, "interpolation": str}],
-        }
-    ],
-    "accessors": [
-        {
-            "bufferView": _INDEX,
-            "byteOffset": _INDEX,
-            "componentType": _INDEX,
-            "normalized": bool,
-            "count": _INDEX,
-            "type": str,
-            "sparse": _ANY,
-        }
-    ],
-    "bufferViews": [{"buffer": _INDEX, "byteOffset": _INDEX, "byteLength": _INDEX, "byteStride": _INDEX}],
-    "buffers": [{"byteLength": _INDEX, "uri": str}],
-}
-
-
-def _schema_error(value, spec, where: str) -> str | None:
-    """Where ``value`` first departs from ``spec`` (see _SCHEMA), or None. Iterative: a
-    document may nest as deep as it likes."""
-    stack = [(value, spec, where)]
-    while stack:
-        value, spec, where = stack.pop()
-        if spec is _ANY:
-            continue
-        if spec is _INDEX:
-            ok = isinstance(value, int) and not isinstance(value, bool) and value >= 0
-            expected = "a non-negative integer"
-        elif spec is _NUMBER:
-            ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-            expected = "a number"
-        elif isinstance(spec, list):
-            ok, expected = isinstance(value, list), "a list"
-            if ok:
-                stack.extend((item, spec[0], f"{where}[{k}]") for k, item in enumerate(value))
-        elif isinstance(spec, dict):
-            ok, expected = isinstance(value, dict), "an object"
-            if ok:
-                stack.extend((value[key], sub, f"{where}.{key}") for key, sub in spec.items() if key in value)
-        else:
-            ok, expected = (
-                isinstance(value, spec) and not isinstance(value, bool) or spec is bool and isinstance(value, bool),
-                f"a {spec.__name__}",
-            )
-        if not ok:
-            return f"{where.lstrip('.')}: expected {expected}, got {json.dumps(value)[:40]}"
-    return None
-
-
 def _split_glb(path: Path, data: bytes) -> tuple[str, bytes | None]:
     """The JSON text and binary chunk of a ``.glb`` (header and chunk lengths checked)."""
     if len(data) < 20:
@@ -377,16 +180,9 @@ def _split_glb(path: Path, data: bytes) -> tuple[str, bytes | None]:
         raise FormatError(path, None, f"JSON chunk is not UTF-8 (byte {20 + e.start})") from None
 
 
-def _small_int(text: str) -> int:
-    """A JSON integer of at most MAX_INT_DIGITS digits (a longer one overflows every float)."""
-    if len(text) > MAX_INT_DIGITS:
-        raise ValueError(f"an integer of {len(text)} digits ({text[:12]}...): glTF holds none that long")
-    return int(text)
-
-
 def _parse(path: Path) -> _Document:
-    """The document, its JSON checked against _SCHEMA and its node count against MAX_JOINTS
-    before anything walks it (linear in the file: JSON objects become :class:`_Fields`)."""
+    """The document, its JSON checked against SCHEMA and its node count against MAX_JOINTS
+    before anything walks it (linear in the file: JSON objects become :class:`Fields`)."""
     data = read_bytes(path, MAX_FILE_BYTES)
     if not data:
         raise FormatError(path, None, "empty file (0 bytes): not a glTF file")
@@ -399,19 +195,19 @@ def _parse(path: Path) -> _Document:
         except UnicodeDecodeError as e:
             raise FormatError(path, None, f"not a .glb and not UTF-8 JSON (byte {e.start})") from None
     try:
-        document = json.loads(text, object_hook=_Fields, parse_int=_small_int)
+        document = json.loads(text, object_hook=Fields, parse_int=small_int)
     except json.JSONDecodeError as e:
         raise FormatError(path, e.lineno, f"not JSON: {e.msg} (column {e.colno})") from None
     except RecursionError:
         raise FormatError(path, None, "JSON nested too deep") from None
-    except ValueError as e:  # from _small_int
+    except ValueError as e:  # from small_int
         raise FormatError(path, None, str(e)) from None
     if not isinstance(document, dict) or not isinstance(document.get("asset"), dict):
         raise FormatError(path, None, "not a glTF document (no asset object)")
     nodes = document.get("nodes")
     if isinstance(nodes, list) and len(nodes) > limits.MAX_JOINTS:
         raise FormatError(path, None, f"{len(nodes)} nodes, more than a skeleton may have ({limits.MAX_JOINTS})")
-    problem = _schema_error(document, _SCHEMA, "")
+    problem = schema_error(document, SCHEMA, "")
     if problem:
         raise FormatError(path, None, problem)
     version = str(document["asset"].get("version", ""))

@@ -146,7 +146,7 @@ def _as_product(offset: tuple[float, ...]) -> bytes | None:
     return best
 
 
-def _mirrors(offsets: list[tuple[float, ...]]) -> list[int]:
+def mirrors(offsets: list[tuple[float, ...]]) -> list[int]:
     """Per joint ``i``, ``back << 3 | signs``: its offset is joint ``i - back``'s with the
     coordinates in ``signs`` (bit a for axis a) negated, bit for bit, the nearest such joint
     and then the fewest signs; 0 if no earlier joint's is (or the offset is zero). One pass with
@@ -181,7 +181,7 @@ def round_offsets(skeleton: Skeleton, precision_cm: float) -> Skeleton:
     return dataclasses.replace(skeleton, joints=tuple(joints))
 
 
-def _fixed_places(offsets: list[tuple[float, ...]]) -> int | None:
+def fixed_places(offsets: list[tuple[float, ...]]) -> int | None:
     """The fewest decimal places k at which every offset is an integer / 10^k, bit for bit."""
     values = [x for o in offsets for x in o]
     if not all(math.isfinite(x) for x in values):
@@ -197,13 +197,13 @@ def _fixed_places(offsets: list[tuple[float, ...]]) -> int | None:
     )
 
 
-def _offset_column(offsets: list[tuple[float, ...]], places: int | None) -> bytes:
+def offset_column(offsets: list[tuple[float, ...]], places: int | None) -> bytes:
     """The offsets, each as a reference to a mirrored earlier one or as its numbers: tagged
     decimals (or an ASF length times direction), or with ``places`` untagged
     integers / 10^places. The column opens with places + 1 (0: tagged)."""
     w = _Writer()
     w.uint(0 if places is None else places + 1)
-    for offset, mirror in zip(offsets, _mirrors(offsets)):
+    for offset, mirror in zip(offsets, mirrors(offsets)):
         if mirror:
             w.uint(mirror)
             continue
@@ -246,7 +246,7 @@ def pack_skeleton(skeleton: Skeleton) -> bytes:
     for j in joints:
         w.uint(BODY_PARTS.index(j.body_part) + 1 if j.body_part else 0)
     offsets = [tuple(float(x) for x in j.offset) for j in joints]
-    w.out += min((_offset_column(offsets, places) for places in (None, _fixed_places(offsets))), key=len)
+    w.out += min((offset_column(offsets, places) for places in (None, fixed_places(offsets))), key=len)
     for j in joints:
         w.uint(int(j.has_axis))
         if j.has_axis:

@@ -174,7 +174,7 @@ class Encoder:
         self.shape_rot, self.shape_trans = self._shape()
         self.joint_offsets = np.zeros(len(self.rot_joints) + self.trans, dtype=np.int64)
         self.grid = self._grid_phase()  # the frames (mod trendwave.LEADS) the blocks' grid starts on
-        self._set_layout(0)
+        self.set_layout(0)
         self.means = np.zeros((len(three_angle_groups(sk)), 3), dtype=np.int64)
         self.turns, self.turned = self._turns()
         self.forms = self._choose_forms() if self.cfg["rotation_vectors"] else np.zeros(0, dtype=np.int64)
@@ -217,7 +217,7 @@ class Encoder:
         steps = channel_steps(self.skeleton, self.codes(self.first_scale()))
         return trendwave.grid_phase(self.values / steps, self.cfg["wavelet"], skip=2)
 
-    def _set_layout(self, keyframes: int) -> None:
+    def set_layout(self, keyframes: int) -> None:
         """Segments and knots with ``keyframes`` leading one-frame segments, the wavelet grid
         on ``self.grid``, and the header."""
         self.keyframes = keyframes
@@ -241,10 +241,10 @@ class Encoder:
         same steps the errors are about the same."""
         passes = []
         for count in range(3):
-            self._set_layout(count)
+            self.set_layout(count)
             passes.append(self.run_pass(self.codes(self.first_scale())))
         best = int(np.argmin([len(self.body(ps)) for ps in passes]))
-        self._set_layout(best)
+        self.set_layout(best)
         self.first_pass = passes[best]  # the search starts from it
 
     def starting_pass(self) -> Pass:
@@ -344,7 +344,7 @@ class Encoder:
                 else np.zeros(idx.size, bool)
             )
             flat, none = np.zeros(rows.size, dtype=bool), ConstantCoding(np.ones(rows.size), np.zeros(rows.size))
-            k_int, c_int, _ = self._quantise(values, flat, step[rows], factors, none, lay)
+            k_int, c_int, _ = self.quantise(values, flat, step[rows], factors, none, lay)
             sizes = coefcoder.group_sizes(k_int, c_int, lay.padded, lay.levels, 3, revision=CODER_REVISION)
             rec = reconstruct(k_int, c_int, flat, step[rows], lay, factors, none)
             back = rotvec.from_forms(rec, kept, forms, turns[idx], pre[idx]) if form else rec
@@ -455,9 +455,9 @@ class Encoder:
             wanted = values[:, iso]
             if iso.size:  # the wavelet sees the neighbours' mean there
                 values[:, iso] = (values[:, iso - 1] + values[:, iso + 1]) / 2.0
-            k_int, c_int, scaled = self._quantise(values, const, step, factors, constants)
+            k_int, c_int, scaled = self.quantise(values, const, step, factors, constants)
             out = reconstruct(k_int, c_int, const, step, lay, factors, constants)
-            c_int, out = self._round_where_far(values, out, scaled, (k_int, c_int, const), step, factors, constants)
+            c_int, out = self.round_where_far(values, out, scaled, (k_int, c_int, const), step, factors, constants)
             knots[channels], coeffs[channels] = k_int, c_int
             if iso.size:
                 patch = np.round((wanted - out[:, iso]) / (step * trendwave.KEYFRAME_QUANTUM)).astype(np.int64)
@@ -478,7 +478,7 @@ class Encoder:
         )
         return Pass(codes, self.const.astype(np.int64), knots, coeffs, decoded, offsets, patches)
 
-    def _quantise(
+    def quantise(
         self,
         target: np.ndarray,
         const: np.ndarray,
@@ -504,7 +504,7 @@ class Encoder:
         c_int[const] = 0
         return k_int, c_int, c
 
-    def _round_where_far(
+    def round_where_far(
         self,
         target: np.ndarray,
         out: np.ndarray,

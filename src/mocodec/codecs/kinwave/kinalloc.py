@@ -59,7 +59,7 @@ def levers(skeleton: Skeleton, closed_loop: bool) -> np.ndarray:
     return out
 
 
-def _points(skeleton: Skeleton, closed_loop: bool, mode: str) -> np.ndarray:
+def points(skeleton: Skeleton, closed_loop: bool, mode: str) -> np.ndarray:
     """Squared levers ``(joints, points)`` of the points the mode bounds."""
     lev = levers(skeleton, closed_loop)
     if mode != "shell":
@@ -89,7 +89,7 @@ def steps(
         raise ValueError(f"unknown allocation mode {mode!r} (one of {', '.join(MODES)})")
     m = np.asarray(angles, dtype=float)
     coded = np.flatnonzero(m > 0)
-    sq = _points(skeleton, closed_loop, mode)
+    sq = points(skeleton, closed_loop, mode)
     # per variable (coded joints, then the translation): rate weight and squared lever per point
     weight = np.append(m[coded], translations) if translations else m[coded]
     lever2 = sq[coded] * (m[coded, None] * _DEG**2)

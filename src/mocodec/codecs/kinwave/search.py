@@ -25,7 +25,7 @@ MAX_PASSES = 8  # secant passes before falling back to halving
 JOINT_FEEDBACK = 1.0  # share of a joint's measured slack (in octaves) its steps take on
 SHORT_FRAMES = 512  # a body this short searches once per share of SHORT_SHARES, the smallest wins
 SHORT_SHARES = (JOINT_FEEDBACK, 0.5, 0.0)
-SLACK_PASSES = 1  # rounds in which a max bound's final pass gives its slack away (_use_slack)
+SLACK_PASSES = 1  # rounds in which a max bound's final pass gives its slack away (use_slack)
 SLACK_TRIES = 3  # passes a round tries, halving the codes that move the points over the bound
 SEGMENT_SLACK_BELOW = 0.9  # ... with time-adaptive steps only when its worst error is under this share
 ACCEPT = 0.95  # a max-error bound is met well enough at 95-100% of it
@@ -139,7 +139,7 @@ class BoundSearch(Encoder):
                 x = x + float(np.clip((aim - y) / slope, -3.0, 3.0))
         return (lo[2] if lo else None), x
 
-    def _use_slack(self, best: Pass, bound: float, below: float = math.inf) -> Pass:
+    def use_slack(self, best: Pass, bound: float, below: float = math.inf) -> Pass:
         """Under a max bound, the final pass gives the slack to the codes whose points have it:
         each code coarser by the 1/8 octaves between the bound and the worst error among the
         points it moves; while the pass then breaks the bound, the codes that move a point now
@@ -168,9 +168,9 @@ class BoundSearch(Encoder):
                 coarser = np.where(moving_over, np.floor(coarser / 2.0), coarser)
             else:
                 break
-        return self._fill(self._scale_up(best, errors.max(), bound), bound)
+        return self.fill(self.scale_up(best, errors.max(), bound), bound)
 
-    def _fill(self, best: Pass, bound: float) -> Pass:
+    def fill(self, best: Pass, bound: float) -> Pass:
         """A final pass still under FILL_BELOW x bound (every code one step coarser together
         breaks the bound: the worst error jumps with single codes at a few frames) gives the
         codes their slack one at a time (FILL_TRIES codes at most): each code coarser by the
@@ -201,7 +201,7 @@ class BoundSearch(Encoder):
                 break
         return best
 
-    def _scale_up(self, best: Pass, worst: float, bound: float) -> Pass:
+    def scale_up(self, best: Pass, worst: float, bound: float) -> Pass:
         """A final pass still under ACCEPT x bound (the time-adaptive search can stop far below
         it when a seam makes one segment's error jump and the segment goes many codes finer)
         takes every code coarser together by the 1/8 octaves between its worst error and the
@@ -232,7 +232,7 @@ class BoundSearch(Encoder):
         best, x = self._search(lambda ps: self.error(ps.decoded), bound, accept, guess, 1.0)
         for _ in range(60):
             if best is not None:
-                body = self.body(self._use_slack(best, bound) if self.cfg["effort"] >= 2 else best)
+                body = self.body(self.use_slack(best, bound) if self.cfg["effort"] >= 2 else best)
                 if self.error(self.decoded_body(body)) <= bound:  # the guarantee, on the real decoder
                     return body
             x -= math.log(2.0)
@@ -297,7 +297,7 @@ class BoundSearch(Encoder):
             ps, seg = run(offsets)
             over = seg > bound
             if not over.any():
-                body = self.body(self._use_slack(ps, bound, SEGMENT_SLACK_BELOW))
+                body = self.body(self.use_slack(ps, bound, SEGMENT_SLACK_BELOW))
                 if self.error(self.decoded_body(body)) <= bound:  # the guarantee, on the real decoder
                     return body
                 over[:] = True

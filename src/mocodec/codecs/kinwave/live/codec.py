@@ -116,8 +116,8 @@ class KinwaveLiveCodec(Codec):
             "layer_ratio",
             float,
             2.0,
-            "each layer's bound over the next one's: a coarser base costs the full stream less "
-            "(2 layers at 32: 32 and 1 cm, about 1.1x one layer at 1 cm; at 2, about 1.4x)",
+            "each layer's bound over the next one's (2 layers at 32: 32 and 1 cm); a coarser base "
+            "costs the full stream less (measured: docs/streaming.md)",
             1.0,
             1000.0,
         ),

@@ -5,6 +5,7 @@ module takes another module's private names."""
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
@@ -132,3 +133,20 @@ def test_the_relay_core_has_no_network_code(name, path, tree):
         for imported in names:
             assert imported.split(".")[0] not in NETWORK, f"{name} imports {imported}"
             assert imported != "mocodec.stream.relay.server", f"{name} imports the server"
+
+
+def test_the_picture_names_every_module():
+    """docs/architecture.md draws the layout: every package and module of mocodec is named in
+    its picture."""
+    doc = (PACKAGE.parent.parent / "docs" / "architecture.md").read_text()
+    picture = doc.split("```")[1]
+    words = set(re.findall(r"[A-Za-z_][A-Za-z0-9_]*", picture))
+    missing = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        name = path.parent.name if path.stem == "__init__" else path.stem
+        if name not in words and path.stem not in ("__init__", "__main__"):
+            missing.append(str(path.relative_to(PACKAGE)))
+    for path in sorted(p for p in PACKAGE.rglob("*") if p.is_dir() and (p / "__init__.py").exists()):
+        if path.name not in words:
+            missing.append(str(path.relative_to(PACKAGE)) + "/")
+    assert not missing, f"not in docs/architecture.md's picture: {missing}"

@@ -68,8 +68,8 @@ lint: $(STAMP)
 
 # every benchmark script of benchmarks/ (speed and rate-distortion of each issue), one after another
 bench: $(WARM)
-	for script in foundation measures coding lossless codec_speed speed seams ratecontrol kinwave kinwave_ablation invariance bound_usage live formats relay_tick js_moc \
-	              primitives rhythmic model_based hostile; do \
+	for script in foundation measures coding lossless codec_speed speed seams ratecontrol kinwave kinwave_ablation fixed_cost \
+	              invariance bound_usage live formats relay_tick js_moc primitives rhythmic model_based hostile; do \
 		$(BIN)/python benchmarks/bench_$$script.py || exit 1; done
 	$(BIN)/python benchmarks/bench_perceptual.py --set amc
 	$(BIN)/python benchmarks/bench_waveform.py --set amc
@@ -77,6 +77,7 @@ bench: $(WARM)
 	$(BIN)/python benchmarks/bench_streaming.py
 	$(BIN)/python benchmarks/bench_capture.py
 	$(BIN)/python benchmarks/relay_load.py
+	$(BIN)/python benchmarks/fig_viewer.py
 
 # the whole comparison on the shared clips: report in bench-out/report.html (docs/benchmarks.md)
 bench-suite: $(WARM)

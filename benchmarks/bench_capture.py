@@ -11,7 +11,7 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from common import best_of  # noqa: E402
+from common import best_of, options  # noqa: E402
 from mocodec import rotations  # noqa: E402
 from mocodec.capture.converter import Converter  # noqa: E402
 from mocodec.capture.simulate import random_poses, simulate  # noqa: E402
@@ -21,6 +21,7 @@ FRAMES = 20_000
 
 
 def main() -> None:
+    options(__doc__)
     t0 = time.perf_counter()
     small = random_poses(10, seed=0)
     Converter().convert(simulate(small, seed=0))

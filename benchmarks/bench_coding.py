@@ -8,6 +8,7 @@ import time
 
 import numpy as np
 
+from common import options
 from mocodec.coding.entropy import huffman, rangecoder, rle
 from mocodec.coding.entropy.bitio import BitReader, BitWriter, zigzag
 from mocodec.coding.quantisation.quantisers import AdaptiveQuantiser, MuLawQuantiser, UniformQuantiser
@@ -23,6 +24,7 @@ def rate(fn, n=N):
 
 
 def main() -> None:
+    options(__doc__)
     rng = np.random.default_rng(0)
     x = np.round(rng.laplace(0, 3, N)).astype(np.int64)
     sym = np.clip(x, -32, 31) + 32

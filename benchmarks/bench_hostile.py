@@ -13,7 +13,7 @@ import zlib
 
 import numpy as np
 
-from common import DATA, best_of
+from common import DATA, best_of, options
 from mocodec import limits, load, moc
 from mocodec.codecs import get_codec
 from mocodec.errors import MocodecError
@@ -44,6 +44,7 @@ def measured(what: str, fn) -> None:
 
 
 def main() -> None:
+    options(__doc__)
     import tempfile
     from pathlib import Path
 

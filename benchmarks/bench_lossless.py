@@ -9,12 +9,13 @@ import time
 import numpy as np
 import zstandard
 
-from common import SHARED
+from common import SHARED, options
 from mocodec import load, moc
 from mocodec.codecs import get_codec
 
 
 def main() -> None:
+    options(__doc__)
     if SHARED is None:
         print("bench_lossless: ../shared/data is not here; skipped")
         return

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from common import DATA, best_of, tile
+from common import DATA, best_of, options, tile
 from mocodec import load
 from mocodec.kinematics import forward_kinematics
 from mocodec.metrics import compare, dof_errors, visual_errors
@@ -18,6 +18,7 @@ FRAMES = 10_000
 
 
 def main() -> None:
+    options(__doc__)
     clip = load(DATA / "135_08.amc")
     original = tile(clip, FRAMES)
     noise = np.random.default_rng(0).normal(0, 0.3, original.channels.shape)

@@ -26,7 +26,7 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from common import SHARED, best_of  # noqa: E402
+from common import SHARED, best_of, options  # noqa: E402
 from mocodec import load  # noqa: E402
 from mocodec.codecs import get_codec  # noqa: E402
 from mocodec.codecs.model import motiontables
@@ -102,6 +102,7 @@ def speed(codec_id: str, clip, tables: str | None) -> str:
 
 
 def main() -> None:
+    options(__doc__)
     folder = tempfile.mkdtemp()
     t_start = time.perf_counter()
     for fmt, suffix in (("bvh", "bvh"), ("asf_amc", "amc")):

@@ -23,7 +23,7 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
-from common import SHARED  # noqa: E402
+from common import SHARED, options  # noqa: E402
 from mocodec import load  # noqa: E402
 from mocodec.codecs import get_codec  # noqa: E402
 from mocodec.codecs.motionprimitives import rhythmdb
@@ -55,6 +55,7 @@ def measure(motion, **knobs) -> str:
 
 
 def main() -> None:
+    options(__doc__)
     clips = [bvh(n) for n in DANCE]
     whole = clips[0].with_channels(np.concatenate([c.channels for c in clips]))
     folder = tempfile.mkdtemp()

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from common import SHARED
+from common import SHARED, options
 from mocodec import load
 from mocodec.codecs import get_codec
 from mocodec.kinematics import forward_kinematics
@@ -27,6 +27,7 @@ def jerk(motion, channels):
 
 
 def main() -> None:
+    options(__doc__)
     if SHARED is None:
         print("../shared/data is not here; skipped")
         return

@@ -3,6 +3,7 @@ by repeating a short one."""
 
 from __future__ import annotations
 
+import argparse
 import time
 from pathlib import Path
 
@@ -42,3 +43,8 @@ def tile(motion: Motion, frames: int) -> Motion:
     """``motion`` repeated to exactly ``frames`` frames."""
     reps = -(-frames // motion.num_frames)
     return motion.with_channels(np.tile(motion.channels, (reps, 1))[:frames])
+
+
+def options(doc: str | None) -> argparse.Namespace:
+    """The command line of a script that takes no options but ``--help`` (which prints ``doc``)."""
+    return argparse.ArgumentParser(description=doc, formatter_class=argparse.RawDescriptionHelpFormatter).parse_args()

@@ -16,6 +16,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
+from common import options  # noqa: E402
 from mocodec import load  # noqa: E402
 from mocodec.metrics import dof_errors, visual_errors  # noqa: E402
 
@@ -30,6 +31,7 @@ def measure(x: np.ndarray, y: np.ndarray, fps: float) -> tuple[float, float]:
 
 
 def main() -> None:
+    options(__doc__)
     motion = load(ROOT / "tests" / "data" / "135_08.amc")
     x = motion.channels[:, motion.skeleton.channel_index(DOF)]
     fps = motion.fps

@@ -8,10 +8,11 @@ import socket
 import subprocess
 import sys
 
-from common import DATA, ROOT
+from common import DATA, ROOT, options
 
 
 def main() -> None:
+    options(__doc__)
     from playwright.sync_api import sync_playwright
 
     with socket.socket() as s:

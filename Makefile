@@ -5,9 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 THREE_VERSION := 0.187.0
-VENDOR := src/mocodec/viewer/static/vendor
-# the last file the vendor rule writes: its presence means the whole set is there
-THREE := $(VENDOR)/addons/loaders/GLTFLoader.js
+VENDOR := src/mocodec/data/three
 
 .PHONY: demo test test-fast lint bench bench-suite vendor clean
 
@@ -16,7 +14,7 @@ $(BIN)/python:
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
 # every extra, then the kernels of the demo's codec compiled once (numba caches them)
-$(STAMP): $(BIN)/python pyproject.toml $(THREE)
+$(STAMP): $(BIN)/python pyproject.toml
 	$(BIN)/python -m pip install --quiet -e ".[test,plot,bench,stream,view,lint,formats,zarr]"
 	$(BIN)/mocodec warmup kinwave
 	touch $(STAMP)
@@ -27,12 +25,10 @@ $(WARM): $(STAMP)
 	$(BIN)/mocodec warmup
 	touch $(WARM)
 
-# the viewer's three.js (and the glTF loader the format tests load our files with), fetched from
-# npm once (pinned; npm checks its integrity) and served from the package, so the viewer works
-# offline
-vendor: $(THREE)
-
-$(THREE):
+# the viewer's three.js (and the glTF loader the format tests load our files with) is checked in
+# with its licence under $(VENDOR), so a wheel carries it; this fetches the pinned version from
+# npm again (npm checks its integrity), after THREE_VERSION changes
+vendor:
 	rm -rf $(VENDOR).tmp && mkdir -p $(VENDOR).tmp
 	cd $(VENDOR).tmp && npm pack --silent three@$(THREE_VERSION) > /dev/null && tar xzf three-$(THREE_VERSION).tgz
 	mkdir -p $(VENDOR)/addons/controls $(VENDOR)/addons/loaders $(VENDOR)/addons/utils

@@ -4,7 +4,7 @@ import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { readFile } from 'node:fs/promises';
 import * as THREE from 'three';
-import { GLTFLoader } from '../../src/mocodec/viewer/static/vendor/addons/loaders/GLTFLoader.js';
+import { GLTFLoader } from '../../src/mocodec/data/three/addons/loaders/GLTFLoader.js';
 
 const DATA = new URL('../formats/', import.meta.url);
 

@@ -11,9 +11,10 @@ from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
 import numpy as np
 import pytest
 
+from mocodec.data import THREE
 from conftest import DATA, ROOT
 
-VENDOR = ROOT / "src" / "mocodec" / "viewer" / "static" / "vendor"
+VENDOR = THREE
 FORMATS = DATA.parent / "formats"
 FILES = {"/": DATA.parent / "js" / "gltf_page.html", "/walk.glb": FORMATS / "walk.glb"}
 

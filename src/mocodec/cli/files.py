@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
 from mocodec.cli.options import add_codec_options, add_input_options, load_input, skeleton_from
 from mocodec.codecs import checked_config
+from mocodec.data import SAMPLE_CLIP
 from mocodec.formats import load, save, with_units
 from mocodec.motion import Motion
 
@@ -161,12 +161,8 @@ def cmd_analyze(args) -> int:
     return 0
 
 
-SAMPLE = "sample_walk_02_02.bvh"  # the bundled clip (mocodec/data)
-
-
 def _sample() -> Motion:
-    with resources.as_file(resources.files("mocodec") / "data" / SAMPLE) as path:
-        return load(path)
+    return load(SAMPLE_CLIP)
 
 
 def cmd_demo(args) -> int:
@@ -174,7 +170,7 @@ def cmd_demo(args) -> int:
     from mocodec.cli.coding import evaluate
 
     motion = _sample()
-    print(describe(motion, f"(bundled) {SAMPLE}"))
+    print(describe(motion, f"(bundled) {SAMPLE_CLIP.name}"))
     print()
     print(evaluate(motion, args))
     print("\nTry: mocodec codecs; mocodec eval FILE --codec ID; mocodec encode FILE -o out.moc")

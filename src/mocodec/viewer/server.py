@@ -1,7 +1,7 @@
 """The viewer's web server (``mocodec view``): the page, its three.js, and a small JSON API.
 
     GET  /                 the page
-    GET  /static/...       its script, style, the vendored three.js (no CDN: works offline) and
+    GET  /static/...       its script and style; /vendor/... the three.js in the package (no CDN: works offline); and
                            mocodec's JavaScript decoder (/static/decoder/, a link to js/src)
     GET  /api/state        the clip, its decoded version and the numbers (session.ViewSession.state)
     GET  /api/codecs       every codec and its knobs
@@ -21,22 +21,22 @@ from pathlib import Path
 
 from aiohttp import web
 
+from mocodec.data import THREE, three_is_there
 from mocodec.errors import MocodecError
 from mocodec.viewer.session import ViewSession, codec_menu
 
 STATIC = Path(__file__).with_name("static")
-VENDOR = STATIC / "vendor"
 DECODER = STATIC / "decoder"  # mocodec's JavaScript decoder (a link to js/src in a checkout)
 
 
-def vendored() -> bool:
-    return (VENDOR / "three.module.js").is_file() and (VENDOR / "addons" / "controls" / "OrbitControls.js").is_file()
+def three_missing() -> MocodecError:
+    return MocodecError(f"three.js is not in the package ({THREE}): reinstall mocodec, or run `make vendor`")
 
 
 def make_app(session: ViewSession | None, relay_url: str | None = None) -> web.Application:
     """The viewer's application: of a clip (``session``), of a relay's rooms, or both."""
-    if not vendored():
-        raise MocodecError(f"three.js is not vendored into {VENDOR}: run `make vendor` (fetches it from npm once)")
+    if not three_is_there():
+        raise three_missing()
     lock = asyncio.Lock()
 
     def no_clip() -> web.Response:
@@ -83,6 +83,7 @@ def make_app(session: ViewSession | None, relay_url: str | None = None) -> web.A
     if DECODER.is_dir():  # before /static, whose files do not follow links out of it
         app.router.add_static("/static/decoder", DECODER.resolve())
     app.router.add_static("/static", STATIC)
+    app.router.add_static("/vendor", THREE)
     return app
 
 

@@ -15,13 +15,14 @@ from pathlib import Path
 from aiohttp import web
 
 from mocodec.errors import MocodecError
-from mocodec.viewer.server import STATIC, vendored
+from mocodec.data import THREE, three_is_there
+from mocodec.viewer.server import STATIC, three_missing
 from mocodec.viewer.study import Study
 
 
 def make_study_app(study: Study, out_dir: str | Path) -> web.Application:
-    if not vendored():
-        raise MocodecError("three.js is not vendored: run `make vendor` (fetches it from npm once)")
+    if not three_is_there():
+        raise three_missing()
     lock = asyncio.Lock()
     saved: list[Path] = []
     shown: dict = {}
@@ -57,4 +58,5 @@ def make_study_app(study: Study, out_dir: str | Path) -> web.Application:
     app.router.add_get("/api/trial", trial)
     app.router.add_post("/api/answer", answer)
     app.router.add_static("/static", STATIC)
+    app.router.add_static("/vendor", THREE)
     return app

@@ -19,11 +19,12 @@ import logging
 import resource
 import time
 from collections.abc import Callable
-from importlib import resources
+from pathlib import Path
 
 from aiohttp import WSMsgType, web
 from aiohttp.abc import AbstractAccessLogger
 
+from mocodec.data import THREE
 from mocodec.errors import MocodecError
 from mocodec.stream import tokens
 from mocodec.stream.relay.core import RelayCore
@@ -32,7 +33,7 @@ from mocodec.stream.relay.rooms import Room, Viewer
 
 log = logging.getLogger("mocodec.relay")
 
-STATIC = resources.files("mocodec.stream") / "static"
+STATIC = Path(__file__).parent.parent / "static"  # the relay's pages (and the decoder: a link to js/src in a checkout)
 
 
 async def messages_of(ws: web.WebSocketResponse, kind: WSMsgType, refusal: str):
@@ -79,10 +80,9 @@ class Relay:
         app.router.add_get("/status", self.handle_status)
         app.router.add_get("/", self.handle_index)
         app.router.add_get("/watch", self.handle_watch)
-        for route, folder in (("/static", STATIC), ("/decoder", STATIC / "decoder"), ("/vendor", vendor())):
-            with resources.as_file(folder) as path:
-                if path.is_dir():
-                    app.router.add_static(route, path.resolve())
+        for route, folder in (("/static", STATIC), ("/decoder", STATIC / "decoder"), ("/vendor", THREE)):
+            if folder.is_dir():
+                app.router.add_static(route, folder.resolve())
         app.on_startup.append(self._start)
         app.on_cleanup.append(self._stop)
         return app
@@ -105,11 +105,11 @@ class Relay:
             await self.bus.stop()
 
     async def handle_index(self, request: web.Request) -> web.FileResponse:
-        return web.FileResponse(STATIC / "index.html")  # type: ignore[arg-type]
+        return web.FileResponse(STATIC / "index.html")
 
     async def handle_watch(self, request: web.Request) -> web.FileResponse:
         """A page that joins a room itself and decodes it in the browser (/decoder)."""
-        return web.FileResponse(STATIC / "watch.html")  # type: ignore[arg-type]
+        return web.FileResponse(STATIC / "watch.html")
 
     async def handle_status(self, request: web.Request) -> web.Response:
         """Totals only: a room's name is what its tokens are issued for."""
@@ -233,10 +233,6 @@ class Relay:
             self.core.tick()
             self._notify()
 
-
-def vendor():
-    """Where the pinned three.js is, inside the package (:mod:`mocodec.viewer`)."""
-    return resources.files("mocodec.viewer") / "static" / "vendor"
 
 
 class ConnectionGuard:

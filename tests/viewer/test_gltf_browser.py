@@ -11,10 +11,9 @@ from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
 import numpy as np
 import pytest
 
+from conftest import DATA
 from mocodec.data import THREE
-from conftest import DATA, ROOT
 
-VENDOR = THREE
 FORMATS = DATA.parent / "formats"
 FILES = {"/": DATA.parent / "js" / "gltf_page.html", "/walk.glb": FORMATS / "walk.glb"}
 
@@ -27,8 +26,8 @@ class _Handler(SimpleHTTPRequestHandler):
         if path in FILES:
             return str(FILES[path])
         if path.startswith("/vendor/") and ".." not in path:
-            return str(VENDOR / path[len("/vendor/") :])
-        return str(VENDOR / "missing")
+            return str(THREE / path[len("/vendor/") :])
+        return str(THREE / "missing")
 
     def log_message(self, *args):
         pass
@@ -36,7 +35,7 @@ class _Handler(SimpleHTTPRequestHandler):
 
 @pytest.fixture
 def page_url():
-    handler = functools.partial(_Handler, directory=str(VENDOR))
+    handler = functools.partial(_Handler, directory=str(THREE))
     server = ThreadingHTTPServer(("127.0.0.1", 0), handler)
     threading.Thread(target=server.serve_forever, daemon=True).start()
     yield f"http://127.0.0.1:{server.server_address[1]}/"

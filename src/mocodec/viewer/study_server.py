@@ -14,8 +14,8 @@ from pathlib import Path
 
 from aiohttp import web
 
-from mocodec.errors import MocodecError
 from mocodec.data import THREE, three_is_there
+from mocodec.errors import MocodecError
 from mocodec.viewer.server import STATIC, three_missing
 from mocodec.viewer.study import Study
 

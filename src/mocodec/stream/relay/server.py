@@ -234,7 +234,6 @@ class Relay:
             self._notify()
 
 
-
 class ConnectionGuard:
     """The relay's protocol factory around aiohttp's: counts connections before HTTP parses
     a byte, refuses those over ``max_connections`` (or ``max_connections_per_host`` from one

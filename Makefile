@@ -7,7 +7,7 @@ STAMP := $(VENV)/.installed
 THREE_VERSION := 0.187.0
 VENDOR := src/mocodec/data/three
 
-.PHONY: demo test test-fast lint bench bench-suite vendor clean
+.PHONY: demo test test-fast lint bench bench-suite vendor api clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -15,7 +15,7 @@ $(BIN)/python:
 
 # every extra, then the kernels of the demo's codec compiled once (numba caches them)
 $(STAMP): $(BIN)/python pyproject.toml
-	$(BIN)/python -m pip install --quiet -e ".[test,plot,bench,stream,view,lint,formats,zarr]"
+	$(BIN)/python -m pip install --quiet -e ".[test,plot,bench,stream,view,lint,formats,zarr,docs]"
 	$(BIN)/mocodec warmup kinwave
 	touch $(STAMP)
 
@@ -74,6 +74,10 @@ bench: $(WARM)
 	$(BIN)/python benchmarks/bench_capture.py
 	$(BIN)/python benchmarks/relay_load.py
 	$(BIN)/python benchmarks/fig_viewer.py
+
+# the API reference from the docstrings: build/api/index.html (pdoc)
+api: $(STAMP)
+	$(BIN)/python docs/api.py build/api
 
 # the whole comparison on the shared clips: report in bench-out/report.html (docs/benchmarks.md)
 bench-suite: $(WARM)

@@ -30,7 +30,12 @@ export function fixedState(probabilityOfZero) {
   return state;
 }
 
+/**
+ * The context-adaptive binary arithmetic decoder of kinwave and kinwave-live
+ * (coding/entropy/binarycoder.py), bit for bit.
+ */
 export class BinaryDecoder {
+  /** @param {Uint8Array} data the coded bytes (read as zeros past their end) */
   constructor(data) {
     this.data = data;
     this.code = 0;

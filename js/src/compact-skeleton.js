@@ -90,7 +90,12 @@ function times(n, read) {
   return Array.from({ length: n }, (_, i) => read(i));
 }
 
-// A Skeleton from the compact form's bytes.
+/**
+ * A Skeleton from the compact form's bytes (formats/skeleton_bin.py).
+ * @param {Uint8Array} data
+ * @returns {Skeleton}
+ * @throws {DecodeError}
+ */
 export function unpackSkeleton(data) {
   const r = new ByteReader(data);
   const version = r.uint();

@@ -6,6 +6,24 @@ import { MAX_FPS, MAX_HEADER_TEXT, MIN_FPS } from './limits.js';
 import { Skeleton } from './skeleton.js';
 
 
+/**
+ * A stream's header (Python's `stream.packets.StreamInfo`).
+ * @typedef {object} StreamInfo
+ * @property {Skeleton} skeleton
+ * @property {number} fps
+ * @property {object} codec the codec config ({codec, knobs, revision})
+ * @property {string} name
+ * @property {object} extra what the codec's decoders need beyond the config (`extra.decoder`)
+ */
+
+/**
+ * A stream header's payload (Python's `stream.packets.StreamInfo`): zlib-deflated JSON of the
+ * skeleton, frame rate, codec config, name and extra, inflated to at most MAX_HEADER_TEXT bytes
+ * and checked.
+ * @param {Uint8Array} payload the header packet's payload
+ * @returns {Promise<StreamInfo>}
+ * @throws {DecodeError} where it is not such a header
+ */
 export async function parseStreamHeader(payload) {
   const text = new TextDecoder().decode(await inflate(payload, { limit: MAX_HEADER_TEXT, what: 'stream header' }));
   let doc;

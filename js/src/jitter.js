@@ -8,7 +8,18 @@ const WINDOW_S = 2.0;
 const SLEW = 0.01;
 const KEEP_S = 2.0;
 
+/**
+ * A receiver-side jitter buffer (stream/jitter.py): frames arrive in bursts; they play out on the
+ * stream's own clock DELAY_S behind the newest arrival, the clock slewing at most 1% toward the
+ * delay the last WINDOW_S of arrivals needed; between frames the pose is interpolated, past the
+ * newest frame it holds, a gap holds the frame before it until a late packet fills it.
+ */
 export class JitterBuffer {
+  /**
+   * @param {number} fps
+   * @param {number} channels
+   * @param {number} [delayS] how far behind the newest arrival frames play
+   */
   constructor(fps, channels, delayS = DELAY_S) {
     this.fps = fps;
     this.channels = channels;
@@ -22,7 +33,11 @@ export class JitterBuffer {
     this.late = 0;
   }
 
-  // `frames` (count x channels, row-major) starting at stream frame `firstFrame` arrived at `arrivalS`.
+  /**
+   * @param {Float64Array} frames count x channels, row-major
+   * @param {number} firstFrame the stream frame of the first
+   * @param {number} arrivalS when they arrived (s, the receiver's clock)
+   */
   push(frames, firstFrame, arrivalS) {
     const C = this.channels;
     const count = frames.length / C;
@@ -61,7 +76,10 @@ export class JitterBuffer {
     }
   }
 
-  // The fractional stream frame that plays at `nowS`, or null before the first.
+  /**
+   * @param {number} nowS
+   * @returns {number | null} the fractional stream frame that plays at `nowS`, null before the first
+   */
   frameAt(nowS) {
     if (this.origin === null) return null;
     if (this.clock !== null && nowS > this.clock && this.recent.length) {
@@ -72,7 +90,10 @@ export class JitterBuffer {
     return (nowS - this.origin) * this.fps;
   }
 
-  // The channels to show at `nowS` (interpolated), or null before the first frame.
+  /**
+   * @param {number} nowS
+   * @returns {Float64Array | null} the channels to show at `nowS` (interpolated), null before the first frame
+   */
   pose(nowS) {
     const at = this.frameAt(nowS);
     if (at === null || !this.frames.length) return null;

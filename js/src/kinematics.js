@@ -1,8 +1,14 @@
 // Forward kinematics (kinematics._fk_kernel): joint positions of frames of channels, each joint
 // G_i = G_p C M C^-1 and x_i = x_p + G_p (offset_i + t_i), composed as quaternions.
 
-// Joint positions (frames x joints x 3, skeleton units) of `channels` (frames x channels, row-major);
-// with `orientations` (frames x joints x 4), each joint's global rotation G_i there too.
+/**
+ * Joint positions of frames of channels (Python's `kinematics.forward_kinematics`): each joint
+ * G_i = G_p C M C^-1 and x_i = x_p + G_p (offset_i + t_i), composed as quaternions.
+ * @param {Skeleton} skeleton
+ * @param {Float64Array} channels frames x channels, row-major
+ * @param {Float64Array | null} [orientations] frames x joints x 4, filled with each joint's global rotation
+ * @returns {Float64Array} frames x joints x 3, skeleton units
+ */
 export function forwardKinematics(skeleton, channels, orientations = null) {
   const C = skeleton.numChannels;
   const J = skeleton.joints.length;

@@ -24,7 +24,11 @@ const DRIFT = 1; // live.DRIFT: the usual change of the scale offset
 export const REVISION = 3; // the format revision this decoder reads (live.KinwaveLiveCodec.revision)
 
 
-// Frames per packet: as many as fit in 50 ms, at least one (live.packet_frames).
+/**
+ * Frames per packet: as many as fit in 50 ms, at least one (Python's `live.packet_frames`).
+ * @param {number} fps
+ * @returns {number}
+ */
 export function packetFrames(fps) {
   return Math.max(Math.floor(fps * 0.05 + 1e-9), 1);
 }
@@ -124,8 +128,18 @@ function layerTables(skeleton) {
   };
 }
 
+/**
+ * The kinwave-live stream decoder (codecs/kinwave/live/decoder.py), bit for bit: every layer a
+ * packet carries that it is in step with.
+ */
 export class KinwaveLiveDecoder {
-  // `config`: the codec config of the stream header; `decoderTables`: its extra.decoder.
+  /**
+   * @param {Skeleton} skeleton
+   * @param {number} fps
+   * @param {object} config the codec config of the stream header
+   * @param {object} decoderTables the header's `extra.decoder` (base step codes, reference pose)
+   * @throws {DecodeError} where the header does not fit
+   */
   constructor(skeleton, fps, config, decoderTables) {
     const revision = config?.revision ?? 1;
     if (revision !== REVISION) throw new DecodeError(`kinwave-live data of format revision ${JSON.stringify(revision)}; this decoder reads revision ${REVISION}`);
@@ -171,9 +185,14 @@ export class KinwaveLiveDecoder {
     return this.layers.length;
   }
 
-  // The packet's frames, (frames x channels) row-major, from the top layer it decodes: its
-  // layers are one arithmetic-coded stream, base first, after every layer's restart flag
-  // (with refresh); a relay may have cut off the `dropped` top ones.
+  /**
+   * The packet's frames, from the top layer it decodes: its layers are one arithmetic-coded
+   * stream, base first, after every layer's restart flag (with refresh).
+   * @param {Uint8Array} packet the codec payload
+   * @param {number} [dropped] top layers a relay cut off
+   * @returns {Float64Array} frames x channels, row-major
+   * @throws {DecodeError} damaged; {OutOfStepError} waiting for the base layer to restart
+   */
   push(packet, dropped = 0) {
     const carried = this.layers.length - dropped;
     if (!(Number.isInteger(dropped) && carried >= 1 && dropped >= 0)) throw new DecodeError(`kinwave-live: ${dropped} layers cut off a stream of ${this.layers.length}`);

@@ -25,8 +25,13 @@ function ascii(data, pos) {
   return String.fromCharCode(...data.subarray(pos, pos + 4));
 }
 
-// The header and index of .moc bytes, every length and check verified: { header, skeleton, fps,
-// frames, codec, chunks: [{ offset, first, count, size }] }.
+/**
+ * The header and index of .moc bytes, every length and check verified.
+ * @param {Uint8Array} data
+ * @returns {Promise<{header: object, skeleton: Skeleton, fps: number, frames: number, codec: object,
+ *   chunks: {offset: number, first: number, count: number, size: number}[]}>}
+ * @throws {DecodeError} where the file is damaged or not a .moc file
+ */
 export async function openMoc(data) {
   if (data.length < START + FOOTER) throw new DecodeError(`not a .moc file: ${data.length} bytes`, 0);
   if (ascii(data, 0) !== MAGIC) throw new DecodeError(`not a .moc file (starts with ${JSON.stringify(ascii(data, 0))}, expected "MOC1")`, 0);
@@ -103,8 +108,15 @@ export function chunkBody(data, chunk, k) {
   return bytes.subarray(start, chunk.size - 4);
 }
 
-// Decode .moc bytes: all frames, or `frames: [first, stop]` (only the chunks they need). Returns
-// { skeleton, fps, codec, first, frames, channels } with `channels` (frames x channels, row-major).
+/**
+ * Decode .moc bytes: all frames, or a range (only the chunks it needs).
+ * @param {Uint8Array} data
+ * @param {{frames?: [number, number] | null, maxValues?: number}} [options] `frames`: [first, stop];
+ *   `maxValues`: the most values (frames x channels) it may decode
+ * @returns {Promise<{skeleton: Skeleton, fps: number, codec: object, first: number, frames: number,
+ *   channels: Float64Array}>} `channels`: frames x channels, row-major
+ * @throws {DecodeError}
+ */
 export async function decodeMoc(data, { frames = null, maxValues = MAX_DECODED_VALUES } = {}) {
   const file = await openMoc(data);
   const [first, stop] = frames ?? [0, file.frames];

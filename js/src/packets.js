@@ -15,6 +15,22 @@ export const CODECS = ['raw', 'quant', 'dpcm', 'adpcm', 'deadreckoning', 'dct', 
   'primitives', 'kinwave', 'kinwave-live'];
 const FIELDS = 44;
 const COMPACT = 0x80;
+
+/**
+ * A parsed packet (Python's `stream.packets.Packet`).
+ * @typedef {object} Packet
+ * @property {number} stream the stream id
+ * @property {number} sequence
+ * @property {number} timestampUs
+ * @property {string} codec the codec id
+ * @property {number} firstFrame the first frame it completes at the receiver
+ * @property {number} frames how many
+ * @property {number[]} position the avatar's root, metres
+ * @property {Uint8Array} payload
+ * @property {number} kind HEADER or DATA
+ * @property {number} flags KEYFRAME, END, CUTS, RESTART
+ * @property {number} dropped top layers a relay cut off
+ */
 const C_EXPLICIT = 8;
 const C_POSITION = 16;
 const C_RESTART = 32;
@@ -32,8 +48,13 @@ function droppedLayers(crcOf, starts, stored, end) {
   return dropped;
 }
 
-// The packets of a batch message ("Mb", the packet count and each packet's length as varints,
-// then the packets: format 2), as views into `data`.
+/**
+ * The packets of a batch message ("Mb", the packet count and each packet's length as varints,
+ * then the packets: format 2), as views into `data`.
+ * @param {Uint8Array} data one WebSocket message from the relay
+ * @returns {Uint8Array[]} the packets, in order
+ * @throws {DecodeError} where the batch does not parse
+ */
 export function splitBatch(data) {
   if (data.length < 3) throw new DecodeError(`${data.length} bytes, shorter than a batch header`, 0);
   if (data[0] === 0x4d && data[1] === 0x42) throw new DecodeError('a batch of format 1 (u32 lengths); this decoder reads format 2', 0);
@@ -154,12 +175,20 @@ function parseCompact(data, cursorOf) {
   };
 }
 
-// A receiver's reading of packets, full or compact: every stream's cursor (packets.Reader).
+/**
+ * A receiver's reading of packets, full or compact: every stream's cursor (Python's
+ * `stream.packets.Reader`).
+ */
 export class Reader {
   constructor() {
     this.cursors = new Map();
   }
 
+  /**
+   * @param {Uint8Array} data one packet
+   * @returns {Packet} the packet, its compact fields filled in from its stream's cursor
+   * @throws {DecodeError} a damaged packet; {OutOfStepError} a compact one before its stream's keyframe
+   */
   read(data) {
     const p = data.length && data[0] & COMPACT ? parseCompact(data, (s) => this.cursors.get(s)) : parseFull(data);
     if (p.kind === HEADER) {
@@ -172,7 +201,11 @@ export class Reader {
   }
 }
 
-// A data packet's codec payload, without its cut table (flag CUTS).
+/**
+ * A data packet's codec payload, without its cut table (flag CUTS).
+ * @param {Packet} p
+ * @returns {Uint8Array}
+ */
 export function codecPayload(p) {
   if (!(p.flags & CUTS)) return p.payload;
   if (p.payload.length < 2 || u16(p.payload, 0) > p.payload.length - 2) throw new DecodeError('the cut table overruns the packet', 0);

@@ -15,7 +15,15 @@ export const REPAIR_HOLD_S = 0.2; // stream/client.py's: how long a gap is waite
 export const REPAIR_AGAIN_S = 0.05; // a missing packet is asked for again after this, then twice as long
 const MAX_REPAIRS = 256; // stream/packets.py's: the packets one request may name
 
+/**
+ * One stream of a room as a viewer keeps it: its decoder (which waits for resent packets) and a
+ * jitter buffer of its decoded frames.
+ */
 export class Avatar {
+  /**
+   * @param {number} stream the stream id
+   * @param {StreamInfo} info its header
+   */
   constructor(stream, info) {
     this.stream = stream;
     this.info = info;
@@ -30,6 +38,10 @@ export class Avatar {
     this.decoded = new Map(); // the last decoded frames by stream frame number (a few seconds)
   }
 
+  /**
+   * @param {Packet} p a packet of this stream
+   * @param {number} arrivalS when its batch arrived (s)
+   */
   take(p, arrivalS) {
     this.bytes += p.payload.length;
     for (const { packet, frames, error } of this.decoder.push(p)) {
@@ -48,7 +60,10 @@ export class Avatar {
     this.buffer.push(frames, p.firstFrame, arrivalS);
   }
 
-  // Joint positions (joints x 3, metres) to show at `nowS`, or null before the first frame.
+  /**
+   * @param {number} [nowS]
+   * @returns {Float64Array | null} joint positions (joints x 3, metres) to show at `nowS`, null before the first frame
+   */
   pose(nowS = now()) {
     const channels = this.buffer.pose(nowS);
     if (!channels) return null;
@@ -57,9 +72,17 @@ export class Avatar {
   }
 }
 
+/**
+ * Joins a relay room as a viewer over WebSocket: `client.avatars` (stream id -> Avatar),
+ * `client.others` (streams of codecs without a decoder here), `client.statuses` (the relay's
+ * status messages).
+ */
 export class RelayClient {
-  // `url`: the relay's ws:// or wss:// address; `room`, `token`: the room and a viewer token;
-  // `budget` (bit/s) and `camera` ([x, y, z] m): what the relay cuts the streams to.
+  /**
+   * @param {string} url the relay's ws:// or wss:// address
+   * @param {{room: string, token: string, budget?: number, camera?: number[], WebSocketClass?: Function}} options
+   *   `budget` (bit/s) and `camera` ([x, y, z] m): what the relay cuts the streams to
+   */
   constructor(url, { room, token, budget = 0, camera = [0, 0, 0], WebSocketClass = globalThis.WebSocket } = {}) {
     this.url = url;
     this.room = room;
@@ -76,6 +99,7 @@ export class RelayClient {
     this.closed = null;
   }
 
+  /** @returns {Promise<void>} once the relay has let the viewer in */
   connect() {
     const query = new URLSearchParams({ room: this.room, role: 'subscribe', token: this.token });
     const ws = new this.WebSocketClass(`${this.url.replace(/\/$/, '')}/ws?${query}`);
@@ -105,12 +129,13 @@ export class RelayClient {
     });
   }
 
-  // Tell the relay this viewer's budget (bit/s) and camera position (m).
+  /** @param {{budget?: number, camera?: number[]}} settings new settings for the relay */
   send(settings) {
     Object.assign(this.settings, settings);
     this.ws.send(JSON.stringify(this.settings));
   }
 
+  /** Leave the room. */
   close() {
     this.ws?.close();
   }

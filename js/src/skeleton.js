@@ -20,7 +20,16 @@ function order(text, what, allowEmpty) {
   return text;
 }
 
+/**
+ * A skeleton as stream headers and .moc files carry it (Python's `mocodec.skeleton.Skeleton`),
+ * every field checked: joints (name, parent, offset, channels, Euler order, ASF axis),
+ * `numChannels`, `unitsPerMetre`.
+ */
 export class Skeleton {
+  /**
+   * @param {object} data the skeleton's JSON (`joints`, `units_per_metre`, `name`)
+   * @throws {DecodeError} where it is not a skeleton
+   */
   constructor(data) {
     if (!data || typeof data !== 'object' || !Array.isArray(data.joints)) throw new DecodeError('skeleton: expected an object with joints');
     if (!data.joints.length || data.joints.length > MAX_JOINTS) throw new DecodeError(`skeleton: ${data.joints.length} joints (1 to ${MAX_JOINTS})`);

@@ -7,13 +7,21 @@ import { DATA, END, KEYFRAME, RESTART, codecPayload } from './packets.js';
 
 const DECODERS = { 'kinwave-live': KinwaveLiveDecoder };
 
-// Whether streams of codec `id` decode here.
+/**
+ * Whether streams of codec `id` decode here.
+ * @param {string} id a codec id
+ * @returns {boolean}
+ */
 export function hasDecoder(id) {
   return Object.hasOwn(DECODERS, id);
 }
 
+/**
+ * One live stream as a receiver follows it (Python's `stream.live.LiveDecoder`, without
+ * concealment): a new codec decoder at each keyframe, packets out of step dropped.
+ */
 export class LiveDecoder {
-  // `info`: a parsed stream header (parseStreamHeader).
+  /** @param {StreamInfo} info a parsed stream header (parseStreamHeader) */
   constructor(info) {
     const Decoder = DECODERS[info.codec.codec];
     if (!Decoder) throw new DecodeError(`codec ${info.codec.codec} has no decoder here (${Object.keys(DECODERS).join(', ')})`);
@@ -36,8 +44,13 @@ export class LiveDecoder {
     return new this.Decoder(skeleton, fps, codec, extra.decoder);
   }
 
-  // The packet's frames (frames x channels, row-major), or null where it cannot be decoded yet
-  // (before a keyframe, out of step after a loss). Damaged packets throw DecodeError.
+  /**
+   * The packet's frames, or null where it cannot be decoded yet (before a keyframe, out of
+   * step after a loss).
+   * @param {Packet} p
+   * @returns {Float64Array | null} frames x channels, row-major
+   * @throws {DecodeError} a damaged packet
+   */
   push(p) {
     if (p.kind !== DATA || p.codec !== this.info.codec.codec) return null;
     if (this.expected !== null) {
@@ -81,11 +94,16 @@ export class LiveDecoder {
 export const MAX_MISSING = 64; // stream/live.py's: a gap waited for, and packets held behind it
 export const MAX_HELD = 256;
 
-// A LiveDecoder that, in step, waits for the packets of a gap in the sequence (the relay resends
-// them on request, `wanted()`): it holds the packets after the gap for up to `holdS` of frames
-// and decodes them in order up to the next gap as each is filled (stream/live.LiveDecoder's hold_s). `push(p)`
-// returns the packets decoded now, each as {packet, frames} (frames null: not decodable).
+/**
+ * A LiveDecoder that, in step, waits for the packets of a gap in the sequence (the relay resends
+ * them on request, `wanted()`): it holds the packets after the gap for up to `holdS` of frames
+ * and decodes them in order up to the next gap as each is filled (Python's hold_s).
+ */
 export class HoldingDecoder {
+  /**
+   * @param {StreamInfo} info
+   * @param {number} holdS seconds of frames it waits for a gap to be filled (0: none)
+   */
   constructor(info, holdS) {
     this.stream = new LiveDecoder(info);
     this.holdFrames = Math.ceil(holdS * info.fps);
@@ -99,11 +117,15 @@ export class HoldingDecoder {
     return (sequence - (this.stream.expected ?? 0)) >>> 0;
   }
 
-  // The sequence numbers waited for, oldest first.
+  /** @returns {number[]} the sequence numbers waited for, oldest first */
   wanted() {
     return [...this.missing].sort((a, b) => this.#ahead(a) - this.#ahead(b));
   }
 
+  /**
+   * @param {Packet} p
+   * @returns {{packet: Packet, frames: Float64Array | null, error?: Error}[]} the packets decoded now
+   */
   push(p) {
     const { stream } = this;
     if (!this.holdFrames || p.kind !== DATA || stream.expected === null) return this.#decode([p]);

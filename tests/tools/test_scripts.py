@@ -1,5 +1,6 @@
-"""Every benchmark script is listed in docs/benchmarks.md, run by ``make bench`` (all but the one
-that needs Blender's Python), and answers ``--help``."""
+"""The scripts beside the package: every benchmark script is listed in docs/benchmarks.md, run by
+``make bench`` (all but the one that needs Blender's Python) and answers ``--help``; the API
+reference builds (``make api``)."""
 
 from __future__ import annotations
 
@@ -43,3 +44,17 @@ def test_every_script_answers_help():
         results = list(pool.map(help_of, SCRIPTS))
     failed = [(name, out[-300:]) for name, code, out in results if code != 0 or "usage:" not in out]
     assert not failed
+
+
+@pytest.mark.slow
+def test_the_api_reference_builds(tmp_path):
+    """``make api``: a page per public module, the codec interface's capabilities on its page."""
+    pytest.importorskip("pdoc")
+    done = subprocess.run(
+        [sys.executable, str(ROOT / "docs" / "api.py"), str(tmp_path)], capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    base = (tmp_path / "mocodec" / "codecs" / "base.html").read_text()
+    assert "packet_number" in base and "Coded" in base and "delay_frames" in base
+    assert (tmp_path / "mocodec" / "stream" / "relay" / "core.html").is_file()
+    assert "Warn" not in done.stderr and "UserWarning" not in done.stderr

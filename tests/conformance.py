@@ -78,6 +78,12 @@ def test_capabilities_are_declared_once(cid):
     if not cls.embedded:
         with pytest.raises(CodecError, match="not embedded"):
             codec.packet_cuts(b"", None)
+    try:
+        faster = codec.at_rate(1234.0)
+    except CodecError as e:
+        assert "no bit rate knob" in str(e)
+    else:
+        assert faster != codec and faster.get_config()["codec"] == cid and 1234.0 in faster.config.values()
 
 
 @pytest.mark.parametrize("cid", CODECS)

@@ -63,7 +63,7 @@ def encode_scene(
     if len({m.fps for m in motions}) != 1:
         raise CodecError("every character of a scene needs the same frame rate")
     codec = SpihtCodec(bits_per_second=bits_per_second, **spiht_knobs)
-    window = codec.config["window"]
+    window = codec.segment_frames()
     if chunk_frames % window:
         raise CodecError(f"chunk_frames ({chunk_frames}) must be a multiple of the window ({window})")
     budgets = allocate(motions, bits_per_second, distances, weights, window)

@@ -237,8 +237,13 @@ class Codec:
         streams restart only at keyframes."""
         return []
 
+    def at_rate(self, bits_per_second: float) -> Codec:
+        """This codec coding at ``bits_per_second`` (its rate knob, whatever its name); CodecError
+        for a codec without one."""
+        raise CodecError(f"codec {self.id} has no bit rate knob")
+
     def segment_frames(self) -> int:
-        """Frames a live stream's refresh is rounded up to: the codec's segment or block, so a
+        """Frames a live stream's keyframe interval is rounded up to: the codec's segment or block, so a
         keyframe does not cut one short (1: any frame)."""
         return 1
 

@@ -1,7 +1,7 @@
 """Python clients of the relay: publish a clip as a live stream, watch a room and record it.
 
     async with connect(url, room, token, "publish") as ws: ...
-    await publish_clip(url, room, token, motion, get_codec("spiht", bits_per_second=8000))
+    await publish_clip(url, room, token, motion, get_codec("spiht").at_rate(8000))
     motions = await record(url, room, token, frames=600, budget=3000)
 
 A refused connection (bad or expired token, wrong room) raises :class:`RelayRefused` with the

@@ -167,6 +167,9 @@ class KinwaveCodec(Codec):
     def segment_frames(self) -> int:
         return self.config["window"]
 
+    def at_rate(self, bits_per_second: float) -> Codec:
+        return self.with_knob("bits_per_second", bits_per_second)
+
     def bound_knobs(self, target: str, value: float) -> dict | None:
         if target == "max_error_cm":
             measure = self.config["error_measure"]

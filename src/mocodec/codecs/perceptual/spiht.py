@@ -359,4 +359,7 @@ class SpihtCodec(Codec):
             raise CodecError(
                 f"cannot truncate to {bits_per_second:g} bit/s, above the coded {self.config['bits_per_second']:g}"
             )
+        return self.at_rate(bits_per_second)
+
+    def at_rate(self, bits_per_second: float) -> SpihtCodec:
         return SpihtCodec(**{**self.config, "bits_per_second": bits_per_second})

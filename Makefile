@@ -46,9 +46,10 @@ demo: $(STAMP)
 # the JavaScript tests (Node's own runner; tests/js/register.mjs resolves 'three' to the vendored copy)
 JS_TESTS := node --import ./tests/js/register.mjs --test tests/js/
 
+# the whole suite, on two workers (the machine's cores; about five minutes)
 test: $(WARM)
 	$(JS_TESTS)
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n 2
 
 # the edit-test loop: everything but the slow tier (fuzzing, corruption sweeps, every shared
 # clip), the browser and the network (relay, NATS) tests

@@ -563,7 +563,7 @@ def test_a_short_payload_keeps_the_smallest_of_its_searches(walk_amc):
     codec = get_codec("kinwave", max_error_cm=1.0, error_measure="shell")
     clip = walk_amc[:200]
     assert clip.num_frames <= SHORT_FRAMES
-    bodies = [BoundSearch(codec, clip)._to_bound_with_share(share) for share in SHORT_SHARES]
+    bodies = [BoundSearch(codec, clip).to_bound_with_share(share) for share in SHORT_SHARES]
     assert len(set(bodies)) > 1  # the shares land apart on this clip
     body = BoundSearch(codec, clip).run()
     assert body == min(bodies, key=len)

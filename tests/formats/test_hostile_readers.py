@@ -83,8 +83,8 @@ def test_channels_that_share_an_accessor_convert_it_once(tmp_path, monkeypatch):
     animation["channels"] = [{"sampler": 0, "target": {"node": k, "path": "rotation"}} for k in range(40)] * 50
     (tmp_path / "shared.glb").write_bytes(g.glb())
     converted = []
-    convert = gltf._Document._convert
-    monkeypatch.setattr(gltf._Document, "_convert", lambda doc, i, what: converted.append(i) or convert(doc, i, what))
+    convert = gltf.Document.convert
+    monkeypatch.setattr(gltf.Document, "convert", lambda doc, i, what: converted.append(i) or convert(doc, i, what))
     assert load(tmp_path / "shared.glb").num_frames > 1
     assert sorted(converted) == [times, values]
 

@@ -52,7 +52,7 @@ MIN_GRID_FPS = 10.0
 _GRID_SLACK_FRAMES = 1e-2
 
 
-class _Document:
+class Document:
     """A parsed glTF document with checked access to its arrays. Each accessor is converted
     once, and all of them together to at most ACCESSOR_VALUES_PER_BYTE values per byte of the
     file: memory in proportion to the file, however many channels share an accessor or how
@@ -104,7 +104,7 @@ class _Document:
     def array(self, index: int, what: str) -> np.ndarray:
         """Accessor ``index`` as float64 ``(count, width)``, every offset checked first."""
         if index not in self._arrays:
-            self._arrays[index] = self._convert(index, what)
+            self._arrays[index] = self.convert(index, what)
         return self._arrays[index]
 
     def _charge(self, values: int, where: str) -> None:
@@ -112,7 +112,7 @@ class _Document:
             raise self.fail(f"{where}: {values} values, more than the file's size allows ({self.values_left} left)")
         self.values_left -= values
 
-    def _convert(self, index: int, what: str) -> np.ndarray:
+    def convert(self, index: int, what: str) -> np.ndarray:
         accessor = self.item(self.gltf.accessors, index, f"{what} accessor")
         where = f"accessor {index} ({what})"
         if getattr(accessor, "sparse", None) is not None:
@@ -180,7 +180,7 @@ def _split_glb(path: Path, data: bytes) -> tuple[str, bytes | None]:
         raise FormatError(path, None, f"JSON chunk is not UTF-8 (byte {20 + e.start})") from None
 
 
-def _parse(path: Path) -> _Document:
+def _parse(path: Path) -> Document:
     """The document, its JSON checked against SCHEMA and its node count against MAX_JOINTS
     before anything walks it (linear in the file: JSON objects become :class:`Fields`)."""
     data = read_bytes(path, MAX_FILE_BYTES)
@@ -213,10 +213,10 @@ def _parse(path: Path) -> _Document:
     version = str(document["asset"].get("version", ""))
     if not version.startswith("2."):
         raise FormatError(path, None, f"glTF version {version!r}, expected 2.x")
-    return _Document(path, document, binary, len(data))
+    return Document(path, document, binary, len(data))
 
 
-def _vector(doc: _Document, values, size: int, default: tuple, what: str) -> np.ndarray:
+def _vector(doc: Document, values, size: int, default: tuple, what: str) -> np.ndarray:
     if values is None:
         return np.array(default, dtype=np.float64)
     try:
@@ -228,7 +228,7 @@ def _vector(doc: _Document, values, size: int, default: tuple, what: str) -> np.
     return array
 
 
-def _rest(doc: _Document, k: int, node) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _rest(doc: Document, k: int, node) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A node's own translation, rotation ``(w, x, y, z)`` and scale (from ``matrix`` if given)."""
     if node.matrix is not None:
         m = _vector(doc, node.matrix, 16, (), f"node {k} matrix").reshape(4, 4).T  # column-major
@@ -245,7 +245,7 @@ def _rest(doc: _Document, k: int, node) -> tuple[np.ndarray, np.ndarray, np.ndar
     return translation, rotations.quat_normalize(xyzw[[3, 0, 1, 2]]), scale
 
 
-def _tree(doc: _Document) -> np.ndarray:
+def _tree(doc: Document) -> np.ndarray:
     """Each node's parent (-1 for none); FormatError for a node with two parents, a cycle or a
     tree deeper than MAX_DEPTH."""
     nodes = doc.gltf.nodes or []
@@ -262,7 +262,7 @@ def _tree(doc: _Document) -> np.ndarray:
     return parents
 
 
-def _choose_animation(doc: _Document, animation: str | int | None):
+def _choose_animation(doc: Document, animation: str | int | None):
     animations = doc.gltf.animations or []
     if not animations:
         raise doc.fail("no animation: the file holds no motion to read")
@@ -280,7 +280,7 @@ def _choose_animation(doc: _Document, animation: str | int | None):
 class _Track:
     """One animation channel: key times, values and how to interpolate between them."""
 
-    def __init__(self, doc: _Document, animation, channel, k: int):
+    def __init__(self, doc: Document, animation, channel, k: int):
         sampler = doc.item(animation.samplers, channel.sampler, f"channel {k} sampler")
         self.times = doc.array(sampler.input, "key times")[:, 0]
         if (np.diff(self.times) < 0).any():
@@ -353,7 +353,7 @@ def _frame_rate(tracks: list[_Track], start: float, end: float) -> float:
     return frames / (end - start) if frames > 0 else FALLBACK_FPS
 
 
-def _joint_nodes(doc: _Document, parents: np.ndarray, moved: set[int]) -> list[int]:
+def _joint_nodes(doc: Document, parents: np.ndarray, moved: set[int]) -> list[int]:
     """The skeleton's nodes, parents first: the first skin's joints, or the moved nodes; with
     every node between them and their common ancestor, and bone tips (childless nodes without
     a mesh) below them."""
@@ -429,7 +429,7 @@ def read_gltf(path: str | os.PathLike, *, animation: str | int | None = None, fp
 
 
 def _motion(
-    doc: _Document,
+    doc: Document,
     keep: list[int],
     needed: list[int],
     parents: np.ndarray,
@@ -452,7 +452,7 @@ def _motion(
 
 
 def _world(
-    doc: _Document,
+    doc: Document,
     needed: list[int],
     parents: np.ndarray,
     tracks: dict[tuple[int, str], _Track],

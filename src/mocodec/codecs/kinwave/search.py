@@ -88,10 +88,10 @@ class BoundSearch(Encoder):
             and self.cfg["joint_feedback"]
             and self.cfg["effort"] >= 3
         ):
-            return min(map(self._to_bound_with_share, SHORT_SHARES), key=len)
+            return min(map(self.to_bound_with_share, SHORT_SHARES), key=len)
         return self._to_bound(self.cfg["max_error_cm"])
 
-    def _to_bound_with_share(self, share: float) -> bytes:
+    def to_bound_with_share(self, share: float) -> bytes:
         """:meth:`_to_bound` with the joint feedback taking ``share`` of the slack. Where a max
         bound's search lands moves a short body a lot (its worst error is a handful of
         frames, and the first pass's slack sets every joint's step); three landings cost little

@@ -141,8 +141,8 @@ def fuzz_container(run: Run) -> None:
     while run.more():
         data = files[int(run.rng.integers(len(files)))]
         run.check("moc file", lambda: moc.unpack(mutate(data, run.rng)))
-        start = container._START.unpack_from(data)
-        head = data[container._START.size : container._START.size + start[3]]
+        start = container.START.unpack_from(data)
+        head = data[container.START.size : container.START.size + start[3]]
         text = zlib.decompressobj(zdict=DICTIONARY).decompress(head)
         meta, _, compact = text.partition(b"\0")
         choice = run.rng.integers(3)
@@ -169,15 +169,15 @@ def fuzz_container(run: Run) -> None:
         deflate = zlib.compressobj(9, zdict=DICTIONARY)
         new_head = deflate.compress(new_text) + deflate.flush()
         forged = (
-            container._START.pack(start[0], start[1], start[2], len(new_head))
+            container.START.pack(start[0], start[1], start[2], len(new_head))
             + new_head
             + struct.pack("<I", zlib.crc32(new_head))
-            + data[container._START.size + start[3] + 4 :]
+            + data[container.START.size + start[3] + 4 :]
         )
         run.check("moc header", lambda: moc.unpack(forged))
     bomb = zlib.compress(b"{" + b" " * (64 << 20), 9)
     forged = (
-        container._START.pack(container.MAGIC, container.VERSION, 0, len(bomb))
+        container.START.pack(container.MAGIC, container.VERSION, 0, len(bomb))
         + bomb
         + struct.pack("<I", zlib.crc32(bomb))
     )

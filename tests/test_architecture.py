@@ -94,7 +94,15 @@ def test_codec_families_import_no_other_family(name, path, tree):
             assert target[2] in SHARED_BY_FAMILIES | {family}, f"{name} imports {'.'.join(target)}"
 
 
-@pytest.mark.parametrize("name,path,tree", MODULES, ids=[m[0] for m in MODULES])
+#: The tests and benchmarks keep to the rule too: what they reach is public.
+TESTS = [
+    (str(p.relative_to(PACKAGE.parent.parent)), p, ast.parse(p.read_text(), str(p)))
+    for folder in ("tests", "benchmarks")
+    for p in sorted((PACKAGE.parent.parent / folder).rglob("*.py"))
+]
+
+
+@pytest.mark.parametrize("name,path,tree", MODULES + TESTS, ids=[m[0] for m in MODULES + TESTS])
 def test_no_private_names_across_modules(name, path, tree):
     for module, imported in _imports(tree):
         if module != name and imported.startswith("_") and not imported.startswith("__"):

@@ -158,7 +158,7 @@ def test_a_spiht_packet_with_a_short_last_part_raises_a_mocodec_error(walk_bvh):
 def test_a_moc_header_bomb_is_refused(walk_bvh):
     data = bytearray(moc.pack(walk_bvh[:10], get_codec("raw")))
     head = bomb(4 * limits.MAX_HEADER_TEXT)
-    start = container._START.pack(container.MAGIC, container.VERSION, 0, len(head))
+    start = container.START.pack(container.MAGIC, container.VERSION, 0, len(head))
     forged = start + head + struct.pack("<I", zlib.crc32(head)) + bytes(data[12:])
     with pytest.raises(CorruptStreamError, match="inflates to over"):
         moc.unpack(forged)

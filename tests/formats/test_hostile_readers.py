@@ -126,7 +126,7 @@ def test_a_moc_index_cannot_claim_more_chunks_than_its_bytes_hold(walk_bvh):
     index_at = c.index[-1].offset + c.index[-1].size
     raw = bytes([0x80, 0x80, 0x04])  # 65,536 chunks
     forged = data[:index_at] + raw + zlib.crc32(raw).to_bytes(4, "little")
-    forged += container._FOOTER.pack(len(raw) + 4, container.FOOTER_MAGIC)
+    forged += container.FOOTER.pack(len(raw) + 4, container.FOOTER_MAGIC)
     with pytest.raises(CorruptStreamError, match="65536 chunks do not fit in"):
         moc.unpack(forged)
 
@@ -141,7 +141,7 @@ def test_deep_json_is_a_one_line_error(tmp_path, walk_bvh):
         load(tmp_path / "deep.gltf")
     header = json.dumps({"codec": {"codec": "raw"}, "deep": "X"}).replace('"X"', "[" * 8000 + "]" * 8000)
     head = zlib.compress(header.encode())
-    start = container._START.pack(container.MAGIC, container.VERSION, 0, len(head))
+    start = container.START.pack(container.MAGIC, container.VERSION, 0, len(head))
     data = start + head + zlib.crc32(head).to_bytes(4, "little") + b"\0" * 16
     with pytest.raises(CorruptStreamError, match="does not parse"):
         moc.unpack(data)

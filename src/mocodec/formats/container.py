@@ -55,8 +55,8 @@ MAX_CHUNKS = 1 << 20
 #: The smallest chunk: a one-byte length, no body, a CRC-32.
 MIN_CHUNK_BYTES = 5
 FLAG_SKELETON = 1
-_START = struct.Struct("<4sHHI")
-_FOOTER = struct.Struct("<I4s")
+START = struct.Struct("<4sHHI")  # magic, version, flags, header length
+FOOTER = struct.Struct("<I4s")  # index length, footer magic
 _U32 = struct.Struct("<I")
 
 
@@ -138,7 +138,7 @@ def pack(header: dict, chunks: list[Chunk], embed_skeleton: bool = True) -> byte
     deflate = zlib.compressobj(9, zdict=DICTIONARY)
     head = deflate.compress(text) + deflate.flush()
     flags = FLAG_SKELETON if embed_skeleton else 0
-    out = bytearray(_START.pack(MAGIC, VERSION, flags, len(head)) + head + _U32.pack(zlib.crc32(head)))
+    out = bytearray(START.pack(MAGIC, VERSION, flags, len(head)) + head + _U32.pack(zlib.crc32(head)))
     index = bytearray(varint.pack(len(chunks)))
     expected = 0
     for chunk in chunks:
@@ -149,7 +149,7 @@ def pack(header: dict, chunks: list[Chunk], embed_skeleton: bool = True) -> byte
         index += varint.pack(chunk.count) + varint.pack(len(framed) + 4)
         out += framed + _U32.pack(zlib.crc32(framed))
     index += _U32.pack(zlib.crc32(index))
-    out += index + _FOOTER.pack(len(index), FOOTER_MAGIC)
+    out += index + FOOTER.pack(len(index), FOOTER_MAGIC)
     return bytes(out)
 
 
@@ -236,8 +236,8 @@ def _read_at(source: BinaryIO, offset: int, length: int, size: int, where: str) 
 def open_container(source: BinaryIO, size: int, name: str, skeleton: Skeleton | None = None) -> Container:
     """Read and check the header, footer and index of a container. ``skeleton`` is needed for
     a file that holds only its skeleton's id (and is ignored for one that holds the skeleton)."""
-    start = _read_at(source, 0, _START.size, size, f"{name}: header")
-    magic, version, flags, head_len = _START.unpack(start)
+    start = _read_at(source, 0, START.size, size, f"{name}: header")
+    magic, version, flags, head_len = START.unpack(start)
     if magic != MAGIC:
         raise CorruptStreamError(f"{name}: not a .moc file (starts with {magic!r}, expected {MAGIC!r})")
     if version != VERSION:
@@ -246,9 +246,9 @@ def open_container(source: BinaryIO, size: int, name: str, skeleton: Skeleton | 
         raise CorruptStreamError(f"{name}: flags {flags:#06x} at byte 6 set bits this version does not define")
     if head_len > MAX_HEADER:
         raise CorruptStreamError(f"{name}: header length {head_len} at byte 8 is implausible")
-    head = _read_at(source, _START.size, head_len + 4, size, f"{name}: header")
+    head = _read_at(source, START.size, head_len + 4, size, f"{name}: header")
     if zlib.crc32(head[:-4]) != _U32.unpack(head[-4:])[0]:
-        raise CorruptStreamError(f"{name}: header CRC mismatch at byte {_START.size}, the header is damaged")
+        raise CorruptStreamError(f"{name}: header CRC mismatch at byte {START.size}, the header is damaged")
     try:
         text = inflate_capped(head[:-4], DICTIONARY, limits.MAX_HEADER_TEXT)
         if flags & FLAG_SKELETON:
@@ -264,7 +264,7 @@ def open_container(source: BinaryIO, size: int, name: str, skeleton: Skeleton | 
         if not isinstance(header["codec"], dict):
             raise ValueError("the codec config is not an object")
     except (ValueError, KeyError, TypeError, AttributeError, OverflowError, RecursionError, zlib.error) as e:
-        raise CorruptStreamError(f"{name}: header at byte {_START.size} does not parse ({e})") from None
+        raise CorruptStreamError(f"{name}: header at byte {START.size} does not parse ({e})") from None
     if embedded is None:
         if skeleton is None:
             raise SkeletonMismatchError(
@@ -279,7 +279,7 @@ def open_container(source: BinaryIO, size: int, name: str, skeleton: Skeleton | 
     assert skeleton is not None  # a file without its skeleton was given one above
     if frames < 0 or not limits.fps_ok(fps):
         raise CorruptStreamError(f"{name}: header says {frames} frames at {fps} fps")
-    chunks_at = _START.size + head_len + 4
+    chunks_at = START.size + head_len + 4
     index = _index(source, size, name, chunks_at)
     if sum(e.count for e in index) != frames:
         raise CorruptStreamError(
@@ -290,8 +290,8 @@ def open_container(source: BinaryIO, size: int, name: str, skeleton: Skeleton | 
 
 def _index(source: BinaryIO, size: int, name: str, chunks_at: int) -> tuple[IndexEntry, ...]:
     """The index, checked against the file's layout."""
-    foot_at = size - _FOOTER.size
-    length, foot_magic = _FOOTER.unpack(_read_at(source, foot_at, _FOOTER.size, size, f"{name}: footer"))
+    foot_at = size - FOOTER.size
+    length, foot_magic = FOOTER.unpack(_read_at(source, foot_at, FOOTER.size, size, f"{name}: footer"))
     if foot_magic != FOOTER_MAGIC:
         raise CorruptStreamError(f"{name}: footer at byte {foot_at} is damaged or the file is truncated")
     index_at = foot_at - length

@@ -50,14 +50,20 @@ def token(room: str = "lobby", role: str = "both", ttl: float = 600.0) -> str:
     return tokens.issue(SECRET, room, role, ttl)
 
 
-def viewers(relay: Relay, count: int = 1, room: str = "lobby"):
-    """A readiness test: ``count`` viewers have joined ``room``."""
-    return lambda: room in relay.core.rooms and len(relay.core.rooms[room].viewers) >= count
+def viewers(relay: Relay, count: int = 1, room: str = "lobby", budget: float = 0.0):
+    """A readiness test: ``count`` viewers have joined ``room`` (and, with ``budget``, their
+    settings of that budget have arrived)."""
+
+    def ready() -> bool:
+        joined = relay.core.rooms[room].viewers if room in relay.core.rooms else []
+        return sum(v.budget == budget for v in joined) >= count if budget else len(joined) >= count
+
+    return ready
 
 
 async def publish_and_record(relay, url, motion, codec, speed=8.0, **watch):
     viewer = asyncio.create_task(record(url, "lobby", token(), timeout_s=30, **watch))
-    await relay.until(viewers(relay))
+    await relay.until(viewers(relay, budget=watch.get("budget", 0.0)))
     await publish_clip(url, "lobby", token(), motion, codec, speed=speed)
     return await viewer
 
@@ -165,7 +171,7 @@ def _near_and_far(walk, codec, budget):
             viewer = asyncio.create_task(
                 record(url, "lobby", token(), budget=budget, camera=camera, timeout_s=30, stream=1)
             )
-            await relay.until(viewers(relay))
+            await relay.until(viewers(relay, budget=budget))
             await asyncio.gather(
                 publish_clip(url, "lobby", token(), walk, codec, speed=8, stream=0),
                 publish_clip(url, "lobby", token(), far, codec, speed=8, stream=1),

@@ -171,7 +171,7 @@ def test_a_hostile_publisher_does_not_disturb_a_viewer(walk_bvh, caplog):
         relay = Relay(SECRET)
         async with serving(relay) as url:
             viewer = asyncio.create_task(record(url, "lobby", token(), timeout_s=30, stream=0, budget=3000))
-            await relay.until(viewers(relay))
+            await relay.until(viewers(relay, budget=3000))
             async with connect(url, "lobby", token(), "publish") as ws:  # a stream that ends at once (it
                 sent = relay.core.counters["packets_in"] + len(rogue_stream)
                 await ws.send_bytes(pack_batch(rogue_stream))  # would take a share of the budget)

@@ -448,6 +448,12 @@ def pack_batch(packets: list[bytes], lengths: np.ndarray | None = None) -> bytes
     return BATCH_MAGIC + varint.pack(len(packets)) + varint.pack_array(lengths) + b"".join(packets)
 
 
+def batch_of(packets: list[bytes], heads: list[bytes]) -> bytes:
+    """:func:`pack_batch` of ``packets`` whose lengths' varints (``heads``) are made already: a
+    relay keeps them beside the packets it serves many viewers."""
+    return BATCH_MAGIC + varint.pack(len(packets)) + b"".join(heads) + b"".join(packets)
+
+
 def is_batch(data: bytes | memoryview) -> bool:
     """Whether a message is a batch (of either format: a format 1 batch is refused as such)."""
     return bytes(data[:2]) in (BATCH_MAGIC, OLD_BATCH_MAGIC)

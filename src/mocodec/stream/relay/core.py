@@ -19,13 +19,14 @@ from mocodec.stream.packets import (
     HEADER,
     MAX_REPAIRS,
     Packet,
+    batch_of,
     cut_table,
     is_batch,
     layer_ends,
     pack_batch,
     split_batch,
 )
-from mocodec.stream.relay.cutting import crowd_of, cut_for, resent, shares_of
+from mocodec.stream.relay.cutting import choose_layers, crowd_of, cut_for, resent, shares_of
 from mocodec.stream.relay.limits import BAD_MESSAGE, QUEUED_S, RATE_LIMIT, TAKEN, TICK_HZ, Bucket, Closing, Limits
 from mocodec.stream.relay.retention import RoomHistory
 from mocodec.stream.relay.rooms import Cursors, Forward, Room, StreamState, Viewer, caps_of, stream_setup
@@ -96,8 +97,11 @@ class RelayCore:
                 if state is None and len(room.streams) >= self.limits.max_streams_per_room:
                     raise Closing(RATE_LIMIT, f"room is full ({self.limits.max_streams_per_room} streams)")
                 if state is not None:
-                    state.history.close()
-                room.streams[p.stream] = StreamState(owner, Forward(p, bytes(r)), info, codec, room.history.stream())
+                    room.end_stream(p.stream)
+                slot = room.take_slot()
+                room.streams[p.stream] = StreamState(
+                    owner, Forward(p, bytes(r)), info, codec, room.history.stream(), slot
+                )
                 room.fresh.append(room.streams[p.stream].header)
                 continue
             if state is None:
@@ -197,33 +201,45 @@ class RelayCore:
         self.ticks += 1
 
     def dispatch(self, room: Room) -> None:
-        """One tick of a room: every viewer gets one batch of what is new (:meth:`offer`)."""
+        """One tick of a room: every viewer gets one batch of what is new (:meth:`offer`). What
+        does not depend on the viewer is worked out once: the batch of every viewer that gets
+        the tick's packets whole, and, for those with a budget, their shares and the layers of
+        every layered packet (:func:`.cutting.choose_layers`), whose variants each batch joins."""
         fresh, room.fresh = room.fresh, []
         shared: bytes | None = None  # the batch of every viewer with nothing of its own
         cut_cache: dict[tuple[int, float], bytes] = {}
         crowd = None  # the scalable streams and where they are, this tick
         viewers = [v for v in room.viewers if not v.dropped]
-        shares: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        column: dict[int, int] = {}  # a budgeted viewer's column in shares and fits
+        chosen_of: dict[int, list[np.ndarray]] = {}  # the variants of the tick's layered packets each gets
+        shares = fits = np.zeros((0, 0))
         scalable = any(f.scalable for f in fresh)
         for viewer in viewers:
             pending, viewer.pending = viewer.pending, []
             resends, viewer.resends = viewer.resends, []
             notes, viewer.notes = viewer.notes, []
+            in_step = not viewer.behind  # gets the tick's fresh packets as they are
             caught, live = self._catch_up(room, viewer, fresh) if viewer.behind else ([], fresh)
             pending += caught
             items = pending + live
             # status, and what it asked for again, go first, in messages of their own: the tick's batch stays shared
             batches: list[bytes | str] = [*notes]
             if resends:
-                batches.append(pack_batch([resent(viewer, f) for f in resends]))
+                batches.append(pack_batch([resent(viewer, f, room.streams.get(f.packet.stream)) for f in resends]))
             if viewer.budget > 0 and (scalable or any(f.scalable for f in pending)):
                 if crowd is None:
                     crowd = crowd_of(room, fresh)
                     budgeted = [v for v in viewers if v.budget > 0]
-                    shares = shares_of(crowd, budgeted, self.limits.min_distance_m)
+                    column = {id(v): k for k, v in enumerate(budgeted)}
+                    shares, fits = shares_of(crowd, budgeted, self.limits.min_distance_m)
+                    together = [v for v in budgeted if not v.behind]
+                    picked = choose_layers(room, crowd, together, fits[:, [column[id(v)] for v in together]])
+                    chosen_of = {id(v): [p[:, k] for p in picked] for k, v in enumerate(together)}
+                k = column[id(viewer)]
                 own = len(items) - len(fresh) if live is fresh else len(items)  # the tick's fresh packets go together
-                cut = cut_for(room, crowd, viewer, *shares[id(viewer)], items, own, cut_cache)
-                batches.append(pack_batch(*cut))
+                picks = chosen_of.get(id(viewer)) if in_step else None
+                bodies, heads = cut_for(room, crowd, viewer, shares[:, k], fits[:, k], items, own, cut_cache, picks)
+                batches.append(batch_of(bodies, heads))
             elif pending or live is not fresh:  # joined late: its streams' last packets before the tick's
                 if items:
                     batches.append(pack_batch([f.data for f in items]))
@@ -233,9 +249,7 @@ class RelayCore:
             if batches:
                 self.offer(viewer, tuple(batches), items)
         for key in [k for k, state in room.streams.items() if state.ended]:
-            room.streams.pop(key).history.close()  # over: late joiners will not see it
-            for viewer in room.viewers:
-                viewer.layers.pop(key, None)
+            room.end_stream(key)
 
     def _catch_up(self, room: Room, viewer: Viewer, fresh: list[Forward]) -> tuple[list[Forward], list[Forward]]:
         """A late viewer's catch-up this tick: the kept packets of each stream it is behind on,

@@ -9,36 +9,53 @@ from __future__ import annotations
 import logging
 from collections import Counter
 from dataclasses import dataclass
-from itertools import repeat
 
 import numpy as np
 
 from mocodec.crowd import layers_within, on_ladder, viewer_shares
 from mocodec.errors import MocodecError
+from mocodec.formats import varint
 from mocodec.stream.packets import truncated
 from mocodec.stream.relay.rooms import Forward, Room, StreamState, Viewer
 
 log = logging.getLogger("mocodec.relay")
+#: The varints of the packet lengths a relay sees most (a batch spells each packet's length).
+_SHORT_LENGTHS = [varint.pack(n) for n in range(1 << 14)]
+
+
+def length_varint(n: int) -> bytes:
+    """``varint.pack(n)``, looked up for the lengths below 16 KiB."""
+    return _SHORT_LENGTHS[n] if n < len(_SHORT_LENGTHS) else varint.pack(n)
+
+
+@dataclass
+class Round:
+    """The tick's fresh layered packets that are the ``k``-th of their stream this tick (a
+    stream's packets go in order, one round each): their streams, rows in the crowd, slots,
+    keyframe flags, and their variants with 1, 2, ... layers (``variants[i * width + k - 1]``)
+    with the varint of each one's length (``heads``)."""
+
+    layered: list[Forward]
+    streams: list[int]
+    rows: np.ndarray
+    slots: np.ndarray
+    keyframes: np.ndarray
+    variants: list[bytes]
+    heads: list[bytes]
 
 
 @dataclass
 class Crowd:
     """A tick's scalable streams (embedded or layered), worked out once for every viewer: each
     stream's row in ``where`` (its position) and in ``rates`` (the bit/s of its layers up to
-    each, infinite past its own), and the tick's fresh layered packets, one per stream: their
-    streams, rows, keyframe flags and their variants with 1, 2, ... layers (``variants[i *
-    width + k - 1]``, and their lengths), and the tick's other fresh packets (``others``)."""
+    each, infinite past its own), the tick's fresh layered packets in rounds (:class:`Round`),
+    and its other fresh packets (``others``)."""
 
     row: dict[int, int]
     where: np.ndarray
     rates: np.ndarray
-    layered: list[Forward]
-    streams: list[int]
-    rows: np.ndarray
-    keyframes: np.ndarray
     width: int
-    variants: list[bytes]
-    lengths: np.ndarray
+    rounds: list[Round]
     together: set[int]
     others: list[Forward]
 
@@ -52,41 +69,94 @@ def crowd_of(room: Room, fresh: list[Forward]) -> Crowd:
         state = room.streams[k]
         rates[i, : state.layers] = state.layer_rates
     row = {k: i for i, k in enumerate(scalable)}
-    count = Counter(f.packet.stream for f in fresh)  # a stream's packets keep their order: one by one
-    alone = [f for f in fresh if count[f.packet.stream] < 2]
-    layered = [f for f in alone if f.layer_ends is not None and f.packet.stream in row]
+    seen: Counter[int] = Counter()
+    grouped: list[list[Forward]] = []
+    for f in fresh:
+        if f.layer_ends is not None and f.packet.stream in row:
+            k = seen[f.packet.stream]
+            seen[f.packet.stream] += 1
+            if k == len(grouped):
+                grouped.append([])
+            grouped[k].append(f)
+    rounds = [_round(room, row, width, packets) for packets in grouped]
+    together = {id(f) for packets in grouped for f in packets}
+    return Crowd(row, where, rates, width, rounds, together, [f for f in fresh if id(f) not in together])
+
+
+def _round(room: Room, row: dict[int, int], width: int, layered: list[Forward]) -> Round:
     streams = [f.packet.stream for f in layered]
     variants: list[bytes] = []
     for f in layered:
         own = layer_variants(f)
         variants += own + own[-1:] * (width - len(own))
-    together = {id(f) for f in layered}
-    return Crowd(
-        row,
-        where,
-        rates,
+    return Round(
         layered,
         streams,
         np.array([row[k] for k in streams], dtype=np.int64),
+        np.array([room.streams[k].slot for k in streams], dtype=np.int64),
         np.array([f.packet.keyframe for f in layered], dtype=bool),
-        width,
         variants,
-        np.fromiter(map(len, variants), dtype="<u4", count=len(variants)),
-        together,
-        [f for f in fresh if id(f) not in together],
+        [length_varint(len(v)) for v in variants],
     )
 
 
-def shares_of(crowd: Crowd, viewers: list[Viewer], min_distance: float) -> dict[int, tuple[np.ndarray, np.ndarray]]:
-    """For every viewer with a budget (by id), its shares of the crowd's streams (6.4, 6.5) and
+def shares_of(crowd: Crowd, viewers: list[Viewer], min_distance: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(streams, viewers)`` twice: each viewer's shares of the crowd's streams (6.4, 6.5) and
     the layers of each stream within its share (at least one), worked out for all at once."""
     streams = len(crowd.row)
     if not streams or not viewers:
-        return {id(v): (np.zeros(streams), np.ones(streams, dtype=np.int64)) for v in viewers}
+        return np.zeros((streams, len(viewers))), np.ones((streams, len(viewers)), dtype=np.int64)
     cameras = np.array([v.camera for v in viewers], dtype=np.float64)
     shares = viewer_shares(crowd.where, cameras, np.array([int(v.budget) for v in viewers]), min_distance)
-    fits = layers_within(crowd.rates, shares)
-    return {id(v): (shares[:, k], fits[:, k]) for k, v in enumerate(viewers)}
+    return shares, layers_within(crowd.rates, shares)
+
+
+def choose_layers(room: Room, crowd: Crowd, viewers: list[Viewer], fits: np.ndarray) -> list[np.ndarray]:
+    """Per round of the tick's fresh layered packets, ``(packets, viewers)``: which variant of
+    each (indices into the round's ``variants``) each viewer gets, for every viewer at once, the
+    viewers' tables of layers updated (:func:`layers_for`, in arrays; ``fits``: the layers within
+    each viewer's share of each crowd stream, ``(streams, viewers)``). A packet's layers depend
+    only on what the viewer had of its stream, which the round before it has set."""
+    return [_choose_round(room, crowd.width, r, viewers, fits) for r in crowd.rounds]
+
+
+def _choose_round(room: Room, width: int, r: Round, viewers: list[Viewer], fits: np.ndarray) -> np.ndarray:
+    count = len(r.streams)
+    if not viewers:
+        return np.zeros((count, 0), dtype=np.int64)
+    had = np.stack([v.layers_at(r.slots) for v in viewers], axis=1).astype(np.int64)
+    fit = fits[r.rows]
+    keep = np.where(r.keyframes[:, None] | (had == 0) | (had >= fit), fit, had)
+    grow = np.nonzero(keep < fit)  # a layer may come back where it restarts
+    if grow[0].size:
+        reach = _reach(room, width, r, np.unique(grow[0]))
+        keep[grow] = np.minimum(fit[grow], reach[grow[0], had[grow]])
+    for k, viewer in enumerate(viewers):
+        viewer.set_layers(r.slots, keep[:, k])
+    return np.arange(count)[:, None] * width + keep - 1
+
+
+def _reach(room: Room, width: int, r: Round, packets: np.ndarray) -> np.ndarray:
+    """``(packets, width + 1)`` for a round's packets (rows ``packets`` filled): the layers a
+    viewer that had ``h`` may take from each, the next ones as far as they restart in it
+    (:func:`layers_for`'s loop)."""
+    reach = np.tile(np.arange(width + 1), (len(r.layered), 1))
+    for i in packets.tolist():
+        f = r.layered[i]
+        starts = restarts_of(f, room.streams[f.packet.stream])
+        for h in range(len(starts) - 1, -1, -1):
+            reach[i, h] = reach[i, h + 1] if starts[h] else h
+    return reach
+
+
+def restarts_of(f: Forward, state: StreamState) -> list[bool]:
+    """Which layers restart in a layered packet (read once, kept; none if it does not parse)."""
+    if f.layer_starts is None:
+        try:
+            f.layer_starts = state.codec.layer_starts(f.packet.payload)
+        except MocodecError:
+            f.layer_starts = []
+    return f.layer_starts
 
 
 def cut_for(
@@ -98,12 +168,13 @@ def cut_for(
     items: list[Forward],
     pending: int,
     cache: dict,
-) -> tuple[list[bytes], np.ndarray | None]:
+    chosen: list[np.ndarray] | None = None,
+) -> tuple[list[bytes], list[bytes]]:
     """The viewer's packets, the scalable streams cut to its ``shares`` of the crowd (bit/s
-    per stream; ``fits``: the layers within each), and their lengths (None: not worked
-    out). The tick's fresh layered packets (``crowd.layered``) go at once, in arrays; the
-    rest, and what the viewer has pending, one by one."""
-    together = pending < len(items) and bool(crowd.together)
+    per stream; ``fits``: the layers within each), and the varint of each one's length. The
+    tick's fresh layered packets (``crowd.layered``) are the variants ``chosen`` for the viewer
+    (:func:`choose_layers`); the rest, and what the viewer has pending, one by one."""
+    together = chosen is not None and pending < len(items) and bool(crowd.together)
     out = []
     for f in items[:pending] + (crowd.others if together else items[pending:]):
         r = crowd.row.get(f.packet.stream)
@@ -121,53 +192,36 @@ def cut_for(
             if key not in cache:
                 cache[key] = cut_embedded(f, room.streams[f.packet.stream], rate)
             out.append(cache[key])
-    if not together:
-        return out, None
-    chosen = _cut_layered(room, crowd, viewer, fits[crowd.rows])
-    lengths = np.concatenate((np.fromiter(map(len, out), dtype="<u4", count=len(out)), crowd.lengths[chosen]))
-    return out + list(map(crowd.variants.__getitem__, chosen.tolist())), lengths
-
-
-def _cut_layered(room: Room, crowd: Crowd, viewer: Viewer, fits: np.ndarray) -> np.ndarray:
-    """Which variant of each of the tick's fresh layered packets a viewer gets (indices into
-    ``crowd.variants``; :func:`layers_for`, in arrays): the only packet of its stream this
-    tick, so its layers depend only on what the viewer had."""
-    count = len(crowd.streams)
-    had = np.fromiter(map(viewer.layers.get, crowd.streams, repeat(0, count)), dtype=np.int64, count=count)
-    keep = np.where(crowd.keyframes | (had == 0), fits, np.minimum(fits, had))
-    for i in np.nonzero(keep < fits)[0].tolist():  # a layer may come back where it restarts
-        f = crowd.layered[i]
-        keep[i] = layers_for(viewer, f, room.streams[f.packet.stream], int(fits[i]))
-    viewer.layers.update(zip(crowd.streams, keep.tolist()))
-    return np.arange(count) * crowd.width + keep - 1
+    heads = [length_varint(len(b)) for b in out]
+    if together:
+        assert chosen is not None
+        for group, picks in zip(crowd.rounds, chosen):
+            indices = picks.tolist()
+            heads += map(group.heads.__getitem__, indices)
+            out += map(group.variants.__getitem__, indices)
+    return out, heads
 
 
 def layers_for(viewer: Viewer, f: Forward, state: StreamState, fits: int) -> int:
     """The layers of a layered stream's packet a viewer gets: the ``fits`` whose rate fits its
     share (at least the base), more than it had only from a keyframe or a packet where the next
     layer restarts (a layer it missed has lost its prediction's history)."""
-    stream = f.packet.stream
-    had = viewer.layers.get(stream)
-    keep = fits if f.packet.keyframe or had is None else min(fits, had)
+    had = viewer.layer_of(state.slot)
+    keep = fits if f.packet.keyframe or not had else min(fits, had)
     if keep < fits:
-        if f.layer_starts is None:
-            try:
-                f.layer_starts = state.codec.layer_starts(f.packet.payload)
-            except MocodecError:
-                f.layer_starts = []
-        starts = f.layer_starts
+        starts = restarts_of(f, state)
         while keep < min(fits, len(starts)) and starts[keep]:
             keep += 1
-    viewer.layers[stream] = keep
+    viewer.set_layer(state.slot, keep)
     return keep
 
 
-def resent(viewer: Viewer, f: Forward) -> bytes:
+def resent(viewer: Viewer, f: Forward, state: StreamState | None) -> bytes:
     """A packet a viewer asked for again: a layered one with the layers the viewer gets now
     (all, without a budget), anything else whole."""
-    if f.layer_ends is None or viewer.budget <= 0:
+    if f.layer_ends is None or viewer.budget <= 0 or state is None:
         return f.data
-    return drop_layers(f, min(viewer.layers.get(f.packet.stream, 1), len(f.layer_ends)))
+    return drop_layers(f, min(viewer.layer_of(state.slot) or 1, len(f.layer_ends)))
 
 
 def drop_layers(f: Forward, keep: int) -> bytes:

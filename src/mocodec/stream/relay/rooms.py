@@ -54,6 +54,7 @@ class StreamState:
     info: StreamInfo
     codec: Any  # the stream's codec (an embedded one offers packet_cutter)
     history: StreamHistory  # what a late viewer catches up from and a repair resends
+    slot: int = 0  # its place in each viewer's table of layers (Room.take_slot)
     position: tuple[float, float, float] = (0.0, 0.0, 0.0)
     next_sequence: int = 0
     next_frame: int = 0
@@ -97,7 +98,7 @@ class StreamState:
         )
 
 
-@dataclass
+@dataclass(eq=False)  # each viewer is itself: it leaves its room by identity
 class Viewer:
     """One viewer of a room. Its batches wait in ``outbox`` (at most ``capacity``) until the
     server sends them; ``wake`` tells the server there are some, ``abort`` cuts its connection."""
@@ -107,7 +108,8 @@ class Viewer:
     capacity: int = 1
     budget: float = 0.0  # bit/s for the scalable streams; 0: everything whole
     camera: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    layers: dict[int, int] = field(default_factory=dict)  # layered stream -> the layers it gets now
+    # by stream slot (StreamState.slot): the layers it gets now of each layered stream (0: none yet)
+    layers: np.ndarray = field(default_factory=lambda: np.zeros(64, dtype=np.int8))
     pending: list[Forward] = field(default_factory=list)  # stream headers it has still to get
     behind: dict[int, tuple[StreamState, int]] = field(default_factory=dict)  # catching up: the next ordinal
     credit: float = 0.0  # bytes of catch-up it may get now
@@ -119,6 +121,25 @@ class Viewer:
     missed: int = 0
     sent: int = 0
     dropped: bool = False
+
+    def layers_at(self, slots: np.ndarray) -> np.ndarray:
+        """The layers it gets now of the streams in ``slots`` (0: none yet)."""
+        if slots.size and slots.max() >= self.layers.size:
+            self.layers = np.concatenate((self.layers, np.zeros(2 * int(slots.max()) + 2 - self.layers.size, np.int8)))
+        return self.layers[slots]
+
+    def set_layers(self, slots: np.ndarray, layers: np.ndarray) -> None:
+        self.layers_at(slots)
+        self.layers[slots] = layers
+
+    def layer_of(self, slot: int) -> int:
+        """The layers it gets now of the stream in ``slot`` (0: none yet)."""
+        return int(self.layers[slot]) if slot < self.layers.size else 0
+
+    def set_layer(self, slot: int, layers: int) -> None:
+        if slot >= self.layers.size:
+            self.layers_at(np.array([slot]))
+        self.layers[slot] = layers
 
 
 def caps_of(limits: Limits) -> Caps:
@@ -132,10 +153,27 @@ class Room:
     viewers: list[Viewer] = field(default_factory=list)
     fresh: list[Forward] = field(default_factory=list)
     publishers: int = 0  # connected senders (a room with one is kept, streams or not)
+    free_slots: list[int] = field(default_factory=list)
+    slots: int = 0  # slots handed out so far
 
     @property
     def idle(self) -> bool:
         return not (self.streams or self.viewers or self.publishers)
+
+    def take_slot(self) -> int:
+        """A place in the viewers' tables of layers for a new stream."""
+        if self.free_slots:
+            return self.free_slots.pop()
+        self.slots += 1
+        return self.slots - 1
+
+    def end_stream(self, key: int) -> None:
+        """The stream is over: late joiners will not see it, and its slot is free again."""
+        state = self.streams.pop(key)
+        state.history.close()
+        for viewer in self.viewers:
+            viewer.set_layers(np.array([state.slot]), np.zeros(1, np.int8))
+        self.free_slots.append(state.slot)
 
 
 class Cursors:

@@ -347,6 +347,13 @@ def percentile(hist: np.ndarray, q: float) -> float:
     return float(np.searchsorted(c, q * c[-1]) * BINS_MS) if c[-1] else float("nan")
 
 
+def relay_processes(pr) -> list:
+    """A relay's processes: ``mocodec serve`` itself, or with --workers its workers (not the
+    NATS server it started, whose CPU is reported apart)."""
+    children = [c for c in pr.children(recursive=True) if "nats" not in c.name()]
+    return children or [pr]
+
+
 def drive(args, token: str, relays: list) -> tuple[list, list, list]:
     """Start the publishers and viewers, watch the relays, collect what the workers report."""
     import psutil
@@ -392,15 +399,16 @@ def drive(args, token: str, relays: list) -> tuple[list, list, list]:
         w.start()
     time.sleep(3.0)
     clients = [psutil.Process(w.pid) for w in workers]
-    for pr in [pr for _, pr in relays] + clients:
+    serving = [relay_processes(pr) for _, pr in relays]  # each relay's processes (its workers)
+    for pr in [pr for group in serving for pr in group] + clients:
         pr.cpu_percent(None)
     t0 = time.monotonic()
     peak_rss = [0] * len(relays)
     while time.monotonic() - t0 < args.seconds:
         time.sleep(1.0)
-        for k, (_, pr) in enumerate(relays):
-            peak_rss[k] = max(peak_rss[k], pr.memory_info().rss)
-    cpu = [pr.cpu_percent(None) for _, pr in relays]
+        for k, group in enumerate(serving):
+            peak_rss[k] = max(peak_rss[k], sum(pr.memory_info().rss for pr in group))
+    cpu = [sum(pr.cpu_percent(None) for pr in group) for group in serving]
     busy = [c.cpu_percent(None) for c in clients]
     print(
         f"  client CPU (% of one core): publishers {sum(busy[: args.publishers]):.0f}, viewer processes "
@@ -445,6 +453,13 @@ def main() -> None:
     ap.add_argument("--publishers", type=int, default=10, help="sending connections (avatars spread over them)")
     ap.add_argument("--tick-hz", type=float, default=TICK_HZ, help="the relay's batches per second to each viewer")
     ap.add_argument("--viewer-procs", type=int, default=1)
+    ap.add_argument(
+        "--workers",
+        type=int,
+        default=1,
+        help="relay processes behind the one port (serve --workers; they share the room through the "
+        "NATS server serve starts)",
+    )
     ap.add_argument(
         "--nats",
         action="store_true",
@@ -493,8 +508,13 @@ def main() -> None:
         ]
         if nats_url:
             cmd += ["--bus", nats_url]
-        p = subprocess.Popen(cmd, stdout=subprocess.DEVNULL)
+        if args.workers > 1:
+            cmd += ["--workers", str(args.workers)]
+        p = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
         procs.append(p)
+        assert p.stdout is not None
+        for _ in range(2 if args.workers > 1 else 1):  # its address; with workers, that all listen
+            p.stdout.readline()
         wait_port(port)
         relays.append((f"ws://127.0.0.1:{port}", psutil.Process(p.pid)))
     try:
@@ -514,6 +534,7 @@ def main() -> None:
         + f" avatars at 30 Hz -> {args.viewers} viewers"
         + (f" of {args.budget:g} bit/s each" if args.budget else "")
         + (", two relays over NATS" if args.nats else "")
+        + (f", {args.workers} workers" if args.workers > 1 else "")
     )
     print(
         f"relay load: {setup}, {args.seconds:g} s measured, loss {args.loss:.0%}, keyframes every {args.keyframe_s:g} s"
@@ -531,6 +552,11 @@ def main() -> None:
     )
     for k, (c, rss) in enumerate(zip(cpu, peak_rss)):
         print(f"  relay {k + 1}: CPU {c:.0f}% of one core, peak RSS {rss / 2**20:.0f} MiB")
+    per_s = tally["received"] / args.seconds
+    print(
+        f"  deliveries {per_s:,.0f} a second, {per_s / max(sum(cpu) / 100.0, 1e-9):,.0f} a second per relay core "
+        f"({sum(cpu) / 100.0 * 1e6 / max(per_s, 1e-9):.2f} us of relay CPU each)"
+    )
     if args.loss:
         if len(resync):
             print(

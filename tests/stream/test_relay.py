@@ -494,3 +494,39 @@ def test_a_sender_that_vanishes_ends_its_stream_for_viewers(walk_bvh):
     (got, waited) = asyncio.run(go())
     half = packets[len(packets) // 2 - 1]
     assert got[0].num_frames == half.first_frame + half.frames and waited < 5  # ended, not timed out
+
+
+def test_workers_behind_one_port_share_their_rooms(walk_bvh):
+    """``serve --workers 2`` (a NATS server started by serve): the kernel spreads connections
+    over both workers, and every viewer gets the stream a sender sent to whichever worker."""
+    if shutil.which("nats-server", path="/usr/sbin:/usr/bin:/usr/local/bin") is None:
+        pytest.skip("nats-server is not installed (.ci/run installs Debian's nats-server)")
+    port = free_port()
+    server = subprocess.Popen(
+        [sys.executable, "-m", "mocodec", "serve", "--port", str(port), "--secret", SECRET, "--workers", "2"],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert "2 workers" in server.stdout.readline()
+        assert "2 workers listening" in server.stdout.readline()
+        url = f"ws://127.0.0.1:{port}"
+
+        async def go():
+            joined = asyncio.Semaphore(0)
+            watchers = [
+                asyncio.create_task(record(url, "lobby", token(), timeout_s=60, joined=joined.release))
+                for _ in range(6)
+            ]
+            for _ in watchers:
+                await joined.acquire()
+            await publish_clip(url, "lobby", token(), walk_bvh[:240], get_codec("dpcm"), speed=8)
+            return await asyncio.gather(*watchers)
+
+        got = asyncio.run(go())
+    finally:
+        server.terminate()
+        server.wait(20)
+    clean = receive_clip(stream_clip(walk_bvh[:240], get_codec("dpcm"))).channels
+    for motions in got:
+        np.testing.assert_array_equal(motions[0].channels, clean)

@@ -52,11 +52,6 @@ def add_secret_options(p) -> None:
 
 
 def cmd_serve(args) -> int:
-    bus = None
-    if args.bus:
-        from mocodec.stream.bus import NatsBus
-
-        bus = NatsBus(args.bus)
     logging.basicConfig(
         level=logging.INFO if args.verbose else logging.WARNING, format="%(asctime)s %(name)s %(levelname)s %(message)s"
     )
@@ -65,12 +60,38 @@ def cmd_serve(args) -> int:
         publish_messages_per_s=args.max_messages_per_s,
         publish_bytes_per_s=args.max_bytes_per_s,
     )
+    secret = secret_of(args)
+    if args.workers > 1:
+        from mocodec.stream.relay.workers import serve_workers
+
+        bus = args.bus or "a NATS server of its own"
+        print(
+            f"mocodec relay on http://{args.host}:{args.port} (WebSocket /ws, status /status), "
+            f"{args.workers} workers sharing rooms through {bus}",
+            flush=True,
+        )
+        serve_workers(
+            args.host,
+            args.port,
+            secret,
+            args.workers,
+            limits,
+            args.bus,
+            args.tick_hz,
+            lambda: print(f"{args.workers} workers listening", flush=True),
+        )
+        return 0
+    bus = None
+    if args.bus:
+        from mocodec.stream.bus import NatsBus
+
+        bus = NatsBus(args.bus)
     print(
         f"mocodec relay on http://{args.host}:{args.port} (WebSocket /ws, status /status)"
         + (f", bus {args.bus}" if bus else ""),
         flush=True,
     )
-    run(args.host, args.port, secret_of(args), limits, bus, args.tick_hz)
+    run(args.host, args.port, secret, limits, bus, args.tick_hz)
     return 0
 
 
@@ -152,6 +173,13 @@ def add_commands(sub) -> None:
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1; 0.0.0.0: all)")
     add_secret_options(p)
     p.add_argument("--bus", metavar="nats://HOST:4222", help="share rooms with other relays through NATS")
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=1,
+        help="relay processes behind the one port, sharing rooms through NATS (--bus, or a nats-server "
+        "that serve starts on a free loopback port); default 1",
+    )
     p.add_argument(
         "--tick-hz", type=float, default=TICK_HZ, help=f"batches per second to each viewer (default {TICK_HZ:g})"
     )

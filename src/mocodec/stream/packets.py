@@ -30,7 +30,7 @@ import json
 import struct
 import zlib
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -116,7 +116,11 @@ class Packet:
         return _U16.unpack_from(self.payload)[0]
 
     def with_payload(self, payload: bytes, flags: int | None = None) -> Packet:
-        return replace(self, payload=payload, flags=self.flags if flags is None else flags)
+        """The packet with another payload (and flags): ``replace`` without its checks, as a
+        relay makes one of every packet it takes in."""
+        other = object.__new__(Packet)
+        other.__dict__.update(self.__dict__, payload=payload, flags=self.flags if flags is None else flags)
+        return other
 
     def without_cuts(self) -> Packet:
         return self.with_payload(self.codec_payload, self.flags & ~CUTS) if self.flags & CUTS else self
@@ -289,19 +293,28 @@ def layer_ends(p: Packet, layers: int) -> list[int]:
     """Where each of the ``layers`` layers of a layered stream's packet ends, from its cut table
     (:func:`with_cut_table`), the top one at the codec payload's end; CorruptStreamError if it
     has no table or the table does not fit (read a varint at a time: a relay reads every one)."""
-    table, size, pos = p.cuts, len(p.codec_payload), 0
+    payload = p.payload
+    size = _U16.unpack_from(payload)[0] if p.flags & CUTS and len(payload) >= _U16.size else -1
+    end = _U16.size + size
+    whole = len(payload) - end  # the codec payload's size
     ends: list[int] = []
+    pos, last = _U16.size, 0
     try:
-        while p.flags & CUTS and pos < len(table) and len(ends) < layers:
-            end, pos = varint.unpack(table, pos, 4)
-            ends.append(end)
+        while 0 <= whole and pos < end and len(ends) < layers:
+            value, pos = varint.unpack(payload, pos, 4)
+            if not last <= value <= whole:
+                break
+            ends.append(value)
+            last = value
     except ValueError:
         pass
-    if pos != len(table) or len(ends) != layers - 1 or any(b < a for a, b in zip([0, *ends], [*ends, size])):
+    if size < 0 or whole < 0 or pos != end or len(ends) != layers - 1:
         raise CorruptStreamError(
-            f"a layered stream's packet needs a cut table of {layers - 1} ends in order, within its {size} bytes"
+            f"a layered stream's packet needs a cut table of {layers - 1} ends in order, within its "
+            f"{max(whole, 0)} bytes"
         )
-    return ends + [size]
+    ends.append(whole)
+    return ends
 
 
 def codec_number(codec_id: str) -> int:

@@ -320,13 +320,16 @@ class PathOnlyAccessLogger(AbstractAccessLogger):
         self.logger.info("%s %s %s %d %.3fs", request.remote, request.method, request.path, response.status, time_s)
 
 
-async def start(relay: Relay, host: str, port: int) -> tuple[web.AppRunner, asyncio.AbstractServer]:
+async def start(
+    relay: Relay, host: str, port: int, reuse_port: bool = False
+) -> tuple[web.AppRunner, asyncio.AbstractServer]:
     """The relay listening on ``host:port`` (0: any free port) behind its
-    :class:`ConnectionGuard`; stop with ``server.close()`` and ``runner.cleanup()``."""
+    :class:`ConnectionGuard` (``reuse_port``: beside other workers on the same port); stop with
+    ``server.close()`` and ``runner.cleanup()``."""
     runner = web.AppRunner(relay.app(), access_log_class=PathOnlyAccessLogger)
     await runner.setup()
     relay.guard = ConnectionGuard(runner.server, relay.limits)
-    server = await asyncio.get_running_loop().create_server(relay.guard, host, port)
+    server = await asyncio.get_running_loop().create_server(relay.guard, host, port, reuse_port=reuse_port or None)
     return runner, server
 
 
@@ -337,12 +340,24 @@ def raise_descriptor_limit() -> None:
         resource.setrlimit(resource.RLIMIT_NOFILE, (hard if hard != resource.RLIM_INFINITY else max(soft, 65536), hard))
 
 
-def run(host: str, port: int, secret: str, limits: Limits | None = None, bus=None, tick_hz: float = TICK_HZ) -> None:
-    """Serve until interrupted (``mocodec serve``)."""
+def run(
+    host: str,
+    port: int,
+    secret: str,
+    limits: Limits | None = None,
+    bus=None,
+    tick_hz: float = TICK_HZ,
+    reuse_port: bool = False,
+    listening: Callable[[], None] | None = None,
+) -> None:
+    """Serve until interrupted (``mocodec serve``; a worker of ``--workers`` with ``reuse_port``);
+    ``listening`` is called once the port takes connections."""
     raise_descriptor_limit()
 
     async def serve() -> None:
-        runner, server = await start(Relay(secret, limits, tick_hz, bus), host, port)
+        runner, server = await start(Relay(secret, limits, tick_hz, bus), host, port, reuse_port)
+        if listening is not None:
+            listening()
         try:
             await asyncio.Event().wait()
         finally:

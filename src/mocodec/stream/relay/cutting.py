@@ -84,20 +84,27 @@ def crowd_of(room: Room, fresh: list[Forward]) -> Crowd:
 
 
 def _round(room: Room, row: dict[int, int], width: int, layered: list[Forward]) -> Round:
+    """A round's arrays; its variants are cut when a viewer is given one (:func:`_cut_variants`)."""
     streams = [f.packet.stream for f in layered]
-    variants: list[bytes] = []
-    for f in layered:
-        own = layer_variants(f)
-        variants += own + own[-1:] * (width - len(own))
     return Round(
         layered,
         streams,
         np.array([row[k] for k in streams], dtype=np.int64),
         np.array([room.streams[k].slot for k in streams], dtype=np.int64),
         np.array([f.packet.keyframe for f in layered], dtype=bool),
-        variants,
-        [length_varint(len(v)) for v in variants],
+        [b""] * (len(layered) * width),
+        [b""] * (len(layered) * width),
     )
+
+
+def _cut_variants(r: Round, width: int, picked: np.ndarray) -> None:
+    """Cut the variants some viewer gets (``picked``: indices into the round's variants)."""
+    for index in np.unique(picked).tolist():
+        i, k = divmod(index, width)
+        f = r.layered[i]
+        assert f.layer_ends is not None
+        variant = drop_layers(f, min(k + 1, len(f.layer_ends)))
+        r.variants[index], r.heads[index] = variant, length_varint(len(variant))
 
 
 def shares_of(crowd: Crowd, viewers: list[Viewer], min_distance: float) -> tuple[np.ndarray, np.ndarray]:
@@ -122,9 +129,12 @@ def choose_layers(room: Room, crowd: Crowd, viewers: list[Viewer], fits: np.ndar
 
 def _choose_round(room: Room, width: int, r: Round, viewers: list[Viewer], fits: np.ndarray) -> np.ndarray:
     count = len(r.streams)
-    if not viewers:
-        return np.zeros((count, 0), dtype=np.int64)
-    had = np.stack([v.layers_at(r.slots) for v in viewers], axis=1).astype(np.int64)
+    if not viewers or not count:
+        return np.zeros((count, len(viewers)), dtype=np.int64)
+    top = int(r.slots.max())
+    for v in viewers:
+        v.hold_slot(top)
+    had = np.stack([v.layers[r.slots] for v in viewers], axis=1).astype(np.int64)
     fit = fits[r.rows]
     keep = np.where(r.keyframes[:, None] | (had == 0) | (had >= fit), fit, had)
     grow = np.nonzero(keep < fit)  # a layer may come back where it restarts
@@ -132,8 +142,10 @@ def _choose_round(room: Room, width: int, r: Round, viewers: list[Viewer], fits:
         reach = _reach(room, width, r, np.unique(grow[0]))
         keep[grow] = np.minimum(fit[grow], reach[grow[0], had[grow]])
     for k, viewer in enumerate(viewers):
-        viewer.set_layers(r.slots, keep[:, k])
-    return np.arange(count)[:, None] * width + keep - 1
+        viewer.layers[r.slots] = keep[:, k]
+    picked = np.arange(count)[:, None] * width + keep - 1
+    _cut_variants(r, width, picked)
+    return picked
 
 
 def _reach(room: Room, width: int, r: Round, packets: np.ndarray) -> np.ndarray:
@@ -230,12 +242,6 @@ def drop_layers(f: Forward, keep: int) -> bytes:
     if keep >= len(f.layer_ends):
         return f.data
     return truncated(f.packet, f.data, f.layer_ends[keep - 1], len(f.layer_ends) - keep)
-
-
-def layer_variants(f: Forward) -> list[bytes]:
-    """A layered packet with 1, 2, ... of its layers (all of them: the packet)."""
-    assert f.layer_ends is not None
-    return [drop_layers(f, keep) for keep in range(1, len(f.layer_ends) + 1)]
 
 
 def cut_embedded(f: Forward, state: StreamState, rate: float) -> bytes:

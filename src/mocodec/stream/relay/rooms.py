@@ -122,10 +122,15 @@ class Viewer:
     sent: int = 0
     dropped: bool = False
 
+    def hold_slot(self, slot: int) -> None:
+        """Make room in its table of layers for the stream in ``slot``."""
+        if slot >= self.layers.size:
+            self.layers = np.concatenate((self.layers, np.zeros(2 * slot + 2 - self.layers.size, np.int8)))
+
     def layers_at(self, slots: np.ndarray) -> np.ndarray:
         """The layers it gets now of the streams in ``slots`` (0: none yet)."""
-        if slots.size and slots.max() >= self.layers.size:
-            self.layers = np.concatenate((self.layers, np.zeros(2 * int(slots.max()) + 2 - self.layers.size, np.int8)))
+        if slots.size:
+            self.hold_slot(int(slots.max()))
         return self.layers[slots]
 
     def set_layers(self, slots: np.ndarray, layers: np.ndarray) -> None:
@@ -137,8 +142,7 @@ class Viewer:
         return int(self.layers[slot]) if slot < self.layers.size else 0
 
     def set_layer(self, slot: int, layers: int) -> None:
-        if slot >= self.layers.size:
-            self.layers_at(np.array([slot]))
+        self.hold_slot(slot)
         self.layers[slot] = layers
 
 

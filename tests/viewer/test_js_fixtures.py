@@ -77,3 +77,14 @@ def test_the_javascript_package_has_mocodecs_version():
 
     package = json.loads((DATA.parent.parent / "js" / "package.json").read_text())
     assert package["version"] == __version__
+
+
+def test_the_javascript_packet_table_is_the_codecs_packet_numbers():
+    """js/src/packets.js names codecs by the numbers of their classes' ``packet_number``."""
+    import re
+
+    from mocodec.codecs import packet_codecs
+
+    source = (DATA.parent.parent / "js" / "src" / "packets.js").read_text()
+    table = re.search(r"export const CODECS = \[([^\]]*)\]", source).group(1)
+    assert tuple(re.findall(r"'([^']+)'", table)) == packet_codecs()

@@ -148,7 +148,7 @@ LAYERED = [cid for cid in STREAMING if "layers" in {k.name for k in codec_class(
 @pytest.mark.parametrize(
     "cid, knobs",
     [(cid, {}) for cid in STREAMING] + [(cid, {"layers": 3}) for cid in LAYERED],
-    ids=STREAMING + [f"{cid}-layered" for cid in LAYERED],
+    ids=[*STREAMING, *(f"{cid}-layered" for cid in LAYERED)],
 )
 def test_each_packet_says_what_it_decodes_to(cid, knobs, walk_amc):
     """A stream encoder's Coded packets carry the frames their decoder gives out (what a live

@@ -49,7 +49,7 @@ JS_TESTS := node --import ./tests/js/register.mjs --test tests/js/
 # the whole suite, on two workers (the machine's cores; about five minutes)
 test: $(WARM)
 	$(JS_TESTS)
-	$(BIN)/python -m pytest -n 2
+	$(BIN)/python -m pytest -n 2 --dist loadgroup
 
 # the edit-test loop: everything but the slow tier (fuzzing, corruption sweeps, every shared
 # clip), the browser and the network (relay, NATS) tests

@@ -42,6 +42,7 @@ def pytest_collection_modifyitems(items):
         if "browser" in getattr(item, "fixturenames", ()):
             item.add_marker(pytest.mark.browser)
             item.add_marker(pytest.mark.network)
+            item.add_marker(pytest.mark.xdist_group("browser"))  # one Chromium at a time (--dist loadgroup)
 
 
 def free_port() -> int:

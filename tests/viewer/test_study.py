@@ -186,7 +186,7 @@ def test_a_dscqs_session_is_completed_by_clicks_and_saved(tmp_path, browser):
             page.click(".score-row[data-clip=A] button[data-score='4']")
             page.click(".score-row[data-clip=B] button[data-score='2']")
             page.click("#next")
-            page.wait_for_function("window.studyState.phase !== 'scoring'")
+            page.wait_for_function("window.studyState.phase !== 'scoring'", timeout=60_000)
 
     result = run_session(config, tmp_path / "out", browser, clicks)
     assert result["kind"] == "dscqs" and result["participant"] == "p7" and len(result["trials"]) == 2
@@ -201,7 +201,7 @@ def test_a_2afc_staircase_is_completed_by_clicks_and_saved(tmp_path, browser):
         for _ in range(4):
             page.wait_for_function("window.studyState.phase === 'choosing'", timeout=60_000)
             page.click("#pick-left")
-            page.wait_for_function("window.studyState.phase !== 'choosing'")
+            page.wait_for_function("window.studyState.phase !== 'choosing'", timeout=60_000)
 
     result = run_session(config, tmp_path / "out", browser, clicks)
     assert result["kind"] == "2afc" and len(result["trials"]) == 4

@@ -50,6 +50,7 @@ SECRET = "load-test"
 RESUMES = KEYFRAME | RESTART  # the flags of a packet a receiver can start decoding from
 BINS_MS = 0.1  # latency histogram resolution
 MAX_MS = 5000.0
+CAPACITY_P99_MS = 50.0  # --capacity: the latency a room must keep
 _STAMP = struct.Struct("<IIQI")  # stream, sequence, timestamp, first frame: bytes 6..26 of a packet
 
 
@@ -465,10 +466,38 @@ def main() -> None:
         action="store_true",
         help="two relays sharing the room through a NATS server: senders on the first, viewers split over both",
     )
+    ap.add_argument(
+        "--capacity",
+        action="store_true",
+        help="the largest room that keeps p99 under 50 ms with nothing lost: runs with 25, 50, 75, 100, "
+        "150 and 200 viewers (each --seconds long) until one fails",
+    )
     args = ap.parse_args()
     if args.nats:
         args.viewer_procs = max(args.viewer_procs, 2)  # viewers on both relays
 
+    if not args.capacity:
+        run_once(args)
+        return
+    largest = None
+    for viewers in (25, 50, 75, 100, 150, 200):
+        p99, lost = run_once(replace_viewers(args, viewers))
+        if p99 >= CAPACITY_P99_MS or lost:
+            break
+        largest = viewers
+    room = f"{args.avatars} avatars x {largest} viewers" if largest else "none of the rooms tried"
+    print(f"capacity: {room} at 30 Hz keep p99 under {CAPACITY_P99_MS:g} ms with nothing lost")
+
+
+def replace_viewers(args, viewers: int):
+    """``args`` with another viewer count (one viewer process per 25)."""
+    return argparse.Namespace(
+        **{**vars(args), "viewers": viewers, "viewer_procs": max(args.viewer_procs, viewers // 25)}
+    )
+
+
+def run_once(args) -> tuple[float, int]:
+    """One load run with ``args``, its figures printed; (p99 latency in ms, packets lost)."""
     import psutil
 
     from mocodec.stream import tokens
@@ -564,6 +593,8 @@ def main() -> None:
                 f"p99 {np.quantile(resync, 0.99):.2f} s, max {resync.max():.2f} s; "
                 f"within 1 s: {np.mean(resync <= 1.0):.1%}"
             )
+
+    return percentile(hist, 0.99), tally["lost"]
 
 
 if __name__ == "__main__":

@@ -453,17 +453,23 @@ def header_packet(stream: int, info: StreamInfo, timestamp_us: int = 0, usual_fr
 
 
 # ----- batches ----------------------------------------------------------------------------------
-def pack_batch(packets: list[bytes], lengths: np.ndarray | None = None) -> bytes:
-    """One message holding ``packets`` (already serialised); ``lengths``: their lengths, when
-    the caller has them in an array already."""
-    if lengths is None:
-        lengths = np.fromiter(map(len, packets), dtype=np.int64, count=len(packets))
-    return BATCH_MAGIC + varint.pack(len(packets)) + varint.pack_array(lengths) + b"".join(packets)
+#: The varints of the packet lengths a batch spells most (a packet under 16 KiB).
+_SHORT_LENGTHS = [varint.pack(n) for n in range(1 << 14)]
+
+
+def length_varint(n: int) -> bytes:
+    """``varint.pack(n)``, looked up for the lengths below 16 KiB: a batch's length of a packet."""
+    return _SHORT_LENGTHS[n] if n < len(_SHORT_LENGTHS) else varint.pack(n)
+
+
+def pack_batch(packets: list[bytes]) -> bytes:
+    """One message holding ``packets`` (already serialised)."""
+    return batch_of(packets, [length_varint(len(p)) for p in packets])
 
 
 def batch_of(packets: list[bytes], heads: list[bytes]) -> bytes:
-    """:func:`pack_batch` of ``packets`` whose lengths' varints (``heads``) are made already: a
-    relay keeps them beside the packets it serves many viewers."""
+    """:func:`pack_batch` of ``packets`` whose lengths' varints (``heads``, :func:`length_varint`)
+    are made already: a relay keeps them beside the packets it serves many viewers."""
     return BATCH_MAGIC + varint.pack(len(packets)) + b"".join(heads) + b"".join(packets)
 
 

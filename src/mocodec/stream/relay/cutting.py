@@ -14,18 +14,10 @@ import numpy as np
 
 from mocodec.crowd import layers_within, on_ladder, viewer_shares
 from mocodec.errors import MocodecError
-from mocodec.formats import varint
-from mocodec.stream.packets import truncated
+from mocodec.stream.packets import length_varint, truncated
 from mocodec.stream.relay.rooms import Forward, Room, StreamState, Viewer
 
 log = logging.getLogger("mocodec.relay")
-#: The varints of the packet lengths a relay sees most (a batch spells each packet's length).
-_SHORT_LENGTHS = [varint.pack(n) for n in range(1 << 14)]
-
-
-def length_varint(n: int) -> bytes:
-    """``varint.pack(n)``, looked up for the lengths below 16 KiB."""
-    return _SHORT_LENGTHS[n] if n < len(_SHORT_LENGTHS) else varint.pack(n)
 
 
 @dataclass

@@ -336,3 +336,11 @@ def test_a_packet_cut_by_more_layers_than_its_stream_has_is_concealed(walk_bvh, 
     frames = whole.push(cut)
     assert len(frames) == packets[6].frames and np.isfinite(frames).all()
     assert whole.stats.dropped == (1 if layers == 1 else 0)
+
+
+def test_a_batchs_length_varints_are_varints():
+    from mocodec.formats import varint
+    from mocodec.stream.packets import length_varint
+
+    for n in [*range(300), 0x3FFF, 0x4000, 0x4001, 65_535, 1 << 20, 1 << 28]:
+        assert length_varint(n) == varint.pack(n)

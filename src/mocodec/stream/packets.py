@@ -453,13 +453,14 @@ def header_packet(stream: int, info: StreamInfo, timestamp_us: int = 0, usual_fr
 
 
 # ----- batches ----------------------------------------------------------------------------------
-#: The varints of the packet lengths a batch spells most (a packet under 16 KiB).
-_SHORT_LENGTHS = [varint.pack(n) for n in range(1 << 14)]
-
-
 def length_varint(n: int) -> bytes:
-    """``varint.pack(n)``, looked up for the lengths below 16 KiB: a batch's length of a packet."""
-    return _SHORT_LENGTHS[n] if n < len(_SHORT_LENGTHS) else varint.pack(n)
+    """``varint.pack(n)``, spelled out for the one- and two-byte lengths a batch holds most (a
+    packet under 16 KiB)."""
+    if n < 0x80:
+        return bytes((n,))
+    if n < 0x4000:
+        return bytes((n & 0x7F | 0x80, n >> 7))
+    return varint.pack(n)
 
 
 def pack_batch(packets: list[bytes]) -> bytes:

@@ -210,6 +210,7 @@ class RelayCore:
         cut_cache: dict[tuple[int, float], bytes] = {}
         crowd = None  # the scalable streams and where they are, this tick
         viewers = [v for v in room.viewers if not v.dropped]
+        in_step = {id(v) for v in viewers if not v.behind}  # they get the tick's fresh packets as they are
         column: dict[int, int] = {}  # a budgeted viewer's column in shares and fits
         chosen_of: dict[int, list[np.ndarray]] = {}  # the variants of the tick's layered packets each gets
         shares = fits = np.zeros((0, 0))
@@ -218,7 +219,6 @@ class RelayCore:
             pending, viewer.pending = viewer.pending, []
             resends, viewer.resends = viewer.resends, []
             notes, viewer.notes = viewer.notes, []
-            in_step = not viewer.behind  # gets the tick's fresh packets as they are
             caught, live = self._catch_up(room, viewer, fresh) if viewer.behind else ([], fresh)
             pending += caught
             items = pending + live
@@ -232,12 +232,12 @@ class RelayCore:
                     budgeted = [v for v in viewers if v.budget > 0]
                     column = {id(v): k for k, v in enumerate(budgeted)}
                     shares, fits = shares_of(crowd, budgeted, self.limits.min_distance_m)
-                    together = [v for v in budgeted if not v.behind]
+                    together = [v for v in budgeted if id(v) in in_step]
                     picked = choose_layers(room, crowd, together, fits[:, [column[id(v)] for v in together]])
                     chosen_of = {id(v): [p[:, k] for p in picked] for k, v in enumerate(together)}
                 k = column[id(viewer)]
                 own = len(items) - len(fresh) if live is fresh else len(items)  # the tick's fresh packets go together
-                picks = chosen_of.get(id(viewer)) if in_step else None
+                picks = chosen_of.get(id(viewer))
                 bodies, heads = cut_for(room, crowd, viewer, shares[:, k], fits[:, k], items, own, cut_cache, picks)
                 batches.append(batch_of(bodies, heads))
             elif pending or live is not fresh:  # joined late: its streams' last packets before the tick's

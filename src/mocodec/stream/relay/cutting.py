@@ -142,15 +142,23 @@ def _choose_round(room: Room, width: int, r: Round, viewers: list[Viewer], fits:
 
 def _reach(room: Room, width: int, r: Round, packets: np.ndarray) -> np.ndarray:
     """``(packets, width + 1)`` for a round's packets (rows ``packets`` filled): the layers a
-    viewer that had ``h`` may take from each, the next ones as far as they restart in it
-    (:func:`layers_for`'s loop)."""
+    viewer that had ``h`` may take from each (:func:`regained`)."""
     reach = np.tile(np.arange(width + 1), (len(r.layered), 1))
     for i in packets.tolist():
         f = r.layered[i]
         starts = restarts_of(f, room.streams[f.packet.stream])
-        for h in range(len(starts) - 1, -1, -1):
-            reach[i, h] = reach[i, h + 1] if starts[h] else h
+        reach[i, : len(starts)] = [regained(starts, h) for h in range(len(starts))]
     return reach
+
+
+def regained(starts: list[bool], had: int) -> int:
+    """The layers a viewer that had ``had`` may take from a packet whose layers restart where
+    ``starts`` says: the next ones as far as each restarts in it (a layer it missed has lost
+    its prediction's history until it restarts)."""
+    keep = had
+    while keep < len(starts) and starts[keep]:
+        keep += 1
+    return keep
 
 
 def restarts_of(f: Forward, state: StreamState) -> list[bool]:
@@ -211,11 +219,7 @@ def layers_for(viewer: Viewer, f: Forward, state: StreamState, fits: int) -> int
     share (at least the base), more than it had only from a keyframe or a packet where the next
     layer restarts (a layer it missed has lost its prediction's history)."""
     had = viewer.layer_of(state.slot)
-    keep = fits if f.packet.keyframe or not had else min(fits, had)
-    if keep < fits:
-        starts = restarts_of(f, state)
-        while keep < min(fits, len(starts)) and starts[keep]:
-            keep += 1
+    keep = fits if f.packet.keyframe or not had or had >= fits else min(fits, regained(restarts_of(f, state), had))
     viewer.set_layer(state.slot, keep)
     return keep
 

@@ -127,16 +127,6 @@ class Viewer:
         if slot >= self.layers.size:
             self.layers = np.concatenate((self.layers, np.zeros(2 * slot + 2 - self.layers.size, np.int8)))
 
-    def layers_at(self, slots: np.ndarray) -> np.ndarray:
-        """The layers it gets now of the streams in ``slots`` (0: none yet)."""
-        if slots.size:
-            self.hold_slot(int(slots.max()))
-        return self.layers[slots]
-
-    def set_layers(self, slots: np.ndarray, layers: np.ndarray) -> None:
-        self.layers_at(slots)
-        self.layers[slots] = layers
-
     def layer_of(self, slot: int) -> int:
         """The layers it gets now of the stream in ``slot`` (0: none yet)."""
         return int(self.layers[slot]) if slot < self.layers.size else 0
@@ -176,7 +166,7 @@ class Room:
         state = self.streams.pop(key)
         state.history.close()
         for viewer in self.viewers:
-            viewer.set_layers(np.array([state.slot]), np.zeros(1, np.int8))
+            viewer.set_layer(state.slot, 0)
         self.free_slots.append(state.slot)
 
 

@@ -61,18 +61,22 @@ class Relay:
         self.bus = bus
         self.guard: ConnectionGuard | None = None  # set by start()
         self.started = time.monotonic()
-        self._changed = asyncio.Event()
+        self._changed: asyncio.Event | None = None  # made while someone waits (until)
 
     async def until(self, ready: Callable[[], bool], timeout_s: float = 10.0) -> None:
         """Wait until ``ready()`` holds, checked after every message the relay takes in and
         every tick (TimeoutError after ``timeout_s``): how tests wait for the relay."""
         async with asyncio.timeout(timeout_s):
             while not ready():
+                if self._changed is None:
+                    self._changed = asyncio.Event()
                 await self._changed.wait()
 
     def _notify(self) -> None:
-        self._changed.set()
-        self._changed = asyncio.Event()
+        """Wake whoever waits in :meth:`until` (nothing to do, on the hot path, when nobody does)."""
+        if self._changed is not None:
+            self._changed.set()
+            self._changed = None
 
     # ----- the application -------------------------------------------------------------------
     def app(self) -> web.Application:

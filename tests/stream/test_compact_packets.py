@@ -129,3 +129,34 @@ def test_a_packet_cut_from_its_bytes_is_the_packet_with_the_shorter_payload(pack
     with pytest.raises(CorruptStreamError, match="CRC"):
         parse(replace(packets[0], dropped=1).to_bytes())
     assert parse(header).dropped == 0
+
+
+@pytest.mark.parametrize("compact", [True, False])
+def test_a_packet_stripped_of_its_cut_table_is_the_packet_without_it(packets, compact):
+    """What a relay forwards (``stripped``, made from the bytes as they came) is the packet
+    without its cut table as its own ``to_bytes`` makes it, and reads back as that packet."""
+    from dataclasses import replace
+
+    from mocodec.stream.packets import CUTS, stripped, with_cut_table
+
+    reader = Reader()
+    reader.read(packets[0].to_bytes())
+    for p in [q for q in packets if q.kind != HEADER][:20]:
+        ends = [len(p.payload) // 3, len(p.payload) // 2]
+        cut = replace(p, compact=compact, payload=with_cut_table(p.payload, ends), flags=p.flags | CUTS)
+        data = cut.to_bytes()
+        assert parse(data, "with cuts", reader.cursors.get).cuts  # a table to strip
+        plain, forwarded = stripped(cut, data)
+        assert plain == replace(p, compact=compact) and forwarded == plain.to_bytes()
+        back = parse(forwarded, "forwarded", reader.cursors.get)
+        assert (back.payload, back.flags, back.sequence) == (p.payload, p.flags, p.sequence)
+        assert stripped(plain, forwarded) == (plain, forwarded)  # nothing to strip: the same bytes
+        reader.read(data)
+
+
+def test_a_parsed_full_packet_equals_the_packet_written(packets):
+    from dataclasses import replace
+
+    for p in [q for q in packets if q.kind != HEADER][:10]:
+        full = replace(p, compact=False, timestamp_us=1_700_000_000_000_000, position=(1.5, 0.25, -2.0))
+        assert parse(full.to_bytes()) == replace(full, usual_frames=0, sends_position=True)

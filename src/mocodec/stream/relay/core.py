@@ -25,6 +25,7 @@ from mocodec.stream.packets import (
     layer_ends,
     pack_batch,
     split_batch,
+    stripped,
 )
 from mocodec.stream.relay.cutting import choose_layers, crowd_of, cut_for, resent, shares_of
 from mocodec.stream.relay.limits import BAD_MESSAGE, QUEUED_S, RATE_LIMIT, TAKEN, TICK_HZ, Bucket, Closing, Limits
@@ -333,11 +334,9 @@ def _forwarded(p: Packet, raw: memoryview, state: StreamState) -> Forward:
     lengths; Closing if it does not parse."""
     try:
         if state.layered and p.frames:
-            plain = p.without_cuts()
-            return Forward(plain, plain.to_bytes(), layer_ends=layer_ends(p, state.layers))
-        if not p.flags & CUTS:
-            return Forward(p, bytes(raw))
-        plain = p.without_cuts()
-        return Forward(plain, plain.to_bytes(), cuts=None if state.layered else cut_table(p))
+            ends = layer_ends(p, state.layers)
+            return Forward(*stripped(p, raw), layer_ends=ends)
+        cuts = cut_table(p) if p.flags & CUTS and not state.layered else None
+        return Forward(*stripped(p, raw), cuts=cuts)
     except CorruptStreamError as e:
         raise Closing(BAD_MESSAGE, f"stream {p.stream}: packet {p.sequence}: {e}") from None

@@ -1,9 +1,9 @@
 """kinwave against SZ3 (pysz, one channel at a time, absolute bound) at equal max shell error,
 its ratio at a mean joint error bound, the guarantee on every clip (and how much of a max
-bound it uses), and its speed; every figure per source (CMU BVH, CMU ASF/AMC, Bandai Namco),
-side by side.
+bound it uses), and its speed; every figure per source (CMU BVH, CMU ASF/AMC, Bandai Namco, the
+game-export stand-in set), side by side.
 
-    python benchmarks/bench_kinwave.py [--set bvh|amc|bandai|all] [--limit N]
+    python benchmarks/bench_kinwave.py [--set bvh|amc|bandai|game|all] [--limit N]
 
 SZ3's bound (degrees, and cm for translations) is bisected per clip to the largest one whose
 decoded max shell error is within the target; kinwave is given the target as its bound. Sizes
@@ -19,13 +19,13 @@ import time
 import numpy as np
 
 from baselines import sz3_per_channel
-from common import shared_sources
+from common import GAME_EXPORT, shared_sources
 from mocodec import load, moc
 from mocodec.codecs import get_codec
 from mocodec.kinematics import forward_kinematics
 from mocodec.metrics.pose import shell_errors
 
-SETS = {"bvh": "CMU BVH", "amc": "CMU ASF/AMC", "bandai": "Bandai Namco"}
+SETS = {"bvh": "CMU BVH", "amc": "CMU ASF/AMC", "bandai": "Bandai Namco", "game": GAME_EXPORT}
 
 
 def errors(motion, channels):
@@ -53,7 +53,7 @@ def sz3_at_shell(motion, target):
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--set", choices=("bvh", "amc", "bandai", "all"), default="all")
+    ap.add_argument("--set", choices=(*SETS, "all"), default="all")
     ap.add_argument("--limit", type=int, default=0, help="only the first N clips of each set")
     args = ap.parse_args()
     clips = [

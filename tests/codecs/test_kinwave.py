@@ -464,6 +464,32 @@ def test_bones_in_position_channels_cost_only_their_constants(walk_amc):
     assert _errors(moved, codec.decode(body, moved.skeleton, moved.num_frames, moved.fps))["shell"] <= 1.0
 
 
+def test_bones_stored_as_float32_cost_what_constant_bones_cost(walk_amc):
+    """An FBX pipeline stores every bone's translation as float32, each frame a few units in
+    the last place off: kinwave codes those channels as constants (else each bone restores its
+    position from its parent's decoded one and codes the parent's error: three times the
+    bytes), but not a bone that really moves, even by a little, nor noise the bound would see."""
+    from mocodec.reexpress import with_position_channels
+
+    clip = with_position_channels(walk_amc[:240])
+    bones = ~clip.skeleton.rotation_mask
+    bones[: clip.skeleton.channel_offsets[1]] = False
+    rng = np.random.default_rng(5)
+    noisy = clip.channels.astype(np.float32)
+    noisy[:, bones] += rng.integers(-3, 4, size=noisy[:, bones].shape) * np.spacing(np.abs(noisy[:, bones]))
+    stored = clip.with_channels(noisy.astype(np.float64))
+    codec = get_codec("kinwave", max_error_cm=1.0, error_measure="shell")
+    assert BoundSearch(codec, stored).const[bones].all()
+    exact, body = codec.encode(clip), codec.encode(stored)
+    assert len(body) <= len(exact) * 1.03
+    assert _errors(stored, codec.decode(body, stored.skeleton, stored.num_frames, stored.fps))["shell"] <= 1.0
+    moving = clip.channels.copy()
+    moving[:, np.flatnonzero(bones)[0]] += 0.001 * np.sin(np.arange(clip.num_frames) / 10.0)  # 0.06 mm: real
+    assert not BoundSearch(codec, clip.with_channels(moving)).const[np.flatnonzero(bones)[0]]
+    tight = get_codec("kinwave", max_error_cm=1e-4, error_measure="shell")  # the noise is not under 1/64 of it
+    assert not BoundSearch(tight, stored).const[bones].all()
+
+
 def test_a_turned_dummy_root_takes_fine_turns(walk_bvh):
     """A constant rotation of a joint with a translation channel below it (a dummy root turned
     (0, 90, 0) above the body's root) is coded at a 64th of its step (more flags bit 5): its

@@ -59,6 +59,8 @@ from mocodec.skeleton import Skeleton
 
 MEAN_LEAST = 20.0  # degrees: a mean rotation smaller than this is left at the identity
 CONSTANT = 1e-6  # a channel whose range is below this is one knot
+FLOAT32_STEPS = 16  # ... and a translation whose range is this many float32 steps of its size (storage noise)
+NOISE_SHARE = 1.0 / 64.0  # ... if that range is under this share of a max bound
 JUMP_CM = 10.0  # a leading frame jumping less than this is not tried as a keyframe
 TRIAL_FRAMES = 1024  # frames the choice of forms codes each form of every joint on
 FAR_STEPS = 0.7  # a frame missing its target by more than this many steps rounds its coefficients plainly
@@ -165,7 +167,7 @@ class Encoder:
         self.cm = 100.0 / sk.units_per_metre
         self.positions = pos * self.cm
         self.quats = quat
-        self.const = (np.ptp(self.values, axis=1) <= CONSTANT) if self.frames else np.ones(sk.num_channels, bool)
+        self.const = self._constant_channels() if self.frames else np.ones(sk.num_channels, bool)
         self.constants = self._constant_coding()
         self.first_pass: Pass | None = None
         self.isolated = isolated_frames(self.positions, 2) if self.cfg["keyframes"] else np.zeros(0, np.int64)
@@ -182,6 +184,22 @@ class Encoder:
         self.world_translations = world_translations(sk, self.const)
         if self.cfg["keyframes"] and jumps_at_start(self.positions):
             self._choose_keyframes()
+
+    def _constant_channels(self) -> np.ndarray:
+        """Channels coded as one knot: a range below CONSTANT, or a translation whose range is
+        the noise of float32 storage (FLOAT32_STEPS of its size's float32 step, and small
+        against a max bound). An FBX pipeline stores every bone's translation so: coded as
+        motion, a bone's translation restores its position from its parent's decoded one and
+        codes the parent's error (three times the bytes on CMU clips exported so)."""
+        spread = np.ptp(self.values, axis=1)
+        const = spread <= CONSTANT
+        moving = ~self.skeleton.rotation_mask & ~const
+        size = np.abs(self.values[moving]).max(axis=1).astype(np.float32)
+        noise = FLOAT32_STEPS * np.spacing(size).astype(np.float64)
+        if not self.cfg["bits_per_second"]:
+            noise = np.minimum(noise, NOISE_SHARE * self.cfg["max_error_cm"] / self.cm)
+        const[moving] = spread[moving] <= noise
+        return const
 
     def _turns(self) -> tuple[np.ndarray, np.ndarray]:
         """Per three-angle joint, the turn a WORLD form would take off (:func:`parent_turns`,

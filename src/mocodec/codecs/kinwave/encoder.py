@@ -190,7 +190,7 @@ class Encoder:
         the noise of float32 storage (FLOAT32_STEPS of its size's float32 step, and small
         against a max bound). An FBX pipeline stores every bone's translation so: coded as
         motion, a bone's translation restores its position from its parent's decoded one and
-        codes the parent's error (three times the bytes on CMU clips exported so)."""
+        codes the parent's error (docs/kinwave.md, "Game exports")."""
         spread = np.ptp(self.values, axis=1)
         const = spread <= CONSTANT
         moving = ~self.skeleton.rotation_mask & ~const

@@ -43,15 +43,26 @@ def split_budget(total, scores: np.ndarray) -> np.ndarray:
 def viewer_shares(where: np.ndarray, cameras: np.ndarray, budgets: np.ndarray, min_distance: float) -> np.ndarray:
     """``(avatars, viewers)`` bit/s: each viewer's budget split over the avatars at ``where
     (avatars, 3)`` by their distance scores from its camera ``(viewers, 3)`` (6.4, 6.5), a
-    distance below ``min_distance`` counting as that."""
-    d = np.linalg.norm(where[:, None, :] - cameras[None, :, :], axis=2)
-    return split_budget(budgets, bandwidth_scores(np.maximum(d, min_distance)))
+    distance below ``min_distance`` counting as that. The same numbers as
+    :func:`bandwidth_scores` and :func:`split_budget` of the distances, a coordinate at a time
+    (a relay works this out every tick)."""
+    squared = np.zeros((len(where), len(cameras)))
+    for axis in range(3):
+        apart = where[:, axis, None] - cameras[None, :, axis]
+        squared += apart * apart
+    d = np.maximum(np.sqrt(squared), min_distance)
+    if not (d > 0).all():
+        raise CodecError("camera distances must be positive")
+    return split_budget(budgets, d.min(axis=0) / d)
 
 
 def layers_within(rates: np.ndarray, shares: np.ndarray) -> np.ndarray:
     """``(avatars, viewers)``: how many layers of each avatar fit each viewer's share, at least
     one, given ``rates (avatars, layers)``, the bit/s of each avatar's layers up to each."""
-    return np.maximum((rates[:, None, :] <= shares[:, :, None]).sum(axis=2), 1)
+    count = np.zeros(shares.shape, dtype=np.int64)
+    for layer in range(rates.shape[1]):
+        count += rates[:, layer, None] <= shares
+    return np.maximum(count, 1)
 
 
 def on_ladder(bits_per_second: float) -> float:

@@ -65,3 +65,24 @@ def test_split_budget_splits_each_column_as_its_own_budget():
         assert np.array_equal(together[:, k], split_budget(int(totals[k]), scores[:, k]))
         assert together[:, k].sum() <= totals[k]
     assert np.array_equal(split_budget(100, np.zeros(3)), [0, 0, 0])
+
+
+def test_viewer_shares_are_6_4_and_6_5_of_the_camera_distances():
+    """The relay's shares for all viewers at once: avatars 1 m and 2 m from a camera share its
+    3,000 bit/s 2:1 (a nearer one counting as 0.5 m), and every random case gives what the
+    equations give of the distances one by one; the layers within a share count the layer
+    rates up to it, at least one."""
+    from mocodec.crowd import bandwidth_scores, layers_within, split_budget, viewer_shares
+
+    where = np.array([[1.0, 0.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 0.1]])
+    shares = viewer_shares(where, np.zeros((1, 3)), np.array([3500]), 0.5)
+    assert shares[:, 0].tolist() == [1000, 500, 2000]
+    rng = np.random.default_rng(4)
+    for _ in range(50):
+        avatars, cameras = rng.uniform(-20, 20, (30, 3)), rng.uniform(-20, 20, (4, 3))
+        budgets = rng.integers(0, 10**7, 4)
+        distances = np.maximum(np.linalg.norm(avatars[:, None] - cameras[None], axis=2), 0.1)
+        expected = split_budget(budgets, bandwidth_scores(distances))
+        assert np.array_equal(viewer_shares(avatars, cameras, budgets, 0.1), expected)
+    rates = np.array([[100.0, 300.0, 900.0], [50.0, 60.0, 70.0]])
+    assert layers_within(rates, np.array([[99.0, 300.0], [10.0, 1e6]])).tolist() == [[1, 2], [1, 3]]

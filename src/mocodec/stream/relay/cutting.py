@@ -24,14 +24,16 @@ log = logging.getLogger("mocodec.relay")
 class Round:
     """The tick's fresh layered packets that are the ``k``-th of their stream this tick (a
     stream's packets go in order, one round each): their streams, rows in the crowd, slots,
-    keyframe flags, and their variants with 1, 2, ... layers (``variants[i * width + k - 1]``)
-    with the varint of each one's length (``heads``)."""
+    keyframe flags and layers, and their variants with 1, 2, ... layers (``variants[i * width +
+    k - 1]``, the whole packet from its own layer count on) with the varint of each one's
+    length (``heads``)."""
 
     layered: list[Forward]
     streams: list[int]
     rows: np.ndarray
     slots: np.ndarray
     keyframes: np.ndarray
+    layer_counts: np.ndarray
     variants: list[bytes]
     heads: list[bytes]
 
@@ -53,13 +55,12 @@ class Crowd:
 
 
 def crowd_of(room: Room, fresh: list[Forward]) -> Crowd:
-    scalable = [k for k, s in room.streams.items() if s.embedded or s.layered]
-    where = np.array([room.streams[k].position for k in scalable], dtype=np.float64).reshape(-1, 3)
-    width = max((room.streams[k].layers for k in scalable), default=1)
-    rates = np.full((len(scalable), width), np.inf)
-    for i, k in enumerate(scalable):
-        state = room.streams[k]
-        rates[i, : state.layers] = state.layer_rates
+    scalable = {k: s for k, s in room.streams.items() if s.embedded or s.layered}
+    states = scalable.values()
+    where = np.array([s.position for s in states], dtype=np.float64).reshape(-1, 3)
+    width = max((s.layers for s in states), default=1)
+    rates = np.array([s.layer_rates + [np.inf] * (width - s.layers) for s in states], dtype=np.float64)
+    rates = rates.reshape(-1, width)
     row = {k: i for i, k in enumerate(scalable)}
     seen: Counter[int] = Counter()
     grouped: list[list[Forward]] = []
@@ -76,27 +77,29 @@ def crowd_of(room: Room, fresh: list[Forward]) -> Crowd:
 
 
 def _round(room: Room, row: dict[int, int], width: int, layered: list[Forward]) -> Round:
-    """A round's arrays; its variants are cut when a viewer is given one (:func:`_cut_variants`)."""
+    """A round's arrays, every variant the whole packet until a viewer needs a cut one
+    (:func:`_cut_variants`)."""
     streams = [f.packet.stream for f in layered]
+    heads = [length_varint(len(f.data)) for f in layered]
     return Round(
         layered,
         streams,
         np.array([row[k] for k in streams], dtype=np.int64),
         np.array([room.streams[k].slot for k in streams], dtype=np.int64),
         np.array([f.packet.keyframe for f in layered], dtype=bool),
-        [b""] * (len(layered) * width),
-        [b""] * (len(layered) * width),
+        np.array([len(f.layer_ends or ()) for f in layered], dtype=np.int64),
+        [f.data for f in layered for _ in range(width)],
+        [h for h in heads for _ in range(width)],
     )
 
 
-def _cut_variants(r: Round, width: int, picked: np.ndarray) -> None:
-    """Cut the variants some viewer gets (``picked``: indices into the round's variants)."""
-    for index in np.unique(picked).tolist():
-        i, k = divmod(index, width)
+def _cut_variants(r: Round, width: int, packets: list[int]) -> None:
+    """Cut the variants with fewer layers of the round's ``packets`` (some viewer gets one)."""
+    for i in packets:
         f = r.layered[i]
-        assert f.layer_ends is not None
-        variant = drop_layers(f, min(k + 1, len(f.layer_ends)))
-        r.variants[index], r.heads[index] = variant, length_varint(len(variant))
+        for keep in range(1, int(r.layer_counts[i])):
+            variant = drop_layers(f, keep)
+            r.variants[i * width + keep - 1], r.heads[i * width + keep - 1] = variant, length_varint(len(variant))
 
 
 def shares_of(crowd: Crowd, viewers: list[Viewer], min_distance: float) -> tuple[np.ndarray, np.ndarray]:
@@ -135,9 +138,8 @@ def _choose_round(room: Room, width: int, r: Round, viewers: list[Viewer], fits:
         keep[grow] = np.minimum(fit[grow], reach[grow[0], had[grow]])
     for k, viewer in enumerate(viewers):
         viewer.layers[r.slots] = keep[:, k]
-    picked = np.arange(count)[:, None] * width + keep - 1
-    _cut_variants(r, width, picked)
-    return picked
+    _cut_variants(r, width, np.flatnonzero((keep < r.layer_counts[:, None]).any(axis=1)).tolist())
+    return np.arange(count)[:, None] * width + keep - 1
 
 
 def _reach(room: Room, width: int, r: Round, packets: np.ndarray) -> np.ndarray:

@@ -3,6 +3,8 @@ retention and settings, called through its public API (:mod:`mocodec.stream.rela
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import pytest
 
 from mocodec.codecs import get_codec
@@ -187,3 +189,27 @@ def test_an_idle_room_goes_at_the_next_tick(walk_bvh):
     core.leave(room, viewer)
     core.tick()
     assert "lobby" not in core.rooms and core.status()["rooms"] == 0
+
+
+def test_the_crowd_layout_is_kept_a_few_ticks_and_remade_when_a_camera_moves(walk_bvh):
+    """Viewers' shares are worked out every LAYOUT_TICKS ticks, not every tick; a camera, a
+    budget or a stream that changes makes them anew at once, and a near avatar gets more of a
+    budget than a far one."""
+    from mocodec.stream.relay.cutting import LAYOUT_TICKS, layout_of
+
+    codec = get_codec("kinwave-live", layers=3, refresh_s=0.5)
+    core = RelayCore()
+    room = core.room("lobby")
+    for stream, x in ((0, 1.0), (1, 9.0)):
+        for p in stream_clip(walk_bvh[:60], codec, stream=stream)[:3]:
+            core.ingest(room, pack_batch([replace(p, position=(x, 0.0, 0.0)).to_bytes()]), owner=1)
+    viewer = Viewer(budget=8000.0, camera=(0.0, 0.0, 0.0))
+    first = layout_of(room, [viewer], 0.1)
+    near, far = first.shares[first.row[0], 0], first.shares[first.row[1], 0]
+    assert near > 4 * far and near + far <= 8000
+    kept = [layout_of(room, [viewer], 0.1) for _ in range(LAYOUT_TICKS)]
+    assert all(k is first for k in kept) and layout_of(room, [viewer], 0.1) is not first  # its age is up
+    again = layout_of(room, [viewer], 0.1)
+    viewer.camera = (10.0, 0.0, 0.0)
+    moved = layout_of(room, [viewer], 0.1)
+    assert moved is not again and moved.shares[moved.row[1], 0] > moved.shares[moved.row[0], 0]

@@ -542,8 +542,8 @@ def truncated(p: Packet, data: bytes, size: int, dropped: int) -> bytes:
 def split_batch(data: bytes | memoryview, where: str = "batch") -> list[memoryview]:
     """The packets of a batch, unparsed (views into ``data``)."""
     view = memoryview(data)
-    offsets = batch_offsets(view, where)
-    return [view[a:b] for a, b in zip(offsets[:-1], offsets[1:])]
+    offsets = batch_offsets(view, where).tolist()
+    return [view[a:b] for a, b in zip(offsets, offsets[1:])]
 
 
 def batch_offsets(data: bytes | memoryview, where: str = "batch") -> np.ndarray:

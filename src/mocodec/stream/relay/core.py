@@ -27,7 +27,7 @@ from mocodec.stream.packets import (
     split_batch,
     stripped,
 )
-from mocodec.stream.relay.cutting import choose_layers, crowd_of, cut_for, resent, shares_of
+from mocodec.stream.relay.cutting import choose_layers, crowd_of, cut_for, layout_of, resent
 from mocodec.stream.relay.limits import BAD_MESSAGE, QUEUED_S, RATE_LIMIT, TAKEN, TICK_HZ, Bucket, Closing, Limits
 from mocodec.stream.relay.retention import RoomHistory
 from mocodec.stream.relay.rooms import Cursors, Forward, Room, StreamState, Viewer, caps_of, stream_setup
@@ -229,10 +229,9 @@ class RelayCore:
                 batches.append(pack_batch([resent(viewer, f, room.streams.get(f.packet.stream)) for f in resends]))
             if viewer.budget > 0 and (scalable or any(f.scalable for f in pending)):
                 if crowd is None:
-                    crowd = crowd_of(room, fresh)
                     budgeted = [v for v in viewers if v.budget > 0]
-                    column = {id(v): k for k, v in enumerate(budgeted)}
-                    shares, fits = shares_of(crowd, budgeted, self.limits.min_distance_m)
+                    crowd = crowd_of(room, fresh, layout_of(room, budgeted, self.limits.min_distance_m))
+                    shares, fits, column = crowd.layout.shares, crowd.layout.fits, crowd.layout.column
                     together = [v for v in budgeted if id(v) in in_step]
                     picked = choose_layers(room, crowd, together, fits[:, [column[id(v)] for v in together]])
                     chosen_of = {id(v): [p[:, k] for p in picked] for k, v in enumerate(together)}

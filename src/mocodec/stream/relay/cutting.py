@@ -38,30 +38,79 @@ class Round:
     heads: list[bytes]
 
 
-@dataclass
-class Crowd:
-    """A tick's scalable streams (embedded or layered), worked out once for every viewer: each
-    stream's row in ``where`` (its position) and in ``rates`` (the bit/s of its layers up to
-    each, infinite past its own), the tick's fresh layered packets in rounds (:class:`Round`),
-    and its other fresh packets (``others``)."""
+#: Ticks a room's layout (:class:`Layout`) is kept for while its streams and its viewers'
+#: budgets and cameras stay the same: 0.1 s at 60 Hz, in which avatars move a few centimetres
+#: and the layers' measured rates (averaged over a second) little.
+LAYOUT_TICKS = 6
 
+
+@dataclass
+class Layout:
+    """A room's scalable streams (embedded or layered) and its budgeted viewers' shares of
+    them, worked out every LAYOUT_TICKS ticks or when a stream, a budget or a camera changes:
+    each stream's row in ``where`` (its position) and in ``rates`` (the bit/s of its layers up
+    to each, infinite past its own), and each viewer's column (by ``id``) in ``shares`` (bit/s,
+    6.4 and 6.5) and ``fits`` (the layers within them, at least one), ``(streams, viewers)``."""
+
+    key: tuple
     row: dict[int, int]
     where: np.ndarray
     rates: np.ndarray
     width: int
+    column: dict[int, int]
+    shares: np.ndarray
+    fits: np.ndarray
+    age: int = 0
+
+
+@dataclass
+class Crowd:
+    """A tick's scalable streams, worked out once for every viewer: the room's
+    :class:`Layout`, the tick's fresh layered packets in rounds (:class:`Round`), and its other
+    fresh packets (``others``)."""
+
+    layout: Layout
     rounds: list[Round]
     together: set[int]
     others: list[Forward]
 
 
-def crowd_of(room: Room, fresh: list[Forward]) -> Crowd:
+def layout_of(room: Room, viewers: list[Viewer], min_distance: float) -> Layout:
+    """The room's layout for the budgeted ``viewers``: the one kept in ``room.layout`` while
+    it is younger than LAYOUT_TICKS and its streams, budgets and cameras are the same, else a
+    new one."""
+    key = (tuple(map(id, room.streams.values())), tuple((id(v), v.budget, v.camera) for v in viewers))
+    kept = room.layout
+    if isinstance(kept, Layout) and kept.key == key and kept.age < LAYOUT_TICKS:
+        kept.age += 1
+        return kept
     scalable = {k: s for k, s in room.streams.items() if s.embedded or s.layered}
     states = scalable.values()
     where = np.array([s.position for s in states], dtype=np.float64).reshape(-1, 3)
     width = max((s.layers for s in states), default=1)
     rates = np.array([s.layer_rates + [np.inf] * (width - s.layers) for s in states], dtype=np.float64)
     rates = rates.reshape(-1, width)
-    row = {k: i for i, k in enumerate(scalable)}
+    if scalable and viewers:
+        cameras = np.array([v.camera for v in viewers], dtype=np.float64)
+        shares = viewer_shares(where, cameras, np.array([int(v.budget) for v in viewers]), min_distance)
+        fits = layers_within(rates, shares)
+    else:
+        shares, fits = np.zeros((len(scalable), len(viewers))), np.ones((len(scalable), len(viewers)), dtype=np.int64)
+    room.layout = Layout(
+        key,
+        {k: i for i, k in enumerate(scalable)},
+        where,
+        rates,
+        width,
+        {id(v): i for i, v in enumerate(viewers)},
+        shares,
+        fits,
+    )
+    return room.layout
+
+
+def crowd_of(room: Room, fresh: list[Forward], layout: Layout) -> Crowd:
+    row = layout.row
     seen: Counter[int] = Counter()
     grouped: list[list[Forward]] = []
     for f in fresh:
@@ -71,9 +120,9 @@ def crowd_of(room: Room, fresh: list[Forward]) -> Crowd:
             if k == len(grouped):
                 grouped.append([])
             grouped[k].append(f)
-    rounds = [_round(room, row, width, packets) for packets in grouped]
+    rounds = [_round(room, row, layout.width, packets) for packets in grouped]
     together = {id(f) for packets in grouped for f in packets}
-    return Crowd(row, where, rates, width, rounds, together, [f for f in fresh if id(f) not in together])
+    return Crowd(layout, rounds, together, [f for f in fresh if id(f) not in together])
 
 
 def _round(room: Room, row: dict[int, int], width: int, layered: list[Forward]) -> Round:
@@ -102,24 +151,13 @@ def _cut_variants(r: Round, width: int, packets: list[int]) -> None:
             r.variants[i * width + keep - 1], r.heads[i * width + keep - 1] = variant, length_varint(len(variant))
 
 
-def shares_of(crowd: Crowd, viewers: list[Viewer], min_distance: float) -> tuple[np.ndarray, np.ndarray]:
-    """``(streams, viewers)`` twice: each viewer's shares of the crowd's streams (6.4, 6.5) and
-    the layers of each stream within its share (at least one), worked out for all at once."""
-    streams = len(crowd.row)
-    if not streams or not viewers:
-        return np.zeros((streams, len(viewers))), np.ones((streams, len(viewers)), dtype=np.int64)
-    cameras = np.array([v.camera for v in viewers], dtype=np.float64)
-    shares = viewer_shares(crowd.where, cameras, np.array([int(v.budget) for v in viewers]), min_distance)
-    return shares, layers_within(crowd.rates, shares)
-
-
 def choose_layers(room: Room, crowd: Crowd, viewers: list[Viewer], fits: np.ndarray) -> list[np.ndarray]:
     """Per round of the tick's fresh layered packets, ``(packets, viewers)``: which variant of
     each (indices into the round's ``variants``) each viewer gets, for every viewer at once, the
     viewers' tables of layers updated (:func:`layers_for`, in arrays; ``fits``: the layers within
     each viewer's share of each crowd stream, ``(streams, viewers)``). A packet's layers depend
     only on what the viewer had of its stream, which the round before it has set."""
-    return [_choose_round(room, crowd.width, r, viewers, fits) for r in crowd.rounds]
+    return [_choose_round(room, crowd.layout.width, r, viewers, fits) for r in crowd.rounds]
 
 
 def _choose_round(room: Room, width: int, r: Round, viewers: list[Viewer], fits: np.ndarray) -> np.ndarray:
@@ -191,7 +229,7 @@ def cut_for(
     together = chosen is not None and pending < len(items) and bool(crowd.together)
     out = []
     for f in items[:pending] + (crowd.others if together else items[pending:]):
-        r = crowd.row.get(f.packet.stream)
+        r = crowd.layout.row.get(f.packet.stream)
         if r is None or (f.cuts is None and f.layer_ends is None):
             out.append(f.data)
         elif f.layer_ends is not None:

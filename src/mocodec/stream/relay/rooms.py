@@ -149,6 +149,7 @@ class Room:
     publishers: int = 0  # connected senders (a room with one is kept, streams or not)
     free_slots: list[int] = field(default_factory=list)
     slots: int = 0  # slots handed out so far
+    layout: object = None  # the cutting.Layout of the last few ticks
 
     @property
     def idle(self) -> bool:

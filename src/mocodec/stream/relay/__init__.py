@@ -20,7 +20,9 @@ share rounded down to a ladder of 4 rates per octave, so that viewers with nearl
 share one cut; a layered (``kinwave-live`` with layers) stream keeps the most layers whose
 measured rate fits the share (the base layer always), more only from a keyframe or a packet
 where the layer restarts, since a layer's prediction needs its history: the share by distance is
-spent as error bounds. Other streams pass whole. A viewer that joins late gets every stream
+spent as error bounds. Shares are worked out every few ticks (:data:`.cutting.LAYOUT_TICKS`)
+and at once when a stream, a budget or a camera changes. Other streams pass whole. A viewer
+that joins late gets every stream
 header and catches up from each stream's last keyframe (or restart point, where the codec
 stream restarts its base layer on its own), paced at ``catchup_bytes_per_s`` (or its budget)
 beyond the live packets (:mod:`.retention` keeps them, capped in bytes per stream

@@ -20,7 +20,7 @@ LAYERS = [
     {"skeleton"},
     {"kinematics"},
     {"motion", "perception"},
-    {"human", "reexpress"},
+    {"human", "reexpress", "mannequin"},
     {"formats", "metrics", "coding", "analysis"},
     {"codecs"},
     {"moc"},

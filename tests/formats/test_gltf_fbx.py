@@ -41,15 +41,45 @@ def test_round_trip_keeps_the_skeleton_layout_and_every_pose(clip, ext, tmp_path
     assert _joint_error_cm(motion, load(tmp_path / "again.bvh")) < 1e-4
 
 
-def test_the_javascript_fixture_is_what_the_writer_makes():
+def test_the_javascript_fixtures_are_what_the_writer_makes():
     sys.path.insert(0, str(DATA.parent / "js"))
     try:
-        from make_fixtures import fixture
+        from make_fixtures import fixture, mannequin_fixture
     finally:
         sys.path.pop(0)
-    glb, expected = fixture()
-    assert (FORMATS / "walk.glb").read_bytes() == glb, "run tests/js/make_fixtures.py"
-    assert (FORMATS / "walk.glb.json").read_text() == expected, "run tests/js/make_fixtures.py"
+    for name, (glb, expected) in (("walk", fixture()), ("walk_mannequin", mannequin_fixture())):
+        assert (FORMATS / f"{name}.glb").read_bytes() == glb, "run tests/js/make_fixtures.py"
+        assert (FORMATS / f"{name}.glb.json").read_text() == expected, "run tests/js/make_fixtures.py"
+
+
+@pytest.mark.parametrize("ext", [".glb", ".gltf"])
+def test_a_file_with_the_mannequin_reads_back_the_same_motion(walk_bvh, ext, tmp_path):
+    """The mesh is one skinned body on a node of its own: readers of the skeleton (ours) see the
+    same motion, and a 57-joint body adds under 300 KB to a .glb."""
+    import pygltflib
+
+    clip = walk_bvh[:60]
+    save(clip, tmp_path / f"body{ext}", mesh="mannequin")
+    back = load(tmp_path / f"body{ext}")
+    assert back.skeleton.difference(clip.skeleton) is None and _joint_error_cm(clip, back) < 1e-4
+    gltf = pygltflib.GLTF2().load(str(tmp_path / f"body{ext}"))
+    (node,) = [n for n in gltf.nodes if n.mesh is not None]
+    assert node.skin == 0 and gltf.nodes.index(node) in gltf.scenes[0].nodes
+    attributes = gltf.meshes[0].primitives[0].attributes
+    assert attributes.JOINTS_0 is not None and attributes.WEIGHTS_0 is not None
+    if ext == ".glb":
+        added = len(to_gltf_bytes(clip, True, mesh="mannequin")) - len(to_gltf_bytes(clip, True))
+        assert len(clip.skeleton) >= 57 and added < 300_000
+
+
+def test_convert_writes_the_mannequin_to_gltf_only(tmp_path, capsys):
+    from mocodec.cli import main
+
+    assert main(["convert", str(DATA / "07_03.amc"), str(tmp_path / "walk.glb"), "--mesh", "mannequin"]) == 0
+    assert main(["convert", str(DATA / "07_03.amc"), str(tmp_path / "walk.bvh"), "--mesh", "mannequin"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "a mesh is written to .gltf or .glb only" in err[0]
+    assert not (tmp_path / "walk.bvh").exists()
 
 
 def test_the_same_motion_gives_the_same_bytes(walk_bvh):

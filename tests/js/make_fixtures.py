@@ -1,5 +1,5 @@
-"""Write the fixtures the JavaScript tests load, and what they expect of them: the glTF file
-tests/formats/walk.glb (and walk.glb.json), live streams in tests/data/live/ (each case's
+"""Write the fixtures the JavaScript tests load, and what they expect of them: the glTF files
+tests/formats/walk.glb and walk_mannequin.glb (and their .json), live streams in tests/data/live/ (each case's
 stream as one batch message, the Python decoder's channels, the integers it read per packet and
 layer, and joint positions), .moc files in tests/data/moc/ (the same per chunk) and the
 JavaScript copy of the .moc header dictionary (js/src/header-dict.js). Run from the repository
@@ -291,11 +291,43 @@ def header_dictionary_module() -> str:
     )
 
 
+#: Vertices whose skinned positions the JavaScript test checks (every SAMPLE_STEP-th).
+SAMPLE_STEP = 97
+
+
+def mannequin_fixture() -> tuple[bytes, str]:
+    """The .glb with the mannequin and the expectations' JSON text: its counts, and where
+    linear-blend skinning (:func:`mocodec.mannequin.skinned`) puts some vertices at POSE_FRAME."""
+    import numpy as np
+
+    from mocodec import load, mannequin
+    from mocodec.formats.gltfwrite import to_gltf_bytes
+    from mocodec.kinematics import forward_kinematics
+
+    motion = load(DATA / "07_03.bvh")[:FRAMES]
+    sk = motion.skeleton
+    bind = mannequin.bind_positions(sk, motion.channels[0])
+    body = mannequin.build(sk, bind)
+    positions, quats = forward_kinematics(sk, motion.channels[POSE_FRAME : POSE_FRAME + 1])
+    posed = mannequin.skinned(body, bind, positions[0], quats[0]) / sk.units_per_metre
+    picked = np.arange(0, len(body.positions), SAMPLE_STEP)
+    expected = {
+        "source": "tests/data/07_03.bvh, first 30 frames, --mesh mannequin",
+        "joints": len(sk),
+        "vertices": len(body.positions),
+        "triangles": len(body.triangles),
+        "fps": motion.fps,
+        "pose_frame": POSE_FRAME,
+        "posed_m": {str(int(v)): [round(float(x), 7) for x in posed[v]] for v in picked},
+    }
+    return to_gltf_bytes(motion, binary=True, mesh="mannequin"), json.dumps(expected, indent=1) + "\n"
+
+
 def main() -> int:
-    glb, expected = fixture()
-    (FORMATS / "walk.glb").write_bytes(glb)
-    (FORMATS / "walk.glb.json").write_text(expected)
-    print(f"wrote {FORMATS / 'walk.glb'} ({len(glb)} bytes) and walk.glb.json")
+    for name, (glb, expected) in (("walk", fixture()), ("walk_mannequin", mannequin_fixture())):
+        (FORMATS / f"{name}.glb").write_bytes(glb)
+        (FORMATS / f"{name}.glb.json").write_text(expected)
+        print(f"wrote {FORMATS / (name + '.glb')} ({len(glb)} bytes) and {name}.glb.json")
     for folder, files in (("live", live_fixtures()), ("moc", {**moc_fixtures(), "steps.json": steps_table()})):
         (DATA / folder).mkdir(exist_ok=True)
         for name, data in files.items():

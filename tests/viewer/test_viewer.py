@@ -207,3 +207,53 @@ def test_the_page_watches_a_relay_room_live(browser):
     finally:
         relay.terminate()
         relay.wait(10)
+
+
+def _pixels(png: bytes) -> np.ndarray:
+    from io import BytesIO
+
+    from matplotlib import image
+
+    return image.imread(BytesIO(png), format="png")[:, :, :3]
+
+
+def test_the_page_shows_bodies_painted_with_the_error(browser):
+    """By default the page draws the mannequin: the bodies cover several times the screen area
+    of the stick figures, and at the frame of the clip's largest error the decoded body is red
+    where that joint is (the heatmap on its surface) and the original nowhere."""
+    with viewer_process(str(DATA / "07_03.bvh"), "--codec", "dpcm", "--levels", "8") as url:
+        page = browser.new_page(viewport={"width": 1280, "height": 900})
+        errors = []
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.goto(url)
+        page.wait_for_function("window.viewerState && window.viewerState.ready", timeout=30_000)
+        state = page.evaluate("fetch('/api/state').then(r => r.json())")
+        n, j = state["frames"], len(state["joints"])
+        error = np.frombuffer(base64.b64decode(state["error_cm"]), dtype="<f4").reshape(n, j)
+        frame, joint = np.unravel_index(int(error.argmax()), error.shape)
+        page.fill("#scrub", str(frame))
+        page.dispatch_event("#scrub", "input")
+        canvas = page.locator("#view canvas")
+        bodies = _pixels(canvas.screenshot())
+        page.select_option("#figures", "sticks")
+        sticks = _pixels(canvas.screenshot())
+        page.select_option("#figures", "bodies")
+
+        def covered(img):
+            return int((np.abs(img - img[2, 2]).sum(axis=2) > 0.25).sum())  # off the background colour
+
+        assert covered(bodies) > 3 * covered(sticks), (covered(bodies), covered(sticks))
+        shift = np.array([page.evaluate("viewerState.decodedShift()"), 0.0, 0.0])
+        where = positions(state["decoded"], n, j)[frame, joint] + shift
+        x, y = page.evaluate("([x, y, z]) => viewerState.project(x, y, z)", [float(v) for v in where])
+        red = (bodies[:, :, 0] > 0.55) & (bodies[:, :, 1] < 0.35) & (bodies[:, :, 2] < 0.35)
+        rows, cols = np.nonzero(red)
+        assert rows.size, "no red on the decoded body"
+        assert np.hypot(cols - x, rows - y).min() < 40  # red at the worst joint
+        roots = positions(state["original"], n, j)[frame, 0], positions(state["decoded"], n, j)[frame, 0] + shift
+        left, right = (
+            page.evaluate("([x, y, z]) => viewerState.project(x, y, z)[0]", [float(v) for v in r]) for r in roots
+        )
+        assert not red[:, : int((left + right) / 2)].any()  # none on the original, on the left
+        assert not errors, errors
+        page.close()

@@ -100,7 +100,7 @@ def cmd_convert(args) -> int:
     from mocodec.formats import verify
 
     motion = load_input(args.input, args)
-    written = save(motion, args.output, asf=args.out_asf)
+    written = save(motion, args.output, asf=args.out_asf, mesh=args.mesh)
     asf = next((p for p in written if p.suffix.lower() == ".asf"), None)
     back = load(args.output, asf=asf, fps=motion.fps if asf else None)
     error, tolerance = verify.joint_error_m(motion, back), verify.tolerance_m(motion)
@@ -227,6 +227,12 @@ def add_commands(sub) -> None:
     p.add_argument("input", metavar="IN", help="motion file: .bvh, .amc, .gltf, .glb or .fbx")
     p.add_argument("output", metavar="OUT", help="motion file to write: .bvh, .amc, .gltf or .glb")
     p.add_argument("--out-asf", help="where to write the ASF when OUT is .amc")
+    p.add_argument(
+        "--mesh",
+        choices=("mannequin",),
+        help="with OUT .gltf or .glb: also write a skinned body made from the skeleton, so the file "
+        "plays as a character in glTF viewers (docs/viewer.md)",
+    )
     add_input_options(p)
     p.set_defaults(func=cmd_convert)
 

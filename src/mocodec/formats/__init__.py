@@ -52,9 +52,12 @@ def load(
     raise FormatError(path, None, f"unknown file type {path.suffix or '(none)'!r}, expected one of {expected}")
 
 
-def save(motion: Motion, path: str | os.PathLike, *, asf: str | os.PathLike | None = None) -> list[Path]:
+def save(
+    motion: Motion, path: str | os.PathLike, *, asf: str | os.PathLike | None = None, mesh: str | None = None
+) -> list[Path]:
     """Write ``motion`` as ``.bvh``, ``.amc`` (plus its ``.asf``, by default beside it with the
-    same stem) or ``.gltf``/``.glb``, converting the skeleton form as needed; returns the files
+    same stem) or ``.gltf``/``.glb`` (with ``mesh="mannequin"`` a skinned body too:
+    :mod:`mocodec.mannequin`), converting the skeleton form as needed; returns the files
     written.
 
     A BVH is written in the skeleton's unit when a reader would guess it from the skeleton's
@@ -62,6 +65,8 @@ def save(motion: Motion, path: str | os.PathLike, *, asf: str | os.PathLike | No
     misread (:mod:`mocodec.formats.bvh`)."""
     path = Path(path)
     ext = path.suffix.lower()
+    if mesh is not None and ext not in (".gltf", ".glb"):
+        raise ConversionError(f"{path}: a mesh is written to .gltf or .glb only, not {path.suffix or 'no extension'}")
     if ext == ".bvh":
         bvh_motion = to_bvh_form(motion)
         if guess_units_per_metre(bvh_motion.skeleton.span()) != bvh_motion.skeleton.units_per_metre:
@@ -73,7 +78,7 @@ def save(motion: Motion, path: str | os.PathLike, *, asf: str | os.PathLike | No
         write_amc(to_asf_form(motion), path, asf_path)
         return [asf_path, path]
     if ext in (".gltf", ".glb"):
-        write_gltf(motion, path)
+        write_gltf(motion, path, mesh=mesh)
         return [path]
     expected = ", ".join(WRITABLE)
     raise ConversionError(f"{path}: cannot write {path.suffix or 'files without extension'}, expected {expected}")

@@ -2,7 +2,10 @@
 translation, in metres as glTF requires), one skin over all joints (so loaders such as three.js
 make them bones), and one animation sampling every frame: a rotation channel (quaternions) for
 each joint that rotates, a translation channel for each joint that translates (a still pose:
-the root's rotation), LINEAR between frames. Each node's ``extras.mocodec`` keeps the joint's
+the root's rotation), LINEAR between frames. With ``mesh="mannequin"`` the skin also has a body: the procedural
+mannequin of :mod:`mocodec.mannequin` (positions, normals, four joints and weights a vertex, as
+bytes), on a node of its own beside the skeleton, its inverse bind matrices at the mannequin's
+bind pose, so the file plays as a character in any glTF viewer. Each node's ``extras.mocodec`` keeps the joint's
 channel layout (channels, Euler order, ASF axis, exact offset) and the asset's
 ``extras.mocodec`` the unit and frame rate, so a file read back (:mod:`.gltf`) has the same
 skeleton; other readers ignore them. Values are 32-bit floats, as glTF stores them. Needs
@@ -16,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mocodec import rotations
+from mocodec import mannequin, rotations
 from mocodec.errors import ConversionError
 from mocodec.extras import require
 from mocodec.formats import nodetree
@@ -25,7 +28,10 @@ from mocodec.motion import Motion
 from mocodec.skeleton import POSITION_CHANNELS
 from mocodec.version import __version__
 
-_FLOAT = 5126
+_FLOAT, _UBYTE, _USHORT, _UINT = 5126, 5121, 5123, 5125
+_DTYPES = {_FLOAT: "<f4", _UBYTE: "u1", _USHORT: "<u2", _UINT: "<u4"}
+_VERTICES, _INDICES = 34962, 34963  # buffer view targets
+MESHES = ("mannequin",)  # what ``mesh`` may name
 
 
 def _pygltflib():
@@ -42,15 +48,27 @@ class _Blob:
         self.gltf = gltf
         self.data = bytearray()
 
-    def add(self, values: np.ndarray, kind: str, with_bounds: bool = False) -> int:
+    def add(
+        self,
+        values: np.ndarray,
+        kind: str,
+        with_bounds: bool = False,
+        component: int = _FLOAT,
+        normalized: bool = False,
+        target: int | None = None,
+    ) -> int:
         g = _pygltflib()
-        array = np.ascontiguousarray(values, dtype="<f4")
+        array = np.ascontiguousarray(values, dtype=_DTYPES[component])
         self.data += b"\0" * (-len(self.data) % 4)
-        view = g.BufferView(buffer=0, byteOffset=len(self.data), byteLength=array.nbytes)
+        view = g.BufferView(buffer=0, byteOffset=len(self.data), byteLength=array.nbytes, target=target)
         self.data += array.tobytes()
         self.gltf.bufferViews.append(view)
         count = array.shape[0]
-        accessor = g.Accessor(bufferView=len(self.gltf.bufferViews) - 1, componentType=_FLOAT, count=count, type=kind)
+        accessor = g.Accessor(
+            bufferView=len(self.gltf.bufferViews) - 1, componentType=component, count=count, type=kind
+        )
+        if normalized:
+            accessor.normalized = True
         if with_bounds:
             flat = array.reshape(count, -1)
             accessor.min = [float(v) for v in flat.min(axis=0)]
@@ -59,11 +77,14 @@ class _Blob:
         return len(self.gltf.accessors) - 1
 
 
-def to_gltf_bytes(motion: Motion, binary: bool, animation_name: str = "") -> bytes:
-    """``motion`` as a ``.glb`` (``binary``) or a self-contained ``.gltf`` (buffer as a data URI)."""
+def to_gltf_bytes(motion: Motion, binary: bool, animation_name: str = "", mesh: str | None = None) -> bytes:
+    """``motion`` as a ``.glb`` (``binary``) or a self-contained ``.gltf`` (buffer as a data
+    URI), with the body ``mesh`` names (one of MESHES) or none."""
     g = _pygltflib()
     if motion.num_frames == 0:
         raise ConversionError("a glTF animation needs at least one frame; the motion has none")
+    if mesh is not None and mesh not in MESHES:
+        raise ConversionError(f"unknown mesh {mesh!r} (expected one of: {', '.join(MESHES)})")
     sk = motion.skeleton
     translation, rotation = nodetree.from_motion(motion)
     gltf = g.GLTF2(asset=g.Asset(version="2.0", generator=f"mocodec {__version__}"))
@@ -76,7 +97,8 @@ def to_gltf_bytes(motion: Motion, binary: bool, animation_name: str = "") -> byt
         gltf.nodes.append(node)
     gltf.scenes = [g.Scene(nodes=[0])]
     gltf.scene = 0
-    rest = sk.rest_positions / sk.units_per_metre
+    bind = mannequin.bind_positions(sk, motion.channels[0]) if mesh else sk.rest_positions
+    rest = bind / sk.units_per_metre
     inverse_bind = np.tile(np.eye(4), (len(sk), 1, 1))
     inverse_bind[:, :3, 3] = -rest
     # glTF matrices are column-major: the transpose's rows are the columns
@@ -106,6 +128,8 @@ def to_gltf_bytes(motion: Motion, binary: bool, animation_name: str = "") -> byt
         target = g.AnimationChannelTarget(node=0, path="rotation")
         animation.channels.append(g.AnimationChannel(sampler=0, target=target))
     gltf.animations = [animation]
+    if mesh:
+        _add_mannequin(gltf, blob, mannequin.build(sk, bind), sk.units_per_metre)
     data = bytes(blob.data) + b"\0" * (-len(blob.data) % 4)
     if binary:
         gltf.buffers = [g.Buffer(byteLength=len(data))]
@@ -116,7 +140,32 @@ def to_gltf_bytes(motion: Motion, binary: bool, animation_name: str = "") -> byt
     return gltf.gltf_to_json().encode("utf-8")
 
 
-def write_gltf(motion: Motion, path: str | os.PathLike, animation_name: str = "") -> None:
-    """Write ``motion`` as ``.glb`` or ``.gltf`` (by extension), atomically."""
+def _add_mannequin(gltf, blob: _Blob, body: mannequin.Mesh, units_per_metre: float) -> None:
+    """The mannequin as the skin's mesh, on a root node of its own (glTF ignores a skinned
+    node's transform): positions in metres, joints and weights as bytes (weights summing to
+    255 of 255) where the skeleton has fewer than 256 joints."""
+    g = _pygltflib()
+    joints = _UBYTE if body.joints.max() < 256 else _USHORT
+    weights = np.round(body.weights * 255.0).astype(np.int64)
+    top = weights.argmax(axis=1)
+    weights[np.arange(len(weights)), top] += 255 - weights.sum(axis=1)  # the rounding goes to the largest
+    count = len(body.positions)
+    attributes = g.Attributes(
+        POSITION=blob.add(body.positions / units_per_metre, "VEC3", with_bounds=True, target=_VERTICES),
+        NORMAL=blob.add(body.normals, "VEC3", target=_VERTICES),
+        JOINTS_0=blob.add(body.joints, "VEC4", component=joints, target=_VERTICES),
+        WEIGHTS_0=blob.add(weights, "VEC4", component=_UBYTE, normalized=True, target=_VERTICES),
+    )
+    indices = blob.add(
+        body.triangles.reshape(-1), "SCALAR", component=_USHORT if count < 65536 else _UINT, target=_INDICES
+    )
+    gltf.meshes = [g.Mesh(name="mannequin", primitives=[g.Primitive(attributes=attributes, indices=indices)])]
+    gltf.nodes.append(g.Node(name="mannequin", mesh=0, skin=0))
+    gltf.scenes[0].nodes.append(len(gltf.nodes) - 1)
+
+
+def write_gltf(motion: Motion, path: str | os.PathLike, animation_name: str = "", mesh: str | None = None) -> None:
+    """Write ``motion`` as ``.glb`` or ``.gltf`` (by extension), atomically, with the body
+    ``mesh`` names (``"mannequin"``) or none."""
     binary = Path(path).suffix.lower() == ".glb"
-    atomic_write_bytes(path, to_gltf_bytes(motion, binary, animation_name))
+    atomic_write_bytes(path, to_gltf_bytes(motion, binary, animation_name, mesh))

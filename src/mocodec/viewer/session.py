@@ -3,10 +3,11 @@
 A :class:`ViewSession` holds the reference motion (a BVH or ASF/AMC clip, or the motion a
 .moc file decodes to) and, after :meth:`ViewSession.code`, its decoded version under a codec
 and knobs or a rate-control target. :meth:`ViewSession.state` is the JSON the page draws: the
-bones, the global joint positions of both motions (metres, computed here by forward
-kinematics, so the page needs no kinematics of its own), the joint position error of every
-joint in every frame (cm), and the headline numbers (ratio, bit rate, PSNR, VPSNR, joint
-errors).
+bones, the global joint positions and orientations of both motions (metres and quaternions,
+computed here by forward kinematics, so the page needs no kinematics of its own), the
+skeleton's mannequin (:mod:`mocodec.mannequin`, which the page skins with them), the joint
+position error of every joint in every frame (cm), and the headline numbers (ratio, bit rate,
+PSNR, VPSNR, joint errors).
 """
 
 from __future__ import annotations
@@ -17,10 +18,11 @@ from pathlib import Path
 
 import numpy as np
 
-from mocodec import moc, ratecontrol
+from mocodec import mannequin, moc, ratecontrol
 from mocodec.codecs import Codec, codec_class, codec_ids, get_codec
 from mocodec.errors import CodecError
 from mocodec.formats import load
+from mocodec.kinematics import forward_kinematics
 from mocodec.metrics import compare
 from mocodec.motion import Motion
 
@@ -28,6 +30,36 @@ from mocodec.motion import Motion
 def base64_f32(values: np.ndarray) -> str:
     """An array as base64 little-endian float32 (compact for the page, decoded with atob)."""
     return base64.b64encode(np.ascontiguousarray(values, dtype="<f4").tobytes()).decode()
+
+
+def base64_u32(values: np.ndarray) -> str:
+    """An array of indices as base64 little-endian uint32."""
+    return base64.b64encode(np.ascontiguousarray(values, dtype="<u4").tobytes()).decode()
+
+
+def orientations(motion: Motion) -> str:
+    """Every joint's global orientation in every frame as base64 float32 quaternions in
+    three.js's order (x, y, z, w)."""
+    return base64_f32(forward_kinematics(motion.skeleton, motion.channels)[1][..., [1, 2, 3, 0]])
+
+
+def body_of(motion: Motion, level: int = 0) -> dict:
+    """The motion's mannequin for the page: bind-pose positions (metres), normals, triangles,
+    four joints and weights a vertex, the joint whose error paints each vertex, and the bind
+    pose's joint positions."""
+    sk = motion.skeleton
+    bind = mannequin.bind_positions(sk, motion.channels[0] if motion.num_frames else None)
+    body = mannequin.build(sk, bind, level)
+    metre = sk.units_per_metre
+    return {
+        "positions": base64_f32(body.positions / metre),
+        "normals": base64_f32(body.normals),
+        "triangles": base64_u32(body.triangles),
+        "joints": base64_u32(body.joints),
+        "weights": base64_f32(body.weights),
+        "owners": base64_u32(body.owners),
+        "bind": base64_f32(bind / metre),
+    }
 
 
 def load_reference(path: str | Path, asf: str | None = None) -> Motion:
@@ -50,6 +82,8 @@ class ViewSession:
     def __init__(self, motion: Motion, name: str = ""):
         self.motion, self.name = motion, name
         self.positions = motion.positions_m()
+        self.quats = orientations(motion)
+        self.body = body_of(motion)
         self.coded: Coded | None = None
 
     def code(self, codec_id: str, knobs: dict | None = None, target: tuple[str, float] | None = None) -> Coded:
@@ -85,7 +119,10 @@ class ViewSession:
             "joints": list(sk.names),
             "parents": [int(p) for p in sk.parents],
             "original": base64_f32(self.positions),
+            "original_quats": self.quats,
+            "body": self.body,
             "decoded": None,
+            "decoded_quats": None,
             "error_cm": None,
             "numbers": None,
             "config": None,
@@ -95,6 +132,7 @@ class ViewSession:
             error_cm = np.linalg.norm(decoded - self.positions, axis=2) * 100
             out.update(
                 decoded=base64_f32(decoded),
+                decoded_quats=orientations(self.coded.decoded),
                 error_cm=base64_f32(error_cm),
                 numbers=self.coded.numbers,
                 config=self.coded.codec.get_config(),

@@ -44,3 +44,55 @@ export class Figure {
     this.joints.instanceColor.needsUpdate = true;
   }
 }
+
+export function u32(b64) {
+  return new Uint32Array(f32(b64).buffer);
+}
+
+// A skeleton's mannequin (mocodec.mannequin, from the server) skinned by three.js: one bone per
+// joint, every bone a child of the body's group and set to the joint's global position and
+// orientation each frame, so the skinning needs no hierarchy. Vertex colours paint the body,
+// each vertex the colour of the joint its bone ends at (the error heatmap).
+export class Body {
+  constructor(scene, mesh, colour) {
+    const positions = f32(mesh.positions), bind = f32(mesh.bind);
+    this.owners = u32(mesh.owners);
+    this.count = this.owners.length;
+    const geometry = new THREE.BufferGeometry();
+    geometry.setAttribute("position", new THREE.BufferAttribute(positions, 3));
+    geometry.setAttribute("normal", new THREE.BufferAttribute(f32(mesh.normals), 3));
+    geometry.setAttribute("skinIndex", new THREE.Uint16BufferAttribute(Uint16Array.from(u32(mesh.joints)), 4));
+    geometry.setAttribute("skinWeight", new THREE.BufferAttribute(f32(mesh.weights), 4));
+    geometry.setAttribute("color", new THREE.BufferAttribute(new Float32Array(this.count * 3), 3));
+    geometry.setIndex(new THREE.BufferAttribute(u32(mesh.triangles), 1));
+    this.joints = bind.length / 3;
+    this.bones = Array.from({ length: this.joints }, () => new THREE.Bone());
+    const inverses = this.bones.map((_, j) => new THREE.Matrix4().makeTranslation(-bind[3 * j], -bind[3 * j + 1], -bind[3 * j + 2]));
+    this.material = new THREE.MeshStandardMaterial({ vertexColors: true, roughness: 0.75, metalness: 0.0 });
+    this.mesh = new THREE.SkinnedMesh(geometry, this.material);
+    this.mesh.frustumCulled = false;       // its bind-pose bounds say nothing of where it is
+    this.group = new THREE.Group();
+    this.group.add(...this.bones, this.mesh);
+    this.mesh.bind(new THREE.Skeleton(this.bones, inverses), new THREE.Matrix4());
+    scene.add(this.group);
+    this.paint(new THREE.Color(colour));
+  }
+  pose(positions, quats, frame) {
+    const p = frame * this.joints * 3, q = frame * this.joints * 4;
+    this.bones.forEach((bone, j) => {
+      bone.position.set(positions[p + 3 * j], positions[p + 3 * j + 1], positions[p + 3 * j + 2]);
+      bone.quaternion.set(quats[q + 4 * j], quats[q + 4 * j + 1], quats[q + 4 * j + 2], quats[q + 4 * j + 3]);
+    });
+  }
+  paint(colour) {
+    this.colour(Array.from({ length: this.joints }, () => colour));
+  }
+  colour(jointColours) {
+    const rgb = this.mesh.geometry.attributes.color;
+    for (let v = 0; v < this.count; v++) {
+      const c = jointColours[this.owners[v]];
+      rgb.setXYZ(v, c.r, c.g, c.b);
+    }
+    rgb.needsUpdate = true;
+  }
+}

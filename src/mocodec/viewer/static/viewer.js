@@ -2,10 +2,11 @@
 // by their error, the error over time, the numbers, and re-encoding with another codec or knob;
 // or, with ?room=R&token=T, every avatar of a relay room live with the bit rate it gets, the page
 // joining the relay itself and decoding in the browser (mocodec's JavaScript decoder).
-// A clip's joint positions come from the server in metres (forward kinematics is done there).
+// A clip's joint positions (metres) and orientations come from the server (forward kinematics is
+// done there), with the skeleton's mannequin, drawn as a skinned body (or as stick figures).
 import * as THREE from "three";
 import { OrbitControls } from "three/addons/controls/OrbitControls.js";
-import { Figure, f32 } from "/static/figure.js";
+import { Body, Figure, f32 } from "/static/figure.js";
 import { RelayClient } from "/static/decoder/index.js";
 
 const $ = (id) => document.getElementById(id);
@@ -22,6 +23,17 @@ scene.background = new THREE.Color(0xfafafa);
 const camera = new THREE.PerspectiveCamera(45, 1, 0.05, 200);
 const controls = new OrbitControls(camera, renderer.domElement);
 scene.add(new THREE.GridHelper(40, 40, 0x999999, 0xdddddd));
+scene.add(new THREE.HemisphereLight(0xffffff, 0x8d8d8d, 2.2));
+const sun = new THREE.DirectionalLight(0xffffff, 1.6);
+sun.position.set(3, 6, 4);
+scene.add(sun);
+
+// where a point (metres, world) lands on the canvas, in pixels: for the browser tests
+state.project = (x, y, z) => {
+  const v = new THREE.Vector3(x, y, z).project(camera);
+  return [((v.x + 1) / 2) * view.clientWidth, ((1 - v.y) / 2) * view.clientHeight];
+};
+state.decodedShift = () => (decodedBody ? decodedBody.group.position.x : 0);
 
 function resize() {
   const w = view.clientWidth, h = view.clientHeight;
@@ -32,7 +44,8 @@ function resize() {
 window.addEventListener("resize", resize);
 
 // ----- the clip ----------------------------------------------------------------------------------
-let clip = null, original = null, decoded = null, lastRoot = null;
+let clip = null, original = null, decoded = null, originalBody = null, decodedBody = null, lastRoot = null;
+const BODY = new THREE.Color(0x8a9bb8), DECODED_BODY = new THREE.Color(0xb0b0b0);
 const SPACING = 1.2;                   // metres between the two figures side by side
 
 function heat(value, max) {
@@ -44,7 +57,9 @@ function show(data) {
   clip = {
     fps: data.fps, frames: data.frames, joints: data.joints.length, parents: data.parents,
     original: f32(data.original),
+    originalQuats: f32(data.original_quats),
     decoded: data.decoded ? f32(data.decoded) : null,
+    decodedQuats: data.decoded_quats ? f32(data.decoded_quats) : null,
     error: data.error_cm ? f32(data.error_cm) : null,
   };
   state.frames = clip.frames; state.fps = clip.fps; state.numbers = data.numbers;
@@ -53,8 +68,9 @@ function show(data) {
   if (!original) {
     original = new Figure(scene, clip.parents, 0x3b4a6b, 0x3b4a6b);
     decoded = new Figure(scene, clip.parents, 0x555555, 0x2a6fdb);
+    originalBody = new Body(scene, data.body, BODY);
+    decodedBody = new Body(scene, data.body, DECODED_BODY);
   }
-  decoded.group.visible = Boolean(clip.decoded);
   numbers(data.numbers);
   chart();
   layout();
@@ -74,9 +90,19 @@ function numbers(n) {
 }
 
 function layout() {
-  const side = $("layout").value === "side";
+  const side = $("layout").value === "side", bodies = $("figures").value === "bodies";
   decoded.group.position.set(side ? SPACING : 0, 0, 0);
+  decodedBody.group.position.copy(decoded.group.position);
   decoded.lines.material.color.set(side ? 0x555555 : 0xd7301f);
+  original.group.visible = !bodies;
+  decoded.group.visible = !bodies && Boolean(clip.decoded);
+  originalBody.group.visible = bodies;
+  decodedBody.group.visible = bodies && Boolean(clip.decoded);
+  // overlaid, the original body is a ghost around the decoded one
+  originalBody.material.transparent = bodies && !side && Boolean(clip.decoded);
+  originalBody.material.opacity = originalBody.material.transparent ? 0.35 : 1;
+  originalBody.material.depthWrite = !originalBody.material.transparent;
+  originalBody.material.needsUpdate = true;
   lastRoot = null;
 }
 
@@ -84,11 +110,15 @@ function draw() {
   if (!clip) return;
   const f = Math.min(state.frame, clip.frames - 1);
   original.pose(clip.original, f);
+  originalBody.pose(clip.original, clip.originalQuats, f);
   if (clip.decoded) {
     decoded.pose(clip.decoded, f);
+    decodedBody.pose(clip.decoded, clip.decodedQuats, f);
     const max = state.numbers ? state.numbers.max_joint_error_cm : 1;
     const row = clip.error.subarray(f * clip.joints, (f + 1) * clip.joints);
-    decoded.colour(Array.from(row, (e) => heat(e, max)));
+    const colours = Array.from(row, (e) => heat(e, max));
+    decoded.colour(colours);
+    decodedBody.colour(colours);
   }
   // the camera follows the figures: move it with the root
   const root = new THREE.Vector3(clip.original[f * clip.joints * 3], 0.9, clip.original[f * clip.joints * 3 + 2]);
@@ -169,6 +199,7 @@ function setPlaying(on) {
 $("play").addEventListener("click", () => setPlaying(!state.playing));
 $("scrub").addEventListener("input", (e) => { state.frame = Number(e.target.value); state.time = state.frame / state.fps; draw(); });
 $("layout").addEventListener("change", () => { layout(); draw(); });
+$("figures").addEventListener("change", () => { layout(); draw(); });
 controls.addEventListener("change", () => renderer.render(scene, camera));
 
 // ----- coding controls ---------------------------------------------------------------------------

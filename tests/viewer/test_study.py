@@ -30,6 +30,7 @@ def test_config_errors_name_the_file_and_the_problem(tmp_path):
         ({"kind": "dscqs", "cases": [{"clip": 0, "codec": "dpcm", "levels": 8}]}, "unknown key 'levels'"),
         ({"kind": "2afc", "step": 0}, "positive"),
         ({"kind": "2afc", "colour": 1}, "unknown setting"),
+        ({"kind": "2afc", "rendering": "cartoon"}, "rendering"),
     ]:
         with pytest.raises(FormatError, match=why) as e:
             study.load_config(write(tmp_path, doc))
@@ -181,6 +182,8 @@ def test_a_dscqs_session_is_completed_by_clicks_and_saved(tmp_path, browser):
     )
 
     def clicks(page):
+        page.wait_for_function("window.studyState.phase === 'playing'", timeout=60_000)
+        assert page.evaluate("window.studyState.rendering") == "body"  # the mannequin, by default
         for _ in range(2):
             page.wait_for_function("window.studyState.phase === 'scoring'", timeout=60_000)
             page.click(".score-row[data-clip=A] button[data-score='4']")
@@ -190,16 +193,21 @@ def test_a_dscqs_session_is_completed_by_clicks_and_saved(tmp_path, browser):
 
     result = run_session(config, tmp_path / "out", browser, clicks)
     assert result["kind"] == "dscqs" and result["participant"] == "p7" and len(result["trials"]) == 2
+    assert result["config"]["rendering"] == "body"
     for t in result["trials"]:
-        assert t["difference"] == (2 if t["reference"] == "A" else -2)
+        assert t["difference"] == (2 if t["reference"] == "A" else -2) and t["rendering"] == "body"
 
 
 def test_a_2afc_staircase_is_completed_by_clicks_and_saved(tmp_path, browser):
-    config = write(tmp_path, {"kind": "2afc", "speed": 4, "max_trials": 4, "reversals": 3, "average_last": 3})
+    config = write(
+        tmp_path,
+        {"kind": "2afc", "speed": 4, "max_trials": 4, "reversals": 3, "average_last": 3, "rendering": "sticks"},
+    )
 
     def clicks(page):
         for _ in range(4):
             page.wait_for_function("window.studyState.phase === 'choosing'", timeout=60_000)
+            assert page.evaluate("window.studyState.rendering") == "sticks"
             page.click("#pick-left")
             page.wait_for_function("window.studyState.phase !== 'choosing'", timeout=60_000)
 
@@ -207,3 +215,4 @@ def test_a_2afc_staircase_is_completed_by_clicks_and_saved(tmp_path, browser):
     assert result["kind"] == "2afc" and len(result["trials"]) == 4
     assert result["trials"][0]["value"] == pytest.approx(0.024)
     assert all(t["choice"] == "left" and t["correct"] == (t["original"] == "left") for t in result["trials"])
+    assert all(t["rendering"] == "sticks" for t in result["trials"])

@@ -31,9 +31,10 @@ from mocodec.errors import FormatError, MocodecError
 from mocodec.formats import load
 from mocodec.formats.fileio import atomic_write
 from mocodec.motion import Motion
-from mocodec.viewer.session import base64_f32
+from mocodec.viewer.session import base64_f32, body_of, orientations
 
 KINDS = ("dscqs", "2afc")
+RENDERINGS = ("body", "sticks")  # what the trials show: the mannequin, or stick figures
 SCORES = {1: "Bad", 2: "Poor", 3: "Fair", 4: "Good", 5: "Excellent"}
 
 
@@ -53,6 +54,7 @@ class StudyConfig:
     reversals: int = 6
     average_last: int = 3
     max_trials: int = 40
+    rendering: str = "body"  # one of RENDERINGS, recorded with every trial
 
 
 def load_config(path: str | Path) -> StudyConfig:
@@ -72,6 +74,8 @@ def load_config(path: str | Path) -> StudyConfig:
     if not isinstance(clips, list) or not clips:
         raise FormatError(path, None, '"clips" must be a non-empty list of motion files')
     cfg = StudyConfig(**{**doc, "clips": [path.parent / c for c in clips]})
+    if cfg.rendering not in RENDERINGS:
+        raise FormatError(path, None, f'"rendering" must be one of {", ".join(RENDERINGS)}, not {cfg.rendering!r}')
     if cfg.kind == "dscqs":
         if not cfg.cases:
             raise FormatError(path, None, 'a dscqs study needs "cases": [{"clip": 0, "codec": "spiht", "ratio": 40}]')
@@ -91,8 +95,9 @@ def load_config(path: str | Path) -> StudyConfig:
     return cfg
 
 
-def _positions(motion: Motion) -> str:
-    return base64_f32(motion.positions_m())
+def _clip(motion: Motion) -> dict:
+    """A clip for the page: joint positions (metres) and orientations, every frame."""
+    return {"positions": base64_f32(motion.positions_m()), "quats": orientations(motion)}
 
 
 class Study:
@@ -129,6 +134,8 @@ class Study:
             "frames": motion.num_frames,
             "parents": [int(p) for p in motion.skeleton.parents],
             "speed": self.cfg.speed,
+            "rendering": self.cfg.rendering,
+            "body": body_of(motion) if self.cfg.rendering == "body" else None,
         }
 
     def results(self) -> dict:
@@ -168,7 +175,7 @@ class Dscqs(Study):
         if target is not None:
             codec = ratecontrol.configure(codec, motion, target[0], float(target[1]))
         trip = moc.round_trip(motion, codec)
-        ref, cod = _positions(motion), _positions(trip.decoded)
+        ref, cod = _clip(motion), _clip(trip.decoded)
         a_is_ref = bool(self.reference_first[k])
         self.current = {
             "case": k,
@@ -176,6 +183,7 @@ class Dscqs(Study):
             "codec": codec.get_config(),
             "ratio": motion.raw_bits / 8 / len(trip.data),
             "reference": "A" if a_is_ref else "B",
+            "rendering": self.cfg.rendering,
         }
         return {
             **self._frame(motion, k, len(self.cfg.cases)),
@@ -219,15 +227,16 @@ class Staircase(Study):
         k = len(self.trials)
         motion = self.motions[k % len(self.motions)]  # the clips take turns
         codec = get_codec(self.cfg.codec, **{self.cfg.knob: self.value})
-        distorted = _positions(moc.round_trip(motion, codec).decoded)
+        distorted = _clip(moc.round_trip(motion, codec).decoded)
         original_left = bool(self.rng.random() < 0.5)
         self.current = {
             "trial": k,
             "clip": self.cfg.clips[k % len(self.motions)].name,
             "value": self.value,
             "original": "left" if original_left else "right",
+            "rendering": self.cfg.rendering,
         }
-        ref = _positions(motion)
+        ref = _clip(motion)
         return {
             **self._frame(motion, k, None),
             "left": ref if original_left else distorted,

@@ -2,7 +2,7 @@
 // and the 2AFC staircase (original and distorted side by side, pick the smoother). The server
 // chooses the order and keeps the answers; this page only plays and asks.
 import * as THREE from "three";
-import { Figure, f32 } from "/static/figure.js";
+import { Body, Figure, f32 } from "/static/figure.js";
 
 const $ = (id) => document.getElementById(id);
 const state = { ready: false, phase: "loading", index: 0, saved: null };
@@ -14,6 +14,10 @@ view.appendChild(renderer.domElement);
 const scene = new THREE.Scene();
 scene.background = new THREE.Color(0xfafafa);
 scene.add(new THREE.GridHelper(40, 40, 0x999999, 0xdddddd));
+scene.add(new THREE.HemisphereLight(0xffffff, 0x8d8d8d, 2.2));
+const sun = new THREE.DirectionalLight(0xffffff, 1.6);
+sun.position.set(3, 6, 4);
+scene.add(sun);
 const camera = new THREE.PerspectiveCamera(45, 1, 0.05, 200);
 function resize() {
   renderer.setSize(view.clientWidth, view.clientHeight);
@@ -24,12 +28,18 @@ function resize() {
 let figures = [], showing = 0;          // `showing` counts plays: an older play's loop stops
 function clear() { figures.forEach((f) => scene.remove(f.group)); figures = []; showing++; }
 
-// play `clips` (position arrays) side by side once; resolves when done (or loop until stopped)
+// a clip of the trial: joint positions and orientations, from base64
+const clipOf = (c) => ({ positions: f32(c.positions), quats: f32(c.quats) });
+
+// play `clips` side by side once, as bodies or stick figures (the study's rendering, which the
+// server records with each trial); resolves when done (or loops until stopped)
 function play(trial, clips, loop) {
   clear();
   const offset = 1.2, n = trial.parents.length;
+  state.rendering = trial.rendering;
   clips.forEach((_, k) => {
-    const fig = new Figure(scene, trial.parents, 0x3b4a6b, 0x3b4a6b);
+    const fig = trial.rendering === "body" ? new Body(scene, trial.body, 0x8a9bb8)
+                                           : new Figure(scene, trial.parents, 0x3b4a6b, 0x3b4a6b);
     fig.group.position.x = (k - (clips.length - 1) / 2) * offset;
     figures.push(fig);
   });
@@ -44,9 +54,10 @@ function play(trial, clips, loop) {
         if (!loop || state.phase !== "choosing") { resolve(); return; }
         start = now; f = 0;
       }
-      const root = [clips[0][f * n * 3], clips[0][f * n * 3 + 2]];
+      const root = [clips[0].positions[f * n * 3], clips[0].positions[f * n * 3 + 2]];
       clips.forEach((c, k) => { figures[k].group.position.x = (k - (clips.length - 1) / 2) * offset - root[0];
-                                figures[k].group.position.z = -root[1]; figures[k].pose(c, f); });
+                                figures[k].group.position.z = -root[1]; if (figures[k] instanceof Body) figures[k].pose(c.positions, c.quats, f);
+                                else figures[k].pose(c.positions, f); });
       camera.position.set(0, 1.4, 3.6);
       camera.lookAt(0, 0.9, 0);
       renderer.render(scene, camera);
@@ -71,7 +82,7 @@ async function dscqs(trial) {
   state.phase = "playing";
   for (const label of trial.sequence) {
     $("showing").textContent = label;
-    await play(trial, [f32(trial[label])], false);
+    await play(trial, [clipOf(trial[label])], false);
   }
   $("showing").textContent = "";
   clear();
@@ -101,7 +112,7 @@ async function dscqs(trial) {
 async function choose(trial) {
   state.phase = "choosing";
   $("choice").hidden = false;
-  play(trial, [f32(trial.left), f32(trial.right)], true);
+  play(trial, [clipOf(trial.left), clipOf(trial.right)], true);
   const choice = await new Promise((resolve) => {
     $("pick-left").onclick = () => resolve("left");
     $("pick-right").onclick = () => resolve("right");

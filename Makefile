@@ -66,7 +66,7 @@ lint: $(STAMP)
 # every benchmark script of benchmarks/ (speed and rate-distortion of each issue), one after another
 bench: $(WARM)
 	for script in foundation measures coding lossless codec_speed speed seams ratecontrol kinwave kinwave_ablation fixed_cost \
-	              invariance bound_usage search live formats relay_tick js_moc primitives rhythmic model_based hostile; do \
+	              invariance bound_usage search live live_page formats relay_tick js_moc primitives rhythmic model_based hostile; do \
 		$(BIN)/python benchmarks/bench_$$script.py || exit 1; done
 	$(BIN)/python benchmarks/bench_perceptual.py --set amc
 	$(BIN)/python benchmarks/bench_waveform.py --set amc

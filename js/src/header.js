@@ -10,6 +10,7 @@ import { Skeleton } from './skeleton.js';
  * A stream's header (Python's `stream.packets.StreamInfo`).
  * @typedef {object} StreamInfo
  * @property {Skeleton} skeleton
+ * @property {object} skeletonDoc the skeleton as the header states it (JSON), e.g. to ask a server for its mannequin
  * @property {number} fps
  * @property {object} codec the codec config ({codec, knobs, revision})
  * @property {string} name
@@ -38,5 +39,7 @@ export async function parseStreamHeader(payload) {
   const fps = doc.fps;
   if (typeof fps !== 'number' || !(fps >= MIN_FPS && fps <= MAX_FPS)) throw new DecodeError(`stream header: frame rate ${fps} is outside [${MIN_FPS}, ${MAX_FPS}]`);
   const extra = doc.extra && typeof doc.extra === 'object' ? doc.extra : {};
-  return { skeleton: new Skeleton(doc.skeleton), fps, codec: doc.codec, name: String(doc.name ?? ''), extra };
+  return {
+    skeleton: new Skeleton(doc.skeleton), skeletonDoc: doc.skeleton, fps, codec: doc.codec, name: String(doc.name ?? ''), extra,
+  };
 }

@@ -62,12 +62,13 @@ export class Avatar {
 
   /**
    * @param {number} [nowS]
+   * @param {Float64Array | null} [orientations] joints x 4, filled with each joint's global rotation (w, x, y, z)
    * @returns {Float64Array | null} joint positions (joints x 3, metres) to show at `nowS`, null before the first frame
    */
-  pose(nowS = now()) {
+  pose(nowS = now(), orientations = null) {
     const channels = this.buffer.pose(nowS);
     if (!channels) return null;
-    const positions = forwardKinematics(this.skeleton, channels);
+    const positions = forwardKinematics(this.skeleton, channels, orientations);
     return positions.map((v) => v / this.skeleton.unitsPerMetre);
   }
 }
@@ -88,6 +89,7 @@ export class RelayClient {
     this.room = room;
     this.token = token;
     this.settings = { budget, camera };
+    this.decodeMs = 0; // time spent decoding packets so far (ms)
     this.WebSocketClass = WebSocketClass;
     this.avatars = new Map();
     this.statuses = []; // the relay's status messages (a stream that starts live, without its history)
@@ -183,7 +185,11 @@ export class RelayClient {
       } else if (p.kind === DATA) {
         const other = this.others.get(p.stream);
         if (other) other.bytes += p.payload.length;
-        else this.avatars.get(p.stream)?.take(p, arrival);
+        else {
+          const started = performance.now();
+          this.avatars.get(p.stream)?.take(p, arrival);
+          this.decodeMs += performance.now() - started;
+        }
       }
     }
     this.#repair(now());

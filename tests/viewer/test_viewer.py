@@ -150,7 +150,8 @@ def test_view_refuses_a_bad_file_with_one_line(tmp_path):
 def test_the_page_watches_a_relay_room_live(browser):
     """The page joins the relay itself and decodes in the browser: two kinwave-live avatars (one
     with two layers) are drawn with their bit rates; a dpcm stream, which has no decoder there, is
-    listed as such. The viewer's server only serves files (it has no route that decodes)."""
+    listed as such. Both avatars are drawn as bodies, their mannequin made once by the viewer's
+    server, which has no route that decodes."""
     from mocodec.codecs import get_codec
     from mocodec.stream import tokens
     from mocodec.stream.client import publish_clip
@@ -188,6 +189,7 @@ def test_the_page_watches_a_relay_room_live(browser):
             sender = threading.Thread(target=asyncio.run, args=(publish(),))
             sender.start()
             page.wait_for_function("window.viewerState.live.streams === 2", timeout=30_000)
+            page.wait_for_function("window.viewerState.live.bodies === 2", timeout=30_000)  # as bodies
             page.wait_for_timeout(1500)
             bits = page.evaluate("window.viewerState.live.bits")
             assert len(bits) == 2 and all(b > 0 for b in bits.values()), bits
@@ -257,3 +259,39 @@ def test_the_page_shows_bodies_painted_with_the_error(browser):
         assert not red[:, : int((left + right) / 2)].any()  # none on the original, on the left
         assert not errors, errors
         page.close()
+
+
+def test_a_live_avatars_mannequin_is_made_from_its_stream_header(walk_bvh):
+    """What the live page asks of the viewer's server: the mannequin of a stream header's
+    skeleton, every level of detail, the same mesh as the file viewer's; a request that is not
+    such a skeleton gets a one-line error and status 400."""
+    from mocodec.formats.container import skeleton_to_dict
+    from mocodec.viewer.session import body_of
+
+    doc = {"skeleton": skeleton_to_dict(walk_bvh.skeleton), "frame": [0.0] * walk_bvh.num_channels}
+
+    async def go():
+        runner = web.AppRunner(make_app(None))
+        await runner.setup()
+        site = web.TCPSite(runner, "127.0.0.1", 0)
+        await site.start()
+        port = runner.addresses[0][1]
+        import aiohttp
+
+        try:
+            async with aiohttp.ClientSession() as http:
+                url = f"http://127.0.0.1:{port}/api/mannequin"
+                ok = await (await http.post(url, json=doc)).json()
+                bad = [
+                    await http.post(url, data=body)
+                    for body in (b"not json", b"[1, 2]", b'{"skeleton": {"joints": 7}}', b"[" * 100_000)
+                ]
+                short = await http.post(url, json={**doc, "frame": [0.0, 1.0]})
+                return ok, [(r.status, (await r.json())["error"]) for r in [*bad, short]]
+        finally:
+            await runner.cleanup()
+
+    ok, refused = asyncio.run(go())
+    assert len(ok["levels"]) == 3 and ok["levels"][0] == body_of(walk_bvh.skeleton, np.zeros(walk_bvh.num_channels))
+    assert all(status == 400 and "\n" not in error for status, error in refused), refused
+    assert "frame must be" in refused[-1][1]

@@ -23,10 +23,11 @@ from aiohttp import web
 
 from mocodec.data import THREE, three_is_there
 from mocodec.errors import MocodecError
-from mocodec.viewer.session import ViewSession, codec_menu
+from mocodec.viewer.session import ViewSession, codec_menu, mannequin_levels
 
 STATIC = Path(__file__).with_name("static")
 DECODER = STATIC / "decoder"  # mocodec's JavaScript decoder (a link to js/src in a checkout)
+BODIES_KEPT = 16  # live avatars' mannequins kept, by their request
 
 
 def three_missing() -> MocodecError:
@@ -74,8 +75,23 @@ def make_app(session: ViewSession | None, relay_url: str | None = None) -> web.A
                 return web.json_response({"error": str(e)}, status=400)
         return web.json_response(session.state())
 
+    async def body(request: web.Request) -> web.Response:
+        """A live avatar's mannequin, made here from its stream header's skeleton (the page
+        decodes the motion itself); kept for the next avatar of the same kind."""
+        try:
+            text = await request.text()
+            if text not in bodies:
+                bodies[text] = await asyncio.to_thread(mannequin_levels, json.loads(text))
+                while len(bodies) > BODIES_KEPT:
+                    bodies.pop(next(iter(bodies)))
+        except (MocodecError, json.JSONDecodeError, RecursionError) as e:
+            return web.json_response({"error": str(e)}, status=400)
+        return web.json_response(bodies[text])
+
+    bodies: dict[str, dict] = {}
     app = web.Application()
     app.router.add_get("/", index)
+    app.router.add_post("/api/mannequin", body)
     app.router.add_get("/api/state", state)
     app.router.add_get("/api/codecs", codecs)
     app.router.add_post("/api/encode", encode)

@@ -135,7 +135,7 @@ class Study:
             "parents": [int(p) for p in motion.skeleton.parents],
             "speed": self.cfg.speed,
             "rendering": self.cfg.rendering,
-            "body": body_of(motion) if self.cfg.rendering == "body" else None,
+            "body": body_of(motion.skeleton, motion.channels[0]) if self.cfg.rendering == "body" else None,
         }
 
     def results(self) -> dict:

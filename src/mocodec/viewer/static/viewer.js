@@ -271,14 +271,19 @@ $("coding").addEventListener("submit", async (event) => {
 const RATE_WINDOW_S = 4;                // seconds over which an avatar's bit rate is measured
 const CAMERA_EVERY_S = 1;               // how often the relay may hear where this viewer looks from
 const TABLE_EVERY_S = 0.25;             // how often the table of avatars is redrawn
-const avatars = new Map();              // stream id -> Figure
+const FRAME_TIMES = 240;                // animation frames whose JavaScript time the page keeps (tests, benchmarks)
+const avatars = new Map();              // stream id -> its stick figure, body and rotations
 async function startLive(params) {
   resize();
   for (const id of ["chart", "transport"]) $(id).hidden = true;
   $("clip-panel").hidden = true;
   $("live-panel").hidden = false;
   $("room-name").textContent = params.get("room");
-  state.live = { streams: 0, frames: {}, bits: {}, others: {} };
+  if (params.get("figures") === "sticks") $("figures").value = "sticks";  // ?figures=sticks: no bodies
+  // ?render=0: decode and pose (with the skin matrices), but draw nothing (measures the page's
+  // JavaScript alone, as benchmarks/bench_live_page.py does, free of a software renderer's cost)
+  const draws = params.get("render") !== "0";
+  state.live = { streams: 0, frames: {}, bits: {}, others: {}, frameMs: [], partsMs: [], poseMs: 0, bodies: 0 };
   const { relay } = await (await fetch("/api/relay")).json();
   if (!relay) throw new Error("this viewer has no relay: start it with --relay ws://HOST:PORT");
   const client = new RelayClient(relay, {
@@ -290,7 +295,7 @@ async function startLive(params) {
   $("status").textContent = "watching, decoded in this page";
   state.ready = true;
   const history = [];                   // [seconds, {stream: bytes}]
-  let cameraAt = 0, cameraSent = "", tableAt = 0;
+  let cameraAt = 0, cameraSent = "", tableAt = 0, decoded = 0;
   const loop = () => {
     const now = performance.now() / 1000;
     const bytes = {};
@@ -307,24 +312,74 @@ async function startLive(params) {
       client.send({ camera: where });
       [cameraAt, cameraSent] = [now, String(where)];
     }
-    renderer.render(scene, camera);
+    const drawn = performance.now();
+    if (draws) renderer.render(scene, camera);
+    // this frame's JavaScript: decoding since the last one, posing (with the skin matrices), drawing
+    const parts = [client.decodeMs - decoded, state.live.poseMs, performance.now() - drawn];
+    decoded = client.decodeMs;
+    state.live.frameMs.push(parts[0] + parts[1] + parts[2]);
+    state.live.partsMs.push(parts);     // decoding, posing (with the skin matrices), drawing
+    if (state.live.frameMs.length > FRAME_TIMES) { state.live.frameMs.shift(); state.live.partsMs.shift(); }
     requestAnimationFrame(loop);
   };
   requestAnimationFrame(loop);
 }
 
-// Every avatar's pose now (joint positions in metres, played out by its jitter buffer).
-function drawRoom(client, now) {
-  for (const [id, figure] of avatars) {
-    const a = client.avatars.get(id);
-    if (!a || a.decoder.ended) { scene.remove(figure.group); avatars.delete(id); }
+// Every avatar's pose now (joint positions in metres and global rotations, played out by its
+// jitter buffer), as a body (its mannequin, asked of the server once per kind of skeleton, at a
+// level of detail by its distance from the camera) or as a stick figure.
+const BODY_LEVEL_M = [6, 15];           // nearer than these: levels 0 and 1 of detail; else 2
+const mannequins = new Map();           // request text -> null while asked, false if refused, or the levels
+function mannequinOf(a, it) {
+  if (!it.key) {
+    const frame = a.decoded.values().next().value;
+    if (!frame) return null;
+    const { posIndex } = a.skeleton, bones = new Array(frame.length).fill(0);
+    for (let k = 3; k < posIndex.length; k++) if (posIndex[k] >= 0) bones[posIndex[k]] = frame[posIndex[k]];
+    it.key = JSON.stringify({ skeleton: a.info.skeletonDoc, frame: bones });  // one per kind of avatar
   }
+  const key = it.key;
+  if (!mannequins.has(key)) {
+    mannequins.set(key, null);
+    fetch("/api/mannequin", { method: "POST", body: key })
+      .then((r) => (r.ok ? r.json() : null))
+      .then((d) => mannequins.set(key, d ? d.levels : false), () => mannequins.set(key, false));
+  }
+  return mannequins.get(key);
+}
+
+function drawRoom(client, now) {
+  const started = performance.now();
+  for (const [id, shown] of avatars) {
+    const a = client.avatars.get(id);
+    if (!a || a.decoder.ended) {
+      scene.remove(shown.figure.group);
+      if (shown.body) scene.remove(shown.body.group);
+      avatars.delete(id);
+    }
+  }
+  const bodies = $("figures").value === "bodies";
   let cx = 0, cz = 0, shown = 0;
   for (const [id, a] of client.avatars) {
-    const pose = a.decoder.ended ? null : a.pose(now);
+    const J = a.skeleton.joints.length;
+    if (!avatars.has(id)) {
+      avatars.set(id, { figure: new Figure(scene, Array.from(a.skeleton.parents), 0x3b4a6b, 0x2a6fdb), body: null,
+                        wxyz: new Float64Array(J * 4), key: null });
+    }
+    const it = avatars.get(id);
+    const pose = a.decoder.ended ? null : a.pose(now, it.wxyz);
     if (!pose) continue;
-    if (!avatars.has(id)) avatars.set(id, new Figure(scene, Array.from(a.skeleton.parents), 0x3b4a6b, 0x2a6fdb));
-    avatars.get(id).pose(pose, 0);
+    const levels = bodies ? mannequinOf(a, it) : null;
+    if (levels && !it.body) it.body = new Body(scene, levels, 0x8a9bb8);
+    it.figure.group.visible = !(levels && it.body);
+    if (it.body) it.body.group.visible = Boolean(levels);
+    if (levels && it.body) {
+      it.body.pose(pose, it.wxyz, 0, true);
+      const far = Math.hypot(pose[0] - camera.position.x, pose[1] - camera.position.y, pose[2] - camera.position.z);
+      it.body.detail(BODY_LEVEL_M.filter((m) => far >= m).length);
+    } else {
+      it.figure.pose(pose, 0);
+    }
     cx += pose[0]; cz += pose[2]; shown += 1;
   }
   if (shown && !state.live.streams) {     // look at the crowd when it first appears
@@ -333,6 +388,8 @@ function drawRoom(client, now) {
     controls.update();
   }
   state.live.streams = shown;
+  state.live.bodies = [...avatars.values()].filter((it) => it.body && it.body.group.visible).length;
+  state.live.poseMs = performance.now() - started;
 }
 
 // The table of avatars: each one's codec, frames and bit rate over the window of `history`.

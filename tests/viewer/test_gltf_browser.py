@@ -15,7 +15,11 @@ from conftest import DATA
 from mocodec.data import THREE
 
 FORMATS = DATA.parent / "formats"
-FILES = {"/": DATA.parent / "js" / "gltf_page.html", "/walk.glb": FORMATS / "walk.glb"}
+FILES = {
+    "/": DATA.parent / "js" / "gltf_page.html",
+    "/walk.glb": FORMATS / "walk.glb",
+    "/walk_mannequin.glb": FORMATS / "walk_mannequin.glb",
+}
 
 
 class _Handler(SimpleHTTPRequestHandler):
@@ -58,5 +62,25 @@ def test_a_written_gltf_plays_in_chromium_with_its_bones_duration_and_pose(brows
         worst = max(np.linalg.norm(np.subtract(pose[name], p)) for name, p in expected["positions_m"].items())
         assert worst < 1e-5
         assert page.evaluate("window.gltfCheck.drawnPixels()") > 50  # the skeleton is on the canvas
+    finally:
+        page.close()
+
+
+def test_a_gltf_with_the_mannequin_plays_in_chromium_as_a_body(browser, page_url):
+    """Written with --mesh mannequin, the same walk loads with one skinned mesh on its bones and
+    covers many times the pixels of its skeleton's lines as it plays."""
+    page = browser.new_page()
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    try:
+        drawn = {}
+        for name in ("walk.glb", "walk_mannequin.glb"):
+            page.goto(f"{page_url}?file={name}")
+            page.wait_for_function("window.gltfCheck && window.gltfCheck.frames() > 5", timeout=30_000)
+            drawn[name] = (page.evaluate("window.gltfCheck.skinned"), page.evaluate("window.gltfCheck.drawnPixels()"))
+        assert not errors, errors
+        assert drawn["walk.glb"][0] == 0 and drawn["walk_mannequin.glb"][0] == 1
+        assert page.evaluate("window.gltfCheck.mixerTime()") > 0  # it plays
+        assert drawn["walk_mannequin.glb"][1] > 5 * drawn["walk.glb"][1], drawn
     finally:
         page.close()

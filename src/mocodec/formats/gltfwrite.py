@@ -159,7 +159,17 @@ def _add_mannequin(gltf, blob: _Blob, body: mannequin.Mesh, units_per_metre: flo
     indices = blob.add(
         body.triangles.reshape(-1), "SCALAR", component=_USHORT if count < 65536 else _UINT, target=_INDICES
     )
-    gltf.meshes = [g.Mesh(name="mannequin", primitives=[g.Primitive(attributes=attributes, indices=indices)])]
+    # a matte grey: glTF's default material is fully metallic, which renders black without an environment
+    gltf.materials = [
+        g.Material(
+            name="mannequin",
+            pbrMetallicRoughness=g.PbrMetallicRoughness(
+                baseColorFactor=[0.62, 0.66, 0.74, 1.0], metallicFactor=0.0, roughnessFactor=0.8
+            ),
+        )
+    ]
+    primitive = g.Primitive(attributes=attributes, indices=indices, material=0)
+    gltf.meshes = [g.Mesh(name="mannequin", primitives=[primitive])]
     gltf.nodes.append(g.Node(name="mannequin", mesh=0, skin=0))
     gltf.scenes[0].nodes.append(len(gltf.nodes) - 1)
 

@@ -318,3 +318,31 @@ def test_late_viewers_of_big_streams_without_restarts_stall_nothing(walk_bvh):
     for largest, notes in latecomers:
         assert largest <= 3 * streams * (size + 100)  # a few ticks' live packets at most
         assert len(notes) == streams and all("restart point" in n for n in notes)
+
+
+def test_the_watch_pages_mannequins_are_made_seldom_and_refuse_junk(walk_bvh):
+    """The relay makes the watch page's mannequins from a stream header's skeleton: one request
+    per kind of avatar is kept; junk gets a one-line 400; new kinds beyond the budget a 429,
+    so requests cannot take the streams' time."""
+    from mocodec.formats.container import skeleton_to_dict
+    from mocodec.stream.relay.server import MANNEQUINS_PER_S
+
+    doc = {"skeleton": skeleton_to_dict(walk_bvh.skeleton), "frame": [0.0] * walk_bvh.num_channels}
+
+    async def go():
+        async with serving() as url:
+            base = url.replace("ws://", "http://") + "/mannequin"
+            async with aiohttp.ClientSession() as s:
+                statuses = []
+                for body in (json.dumps(doc), json.dumps(doc), "not json", "[" * 100_000):
+                    async with s.post(base, data=body) as r:
+                        statuses.append((r.status, (await r.json()).get("error", "")))
+                for k in range(int(MANNEQUINS_PER_S * 5) + 2):  # new kinds: the budget runs out
+                    async with s.post(base, data=json.dumps({**doc, "frame": [float(k)] * walk_bvh.num_channels})) as r:
+                        statuses.append((r.status, ""))
+                return statuses
+
+    statuses = asyncio.run(go())
+    assert statuses[0][0] == statuses[1][0] == 200
+    assert all(code == 400 and error and "\n" not in error for code, error in statuses[2:4]), statuses[2:4]
+    assert any(code == 429 for code, _ in statuses[4:])

@@ -73,6 +73,7 @@ def test_a_relay_page_decodes_and_draws_two_live_avatars(browser, relay_port):
             shown = np.array(page.evaluate(f"window.watch.positions({stream}, {frame})")).reshape(-1, 3)
             error_cm = np.linalg.norm(shown - truth[frame], axis=1).max() * 100
             assert error_cm <= bound_cm + 1e-6, (stream, frame, error_cm)
+    page.wait_for_function("window.watch.bodies() === 2", timeout=30_000)  # each a body, from the relay's mannequin
     assert page.evaluate("window.watch.drawnPixels()") > 200
     assert not errors
     sender.join()

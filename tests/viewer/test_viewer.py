@@ -7,6 +7,7 @@ import base64
 import contextlib
 import subprocess
 import sys
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pytest
@@ -266,7 +267,7 @@ def test_a_live_avatars_mannequin_is_made_from_its_stream_header(walk_bvh):
     skeleton, every level of detail, the same mesh as the file viewer's; a request that is not
     such a skeleton gets a one-line error and status 400."""
     from mocodec.formats.container import skeleton_to_dict
-    from mocodec.viewer.session import body_of
+    from mocodec.formats.pagejson import body_of
 
     doc = {"skeleton": skeleton_to_dict(walk_bvh.skeleton), "frame": [0.0] * walk_bvh.num_channels}
 
@@ -291,7 +292,8 @@ def test_a_live_avatars_mannequin_is_made_from_its_stream_header(walk_bvh):
         finally:
             await runner.cleanup()
 
-    ok, refused = asyncio.run(go())
+    with ThreadPoolExecutor(1) as thread:  # a thread of its own: the browser tests' loop may run in this one
+        ok, refused = thread.submit(asyncio.run, go()).result()
     assert len(ok["levels"]) == 3 and ok["levels"][0] == body_of(walk_bvh.skeleton, np.zeros(walk_bvh.num_channels))
     assert all(status == 400 and "\n" not in error for status, error in refused), refused
     assert "frame must be" in refused[-1][1]

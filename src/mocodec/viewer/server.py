@@ -21,9 +21,10 @@ from pathlib import Path
 
 from aiohttp import web
 
-from mocodec.data import THREE, three_is_there
+from mocodec.data import PAGES, THREE, three_is_there
 from mocodec.errors import MocodecError
-from mocodec.viewer.session import ViewSession, codec_menu, mannequin_levels
+from mocodec.formats.pagejson import mannequin_levels
+from mocodec.viewer.session import ViewSession, codec_menu
 
 STATIC = Path(__file__).with_name("static")
 DECODER = STATIC / "decoder"  # mocodec's JavaScript decoder (a link to js/src in a checkout)
@@ -100,6 +101,7 @@ def make_app(session: ViewSession | None, relay_url: str | None = None) -> web.A
         app.router.add_static("/static/decoder", DECODER.resolve())
     app.router.add_static("/static", STATIC)
     app.router.add_static("/vendor", THREE)
+    app.router.add_static("/shared", PAGES)
     return app
 
 

@@ -12,73 +12,18 @@ PSNR, VPSNR, joint errors).
 
 from __future__ import annotations
 
-import base64
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from mocodec import mannequin, moc, ratecontrol
+from mocodec import moc, ratecontrol
 from mocodec.codecs import Codec, codec_class, codec_ids, get_codec
-from mocodec.errors import CodecError, MocodecError
+from mocodec.errors import CodecError
 from mocodec.formats import load
-from mocodec.formats.container import skeleton_from_dict
-from mocodec.kinematics import forward_kinematics
+from mocodec.formats.pagejson import base64_f32, body_of, orientations
 from mocodec.metrics import compare
 from mocodec.motion import Motion
-from mocodec.skeleton import Skeleton
-
-
-def base64_f32(values: np.ndarray) -> str:
-    """An array as base64 little-endian float32 (compact for the page, decoded with atob)."""
-    return base64.b64encode(np.ascontiguousarray(values, dtype="<f4").tobytes()).decode()
-
-
-def base64_u32(values: np.ndarray) -> str:
-    """An array of indices as base64 little-endian uint32."""
-    return base64.b64encode(np.ascontiguousarray(values, dtype="<u4").tobytes()).decode()
-
-
-def orientations(motion: Motion) -> str:
-    """Every joint's global orientation in every frame as base64 float32 quaternions in
-    three.js's order (x, y, z, w)."""
-    return base64_f32(forward_kinematics(motion.skeleton, motion.channels)[1][..., [1, 2, 3, 0]])
-
-
-def body_of(skeleton: Skeleton, first_frame: np.ndarray | None = None, level: int = 0) -> dict:
-    """A skeleton's mannequin for the page: bind-pose positions (metres), normals, triangles,
-    four joints and weights a vertex, the joint whose error paints each vertex, and the bind
-    pose's joint positions (:func:`mocodec.mannequin.bind_positions` of ``first_frame``)."""
-    bind = mannequin.bind_positions(skeleton, first_frame)
-    body = mannequin.build(skeleton, bind, level)
-    metre = skeleton.units_per_metre
-    return {
-        "positions": base64_f32(body.positions / metre),
-        "normals": base64_f32(body.normals),
-        "triangles": base64_u32(body.triangles),
-        "joints": base64_u32(body.joints),
-        "weights": base64_f32(body.weights),
-        "owners": base64_u32(body.owners),
-        "bind": base64_f32(bind / metre),
-    }
-
-
-def mannequin_levels(request: object) -> dict:
-    """The reply to a live page's ``{"skeleton": <a stream header's skeleton>, "frame": [first
-    decoded frame's channels]}``: the mannequin at every level of detail (nearest first);
-    MocodecError naming what is wrong with the request."""
-    try:
-        if not isinstance(request, dict):
-            raise TypeError("not an object")
-        skeleton = skeleton_from_dict(request["skeleton"])
-        frame = np.asarray(request.get("frame") or np.zeros(skeleton.num_channels), dtype=np.float64)
-        if frame.shape != (skeleton.num_channels,) or not np.isfinite(frame).all():
-            raise ValueError(f"frame must be {skeleton.num_channels} finite numbers")
-        return {"levels": [body_of(skeleton, frame, level) for level in range(len(mannequin.LEVELS))]}
-    except MocodecError:
-        raise
-    except (KeyError, TypeError, ValueError) as e:
-        raise MocodecError(f'expected {{"skeleton": {{...}}, "frame": [...]}}: {e}') from None
 
 
 def load_reference(path: str | Path, asf: str | None = None) -> Motion:

@@ -30,8 +30,8 @@ from mocodec.codecs import get_codec
 from mocodec.errors import FormatError, MocodecError
 from mocodec.formats import load
 from mocodec.formats.fileio import atomic_write
+from mocodec.formats.pagejson import base64_f32, body_of, orientations
 from mocodec.motion import Motion
-from mocodec.viewer.session import base64_f32, body_of, orientations
 
 KINDS = ("dscqs", "2afc")
 RENDERINGS = ("body", "sticks")  # what the trials show: the mannequin, or stick figures

@@ -16,6 +16,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import gc
+import json
 import logging
 import resource
 import time
@@ -25,8 +26,9 @@ from pathlib import Path
 from aiohttp import WSMsgType, web
 from aiohttp.abc import AbstractAccessLogger
 
-from mocodec.data import THREE
+from mocodec.data import PAGES, THREE
 from mocodec.errors import MocodecError
+from mocodec.formats.pagejson import mannequin_levels
 from mocodec.stream import tokens
 from mocodec.stream.relay.core import RelayCore
 from mocodec.stream.relay.limits import BAD_MESSAGE, BAD_TOKEN, RATE_LIMIT, TICK_HZ, Bucket, Closing, Limits
@@ -35,6 +37,8 @@ from mocodec.stream.relay.rooms import Room, Viewer
 log = logging.getLogger("mocodec.relay")
 
 STATIC = Path(__file__).parent.parent / "static"  # the relay's pages (and the decoder: a link to js/src in a checkout)
+MANNEQUINS_KEPT = 16  # the watch page's mannequins kept, by their request
+MANNEQUINS_PER_S = 2.0  # new mannequins made a second (each costs tens of ms of this process)
 
 
 async def messages_of(ws: web.WebSocketResponse, kind: WSMsgType, refusal: str):
@@ -62,6 +66,8 @@ class Relay:
         self.guard: ConnectionGuard | None = None  # set by start()
         self.started = time.monotonic()
         self._changed: asyncio.Event | None = None  # made while someone waits (until)
+        self._mannequins: dict[str, dict] = {}
+        self._mannequin_budget = Bucket(MANNEQUINS_PER_S, 5.0)
 
     async def until(self, ready: Callable[[], bool], timeout_s: float = 10.0) -> None:
         """Wait until ``ready()`` holds, checked after every message the relay takes in and
@@ -85,7 +91,13 @@ class Relay:
         app.router.add_get("/status", self.handle_status)
         app.router.add_get("/", self.handle_index)
         app.router.add_get("/watch", self.handle_watch)
-        for route, folder in (("/static", STATIC), ("/decoder", STATIC / "decoder"), ("/vendor", THREE)):
+        app.router.add_post("/mannequin", self.handle_mannequin)
+        for route, folder in (
+            ("/static", STATIC),
+            ("/decoder", STATIC / "decoder"),
+            ("/vendor", THREE),
+            ("/shared", PAGES),
+        ):
             if folder.is_dir():
                 app.router.add_static(route, folder.resolve())
         app.on_startup.append(self._start)
@@ -115,6 +127,22 @@ class Relay:
     async def handle_watch(self, request: web.Request) -> web.FileResponse:
         """A page that joins a room itself and decodes it in the browser (/decoder)."""
         return web.FileResponse(STATIC / "watch.html")
+
+    async def handle_mannequin(self, request: web.Request) -> web.Response:
+        """The watch page's avatars' mannequins (:func:`~mocodec.formats.pagejson.mannequin_levels`
+        of a stream header's skeleton), kept for the next avatar of the kind; new ones are made at
+        MANNEQUINS_PER_S at most, so requests cannot take the relay's time from its streams."""
+        text = await request.text()
+        if text not in self._mannequins:
+            if not self._mannequin_budget.take():
+                return web.json_response({"error": "too many new mannequins: try again shortly"}, status=429)
+            try:
+                self._mannequins[text] = await asyncio.to_thread(mannequin_levels, json.loads(text))
+            except (MocodecError, ValueError, RecursionError) as e:
+                return web.json_response({"error": str(e).splitlines()[0]}, status=400)
+            while len(self._mannequins) > MANNEQUINS_KEPT:
+                self._mannequins.pop(next(iter(self._mannequins)))
+        return web.json_response(self._mannequins[text])
 
     async def handle_status(self, request: web.Request) -> web.Response:
         """Totals only: a room's name is what its tokens are issued for."""

@@ -1,7 +1,10 @@
 // The watch page: joins the room named in the address with mocodec's JavaScript decoder and draws
-// every avatar's bones; no decoding anywhere else.
+// every avatar as a body (its mannequin, asked of the relay once per kind of skeleton, at a level
+// of detail by distance), or its bones until the body is there or with &figures=sticks; no
+// decoding anywhere else.
 import * as THREE from 'three';
 import { RelayClient, forwardKinematics } from '/decoder/index.js';
+import { Body, Mannequins, detailAt } from '/shared/body.js';
 
 const params = new URLSearchParams(location.search);
 const relayUrl = `${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}`;
@@ -14,10 +17,13 @@ const renderer = new THREE.WebGLRenderer({ antialias: true, preserveDrawingBuffe
 renderer.setSize(innerWidth, innerHeight);
 document.body.appendChild(renderer.domElement);
 const scene = new THREE.Scene();
+scene.add(new THREE.HemisphereLight(0xffffff, 0x444444, 2.5));
 const camera = new THREE.PerspectiveCamera(50, innerWidth / innerHeight, 0.05, 200);
 camera.position.set(0, 2, 8);
 camera.lookAt(0, 1, 0);
-const figures = new Map(); // stream -> LineSegments
+const figures = new Map(); // stream -> its lines, body and rotations
+const mannequins = new Mannequins('/mannequin');
+const bodies = params.get('figures') !== 'sticks';
 
 function figure(avatar) {
   const bones = avatar.skeleton.joints.length - 1;
@@ -26,22 +32,30 @@ function figure(avatar) {
   const lines = new THREE.LineSegments(geometry, new THREE.LineBasicMaterial({ color: 0x66ccff }));
   lines.frustumCulled = false;
   scene.add(lines);
-  return lines;
+  return { lines, body: null, wxyz: new Float64Array(4 * avatar.skeleton.joints.length), key: null };
 }
 
 function draw() {
   const t = performance.now() / 1000;
   for (const [stream, avatar] of client.avatars) {
-    const pose = avatar.pose(t);
+    const shown = figures.get(stream) ?? figures.set(stream, figure(avatar)).get(stream);
+    const pose = avatar.pose(t, shown.wxyz);
     if (!pose) continue;
-    const lines = figures.get(stream) ?? figures.set(stream, figure(avatar)).get(stream);
-    const out = lines.geometry.attributes.position.array;
+    const levels = bodies ? mannequins.of(avatar, shown) : null;
+    if (levels && !shown.body) shown.body = new Body(scene, levels, 0x8a9bb8);
+    shown.lines.visible = !shown.body;
+    if (shown.body) {
+      shown.body.pose(pose, shown.wxyz, 0, true);
+      shown.body.detail(detailAt(Math.hypot(pose[0] - camera.position.x, pose[1] - camera.position.y, pose[2] - camera.position.z)));
+      continue;
+    }
+    const out = shown.lines.geometry.attributes.position.array;
     avatar.skeleton.joints.forEach((j, i) => {
       if (i === 0) return;
       out.set(pose.subarray(3 * j.parent, 3 * j.parent + 3), 6 * (i - 1));
       out.set(pose.subarray(3 * i, 3 * i + 3), 6 * (i - 1) + 3);
     });
-    lines.geometry.attributes.position.needsUpdate = true;
+    shown.lines.geometry.attributes.position.needsUpdate = true;
   }
   renderer.render(scene, camera);
   const note = client.statuses.at(-1);
@@ -61,6 +75,7 @@ window.watch = {
     return Array.from(forwardKinematics(avatar.skeleton, channels), (v) => v / avatar.skeleton.unitsPerMetre);
   },
   frames: (stream) => [...(client.avatars.get(stream)?.decoded.keys() ?? [])],
+  bodies: () => [...figures.values()].filter((shown) => shown.body).length,
   drawnPixels() {
     const gl = renderer.getContext();
     const pixels = new Uint8Array(gl.drawingBufferWidth * gl.drawingBufferHeight * 4);

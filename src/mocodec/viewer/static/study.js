@@ -2,7 +2,8 @@
 // and the 2AFC staircase (original and distorted side by side, pick the smoother). The server
 // chooses the order and keeps the answers; this page only plays and asks.
 import * as THREE from "three";
-import { Body, Figure, f32 } from "/static/figure.js";
+import { Body, f32 } from "/shared/body.js";
+import { Figure } from "/static/figure.js";
 
 const $ = (id) => document.getElementById(id);
 const state = { ready: false, phase: "loading", index: 0, saved: null };

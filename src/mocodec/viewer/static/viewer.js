@@ -6,7 +6,8 @@
 // done there), with the skeleton's mannequin, drawn as a skinned body (or as stick figures).
 import * as THREE from "three";
 import { OrbitControls } from "three/addons/controls/OrbitControls.js";
-import { Body, Figure, f32 } from "/static/figure.js";
+import { Body, Mannequins, detailAt, f32 } from "/shared/body.js";
+import { Figure } from "/static/figure.js";
 import { RelayClient } from "/static/decoder/index.js";
 
 const $ = (id) => document.getElementById(id);
@@ -327,26 +328,8 @@ async function startLive(params) {
 
 // Every avatar's pose now (joint positions in metres and global rotations, played out by its
 // jitter buffer), as a body (its mannequin, asked of the server once per kind of skeleton, at a
-// level of detail by its distance from the camera) or as a stick figure.
-const BODY_LEVEL_M = [6, 15];           // nearer than these: levels 0 and 1 of detail; else 2
-const mannequins = new Map();           // request text -> null while asked, false if refused, or the levels
-function mannequinOf(a, it) {
-  if (!it.key) {
-    const frame = a.decoded.values().next().value;
-    if (!frame) return null;
-    const { posIndex } = a.skeleton, bones = new Array(frame.length).fill(0);
-    for (let k = 3; k < posIndex.length; k++) if (posIndex[k] >= 0) bones[posIndex[k]] = frame[posIndex[k]];
-    it.key = JSON.stringify({ skeleton: a.info.skeletonDoc, frame: bones });  // one per kind of avatar
-  }
-  const key = it.key;
-  if (!mannequins.has(key)) {
-    mannequins.set(key, null);
-    fetch("/api/mannequin", { method: "POST", body: key })
-      .then((r) => (r.ok ? r.json() : null))
-      .then((d) => mannequins.set(key, d ? d.levels : false), () => mannequins.set(key, false));
-  }
-  return mannequins.get(key);
-}
+// level of detail by its distance from the camera: /shared/body.js) or as a stick figure.
+const mannequins = new Mannequins("/api/mannequin");
 
 function drawRoom(client, now) {
   const started = performance.now();
@@ -369,14 +352,14 @@ function drawRoom(client, now) {
     const it = avatars.get(id);
     const pose = a.decoder.ended ? null : a.pose(now, it.wxyz);
     if (!pose) continue;
-    const levels = bodies ? mannequinOf(a, it) : null;
+    const levels = bodies ? mannequins.of(a, it) : null;
     if (levels && !it.body) it.body = new Body(scene, levels, 0x8a9bb8);
     it.figure.group.visible = !(levels && it.body);
     if (it.body) it.body.group.visible = Boolean(levels);
     if (levels && it.body) {
       it.body.pose(pose, it.wxyz, 0, true);
       const far = Math.hypot(pose[0] - camera.position.x, pose[1] - camera.position.y, pose[2] - camera.position.z);
-      it.body.detail(BODY_LEVEL_M.filter((m) => far >= m).length);
+      it.body.detail(detailAt(far));
     } else {
       it.figure.pose(pose, 0);
     }

@@ -21,18 +21,11 @@ import time
 
 import numpy as np
 
+from common import free_port
 from relay_load import publisher, templates, wait_port
 
 SECRET = "bench"
 PUBLISHERS = 2
-
-
-def free_port() -> int:
-    import socket
-
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def frame_times(page, seconds: float) -> tuple[np.ndarray, np.ndarray]:

@@ -1,10 +1,11 @@
 """Pieces every benchmark script uses: where the shared clips are (and the game-export stand-in
-set made from them), timing, and long clips made by repeating a short one."""
+set made from them), timing, free loopback ports, and long clips made by repeating a short one."""
 
 from __future__ import annotations
 
 import argparse
 import os
+import socket
 import time
 from pathlib import Path
 
@@ -73,6 +74,13 @@ def game_export_set(paths: list[Path]) -> list[Path]:
             partial.replace(target)
         out.append(target)
     return sorted(out)
+
+
+def free_port() -> int:
+    """A loopback port nothing listens on now."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
 
 
 def best_of(fn, repeats: int = 5) -> float:

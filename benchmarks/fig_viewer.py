@@ -11,23 +11,16 @@ from __future__ import annotations
 import contextlib
 import json
 import multiprocessing as mp
-import socket
 import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
-from common import DATA, ROOT, options
+from common import DATA, ROOT, free_port, options
 from relay_load import publisher, templates, wait_port
 
 FIGURES = ROOT / "docs" / "figures"
 LIVE_AVATARS = 20
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @contextlib.contextmanager

@@ -41,27 +41,29 @@ def test_state_has_both_motions_errors_and_numbers(session):
     assert st["numbers"]["ratio"] > 1 and st["config"]["codec"] == "dpcm"
 
 
+@contextlib.asynccontextmanager
+async def app_url(app: web.Application):
+    """The app served on a free loopback port: its http:// address."""
+    runner = web.AppRunner(app)
+    await runner.setup()
+    site = web.TCPSite(runner, "127.0.0.1", 0)
+    await site.start()
+    try:
+        yield f"http://127.0.0.1:{runner.addresses[0][1]}"
+    finally:
+        await runner.cleanup()
+
+
 def test_encode_api_re_encodes_and_reports_bad_requests(session):
     async def go():
-        runner = web.AppRunner(make_app(session))
-        await runner.setup()
-        site = web.TCPSite(runner, "127.0.0.1", 0)
-        await site.start()
-        port = runner.addresses[0][1]
         import aiohttp
 
-        try:
-            async with aiohttp.ClientSession() as http:
-                url = f"http://127.0.0.1:{port}"
-                ok = await (
-                    await http.post(f"{url}/api/encode", json={"codec": "spiht", "target": ["ratio", 40]})
-                ).json()
-                bad = await http.post(f"{url}/api/encode", json={"codec": "dpcm", "knobs": {"levels": "many"}})
-                junk = await http.post(f"{url}/api/encode", data=b"not json")
-                menu = await (await http.get(f"{url}/api/codecs")).json()
-                return ok, bad.status, (await bad.json())["error"], junk.status, menu
-        finally:
-            await runner.cleanup()
+        async with app_url(make_app(session)) as url, aiohttp.ClientSession() as http:
+            ok = await (await http.post(f"{url}/api/encode", json={"codec": "spiht", "target": ["ratio", 40]})).json()
+            bad = await http.post(f"{url}/api/encode", json={"codec": "dpcm", "knobs": {"levels": "many"}})
+            junk = await http.post(f"{url}/api/encode", data=b"not json")
+            menu = await (await http.get(f"{url}/api/codecs")).json()
+            return ok, bad.status, (await bad.json())["error"], junk.status, menu
 
     ok, bad_status, bad_error, junk_status, menu = asyncio.run(go())
     assert ok["config"]["codec"] == "spiht" and abs(ok["numbers"]["ratio"] - 40) < 0.02 * 40
@@ -272,25 +274,17 @@ def test_a_live_avatars_mannequin_is_made_from_its_stream_header(walk_bvh):
     doc = {"skeleton": skeleton_to_dict(walk_bvh.skeleton), "frame": [0.0] * walk_bvh.num_channels}
 
     async def go():
-        runner = web.AppRunner(make_app(None))
-        await runner.setup()
-        site = web.TCPSite(runner, "127.0.0.1", 0)
-        await site.start()
-        port = runner.addresses[0][1]
         import aiohttp
 
-        try:
-            async with aiohttp.ClientSession() as http:
-                url = f"http://127.0.0.1:{port}/api/mannequin"
-                ok = await (await http.post(url, json=doc)).json()
-                bad = [
-                    await http.post(url, data=body)
-                    for body in (b"not json", b"[1, 2]", b'{"skeleton": {"joints": 7}}', b"[" * 100_000)
-                ]
-                short = await http.post(url, json={**doc, "frame": [0.0, 1.0]})
-                return ok, [(r.status, (await r.json())["error"]) for r in [*bad, short]]
-        finally:
-            await runner.cleanup()
+        async with app_url(make_app(None)) as base, aiohttp.ClientSession() as http:
+            url = f"{base}/api/mannequin"
+            ok = await (await http.post(url, json=doc)).json()
+            bad = [
+                await http.post(url, data=body)
+                for body in (b"not json", b"[1, 2]", b'{"skeleton": {"joints": 7}}', b"[" * 100_000)
+            ]
+            short = await http.post(url, json={**doc, "frame": [0.0, 1.0]})
+            return ok, [(r.status, (await r.json())["error"]) for r in [*bad, short]]
 
     with ThreadPoolExecutor(1) as thread:  # a thread of its own: the browser tests' loop may run in this one
         ok, refused = thread.submit(asyncio.run, go()).result()

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from aiohttp import web
 
-from mocodec.data import THREE, three_is_there
+from mocodec.data import PAGES, THREE, three_is_there
 from mocodec.errors import MocodecError
 from mocodec.viewer.server import STATIC, three_missing
 from mocodec.viewer.study import Study
@@ -59,4 +59,5 @@ def make_study_app(study: Study, out_dir: str | Path) -> web.Application:
     app.router.add_post("/api/answer", answer)
     app.router.add_static("/static", STATIC)
     app.router.add_static("/vendor", THREE)
+    app.router.add_static("/shared", PAGES)
     return app

@@ -291,3 +291,14 @@ def test_a_live_avatars_mannequin_is_made_from_its_stream_header(walk_bvh):
     assert len(ok["levels"]) == 3 and ok["levels"][0] == body_of(walk_bvh.skeleton, np.zeros(walk_bvh.num_channels))
     assert all(status == 400 and "\n" not in error for status, error in refused), refused
     assert "frame must be" in refused[-1][1]
+
+
+def test_a_skeleton_without_bones_is_shown_as_dots():
+    """A motion whose skeleton has no bone to build a body on (a single joint) still opens: the
+    page gets no mannequin and draws its stick figure."""
+    from mocodec.skeleton import POSITION_CHANNELS, Joint, Skeleton
+
+    point = Skeleton((Joint(name="marker", parent=-1, offset=(0.0, 0.0, 0.0), channels=POSITION_CHANNELS),), 100.0)
+    motion = Motion(point, 30.0, np.cumsum(np.ones((20, 3)), axis=0))
+    state = ViewSession(motion, "marker").state()
+    assert state["body"] is None and state["frames"] == 20

@@ -32,6 +32,15 @@ def orientations(motion: Motion) -> str:
     return base64_f32(forward_kinematics(motion.skeleton, motion.channels)[1][..., [1, 2, 3, 0]])
 
 
+def body_or_none(skeleton: Skeleton, first_frame: np.ndarray | None = None) -> dict | None:
+    """:func:`body_of`, or None for a skeleton without a bone to build on (a page then draws
+    stick figures)."""
+    try:
+        return body_of(skeleton, first_frame)
+    except ValueError:
+        return None
+
+
 def body_of(skeleton: Skeleton, first_frame: np.ndarray | None = None, level: int = 0) -> dict:
     """A skeleton's mannequin for the page: bind-pose positions (metres), normals, triangles,
     four joints and weights a vertex, the joint whose error paints each vertex, and the bind

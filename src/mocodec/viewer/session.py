@@ -21,7 +21,7 @@ from mocodec import moc, ratecontrol
 from mocodec.codecs import Codec, codec_class, codec_ids, get_codec
 from mocodec.errors import CodecError
 from mocodec.formats import load
-from mocodec.formats.pagejson import base64_f32, body_of, orientations
+from mocodec.formats.pagejson import base64_f32, body_or_none, orientations
 from mocodec.metrics import compare
 from mocodec.motion import Motion
 
@@ -47,7 +47,7 @@ class ViewSession:
         self.motion, self.name = motion, name
         self.positions = motion.positions_m()
         self.quats = orientations(motion)
-        self.body = body_of(motion.skeleton, motion.channels[0] if motion.num_frames else None)
+        self.body = body_or_none(motion.skeleton, motion.channels[0] if motion.num_frames else None)
         self.coded: Coded | None = None
 
     def code(self, codec_id: str, knobs: dict | None = None, target: tuple[str, float] | None = None) -> Coded:

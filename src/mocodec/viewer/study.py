@@ -30,7 +30,7 @@ from mocodec.codecs import get_codec
 from mocodec.errors import FormatError, MocodecError
 from mocodec.formats import load
 from mocodec.formats.fileio import atomic_write
-from mocodec.formats.pagejson import base64_f32, body_of, orientations
+from mocodec.formats.pagejson import base64_f32, body_or_none, orientations
 from mocodec.motion import Motion
 
 KINDS = ("dscqs", "2afc")
@@ -135,7 +135,7 @@ class Study:
             "parents": [int(p) for p in motion.skeleton.parents],
             "speed": self.cfg.speed,
             "rendering": self.cfg.rendering,
-            "body": body_of(motion.skeleton, motion.channels[0]) if self.cfg.rendering == "body" else None,
+            "body": body_or_none(motion.skeleton, motion.channels[0]) if self.cfg.rendering == "body" else None,
         }
 
     def results(self) -> dict:

@@ -39,7 +39,7 @@ function play(trial, clips, loop) {
   const offset = 1.2, n = trial.parents.length;
   state.rendering = trial.rendering;
   clips.forEach((_, k) => {
-    const fig = trial.rendering === "body" ? new Body(scene, trial.body, 0x8a9bb8)
+    const fig = trial.rendering === "body" && trial.body ? new Body(scene, trial.body, 0x8a9bb8)
                                            : new Figure(scene, trial.parents, 0x3b4a6b, 0x3b4a6b);
     fig.group.position.x = (k - (clips.length - 1) / 2) * offset;
     figures.push(fig);

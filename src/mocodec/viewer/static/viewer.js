@@ -69,8 +69,13 @@ function show(data) {
   if (!original) {
     original = new Figure(scene, clip.parents, 0x3b4a6b, 0x3b4a6b);
     decoded = new Figure(scene, clip.parents, 0x555555, 0x2a6fdb);
-    originalBody = new Body(scene, data.body, BODY);
-    decodedBody = new Body(scene, data.body, DECODED_BODY);
+    if (data.body) {
+      originalBody = new Body(scene, data.body, BODY);
+      decodedBody = new Body(scene, data.body, DECODED_BODY);
+    } else {                              // a skeleton without a bone to build a body on
+      $("figures").value = "sticks";
+      $("figures").disabled = true;
+    }
   }
   numbers(data.numbers);
   chart();
@@ -93,10 +98,12 @@ function numbers(n) {
 function layout() {
   const side = $("layout").value === "side", bodies = $("figures").value === "bodies";
   decoded.group.position.set(side ? SPACING : 0, 0, 0);
-  decodedBody.group.position.copy(decoded.group.position);
   decoded.lines.material.color.set(side ? 0x555555 : 0xd7301f);
   original.group.visible = !bodies;
   decoded.group.visible = !bodies && Boolean(clip.decoded);
+  lastRoot = null;
+  if (!originalBody) return;
+  decodedBody.group.position.copy(decoded.group.position);
   originalBody.group.visible = bodies;
   decodedBody.group.visible = bodies && Boolean(clip.decoded);
   // overlaid, the original body is a ghost around the decoded one
@@ -104,22 +111,21 @@ function layout() {
   originalBody.material.opacity = originalBody.material.transparent ? 0.35 : 1;
   originalBody.material.depthWrite = !originalBody.material.transparent;
   originalBody.material.needsUpdate = true;
-  lastRoot = null;
 }
 
 function draw() {
   if (!clip) return;
   const f = Math.min(state.frame, clip.frames - 1);
   original.pose(clip.original, f);
-  originalBody.pose(clip.original, clip.originalQuats, f);
+  originalBody?.pose(clip.original, clip.originalQuats, f);
   if (clip.decoded) {
     decoded.pose(clip.decoded, f);
-    decodedBody.pose(clip.decoded, clip.decodedQuats, f);
+    decodedBody?.pose(clip.decoded, clip.decodedQuats, f);
     const max = state.numbers ? state.numbers.max_joint_error_cm : 1;
     const row = clip.error.subarray(f * clip.joints, (f + 1) * clip.joints);
     const colours = Array.from(row, (e) => heat(e, max));
     decoded.colour(colours);
-    decodedBody.colour(colours);
+    decodedBody?.colour(colours);
   }
   // the camera follows the figures: move it with the root
   const root = new THREE.Vector3(clip.original[f * clip.joints * 3], 0.9, clip.original[f * clip.joints * 3 + 2]);

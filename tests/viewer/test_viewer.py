@@ -101,14 +101,19 @@ def figure_pixels(png: bytes) -> tuple[int, int]:
     return int(dark[:, :half].sum()), int(dark[:, half:].sum())
 
 
+def opened(browser, url: str):
+    """The viewer's page at ``url``, ready: the page, the list its errors go to, and its state."""
+    page = browser.new_page(viewport={"width": 1280, "height": 900})
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.goto(url)
+    page.wait_for_function("window.viewerState && window.viewerState.ready", timeout=30_000)
+    return page, errors, page.evaluate("fetch('/api/state').then(r => r.json())")
+
+
 def test_the_page_plays_both_figures_and_shows_the_servers_numbers(browser, tmp_path):
     with viewer_process(str(DATA / "07_03.bvh"), "--codec", "dpcm", "--levels", "32") as url:
-        page = browser.new_page(viewport={"width": 1280, "height": 900})
-        errors = []
-        page.on("pageerror", lambda e: errors.append(str(e)))
-        page.goto(url)
-        page.wait_for_function("window.viewerState && window.viewerState.ready", timeout=30_000)
-        state = page.evaluate("fetch('/api/state').then(r => r.json())")
+        page, errors, state = opened(browser, url)
         numbers = state["numbers"]
         assert page.inner_text("#n-ratio") == f"{numbers['ratio']:.2f} : 1"
         assert page.inner_text("#n-max") == f"{numbers['max_joint_error_cm']:.3f} cm"
@@ -227,12 +232,7 @@ def test_the_page_shows_bodies_painted_with_the_error(browser):
     of the stick figures, and at the frame of the clip's largest error the decoded body is red
     where that joint is (the heatmap on its surface) and the original nowhere."""
     with viewer_process(str(DATA / "07_03.bvh"), "--codec", "dpcm", "--levels", "8") as url:
-        page = browser.new_page(viewport={"width": 1280, "height": 900})
-        errors = []
-        page.on("pageerror", lambda e: errors.append(str(e)))
-        page.goto(url)
-        page.wait_for_function("window.viewerState && window.viewerState.ready", timeout=30_000)
-        state = page.evaluate("fetch('/api/state').then(r => r.json())")
+        page, errors, state = opened(browser, url)
         n, j = state["frames"], len(state["joints"])
         error = np.frombuffer(base64.b64decode(state["error_cm"]), dtype="<f4").reshape(n, j)
         frame, joint = np.unravel_index(int(error.argmax()), error.shape)

@@ -113,6 +113,11 @@ export class HoldingDecoder {
     this.repaired = 0;
   }
 
+  /** @returns {boolean} whether the decoder follows the stream now (false before a keyframe or a restart after a loss) */
+  get inStep() {
+    return this.stream.inStep;
+  }
+
   #ahead(sequence) {
     return (sequence - (this.stream.expected ?? 0)) >>> 0;
   }

@@ -82,7 +82,12 @@ test('a holding decoder decodes reordered packets as the stream in order, and gi
   const order = packets.slice(1);
   for (let k = 3; k + 1 < order.length; k += 5) [order[k], order[k + 1]] = [order[k + 1], order[k]];
   const holding = new HoldingDecoder(info, 0.1);
-  const out = order.flatMap((p) => holding.push(p)).filter((x) => x.frames?.length).map((x) => x.frames);
+  assert.equal(holding.inStep, false); // before its first keyframe
+  const half = order.length >> 1;
+  const first = order.slice(0, half).flatMap((p) => holding.push(p));
+  assert.equal(holding.inStep, true); // following the stream
+  const out = [...first, ...order.slice(half).flatMap((p) => holding.push(p))]
+    .filter((x) => x.frames?.length).map((x) => x.frames);
   assert.deepEqual(out, frames.filter((f) => f.length));
   assert.ok(holding.repaired > 0 && holding.stream.lost === 0);
   const lossy = new HoldingDecoder(info, 0.1); // packet 5 never comes: held, then given up

@@ -204,6 +204,7 @@ def test_the_page_watches_a_relay_room_live(browser):
             assert page.evaluate("window.viewerState.live.others") == {"2": "dpcm"}
             table = page.inner_text("#avatars")
             assert "walker 0" in table and "kinwave-live" in table and "not decodable in the browser" in table
+            assert "(resync)" not in table  # nothing is lost on the way: both decoders follow their streams
             shot = page.locator("#view canvas").screenshot()
             assert sum(figure_pixels(shot)) > 300
             assert page.evaluate("fetch('/api/live').then(r => r.status)") == 404

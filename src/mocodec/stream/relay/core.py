@@ -212,9 +212,7 @@ class RelayCore:
         crowd = None  # the scalable streams and where they are, this tick
         viewers = [v for v in room.viewers if not v.dropped]
         in_step = {id(v) for v in viewers if not v.behind}  # they get the tick's fresh packets as they are
-        column: dict[int, int] = {}  # a budgeted viewer's column in shares and fits
         chosen_of: dict[int, list[np.ndarray]] = {}  # the variants of the tick's layered packets each gets
-        shares = fits = np.zeros((0, 0))
         scalable = any(f.scalable for f in fresh)
         for viewer in viewers:
             pending, viewer.pending = viewer.pending, []
@@ -231,14 +229,12 @@ class RelayCore:
                 if crowd is None:
                     budgeted = [v for v in viewers if v.budget > 0]
                     crowd = crowd_of(room, fresh, layout_of(room, budgeted, self.limits.min_distance_m))
-                    shares, fits, column = crowd.layout.shares, crowd.layout.fits, crowd.layout.column
                     together = [v for v in budgeted if id(v) in in_step]
-                    picked = choose_layers(room, crowd, together, fits[:, [column[id(v)] for v in together]])
+                    columns = [crowd.layout.column[id(v)] for v in together]
+                    picked = choose_layers(room, crowd, together, crowd.layout.fits[:, columns])
                     chosen_of = {id(v): [p[:, k] for p in picked] for k, v in enumerate(together)}
-                k = column[id(viewer)]
                 own = len(items) - len(fresh) if live is fresh else len(items)  # the tick's fresh packets go together
-                picks = chosen_of.get(id(viewer))
-                bodies, heads = cut_for(room, crowd, viewer, shares[:, k], fits[:, k], items, own, cut_cache, picks)
+                bodies, heads = cut_for(room, crowd, viewer, items, own, cut_cache, chosen_of.get(id(viewer)))
                 batches.append(batch_of(bodies, heads))
             elif pending or live is not fresh:  # joined late: its streams' last packets before the tick's
                 if items:

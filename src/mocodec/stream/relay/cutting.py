@@ -215,17 +215,18 @@ def cut_for(
     room: Room,
     crowd: Crowd,
     viewer: Viewer,
-    shares: np.ndarray,
-    fits: np.ndarray,
     items: list[Forward],
     pending: int,
     cache: dict,
     chosen: list[np.ndarray] | None = None,
 ) -> tuple[list[bytes], list[bytes]]:
-    """The viewer's packets, the scalable streams cut to its ``shares`` of the crowd (bit/s
-    per stream; ``fits``: the layers within each), and the varint of each one's length. The
-    tick's fresh layered packets (``crowd.layered``) are the variants ``chosen`` for the viewer
-    (:func:`choose_layers`); the rest, and what the viewer has pending, one by one."""
+    """The viewer's packets, the scalable streams cut to its shares of the crowd (bit/s per
+    stream, and the layers within each: its column of the layout), and the varint of each
+    one's length. The tick's fresh layered packets (``crowd.layered``) are the variants
+    ``chosen`` for the viewer (:func:`choose_layers`); the rest, and what the viewer has
+    pending, one by one."""
+    column = crowd.layout.column[id(viewer)]
+    shares, fits = crowd.layout.shares[:, column], crowd.layout.fits[:, column]
     together = chosen is not None and pending < len(items) and bool(crowd.together)
     out = []
     for f in items[:pending] + (crowd.others if together else items[pending:]):

@@ -5,6 +5,7 @@ of detail, for the file viewer, the studies and the live pages of the viewer and
 from __future__ import annotations
 
 import base64
+import json
 
 import numpy as np
 
@@ -75,3 +76,30 @@ def mannequin_levels(request: object) -> dict:
         raise
     except (KeyError, TypeError, ValueError) as e:
         raise MocodecError(f'expected {{"skeleton": {{...}}, "frame": [...]}}: {e}') from None
+
+
+class Mannequins:
+    """The mannequins a server made for live pages, by request text (:func:`mannequin_levels`),
+    the ``kept`` newest: avatars of one kind send one request, so each kind is made once."""
+
+    def __init__(self, kept: int):
+        self.kept = kept
+        self.made: dict[str, dict] = {}
+
+    def __contains__(self, request: str) -> bool:
+        return request in self.made
+
+    def __getitem__(self, request: str) -> dict:
+        return self.made[request]
+
+    def make(self, request: str) -> dict:
+        """The reply to ``request`` (JSON text), kept; MocodecError in one line where it is not
+        such a request."""
+        try:
+            doc = json.loads(request)
+        except (ValueError, RecursionError) as e:
+            raise MocodecError(f"not JSON: {e}") from None
+        self.made[request] = reply = mannequin_levels(doc)
+        while len(self.made) > self.kept:
+            self.made.pop(next(iter(self.made)))
+        return reply

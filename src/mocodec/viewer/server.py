@@ -23,7 +23,7 @@ from aiohttp import web
 
 from mocodec.data import PAGES, THREE, three_is_there
 from mocodec.errors import MocodecError
-from mocodec.formats.pagejson import mannequin_levels
+from mocodec.formats.pagejson import Mannequins
 from mocodec.viewer.session import ViewSession, codec_menu
 
 STATIC = Path(__file__).with_name("static")
@@ -79,17 +79,15 @@ def make_app(session: ViewSession | None, relay_url: str | None = None) -> web.A
     async def body(request: web.Request) -> web.Response:
         """A live avatar's mannequin, made here from its stream header's skeleton (the page
         decodes the motion itself); kept for the next avatar of the same kind."""
-        try:
-            text = await request.text()
-            if text not in bodies:
-                bodies[text] = await asyncio.to_thread(mannequin_levels, json.loads(text))
-                while len(bodies) > BODIES_KEPT:
-                    bodies.pop(next(iter(bodies)))
-        except (MocodecError, json.JSONDecodeError, RecursionError) as e:
-            return web.json_response({"error": str(e)}, status=400)
+        text = await request.text()
+        if text not in bodies:
+            try:
+                await asyncio.to_thread(bodies.make, text)
+            except MocodecError as e:
+                return web.json_response({"error": str(e)}, status=400)
         return web.json_response(bodies[text])
 
-    bodies: dict[str, dict] = {}
+    bodies = Mannequins(BODIES_KEPT)
     app = web.Application()
     app.router.add_get("/", index)
     app.router.add_post("/api/mannequin", body)

@@ -16,7 +16,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import gc
-import json
 import logging
 import resource
 import time
@@ -28,7 +27,7 @@ from aiohttp.abc import AbstractAccessLogger
 
 from mocodec.data import PAGES, THREE
 from mocodec.errors import MocodecError
-from mocodec.formats.pagejson import mannequin_levels
+from mocodec.formats.pagejson import Mannequins
 from mocodec.stream import tokens
 from mocodec.stream.relay.core import RelayCore
 from mocodec.stream.relay.limits import BAD_MESSAGE, BAD_TOKEN, RATE_LIMIT, TICK_HZ, Bucket, Closing, Limits
@@ -66,7 +65,7 @@ class Relay:
         self.guard: ConnectionGuard | None = None  # set by start()
         self.started = time.monotonic()
         self._changed: asyncio.Event | None = None  # made while someone waits (until)
-        self._mannequins: dict[str, dict] = {}
+        self._mannequins = Mannequins(MANNEQUINS_KEPT)
         self._mannequin_budget = Bucket(MANNEQUINS_PER_S, 5.0)
 
     async def until(self, ready: Callable[[], bool], timeout_s: float = 10.0) -> None:
@@ -129,19 +128,17 @@ class Relay:
         return web.FileResponse(STATIC / "watch.html")
 
     async def handle_mannequin(self, request: web.Request) -> web.Response:
-        """The watch page's avatars' mannequins (:func:`~mocodec.formats.pagejson.mannequin_levels`
-        of a stream header's skeleton), kept for the next avatar of the kind; new ones are made at
+        """The watch page's avatars' mannequins (:class:`~mocodec.formats.pagejson.Mannequins` of
+        a stream header's skeleton), kept for the next avatar of the kind; new ones are made at
         MANNEQUINS_PER_S at most, so requests cannot take the relay's time from its streams."""
         text = await request.text()
         if text not in self._mannequins:
             if not self._mannequin_budget.take():
                 return web.json_response({"error": "too many new mannequins: try again shortly"}, status=429)
             try:
-                self._mannequins[text] = await asyncio.to_thread(mannequin_levels, json.loads(text))
-            except (MocodecError, ValueError, RecursionError) as e:
-                return web.json_response({"error": str(e).splitlines()[0]}, status=400)
-            while len(self._mannequins) > MANNEQUINS_KEPT:
-                self._mannequins.pop(next(iter(self._mannequins)))
+                await asyncio.to_thread(self._mannequins.make, text)
+            except MocodecError as e:
+                return web.json_response({"error": str(e)}, status=400)
         return web.json_response(self._mannequins[text])
 
     async def handle_status(self, request: web.Request) -> web.Response:

@@ -87,8 +87,9 @@ def build(skeleton: Skeleton, bind: np.ndarray | None = None, level: int = 0) ->
             continue
         chain = chains[j] if chains[j] in RADII_M else "torso"
         radius = RADII_M[chain] * metre
-        tips = [k for k in skeleton.children[j] if np.linalg.norm(bind[k] - bind[j]) >= SHORTEST_M * metre]
-        if chain == "head" and not tips:  # the head itself: as wide as its bone is long
+        if chain == "head" and not any(  # the head itself (no bone beyond it): as wide as its bone is long
+            np.linalg.norm(bind[k] - bind[j]) >= SHORTEST_M * metre for k in skeleton.children[j]
+        ):
             radius = min(radius, HEAD_OF_LENGTH * length)
         elif chain != "torso":
             radius = min(radius, RADIUS_OF_LENGTH * length)
@@ -129,7 +130,6 @@ def _capsule(start: np.ndarray, end: np.ndarray, radius: float, level: tuple[int
     rings += [(length + radius * np.sin(a), radius * np.cos(a), np.sin(a)) for a in -angles[::-1]]
     turn = np.linspace(0.0, 2 * np.pi, around, endpoint=False)
     circle = np.cos(turn)[:, None] * u + np.sin(turn)[:, None] * v  # (around, 3)
-    heights = np.array([-radius] + [h for h, _, _ in rings] + [length + radius])
     positions = [start - radius * axis]
     normals = [-axis]
     for height, ring_radius, axial in rings:
@@ -138,7 +138,7 @@ def _capsule(start: np.ndarray, end: np.ndarray, radius: float, level: tuple[int
         normals += list(axial * axis + radial * circle)
     positions.append(end + radius * axis)
     normals.append(axis)
-    heights = np.concatenate(([-radius], np.repeat(heights[1:-1], around), [length + radius]))
+    heights = np.concatenate(([-radius], np.repeat([h for h, _, _ in rings], around), [length + radius]))
     triangles = _capsule_triangles(around, len(rings))
     joint_ids, weights = _blend(heights / length, joints)
     return np.array(positions), np.array(normals), triangles, joint_ids, weights

@@ -40,6 +40,7 @@ class Coded:
     decoded: Motion
     numbers: dict
     positions: np.ndarray  # the decoded motion's joint positions, metres
+    quats: str  # ... and its joints' rotations, as the page takes them (orientations)
 
 
 class ViewSession:
@@ -71,7 +72,13 @@ class ViewSession:
             "mean_joint_error_cm": s["mean_joint_error_cm"],
             "max_joint_error_cm": s["max_joint_error_cm"],
         }
-        self.coded = Coded(codec, trip.decoded, {k: _finite(v) for k, v in numbers.items()}, trip.decoded.positions_m())
+        self.coded = Coded(
+            codec,
+            trip.decoded,
+            {k: _finite(v) for k, v in numbers.items()},
+            trip.decoded.positions_m(),
+            orientations(trip.decoded),
+        )
         return self.coded
 
     def state(self) -> dict:
@@ -96,7 +103,7 @@ class ViewSession:
             error_cm = np.linalg.norm(decoded - self.positions, axis=2) * 100
             out.update(
                 decoded=base64_f32(decoded),
-                decoded_quats=orientations(self.coded.decoded),
+                decoded_quats=self.coded.quats,
                 error_cm=base64_f32(error_cm),
                 numbers=self.coded.numbers,
                 config=self.coded.codec.get_config(),

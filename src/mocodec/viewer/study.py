@@ -108,6 +108,10 @@ class Study:
         self.motions = [load(p) for p in cfg.clips]
         if cfg.max_frames:
             self.motions = [m[: cfg.max_frames] for m in self.motions]
+        # each clip's mannequin, made once for all its trials
+        self.bodies = {
+            id(m): body_or_none(m.skeleton, m.channels[0]) if cfg.rendering == "body" else None for m in self.motions
+        }
         self.rng = np.random.default_rng(cfg.seed)
         self.trials: list[dict] = []
         self.started = _now()
@@ -135,7 +139,7 @@ class Study:
             "parents": [int(p) for p in motion.skeleton.parents],
             "speed": self.cfg.speed,
             "rendering": self.cfg.rendering,
-            "body": body_or_none(motion.skeleton, motion.channels[0]) if self.cfg.rendering == "body" else None,
+            "body": self.bodies[id(motion)],
         }
 
     def results(self) -> dict:

@@ -84,6 +84,13 @@ export class Body {
       m[o + 15] = 1;
     }
   }
+  // a live avatar now: joint positions and rotations (w first), at the level of detail its
+  // root's distance from `camera` calls for
+  follow(positions, wxyz, camera) {
+    this.pose(positions, wxyz, 0, true);
+    const at = camera.position;
+    this.detail(detailAt(Math.hypot(positions[0] - at.x, positions[1] - at.y, positions[2] - at.z)));
+  }
   paint(colour) {
     this.colour(Array.from({ length: this.joints }, () => colour));
   }
@@ -100,10 +107,10 @@ export class Body {
 }
 
 // nearer than these (metres) a live avatar is drawn at levels 0 and 1 of detail; farther, at 2
-export const DETAIL_M = [6, 15];
+const DETAIL_M = [6, 15];
 
 /** The level of detail for an avatar `metres` from the camera. */
-export function detailAt(metres) {
+function detailAt(metres) {
   return DETAIL_M.filter((m) => metres >= m).length;
 }
 

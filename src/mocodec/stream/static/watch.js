@@ -4,7 +4,7 @@
 // decoding anywhere else.
 import * as THREE from 'three';
 import { RelayClient, forwardKinematics } from '/decoder/index.js';
-import { Body, Mannequins, detailAt } from '/shared/body.js';
+import { Body, Mannequins } from '/shared/body.js';
 
 const params = new URLSearchParams(location.search);
 const relayUrl = `${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}`;
@@ -45,8 +45,7 @@ function draw() {
     if (levels && !shown.body) shown.body = new Body(scene, levels, 0x8a9bb8);
     shown.lines.visible = !shown.body;
     if (shown.body) {
-      shown.body.pose(pose, shown.wxyz, 0, true);
-      shown.body.detail(detailAt(Math.hypot(pose[0] - camera.position.x, pose[1] - camera.position.y, pose[2] - camera.position.z)));
+      shown.body.follow(pose, shown.wxyz, camera);
       continue;
     }
     const out = shown.lines.geometry.attributes.position.array;

@@ -6,7 +6,7 @@
 // done there), with the skeleton's mannequin, drawn as a skinned body (or as stick figures).
 import * as THREE from "three";
 import { OrbitControls } from "three/addons/controls/OrbitControls.js";
-import { Body, Mannequins, detailAt, f32 } from "/shared/body.js";
+import { Body, Mannequins, f32 } from "/shared/body.js";
 import { Figure } from "/static/figure.js";
 import { RelayClient } from "/static/decoder/index.js";
 
@@ -363,9 +363,7 @@ function drawRoom(client, now) {
     it.figure.group.visible = !(levels && it.body);
     if (it.body) it.body.group.visible = Boolean(levels);
     if (levels && it.body) {
-      it.body.pose(pose, it.wxyz, 0, true);
-      const far = Math.hypot(pose[0] - camera.position.x, pose[1] - camera.position.y, pose[2] - camera.position.z);
-      it.body.detail(detailAt(far));
+      it.body.follow(pose, it.wxyz, camera);
     } else {
       it.figure.pose(pose, 0);
     }

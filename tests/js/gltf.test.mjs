@@ -2,19 +2,10 @@
 // duration and the pose at one frame are what the Python side computed (walk.glb.json).
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { readFile } from 'node:fs/promises';
 import * as THREE from 'three';
-import { GLTFLoader } from '../../src/mocodec/data/three/addons/loaders/GLTFLoader.js';
+import { loadGlb } from './glb-fixture.mjs';
 
-const DATA = new URL('../formats/', import.meta.url);
-
-async function loadFixture() {
-  const bytes = await readFile(new URL('walk.glb', DATA));
-  const expected = JSON.parse(await readFile(new URL('walk.glb.json', DATA), 'utf8'));
-  const buffer = bytes.buffer.slice(bytes.byteOffset, bytes.byteOffset + bytes.byteLength);
-  const gltf = await new GLTFLoader().parseAsync(buffer, '');
-  return { gltf, expected };
-}
+const loadFixture = () => loadGlb('walk.glb');
 
 test('every joint is a bone and the clip lasts as long as the motion', async () => {
   const { gltf, expected } = await loadFixture();

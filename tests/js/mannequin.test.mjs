@@ -4,17 +4,11 @@
 // (walk_mannequin.glb.json, from tests/js/make_fixtures.py).
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { readFile } from 'node:fs/promises';
 import * as THREE from 'three';
-import { GLTFLoader } from '../../src/mocodec/data/three/addons/loaders/GLTFLoader.js';
-
-const DATA = new URL('../formats/', import.meta.url);
+import { loadGlb } from './glb-fixture.mjs';
 
 async function loadFixture() {
-  const bytes = await readFile(new URL('walk_mannequin.glb', DATA));
-  const expected = JSON.parse(await readFile(new URL('walk_mannequin.glb.json', DATA), 'utf8'));
-  const buffer = bytes.buffer.slice(bytes.byteOffset, bytes.byteOffset + bytes.byteLength);
-  const gltf = await new GLTFLoader().parseAsync(buffer, '');
+  const { gltf, expected } = await loadGlb('walk_mannequin.glb');
   let body = null;
   gltf.scene.traverse((o) => { if (o.isSkinnedMesh) body = o; });
   return { gltf, body, expected };

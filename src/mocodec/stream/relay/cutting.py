@@ -48,14 +48,13 @@ LAYOUT_TICKS = 6
 class Layout:
     """A room's scalable streams (embedded or layered) and its budgeted viewers' shares of
     them, worked out every LAYOUT_TICKS ticks or when a stream, a budget or a camera changes:
-    each stream's row in ``where`` (its position) and in ``rates`` (the bit/s of its layers up
-    to each, infinite past its own), and each viewer's column (by ``id``) in ``shares`` (bit/s,
-    6.4 and 6.5) and ``fits`` (the layers within them, at least one), ``(streams, viewers)``."""
+    each stream's row and each viewer's column (by ``id``) in ``shares`` (bit/s, 6.4 and 6.5,
+    by the distance from the viewer's camera to the stream's position) and ``fits`` (the layers
+    whose measured rates fit them, at least one), ``(streams, viewers)``; ``width``: the most
+    layers a stream has."""
 
     key: tuple
     row: dict[int, int]
-    where: np.ndarray
-    rates: np.ndarray
     width: int
     column: dict[int, int]
     shares: np.ndarray
@@ -99,8 +98,6 @@ def layout_of(room: Room, viewers: list[Viewer], min_distance: float) -> Layout:
     room.layout = Layout(
         key,
         {k: i for i, k in enumerate(scalable)},
-        where,
-        rates,
         width,
         {id(v): i for i, v in enumerate(viewers)},
         shares,
@@ -222,7 +219,7 @@ def cut_for(
 ) -> tuple[list[bytes], list[bytes]]:
     """The viewer's packets, the scalable streams cut to its shares of the crowd (bit/s per
     stream, and the layers within each: its column of the layout), and the varint of each
-    one's length. The tick's fresh layered packets (``crowd.layered``) are the variants
+    one's length. The tick's fresh layered packets (``crowd.rounds``) are the variants
     ``chosen`` for the viewer (:func:`choose_layers`); the rest, and what the viewer has
     pending, one by one."""
     column = crowd.layout.column[id(viewer)]

@@ -516,11 +516,7 @@ def stripped(p: Packet, data: bytes | memoryview) -> tuple[Packet, bytes]:
         return p, bytes(data)
     if data[0] & COMPACT:
         return plain, plain.to_bytes()
-    fields = bytearray(data[: _FIELDS.size])
-    fields[4] = plain.flags
-    struct.pack_into("<I", fields, _FIELDS.size - 4, len(plain.payload))
-    crc = zlib.crc32(plain.payload, zlib.crc32(fields, CRC32_STARTS[p.dropped]))
-    return plain, bytes(fields) + plain.payload + _CRC.pack(crc)
+    return plain, _reframed(data, plain.payload, p.dropped, plain.flags)
 
 
 def truncated(p: Packet, data: bytes, size: int, dropped: int) -> bytes:
@@ -534,7 +530,15 @@ def truncated(p: Packet, data: bytes, size: int, dropped: int) -> bytes:
         head = data[: len(data) - _U16.size - len(p.payload)]
         out = head + body
         return out + _U16.pack(binascii.crc_hqx(out, CRC16_STARTS[dropped]))
+    return _reframed(data, body, dropped)
+
+
+def _reframed(data: bytes | memoryview, body: bytes, dropped: int, flags: int | None = None) -> bytes:
+    """A full packet's wire bytes ``data`` with the payload ``body`` (and ``flags``): its header
+    kept, the payload length set anew, the check made from the start that says ``dropped``."""
     fields = bytearray(data[: _FIELDS.size])
+    if flags is not None:
+        fields[4] = flags
     struct.pack_into("<I", fields, _FIELDS.size - 4, len(body))
     return bytes(fields) + body + _CRC.pack(zlib.crc32(body, zlib.crc32(fields, CRC32_STARTS[dropped])))
 

@@ -20,10 +20,15 @@ def bandwidth_scores(distances: np.ndarray, weights: np.ndarray | None = None) -
     (characters, segments); d_m is the smallest distance (per segment). NaN marks a character
     absent from a segment and scores 0."""
     d = np.asarray(distances, dtype=np.float64)
-    if np.any(d[~np.isnan(d)] <= 0):
-        raise CodecError("camera distances must be positive")
-    nearest = np.nanmin(d, axis=0)
-    scores = np.where(np.isnan(d), 0.0, nearest / np.where(np.isnan(d), 1.0, d))
+    absent = np.isnan(d)
+    if absent.any():
+        if np.any(d[~absent] <= 0):
+            raise CodecError("camera distances must be positive")
+        scores = np.where(absent, 0.0, np.nanmin(d, axis=0) / np.where(absent, 1.0, d))
+    else:  # every character in every column (a relay's crowd, each tick): no NaN to step around
+        if not (d > 0).all():
+            raise CodecError("camera distances must be positive")
+        scores = d.min(axis=0) / d
     if weights is not None:
         w = np.asarray(weights, dtype=np.float64)
         scores = scores * (w[:, None] if scores.ndim == 2 else w)
@@ -43,17 +48,13 @@ def split_budget(total, scores: np.ndarray) -> np.ndarray:
 def viewer_shares(where: np.ndarray, cameras: np.ndarray, budgets: np.ndarray, min_distance: float) -> np.ndarray:
     """``(avatars, viewers)`` bit/s: each viewer's budget split over the avatars at ``where
     (avatars, 3)`` by their distance scores from its camera ``(viewers, 3)`` (6.4, 6.5), a
-    distance below ``min_distance`` counting as that. The same numbers as
-    :func:`bandwidth_scores` and :func:`split_budget` of the distances, a coordinate at a time
-    (a relay works this out every tick)."""
+    distance below ``min_distance`` counting as that; the distances made a coordinate at a time
+    (a relay works this out every few ticks)."""
     squared = np.zeros((len(where), len(cameras)))
     for axis in range(3):
         apart = where[:, axis, None] - cameras[None, :, axis]
         squared += apart * apart
-    d = np.maximum(np.sqrt(squared), min_distance)
-    if not (d > 0).all():
-        raise CodecError("camera distances must be positive")
-    return split_budget(budgets, d.min(axis=0) / d)
+    return split_budget(budgets, bandwidth_scores(np.maximum(np.sqrt(squared), min_distance)))
 
 
 def layers_within(rates: np.ndarray, shares: np.ndarray) -> np.ndarray:

@@ -10,6 +10,7 @@ from mocodec.cli.options import add_codec_options, add_input_options, load_input
 from mocodec.codecs import checked_config
 from mocodec.data import SAMPLE_CLIP
 from mocodec.formats import load, save, with_units
+from mocodec.formats.gltfwrite import MESHES
 from mocodec.motion import Motion
 
 
@@ -229,7 +230,7 @@ def add_commands(sub) -> None:
     p.add_argument("--out-asf", help="where to write the ASF when OUT is .amc")
     p.add_argument(
         "--mesh",
-        choices=("mannequin",),
+        choices=MESHES,
         help="with OUT .gltf or .glb: also write a skinned body made from the skeleton, so the file "
         "plays as a character in glTF viewers (docs/viewer.md)",
     )

@@ -3,15 +3,18 @@ segments, closed-loop target angles, the convex step allocation and the compact 
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
+import pywt
 from hypothesis import given, strategies as st
 
 from mocodec import rotations
-from mocodec.codecs.kinwave import kinalloc
+from mocodec.codecs.kinwave import channelcode, kinalloc
 from mocodec.codecs.shared import closedloop
 from mocodec.coding.entropy import coefcoder
-from mocodec.coding.transforms import trendwave
+from mocodec.coding.transforms import trendwave, wavelets
 from mocodec.errors import CorruptStreamError
 from mocodec.formats import container, skeleton_bin
 from mocodec.formats.skeleton_bin import pack_skeleton, unpack_skeleton
@@ -167,6 +170,54 @@ def test_trend_and_wavelets_reconstruct_exactly():
     assert np.allclose(back, residual, atol=1e-10)
     # with the knots, a segment's residual is zero at its start
     assert np.allclose(residual[:, lay.starts], 0.0)
+
+
+@pytest.mark.parametrize("wavelet", ["cdf97", "d4", "haar"])
+def test_compiled_wavelets_give_pywavelets_floats(wavelet):
+    """Every sum in PyWavelets' order: the same floats, bit for bit, so bodies keep their bytes
+    (levels down to bands shorter than the filter, scales from 1e-3 to 1e3)."""
+    w = pywt.Wavelet(wavelets.WAVELETS[wavelet])
+    rng = np.random.default_rng(3)
+    for levels in range(1, 10):
+        for multiple in (1, 2, 3, 5):
+            n = multiple << levels
+            x = rng.normal(size=(3, n)) * 10.0 ** rng.uniform(-3, 3)
+            with warnings.catch_warnings():  # (deep levels on short rows: what kinwave does)
+                warnings.simplefilter("ignore", UserWarning)
+                bands = pywt.wavedec(x, w, mode="periodization", level=levels, axis=-1)
+            coeffs = wavelets.forward(x, wavelet, levels)
+            assert np.array_equal(coeffs, np.concatenate(bands, axis=-1)), (levels, n)
+            c = rng.normal(size=(3, n))
+            split = np.split(c, np.cumsum(wavelets.band_lengths(n, wavelet, levels))[:-1], axis=-1)
+            reference = pywt.waverec(split, w, mode="periodization", axis=-1)
+            assert np.array_equal(wavelets.inverse(c, n, wavelet, levels), reference), (levels, n)
+
+
+def test_compiled_rows_quantise_within_half_a_step_and_round_where_far():
+    """rows.quantise then rows.reconstruct: plain rounding (dead zone 0.5) misses a smooth signal
+    by at most about half a step; a wide dead zone misses by more, and the coefficients reaching
+    the frames it misses far are the ones far_coefficients marks."""
+    rng = np.random.default_rng(4)
+    lay = trendwave.layout(300, 128, 4, 1)
+    x = np.cumsum(rng.normal(size=(4, 300)), axis=1) * 3.0
+    const = np.array([False, False, True, False])
+    x[2] = 7.25
+    step = np.array([0.05, 0.2, 0.1, 0.5])
+    fraction, base = np.full(4, 0.125), np.zeros(4)
+    factors = (np.ones(lay.num_knots), np.ones(lay.num_coeffs), np.ones(lay.starts.size - 1))
+    knots, coeffs, scaled = channelcode.quantise(x, const, step, fraction, base, lay, factors, 0.5)
+    assert (coeffs[const] == 0).all() and (knots[2] == 580).all()  # 7.25 in quanta of 0.0125
+    out = channelcode.reconstruct(knots, coeffs, const, step, fraction, base, lay, factors, 1.0, 8)
+    assert out[2] == pytest.approx(7.25)
+    assert (np.abs(out - x).max(axis=1) < step * 1.5).all()
+    _, coarse, _ = channelcode.quantise(x, const, step, fraction, base, lay, factors, 0.2)
+    assert np.count_nonzero(coarse) < np.count_nonzero(coeffs)
+    rough = channelcode.reconstruct(knots, coarse, const, step, fraction, base, lay, factors, 1.0, 8)
+    far = channelcode.far_coefficients(x, rough, const, step, factors[0], 0.7, lay)
+    assert far.any() and not far[2].any()
+    nearest = np.where(far, np.sign(scaled) * np.floor(np.abs(scaled) + 0.5), coarse).astype(np.int64)
+    fixed = channelcode.reconstruct(knots, nearest, const, step, fraction, base, lay, factors, 1.0, 8)
+    assert (np.abs(fixed - x).max(axis=1) < np.abs(rough - x).max(axis=1) + 1e-12).all()
 
 
 def test_closed_loop_targets_restore_the_global_orientation(walk_bvh, walk_amc):

@@ -29,9 +29,10 @@ from functools import lru_cache
 import numpy as np
 
 from mocodec import rotations
+from mocodec.codecs.kinwave import channelcode
 from mocodec.codecs.shared import rotvec
 from mocodec.coding.entropy import coefcoder
-from mocodec.coding.transforms import seams, trendwave
+from mocodec.coding.transforms import trendwave
 from mocodec.errors import CorruptStreamError
 from mocodec.kinematics import channel_plan, forward_kinematics, position_offsets
 from mocodec.motion import Motion
@@ -285,12 +286,18 @@ def reconstruct(
     at a time, the decoder for all channels at once; each row's floats are the same either
     way). A constant channel is its first knot as :class:`ConstantCoding` says (``base`` of these
     rows)."""
-    knot_f, coeff_f, seam_f = factors
-    values = knots * (step * lay.knot_quantum * knot_f)
-    values[const] = constants.base[const, None] + knots[const, :1] * (step[const] * constants.fraction[const, None])
-    out = trendwave.trend(values, lay) + trendwave.synthesise(coeffs * (step * coeff_f), lay)
-    limits = SEAM_LIMIT * seam_f[:, None] * step[:, 0]
-    return seams.smooth_seams(out.T, lay.starts[1:], SEAM_HALF_WIDTH, limits).T
+    return channelcode.reconstruct(
+        knots,
+        coeffs,
+        const,
+        step[:, 0],
+        constants.fraction,
+        constants.base,
+        lay,
+        factors,
+        SEAM_LIMIT,
+        SEAM_HALF_WIDTH,
+    )
 
 
 def levels_for(fps: float) -> int:

@@ -12,7 +12,7 @@ import numpy as np
 
 from mocodec import rotations
 from mocodec.codecs.base import Codec
-from mocodec.codecs.kinwave import kinalloc
+from mocodec.codecs.kinwave import channelcode, kinalloc
 from mocodec.codecs.kinwave.body import (
     CODER_REVISION,
     FINE_CONSTANTS,
@@ -508,19 +508,16 @@ class Encoder:
         """Knots and dead-zone quantised coefficients of ``target (k, T)`` with steps ``(k, 1)``,
         the segments' step :func:`segment_factors` and the rows' :class:`ConstantCoding`, laid out as
         ``lay`` (default: the body's), and the coefficients in steps before rounding."""
-        lay = lay or self.lay
-        knot_f, coeff_f, _ = factors
-        quantum = step * lay.knot_quantum * knot_f
-        k_int = np.round(target[:, lay.knot_frames] / quantum).astype(np.int64)
-        k_int[const] = np.round(
-            (target[const, :1] - constants.base[const, None]) / (step[const] * constants.fraction[const, None])
-        ).astype(np.int64)
-        residual = target - trendwave.trend(k_int * quantum, lay)
-        residual[const] = 0.0
-        c = trendwave.analyse(residual, lay) / (step * coeff_f)
-        c_int = (np.sign(c) * np.floor(np.abs(c) + self.cfg["deadzone"])).astype(np.int64)
-        c_int[const] = 0
-        return k_int, c_int, c
+        return channelcode.quantise(
+            target,
+            const,
+            step[:, 0],
+            constants.fraction,
+            constants.base,
+            lay or self.lay,
+            factors,
+            self.cfg["deadzone"],
+        )
 
     def round_where_far(
         self,
@@ -542,24 +539,23 @@ class Encoder:
         knots, coeffs, const = integers
         if self.cfg["error_measure"] == "mean" or self.cfg["deadzone"] >= 0.5:
             return coeffs, out  # a mean is not set by single frames; plain rounding already
-        far = np.abs(out - target) > FAR_STEPS * step * factors[0][self.lay.left]
-        far[const] = False
+        far = channelcode.far_coefficients(target, out, const, step[:, 0], factors[0], FAR_STEPS, self.lay)
         if not far.any():
             return coeffs, out
         nearest = np.sign(scaled) * np.floor(np.abs(scaled) + 0.5)
-        rounded = np.where(trendwave.coefficients_at(far, self.lay), nearest, coeffs).astype(np.int64)
-        rows = np.flatnonzero((rounded != coeffs).any(axis=1))
-        if not rows.size:
+        rounded = np.where(far, nearest, coeffs).astype(np.int64)
+        changed = np.flatnonzero((rounded != coeffs).any(axis=1))
+        if not changed.size:
             return coeffs, out
         coeffs, out = rounded, out.copy()
-        out[rows] = reconstruct(
-            knots[rows],
-            coeffs[rows],
-            const[rows],
-            step[rows],
+        out[changed] = reconstruct(
+            knots[changed],
+            coeffs[changed],
+            const[changed],
+            step[changed],
             self.lay,
             factors,
-            ConstantCoding(constants.fraction[rows], constants.base[rows]),
+            ConstantCoding(constants.fraction[changed], constants.base[changed]),
         )
         return coeffs, out
 

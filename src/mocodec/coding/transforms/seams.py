@@ -10,6 +10,8 @@ and a curve without a step is not changed at all.
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numba
 import numpy as np
 
@@ -36,10 +38,30 @@ def smooth_seams(x: np.ndarray, seams, half_width: int, limits: np.ndarray | Non
         return out
     where = seams[inside]
     bound = np.full((where.size, out.shape[1]), np.inf) if limits is None else np.asarray(limits)[inside]
-    h = max(int(half_width), 1)
-    weight = 0.5 * (1 + np.cos(np.pi * (np.arange(h) + 0.5) / h))  # 1 next to the seam -> 0
-    _smooth(out, where, np.ascontiguousarray(bound, dtype=np.float64), weight, _EXTRAPOLATE, _PROBES)
+    _smooth(out, where, np.ascontiguousarray(bound, dtype=np.float64), ramp(half_width), _EXTRAPOLATE, _PROBES)
     return out
+
+
+@lru_cache(maxsize=16)
+def ramp(half_width: int) -> np.ndarray:
+    """The raised-cosine weights of a ramp over ``half_width`` frames, 1 next to the seam -> 0
+    (numpy's cosine, made once: compiled callers take these floats, not their own)."""
+    h = max(int(half_width), 1)
+    weight = 0.5 * (1 + np.cos(np.pi * (np.arange(h) + 0.5) / h))
+    weight.setflags(write=False)
+    return weight
+
+
+@numba.njit(cache=True)
+def smooth_rows(rows, seams, limits, weight):
+    """:func:`smooth_seams` in place on ``rows (channels, frames)`` (a compiled caller's layout),
+    the step at seam ``seams[k]`` at most ``limits[k, channel]``, the ramp ``weight``
+    (:func:`ramp`)."""
+    frames = rows.shape[1]
+    inside = (seams >= 3) & (seams + 3 <= frames)
+    if not inside.any():
+        return
+    _smooth(rows.T, seams[inside], np.ascontiguousarray(limits[inside]), weight, _EXTRAPOLATE, _PROBES)
 
 
 @numba.njit(inline="always")

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import NamedTuple
 
 import numpy as np
 
@@ -186,6 +187,57 @@ def coefficients_at(frames: np.ndarray, lay: Layout) -> np.ndarray:
             if rows.size:
                 out[rows, o : o + n] = marked[rows].astype(np.float64) @ reach[z : z + m] > 0
     return out
+
+
+class Flat(NamedTuple):
+    """A :class:`Layout` as the arrays compiled kernels take (:func:`flat`)."""
+
+    knot_frames: np.ndarray
+    left: np.ndarray
+    frac: np.ndarray
+    knot_quantum: np.ndarray
+    starts: np.ndarray
+    lengths: np.ndarray
+    leads: np.ndarray
+    padded: np.ndarray
+    levels: np.ndarray
+    offsets: np.ndarray  # (S,) each segment's first coefficient
+
+
+@lru_cache(maxsize=256)
+def flat(lay: Layout) -> Flat:
+    """``lay`` as flat arrays for compiled kernels."""
+    offsets = np.concatenate([[0], np.cumsum(lay.padded)[:-1]]).astype(np.int64)
+    return Flat(
+        lay.knot_frames,
+        lay.left,
+        lay.frac,
+        lay.knot_quantum,
+        lay.starts,
+        lay.lengths,
+        lay.leads,
+        lay.padded,
+        lay.levels,
+        offsets,
+    )
+
+
+@lru_cache(maxsize=256)
+def reaches(lay: Layout) -> tuple[np.ndarray, np.ndarray]:
+    """Every block's :func:`_reach` (u8, ``(frames, coefficients)`` flattened, one copy per block
+    shape) and where each segment's starts (-1: no block): :func:`coefficients_at` for compiled
+    kernels."""
+    parts: list[np.ndarray] = []
+    at = np.full(lay.starts.size, -1, dtype=np.int64)
+    first: dict[tuple[int, int], int] = {}
+    size = 0
+    for s in np.flatnonzero(lay.padded):
+        key = (int(lay.padded[s]), int(lay.levels[s]))
+        if key not in first:
+            parts.append(_reach(*key, lay.wavelet).astype(np.uint8).ravel())
+            first[key], size = size, size + parts[-1].size
+        at[s] = first[key]
+    return (np.concatenate(parts) if parts else np.zeros(0, dtype=np.uint8)), at
 
 
 def synthesise(coeffs: np.ndarray, lay: Layout) -> np.ndarray:

@@ -17,6 +17,8 @@ from functools import lru_cache
 import numpy as np
 import pywt
 
+from mocodec.coding.transforms import periodized
+
 WAVELETS = {"d4": "db2", "cdf97": "bior4.4", "haar": "haar"}
 
 
@@ -25,6 +27,24 @@ def _wavelet(name: str) -> pywt.Wavelet:
     """PyWavelets' wavelet of one of our names (or its own), made once: a transform given the
     object skips the lookup a name costs on every call."""
     return pywt.Wavelet(WAVELETS.get(name, name))
+
+
+@lru_cache(maxsize=16)
+def filters(wavelet: str, kind: str) -> tuple[np.ndarray, np.ndarray]:
+    """A wavelet's low- and high-pass filters, ``dec`` (analysis) or ``rec`` (synthesis), as
+    PyWavelets has them (:mod:`.periodized`'s kernels take them)."""
+    w = _wavelet(wavelet)
+    lo, hi = (w.dec_lo, w.dec_hi) if kind == "dec" else (w.rec_lo, w.rec_hi)
+    out = np.array(lo, dtype=np.float64), np.array(hi, dtype=np.float64)
+    for f in out:
+        f.setflags(write=False)
+    return out
+
+
+def _compiled(x: np.ndarray, levels: int, wavelet: str, mode: str) -> bool:
+    """Whether :mod:`.periodized`'s kernels transform ``x (rows, n)`` with PyWavelets' floats: a
+    periodised transform of rows whose length is a multiple of 2^levels."""
+    return mode == "periodization" and x.ndim == 2 and x.shape[-1] % (1 << levels) == 0
 
 
 def max_levels(frames: int, wavelet: str) -> int:
@@ -48,6 +68,8 @@ def forward(x: np.ndarray, wavelet: str, levels: int, mode: str = "periodization
     x = np.asarray(x, dtype=np.float64)
     if levels == 0:
         return x.copy()
+    if _compiled(x, levels, wavelet, mode):
+        return periodized.forward_rows(x, levels, *filters(wavelet, "dec"))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # deep levels on short segments
         bands = pywt.wavedec(x, _wavelet(wavelet), mode=mode, level=levels, axis=-1)
@@ -59,6 +81,8 @@ def inverse(coeffs: np.ndarray, frames: int, wavelet: str, levels: int, mode: st
     coeffs = np.asarray(coeffs, dtype=np.float64)
     if levels == 0:
         return coeffs.copy()
+    if coeffs.shape[-1] == frames and _compiled(coeffs, levels, wavelet, mode):
+        return periodized.inverse_rows(coeffs, levels, *filters(wavelet, "rec"))
     bounds = np.cumsum(band_lengths(frames, wavelet, levels, mode))[:-1]
     bands = np.split(coeffs, bounds, axis=-1)
     out = pywt.waverec(bands, _wavelet(wavelet), mode=mode, axis=-1)

@@ -1,0 +1,213 @@
+"""kinwave's rows in compiled loops: the quantisation of channels to knots and dead-zone wavelet
+coefficients, their reconstruction (trend, wavelet synthesis, seam smoothing) and the encoder's
+plain rounding where a frame misses its target far (docs/kinwave.md). Each row is coded alone,
+with the same floats as the numpy expressions these loops replace term for term, so the bytes
+of every body are what they were; the wavelets are :mod:`.periodized`'s (PyWavelets' floats).
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from mocodec.coding.transforms import periodized, seams, trendwave, wavelets
+
+
+@numba.njit(inline="always")
+def _trend_row(values, left, frac, out):
+    """The piecewise-linear trend through knot ``values`` at every frame (:func:`trendwave.trend`)."""
+    last = values.size - 1
+    for t in range(left.size):
+        a = values[left[t]]
+        b = values[min(left[t] + 1, last)]
+        out[t] = a + (b - a) * frac[t]
+
+
+@numba.njit(cache=True)
+def _reconstruct(knots, coeffs, const, step, fraction, base, knot_f, coeff_f, seam_f, seam_limit, lay, lo, hi, weight):
+    """Decoded rows ``(k, T)`` from their integers (:func:`reconstruct`)."""
+    knot_frames, left, frac, knot_quantum, starts, lengths, leads, padded, levels, offsets = lay
+    rows, frames = knots.shape[0], left.size
+    widest = max(padded.max(), 1) if padded.size else 1
+    out = np.empty((rows, frames))
+    values = np.empty(knot_frames.size)
+    trend = np.empty(frames)
+    block, signal, a, b = np.empty(widest), np.empty(widest), np.empty(widest), np.empty(widest)
+    for r in range(rows):
+        if const[r]:
+            values[:] = base[r] + knots[r, 0] * (step[r] * fraction[r])
+        else:
+            for k in range(knot_frames.size):
+                values[k] = knots[r, k] * (step[r] * knot_quantum[k] * knot_f[k])
+        _trend_row(values, left, frac, trend)
+        residual = np.zeros(frames)
+        for s in range(starts.size):
+            n = padded[s]
+            if n == 0:
+                continue
+            o = offsets[s]
+            for i in range(n):
+                block[i] = coeffs[r, o + i] * (step[r] * coeff_f[o + i])
+            periodized.inverse_one(block, n, levels[s], lo, hi, signal, a, b)
+            for t in range(lengths[s]):
+                residual[starts[s] + t] = signal[leads[s] + t]
+        for t in range(frames):
+            out[r, t] = trend[t] + residual[t]
+    if starts.size > 1:
+        limits = np.empty((starts.size - 1, rows))
+        for s in range(starts.size - 1):
+            for r in range(rows):
+                limits[s, r] = seam_limit * seam_f[s] * step[r]
+        seams.smooth_rows(out, starts[1:], limits, weight)
+    return out
+
+
+@numba.njit(cache=True)
+def _quantise(target, const, step, fraction, base, knot_f, coeff_f, lay, lo, hi, deadzone):
+    """Knots, dead-zone coefficients and the coefficients in steps of ``target (k, T)``
+    (:func:`quantise`)."""
+    knot_frames, left, frac, knot_quantum, starts, lengths, leads, padded, levels, offsets = lay
+    rows, frames = target.shape
+    K, N = knot_frames.size, int(padded.sum())
+    widest = max(padded.max(), 1) if padded.size else 1
+    k_int = np.empty((rows, K), dtype=np.int64)
+    c_int = np.zeros((rows, N), dtype=np.int64)
+    scaled = np.zeros((rows, N))
+    values = np.empty(K)
+    trend = np.empty(frames)
+    block, coeffs, a, b = np.empty(widest), np.empty(widest), np.empty(widest), np.empty(widest)
+    for r in range(rows):
+        if const[r]:
+            k_int[r, :] = np.int64(np.rint((target[r, 0] - base[r]) / (step[r] * fraction[r])))
+            continue
+        for k in range(K):
+            quantum = step[r] * knot_quantum[k] * knot_f[k]
+            k_int[r, k] = np.int64(np.rint(target[r, knot_frames[k]] / quantum))
+            values[k] = k_int[r, k] * quantum
+        _trend_row(values, left, frac, trend)
+        for s in range(starts.size):
+            n = padded[s]
+            if n == 0:
+                continue
+            block[:n] = 0.0
+            for t in range(lengths[s]):
+                f = starts[s] + t
+                block[leads[s] + t] = target[r, f] - trend[f]
+            periodized.forward_one(block, n, levels[s], lo, hi, coeffs, a, b)
+            o = offsets[s]
+            for i in range(n):
+                c = coeffs[i] / (step[r] * coeff_f[o + i])
+                scaled[r, o + i] = c
+                v = np.int64(np.floor(abs(c) + deadzone))
+                c_int[r, o + i] = v if c > 0 else (-v if c < 0 else 0)
+    return k_int, c_int, scaled
+
+
+@numba.njit(cache=True)
+def _far_coefficients(target, out, const, step, knot_f, far_steps, lay, reach, reach_at):
+    """``(k, N)`` bool: the coefficients whose synthesis reaches a frame where ``out`` misses
+    ``target`` by more than ``far_steps`` of the frame's step (:func:`trendwave.coefficients_at`)."""
+    knot_frames, left, frac, knot_quantum, starts, lengths, leads, padded, levels, offsets = lay
+    rows = target.shape[0]
+    marked = np.zeros((rows, int(padded.sum())), dtype=np.bool_)
+    for r in range(rows):
+        if const[r]:
+            continue
+        for s in range(starts.size):
+            n = padded[s]
+            if n == 0:
+                continue
+            at, o = reach_at[s], offsets[s]
+            for t in range(lengths[s]):
+                f = starts[s] + t
+                if abs(out[r, f] - target[r, f]) > far_steps * step[r] * knot_f[left[f]]:
+                    row = at + (leads[s] + t) * n
+                    for i in range(n):
+                        if reach[row + i]:
+                            marked[r, o + i] = True
+    return marked
+
+
+def reconstruct(
+    knots: np.ndarray,
+    coeffs: np.ndarray,
+    const: np.ndarray,
+    step: np.ndarray,
+    fraction: np.ndarray,
+    base: np.ndarray,
+    lay: trendwave.Layout,
+    factors: tuple[np.ndarray, np.ndarray, np.ndarray],
+    seam_limit: float,
+    half_width: int,
+) -> np.ndarray:
+    """Rows ``(k, T)`` from their integers, steps ``step (k,)``, the segments' step ``factors``
+    (knots, coefficients, seams), a constant row its first knot in ``fraction`` of its step about
+    ``base``; each seam's step smoothed over ``half_width`` frames, at most ``seam_limit`` of the
+    finer side's step."""
+    knot_f, coeff_f, seam_f = factors
+    return _reconstruct(
+        np.ascontiguousarray(knots, dtype=np.int64),
+        np.ascontiguousarray(coeffs, dtype=np.int64),
+        np.ascontiguousarray(const, dtype=np.bool_),
+        np.ascontiguousarray(step, dtype=np.float64),
+        np.ascontiguousarray(fraction, dtype=np.float64),
+        np.ascontiguousarray(base, dtype=np.float64),
+        knot_f,
+        coeff_f,
+        np.asarray(seam_f, dtype=np.float64),
+        float(seam_limit),
+        tuple(trendwave.flat(lay)),
+        *wavelets.filters(lay.wavelet, "rec"),
+        seams.ramp(half_width),
+    )
+
+
+def quantise(
+    target: np.ndarray,
+    const: np.ndarray,
+    step: np.ndarray,
+    fraction: np.ndarray,
+    base: np.ndarray,
+    lay: trendwave.Layout,
+    factors: tuple[np.ndarray, np.ndarray, np.ndarray],
+    deadzone: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Knots and dead-zone quantised coefficients of ``target (k, T)`` (arguments as
+    :func:`reconstruct`'s), and the coefficients in steps before rounding."""
+    knot_f, coeff_f, _ = factors
+    return _quantise(
+        np.ascontiguousarray(target, dtype=np.float64),
+        np.ascontiguousarray(const, dtype=np.bool_),
+        np.ascontiguousarray(step, dtype=np.float64),
+        np.ascontiguousarray(fraction, dtype=np.float64),
+        np.ascontiguousarray(base, dtype=np.float64),
+        knot_f,
+        coeff_f,
+        tuple(trendwave.flat(lay)),
+        *wavelets.filters(lay.wavelet, "dec"),
+        float(deadzone),
+    )
+
+
+def far_coefficients(
+    target: np.ndarray,
+    out: np.ndarray,
+    const: np.ndarray,
+    step: np.ndarray,
+    knot_f: np.ndarray,
+    far_steps: float,
+    lay: trendwave.Layout,
+) -> np.ndarray:
+    """``(k, N)`` bool: the coefficients reaching a frame where the reconstruction ``out`` misses
+    ``target`` by more than ``far_steps`` of the frame's step (``step (k,)`` times its knot's
+    factor); constant rows none."""
+    return _far_coefficients(
+        np.ascontiguousarray(target, dtype=np.float64),
+        out,
+        np.ascontiguousarray(const, dtype=np.bool_),
+        np.ascontiguousarray(step, dtype=np.float64),
+        knot_f,
+        float(far_steps),
+        tuple(trendwave.flat(lay)),
+        *trendwave.reaches(lay),
+    )

@@ -94,14 +94,14 @@ def frame_moves(positions_cm: np.ndarray) -> np.ndarray:
     return np.linalg.norm(np.diff(positions_cm, axis=0), axis=2).max(axis=1)
 
 
-def jumps_at_start(positions_cm: np.ndarray) -> bool:
-    """Whether the first or second frame jumps far from the next one: twice the clip's own
-    largest frame-to-frame motion after them, and at least JUMP_CM (a bind pose, a T-pose, or
-    both, lead the clip; a walk's first step does not)."""
+def leading_jumps(positions_cm: np.ndarray) -> np.ndarray:
+    """``(2,)`` bool: whether the first and the second frame jump far from the next one: twice
+    the clip's own largest frame-to-frame motion after them, and at least JUMP_CM (a bind pose,
+    a T-pose, or both, lead the clip; a walk's first step does not)."""
     if len(positions_cm) < 8:
-        return False
+        return np.zeros(2, dtype=bool)
     moves = frame_moves(positions_cm)
-    return bool(moves[:2].max() > max(2.0 * np.percentile(moves[2:], 99) + 1.0, JUMP_CM))
+    return moves[:2] > max(2.0 * np.percentile(moves[2:], 99) + 1.0, JUMP_CM)
 
 
 @dataclass
@@ -182,8 +182,8 @@ class Encoder:
         self.forms = self._choose_forms() if self.cfg["rotation_vectors"] else np.zeros(0, dtype=np.int64)
         self._constant_in_forms()
         self.world_translations = world_translations(sk, self.const)
-        if self.cfg["keyframes"] and jumps_at_start(self.positions):
-            self._choose_keyframes()
+        if self.cfg["keyframes"]:
+            self._choose_keyframes(leading_jumps(self.positions))
 
     def _constant_channels(self) -> np.ndarray:
         """Channels coded as one knot: a range below CONSTANT, or a translation whose range is
@@ -252,17 +252,29 @@ class Encoder:
             self.skeleton.num_channels,
         )
 
-    def _choose_keyframes(self) -> None:
+    def _choose_keyframes(self, jumps: np.ndarray) -> None:
         """Leading frames that jump away (a bind pose, a T-pose) cost the wavelet a jump, but
         as keyframes a finely quantised pose each; which is cheaper depends on the pose and the
-        bound (docs/kinwave.md). One pass at the starting scale with 0, 1 and 2 keyframes decides: at the
-        same steps the errors are about the same."""
+        bound (docs/kinwave.md). One pass at the starting scale with each count decides (at the
+        same steps the errors are about the same): 0, 1 and 2 keyframes at the highest effort.
+        Below it, only the counts that won on the shared clips' kind of start: a second frame
+        jumping away alone is a keyframe with the frame before it (no trial), a first frame
+        alone tries 0 and 1, both try 0 and 2."""
+        if not jumps.any():
+            return
+        if self.cfg["effort"] >= 3:
+            counts: tuple[int, ...] = (0, 1, 2)
+        elif not jumps[0]:
+            self.set_layout(2)
+            return
+        else:
+            counts = (0, 2) if jumps[1] else (0, 1)
         passes = []
-        for count in range(3):
+        for count in counts:
             self.set_layout(count)
             passes.append(self.run_pass(self.codes(self.first_scale())))
         best = int(np.argmin([len(self.body(ps)) for ps in passes]))
-        self.set_layout(best)
+        self.set_layout(counts[best])
         self.first_pass = passes[best]  # the search starts from it
 
     def starting_pass(self) -> Pass:

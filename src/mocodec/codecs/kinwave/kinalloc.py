@@ -27,6 +27,7 @@ from __future__ import annotations
 
 from functools import lru_cache
 
+import numba
 import numpy as np
 from scipy.optimize import minimize
 
@@ -141,19 +142,48 @@ def _mean_program(weight: np.ndarray, lever2: np.ndarray, start: np.ndarray) -> 
     return u / np.sqrt(lever2.T @ u).mean() ** 2  # the bound met whatever SLSQP returned
 
 
+@numba.njit(cache=True)
+def _dual_rounds(weight, lever2, start):
+    """:func:`_max_program`'s prices: the rounds from equal prices ``start`` (compiled: a round
+    is two small products, and a skeleton can take thousands)."""
+    joints, points = lever2.shape
+    prices = np.full(points, start)
+    u = np.empty(joints)
+    load = np.empty(points)
+    for _ in range(MAX_ROUNDS):
+        for j in range(joints):
+            total = 0.0
+            for p in range(points):
+                total += lever2[j, p] * prices[p]
+            u[j] = weight[j] / max(total, 1e-300)
+        top = prices.max()
+        worst_priced, worst_free = 0.0, 0.0
+        for p in range(points):
+            total = 0.0
+            for j in range(joints):
+                total += lever2[j, p] * u[j]
+            load[p] = total
+            if prices[p] > PRICE_FLOOR * top:
+                worst_priced = max(worst_priced, abs(total - 1.0))
+            else:
+                worst_free = max(worst_free, total)
+        if worst_priced <= MAX_GAP and worst_free <= 1.0 + MAX_GAP:
+            break
+        for p in range(points):
+            prices[p] *= load[p]
+    return prices
+
+
 def _max_program(weight: np.ndarray, lever2: np.ndarray) -> np.ndarray:
     """maximise sum w log u subject to lever2^T u <= 1 (every point), by its dual: with a price
     ``lam_p >= 0`` per point, ``u_j = w_j / (lever2 lam)_j`` (the optimality condition), and
     each price scaled by how far its point's constraint is from tight, ``lam_p *= (lever2^T
     u)_p``, from equal prices until every priced constraint is tight and no other is broken (to
     MAX_GAP). Each round costs two small products (time against SLSQP: docs/kinwave.md)."""
-    prices = np.full(lever2.shape[1], weight.sum() / lever2.shape[1])
-    for _ in range(MAX_ROUNDS):
-        u = weight / np.maximum(lever2 @ prices, 1e-300)
-        load = lever2.T @ u
-        priced = prices > PRICE_FLOOR * prices.max()
-        if np.abs(load[priced] - 1.0).max(initial=0.0) <= MAX_GAP and load[~priced].max(initial=0.0) <= 1.0 + MAX_GAP:
-            break
-        prices = prices * load
+    prices = _dual_rounds(
+        np.ascontiguousarray(weight, dtype=np.float64),
+        np.ascontiguousarray(lever2, dtype=np.float64),
+        weight.sum() / lever2.shape[1],
+    )
     u = weight / np.maximum(lever2 @ prices, 1e-300)
     return u / max((lever2.T @ u).max(), 1e-300)  # feasible wherever the rounds stopped

@@ -15,11 +15,13 @@ from mocodec.coding.transforms import periodized, seams, trendwave, wavelets
 
 @numba.njit(inline="always")
 def _trend_row(values, left, frac, out):
-    """The piecewise-linear trend through knot ``values`` at every frame (:func:`trendwave.trend`)."""
+    """The piecewise-linear trend through knot ``values`` at every frame (:func:`trendwave.trend`).
+    (Computed indices are cast to unsigned here and below: numba then skips its check for a
+    negative one in the per-sample loops.)"""
     last = values.size - 1
     for t in range(left.size):
-        a = values[left[t]]
-        b = values[min(left[t] + 1, last)]
+        a = values[np.uintp(left[t])]
+        b = values[np.uintp(min(left[t] + 1, last))]
         out[t] = a + (b - a) * frac[t]
 
 
@@ -47,10 +49,11 @@ def _reconstruct(knots, coeffs, const, step, fraction, base, knot_f, coeff_f, se
                 continue
             o = offsets[s]
             for i in range(n):
-                block[i] = coeffs[r, o + i] * (step[r] * coeff_f[o + i])
+                at = np.uintp(o + i)
+                block[i] = coeffs[r, at] * (step[r] * coeff_f[at])
             periodized.inverse_one(block, n, levels[s], lo, hi, signal, a, b)
             for t in range(lengths[s]):
-                residual[starts[s] + t] = signal[leads[s] + t]
+                residual[np.uintp(starts[s] + t)] = signal[np.uintp(leads[s] + t)]
         for t in range(frames):
             out[r, t] = trend[t] + residual[t]
     if starts.size > 1:
@@ -91,15 +94,16 @@ def _quantise(target, const, step, fraction, base, knot_f, coeff_f, lay, lo, hi,
                 continue
             block[:n] = 0.0
             for t in range(lengths[s]):
-                f = starts[s] + t
-                block[leads[s] + t] = target[r, f] - trend[f]
+                f = np.uintp(starts[s] + t)
+                block[np.uintp(leads[s] + t)] = target[r, f] - trend[f]
             periodized.forward_one(block, n, levels[s], lo, hi, coeffs, a, b)
             o = offsets[s]
             for i in range(n):
-                c = coeffs[i] / (step[r] * coeff_f[o + i])
-                scaled[r, o + i] = c
+                at = np.uintp(o + i)
+                c = coeffs[i] / (step[r] * coeff_f[at])
+                scaled[r, at] = c
                 v = np.int64(np.floor(abs(c) + deadzone))
-                c_int[r, o + i] = v if c > 0 else (-v if c < 0 else 0)
+                c_int[r, at] = v if c > 0 else (-v if c < 0 else 0)
     return k_int, c_int, scaled
 
 

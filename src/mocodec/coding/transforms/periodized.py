@@ -23,7 +23,7 @@ def analysis_sum(x, n, i, h):
     total = 0.0
     if taps - 1 <= i < n:  # no wrap: the common case, without the modulo
         for f in range(taps):
-            total += h[f] * x[i - f]
+            total += h[f] * x[np.uintp(i - f)]  # (unsigned: no check for a negative index)
         return total
     f0 = 0
     if i >= n:
@@ -46,13 +46,13 @@ def synthesis_add(x, n, h, out):
     size = 2 * n
     for i in range(start, n + start):
         o = 2 * (i - start) + shift
-        even, odd = o % size, (o + 1) % size
-        if half - 1 <= i < n:  # no wrap
+        if half - 1 <= i < n:  # no wrap (nor of the output: i < n)
             for g in range(half):
-                v = x[i - g]
-                out[even] += h[2 * g] * v
-                out[odd] += h[2 * g + 1] * v
+                v = x[np.uintp(i - g)]
+                out[np.uintp(o)] += h[2 * g] * v
+                out[np.uintp(o + 1)] += h[2 * g + 1] * v
             continue
+        even, odd = o % size, (o + 1) % size
         g0 = 0
         if i >= n:
             for g in range(i - n, -1, -1):
@@ -79,7 +79,7 @@ def forward_one(x, n, levels, lo, hi, out, a, b):
         for o in range(half):
             i = lo.size // 2 + 2 * o
             b[o] = analysis_sum(a, m, i, lo)
-            out[half + o] = analysis_sum(a, m, i, hi)
+            out[np.uintp(half + o)] = analysis_sum(a, m, i, hi)
         for o in range(half):
             a[o] = b[o]
         m = half

@@ -137,37 +137,60 @@ def get_even(st, data):
 # ----- integers -----------------------------------------------------------------------------
 @numba.njit(inline="always")
 def put_int(st, buf, state, v, zctx, uctx, ulen, mctx, sctx):
-    if v == 0:
-        put(st, buf, state, zctx, 0)
-        return
-    put(st, buf, state, zctx, 1)
+    """``v`` as: a zero flag; then the class k of |v| in unary (k ones, a zero below
+    MAX_CLASS); the top mantissa bit in its class's context; the other k - 1 mantissa bits at
+    even odds; the sign. The adaptive decisions go through one call of :func:`put` (the
+    compiled code of a caller inlines it once, not at every kind of decision)."""
     m = -v if v < 0 else v
     k = 0
     while (m >> (k + 1)) != 0:
         k += 1
-    for i in range(k):
-        put(st, buf, state, uctx + min(i, ulen - 1), 1)
-    if k < MAX_CLASS:
-        put(st, buf, state, uctx + min(k, ulen - 1), 0)
-    if k > 0:
-        put(st, buf, state, mctx + k, (m >> (k - 1)) & 1)
-        for b in range(k - 2, -1, -1):
-            put_even(st, buf, (m >> b) & 1)
+    unary = (k + (1 if k < MAX_CLASS else 0)) if v != 0 else 0
+    top = 1 if v != 0 and k > 0 else 0
+    for step in range(1 + unary + top):
+        if step == 0:
+            ctx, bit = zctx, 1 if v != 0 else 0
+        elif step <= unary:
+            ctx, bit = uctx + min(step - 1, ulen - 1), 1 if step <= k else 0
+        else:
+            ctx, bit = mctx + k, (m >> (k - 1)) & 1
+        put(st, buf, state, ctx, bit)
+    if v == 0:
+        return
+    for b in range(k - 2, -1, -1):
+        put_even(st, buf, (m >> b) & 1)
     put(st, buf, state, sctx, 1 if v < 0 else 0)
 
 
 @numba.njit(inline="always")
 def get_int(st, data, state, zctx, uctx, ulen, mctx, sctx):
-    if get(st, data, state, zctx) == 0:
-        return 0
-    k = 0
-    while k < MAX_CLASS and get(st, data, state, uctx + min(k, ulen - 1)) == 1:
-        k += 1
-    m = 1
-    if k > 0:
-        m = (m << 1) | get(st, data, state, mctx + k)
-        for _ in range(k - 1):
-            m = (m << 1) | get_even(st, data)
+    """Inverse of :func:`put_int`, its adaptive decisions through one call of :func:`get`."""
+    k, m, step, done = 0, 1, 0, False
+    while not done:
+        if step == 0:
+            ctx = zctx
+        elif step == 1 and k < MAX_CLASS:
+            ctx = uctx + min(k, ulen - 1)
+        else:
+            ctx = mctx + k
+        bit = get(st, data, state, ctx)
+        if step == 0:
+            if bit == 0:
+                return 0
+            step = 1
+        elif step == 1 and k < MAX_CLASS:
+            if bit == 1:
+                k += 1
+            else:
+                step = 2
+                done = k == 0
+        else:
+            m = (m << 1) | bit
+            done = True
+        if step == 1 and k == MAX_CLASS:
+            step, done = 2, k == 0
+    for _ in range(k - 1):
+        m = (m << 1) | get_even(st, data)
     return -m if get(st, data, state, sctx) == 1 else m
 
 

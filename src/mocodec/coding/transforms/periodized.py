@@ -66,7 +66,7 @@ def synthesis_add(x, n, h, out):
             out[odd] += h[2 * g + 1] * v
 
 
-@numba.njit(inline="always")
+@numba.njit(cache=True)
 def forward_one(x, n, levels, lo, hi, out, a, b):
     """Coefficients of ``x[:n]`` (n a multiple of 2^levels) into ``out[:n]``, coarsest band
     first: [approximation, coarsest details, ..., finest details]; ``a`` and ``b`` are scratch
@@ -87,7 +87,7 @@ def forward_one(x, n, levels, lo, hi, out, a, b):
         out[t] = a[t]
 
 
-@numba.njit(inline="always")
+@numba.njit(cache=True)
 def inverse_one(c, n, levels, lo, hi, out, a, b):
     """Inverse of :func:`forward_one`: the signal of ``c[:n]`` into ``out[:n]``; ``a`` and ``b``
     are scratch of n values (``c`` may not be ``out``)."""

@@ -38,8 +38,9 @@ def smooth_seams(x: np.ndarray, seams, half_width: int, limits: np.ndarray | Non
         return out
     where = seams[inside]
     bound = np.full((where.size, out.shape[1]), np.inf) if limits is None else np.asarray(limits)[inside]
-    _smooth(out, where, np.ascontiguousarray(bound, dtype=np.float64), ramp(half_width), _EXTRAPOLATE, _PROBES)
-    return out
+    rows = np.ascontiguousarray(out.T)
+    _smooth(rows, where, np.ascontiguousarray(bound, dtype=np.float64), ramp(half_width), _EXTRAPOLATE, _PROBES)
+    return np.ascontiguousarray(rows.T)
 
 
 @lru_cache(maxsize=16)
@@ -61,23 +62,23 @@ def smooth_rows(rows, seams, limits, weight):
     inside = (seams >= 3) & (seams + 3 <= frames)
     if not inside.any():
         return
-    _smooth(rows.T, seams[inside], np.ascontiguousarray(limits[inside]), weight, _EXTRAPOLATE, _PROBES)
+    _smooth(rows, seams[inside], np.ascontiguousarray(limits[inside]), weight, _EXTRAPOLATE, _PROBES)
 
 
 @numba.njit(inline="always")
 def _step_at(x, s, col, abc):
-    """The step at seam ``s`` in column ``col``: each side's extrapolation ``abc`` to the midpoint."""
-    left = abc[0] * x[s - 3, col] + abc[1] * x[s - 2, col] + abc[2] * x[s - 1, col]
-    right = abc[0] * x[s + 2, col] + abc[1] * x[s + 1, col] + abc[2] * x[s, col]
+    """The step at seam ``s`` in row ``col``: each side's extrapolation ``abc`` to the midpoint."""
+    left = abc[0] * x[col, s - 3] + abc[1] * x[col, s - 2] + abc[2] * x[col, s - 1]
+    right = abc[0] * x[col, s + 2] + abc[1] * x[col, s + 1] + abc[2] * x[col, s]
     return right - left
 
 
 @numba.njit(cache=True)
 def _smooth(out, where, bound, weight, abc, probes):
-    """:func:`smooth_seams` on ``out`` in place, seams ``where`` all inside: every step measured
-    first, then the ramps added (every seam's left side, then every right side; the browser
-    decoder's order and floats, js/src/seams.js)."""
-    frames, channels = out.shape
+    """:func:`smooth_seams` on the rows ``out (channels, frames)`` in place, seams ``where`` all
+    inside: every step measured first, then the ramps added (every seam's left side, then every
+    right side; the browser decoder's order and floats, js/src/seams.js)."""
+    channels, frames = out.shape
     halves = np.zeros((where.size, channels))
     sizes = np.empty(probes.size)
     for k in range(where.size):
@@ -88,12 +89,16 @@ def _smooth(out, where, bound, weight, abc, probes):
             for m in range(probes.size):
                 p = s + probes[m]
                 if p >= 3 and p <= frames - 3:
-                    sizes[count] = abs(_step_at(out, p, col, abc))
+                    size = abs(_step_at(out, p, col, abc))
+                    at = count  # insertion: sizes[:count] stay sorted
+                    while at > 0 and sizes[at - 1] > size:
+                        sizes[at] = sizes[at - 1]
+                        at -= 1
+                    sizes[at] = size
                     count += 1
             natural = 0.0
             if count:
-                ordered = np.sort(sizes[:count])
-                natural = (ordered[(count - 1) // 2] + ordered[count // 2]) / 2
+                natural = (sizes[(count - 1) // 2] + sizes[count // 2]) / 2
             size = max(abs(step) - 4.0 * natural, 0.0)
             size = min(size, bound[k, col])
             halves[k, col] = 0.5 * np.sign(step) * size
@@ -103,4 +108,4 @@ def _smooth(out, where, bound, weight, abc, probes):
                 row = where[k] - 1 - i if side > 0 else where[k] + i
                 if 0 <= row < frames:
                     for col in range(channels):
-                        out[row, col] += side * halves[k, col] * weight[i]
+                        out[col, row] += side * halves[k, col] * weight[i]

@@ -377,10 +377,8 @@ class Encoder:
             k_int, c_int, _ = self.quantise(values, flat, step[rows], factors, none, lay)
             sizes = coefcoder.group_sizes(k_int, c_int, lay.padded, lay.levels, 3, revision=CODER_REVISION)
             rec = reconstruct(k_int, c_int, flat, step[rows], lay, factors, none)
-            back = rotvec.from_forms(rec, kept, forms, turns[idx], pre[idx]) if form else rec
-            err = np.maximum(
-                rotations.quat_distance(original[:, idx], rotvec.euler_quats(back, kept)).mean(axis=0), 1e-12
-            )
+            back = rotvec.form_quats(rec, kept, forms, turns[idx], pre[idx]) if form else rotvec.euler_quats(rec, kept)
+            err = np.maximum(rotations.quat_distance(original[:, idx], back).mean(axis=0), 1e-12)
             nonzero = (c_int != 0).reshape(idx.size, -1).sum(axis=1)
             return np.where(locked, np.inf, sizes), nonzero, err
 

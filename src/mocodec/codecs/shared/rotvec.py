@@ -270,14 +270,21 @@ def from_forms(
 ) -> np.ndarray:
     """Inverse of :func:`to_forms`: file-order Euler angle rows, each joint's triples as
     continuous as the Euler form allows (frame 0 in the principal range)."""
+    return _rows(_quat_euler_kernel(form_quats(rows, orders, forms, means, pre), _axes(orders)))
+
+
+def form_quats(
+    rows: np.ndarray, orders: tuple[str, ...], forms: np.ndarray, means: np.ndarray, pre: np.ndarray | None = None
+) -> np.ndarray:
+    """The rotations ``(T, n, 4)`` of rows in the joints' coding forms (:func:`from_forms`
+    without the Euler angles: what a measure of rotation error needs)."""
     forms = np.asarray(forms)
     vector = forms % WORLD == VECTOR
     means = np.where(vector[:, None], means, _identity_means(len(orders)))
     quats = _form_quats_kernel(
         _per_joint(rows), _form_axes(forms, orders), vector, np.ascontiguousarray(means, dtype=np.float64)
     )
-    quats = np.ascontiguousarray(_turned(quats, forms, pre, inverse=True))
-    return _rows(_quat_euler_kernel(quats, _axes(orders)))
+    return np.ascontiguousarray(_turned(quats, forms, pre, inverse=True))
 
 
 def near_lock(rows: np.ndarray, orders: tuple[str, ...], margin_deg: float) -> np.ndarray:

@@ -358,26 +358,32 @@ class Encoder:
         self.means[live] = means
         turns = rotvec.mean_quats(means, MEAN_QUANTUM)
 
-        def trial(form: int, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-            """The joints ``idx`` (of ``live``) coded in ``form``: (bytes, nonzero coefficients,
-            mean rotation error), infinite bytes within GIMBAL_MARGIN of the form's lock."""
+        def trial(forms: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            """Each joint ``idx[e]`` (of ``live``) coded in ``forms[e]``, all in one batch (each
+            joint's rows are coded on their own): (bytes, nonzero coefficients, mean rotation
+            error) per entry, infinite bytes within GIMBAL_MARGIN of the form's lock."""
             rows = (3 * idx[:, None] + np.arange(3)).ravel()
             sub, kept = euler[rows], tuple(orders[i] for i in idx)
-            forms = np.full(idx.size, form)
-            values = sub if form == 0 else rotvec.to_forms(sub, kept, forms, turns[idx], pre=pre[idx])
-            base = form % rotvec.WORLD
-            locked = (
-                rotvec.near_lock(
-                    values, kept if base == 0 else (rotvec.CODING_ORDERS[base - 2],) * idx.size, GIMBAL_MARGIN
-                )
-                if base != rotvec.VECTOR
-                else np.zeros(idx.size, bool)
-            )
+            values = sub.copy()
+            moved = np.flatnonzero(forms)  # form 0: the file's Euler angles as they are
+            if moved.size:
+                cols = (3 * moved[:, None] + np.arange(3)).ravel()
+                tb = tuple(kept[e] for e in moved)
+                values[cols] = rotvec.to_forms(sub[cols], tb, forms[moved], turns[idx[moved]], pre=pre[idx[moved]])
+            base = forms % rotvec.WORLD
+            lock_orders = tuple(o if f == 0 else rotvec.CODING_ORDERS[max(f - 2, 0)] for o, f in zip(kept, base))
+            locked = rotvec.near_lock(values, lock_orders, GIMBAL_MARGIN) & (base != rotvec.VECTOR)
             flat, none = np.zeros(rows.size, dtype=bool), ConstantCoding(np.ones(rows.size), np.zeros(rows.size))
             k_int, c_int, _ = self.quantise(values, flat, step[rows], factors, none, lay)
             sizes = coefcoder.group_sizes(k_int, c_int, lay.padded, lay.levels, 3, revision=CODER_REVISION)
             rec = reconstruct(k_int, c_int, flat, step[rows], lay, factors, none)
-            back = rotvec.form_quats(rec, kept, forms, turns[idx], pre[idx]) if form else rotvec.euler_quats(rec, kept)
+            back = np.empty((rec.shape[1], idx.size, 4))
+            kept_as_is = np.flatnonzero(forms == 0)
+            if kept_as_is.size:
+                same = (3 * kept_as_is[:, None] + np.arange(3)).ravel()
+                back[:, kept_as_is] = rotvec.euler_quats(rec[same], tuple(kept[e] for e in kept_as_is))
+            if moved.size:
+                back[:, moved] = rotvec.form_quats(rec[cols], tb, forms[moved], turns[idx[moved]], pre[idx[moved]])
             err = np.maximum(rotations.quat_distance(original[:, idx], back).mean(axis=0), 1e-12)
             nonzero = (c_int != 0).reshape(idx.size, -1).sum(axis=1)
             return np.where(locked, np.inf, sizes), nonzero, err
@@ -385,18 +391,18 @@ class Encoder:
         local = np.flatnonzero(~self.turned[live])
         candidates = [(form, local) for form in range(rotvec.FORMS)]
         candidates += [(rotvec.WORLD + form, turned) for form in range(rotvec.FORMS)]
-        costs = np.full((len(candidates), len(live)), np.inf)
+        entry_forms = np.concatenate([np.full(idx.size, form) for form, idx in candidates]).astype(np.int64)
+        entry_joints = np.concatenate([idx for _, idx in candidates]).astype(np.int64)
+        sizes, nonzero, err = trial(entry_forms, entry_joints)
+        at = np.cumsum([0] + [idx.size for _, idx in candidates])
         reference = np.ones(len(live))  # the error of the file's own angles (forms 0 and WORLD)
-        results: list[tuple[np.ndarray, np.ndarray, np.ndarray] | None] = []
-        for form, idx in candidates:
-            result = trial(form, idx) if idx.size else None
-            results.append(result)
-            if form % rotvec.WORLD == 0 and result is not None:
-                reference[idx] = result[2]
-        for row, ((_, idx), result) in enumerate(zip(candidates, results)):
-            if result is not None:
-                sizes, nonzero, err = result
-                costs[row, idx] = sizes + nonzero / 8.0 * np.log2(err / reference[idx])
+        for row, (form, idx) in enumerate(candidates):
+            if form % rotvec.WORLD == 0:
+                reference[idx] = err[at[row] : at[row + 1]]
+        costs = np.full((len(candidates), len(live)), np.inf)
+        for row, (_, idx) in enumerate(candidates):
+            part = slice(at[row], at[row + 1])
+            costs[row, idx] = sizes[part] + nonzero[part] / 8.0 * np.log2(err[part] / reference[idx])
         choice[live] = np.array([form for form, _ in candidates])[np.argmin(costs, axis=0)]
         self.means[choice % rotvec.WORLD != rotvec.VECTOR] = 0
         return choice

@@ -20,6 +20,7 @@ const REST_AT_ZERO = 2; // ... with every translation 0 too
 const LEAD_SHIFT = 2; // more flags bits 2-3: the layout's lead (trendwave.layout)
 const FINE_CONSTANTS = 16; // more flags bit 4: constant translations at FINE_CONST_FRACTION of their step
 const FINE_TURNS = 32; // more flags bit 5: constant rotations of joints above translation channels, the same
+const ZERO_CONSTANTS = 64; // more flags bit 6: constant translations about 0, not about their joints' offsets
 const CODER_REVISION = 2;
 const HEAD_SIZE = 6;
 const FLAG_KEYFRAME = 1;
@@ -158,33 +159,37 @@ function damaged(what, offset = null) {
   return new DecodeError(`kinwave payload: ${what}`, offset);
 }
 
-// A format 2 body as { body, frames, rest, lead, fine, fineTurns }: the format 1 body of the
-// frames after a rest pose in frame 0 (payload.rest_kind), which is not coded, its layout's lead
-// and whether its constant translations and its constant rotations of joints above translation
-// channels are fine (payload.ConstantCoding); a format 1 body as it is, rest 0, lead 0, not fine.
+// A format 2 body as { body, frames, rest, lead, fine, fineTurns, aboutZero }: the format 1 body
+// of the frames after a rest pose in frame 0 (payload.rest_kind), which is not coded, its layout's
+// lead, whether its constant translations and its constant rotations of joints above translation
+// channels are fine and whether its constant translations are coded about 0 instead of the
+// offsets (body.ConstantCoding); a format 1 body as it is, rest 0, lead 0, none of them.
 function withoutMore(body, frames) {
-  if (body[0] !== FORMAT_MORE) return { body, frames, rest: 0, lead: 0, fine: false, fineTurns: false };
+  if (body[0] !== FORMAT_MORE) {
+    return { body, frames, rest: 0, lead: 0, fine: false, fineTurns: false, aboutZero: false };
+  }
   if (body.length <= HEAD_SIZE) throw damaged(`${body.length} bytes is shorter than its ${HEAD_SIZE + 1}-byte header`, 0);
   const more = body[HEAD_SIZE];
   const rest = more & 3;
   const lead = (more >> LEAD_SHIFT) & 3;
   const fine = (more & FINE_CONSTANTS) !== 0;
   const fineTurns = (more & FINE_TURNS) !== 0;
-  if (!more || more >> 6 || ![0, REST, REST_AT_ZERO].includes(rest) || frames < 1 + (rest ? 1 : 0)) {
+  const aboutZero = (more & ZERO_CONSTANTS) !== 0;
+  if (!more || more >> 7 || ![0, REST, REST_AT_ZERO].includes(rest) || frames < 1 + (rest ? 1 : 0)) {
     throw damaged(`its more flags are damaged (${more} for ${frames} frames)`, HEAD_SIZE);
   }
   const inner = new Uint8Array(body.length - 1);
   inner[0] = FORMAT;
   inner.set(body.subarray(1, HEAD_SIZE), 1);
   inner.set(body.subarray(HEAD_SIZE + 1), HEAD_SIZE);
-  return { body: inner, frames: rest ? frames - 1 : frames, rest, lead, fine, fineTurns };
+  return { body: inner, frames: rest ? frames - 1 : frames, rest, lead, fine, fineTurns, aboutZero };
 }
 
 // The header and integers of a kinwave body, every field checked: { lay, wavelet, coded (side,
 // constant, knots, coeffs), codes, offsets, forms, means, isolated, patches } of its coded
 // frames (a rest pose in frame 0 is not coded: rest, payload.rest_kind).
 export function readKinwave(whole, skeleton, allFrames) {
-  const { body, frames, rest, lead, fine, fineTurns } = withoutMore(whole, allFrames);
+  const { body, frames, rest, lead, fine, fineTurns, aboutZero } = withoutMore(whole, allFrames);
   const plan = planOf(skeleton);
   const C = skeleton.numChannels;
   const numCodes = plan.rotationJoints.length + (plan.translation.length ? 1 : 0);
@@ -223,6 +228,7 @@ export function readKinwave(whole, skeleton, allFrames) {
     rest,
     fine,
     fineTurns,
+    aboutZero,
     lay,
     wavelet: WAVELET_IDS[(flags >> 1) & 3],
     coded,
@@ -269,7 +275,7 @@ export function decodeKinwave(body, skeleton, allFrames) {
 }
 
 // payload.reconstruct: per channel its trend plus its blocks' residual, then the seams smoothed.
-function reconstruct(skeleton, plan, { coded, offsets, lay, wavelet, fine, fineTurns }, steps) {
+function reconstruct(skeleton, plan, { coded, offsets, lay, wavelet, fine, fineTurns, aboutZero }, steps) {
   const C = skeleton.numChannels;
   const { frames, starts, lengths, leads, padded, segLevels, left, frac, quantum } = lay;
   const S = starts.length;
@@ -293,7 +299,7 @@ function reconstruct(skeleton, plan, { coded, offsets, lay, wavelet, fine, fineT
     if (coded.constant[c]) {
       const isFine = plan.isTranslation[c] ? fine : fineTurns && plan.turnOverTranslation[c];
       const fraction = isFine ? FINE_CONST_FRACTION : CONST_FRACTION;
-      row.fill(plan.base[c] + coded.knots[c * K] * (step * fraction));
+      row.fill((aboutZero ? 0.0 : plan.base[c]) + coded.knots[c * K] * (step * fraction));
       continue;
     }
     for (let k = 0; k < K; k++) values[k] = coded.knots[c * K + k] * (step * quantum[k] * knotFactor[k]);

@@ -105,10 +105,13 @@ def with_euler_orders(motion: Motion, order: str | dict[str, str]) -> Motion:
     return Motion(new_sk, motion.fps, np.hstack(columns) if columns else motion.channels.copy())
 
 
-def with_position_channels(motion: Motion) -> Motion:
+def with_position_channels(motion: Motion, keep_offsets: bool = False) -> Motion:
     """Every non-root joint with rotation channels gets three translation channels, constant
     and equal to its offset, and an offset of zero (position channels add to the offset here,
-    so every joint stays where it was); the MotionBuilder layout of 6 channels a joint."""
+    so every joint stays where it was): 6 channels a joint, the bones in the channels. With
+    ``keep_offsets`` the offsets stay and the channels hold 0: MotionBuilder's layout as the
+    BVH reader gives it (its files repeat every offset in the position channels, and the
+    reader takes the offsets off)."""
     sk = motion.skeleton
     joints, columns = [], []
     for j, joint in enumerate(sk.joints):
@@ -121,12 +124,13 @@ def with_position_channels(motion: Motion) -> Motion:
         joints.append(
             replace(
                 joint,
-                offset=(0.0, 0.0, 0.0),
+                offset=joint.offset if keep_offsets else (0.0, 0.0, 0.0),
                 channels=POSITION_CHANNELS + joint.channels,
                 limits=((-np.inf, np.inf),) * 3 + joint.limits,
             )
         )
-        columns.append(np.hstack([np.tile(np.asarray(joint.offset, dtype=float), (motion.num_frames, 1)), block]))
+        held = np.zeros(3) if keep_offsets else np.asarray(joint.offset, dtype=float)
+        columns.append(np.hstack([np.tile(held, (motion.num_frames, 1)), block]))
     new_sk = Skeleton(tuple(joints), sk.units_per_metre, sk.name, dict(sk.metadata))
     return Motion(new_sk, motion.fps, np.hstack(columns))
 

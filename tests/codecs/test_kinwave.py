@@ -490,6 +490,28 @@ def test_bones_stored_as_float32_cost_what_constant_bones_cost(walk_amc):
     assert not BoundSearch(tight, stored).const[bones].all()
 
 
+def test_motionbuilder_bones_cost_what_a_plain_skeleton_costs(walk_amc):
+    """MotionBuilder repeats every offset in the position channels, so the reader gives zeros
+    there: those constants are coded about 0 (more flags bit 6) and cost a few bits a channel
+    (about the offsets they cost as much as the bones themselves: 1,576 bytes against 1,354
+    here). Bones in the channels with offsets 0 (another exporter's layout) keep the offsets as
+    the base, and a file without constant translations does not set the flag."""
+    from mocodec.codecs.kinwave.body import HEAD, ZERO_CONSTANTS
+    from mocodec.reexpress import with_position_channels
+
+    plain = walk_amc[:240]
+    codec = get_codec("kinwave", max_error_cm=1.0, error_measure="shell")
+    repeated, moved = with_position_channels(plain, keep_offsets=True), with_position_channels(plain)
+    for layout, about_zero in ((repeated, True), (moved, False)):
+        body = codec.encode(layout)
+        assert body[0] == 2 and bool(body[HEAD.size] & ZERO_CONSTANTS) == about_zero
+        decoded = codec.decode(body, layout.skeleton, layout.num_frames, layout.fps)
+        assert _errors(layout, decoded)["shell"] <= 1.0
+    assert len(codec.encode(repeated)) <= len(codec.encode(plain)) + repeated.skeleton.num_channels // 3
+    body = codec.encode(plain)
+    assert body[0] == 1 or not body[HEAD.size] & ZERO_CONSTANTS
+
+
 def test_a_turned_dummy_root_takes_fine_turns(walk_bvh):
     """A constant rotation of a joint with a translation channel below it (a dummy root turned
     (0, 90, 0) above the body's root) is coded at a 64th of its step (more flags bit 5): its
@@ -544,7 +566,7 @@ def test_a_damaged_rest_pose_flag_is_refused(walk_bvh):
     for bad, count in (
         (body[:6] + b"\0" + body[7:], frames),
         (body[:6] + b"\3" + body[7:], frames),
-        (body[:6] + b"\x41" + body[7:], frames),  # bit 6
+        (body[:6] + b"\x81" + body[7:], frames),  # bit 7
         (body, 1),
         (body[:6], frames),
     ):

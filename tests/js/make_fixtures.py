@@ -151,7 +151,8 @@ def live_fixtures() -> dict[str, bytes]:
 #: coding orders, WORLD forms under a turned dummy root), world-axis translations, constant
 #: 6-channel joints, keyframes, an isolated frame, the three wavelets, a rate target, ASF axes and
 #: a leading rest pose (payload format 2) of either kind, a layout's lead (a clip cut off the
-#: frames its wavelet grid falls on) and fine constants (bones in position channels).
+#: frames its wavelet grid falls on), fine constants (bones in position channels) and constants
+#: about 0 (MotionBuilder's offsets repeated in the position channels).
 MOC_CASES = (
     ("bvh-joint", "07_03.bvh", 600, None, None, {}, 256),
     ("asf-30fps-shell", "135_08.amc", 300, 30.0, None, {"max_error_cm": 1.0, "error_measure": "shell"}, 1024),
@@ -164,6 +165,7 @@ MOC_CASES = (
     ("rest-at-zero", "135_08.amc", 200, None, "rest-at-zero", {}, 1024),
     ("lead", "07_03.bvh", 400, None, "cut", {"max_error_cm": 0.2}, 256),
     ("bones-in-channels", "07_03.amc", 200, None, "bones-in-channels", {"max_error_cm": 1.0}, 1024),
+    ("offsets-in-channels", "07_03.amc", 200, None, "offsets-in-channels", {"max_error_cm": 1.0}, 1024),
 )
 
 
@@ -184,6 +186,8 @@ def _reexpressed(motion, how):
         return motion[1:]
     if how == "bones-in-channels":
         return reexpress.with_position_channels(motion)
+    if how == "offsets-in-channels":
+        return reexpress.with_position_channels(motion, keep_offsets=True)
     if how == "zxz":
         return reexpress.with_euler_orders(motion, "ZXZ")
     if how == "glitch":

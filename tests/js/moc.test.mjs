@@ -16,7 +16,7 @@ import { crc32, u32 } from '../../js/src/bytes.js';
 import { seeded } from './seeded.mjs';
 
 const MOC = new URL('../data/moc/', import.meta.url);
-const CASES = ['bvh-joint', 'asf-30fps-shell', 'dummy-root', 'dummy-root-bind', 'zxz-d4', 'haar-bitrate', 'glitch', 'rest-pose', 'rest-at-zero', 'lead', 'bones-in-channels'];
+const CASES = ['bvh-joint', 'asf-30fps-shell', 'dummy-root', 'dummy-root-bind', 'zxz-d4', 'haar-bitrate', 'glitch', 'rest-pose', 'rest-at-zero', 'lead', 'bones-in-channels', 'offsets-in-channels'];
 
 async function fixture(name) {
   const data = new Uint8Array(await readFile(new URL(`${name}.moc`, MOC)));
@@ -89,11 +89,13 @@ test('the cases use every coding form: Euler, vector, coding orders and WORLD on
   assert.ok([...formsSeen].some((f) => f >= 8), 'a WORLD form');
 });
 
-test('the lead case has chunks whose wavelet grid starts early, the bones case fine constants, the dummy roots fine turns', async () => {
+test('the lead case has chunks whose wavelet grid starts early, the bones case fine constants, the offsets case constants about 0, the dummy roots fine turns', async () => {
   const { meta } = await fixture('lead');
   assert.ok(meta.chunks.some((c) => (c.more >> 2) & 3), JSON.stringify(meta.chunks));
   const bones = (await fixture('bones-in-channels')).meta;
-  assert.ok(bones.chunks.every((c) => c.more & 16), JSON.stringify(bones.chunks));
+  assert.ok(bones.chunks.every((c) => c.more & 16 && !(c.more & 64)), JSON.stringify(bones.chunks));
+  const offsets = (await fixture('offsets-in-channels')).meta;
+  assert.ok(offsets.chunks.every((c) => c.more & 64), JSON.stringify(offsets.chunks));
   for (const name of ['dummy-root', 'dummy-root-bind']) {
     const turned = (await fixture(name)).meta;
     assert.ok(turned.chunks.every((c) => c.more & 32), `${name}: ${JSON.stringify(turned.chunks)}`);

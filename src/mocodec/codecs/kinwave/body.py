@@ -15,7 +15,8 @@ Format 2 is format 1 with a byte of more flags after the header: bit 0, frame 0 
 skeleton's rest pose (every rotation 0, the translations frame 1's), bit 1, the rest pose with
 every translation 0 too; that frame is not coded, and the rest is a format 1 body of the other
 frames (:func:`rest_kind`); bits 2-3, the lead of the layout (:func:`trendwave.layout`); bit 4,
-constant translations at a finer quantum (:class:`ConstantCoding`).
+constant translations at a finer quantum, bit 5 constant turns above translations too, bit 6
+constant translations about 0 instead of their joints' offsets (:class:`ConstantCoding`).
 docs/formats.md gives the layout byte by byte.
 """
 
@@ -45,6 +46,7 @@ REST_AT_ZERO = 2  # more flags bit 1: frame 0 is the rest pose with every transl
 LEAD_SHIFT = 2  # more flags bits 2-3: the layout's lead (trendwave.layout), in frames
 FINE_CONSTANTS = 16  # more flags bit 4: constant translations at FINE_CONST_FRACTION of their step
 FINE_TURNS = 32  # more flags bit 5: constant rotations of joints above translation channels, the same
+ZERO_CONSTANTS = 64  # more flags bit 6: constant translations coded about 0, not about their joints' offsets
 CODER_REVISION = 2  # the coefficient coder's revision (coefcoder: differences in the approximation band)
 HEAD = struct.Struct("<BBBBH")  # format, flags, log2 window, levels, channels
 FLAG_OFFSETS = 8  # flags bit 3: a signed step offset per segment follows the step codes
@@ -229,20 +231,23 @@ class ConstantCoding:
     """How constant channels are coded: one knot, ``fraction`` of the joint's step, about
     ``base (C,)``. Format 3: a constant's error is the same in every frame and is not noise
     that the closed loop averages out (a dummy root's rotation turns the whole body), so its
-    quantum is 8 times finer than the step, and a constant translation is coded as its
-    difference from the joint's offset on the decoder's skeleton (a MotionBuilder export
-    repeats every offset in its position channels: these cost one decision each). With
+    quantum is 8 times finer than the step. A constant translation is coded as its difference
+    from the joint's offset on the decoder's skeleton, or with ZERO_CONSTANTS from 0: a file
+    whose position channels hold the bones with the offsets 0 (one exporter's layout) keeps
+    them near its offsets, one whose channels repeat its offsets (MotionBuilder's: the reader
+    takes the offsets off) holds zeros there, and either costs one decision a channel. With
     FINE_CONSTANTS a constant translation's quantum is 8 times finer again: a skeleton whose
-    offsets are 0 and whose bones are constant position channels (another exporter's layout)
-    would otherwise add up a quantum's error along every chain, which the steps then pay. With
-    FINE_TURNS so is a constant rotation of a joint with a translation channel below it: its
-    quantum's error turns that translation, which can be far longer than any bone (a dummy root
-    turned (0, 90, 0) above a body walking metres from the origin)."""
+    offsets are 0 and whose bones are constant position channels would otherwise add up a
+    quantum's error along every chain, which the steps then pay. With FINE_TURNS so is a
+    constant rotation of a joint with a translation channel below it: its quantum's error turns
+    that translation, which can be far longer than any bone (a dummy root turned (0, 90, 0)
+    above a body walking metres from the origin)."""
 
     fraction: np.ndarray  # (C,)
     base: np.ndarray  # (C,)
     fine: bool = False  # the more flag FINE_CONSTANTS
     fine_turns: bool = False  # the more flag FINE_TURNS
+    about_zero: bool = False  # the more flag ZERO_CONSTANTS
 
 
 def turns_over_translations(skeleton: Skeleton) -> np.ndarray:
@@ -260,16 +265,18 @@ def turns_over_translations(skeleton: Skeleton) -> np.ndarray:
 
 
 @lru_cache(maxsize=64)
-def constant_coding(skeleton: Skeleton, fine: bool = False, fine_turns: bool = False) -> ConstantCoding:
+def constant_coding(
+    skeleton: Skeleton, fine: bool = False, fine_turns: bool = False, about_zero: bool = False
+) -> ConstantCoding:
     """The coding of ``skeleton``'s constant channels (shared: its arrays are read-only)."""
-    base = position_offsets(skeleton)
+    base = np.zeros(skeleton.num_channels) if about_zero else position_offsets(skeleton)
     fraction = np.full(skeleton.num_channels, CONST_FRACTION)
     if fine_turns:
         fraction[turns_over_translations(skeleton)] = FINE_CONST_FRACTION
     fraction[~skeleton.rotation_mask] = FINE_CONST_FRACTION if fine else CONST_FRACTION
     fraction.setflags(write=False)
     base.setflags(write=False)
-    return ConstantCoding(fraction, base, fine, fine_turns)
+    return ConstantCoding(fraction, base, fine, fine_turns, about_zero)
 
 
 def reconstruct(
@@ -410,11 +417,13 @@ def decode_body(body: bytes, skeleton: Skeleton, frames: int) -> np.ndarray:
         raise CorruptStreamError(f"kinwave body of {len(body)} bytes is shorter than its {HEAD.size + 1}-byte header")
     more = body[HEAD.size]
     kind, lead = more & 3, (more >> LEAD_SHIFT) & 3
-    if not more or more >> 6 or kind not in (0, REST, REST_AT_ZERO) or frames < 1 + bool(kind):
+    if not more or more >> 7 or kind not in (0, REST, REST_AT_ZERO) or frames < 1 + bool(kind):
         raise CorruptStreamError(
             f"kinwave body's more flags at byte {HEAD.size} are damaged ({more} for {frames} frames)"
         )
-    constants = constant_coding(skeleton, bool(more & FINE_CONSTANTS), bool(more & FINE_TURNS))
+    constants = constant_coding(
+        skeleton, bool(more & FINE_CONSTANTS), bool(more & FINE_TURNS), bool(more & ZERO_CONSTANTS)
+    )
     inner = bytes([FORMAT]) + body[1 : HEAD.size] + body[HEAD.size + 1 :]
     if not kind:
         return _decode_frames(inner, skeleton, frames, lead, constants)

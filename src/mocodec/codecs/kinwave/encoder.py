@@ -29,6 +29,7 @@ from mocodec.codecs.kinwave.body import (
     MAX_ISOLATED,
     MEAN_QUANTUM,
     WAVELET_IDS,
+    ZERO_CONSTANTS,
     ConstantCoding,
     apply_patches,
     channel_steps,
@@ -216,17 +217,21 @@ class Encoder:
         return turns, above & (np.abs(turns[:, 0]) < 1.0 - 1e-12)
 
     def _constant_coding(self) -> ConstantCoding:
-        """Fine constants (:class:`ConstantCoding`): translations where a constant one lies
-        CONST_AWAY_CM or more from its joint's offset on the decoder's skeleton (offsets moved
-        into position channels), rotations where a joint with a translation channel below it
-        holds a constant rotation other than 0 (a turned dummy root)."""
-        coarse = constant_coding(self.output_skeleton)
+        """Constant translations about 0 (ZERO_CONSTANTS) where that is nearer them in all than
+        their joints' offsets on the decoder's skeleton; fine constants (:class:`ConstantCoding`):
+        translations where a constant one lies CONST_AWAY_CM or more from its base, rotations
+        where a joint with a translation channel below it holds a constant rotation other than
+        0 (a turned dummy root)."""
+        offsets = constant_coding(self.output_skeleton)
         if not self.frames:
-            return coarse
-        away = np.abs(self.values[:, 0] - coarse.base) * self.cm >= CONST_AWAY_CM
-        moved = self.const & ~self.skeleton.rotation_mask & away
-        turned = self.const & turns_over_translations(self.skeleton) & (self.values[:, 0] != 0)
-        return constant_coding(self.output_skeleton, moved.any(), turned.any())
+            return offsets
+        held = self.const & ~self.skeleton.rotation_mask
+        first = self.values[:, 0]
+        about_zero = bool(np.abs(first[held]).sum() < np.abs(first[held] - offsets.base[held]).sum())
+        base = np.zeros_like(offsets.base) if about_zero else offsets.base
+        away = np.abs(first - base) * self.cm >= CONST_AWAY_CM
+        turned = self.const & turns_over_translations(self.skeleton) & (first != 0)
+        return constant_coding(self.output_skeleton, (held & away).any(), turned.any(), about_zero)
 
     def _grid_phase(self) -> int | None:
         """Where the wavelet grid goes (:func:`trendwave.grid_phase`, the channels in the
@@ -608,4 +613,5 @@ class Encoder:
         )
         more = self.lead << LEAD_SHIFT | (FINE_CONSTANTS if self.constants.fine else 0)
         more |= FINE_TURNS if self.constants.fine_turns else 0
+        more |= ZERO_CONSTANTS if self.constants.about_zero else 0
         return with_more(body, more) if more else body

@@ -439,14 +439,15 @@ def test_a_clip_cut_off_its_grid_is_coded_on_it(walk_bvh, trim):
 
 def test_bones_in_position_channels_cost_only_their_constants(walk_amc):
     """A skeleton whose offsets are 0 and whose bones are constant position channels (another
-    exporter's layout) takes fine constants (more flags bit 4): at the same steps its worst
-    error is within 2% of the clip's own, so the bound's search lands where it does for the
-    clip, and it costs at most two bytes more a constant (12 bits for a 20 cm bone at a
-    64th of a 0.3 cm step); the clip itself does not take them."""
+    exporter's layout) takes fine constants (more flags bit 4) at the highest effort: at the
+    same steps its worst error is within 2% of the clip's own, so the bound's search lands
+    where it does for the clip, and it costs at most two bytes more a constant (12 bits for a
+    20 cm bone at a 64th of a 0.3 cm step); the clip itself does not take them. The default
+    takes the 8th (as many files grow as shrink with the 64th) and holds the bound too."""
     from mocodec.codecs.kinwave.body import FINE_CONSTANTS
     from mocodec.reexpress import with_position_channels
 
-    codec = get_codec("kinwave", max_error_cm=1.0, error_measure="shell")
+    codec = get_codec("kinwave", max_error_cm=1.0, error_measure="shell", effort=3)
     clip = walk_amc[:300]
     moved = with_position_channels(clip)
     base, bones = BoundSearch(codec, clip), BoundSearch(codec, moved)
@@ -462,6 +463,11 @@ def test_bones_in_position_channels_cost_only_their_constants(walk_amc):
     own = codec.encode(clip)
     assert body[0] == 2 and body[6] & FINE_CONSTANTS and (own[0] == 1 or not own[6] & FINE_CONSTANTS)
     assert _errors(moved, codec.decode(body, moved.skeleton, moved.num_frames, moved.fps))["shell"] <= 1.0
+    default = get_codec("kinwave", max_error_cm=1.0, error_measure="shell")
+    assert not BoundSearch(default, moved).constants.fine
+    coarse = default.encode(moved)
+    assert not coarse[6] & FINE_CONSTANTS and len(coarse) <= 1.05 * len(body)
+    assert _errors(moved, default.decode(coarse, moved.skeleton, moved.num_frames, moved.fps))["shell"] <= 1.0
 
 
 def test_bones_stored_as_float32_cost_what_constant_bones_cost(walk_amc):

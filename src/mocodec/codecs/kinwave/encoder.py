@@ -219,9 +219,11 @@ class Encoder:
     def _constant_coding(self) -> ConstantCoding:
         """Constant translations about 0 (ZERO_CONSTANTS) where that is nearer them in all than
         their joints' offsets on the decoder's skeleton; fine constants (:class:`ConstantCoding`):
-        translations where a constant one lies CONST_AWAY_CM or more from its base, rotations
-        where a joint with a translation channel below it holds a constant rotation other than
-        0 (a turned dummy root)."""
+        at the highest effort translations where a constant one lies CONST_AWAY_CM or more from
+        its base (below it they take the 8th: as many files grow as shrink with the 64th, and
+        the constants' own bytes go; docs/kinwave.md), rotations where a joint with a
+        translation channel below it holds a constant rotation other than 0 (a turned dummy
+        root)."""
         offsets = constant_coding(self.output_skeleton)
         if not self.frames:
             return offsets
@@ -231,7 +233,8 @@ class Encoder:
         base = np.zeros_like(offsets.base) if about_zero else offsets.base
         away = np.abs(first - base) * self.cm >= CONST_AWAY_CM
         turned = self.const & turns_over_translations(self.skeleton) & (first != 0)
-        return constant_coding(self.output_skeleton, (held & away).any(), turned.any(), about_zero)
+        fine = bool((held & away).any()) and self.cfg["effort"] >= 3
+        return constant_coding(self.output_skeleton, fine, turned.any(), about_zero)
 
     def _grid_phase(self) -> int | None:
         """Where the wavelet grid goes (:func:`trendwave.grid_phase`, the channels in the

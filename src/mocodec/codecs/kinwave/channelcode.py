@@ -36,11 +36,11 @@ def _reconstruct(knots, coeffs, const, step, fraction, base, knot_f, coeff_f, se
     trend = np.empty(frames)
     block, signal, a, b = np.empty(widest), np.empty(widest), np.empty(widest), np.empty(widest)
     for r in range(rows):
-        if const[r]:
-            values[:] = base[r] + knots[r, 0] * (step[r] * fraction[r])
-        else:
-            for k in range(knot_frames.size):
-                values[k] = knots[r, k] * (step[r] * knot_quantum[k] * knot_f[k])
+        if const[r]:  # (its trend is the value, its coefficients 0 and its seams without a step)
+            out[r, :] = base[r] + knots[r, 0] * (step[r] * fraction[r])
+            continue
+        for k in range(knot_frames.size):
+            values[k] = knots[r, k] * (step[r] * knot_quantum[k] * knot_f[k])
         _trend_row(values, left, frac, trend)
         residual = np.zeros(frames)
         for s in range(starts.size):

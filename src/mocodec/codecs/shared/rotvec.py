@@ -140,8 +140,14 @@ def _euler_of(q, i, jj, k, proper, eps, angles, t):
         triple = (plus + minus, theta2, plus - minus)
     else:
         triple = ((plus + minus) * eps, theta2 - math.pi / 2.0, plus - minus)
-    for m in range(3):
-        angles[t, m] = (((triple[m] + math.pi) % (2.0 * math.pi)) - math.pi) / _DEG
+    for m in range(3):  # into [-180, 180): Python's float modulo, without its fmod (the
+        # triple lies within a turn of the range, where one turn on or off is exact)
+        wrapped = triple[m] + math.pi
+        if wrapped >= 2.0 * math.pi:
+            wrapped -= 2.0 * math.pi
+        elif wrapped < 0.0:
+            wrapped += 2.0 * math.pi
+        angles[t, m] = (wrapped - math.pi) / _DEG
 
 
 @numba.njit(cache=True)

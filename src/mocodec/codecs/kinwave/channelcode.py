@@ -132,6 +132,17 @@ def _far_coefficients(target, out, const, step, knot_f, far_steps, lay, reach, r
     return marked
 
 
+def _row_steps(const, step, fraction, base) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Each row's constant flag, step, and constant's fraction and base, as the contiguous
+    arrays the kernels are compiled for."""
+    return (
+        np.ascontiguousarray(const, dtype=np.bool_),
+        np.ascontiguousarray(step, dtype=np.float64),
+        np.ascontiguousarray(fraction, dtype=np.float64),
+        np.ascontiguousarray(base, dtype=np.float64),
+    )
+
+
 def reconstruct(
     knots: np.ndarray,
     coeffs: np.ndarray,
@@ -149,13 +160,14 @@ def reconstruct(
     ``base``; each seam's step smoothed over ``half_width`` frames, at most ``seam_limit`` of the
     finer side's step."""
     knot_f, coeff_f, seam_f = factors
+    const, step, fraction, base = _row_steps(const, step, fraction, base)
     return _reconstruct(
         np.ascontiguousarray(knots, dtype=np.int64),
         np.ascontiguousarray(coeffs, dtype=np.int64),
-        np.ascontiguousarray(const, dtype=np.bool_),
-        np.ascontiguousarray(step, dtype=np.float64),
-        np.ascontiguousarray(fraction, dtype=np.float64),
-        np.ascontiguousarray(base, dtype=np.float64),
+        const,
+        step,
+        fraction,
+        base,
         knot_f,
         coeff_f,
         np.asarray(seam_f, dtype=np.float64),
@@ -179,12 +191,13 @@ def quantise(
     """Knots and dead-zone quantised coefficients of ``target (k, T)`` (arguments as
     :func:`reconstruct`'s), and the coefficients in steps before rounding."""
     knot_f, coeff_f, _ = factors
+    const, step, fraction, base = _row_steps(const, step, fraction, base)
     return _quantise(
         np.ascontiguousarray(target, dtype=np.float64),
-        np.ascontiguousarray(const, dtype=np.bool_),
-        np.ascontiguousarray(step, dtype=np.float64),
-        np.ascontiguousarray(fraction, dtype=np.float64),
-        np.ascontiguousarray(base, dtype=np.float64),
+        const,
+        step,
+        fraction,
+        base,
         knot_f,
         coeff_f,
         tuple(trendwave.flat(lay)),

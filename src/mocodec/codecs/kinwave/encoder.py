@@ -154,6 +154,51 @@ def bone_skeleton(skeleton: Skeleton, values: np.ndarray, const: np.ndarray) -> 
     return Skeleton(tuple(joints), skeleton.units_per_metre, skeleton.name)
 
 
+@dataclass
+class DepthPlan:
+    """A depth's channels in a pass (:meth:`Encoder.run_pass`): which of its three-angle joints
+    go in another coding form (their rows among the depth's, orders, forms and mean turns, and
+    per joint its rows for its quaternion), which translations go on the world's axes, its
+    constant flags and constants' coding, and whether it needs its parents' decoded turns."""
+
+    const: np.ndarray
+    constants: ConstantCoding
+    vectors: list[int]  # indices into three_angle_groups
+    cols: list[int]
+    orders: tuple[str, ...]
+    forms: np.ndarray
+    turns: np.ndarray
+    world: bool  # a WORLD form among them
+    vector_joints: list[tuple[int, list[int], str]]  # (joint, its rows, its order)
+    moved: list[tuple[int, list[int]]]  # (joint, its rows) on the world's axes
+    turned: bool
+
+    @classmethod
+    def of(cls, enc: Encoder, channels: np.ndarray) -> DepthPlan:
+        sk, groups = enc.skeleton, three_angle_groups(enc.skeleton)
+        column = {c: i for i, c in enumerate(channels)}
+        vectors = [k for k, (g, _) in enumerate(groups) if len(enc.forms) and enc.forms[k] and g[0] in column]
+        forms = enc.forms[vectors] if vectors else np.zeros(0, dtype=np.int64)
+        moved = [(j, [column[c] for c in pos]) for j, pos in enc.world_translations if pos[0] in column]
+        world = bool((forms >= rotvec.WORLD).any())
+        return cls(
+            const=enc.const[channels],
+            constants=ConstantCoding(enc.constants.fraction[channels], enc.constants.base[channels]),
+            vectors=vectors,
+            cols=[column[c] for k in vectors for c in groups[k][0]],
+            orders=tuple(groups[k][1] for k in vectors),
+            forms=forms,
+            turns=rotvec.mean_quats(enc.means[vectors], MEAN_QUANTUM) if vectors else np.zeros((0, 4)),
+            world=world,
+            vector_joints=[
+                (int(sk.channel_joints[groups[k][0][0]]), [column[c] for c in groups[k][0]], groups[k][1])
+                for k in vectors
+            ],
+            moved=moved,
+            turned=bool(moved) or world,
+        )
+
+
 class Encoder:
     """One body: the passes of the scale search and the final bytes."""
 
@@ -171,6 +216,7 @@ class Encoder:
         self.const = self._constant_channels() if self.frames else np.ones(sk.num_channels, bool)
         self.constants = self._constant_coding()
         self.first_pass: Pass | None = None
+        self._depth_plans: dict[bytes, DepthPlan] = {}
         self.isolated = isolated_frames(self.positions, 2) if self.cfg["keyframes"] else np.zeros(0, np.int64)
         self.rot_joints = rotation_joints(sk)
         self.trans = has_translation(sk)
@@ -461,38 +507,26 @@ class Encoder:
         rotvec_groups = three_angle_groups(sk)
 
         def code(channels: np.ndarray, targets: np.ndarray, exact: dict) -> np.ndarray:
-            step, const = steps[channels], self.const[channels]
-            column = {c: i for i, c in enumerate(channels)}
-            vectors = (
-                [k for k, (g, _) in enumerate(rotvec_groups) if self.forms[k] and g[0] in column]
-                if len(self.forms)
-                else []
-            )
-            moved = [(j, [column[c] for c in pos]) for j, pos in self.world_translations if pos[0] in column]
-            turned = moved or any(self.forms[k] >= rotvec.WORLD for k in vectors)
+            plan = self._depth_plan(channels)
+            step, const, vectors = steps[channels], plan.const, plan.vectors
             parents = (
-                parent_orientations(sk, decoded[:, 0]) if turned else np.zeros((0, 4))
+                parent_orientations(sk, decoded[:, 0]) if plan.turned else np.zeros((0, 4))
             )  # of the decoded rows above
             values = targets.T.copy()
             if vectors:
-                cols = [column[c] for k in vectors for c in rotvec_groups[k][0]]
-                orders = tuple(rotvec_groups[k][1] for k in vectors)
-                forms = self.forms[vectors]
-                turns = rotvec.mean_quats(self.means[vectors], MEAN_QUANTUM)
-                pre = parent_turns(sk, parents)[vectors] if (forms >= rotvec.WORLD).any() else None
+                cols, orders, forms, turns = plan.cols, plan.orders, plan.forms, plan.turns
+                pre = parent_turns(sk, parents)[vectors] if plan.world else None
                 quats = np.stack(
                     [
-                        exact[j] if j in exact else rotvec.euler_quats(values[[column[c] for c in g]], (o,))[:, 0]
-                        for j, (g, o) in (
-                            (sk.channel_joints[rotvec_groups[k][0][0]], rotvec_groups[k]) for k in vectors
-                        )
+                        exact[j] if j in exact else rotvec.euler_quats(values[rows], (o,))[:, 0]
+                        for j, rows, o in plan.vector_joints
                     ],
                     axis=1,
                 )
                 values[cols] = rotvec.to_forms(values[cols], orders, forms, turns, quats, pre)
-            for j, rows in moved:
+            for j, rows in plan.moved:
                 values[rows] = on_axes(values[rows], parents[j])
-            constants = ConstantCoding(self.constants.fraction[channels], self.constants.base[channels])
+            constants = plan.constants
             iso = self.isolated
             wanted = values[:, iso]
             if iso.size:  # the wavelet sees the neighbours' mean there
@@ -506,7 +540,7 @@ class Encoder:
                 patch[const] = 0
                 apply_patches(out, step, iso, patch)
                 patches[channels] = patch
-            for j, rows in moved:
+            for j, rows in plan.moved:
                 out[rows] = on_axes(out[rows], parents[j], inverse=True)
             if vectors:
                 out[cols] = rotvec.from_forms(out[cols], orders, forms, turns, pre)
@@ -519,6 +553,14 @@ class Encoder:
             sk, self.values.T, ~self.const, self.quats, code, self.cfg["closed_loop"], self.positions / self.cm, exact
         )
         return Pass(codes, self.const.astype(np.int64), knots, coeffs, decoded, offsets, patches)
+
+    def _depth_plan(self, channels: np.ndarray) -> DepthPlan:
+        """What a pass needs of a depth's ``channels`` that no pass changes (the forms, means,
+        constant flags and world-axis translations are set before the first pass), made once."""
+        key = channels.tobytes()
+        if key not in self._depth_plans:
+            self._depth_plans[key] = DepthPlan.of(self, channels)
+        return self._depth_plans[key]
 
     def quantise(
         self,

@@ -24,6 +24,7 @@ file's Euler triple nearest the previous frame's (the formula of
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
 import numba
 import numpy as np
@@ -44,9 +45,12 @@ def valid_forms(forms: np.ndarray) -> bool:
     return bool(((forms >= 0) & (forms < 2 * WORLD)).all())
 
 
+@lru_cache(maxsize=1024)
 def _axes(orders: tuple[str, ...]) -> np.ndarray:
-    """``(n, 3)`` axis indices (0 = X) of each joint's rotation order."""
-    return np.array([["XYZ".index(c) for c in o] for o in orders], dtype=np.int64).reshape(-1, 3)
+    """``(n, 3)`` axis indices (0 = X) of each joint's rotation order (shared: read-only)."""
+    axes = np.array([["XYZ".index(c) for c in o] for o in orders], dtype=np.int64).reshape(-1, 3)
+    axes.setflags(write=False)
+    return axes
 
 
 @numba.njit(inline="always")

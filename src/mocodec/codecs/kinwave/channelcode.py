@@ -15,7 +15,8 @@ from mocodec.coding.transforms import periodized, seams, trendwave, wavelets
 
 @numba.njit(inline="always")
 def _trend_row(values, left, frac, out):
-    """The piecewise-linear trend through knot ``values`` at every frame (:func:`trendwave.trend`).
+    """The piecewise-linear trend through knot ``values`` at every frame: the value of the knot
+    before it, moved along the line to the next one by its ``frac``.
     (Computed indices are cast to unsigned here and below: numba then skips its check for a
     negative one in the per-sample loops.)"""
     last = values.size - 1
@@ -110,7 +111,7 @@ def _quantise(target, const, step, fraction, base, knot_f, coeff_f, lay, lo, hi,
 @numba.njit(cache=True)
 def _far_coefficients(target, out, const, step, knot_f, far_steps, lay, reach, reach_at):
     """``(k, N)`` bool: the coefficients whose synthesis reaches a frame where ``out`` misses
-    ``target`` by more than ``far_steps`` of the frame's step (:func:`trendwave.coefficients_at`)."""
+    ``target`` by more than ``far_steps`` of the frame's step (``reach``: :func:`trendwave.reaches`)."""
     knot_frames, left, frac, knot_quantum, starts, lengths, leads, padded, levels, offsets = lay
     rows = target.shape[0]
     marked = np.zeros((rows, int(padded.sum())), dtype=np.bool_)

@@ -8,8 +8,9 @@ transform needs (kinwave.md 4: detrend, zero-pad to a multiple of 2^levels, peri
 segment's residual is transformed on its own (CDF 9/7 by default), so segments are the unit
 of streaming delay.
 
-Encoder and decoder reconstruct through the same functions (:func:`trend`, :func:`synthesise`)
-on the same integers, so the encoder knows the decoder's output bit for bit.
+This module lays the segments and knots out (:func:`layout`) and gives compiled coders the
+layout as flat arrays (:func:`flat`, :func:`reaches`); encoder and decoder reconstruct through
+the same kernels on the same integers, so the encoder knows the decoder's output bit for bit.
 """
 
 from __future__ import annotations
@@ -41,7 +42,6 @@ class Layout:
     left: np.ndarray  # (T,) knot index before each frame
     frac: np.ndarray  # (T,) position between knot `left` and the next one
     knot_quantum: np.ndarray  # (K,) knot step relative to the channel's step
-    blocks: tuple  # segments with a block, grouped by (length, levels): (n, levels, segs, offsets)
 
     @property
     def num_knots(self) -> int:
@@ -106,7 +106,6 @@ def layout(frames: int, window: int, levels: int, keyframes: int, wavelet: str =
         left,
         frac,
         quantum,
-        _blocks(padded, seg_levels),
     )
 
 
@@ -131,39 +130,6 @@ def grid_phase(scaled: np.ndarray, wavelet: str, skip: int = 0) -> int | None:
     return best if costs[best] < LEAD_GAIN * costs.max() else None
 
 
-def trend(knot_values: np.ndarray, lay: Layout) -> np.ndarray:
-    """The piecewise-linear trend ``(channels, T)`` through ``knot_values (channels, K)``."""
-    right = np.minimum(lay.left + 1, lay.num_knots - 1)
-    a, b = knot_values[:, lay.left], knot_values[:, right]
-    return a + (b - a) * lay.frac
-
-
-def _blocks(padded: np.ndarray, levels: np.ndarray) -> tuple:
-    """Segments with a block, grouped by (padded length, levels), with their coefficient
-    offsets: each group is transformed in one call."""
-    offsets = np.concatenate([[0], np.cumsum(padded)[:-1]]).astype(np.int64)
-    groups: dict[tuple[int, int], list[int]] = {}
-    for s in np.flatnonzero(padded):
-        groups.setdefault((int(padded[s]), int(levels[s])), []).append(int(s))
-    return tuple((n, lev, np.array(segs), offsets[segs]) for (n, lev), segs in groups.items())
-
-
-def analyse(residual: np.ndarray, lay: Layout) -> np.ndarray:
-    """Wavelet coefficients ``(channels, N)`` of each segment of ``residual (channels, T)``,
-    zero-padded to its block length, coarsest band first."""
-    channels = residual.shape[0]
-    out = np.zeros((channels, lay.num_coeffs))
-    for n, lev, segs, offs in lay.blocks:
-        block = np.zeros((channels, segs.size, n))
-        for k, s in enumerate(segs):
-            a, m, z = lay.starts[s], lay.lengths[s], lay.leads[s]
-            block[:, k, z : z + m] = residual[:, a : a + m]
-        coeffs = wavelets.forward(block.reshape(-1, n), lay.wavelet, lev).reshape(channels, segs.size, n)
-        for k, o in enumerate(offs):
-            out[:, o : o + n] = coeffs[:, k]
-    return out
-
-
 @lru_cache(maxsize=64)
 def _reach(n: int, levels: int, wavelet: str) -> np.ndarray:
     """``(frames, coefficients)`` 0/1 of a block: which coefficients' synthesis functions
@@ -172,21 +138,6 @@ def _reach(n: int, levels: int, wavelet: str) -> np.ndarray:
     reach = (synthesis > 0.05 * synthesis.max(axis=0)).astype(np.float64)
     reach.setflags(write=False)
     return reach
-
-
-def coefficients_at(frames: np.ndarray, lay: Layout) -> np.ndarray:
-    """``(channels, N)`` bool: the coefficients whose synthesis reaches any frame marked in
-    ``frames (channels, T)`` (of the same segment)."""
-    out = np.zeros((frames.shape[0], lay.num_coeffs), dtype=bool)
-    for n, lev, segs, offs in lay.blocks:
-        reach = _reach(n, lev, lay.wavelet)
-        for s, o in zip(segs, offs):
-            a, m, z = lay.starts[s], lay.lengths[s], lay.leads[s]
-            marked = frames[:, a : a + m]
-            rows = np.flatnonzero(marked.any(axis=1))
-            if rows.size:
-                out[rows, o : o + n] = marked[rows].astype(np.float64) @ reach[z : z + m] > 0
-    return out
 
 
 class Flat(NamedTuple):
@@ -225,8 +176,8 @@ def flat(lay: Layout) -> Flat:
 @lru_cache(maxsize=256)
 def reaches(lay: Layout) -> tuple[np.ndarray, np.ndarray]:
     """Every block's :func:`_reach` (u8, ``(frames, coefficients)`` flattened, one copy per block
-    shape) and where each segment's starts (-1: no block): :func:`coefficients_at` for compiled
-    kernels."""
+    shape) and where each segment's starts (-1: no block): which coefficients a frame's error
+    reaches, for compiled kernels."""
     parts: list[np.ndarray] = []
     at = np.full(lay.starts.size, -1, dtype=np.int64)
     first: dict[tuple[int, int], int] = {}
@@ -238,16 +189,3 @@ def reaches(lay: Layout) -> tuple[np.ndarray, np.ndarray]:
             first[key], size = size, size + parts[-1].size
         at[s] = first[key]
     return (np.concatenate(parts) if parts else np.zeros(0, dtype=np.uint8)), at
-
-
-def synthesise(coeffs: np.ndarray, lay: Layout) -> np.ndarray:
-    """Inverse of :func:`analyse`: the residual ``(channels, T)`` (zero where no block)."""
-    channels = coeffs.shape[0]
-    out = np.zeros((channels, lay.frames))
-    for n, lev, segs, offs in lay.blocks:
-        block = np.stack([coeffs[:, o : o + n] for o in offs], axis=1).reshape(-1, n)
-        signal = wavelets.inverse(block, n, lay.wavelet, lev).reshape(channels, segs.size, n)
-        for k, s in enumerate(segs):
-            a, m, z = lay.starts[s], lay.lengths[s], lay.leads[s]
-            out[:, a : a + m] = signal[:, k, z : z + m]
-    return out

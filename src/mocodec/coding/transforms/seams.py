@@ -31,15 +31,10 @@ def smooth_seams(x: np.ndarray, seams, half_width: int, limits: np.ndarray | Non
     explain there), so finely coded or naturally jerky motion keeps its detail. Steps are
     measured on ``x`` as given: seams closer than ``half_width`` plus :data:`CONTEXT` frames
     see each other's input, not each other's output."""
-    out = np.array(x, dtype=np.float64, copy=True)
+    rows = np.array(np.asarray(x, dtype=np.float64).T, order="C")  # (the kernel's layout: a copy)
     seams = np.asarray(seams, dtype=np.int64)
-    inside = (seams >= 3) & (seams + 3 <= len(out))
-    if not inside.any():
-        return out
-    where = seams[inside]
-    bound = np.full((where.size, out.shape[1]), np.inf) if limits is None else np.asarray(limits)[inside]
-    rows = np.ascontiguousarray(out.T)
-    _smooth(rows, where, np.ascontiguousarray(bound, dtype=np.float64), ramp(half_width), _EXTRAPOLATE, _PROBES)
+    bound = np.full((seams.size, rows.shape[0]), np.inf) if limits is None else np.asarray(limits, dtype=np.float64)
+    smooth_rows(rows, seams, np.ascontiguousarray(bound), ramp(half_width))
     return np.ascontiguousarray(rows.T)
 
 

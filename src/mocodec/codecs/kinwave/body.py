@@ -236,7 +236,7 @@ class ConstantCoding:
     from the joint's offset on the decoder's skeleton, or with ZERO_CONSTANTS from 0: a file
     whose position channels hold the bones with the offsets 0 (one exporter's layout) keeps
     them near its offsets, one whose channels repeat its offsets (MotionBuilder's: the reader
-    takes the offsets off) holds zeros there, and either costs one decision a channel. With
+    takes the offsets off) holds zeros there, and either costs a few bits a channel. With
     FINE_CONSTANTS a constant translation's quantum is 8 times finer again: a skeleton whose
     offsets are 0 and whose bones are constant position channels would otherwise add up a
     quantum's error along every chain, which the steps then pay. With FINE_TURNS so is a

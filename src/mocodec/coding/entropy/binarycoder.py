@@ -165,30 +165,21 @@ def put_int(st, buf, state, v, zctx, uctx, ulen, mctx, sctx):
 @numba.njit(inline="always")
 def get_int(st, data, state, zctx, uctx, ulen, mctx, sctx):
     """Inverse of :func:`put_int`, its adaptive decisions through one call of :func:`get`."""
-    k, m, step, done = 0, 1, 0, False
-    while not done:
-        if step == 0:
-            ctx = zctx
-        elif step == 1 and k < MAX_CLASS:
-            ctx = uctx + min(k, ulen - 1)
-        else:
-            ctx = mctx + k
+    k, m, phase = 0, 1, 0  # phases: 0 the zero flag, 1 the class in unary, 2 the top mantissa bit
+    while phase < 3:
+        ctx = zctx if phase == 0 else (uctx + min(k, ulen - 1) if phase == 1 else mctx + k)
         bit = get(st, data, state, ctx)
-        if step == 0:
+        if phase == 0:
             if bit == 0:
                 return 0
-            step = 1
-        elif step == 1 and k < MAX_CLASS:
-            if bit == 1:
-                k += 1
-            else:
-                step = 2
-                done = k == 0
+            phase = 1
+        elif phase == 1:
+            k += bit
+            if bit == 0 or k == MAX_CLASS:
+                phase = 2 if k > 0 else 3
         else:
             m = (m << 1) | bit
-            done = True
-        if step == 1 and k == MAX_CLASS:
-            step, done = 2, k == 0
+            phase = 3
     for _ in range(k - 1):
         m = (m << 1) | get_even(st, data)
     return -m if get(st, data, state, sctx) == 1 else m

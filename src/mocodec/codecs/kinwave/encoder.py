@@ -105,6 +105,11 @@ def leading_jumps(positions_cm: np.ndarray) -> np.ndarray:
     return moves[:2] > max(2.0 * np.percentile(moves[2:], 99) + 1.0, JUMP_CM)
 
 
+def _angle_rows(joints: np.ndarray) -> np.ndarray:
+    """The rows of three-angle joints ``joints`` in an array of their angles, three a joint."""
+    return (3 * joints[:, None] + np.arange(3)).ravel()
+
+
 @dataclass
 class Pass:
     steps: np.ndarray  # u8 codes: rotation joints, then translation
@@ -416,12 +421,12 @@ class Encoder:
             """Each joint ``idx[e]`` (of ``live``) coded in ``forms[e]``, all in one batch (each
             joint's rows are coded on their own): (bytes, nonzero coefficients, mean rotation
             error) per entry, infinite bytes within GIMBAL_MARGIN of the form's lock."""
-            rows = (3 * idx[:, None] + np.arange(3)).ravel()
+            rows = _angle_rows(idx)
             sub, kept = euler[rows], tuple(orders[i] for i in idx)
             values = sub.copy()
             moved = np.flatnonzero(forms)  # form 0: the file's Euler angles as they are
             if moved.size:
-                cols = (3 * moved[:, None] + np.arange(3)).ravel()
+                cols = _angle_rows(moved)
                 tb = tuple(kept[e] for e in moved)
                 values[cols] = rotvec.to_forms(sub[cols], tb, forms[moved], turns[idx[moved]], pre=pre[idx[moved]])
             base = forms % rotvec.WORLD
@@ -434,8 +439,8 @@ class Encoder:
             back = np.empty((rec.shape[1], idx.size, 4))
             kept_as_is = np.flatnonzero(forms == 0)
             if kept_as_is.size:
-                same = (3 * kept_as_is[:, None] + np.arange(3)).ravel()
-                back[:, kept_as_is] = rotvec.euler_quats(rec[same], tuple(kept[e] for e in kept_as_is))
+                as_is_orders = tuple(kept[e] for e in kept_as_is)
+                back[:, kept_as_is] = rotvec.euler_quats(rec[_angle_rows(kept_as_is)], as_is_orders)
             if moved.size:
                 back[:, moved] = rotvec.form_quats(rec[cols], tb, forms[moved], turns[idx[moved]], pre[idx[moved]])
             err = np.maximum(rotations.quat_distance(original[:, idx], back).mean(axis=0), 1e-12)

@@ -41,6 +41,7 @@ class ChannelPlan:
     has_axis: np.ndarray  # (J,) bool
     offsets: np.ndarray  # (J, 3)
     parents: np.ndarray  # (J,)
+    rot_columns: np.ndarray  # the rotation channels, ascending
 
 
 @lru_cache(maxsize=64)
@@ -70,6 +71,7 @@ def channel_plan(skeleton: Skeleton) -> ChannelPlan:
         has_axis,
         np.ascontiguousarray(skeleton.offsets, dtype=np.float64),
         skeleton.parents.astype(np.int64),
+        np.sort(rot_index[rot_index >= 0]),
     )
 
 
@@ -164,11 +166,17 @@ def _checked(skeleton: Skeleton, channels: np.ndarray) -> np.ndarray:
     return channels
 
 
-def _half_angles(channels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """cos and sin of every channel's half angle, by numpy's vectorised (SIMD) trigonometry,
-    which is several times faster than the scalar calls inside the loop."""
-    half = channels * (np.pi / 360.0)
-    return np.cos(half), np.sin(half)
+@numba.njit(cache=True)
+def _half_angles(channels: np.ndarray, columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """cos and sin of the half angle of the rotation ``columns`` of every frame (the other
+    columns are left unset: translations need no trigonometry, and are half of a
+    MotionBuilder or game-engine export's channels)."""
+    cos_half, sin_half = np.empty_like(channels), np.empty_like(channels)
+    for f in range(channels.shape[0]):
+        for c in columns:
+            half = channels[f, c] * (np.pi / 360.0)
+            cos_half[f, c], sin_half[f, c] = np.cos(half), np.sin(half)
+    return cos_half, sin_half
 
 
 def _run(skeleton: Skeleton, channels: np.ndarray, want_local: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -179,7 +187,7 @@ def _run(skeleton: Skeleton, channels: np.ndarray, want_local: bool) -> tuple[np
     local = np.empty((frames, joints, 4) if want_local else (0, 0, 4))
     _fk_kernel(
         channels,
-        *_half_angles(channels),
+        *_half_angles(channels, plan.rot_columns),
         plan.rot_index,
         plan.rot_axis,
         plan.pos_index,

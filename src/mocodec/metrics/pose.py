@@ -48,9 +48,28 @@ class JointErrors:
         return float(self.per_frame.max()) if self.per_frame.size else 0.0
 
 
-def joint_errors(positions_cm: np.ndarray, decoded_positions_cm: np.ndarray) -> JointErrors:
-    """Pivot position errors (cm) of ``(frames, joints, 3)`` arrays."""
-    return JointErrors(np.linalg.norm(decoded_positions_cm - positions_cm, axis=2))
+def joint_errors(positions_cm: np.ndarray, decoded_positions_cm: np.ndarray, scale: float = 1.0) -> JointErrors:
+    """Pivot position errors (cm) of ``(frames, joints, 3)`` arrays, the decoded positions in
+    units of 1/``scale`` cm."""
+    out = np.empty(positions_cm.shape[:2])
+    _distance_kernel(
+        np.ascontiguousarray(positions_cm, dtype=np.float64),
+        np.ascontiguousarray(decoded_positions_cm, dtype=np.float64),
+        float(scale),
+        out,
+    )
+    return JointErrors(out)
+
+
+@numba.njit(cache=True)
+def _distance_kernel(pos, dpos, scale, out):
+    """|scale dpos - pos| of every frame and joint, in one loop (no temporaries)."""
+    for f in range(pos.shape[0]):
+        for j in range(pos.shape[1]):
+            ex = dpos[f, j, 0] * scale - pos[f, j, 0]
+            ey = dpos[f, j, 1] * scale - pos[f, j, 1]
+            ez = dpos[f, j, 2] * scale - pos[f, j, 2]
+            out[f, j] = np.sqrt(ex * ex + ey * ey + ez * ez)
 
 
 def bone_joints(skeleton: Skeleton) -> np.ndarray:

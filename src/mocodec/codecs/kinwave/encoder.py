@@ -54,7 +54,7 @@ from mocodec.codecs.shared import closedloop, rotvec
 from mocodec.coding.entropy import coefcoder
 from mocodec.coding.transforms import trendwave
 from mocodec.kinematics import channel_plan, forward_kinematics
-from mocodec.metrics.pose import bone_joints, shell_errors
+from mocodec.metrics.pose import bone_joints, joint_errors as distances, shell_errors
 from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
@@ -635,10 +635,9 @@ class Encoder:
         """``(frames, points)`` cm: the decoded output's error at every joint, or at the worst
         shell point of every bone."""
         pos, quat = forward_kinematics(self.output_skeleton, decoded.T)
-        pos = pos * self.cm
         if self.cfg["error_measure"] == "shell":
-            return shell_errors(self.skeleton, self.positions, self.quats, pos, quat).per_frame
-        return np.linalg.norm(pos - self.positions, axis=2)
+            return shell_errors(self.skeleton, self.positions, self.quats, pos * self.cm, quat).per_frame
+        return distances(self.positions, pos, self.cm).per_frame
 
     def error(self, decoded: np.ndarray) -> float:
         err = self.joint_errors(decoded)

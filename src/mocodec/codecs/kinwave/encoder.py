@@ -381,7 +381,8 @@ class Encoder:
         so there only the body's root (the first joint that turns,
         below any dummy root) and joints near their gimbal lock may change form; a joint whose
         angles are all constant keeps them always. All joints go through each transform
-        together; only the byte counts are per joint."""
+        together; only the byte counts are per joint. The Tait-Bryan form in the file's own order
+        is form 0 and is not tried twice."""
         groups = three_angle_groups(self.skeleton)
         choice = np.zeros(len(groups), dtype=np.int64)
         moving = [k for k, (channels, _) in enumerate(groups) if not self.const[channels].all()]
@@ -408,9 +409,9 @@ class Encoder:
         )
         step = channel_steps(self.skeleton, self.codes(self.first_scale()))[channels]
         factors = segment_factors(np.zeros(lay.starts.size), lay)
-        original = rotvec.euler_quats(euler, orders)
         pre = self.turns[live]
         whole = rotvec.euler_quats(self.values[channels], orders)
+        original = whole[: euler.shape[1]].copy()
         turned = np.flatnonzero(self.turned[live])
         whole[:, turned] = rotations.quat_multiply(pre[turned][None], whole[:, turned])
         means = rotvec.mean_codes(whole, MEAN_QUANTUM, MEAN_LEAST)  # of pre q for the joints that may turn
@@ -443,13 +444,17 @@ class Encoder:
                 back[:, kept_as_is] = rotvec.euler_quats(rec[_angle_rows(kept_as_is)], as_is_orders)
             if moved.size:
                 back[:, moved] = rotvec.form_quats(rec[cols], tb, forms[moved], turns[idx[moved]], pre[idx[moved]])
-            err = np.maximum(rotations.quat_distance(original[:, idx], back).mean(axis=0), 1e-12)
+            err = np.maximum(rotvec.mean_distances(original[:, idx], back), 1e-12)
             nonzero = (c_int != 0).reshape(idx.size, -1).sum(axis=1)
             return np.where(locked, np.inf, sizes), nonzero, err
 
-        local = np.flatnonzero(~self.turned[live])
-        candidates = [(form, local) for form in range(rotvec.FORMS)]
-        candidates += [(rotvec.WORLD + form, turned) for form in range(rotvec.FORMS)]
+        own = np.array([2 + rotvec.CODING_ORDERS.index(o) if o in rotvec.CODING_ORDERS else -1 for o in orders])
+        local = ~self.turned[live]
+        candidates = [
+            (base + form, np.flatnonzero(joints & (own != form)))  # (the file's own order is form 0)
+            for base, joints in ((0, local), (rotvec.WORLD, ~local))
+            for form in range(rotvec.FORMS)
+        ]
         entry_forms = np.concatenate([np.full(idx.size, form) for form, idx in candidates]).astype(np.int64)
         entry_joints = np.concatenate([idx for _, idx in candidates]).astype(np.int64)
         sizes, nonzero, err = trial(entry_forms, entry_joints)

@@ -91,26 +91,26 @@ def _quats_kernel(euler, axes):
 
 
 @numba.njit(cache=True)
-def _vectors_kernel(q):
-    """Rotation vectors (degrees) of quaternions ``(T, n, 4)``, signs made continuous in time
-    from a frame 0 on the short way round."""
-    frames, joints = q.shape[0], q.shape[1]
+def _vectors_kernel(quats, means):
+    """Rotation vectors (degrees) of quaternions ``quats (T, n, 4)`` about each joint's
+    mean ``means (n, 4)`` (conj(mean) q), signs made continuous in time from a frame 0 on the
+    short way round."""
+    frames, joints = quats.shape[0], quats.shape[1]
     out = np.empty((frames, joints, 3))
+    q = np.empty(4)
+    last = np.empty(4)
     for j in range(joints):
-        sign = 1.0 if frames == 0 or q[0, j, 0] >= 0.0 else -1.0  # frame 0 turns by at most 180 degrees
+        mw, mx, my, mz = means[j, 0], -means[j, 1], -means[j, 2], -means[j, 3]
+        sign = 1.0
         for t in range(frames):
-            if (
-                t > 0
-                and (
-                    q[t, j, 0] * q[t - 1, j, 0]
-                    + q[t, j, 1] * q[t - 1, j, 1]
-                    + q[t, j, 2] * q[t - 1, j, 2]
-                    + q[t, j, 3] * q[t - 1, j, 3]
-                )
-                < 0.0
-            ):
+            r = quats[t, j]
+            q[0], q[1], q[2], q[3] = quat_product(mw, mx, my, mz, r[0], r[1], r[2], r[3])
+            if t == 0:
+                sign = 1.0 if q[0] >= 0.0 else -1.0  # frame 0 turns by at most 180 degrees
+            elif q[0] * last[0] + q[1] * last[1] + q[2] * last[2] + q[3] * last[3] < 0.0:
                 sign = -sign
-            w, x, y, z = q[t, j, 0], q[t, j, 1], q[t, j, 2], q[t, j, 3]
+            last[:] = q
+            w, x, y, z = q[0], q[1], q[2], q[3]
             norm = math.sqrt(w * w + x * x + y * y + z * z)
             w, x, y, z = sign * w / norm, sign * x / norm, sign * y / norm, sign * z / norm
             vn = math.sqrt(x * x + y * y + z * z)
@@ -267,8 +267,7 @@ def to_forms(
     out = np.empty((rows.shape[1], len(orders), 3))
     vector = forms % WORLD == VECTOR
     if vector.any():
-        turned = rotations.quat_multiply(rotations.quat_conjugate(means[vector])[None], quats[:, vector])
-        out[:, vector] = _vectors_kernel(np.ascontiguousarray(turned))
+        out[:, vector] = _vectors_kernel(np.ascontiguousarray(quats[:, vector]), np.ascontiguousarray(means[vector]))
     if (~vector).any():
         kept = tuple(o for o, v in zip(orders, vector) if not v)
         out[:, ~vector] = _quat_euler_kernel(np.ascontiguousarray(quats[:, ~vector]), _form_axes(forms[~vector], kept))

@@ -208,7 +208,7 @@ def test_compiled_wavelets_give_pywavelets_floats(wavelet):
 def test_compiled_rows_quantise_within_half_a_step_and_round_where_far():
     """rows.quantise then rows.reconstruct: plain rounding (dead zone 0.5) misses a smooth signal
     by at most about half a step; a wide dead zone misses by more, and the coefficients reaching
-    the frames it misses far are the ones far_coefficients marks."""
+    rounding the coefficients that reach the frames it misses far (round_far) brings them closer."""
     rng = np.random.default_rng(4)
     lay = trendwave.layout(300, 128, 4, 1)
     x = np.cumsum(rng.normal(size=(4, 300)), axis=1) * 3.0
@@ -225,9 +225,9 @@ def test_compiled_rows_quantise_within_half_a_step_and_round_where_far():
     _, coarse, _ = channelcode.quantise(x, const, step, fraction, base, lay, factors, 0.2)
     assert np.count_nonzero(coarse) < np.count_nonzero(coeffs)
     rough = channelcode.reconstruct(knots, coarse, const, step, fraction, base, lay, factors, 1.0, 8)
-    far = channelcode.far_coefficients(x, rough, const, step, factors[0], 0.7, lay)
-    assert far.any() and not far[2].any()
-    nearest = np.where(far, np.sign(scaled) * np.floor(np.abs(scaled) + 0.5), coarse).astype(np.int64)
+    nearest, changed = channelcode.round_far(x, rough, const, step, factors[0], 0.7, scaled, coarse, lay)
+    assert changed.any() and not changed[2] and (nearest[~changed] == coarse[~changed]).all()
+    assert (np.abs(nearest - scaled)[nearest != coarse] <= 0.5).all()  # the nearest integers
     fixed = channelcode.reconstruct(knots, nearest, const, step, fraction, base, lay, factors, 1.0, 8)
     assert (np.abs(fixed - x).max(axis=1) < np.abs(rough - x).max(axis=1) + 1e-12).all()
 

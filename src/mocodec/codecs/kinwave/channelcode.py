@@ -109,15 +109,19 @@ def _quantise(target, const, step, fraction, base, knot_f, coeff_f, lay, lo, hi,
 
 
 @numba.njit(cache=True)
-def _far_coefficients(target, out, const, step, knot_f, far_steps, lay, reach, reach_at):
-    """``(k, N)`` bool: the coefficients whose synthesis reaches a frame where ``out`` misses
-    ``target`` by more than ``far_steps`` of the frame's step (``reach``: :func:`trendwave.reaches`)."""
+def _round_far(target, out, const, step, knot_f, far_steps, scaled, coeffs, lay, reach, reach_at):
+    """Round to the nearest integer, in place in ``coeffs``, the coefficients whose synthesis
+    reaches a frame where ``out`` misses ``target`` by more than ``far_steps`` of the frame's
+    step (``reach``: :func:`trendwave.reaches`; ``scaled``: the coefficients in steps before
+    rounding). Returns ``(k,)`` bool: the rows that changed."""
     knot_frames, left, frac, knot_quantum, starts, lengths, leads, padded, levels, offsets = lay
     rows = target.shape[0]
-    marked = np.zeros((rows, int(padded.sum())), dtype=np.bool_)
+    marked = np.zeros(int(padded.sum()), dtype=np.bool_)
+    changed = np.zeros(rows, dtype=np.bool_)
     for r in range(rows):
         if const[r]:
             continue
+        marked[:] = False
         for s in range(starts.size):
             n = padded[s]
             if n == 0:
@@ -129,8 +133,16 @@ def _far_coefficients(target, out, const, step, knot_f, far_steps, lay, reach, r
                     row = at + (leads[s] + t) * n
                     for i in range(n):
                         if reach[row + i]:
-                            marked[r, o + i] = True
-    return marked
+                            marked[o + i] = True
+        for i in range(marked.size):
+            if marked[i]:
+                c = scaled[r, i]
+                v = np.int64(np.floor(abs(c) + 0.5))
+                nearest = v if c > 0 else (-v if c < 0 else 0)
+                if nearest != coeffs[r, i]:
+                    coeffs[r, i] = nearest
+                    changed[r] = True
+    return changed
 
 
 def _row_steps(const, step, fraction, base) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -207,25 +219,32 @@ def quantise(
     )
 
 
-def far_coefficients(
+def round_far(
     target: np.ndarray,
     out: np.ndarray,
     const: np.ndarray,
     step: np.ndarray,
     knot_f: np.ndarray,
     far_steps: float,
+    scaled: np.ndarray,
+    coeffs: np.ndarray,
     lay: trendwave.Layout,
-) -> np.ndarray:
-    """``(k, N)`` bool: the coefficients reaching a frame where the reconstruction ``out`` misses
-    ``target`` by more than ``far_steps`` of the frame's step (``step (k,)`` times its knot's
-    factor); constant rows none."""
-    return _far_coefficients(
+) -> tuple[np.ndarray, np.ndarray]:
+    """``coeffs`` with those reaching a frame where the reconstruction ``out`` misses ``target``
+    by more than ``far_steps`` of the frame's step (``step (k,)`` times its knot's factor)
+    rounded to the nearest integer of ``scaled`` (the coefficients in steps before the dead
+    zone), constant rows untouched; and ``(k,)`` bool: the rows that changed."""
+    rounded = np.array(coeffs, dtype=np.int64, order="C")
+    changed = _round_far(
         np.ascontiguousarray(target, dtype=np.float64),
         out,
         np.ascontiguousarray(const, dtype=np.bool_),
         np.ascontiguousarray(step, dtype=np.float64),
         knot_f,
         float(far_steps),
+        np.ascontiguousarray(scaled, dtype=np.float64),
+        rounded,
         tuple(trendwave.flat(lay)),
         *trendwave.reaches(lay),
     )
+    return rounded, changed

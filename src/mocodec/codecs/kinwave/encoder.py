@@ -615,12 +615,10 @@ class Encoder:
         knots, coeffs, const = integers
         if self.cfg["error_measure"] == "mean" or self.cfg["deadzone"] >= 0.5:
             return coeffs, out  # a mean is not set by single frames; plain rounding already
-        far = channelcode.far_coefficients(target, out, const, step[:, 0], factors[0], FAR_STEPS, self.lay)
-        if not far.any():
-            return coeffs, out
-        nearest = np.sign(scaled) * np.floor(np.abs(scaled) + 0.5)
-        rounded = np.where(far, nearest, coeffs).astype(np.int64)
-        changed = np.flatnonzero((rounded != coeffs).any(axis=1))
+        rounded, moved = channelcode.round_far(
+            target, out, const, step[:, 0], factors[0], FAR_STEPS, scaled, coeffs, self.lay
+        )
+        changed = np.flatnonzero(moved)
         if not changed.size:
             return coeffs, out
         coeffs, out = rounded, out.copy()

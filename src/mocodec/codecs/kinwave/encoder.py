@@ -162,7 +162,7 @@ def bone_skeleton(skeleton: Skeleton, values: np.ndarray, const: np.ndarray) -> 
 @dataclass
 class DepthPlan:
     """A depth's channels in a pass (:meth:`Encoder.run_pass`): which of its three-angle joints
-    go in another coding form (their rows among the depth's, orders, forms and mean turns, and
+    go in another coding form (their rows among the depth's, their :class:`rotvec.FormSet`, and
     per joint its rows for its quaternion), which translations go on the world's axes, its
     constant flags and constants' coding, and whether it needs its parents' decoded turns."""
 
@@ -170,9 +170,7 @@ class DepthPlan:
     constants: ConstantCoding
     vectors: list[int]  # indices into three_angle_groups
     cols: list[int]
-    orders: tuple[str, ...]
-    forms: np.ndarray
-    turns: np.ndarray
+    form_set: rotvec.FormSet
     world: bool  # a WORLD form among them
     vector_joints: list[tuple[int, list[int], str]]  # (joint, its rows, its order)
     moved: list[tuple[int, list[int]]]  # (joint, its rows) on the world's axes
@@ -191,9 +189,11 @@ class DepthPlan:
             constants=ConstantCoding(enc.constants.fraction[channels], enc.constants.base[channels]),
             vectors=vectors,
             cols=[column[c] for k in vectors for c in groups[k][0]],
-            orders=tuple(groups[k][1] for k in vectors),
-            forms=forms,
-            turns=rotvec.mean_quats(enc.means[vectors], MEAN_QUANTUM) if vectors else np.zeros((0, 4)),
+            form_set=rotvec.FormSet(
+                tuple(groups[k][1] for k in vectors),
+                forms,
+                rotvec.mean_quats(enc.means[vectors], MEAN_QUANTUM) if vectors else np.zeros((0, 4)),
+            ),
             world=world,
             vector_joints=[
                 (int(sk.channel_joints[groups[k][0][0]]), [column[c] for c in groups[k][0]], groups[k][1])
@@ -524,7 +524,7 @@ class Encoder:
             )  # of the decoded rows above
             values = targets.T.copy()
             if vectors:
-                cols, orders, forms, turns = plan.cols, plan.orders, plan.forms, plan.turns
+                cols = plan.cols
                 pre = parent_turns(sk, parents)[vectors] if plan.world else None
                 quats = np.stack(
                     [
@@ -533,7 +533,7 @@ class Encoder:
                     ],
                     axis=1,
                 )
-                values[cols] = rotvec.to_forms(values[cols], orders, forms, turns, quats, pre)
+                values[cols] = plan.form_set.to_forms(values[cols], quats, pre)
             for j, rows in plan.moved:
                 values[rows] = on_axes(values[rows], parents[j])
             constants = plan.constants
@@ -553,7 +553,7 @@ class Encoder:
             for j, rows in plan.moved:
                 out[rows] = on_axes(out[rows], parents[j], inverse=True)
             if vectors:
-                out[cols] = rotvec.from_forms(out[cols], orders, forms, turns, pre)
+                out[cols] = plan.form_set.from_forms(out[cols], pre)
             decoded[channels] = out
             return out.T
 

@@ -238,16 +238,62 @@ def _form_axes(forms: np.ndarray, orders: tuple[str, ...]) -> np.ndarray:
     return _axes(tuple(CODING_ORDERS[f - 2] if f >= 2 else o for f, o in zip(base, orders)))
 
 
-def _turned(quats: np.ndarray, forms: np.ndarray, pre: np.ndarray | None, inverse: bool) -> np.ndarray:
-    """``quats (T, n, 4)`` with the WORLD joints' turned by ``pre (n, 4)`` on the left (by its
-    conjugate with ``inverse``)."""
-    world = np.asarray(forms) >= WORLD
+def _turned(quats: np.ndarray, world: np.ndarray, pre: np.ndarray | None, inverse: bool) -> np.ndarray:
+    """``quats (T, n, 4)`` with the ``world`` joints' turned by ``pre (n, 4)`` on the left (by
+    its conjugate with ``inverse``)."""
     if pre is None or not world.any():
         return quats
     turn = pre[world] if not inverse else rotations.quat_conjugate(pre[world])
     out = quats.copy()
     out[:, world] = rotations.quat_multiply(turn[None], quats[:, world])
     return out
+
+
+class FormSet:
+    """Joints in their coding forms, with what the conversions need worked out once: a coder
+    converting the same joints many times (kinwave's encoder, once per depth and pass) pays
+    for the set-up once. ``means (n, 4)`` are the vector joints' mean rotations (ignored for
+    Euler forms)."""
+
+    def __init__(self, orders: tuple[str, ...], forms: np.ndarray, means: np.ndarray):
+        forms = np.asarray(forms, dtype=np.int64)
+        self.size = len(orders)
+        self.vector = forms % WORLD == VECTOR
+        self.world = forms >= WORLD
+        self.vectors = np.flatnonzero(self.vector)
+        self.eulers = np.flatnonzero(~self.vector)
+        self.vector_means = np.ascontiguousarray(np.asarray(means, dtype=np.float64)[self.vector])
+        self.euler_axes = _form_axes(forms[self.eulers], tuple(orders[k] for k in self.eulers))
+        self.file_axes = _axes(tuple(orders))
+        self.form_axes = _form_axes(forms, tuple(orders))
+        self.kernel_means = np.ascontiguousarray(np.where(self.vector[:, None], means, _identity_means(self.size)))
+
+    def to_forms(self, rows: np.ndarray, quats: np.ndarray | None = None, pre: np.ndarray | None = None) -> np.ndarray:
+        """File-order Euler angle rows ``(3n, T)`` in each joint's coding form, continuous in
+        time; ``pre (n, 4)`` the WORLD joints' turns. ``quats (T, n, 4)``, when given, are the
+        rotations themselves (``rows`` then gives only the frame count)."""
+        if quats is None:
+            quats = _quats_kernel(_per_joint(rows), self.file_axes)
+        quats = _turned(quats, self.world, pre, inverse=False)
+        if not self.eulers.size:
+            return _rows(_vectors_kernel(np.ascontiguousarray(quats), self.vector_means))
+        if not self.vectors.size:
+            return _rows(_quat_euler_kernel(np.ascontiguousarray(quats), self.euler_axes))
+        out = np.empty((rows.shape[1], self.size, 3))
+        out[:, self.vectors] = _vectors_kernel(np.ascontiguousarray(quats[:, self.vectors]), self.vector_means)
+        out[:, self.eulers] = _quat_euler_kernel(np.ascontiguousarray(quats[:, self.eulers]), self.euler_axes)
+        return _rows(out)
+
+    def quats(self, rows: np.ndarray, pre: np.ndarray | None = None) -> np.ndarray:
+        """The rotations ``(T, n, 4)`` of rows in the coding forms (:meth:`from_forms` without
+        the Euler angles: what a measure of rotation error needs)."""
+        quats = _form_quats_kernel(_per_joint(rows), self.form_axes, self.vector, self.kernel_means)
+        return np.ascontiguousarray(_turned(quats, self.world, pre, inverse=True))
+
+    def from_forms(self, rows: np.ndarray, pre: np.ndarray | None = None) -> np.ndarray:
+        """Inverse of :meth:`to_forms`: file-order Euler angle rows, each joint's triples as
+        continuous as the Euler form allows (frame 0 in the principal range)."""
+        return _rows(_quat_euler_kernel(self.quats(rows, pre), self.file_axes))
 
 
 def to_forms(
@@ -258,42 +304,22 @@ def to_forms(
     quats: np.ndarray | None = None,
     pre: np.ndarray | None = None,
 ) -> np.ndarray:
-    """File-order Euler angle rows in each joint's coding form (``forms`` >= 1), continuous in
-    time; ``means (n, 4)`` are the vector joints' mean rotations (ignored for Euler forms),
-    ``pre (n, 4)`` the WORLD joints' turns. ``quats (T, n, 4)``, when given, are the rotations
-    themselves (``rows`` is then unused)."""
-    forms = np.asarray(forms)
-    quats = _turned(euler_quats(rows, orders) if quats is None else quats, forms, pre, inverse=False)
-    out = np.empty((rows.shape[1], len(orders), 3))
-    vector = forms % WORLD == VECTOR
-    if vector.any():
-        out[:, vector] = _vectors_kernel(np.ascontiguousarray(quats[:, vector]), np.ascontiguousarray(means[vector]))
-    if (~vector).any():
-        kept = tuple(o for o, v in zip(orders, vector) if not v)
-        out[:, ~vector] = _quat_euler_kernel(np.ascontiguousarray(quats[:, ~vector]), _form_axes(forms[~vector], kept))
-    return _rows(out)
+    """:meth:`FormSet.to_forms` for one conversion."""
+    return FormSet(orders, forms, means).to_forms(rows, quats, pre)
 
 
 def from_forms(
     rows: np.ndarray, orders: tuple[str, ...], forms: np.ndarray, means: np.ndarray, pre: np.ndarray | None = None
 ) -> np.ndarray:
-    """Inverse of :func:`to_forms`: file-order Euler angle rows, each joint's triples as
-    continuous as the Euler form allows (frame 0 in the principal range)."""
-    return _rows(_quat_euler_kernel(form_quats(rows, orders, forms, means, pre), _axes(orders)))
+    """:meth:`FormSet.from_forms` for one conversion."""
+    return FormSet(orders, forms, means).from_forms(rows, pre)
 
 
 def form_quats(
     rows: np.ndarray, orders: tuple[str, ...], forms: np.ndarray, means: np.ndarray, pre: np.ndarray | None = None
 ) -> np.ndarray:
-    """The rotations ``(T, n, 4)`` of rows in the joints' coding forms (:func:`from_forms`
-    without the Euler angles: what a measure of rotation error needs)."""
-    forms = np.asarray(forms)
-    vector = forms % WORLD == VECTOR
-    means = np.where(vector[:, None], means, _identity_means(len(orders)))
-    quats = _form_quats_kernel(
-        _per_joint(rows), _form_axes(forms, orders), vector, np.ascontiguousarray(means, dtype=np.float64)
-    )
-    return np.ascontiguousarray(_turned(quats, forms, pre, inverse=True))
+    """:meth:`FormSet.quats` for one conversion."""
+    return FormSet(orders, forms, means).quats(rows, pre)
 
 
 def near_lock(rows: np.ndarray, orders: tuple[str, ...], margin_deg: float) -> np.ndarray:

@@ -88,35 +88,39 @@ def test_closed_loop_beats_open_loop_at_equal_error(walk_bvh):
 
 
 def test_keyframes_are_chosen_by_cost_and_keep_the_bound(walk_amc):
-    """A bind pose before the walk (not the rest pose: every angle 5 degrees) is coded as a
-    keyframe (a pass with it is smaller), the walk alone has none; either way the bound holds."""
+    """At the highest effort, a bind pose before the walk (not the rest pose: every angle 5
+    degrees) is coded as a keyframe (a pass with it is smaller), the walk alone has none; either
+    way the bound holds."""
     from mocodec.reexpress import with_bind_frame
 
     bound = with_bind_frame(walk_amc)
     channels = bound.channels.copy()
     channels[0, bound.skeleton.rotation_mask] = 5.0
     bound = bound.with_channels(channels)
-    codec = get_codec("kinwave", max_error_cm=0.3)
+    codec = get_codec("kinwave", max_error_cm=0.3, effort=3)
     assert BoundSearch(codec, bound).lay.starts[:2].tolist() == [0, 1]
     assert BoundSearch(codec, walk_amc).keyframes == 0
     decoded = codec.decode(codec.encode(bound), bound.skeleton, bound.num_frames, bound.fps)
     assert _errors(bound, decoded)["joint"] <= 0.3
 
 
-def test_the_default_sets_a_lone_second_frame_jump_as_two_keyframes_without_a_trial(walk_amc):
-    """A bind pose in frame 1 alone (frame 0 leads into it: a game export's bind frame after a
-    first frame close to it) takes two keyframes at the default effort without a trial pass (the
-    trial's answer on every shared clip); effort 3 still runs the trial, and both hold the bound."""
+@pytest.mark.parametrize("frame", [0, 1])
+def test_the_default_sets_a_lone_leading_jump_as_keyframes_without_a_trial(walk_amc, frame):
+    """A bind pose in frame 0 alone (a cgspeed T-pose) takes one keyframe, in frame 1 alone
+    (frame 0 leads into it: a game export's bind frame after a first frame close to it) two,
+    at the default effort without a trial pass (the trial's answer on nearly every shared clip);
+    effort 3 still runs the trial, and both hold the bound."""
     from mocodec.codecs.kinwave.encoder import leading_jumps
 
     clip = walk_amc[:300]
     channels = clip.channels.copy()
-    channels[1, clip.skeleton.rotation_mask] = 5.0  # frame 1 far from frames 0 and 2
-    channels[0] = channels[1] + np.where(clip.skeleton.rotation_mask, 0.5, 0.0)
+    channels[frame, clip.skeleton.rotation_mask] = 5.0  # far from the next frames
+    if frame == 1:
+        channels[0] = channels[1] + np.where(clip.skeleton.rotation_mask, 0.5, 0.0)
     jumping = clip.with_channels(channels)
     default = BoundSearch(get_codec("kinwave", max_error_cm=0.5), jumping)
-    assert leading_jumps(default.positions).tolist() == [False, True]
-    assert default.keyframes == 2 and default.first_pass is None
+    assert leading_jumps(default.positions).tolist() == [frame == 0, frame == 1]
+    assert default.keyframes == frame + 1 and default.first_pass is None
     highest = BoundSearch(get_codec("kinwave", max_error_cm=0.5, effort=3), jumping)
     assert highest.first_pass is not None
     for codec in (get_codec("kinwave", max_error_cm=0.5), get_codec("kinwave", max_error_cm=0.5, effort=3)):

@@ -207,8 +207,9 @@ def test_compiled_wavelets_give_pywavelets_floats(wavelet):
 
 def test_compiled_rows_quantise_within_half_a_step_and_round_where_far():
     """rows.quantise then rows.reconstruct: plain rounding (dead zone 0.5) misses a smooth signal
-    by at most about half a step; a wide dead zone misses by more, and the coefficients reaching
-    rounding the coefficients that reach the frames it misses far (round_far) brings them closer."""
+    by at most about half a step; a wide dead zone misses by more, and code_rows, which rounds
+    the coefficients reaching the frames it misses far to the nearest integer, brings them
+    closer; without far rounding code_rows is quantise then reconstruct."""
     rng = np.random.default_rng(4)
     lay = trendwave.layout(300, 128, 4, 1)
     x = np.cumsum(rng.normal(size=(4, 300)), axis=1) * 3.0
@@ -222,13 +223,16 @@ def test_compiled_rows_quantise_within_half_a_step_and_round_where_far():
     out = channelcode.reconstruct(knots, coeffs, const, step, fraction, base, lay, factors, 1.0, 8)
     assert out[2] == pytest.approx(7.25)
     assert (np.abs(out - x).max(axis=1) < step * 1.5).all()
-    _, coarse, _ = channelcode.quantise(x, const, step, fraction, base, lay, factors, 0.2)
+    _, coarse, coarse_scaled = channelcode.quantise(x, const, step, fraction, base, lay, factors, 0.2)
     assert np.count_nonzero(coarse) < np.count_nonzero(coeffs)
     rough = channelcode.reconstruct(knots, coarse, const, step, fraction, base, lay, factors, 1.0, 8)
-    nearest, changed = channelcode.round_far(x, rough, const, step, factors[0], 0.7, scaled, coarse, lay)
-    assert changed.any() and not changed[2] and (nearest[~changed] == coarse[~changed]).all()
-    assert (np.abs(nearest - scaled)[nearest != coarse] <= 0.5).all()  # the nearest integers
-    fixed = channelcode.reconstruct(knots, nearest, const, step, fraction, base, lay, factors, 1.0, 8)
+    plain = channelcode.code_rows(x, const, step, fraction, base, lay, factors, 0.2, 1.0, 8, 0.0)
+    assert np.array_equal(plain[1], coarse) and np.array_equal(plain[2], rough)
+    _, nearest, fixed = channelcode.code_rows(x, const, step, fraction, base, lay, factors, 0.2, 1.0, 8, 0.7)
+    changed = (nearest != coarse).any(axis=1)
+    assert changed.any() and not changed[2]
+    assert (np.abs(nearest - coarse_scaled)[nearest != coarse] <= 0.5).all()  # the nearest integers
+    assert np.array_equal(fixed[~changed], rough[~changed])
     assert (np.abs(fixed - x).max(axis=1) < np.abs(rough - x).max(axis=1) + 1e-12).all()
 
 

@@ -145,6 +145,30 @@ def _round_far(target, out, const, step, knot_f, far_steps, scaled, coeffs, lay,
     return changed
 
 
+@numba.njit(cache=True)
+def _code_rows(target, const, step, fraction, base, factors, seam_limit, lay, dec, rec, weight, deadzone, far, reach):
+    """:func:`_quantise`, :func:`_reconstruct` and, with ``far`` > 0, :func:`_round_far` and
+    the changed rows reconstructed again, in one call (:func:`code_rows`)."""
+    knot_f, coeff_f, seam_f = factors
+    k_int, c_int, scaled = _quantise(
+        target, const, step, fraction, base, knot_f, coeff_f, lay, dec[0], dec[1], deadzone
+    )
+    out = _reconstruct(
+        k_int, c_int, const, step, fraction, base, knot_f, coeff_f, seam_f, seam_limit, lay, rec[0], rec[1], weight
+    )
+    if far <= 0.0:
+        return k_int, c_int, out
+    changed = np.flatnonzero(_round_far(target, out, const, step, knot_f, far, scaled, c_int, lay, reach[0], reach[1]))
+    if changed.size:
+        again = _reconstruct(
+            k_int[changed], c_int[changed], const[changed], step[changed], fraction[changed], base[changed],
+            knot_f, coeff_f, seam_f, seam_limit, lay, rec[0], rec[1], weight,
+        )  # fmt: skip
+        for i in range(changed.size):
+            out[changed[i]] = again[i]
+    return k_int, c_int, out
+
+
 def _row_steps(const, step, fraction, base) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Each row's constant flag, step, and constant's fraction and base, as the contiguous
     arrays the kernels are compiled for."""
@@ -219,32 +243,37 @@ def quantise(
     )
 
 
-def round_far(
+def code_rows(
     target: np.ndarray,
-    out: np.ndarray,
     const: np.ndarray,
     step: np.ndarray,
-    knot_f: np.ndarray,
-    far_steps: float,
-    scaled: np.ndarray,
-    coeffs: np.ndarray,
+    fraction: np.ndarray,
+    base: np.ndarray,
     lay: trendwave.Layout,
-) -> tuple[np.ndarray, np.ndarray]:
-    """``coeffs`` with those reaching a frame where the reconstruction ``out`` misses ``target``
-    by more than ``far_steps`` of the frame's step (``step (k,)`` times its knot's factor)
-    rounded to the nearest integer of ``scaled`` (the coefficients in steps before the dead
-    zone), constant rows untouched; and ``(k,)`` bool: the rows that changed."""
-    rounded = np.array(coeffs, dtype=np.int64, order="C")
-    changed = _round_far(
+    factors: tuple[np.ndarray, np.ndarray, np.ndarray],
+    deadzone: float,
+    seam_limit: float,
+    half_width: int,
+    far_steps: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Knots, coefficients and reconstruction of ``target (k, T)`` in one compiled call: what
+    :func:`quantise` then :func:`reconstruct` give (arguments as theirs), and with ``far_steps``
+    > 0 the coefficients :func:`round_far` rounds to the nearest and their rows' reconstruction
+    again (a pass's work on a tree depth)."""
+    const, step, fraction, base = _row_steps(const, step, fraction, base)
+    return _code_rows(
         np.ascontiguousarray(target, dtype=np.float64),
-        out,
-        np.ascontiguousarray(const, dtype=np.bool_),
-        np.ascontiguousarray(step, dtype=np.float64),
-        knot_f,
-        float(far_steps),
-        np.ascontiguousarray(scaled, dtype=np.float64),
-        rounded,
+        const,
+        step,
+        fraction,
+        base,
+        (factors[0], factors[1], np.asarray(factors[2], dtype=np.float64)),
+        float(seam_limit),
         tuple(trendwave.flat(lay)),
-        *trendwave.reaches(lay),
+        wavelets.filters(lay.wavelet, "dec"),
+        wavelets.filters(lay.wavelet, "rec"),
+        seams.ramp(half_width),
+        float(deadzone),
+        float(far_steps),
+        trendwave.reaches(lay),
     )
-    return rounded, changed

@@ -28,6 +28,8 @@ from mocodec.codecs.kinwave.body import (
     LEAD_SHIFT,
     MAX_ISOLATED,
     MEAN_QUANTUM,
+    SEAM_HALF_WIDTH,
+    SEAM_LIMIT,
     WAVELET_IDS,
     ZERO_CONSTANTS,
     ConstantCoding,
@@ -557,9 +559,10 @@ class Encoder:
             wanted = values[:, iso]
             if iso.size:  # the wavelet sees the neighbours' mean there
                 values[:, iso] = (values[:, iso - 1] + values[:, iso + 1]) / 2.0
-            k_int, c_int, scaled = self.quantise(values, const, step, factors, constants)
-            out = reconstruct(k_int, c_int, const, step, lay, factors, constants)
-            c_int, out = self.round_where_far(values, out, scaled, (k_int, c_int, const), step, factors, constants)
+            k_int, c_int, out = channelcode.code_rows(
+                values, const, step[:, 0], constants.fraction, constants.base, lay, factors, self.cfg["deadzone"],
+                SEAM_LIMIT, SEAM_HALF_WIDTH, self.far_steps,
+            )  # fmt: skip
             knots[channels], coeffs[channels] = k_int, c_int
             if iso.size:
                 patch = np.round((wanted - out[:, iso]) / (step * trendwave.KEYFRAME_QUANTUM)).astype(np.int64)
@@ -588,6 +591,19 @@ class Encoder:
             self._depth_plans[key] = DepthPlan.of(self, channels)
         return self._depth_plans[key]
 
+    @property
+    def far_steps(self) -> float:
+        """Max bounds: where a depth's reconstruction misses its target by more than this many
+        of the frame's steps (FAR_STEPS), the coefficients reaching that frame are rounded to
+        the nearest integer instead of through the dead zone (:func:`channelcode.code_rows`).
+        A max bound is set by a few such frames (several zeroed coefficients adding up), and
+        the whole clip's steps went finer for them; the dead zone keeps its savings everywhere
+        else (docs/kinwave.md). Encoder only: the decoder reads the integers as ever. 0 (none)
+        under a mean bound, which single frames do not set, or with plain rounding already."""
+        if self.cfg["error_measure"] == "mean" or self.cfg["deadzone"] >= 0.5:
+            return 0.0
+        return FAR_STEPS
+
     def quantise(
         self,
         target: np.ndarray,
@@ -610,44 +626,6 @@ class Encoder:
             factors,
             self.cfg["deadzone"],
         )
-
-    def round_where_far(
-        self,
-        target: np.ndarray,
-        out: np.ndarray,
-        scaled: np.ndarray,
-        integers: tuple[np.ndarray, np.ndarray, np.ndarray],
-        step: np.ndarray,
-        factors: tuple[np.ndarray, np.ndarray, np.ndarray],
-        constants: ConstantCoding,
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Max bounds: where the reconstruction ``out`` misses ``target`` by more than FAR_STEPS
-        of the frame's step, the coefficients reaching that frame are rounded to the nearest
-        integer instead of through the dead zone. A max bound is set by a few such frames
-        (several zeroed coefficients adding up), and the whole clip's steps went finer for
-        them; the dead zone keeps its savings everywhere else (docs/kinwave.md). Encoder only:
-        the decoder reads the integers as ever. ``integers`` are the rows' knots, coefficients
-        and constant flags; returns the coefficients and ``out`` again."""
-        knots, coeffs, const = integers
-        if self.cfg["error_measure"] == "mean" or self.cfg["deadzone"] >= 0.5:
-            return coeffs, out  # a mean is not set by single frames; plain rounding already
-        rounded, moved = channelcode.round_far(
-            target, out, const, step[:, 0], factors[0], FAR_STEPS, scaled, coeffs, self.lay
-        )
-        changed = np.flatnonzero(moved)
-        if not changed.size:
-            return coeffs, out
-        coeffs, out = rounded, out.copy()
-        out[changed] = reconstruct(
-            knots[changed],
-            coeffs[changed],
-            const[changed],
-            step[changed],
-            self.lay,
-            factors,
-            ConstantCoding(constants.fraction[changed], constants.base[changed]),
-        )
-        return coeffs, out
 
     # ----- measures and bytes ---------------------------------------------------------------
     def joint_errors(self, decoded: np.ndarray) -> np.ndarray:

@@ -174,6 +174,7 @@ def flat(lay: Layout) -> Flat:
 
 
 @lru_cache(maxsize=256)
+@lru_cache(maxsize=256)
 def reaches(lay: Layout) -> tuple[np.ndarray, np.ndarray]:
     """Every block's :func:`_reach` (u8, ``(frames, coefficients)`` flattened, one copy per block
     shape) and where each segment's starts (-1: no block): which coefficients a frame's error
@@ -188,4 +189,7 @@ def reaches(lay: Layout) -> tuple[np.ndarray, np.ndarray]:
             parts.append(_reach(*key, lay.wavelet).astype(np.uint8).ravel())
             first[key], size = size, size + parts[-1].size
         at[s] = first[key]
-    return (np.concatenate(parts) if parts else np.zeros(0, dtype=np.uint8)), at
+    reach = np.concatenate(parts) if parts else np.zeros(0, dtype=np.uint8)
+    for table in (reach, at):
+        table.setflags(write=False)  # (cached: shared)
+    return reach, at

@@ -244,7 +244,8 @@ def test_frames_far_off_round_their_coefficients_plainly(walk_amc):
     target by more than FAR_STEPS steps, the coefficients reaching that frame go from the dead
     zone's rounding to the nearest integer (one more in magnitude, nothing else changes),
     those frames come closer, and the output is what the decoder's reconstruction gives."""
-    from mocodec.codecs.kinwave.body import ConstantCoding, reconstruct, segment_factors
+    from mocodec.codecs.kinwave import channelcode
+    from mocodec.codecs.kinwave.body import SEAM_HALF_WIDTH, SEAM_LIMIT, ConstantCoding, reconstruct, segment_factors
     from mocodec.codecs.kinwave.encoder import FAR_STEPS
 
     enc = BoundSearch(get_codec("kinwave", max_error_cm=0.5, error_measure="shell"), walk_amc)
@@ -254,13 +255,17 @@ def test_frames_far_off_round_their_coefficients_plainly(walk_amc):
     constants = ConstantCoding(np.ones(8), np.zeros(8))
     knots, coeffs, scaled = enc.quantise(target, const, step, factors, constants)
     out = reconstruct(knots, coeffs, const, step, enc.lay, factors, constants)
-    rounded, closer = enc.round_where_far(target, out, scaled, (knots, coeffs, const), step, factors, constants)
+    _, rounded, closer = channelcode.code_rows(
+        target, const, step[:, 0], constants.fraction, constants.base, enc.lay, factors, enc.cfg["deadzone"],
+        SEAM_LIMIT, SEAM_HALF_WIDTH, enc.far_steps,
+    )  # fmt: skip
     changed = rounded != coeffs
     assert changed.sum() > 10
     assert (np.abs(rounded[changed]) == np.abs(coeffs[changed]) + 1).all()
     assert (np.abs(scaled[changed]) % 1.0 >= 0.5).all()
     far = np.abs(out - target) > FAR_STEPS * step
     assert np.abs(closer - target)[far].mean() < 0.9 * np.abs(out - target)[far].mean()
+    assert enc.far_steps == FAR_STEPS
     assert np.array_equal(closer, reconstruct(knots, rounded, const, step, enc.lay, factors, constants))
 
 

@@ -216,10 +216,12 @@ class Encoder:
         self.output_skeleton = output_skeleton or sk  # the decoder's: errors are measured on its joints
         self.motion = motion.continuous() if motion.num_frames else motion
         self.values = self.motion.channels.T.copy()  # (C, T)
+        self.by_frame = np.ascontiguousarray(self.values.T)  # (T, C), as the closed loop reads it
         self.frames = motion.num_frames
         pos, quat = forward_kinematics(sk, self.motion.channels)
         self.cm = 100.0 / sk.units_per_metre
         self.positions = pos * self.cm
+        self.goal_positions = self.positions / self.cm  # (skeleton units, as the closed loop reads them)
         self.quats = quat
         self.const = self._constant_channels() if self.frames else np.ones(sk.num_channels, bool)
         self.constants = self._constant_coding()
@@ -579,7 +581,7 @@ class Encoder:
         exact = np.zeros(len(sk), dtype=bool)
         exact[sk.channel_joints[[g[0] for form, (g, _) in zip(self.forms, rotvec_groups) if form]]] = True
         closedloop.code_down_tree(
-            sk, self.values.T, ~self.const, self.quats, code, self.cfg["closed_loop"], self.positions / self.cm, exact
+            sk, self.by_frame, ~self.const, self.quats, code, self.cfg["closed_loop"], self.goal_positions, exact
         )
         return Pass(codes, self.const.astype(np.int64), knots, coeffs, decoded, offsets, patches)
 

@@ -23,7 +23,6 @@ from functools import lru_cache
 import numba
 import numpy as np
 
-from mocodec import rotations
 from mocodec.codecs.shared.rotvec import quat_product
 from mocodec.kinematics import channel_plan
 from mocodec.skeleton import Skeleton
@@ -352,9 +351,20 @@ def _placing_of(skeleton: Skeleton, active_flags: bytes) -> np.ndarray:
     return out
 
 
-def _rotate_back(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """``v (T, 3)`` rotated by the inverse of unit quaternions ``q (T, 4)``."""
-    return rotations.quat_rotate(rotations.quat_conjugate(q), v)
+def _turn_vectors(q: np.ndarray, v: np.ndarray, back: bool = False) -> np.ndarray:
+    """``v (T, 3)`` rotated by unit quaternions ``q (T, 4)`` (with ``back``, by their inverse):
+    :func:`mocodec.rotations.quat_rotate` term for term in a compiled loop (the same floats)."""
+    out = np.empty((v.shape[0], 3))
+    _turn_vectors_kernel(np.ascontiguousarray(q), np.ascontiguousarray(v, dtype=np.float64), -1.0 if back else 1.0, out)
+    return out
+
+
+@numba.njit(cache=True)
+def _turn_vectors_kernel(q, v, sign, out):
+    for t in range(v.shape[0]):
+        out[t, 0], out[t, 1], out[t, 2] = _rotate(
+            q[t, 0], sign * q[t, 1], sign * q[t, 2], sign * q[t, 3], v[t, 0], v[t, 1], v[t, 2]
+        )
 
 
 @numba.njit(cache=True)
@@ -423,7 +433,7 @@ def code_down_tree(
             if closed_loop and p >= 0 and flagged[j]:
                 exact_targets[j] = exact_rotation(jp.axis_quat, jp.has_axis, glob[j], goal[:, j])
             if where is not None and goal_positions is not None and p >= 0 and active[jp.moves].any():
-                wanted = _rotate_back(glob[p], goal_positions[:, j] - where[p]) - jp.offset
+                wanted = _turn_vectors(glob[p], goal_positions[:, j] - where[p], back=True) - jp.offset
                 cols = dp.move_columns[i]
                 targets[:, cols] = np.where(active[jp.moves], wanted[:, jp.move_axes], targets[:, cols])
         if not dp.coded.size:
@@ -441,4 +451,4 @@ def code_down_tree(
                 bone = np.tile(jp.offset, (frames, 1))
                 for axis, column in zip(jp.move_axes.tolist(), dp.move_columns[i].tolist()):
                     bone[:, axis] += decoded[:, column]
-                where[j] = bone if p < 0 else where[p] + rotations.quat_rotate(glob[p], bone)
+                where[j] = bone if p < 0 else where[p] + _turn_vectors(glob[p], bone)

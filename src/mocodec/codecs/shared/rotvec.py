@@ -90,33 +90,26 @@ def _quats_kernel(euler, axes):
     return out
 
 
-@numba.njit(cache=True)
-def _vectors_kernel(quats, means):
-    """Rotation vectors (degrees) of quaternions ``quats (T, n, 4)`` about each joint's
-    mean ``means (n, 4)`` (conj(mean) q), signs made continuous in time from a frame 0 on the
-    short way round."""
-    frames, joints = quats.shape[0], quats.shape[1]
-    out = np.empty((frames, joints, 3))
-    q = np.empty(4)
-    last = np.empty(4)
-    for j in range(joints):
-        mw, mx, my, mz = means[j, 0], -means[j, 1], -means[j, 2], -means[j, 3]
-        sign = 1.0
-        for t in range(frames):
-            r = quats[t, j]
-            q[0], q[1], q[2], q[3] = quat_product(mw, mx, my, mz, r[0], r[1], r[2], r[3])
-            if t == 0:
-                sign = 1.0 if q[0] >= 0.0 else -1.0  # frame 0 turns by at most 180 degrees
-            elif q[0] * last[0] + q[1] * last[1] + q[2] * last[2] + q[3] * last[3] < 0.0:
-                sign = -sign
-            last[:] = q
-            w, x, y, z = q[0], q[1], q[2], q[3]
-            norm = math.sqrt(w * w + x * x + y * y + z * z)
-            w, x, y, z = sign * w / norm, sign * x / norm, sign * y / norm, sign * z / norm
-            vn = math.sqrt(x * x + y * y + z * z)
-            scale = 2.0 * (1.0 if vn < 1e-12 else math.atan2(vn, w) / vn) / _DEG
-            out[t, j, 0], out[t, j, 1], out[t, j, 2] = x * scale, y * scale, z * scale
-    return out
+@numba.njit(inline="always")
+def _vector_rows(q, mean, out):
+    """Rotation vectors (degrees) ``out (T, 3)`` of one joint's quaternions ``q (T, 4)`` about
+    its mean (conj(mean) q), signs made continuous in time from a frame 0 on the short way
+    round."""
+    mw, mx, my, mz = mean[0], -mean[1], -mean[2], -mean[3]
+    sign = 1.0
+    lw, lx, ly, lz = 0.0, 0.0, 0.0, 0.0
+    for t in range(q.shape[0]):
+        w, x, y, z = quat_product(mw, mx, my, mz, q[t, 0], q[t, 1], q[t, 2], q[t, 3])
+        if t == 0:
+            sign = 1.0 if w >= 0.0 else -1.0  # frame 0 turns by at most 180 degrees
+        elif w * lw + x * lx + y * ly + z * lz < 0.0:
+            sign = -sign
+        lw, lx, ly, lz = w, x, y, z
+        norm = math.sqrt(w * w + x * x + y * y + z * z)
+        w, x, y, z = sign * w / norm, sign * x / norm, sign * y / norm, sign * z / norm
+        vn = math.sqrt(x * x + y * y + z * z)
+        scale = 2.0 * (1.0 if vn < 1e-12 else math.atan2(vn, w) / vn) / _DEG
+        out[t, 0], out[t, 1], out[t, 2] = x * scale, y * scale, z * scale
 
 
 @numba.njit(inline="always")
@@ -155,9 +148,10 @@ def _euler_of(q, i, jj, k, proper, eps, angles, t):
 
 
 @numba.njit(cache=True)
-def _form_quats_kernel(values, form_axes, vector, means):
+def _form_quats_kernel(values, form_axes, vector, means, world, pre):
     """Quaternions ``(T, n, 4)`` of rotations coded as rotation vectors (``vector[j]``) or Euler
-    angles about ``form_axes[j]`` (degrees), each times its mean ``means[j]`` on the left."""
+    angles about ``form_axes[j]`` (degrees), each times its mean ``means[j]`` on the left, and
+    where ``world[j]`` then by conj(``pre[j]``)."""
     frames, joints = values.shape[0], values.shape[1]
     out = np.empty((frames, joints, 4))
     for j in range(joints):
@@ -171,9 +165,35 @@ def _form_quats_kernel(values, form_axes, vector, means):
                 rw, rx, ry, rz = 1.0, 0.0, 0.0, 0.0
                 for m in range(3):
                     rw, rx, ry, rz = _turn(rw, rx, ry, rz, form_axes[j, m], values[t, j, m])
-            out[t, j, 0], out[t, j, 1], out[t, j, 2], out[t, j, 3] = quat_product(
-                means[j, 0], means[j, 1], means[j, 2], means[j, 3], rw, rx, ry, rz
-            )
+            rw, rx, ry, rz = quat_product(means[j, 0], means[j, 1], means[j, 2], means[j, 3], rw, rx, ry, rz)
+            if world[j]:
+                rw, rx, ry, rz = quat_product(pre[j, 0], -pre[j, 1], -pre[j, 2], -pre[j, 3], rw, rx, ry, rz)
+            out[t, j, 0], out[t, j, 1], out[t, j, 2], out[t, j, 3] = rw, rx, ry, rz
+    return out
+
+
+@numba.njit(cache=True)
+def _forms_kernel(quats, vector, means, axes, world, pre):
+    """Coding-form values ``(T, n, 3)`` of quaternions ``(T, n, 4)``: each joint's rotation,
+    where ``world[j]`` first turned by ``pre[j]`` on the left, as a rotation vector about
+    ``means[j]`` (``vector[j]``) or as Euler angles about ``axes[j]`` continuous in time."""
+    frames, joints = quats.shape[0], quats.shape[1]
+    out = np.empty((frames, joints, 3))
+    turned = np.empty((frames, 4))
+    angles = np.empty((frames, 3))
+    for j in range(joints):
+        for t in range(frames):
+            w, x, y, z = quats[t, j, 0], quats[t, j, 1], quats[t, j, 2], quats[t, j, 3]
+            if world[j]:
+                w, x, y, z = quat_product(pre[j, 0], pre[j, 1], pre[j, 2], pre[j, 3], w, x, y, z)
+            turned[t, 0], turned[t, 1], turned[t, 2], turned[t, 3] = w, x, y, z
+        if vector[j]:
+            _vector_rows(turned, means[j], out[:, j])
+            continue
+        i, jj, k, proper, eps = _order(axes[j])
+        for t in range(frames):
+            _euler_of(turned[t], i, jj, k, proper, eps, angles, t)
+        out[:, j, :] = follow_nearest(angles, proper)
     return out
 
 
@@ -238,17 +258,6 @@ def _form_axes(forms: np.ndarray, orders: tuple[str, ...]) -> np.ndarray:
     return _axes(tuple(CODING_ORDERS[f - 2] if f >= 2 else o for f, o in zip(base, orders)))
 
 
-def _turned(quats: np.ndarray, world: np.ndarray, pre: np.ndarray | None, inverse: bool) -> np.ndarray:
-    """``quats (T, n, 4)`` with the ``world`` joints' turned by ``pre (n, 4)`` on the left (by
-    its conjugate with ``inverse``)."""
-    if pre is None or not world.any():
-        return quats
-    turn = pre[world] if not inverse else rotations.quat_conjugate(pre[world])
-    out = quats.copy()
-    out[:, world] = rotations.quat_multiply(turn[None], quats[:, world])
-    return out
-
-
 class FormSet:
     """Joints in their coding forms, with what the conversions need worked out once: a coder
     converting the same joints many times (kinwave's encoder, once per depth and pass) pays
@@ -257,38 +266,33 @@ class FormSet:
 
     def __init__(self, orders: tuple[str, ...], forms: np.ndarray, means: np.ndarray):
         forms = np.asarray(forms, dtype=np.int64)
-        self.size = len(orders)
         self.vector = forms % WORLD == VECTOR
         self.world = forms >= WORLD
-        self.vectors = np.flatnonzero(self.vector)
-        self.eulers = np.flatnonzero(~self.vector)
-        self.vector_means = np.ascontiguousarray(np.asarray(means, dtype=np.float64)[self.vector])
-        self.euler_axes = _form_axes(forms[self.eulers], tuple(orders[k] for k in self.eulers))
+        self.unturned = np.zeros_like(self.world)
         self.file_axes = _axes(tuple(orders))
         self.form_axes = _form_axes(forms, tuple(orders))
-        self.kernel_means = np.ascontiguousarray(np.where(self.vector[:, None], means, _identity_means(self.size)))
+        self.means = np.ascontiguousarray(np.where(self.vector[:, None], means, _identity_means(len(orders))))
+
+    def _turns(self, pre: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """Which joints ``pre (n, 4)`` turns (the WORLD ones, none without it), and the turns."""
+        if pre is None:
+            return self.unturned, self.means
+        return self.world, np.ascontiguousarray(pre, dtype=np.float64)
 
     def to_forms(self, rows: np.ndarray, quats: np.ndarray | None = None, pre: np.ndarray | None = None) -> np.ndarray:
         """File-order Euler angle rows ``(3n, T)`` in each joint's coding form, continuous in
         time; ``pre (n, 4)`` the WORLD joints' turns. ``quats (T, n, 4)``, when given, are the
-        rotations themselves (``rows`` then gives only the frame count)."""
+        rotations themselves (``rows`` is then unused)."""
         if quats is None:
             quats = _quats_kernel(_per_joint(rows), self.file_axes)
-        quats = _turned(quats, self.world, pre, inverse=False)
-        if not self.eulers.size:
-            return _rows(_vectors_kernel(np.ascontiguousarray(quats), self.vector_means))
-        if not self.vectors.size:
-            return _rows(_quat_euler_kernel(np.ascontiguousarray(quats), self.euler_axes))
-        out = np.empty((rows.shape[1], self.size, 3))
-        out[:, self.vectors] = _vectors_kernel(np.ascontiguousarray(quats[:, self.vectors]), self.vector_means)
-        out[:, self.eulers] = _quat_euler_kernel(np.ascontiguousarray(quats[:, self.eulers]), self.euler_axes)
-        return _rows(out)
+        world, turns = self._turns(pre)
+        return _rows(_forms_kernel(np.ascontiguousarray(quats), self.vector, self.means, self.form_axes, world, turns))
 
     def quats(self, rows: np.ndarray, pre: np.ndarray | None = None) -> np.ndarray:
         """The rotations ``(T, n, 4)`` of rows in the coding forms (:meth:`from_forms` without
         the Euler angles: what a measure of rotation error needs)."""
-        quats = _form_quats_kernel(_per_joint(rows), self.form_axes, self.vector, self.kernel_means)
-        return np.ascontiguousarray(_turned(quats, self.world, pre, inverse=True))
+        world, turns = self._turns(pre)
+        return _form_quats_kernel(_per_joint(rows), self.form_axes, self.vector, self.means, world, turns)
 
     def from_forms(self, rows: np.ndarray, pre: np.ndarray | None = None) -> np.ndarray:
         """Inverse of :meth:`to_forms`: file-order Euler angle rows, each joint's triples as

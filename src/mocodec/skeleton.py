@@ -93,7 +93,11 @@ class Joint:
 
 @dataclass(frozen=True, eq=False)
 class Skeleton:
-    """An ordered tree of joints (parents before children) and its unit of length."""
+    """An ordered tree of joints (parents before children) and its unit of length.
+
+    Two skeletons are equal (and hash alike) when their joints, unit and name are: the plans
+    worked out per skeleton (channel tables, step groups, allocations) are then shared by every
+    clip read with the same skeleton, not made again for each file (the metadata does not count)."""
 
     joints: tuple[Joint, ...]
     units_per_metre: float = 1.0
@@ -115,6 +119,21 @@ class Skeleton:
                 raise ValueError(f"joint {j.name!r}: parent index {j.parent} must come before it")
         if not self.units_per_metre > 0:
             raise ValueError("units_per_metre must be positive")
+
+    @cached_property
+    def _identity(self) -> tuple[tuple, int]:
+        key = (self.joints, self.units_per_metre, self.name)
+        return key, hash(key)
+
+    def __eq__(self, other: object) -> bool:
+        if self is other:
+            return True
+        if not isinstance(other, Skeleton):
+            return NotImplemented
+        return self._identity == other._identity
+
+    def __hash__(self) -> int:
+        return self._identity[1]
 
     # ----- structure -------------------------------------------------------------------
     def __len__(self) -> int:

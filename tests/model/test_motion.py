@@ -75,3 +75,25 @@ def test_resample_keeps_euler_curves_continuous(walk_bvh):
 def test_root_positions_are_joint_0s_forward_kinematics(walk_bvh, walk_amc):
     for motion in (walk_bvh, walk_amc):
         assert np.allclose(motion.root_positions(), motion.positions()[:, 0], atol=1e-9)
+
+
+def test_skeletons_read_alike_are_equal_and_share_their_plans(walk_bvh):
+    """A file read twice gives two skeletons that are equal and hash alike, so per-skeleton
+    plans (cached on the skeleton) are made once; another offset, unit or name makes another
+    skeleton, and the metadata does not count."""
+    from dataclasses import replace
+
+    from conftest import DATA
+    from mocodec import load
+    from mocodec.kinematics import channel_plan
+
+    again = load(DATA / "07_03.bvh").skeleton
+    sk = walk_bvh.skeleton
+    assert again is not sk and again == sk and hash(again) == hash(sk)
+    assert channel_plan(again) is channel_plan(sk)
+    moved = list(sk.joints)
+    moved[3] = replace(moved[3], offset=(moved[3].offset[0] + 1.0, *moved[3].offset[1:]))
+    for other in (Skeleton(tuple(moved), sk.units_per_metre), Skeleton(sk.joints, 2 * sk.units_per_metre)):
+        assert other != sk
+    assert Skeleton(sk.joints, sk.units_per_metre, sk.name, {"note": 1}) == sk
+    assert sk != "skeleton"

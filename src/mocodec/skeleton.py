@@ -18,6 +18,7 @@ One representation serves BVH, ASF/AMC and the built-in human model:
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -121,19 +122,20 @@ class Skeleton:
             raise ValueError("units_per_metre must be positive")
 
     @cached_property
-    def _identity(self) -> tuple[tuple, int]:
-        key = (self.joints, self.units_per_metre, self.name)
-        return key, hash(key)
+    def _digest(self) -> bytes:
+        """A 128-bit digest of what makes the skeleton (floats by their exact repr): equality is
+        then one comparison of 16 bytes, as cached plans look skeletons up on every use."""
+        return hashlib.blake2b(repr((self.joints, self.units_per_metre, self.name)).encode(), digest_size=16).digest()
 
     def __eq__(self, other: object) -> bool:
         if self is other:
             return True
         if not isinstance(other, Skeleton):
             return NotImplemented
-        return self._identity == other._identity
+        return self._digest == other._digest
 
     def __hash__(self) -> int:
-        return self._identity[1]
+        return int.from_bytes(self._digest[:8], "little", signed=True)
 
     # ----- structure -------------------------------------------------------------------
     def __len__(self) -> int:

@@ -436,7 +436,9 @@ class Encoder:
             if moved.size:
                 cols = _angle_rows(moved)
                 tb = tuple(kept[e] for e in moved)
-                values[cols] = rotvec.to_forms(sub[cols], tb, forms[moved], turns[idx[moved]], pre=pre[idx[moved]])
+                values[cols] = rotvec.to_forms(
+                    sub[cols], tb, forms[moved], turns[idx[moved]], original[:, idx[moved]], pre[idx[moved]]
+                )
             base = forms % rotvec.WORLD
             lock_orders = tuple(o if f == 0 else rotvec.CODING_ORDERS[max(f - 2, 0)] for o, f in zip(kept, base))
             locked = rotvec.near_lock(values, lock_orders, GIMBAL_MARGIN) & (base != rotvec.VECTOR)

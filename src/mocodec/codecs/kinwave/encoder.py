@@ -442,20 +442,35 @@ class Encoder:
             base = forms % rotvec.WORLD
             lock_orders = tuple(o if f == 0 else rotvec.CODING_ORDERS[max(f - 2, 0)] for o, f in zip(kept, base))
             locked = rotvec.near_lock(values, lock_orders, GIMBAL_MARGIN) & (base != rotvec.VECTOR)
+            sizes, nonzero, err = np.full(idx.size, np.inf), np.zeros(idx.size, dtype=np.int64), np.ones(idx.size)
+            coded = np.flatnonzero(~locked | (base == 0))  # (the file's angles give the reference error)
+            if coded.size:
+                sizes[coded], nonzero[coded], err[coded] = code(forms[coded], idx[coded], values[_angle_rows(coded)])
+            return np.where(locked, np.inf, sizes), nonzero, err
+
+        def code(forms: np.ndarray, idx: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            """The trial's entries ``idx`` in ``forms``, their rows ``values`` in those forms,
+            coded: (bytes, nonzero coefficients, mean rotation error) per entry."""
+            rows, kept = _angle_rows(idx), tuple(orders[i] for i in idx)
             flat, none = np.zeros(rows.size, dtype=bool), ConstantCoding(np.ones(rows.size), np.zeros(rows.size))
             k_int, c_int, _ = self.quantise(values, flat, step[rows], factors, none, lay)
             sizes = coefcoder.group_sizes(k_int, c_int, lay.padded, lay.levels, 3, revision=CODER_REVISION)
             rec = reconstruct(k_int, c_int, flat, step[rows], lay, factors, none)
             back = np.empty((rec.shape[1], idx.size, 4))
-            kept_as_is = np.flatnonzero(forms == 0)
+            kept_as_is, moved = np.flatnonzero(forms == 0), np.flatnonzero(forms)
             if kept_as_is.size:
                 as_is_orders = tuple(kept[e] for e in kept_as_is)
                 back[:, kept_as_is] = rotvec.euler_quats(rec[_angle_rows(kept_as_is)], as_is_orders)
             if moved.size:
-                back[:, moved] = rotvec.form_quats(rec[cols], tb, forms[moved], turns[idx[moved]], pre[idx[moved]])
+                back[:, moved] = rotvec.form_quats(
+                    rec[_angle_rows(moved)],
+                    tuple(kept[e] for e in moved),
+                    forms[moved],
+                    turns[idx[moved]],
+                    pre[idx[moved]],
+                )
             err = np.maximum(rotvec.mean_distances(original[:, idx], back), 1e-12)
-            nonzero = (c_int != 0).reshape(idx.size, -1).sum(axis=1)
-            return np.where(locked, np.inf, sizes), nonzero, err
+            return sizes, (c_int != 0).reshape(idx.size, -1).sum(axis=1), err
 
         own = np.array([2 + rotvec.CODING_ORDERS.index(o) if o in rotvec.CODING_ORDERS else -1 for o in orders])
         local = ~self.turned[live]

@@ -157,6 +157,24 @@ def test_quiet_joints_try_no_other_euler_order_below_the_highest_effort(walk_bvh
     assert (highest.forms[quiet] % rotvec.WORLD > rotvec.VECTOR).any()  # what the rule gives up
 
 
+def test_the_form_trial_codes_the_clips_thirds_below_the_highest_effort(walk_bvh):
+    """Effort 3 tries the forms on the first TRIAL_FRAMES frames; the default, on a long clip,
+    on two windows of TRIAL_SAMPLE / 2 frames centred on its thirds (past a T-pose and a start),
+    and on a short clip on every frame."""
+    from mocodec.codecs.kinwave.encoder import TRIAL_FRAMES, TRIAL_SAMPLE
+
+    clip = walk_bvh.resample(3 * walk_bvh.fps) if walk_bvh.num_frames < 1200 else walk_bvh
+    assert clip.num_frames >= 1200
+    highest = BoundSearch(get_codec("kinwave", effort=3), clip)._trial_frames()
+    assert np.array_equal(highest, np.arange(TRIAL_FRAMES))
+    default = BoundSearch(get_codec("kinwave"), clip)._trial_frames()
+    half, thirds = TRIAL_SAMPLE // 2, clip.num_frames * np.array([1, 2]) // 3
+    assert default.size == TRIAL_SAMPLE and np.array_equal(default[[0, half]], thirds - half // 2)
+    assert (np.diff(default[:half]) == 1).all() and (np.diff(default[half:]) == 1).all()
+    short = BoundSearch(get_codec("kinwave"), walk_bvh[:300])._trial_frames()
+    assert np.array_equal(short, np.arange(300))
+
+
 def test_constant_channels_cost_almost_nothing(walk_amc):
     still = walk_amc.with_channels(np.tile(walk_amc.channels[5], (walk_amc.num_frames, 1)))
     payload = get_codec("kinwave", max_error_cm=0.01).encode(still)

@@ -104,28 +104,29 @@ def test_keyframes_are_chosen_by_cost_and_keep_the_bound(walk_amc):
     assert _errors(bound, decoded)["joint"] <= 0.3
 
 
-@pytest.mark.parametrize("frame", [0, 1])
-def test_the_default_sets_a_lone_leading_jump_as_keyframes_without_a_trial(walk_amc, frame):
-    """A bind pose in frame 0 alone (a cgspeed T-pose) takes one keyframe, in frame 1 alone
-    (frame 0 leads into it: a game export's bind frame after a first frame close to it) two,
-    at the default effort without a trial pass (the trial's answer on nearly every shared clip);
+@pytest.mark.parametrize("jumping", [(True, False), (False, True), (True, True)])
+def test_the_default_sets_leading_jumps_as_keyframes_without_a_trial(walk_amc, jumping):
+    """A bind pose in frame 0 alone (a cgspeed T-pose) takes one keyframe; in frame 1 (frame 0
+    leads into it: a game export's bind frame after a first frame close to it), or in both
+    frames, two; at the default effort without a trial pass (what won on the shared clips);
     effort 3 still runs the trial, and both hold the bound."""
     from mocodec.codecs.kinwave.encoder import leading_jumps
 
     clip = walk_amc[:300]
     channels = clip.channels.copy()
-    channels[frame, clip.skeleton.rotation_mask] = 5.0  # far from the next frames
-    if frame == 1:
-        channels[0] = channels[1] + np.where(clip.skeleton.rotation_mask, 0.5, 0.0)
-    jumping = clip.with_channels(channels)
-    default = BoundSearch(get_codec("kinwave", max_error_cm=0.5), jumping)
-    assert leading_jumps(default.positions).tolist() == [frame == 0, frame == 1]
-    assert default.keyframes == frame + 1 and default.first_pass is None
-    highest = BoundSearch(get_codec("kinwave", max_error_cm=0.5, effort=3), jumping)
+    rot = clip.skeleton.rotation_mask
+    if jumping[1]:
+        channels[1, rot] = 5.0  # far from frame 2
+    channels[0] = np.where(rot, -20.0, channels[1]) if jumping[0] else channels[1] + np.where(rot, 0.5, 0.0)
+    moved = clip.with_channels(channels)
+    default = BoundSearch(get_codec("kinwave", max_error_cm=0.5), moved)
+    assert leading_jumps(default.positions).tolist() == list(jumping)
+    assert default.keyframes == (2 if jumping[1] else 1) and default.first_pass is None
+    highest = BoundSearch(get_codec("kinwave", max_error_cm=0.5, effort=3), moved)
     assert highest.first_pass is not None
     for codec in (get_codec("kinwave", max_error_cm=0.5), get_codec("kinwave", max_error_cm=0.5, effort=3)):
-        decoded = codec.decode(codec.encode(jumping), jumping.skeleton, jumping.num_frames, jumping.fps)
-        assert _errors(jumping, decoded)["joint"] <= 0.5
+        decoded = codec.decode(codec.encode(moved), moved.skeleton, moved.num_frames, moved.fps)
+        assert _errors(moved, decoded)["joint"] <= 0.5
 
 
 def test_a_mean_bound_searches_as_closely_at_the_default_as_at_the_highest_effort(walk_amc, monkeypatch):

@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import struct
+from functools import lru_cache
 
 from mocodec.errors import CorruptStreamError
 from mocodec.formats import varint
@@ -221,10 +222,12 @@ def offset_column(offsets: list[tuple[float, ...]], places: int | None) -> bytes
     return bytes(w.out)
 
 
+@lru_cache(maxsize=64)
 def pack_skeleton(skeleton: Skeleton) -> bytes:
     """Column by column (all names, then all parents, ...), which compresses best; fields at
     their usual value (rotation order = channel order, axis order ZYX, no axis, no limits)
-    cost one byte per joint."""
+    cost one byte per joint. Kept per skeleton (the search for the shortest offsets takes a
+    few milliseconds, and a library's files share their skeletons)."""
     w = _Writer()
     joints = skeleton.joints
     w.uint(VERSION)

@@ -170,13 +170,14 @@ def _code_rows(target, const, step, fraction, base, factors, seam_limit, lay, de
 
 
 def _row_steps(const, step, fraction, base) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Each row's constant flag, step, and constant's fraction and base, as the contiguous
-    arrays the kernels are compiled for."""
+    """Each row's constant flag, step, and constant's fraction and base, as the contiguous,
+    writable arrays the kernels are compiled for (a read-only one, such as a cached plan's,
+    would compile them a second time)."""
     return (
-        np.ascontiguousarray(const, dtype=np.bool_),
-        np.ascontiguousarray(step, dtype=np.float64),
-        np.ascontiguousarray(fraction, dtype=np.float64),
-        np.ascontiguousarray(base, dtype=np.float64),
+        np.require(const, np.bool_, ("C", "W")),
+        np.require(step, np.float64, ("C", "W")),
+        np.require(fraction, np.float64, ("C", "W")),
+        np.require(base, np.float64, ("C", "W")),
     )
 
 

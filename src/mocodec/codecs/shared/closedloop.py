@@ -421,7 +421,7 @@ def code_down_tree(
     placing = _placing(skeleton, active) if closed_loop and goal_positions is not None else np.zeros(0, bool)
     where = np.zeros((len(skeleton), frames, 3)) if placing.any() else None
     for dp in _depth_plans(skeleton):
-        targets = start[:, dp.coded]
+        targets = np.ascontiguousarray(start[:, dp.coded])  # (one layout: one compiled kernel)
         _depth_targets(
             start, active, goal, glob, dp.joints, dp.parents, dp.chans, dp.columns, dp.steps, dp.axes,
             dp.axis_quats, dp.has_axis, skip, targets,

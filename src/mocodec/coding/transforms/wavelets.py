@@ -70,7 +70,7 @@ def forward(x: np.ndarray, wavelet: str, levels: int, mode: str = "periodization
     if levels == 0:
         return x.copy()
     if _compiled(x, levels, wavelet, mode):
-        return periodized.forward_rows(x, levels, *filters(wavelet, "dec"))
+        return periodized.forward_rows(np.ascontiguousarray(x), levels, *filters(wavelet, "dec"))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # deep levels on short segments
         bands = pywt.wavedec(x, _wavelet(wavelet), mode=mode, level=levels, axis=-1)
@@ -83,7 +83,7 @@ def inverse(coeffs: np.ndarray, frames: int, wavelet: str, levels: int, mode: st
     if levels == 0:
         return coeffs.copy()
     if coeffs.shape[-1] == frames and _compiled(coeffs, levels, wavelet, mode):
-        return periodized.inverse_rows(coeffs, levels, *filters(wavelet, "rec"))
+        return periodized.inverse_rows(np.ascontiguousarray(coeffs), levels, *filters(wavelet, "rec"))
     bounds = np.cumsum(band_lengths(frames, wavelet, levels, mode))[:-1]
     bands = np.split(coeffs, bounds, axis=-1)
     out = pywt.waverec(bands, _wavelet(wavelet), mode=mode, axis=-1)

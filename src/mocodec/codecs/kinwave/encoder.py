@@ -70,6 +70,7 @@ TRIAL_SAMPLE = 512  # ... below it, at most this many (Encoder._trial_frames)
 FAR_STEPS = 0.7  # a frame missing its target by more than this many steps rounds its coefficients plainly
 CONST_AWAY_CM = 0.1  # a constant translation this far from its joint's offset takes fine constants
 GIMBAL_MARGIN = 15.0  # degrees from an Euler order's lock within which a joint goes as a vector
+BONE_PLACES = 4  # decimals of a bone held in translation channels that the allocation sees
 QUIET_TURN, QUIET_ANGLES = 20.0, 30.0  # degrees: a joint within both tries no other Euler order (effort < 3)
 
 
@@ -148,7 +149,10 @@ def isolated_frames(positions_cm: np.ndarray, skip: int) -> np.ndarray:
 def bone_skeleton(skeleton: Skeleton, values: np.ndarray, const: np.ndarray) -> Skeleton:
     """The skeleton with each non-root joint's constant translation channels (``values (C, T)``)
     added to its offset: the bones the motion really has, whose lengths are the allocation's
-    levers (a MotionBuilder export keeps every bone in position channels)."""
+    levers (a MotionBuilder export keeps every bone in position channels). The constants are
+    rounded to BONE_PLACES decimals of the skeleton's unit: a game export stores them with
+    float32 noise that differs from clip to clip, and the allocation (cached per skeleton)
+    would otherwise be solved again for every clip of the same body."""
     plan = channel_plan(skeleton)
     joints = list(skeleton.joints)
     for j in range(1, len(joints)):
@@ -156,7 +160,7 @@ def bone_skeleton(skeleton: Skeleton, values: np.ndarray, const: np.ndarray) -> 
         if held and values.shape[1]:
             offset = list(joints[j].offset)
             for k, c in held:
-                offset[k] += float(values[c, 0])
+                offset[k] += round(float(values[c, 0]), BONE_PLACES)
             joints[j] = replace(joints[j], offset=tuple(offset))
     if joints == list(skeleton.joints):
         return skeleton

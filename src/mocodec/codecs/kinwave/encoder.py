@@ -124,6 +124,7 @@ class Pass:
     decoded: np.ndarray  # (C, T)
     offsets: np.ndarray  # i8 per segment: its steps are 2^(offset/8) times the joints'
     patches: np.ndarray  # (C, isolated frames): each isolated frame's correction (apply_patches)
+    errors: np.ndarray | None = None  # (frames, points) cm, once measured (Encoder.pass_errors)
 
 
 def isolated_frames(positions_cm: np.ndarray, skip: int) -> np.ndarray:
@@ -672,8 +673,20 @@ class Encoder:
         return distances(self.positions, pos, self.cm).per_frame
 
     def error(self, decoded: np.ndarray) -> float:
-        err = self.joint_errors(decoded)
+        return self._summary(self.joint_errors(decoded))
+
+    def _summary(self, err: np.ndarray) -> float:
         return float(err.mean() if self.cfg["error_measure"] == "mean" else err.max())
+
+    def pass_errors(self, ps: Pass) -> np.ndarray:
+        """:meth:`joint_errors` of a pass's output, measured once (the search reads them again)."""
+        if ps.errors is None:
+            ps.errors = self.joint_errors(ps.decoded)
+        return ps.errors
+
+    def pass_error(self, ps: Pass) -> float:
+        """:meth:`error` of a pass's output."""
+        return self._summary(self.pass_errors(ps))
 
     def body(self, ps: Pass) -> bytes:
         flags = self.header[1]

@@ -152,7 +152,7 @@ class BoundSearch(Encoder):
         the rounds buy and cost: docs/kinwave.md."""
         if self.cfg["error_measure"] == "mean":
             return best
-        errors = self.joint_errors(best.decoded).max(axis=0)  # per point, over the frames
+        errors = self.pass_errors(best).max(axis=0)  # per point, over the frames
         for _ in range(SLACK_PASSES):
             if errors.max() >= below * bound:
                 return best
@@ -161,7 +161,7 @@ class BoundSearch(Encoder):
                 if not coarser.any():
                     break
                 ps = self.run_pass(np.clip(best.steps + coarser, 0, 255).astype(np.uint8), best.offsets)
-                trial = self.joint_errors(ps.decoded).max(axis=0)
+                trial = self.pass_errors(ps).max(axis=0)
                 if trial.max() <= bound:
                     best, errors = ps, trial
                     break
@@ -179,7 +179,7 @@ class BoundSearch(Encoder):
         while that breaks the bound, kept if the body shrinks. Codes go in order of the
         slack times the nonzero coefficients of their channels (a joint that barely moves saves
         nothing)."""
-        errors = self.joint_errors(best.decoded).max(axis=0)
+        errors = self.pass_errors(best).max(axis=0)
         if errors.max() >= FILL_BELOW * bound:
             return best
         coded = np.count_nonzero(best.coeffs, axis=1)  # per channel: what a coarser step saves
@@ -191,7 +191,7 @@ class BoundSearch(Encoder):
                 steps = best.steps.astype(np.int64)
                 steps[code] = min(steps[code] + amount, 255)
                 ps = self.run_pass(steps.astype(np.uint8), best.offsets)
-                trial = self.joint_errors(ps.decoded).max(axis=0)
+                trial = self.pass_errors(ps).max(axis=0)
                 if trial.max() <= bound:
                     smaller = len(self.body(ps))
                     if smaller < size:  # (a coarser step rarely costs bytes: contexts)
@@ -214,7 +214,7 @@ class BoundSearch(Encoder):
                 if np.array_equal(steps, best.steps):
                     return best  # every code is already the coarsest (a motion that holds still)
                 ps = self.run_pass(steps, best.offsets)
-                trial = self.joint_errors(ps.decoded).max()
+                trial = self.pass_errors(ps).max()
                 if trial <= bound:
                     best, worst = ps, trial
                     break
@@ -226,14 +226,14 @@ class BoundSearch(Encoder):
     def _to_bound(self, bound: float) -> bytes:
         guess = self.first_scale()
         if self.cfg["error_measure"] != "mean" and self.cfg["joint_feedback"] and not self.joint_offsets.any():
-            guess *= self._adapt_joints(self.joint_errors(self.starting_pass().decoded), bound)
+            guess *= self._adapt_joints(self.pass_errors(self.starting_pass()), bound)
         if self.cfg["error_measure"] == "mean":  # (no slack rounds: a mean is smooth in the scale)
             accept = MEAN_ACCEPT
         else:
             accept = ACCEPT if self.cfg["effort"] >= 3 else DEFAULT_ACCEPT
         if self.cfg["effort"] <= 1:
             accept = min(accept, LOW_EFFORT_ACCEPT)
-        best, x = self._search(lambda ps: self.error(ps.decoded), bound, accept, guess, 1.0)
+        best, x = self._search(self.pass_error, bound, accept, guess, 1.0)
         for _ in range(60):
             if best is not None:
                 body = self.body(self.use_slack(best, bound) if self.cfg["effort"] >= 2 else best)
@@ -241,7 +241,7 @@ class BoundSearch(Encoder):
                     return body
             x -= math.log(2.0)
             ps = self.run_pass(self.codes(math.exp(x)))
-            best = ps if self.error(ps.decoded) <= bound else None
+            best = ps if self.pass_error(ps) <= bound else None
         raise CodecError(f"kinwave cannot reach {self.cfg['error_measure']} error {bound:g} cm")
 
     def _to_bound_by_segment(self, bound: float) -> bytes:
@@ -260,7 +260,7 @@ class BoundSearch(Encoder):
         guess = self.first_scale()
         first = None
         if self.cfg["joint_feedback"]:
-            errors = self.joint_errors(self.starting_pass().decoded)
+            errors = self.pass_errors(self.starting_pass())
             first = segment_errors(errors)
             guess *= self._adapt_joints(errors, bound)
         base = self.codes(guess)
@@ -271,7 +271,7 @@ class BoundSearch(Encoder):
             key = offsets.astype(np.int8).tobytes()
             if key not in passes:
                 ps = self.run_pass(base, offsets)
-                passes[key] = ps, segment_errors(self.joint_errors(ps.decoded))
+                passes[key] = ps, segment_errors(self.pass_errors(ps))
             return passes[key]
 
         offsets = np.zeros(starts.size, dtype=np.int64)

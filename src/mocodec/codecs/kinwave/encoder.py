@@ -328,10 +328,9 @@ class Encoder:
         bound (docs/kinwave.md). At the highest effort one pass at the starting scale with 0,
         1 and 2 keyframes decides (at the same steps the errors are about the same). Below it,
         the counts that won on the shared clips, without a trial: a first frame jumping alone
-        is one keyframe (the trial's choice in 199 of 204 cases at three bounds), a second
-        frame jumping, alone or with the first, makes both keyframes (with both jumping the
-        trial chose 2 in 76 of 120 cases, and always 2 gave 0.1% fewer bytes on CMU BVH than
-        the trial, whose passes are at the starting scale, not the final one)."""
+        is one keyframe, a second frame jumping, alone or with the first, makes both keyframes
+        (how often each won, and what a fixed count costs against the trial, whose passes are
+        at the starting scale and not the final one: docs/kinwave.md)."""
         if not jumps.any():
             return
         if self.cfg["effort"] < 3:
@@ -504,9 +503,9 @@ class Encoder:
     def _trial_frames(self) -> np.ndarray:
         """The frames the form trial codes: the first TRIAL_FRAMES at the highest effort; below
         it, on a clip longer than TRIAL_SAMPLE frames, two windows of half as many centred on
-        its thirds (a clip's first frames are often a T-pose and a start, unlike the rest: on
-        the shared CMU clips the windows choose forms as good as the first 1024 frames, within
-        0.2% of the bytes, at half the trial's work)."""
+        its thirds (a clip's first frames are often a T-pose and a start, unlike the rest; the
+        windows choose forms as good as the first 1024 frames for half the work:
+        docs/kinwave.md)."""
         if self.cfg["effort"] >= 3 or self.frames <= TRIAL_SAMPLE:
             return np.arange(min(self.frames, TRIAL_FRAMES))
         half = TRIAL_SAMPLE // 2
@@ -518,8 +517,7 @@ class Encoder:
         """Per joint of quaternions ``quats (T, n, 4)`` and Euler angle rows ``euler (3n, T)``:
         whether it stays within QUIET_TURN degrees of its first frame's rotation and its angles
         within QUIET_ANGLES of their first frame's. Another Euler order hardly changes what such
-        a joint costs (on the shared clips, the Tait-Bryan orders saved quiet joints 1-2% of
-        what the forms save in all, against 20-30% of the trial's time)."""
+        a joint costs, against a large share of the trial's time (docs/kinwave.md)."""
         closeness = np.abs(np.einsum("tjk,jk->tj", quats, quats[0])).min(axis=0, initial=1.0)
         turn = np.degrees(2.0 * np.arccos(np.minimum(closeness, 1.0)))
         angles = np.abs(euler - euler[:, :1]).max(axis=1, initial=0.0).reshape(-1, 3).max(axis=1)

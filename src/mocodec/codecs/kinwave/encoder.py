@@ -66,7 +66,7 @@ FLOAT32_STEPS = 16  # ... and a translation whose range is this many float32 ste
 NOISE_SHARE = 1.0 / 64.0  # ... if that range is under this share of a max bound
 JUMP_CM = 10.0  # a leading frame jumping less than this is not tried as a keyframe
 TRIAL_FRAMES = 1024  # frames the choice of forms codes each form of every joint on (effort 3)
-TRIAL_SAMPLE = 512  # ... below it, at most this many (Encoder._trial_frames)
+TRIAL_SAMPLE = 512  # ... below it, of a longer body, this many (Encoder._trial_frames)
 FAR_STEPS = 0.7  # a frame missing its target by more than this many steps rounds its coefficients plainly
 CONST_AWAY_CM = 0.1  # a constant translation this far from its joint's offset takes fine constants
 GIMBAL_MARGIN = 15.0  # degrees from an Euler order's lock within which a joint goes as a vector
@@ -501,12 +501,13 @@ class Encoder:
         return choice
 
     def _trial_frames(self) -> np.ndarray:
-        """The frames the form trial codes: the first TRIAL_FRAMES at the highest effort; below
-        it, on a clip longer than TRIAL_SAMPLE frames, two windows of half as many centred on
-        its thirds (a clip's first frames are often a T-pose and a start, unlike the rest; the
-        windows choose forms as good as the first 1024 frames for half the work:
+        """The frames the form trial codes: all of a body up to TRIAL_FRAMES (a .moc chunk);
+        of a longer one, the first TRIAL_FRAMES at the highest effort, and below it two windows
+        of TRIAL_SAMPLE / 2 frames centred on its thirds (a clip's first frames are often a
+        T-pose and a start, unlike the rest; the windows choose forms as good as the first
+        1024 frames for half the work, where a whole chunk's frames choose better:
         docs/kinwave.md)."""
-        if self.cfg["effort"] >= 3 or self.frames <= TRIAL_SAMPLE:
+        if self.cfg["effort"] >= 3 or self.frames <= TRIAL_FRAMES:
             return np.arange(min(self.frames, TRIAL_FRAMES))
         half = TRIAL_SAMPLE // 2
         starts = (self.frames * np.array([1, 2]) // 3 - half // 2).clip(0, self.frames - half)

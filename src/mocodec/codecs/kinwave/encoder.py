@@ -392,7 +392,7 @@ class Encoder:
         angles are all constant keeps them always. All joints go through each transform
         together; only the byte counts are per joint. The Tait-Bryan form in the file's own order
         is form 0 and is not tried twice; below the highest effort a quiet joint (:meth:`_quiet`)
-        tries only its file's angles and a vector."""
+        other than the body's root tries only its file's angles and a vector."""
         groups = three_angle_groups(self.skeleton)
         choice = np.zeros(len(groups), dtype=np.int64)
         moving = [k for k, (channels, _) in enumerate(groups) if not self.const[channels].all()]
@@ -479,6 +479,7 @@ class Encoder:
         own = np.array([2 + rotvec.CODING_ORDERS.index(o) if o in rotvec.CODING_ORDERS else -1 for o in orders])
         local = ~self.turned[live]
         quiet = self._quiet(original, euler) if self.cfg["effort"] <= 2 else np.zeros(len(live), dtype=bool)
+        quiet[0] &= live[0] != moving[0]  # the body's root, which turns everything, tries every form
         candidates = [
             (base + form, np.flatnonzero(joints & (own != form) & ((form <= rotvec.VECTOR) | ~quiet)))
             for base, joints in ((0, local), (rotvec.WORLD, ~local))

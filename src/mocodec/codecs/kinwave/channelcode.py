@@ -259,7 +259,7 @@ def code_rows(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Knots, coefficients and reconstruction of ``target (k, T)`` in one compiled call: what
     :func:`quantise` then :func:`reconstruct` give (arguments as theirs), and with ``far_steps``
-    > 0 the coefficients :func:`round_far` rounds to the nearest and their rows' reconstruction
+    > 0 the coefficients :func:`_round_far` rounds to the nearest and their rows' reconstruction
     again (a pass's work on a tree depth)."""
     const, step, fraction, base = _row_steps(const, step, fraction, base)
     return _code_rows(

@@ -174,7 +174,6 @@ def flat(lay: Layout) -> Flat:
 
 
 @lru_cache(maxsize=256)
-@lru_cache(maxsize=256)
 def reaches(lay: Layout) -> tuple[np.ndarray, np.ndarray]:
     """Every block's :func:`_reach` (u8, ``(frames, coefficients)`` flattened, one copy per block
     shape) and where each segment's starts (-1: no block): which coefficients a frame's error

@@ -30,7 +30,6 @@ def _wavelet(name: str) -> pywt.Wavelet:
 
 
 @lru_cache(maxsize=16)
-@lru_cache(maxsize=16)
 def filters(wavelet: str, kind: str) -> tuple[np.ndarray, np.ndarray]:
     """A wavelet's low- and high-pass filters, ``dec`` (analysis) or ``rec`` (synthesis), as
     PyWavelets has them (:mod:`.periodized`'s kernels take them)."""

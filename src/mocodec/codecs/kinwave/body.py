@@ -27,7 +27,6 @@ import struct
 from dataclasses import dataclass
 from functools import lru_cache
 
-import numba
 import numpy as np
 
 from mocodec import rotations
@@ -214,29 +213,7 @@ def _world_translations(skeleton: Skeleton, const_flags: bytes) -> tuple[tuple[i
 
 def on_axes(rows: np.ndarray, turn: np.ndarray, inverse: bool = False) -> np.ndarray:
     """Translation rows ``(3, T)`` turned by the unit quaternion ``turn`` (its inverse)."""
-    w, x, y, z = (float(c) for c in turn)
-    out = np.empty((3, rows.shape[1]))
-    _turn_rows(
-        np.ascontiguousarray(rows, dtype=np.float64),
-        w,
-        -x if inverse else x,
-        -y if inverse else y,
-        -z if inverse else z,
-        out,
-    )
-    return out
-
-
-@numba.njit(cache=True)
-def _turn_rows(rows, w, x, y, z, out):
-    """:func:`mocodec.rotations.quat_rotate` of every column by one quaternion, term for term
-    (the same floats, without its temporaries)."""
-    for t in range(rows.shape[1]):
-        vx, vy, vz = rows[0, t], rows[1, t], rows[2, t]
-        tx, ty, tz = 2.0 * (y * vz - z * vy), 2.0 * (z * vx - x * vz), 2.0 * (x * vy - y * vx)
-        out[0, t] = vx + w * tx + y * tz - z * ty
-        out[1, t] = vy + w * ty + z * tx - x * tz
-        out[2, t] = vz + w * tz + x * ty - y * tx
+    return rotvec.turn_vectors(np.broadcast_to(turn, (rows.shape[1], 4)), rows.T, back=inverse).T
 
 
 def segment_factors(offsets: np.ndarray, lay: trendwave.Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

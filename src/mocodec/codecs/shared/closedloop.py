@@ -23,19 +23,12 @@ from functools import lru_cache
 import numba
 import numpy as np
 
-from mocodec.codecs.shared.rotvec import quat_product
+from mocodec.codecs.shared.rotvec import quat_product, rotate_vector, turn_vectors
 from mocodec.kinematics import channel_plan
 from mocodec.skeleton import Skeleton
 
 _DAMPING = 1e-9
 _ITERATIONS = 1
-
-
-@numba.njit(inline="always")
-def _rotate(w, x, y, z, vx, vy, vz):
-    """Vector (vx, vy, vz) rotated by the unit quaternion (w, x, y, z)."""
-    tx, ty, tz = 2.0 * (y * vz - z * vy), 2.0 * (z * vx - x * vz), 2.0 * (x * vy - y * vx)
-    return vx + w * tx + y * tz - z * ty, vy + w * ty + z * tx - x * tz, vz + w * tz + x * ty - y * tx
 
 
 @numba.njit(inline="always")
@@ -73,9 +66,9 @@ def _targets(angles, axes, active, cq, has_axis, parent, goal, out):
                     (1.0 if axes[i] == 1 else 0.0),
                     (1.0 if axes[i] == 2 else 0.0),
                 )
-                jx, jy, jz = _rotate(sw, -sx, -sy, -sz, ex, ey, ez)
+                jx, jy, jz = rotate_vector(sw, -sx, -sy, -sz, ex, ey, ez)
                 if has_axis:
-                    jx, jy, jz = _rotate(cq[0], cq[1], cq[2], cq[3], jx, jy, jz)
+                    jx, jy, jz = rotate_vector(cq[0], cq[1], cq[2], cq[3], jx, jy, jz)
                 jac[i, 0], jac[i, 1], jac[i, 2] = jx, jy, jz
                 sw, sx, sy, sz = quat_product(steps[i, 0], steps[i, 1], steps[i, 2], steps[i, 3], sw, sx, sy, sz)
             lw, lx, ly, lz = sw, sx, sy, sz
@@ -351,22 +344,6 @@ def _placing_of(skeleton: Skeleton, active_flags: bytes) -> np.ndarray:
     return out
 
 
-def _turn_vectors(q: np.ndarray, v: np.ndarray, back: bool = False) -> np.ndarray:
-    """``v (T, 3)`` rotated by unit quaternions ``q (T, 4)`` (with ``back``, by their inverse):
-    :func:`mocodec.rotations.quat_rotate` term for term in a compiled loop (the same floats)."""
-    out = np.empty((v.shape[0], 3))
-    _turn_vectors_kernel(np.ascontiguousarray(q), np.ascontiguousarray(v, dtype=np.float64), -1.0 if back else 1.0, out)
-    return out
-
-
-@numba.njit(cache=True)
-def _turn_vectors_kernel(q, v, sign, out):
-    for t in range(v.shape[0]):
-        out[t, 0], out[t, 1], out[t, 2] = _rotate(
-            q[t, 0], sign * q[t, 1], sign * q[t, 2], sign * q[t, 3], v[t, 0], v[t, 1], v[t, 2]
-        )
-
-
 @numba.njit(cache=True)
 def exact_rotation(axis_quat, has_axis, parent, goal):
     """Quaternions ``(T, 4)`` of exactly the local rotation (the one its Euler angles make,
@@ -433,7 +410,7 @@ def code_down_tree(
             if closed_loop and p >= 0 and flagged[j]:
                 exact_targets[j] = exact_rotation(jp.axis_quat, jp.has_axis, glob[j], goal[:, j])
             if where is not None and goal_positions is not None and p >= 0 and active[jp.moves].any():
-                wanted = _turn_vectors(glob[p], goal_positions[:, j] - where[p], back=True) - jp.offset
+                wanted = turn_vectors(glob[p], goal_positions[:, j] - where[p], back=True) - jp.offset
                 cols = dp.move_columns[i]
                 targets[:, cols] = np.where(active[jp.moves], wanted[:, jp.move_axes], targets[:, cols])
         if not dp.coded.size:
@@ -451,4 +428,4 @@ def code_down_tree(
                 bone = np.tile(jp.offset, (frames, 1))
                 for axis, column in zip(jp.move_axes.tolist(), dp.move_columns[i].tolist()):
                     bone[:, axis] += decoded[:, column]
-                where[j] = bone if p < 0 else where[p] + _turn_vectors(glob[p], bone)
+                where[j] = bone if p < 0 else where[p] + turn_vectors(glob[p], bone)

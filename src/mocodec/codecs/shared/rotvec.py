@@ -77,6 +77,31 @@ def quat_product(aw, ax, ay, az, bw, bx, by, bz):
     )
 
 
+@numba.njit(inline="always")
+def rotate_vector(w, x, y, z, vx, vy, vz):
+    """Vector (vx, vy, vz) rotated by the unit quaternion (w, x, y, z): ``v + w t + u x t``
+    with ``t = 2 u x v``, term for term as :func:`mocodec.rotations.quat_rotate` (for numba
+    kernels)."""
+    tx, ty, tz = 2.0 * (y * vz - z * vy), 2.0 * (z * vx - x * vz), 2.0 * (x * vy - y * vx)
+    return vx + w * tx + y * tz - z * ty, vy + w * ty + z * tx - x * tz, vz + w * tz + x * ty - y * tx
+
+
+@numba.njit(cache=True)
+def _turn_vectors_kernel(q, v, sign, out):
+    for t in range(v.shape[0]):
+        out[t, 0], out[t, 1], out[t, 2] = rotate_vector(
+            q[t, 0], sign * q[t, 1], sign * q[t, 2], sign * q[t, 3], v[t, 0], v[t, 1], v[t, 2]
+        )
+
+
+def turn_vectors(q: np.ndarray, v: np.ndarray, back: bool = False) -> np.ndarray:
+    """``v (T, 3)`` rotated by unit quaternions ``q (T, 4)`` (with ``back``, by their inverse):
+    :func:`mocodec.rotations.quat_rotate` in a compiled loop (the same floats)."""
+    out = np.empty((v.shape[0], 3))
+    _turn_vectors_kernel(np.ascontiguousarray(q), np.ascontiguousarray(v, dtype=np.float64), -1.0 if back else 1.0, out)
+    return out
+
+
 @numba.njit(cache=True)
 def _quats_kernel(euler, axes):
     frames, joints = euler.shape[0], euler.shape[1]

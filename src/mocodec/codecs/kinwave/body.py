@@ -160,13 +160,24 @@ def parent_turns(skeleton: Skeleton, parents: np.ndarray) -> np.ndarray:
     the turn a WORLD form (:mod:`mocodec.codecs.shared.rotvec`) puts on the joint's rotation ``M``,
     since ``G = G_p C M C^-1 = C (conj(C) G_p C M) C^-1``. Encoder and decoder compute it from
     the same decoded constants, so it is the same floats on both ends."""
-    joints = np.array([skeleton.channel_joints[g[0]] for g, _ in three_angle_groups(skeleton)], dtype=np.int64)
+    joints, axis, c = _turn_setup(skeleton)
     out = parents[joints]
-    axis = np.array([skeleton.joints[j].has_axis for j in joints], dtype=bool)
     if axis.any():
-        c = rotations.matrix_to_quat(skeleton.axis_matrices)[joints[axis]]
         out[axis] = rotations.quat_multiply(rotations.quat_conjugate(c), rotations.quat_multiply(out[axis], c))
     return out
+
+
+@lru_cache(maxsize=64)
+def _turn_setup(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What :func:`parent_turns` needs of a skeleton (every pass of an encoder and every decode
+    asks): the three-angle joints, which of them have a pre-rotation, and those pre-rotations
+    ``C`` as quaternions."""
+    joints = np.array([skeleton.channel_joints[g[0]] for g, _ in three_angle_groups(skeleton)], dtype=np.int64)
+    axis = np.array([skeleton.joints[j].has_axis for j in joints], dtype=bool)
+    c = rotations.matrix_to_quat(skeleton.axis_matrices)[joints[axis]] if axis.any() else np.zeros((0, 4))
+    for a in (joints, axis, c):
+        a.setflags(write=False)
+    return joints, axis, c
 
 
 def still_rotations(skeleton: Skeleton, const: np.ndarray) -> np.ndarray:

@@ -212,6 +212,19 @@ class DepthPlan:
             turned=bool(moved) or world,
         )
 
+    def quats(self, values: np.ndarray, joints: np.ndarray, rotations: np.ndarray) -> np.ndarray:
+        """The vector joints' rotations ``(T, n, 4)``: the closed loop's own where it gives
+        them (``rotations (T, k, 4)`` of ``joints``), else those of their Euler angle rows in
+        ``values``."""
+        at = {j: i for i, j in enumerate(joints.tolist())}
+        index = [at.get(j, -1) for j, _, _ in self.vector_joints]
+        if min(index) >= 0:
+            return rotations[:, index]
+        out = rotvec.euler_quats(values[self.cols], tuple(o for _, _, o in self.vector_joints))
+        found = [k for k, i in enumerate(index) if i >= 0]
+        out[:, found] = rotations[:, [index[k] for k in found]]
+        return out
+
 
 class Encoder:
     """One body: the passes of the scale search and the final bytes."""
@@ -570,7 +583,7 @@ class Encoder:
         factors = segment_factors(offsets, lay)
         rotvec_groups = three_angle_groups(sk)
 
-        def code(channels: np.ndarray, targets: np.ndarray, exact: dict) -> np.ndarray:
+        def code(channels: np.ndarray, targets: np.ndarray, exact: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
             plan = self._depth_plan(channels)
             step, const, vectors = steps[channels], plan.const, plan.vectors
             parents = (
@@ -580,13 +593,7 @@ class Encoder:
             if vectors:
                 cols = plan.cols
                 pre = parent_turns(sk, parents)[vectors] if plan.world else None
-                quats = np.stack(
-                    [
-                        exact[j] if j in exact else rotvec.euler_quats(values[rows], (o,))[:, 0]
-                        for j, rows, o in plan.vector_joints
-                    ],
-                    axis=1,
-                )
+                quats = plan.quats(values, *exact)
                 values[cols] = plan.form_set.to_forms(values[cols], quats, pre)
             for j, rows in plan.moved:
                 values[rows] = on_axes(values[rows], parents[j])

@@ -323,25 +323,28 @@ def _depth_compose(decoded, glob, d_joints, columns, steps, axes, quats, has_axi
         _compose(angles, axes[i, :k], quats[i], has_axis[i], parent, glob[j])
 
 
-def _placing(skeleton: Skeleton, active: np.ndarray) -> np.ndarray:
-    """Joints whose decoded position closed-loop translations need: the ancestors of every
-    non-root joint with an active translation channel."""
+def _placing(skeleton: Skeleton, active: np.ndarray) -> tuple[np.ndarray, list[bool]]:
+    """Joints whose decoded position closed-loop translations need (the ancestors of every
+    non-root joint with an active translation channel), and per joint whether it is such a
+    joint (its translations are targeted)."""
     return _placing_of(skeleton, active.tobytes())
 
 
 @lru_cache(maxsize=256)
-def _placing_of(skeleton: Skeleton, active_flags: bytes) -> np.ndarray:
+def _placing_of(skeleton: Skeleton, active_flags: bytes) -> tuple[np.ndarray, list[bool]]:
     active = np.frombuffer(active_flags, dtype=np.bool_)
     plan = channel_plan(skeleton)
     out = np.zeros(len(skeleton), dtype=bool)
+    targeted = [False] * len(skeleton)
     for j in range(1, len(skeleton)):
         moves = plan.pos_index[j][plan.pos_index[j] >= 0]
+        targeted[j] = bool(active[moves].any()) and skeleton.parents[j] >= 0
         p = skeleton.parents[j]
         while active[moves].any() and p >= 0 and not out[p]:
             out[p] = True
             p = skeleton.parents[p]
     out.setflags(write=False)
-    return out
+    return out, targeted
 
 
 @numba.njit(cache=True)
@@ -361,6 +364,17 @@ def exact_rotation(axis_quat, has_axis, parent, goal):
             w, x, y, z = quat_product(cw, -cx, -cy, -cz, w, x, y, z)
             w, x, y, z = quat_product(w, x, y, z, cw, cx, cy, cz)
         out[f, 0], out[f, 1], out[f, 2], out[f, 3] = w, x, y, z
+    return out
+
+
+@numba.njit(cache=True)
+def _exact_rotations(rows, joints, axis_quats, has_axis, glob, goal):
+    """``(T, n, 4)``: :func:`exact_rotation` of the depth's joints ``joints[rows]``."""
+    out = np.empty((goal.shape[0], rows.size, 4))
+    for i in range(rows.size):
+        r = rows[i]
+        j = joints[r]
+        out[:, i, :] = exact_rotation(axis_quats[r], has_axis[r], glob[j], goal[:, j])
     return out
 
 
@@ -384,9 +398,10 @@ def code_down_tree(
     orientation (a translated joint below a rotated dummy root), else translations go as they
     are. ``code(channels, targets (T, k))`` codes a depth's channels and returns what the
     decoder will make of them ``(T, k)``; with ``exact (joints,)`` (joints of three axes, all
-    active) it is called as ``code(channels, targets, rotations)``, where ``rotations`` maps
-    each flagged joint of the depth to its :func:`exact_rotation`, its target instead of the
-    (then meaningless) angles in ``targets``."""
+    active) it is called as ``code(channels, targets, rotations)``, where ``rotations`` is
+    ``(joints, quaternions (T, n, 4))``: the depth's flagged joints below the root and their
+    :func:`exact_rotation`, their targets instead of the (then meaningless) angles in
+    ``targets``."""
     plans = _joint_plans(skeleton)
     frames = start.shape[0]
     glob = np.empty((len(skeleton), frames, 4))
@@ -395,7 +410,9 @@ def code_down_tree(
     active = np.ascontiguousarray(active, dtype=np.bool_)
     flagged = np.zeros(len(skeleton), dtype=np.bool_) if exact is None else np.asarray(exact, dtype=np.bool_)
     skip = flagged if closed_loop else np.ones(len(skeleton), dtype=np.bool_)  # no target angles
-    placing = _placing(skeleton, active) if closed_loop and goal_positions is not None else np.zeros(0, bool)
+    placing, targeted = (
+        _placing(skeleton, active) if closed_loop and goal_positions is not None else (np.zeros(0, bool), [])
+    )
     where = np.zeros((len(skeleton), frames, 3)) if placing.any() else None
     for dp in _depth_plans(skeleton):
         targets = np.ascontiguousarray(start[:, dp.coded])  # (one layout: one compiled kernel)
@@ -403,19 +420,20 @@ def code_down_tree(
             start, active, goal, glob, dp.joints, dp.parents, dp.chans, dp.columns, dp.steps, dp.axes,
             dp.axis_quats, dp.has_axis, skip, targets,
         )  # fmt: skip
-        exact_targets = {}
-        per_joint = where is not None or (closed_loop and exact is not None and flagged[dp.joints].any())
-        for i, (j, p) in enumerate(zip(dp.joints.tolist(), dp.parents.tolist()) if per_joint else ()):
-            jp = plans[j]
-            if closed_loop and p >= 0 and flagged[j]:
-                exact_targets[j] = exact_rotation(jp.axis_quat, jp.has_axis, glob[j], goal[:, j])
-            if where is not None and goal_positions is not None and p >= 0 and active[jp.moves].any():
+        for i, (j, p) in enumerate(zip(dp.joints.tolist(), dp.parents.tolist()) if where is not None else ()):
+            if targeted[j] and goal_positions is not None:
+                jp = plans[j]
                 wanted = turn_vectors(glob[p], goal_positions[:, j] - where[p], back=True) - jp.offset
                 cols = dp.move_columns[i]
                 targets[:, cols] = np.where(active[jp.moves], wanted[:, jp.move_axes], targets[:, cols])
         if not dp.coded.size:
             continue
-        decoded = code(dp.coded, targets) if exact is None else code(dp.coded, targets, exact_targets)
+        if exact is None:
+            decoded = code(dp.coded, targets)
+        else:
+            rows = np.flatnonzero(flagged[dp.joints] & (dp.parents >= 0)) if closed_loop else np.zeros(0, np.int64)
+            rotations = _exact_rotations(rows, dp.joints, dp.axis_quats, dp.has_axis, glob, goal)
+            decoded = code(dp.coded, targets, (dp.joints[rows], rotations))
         _depth_compose(
             np.ascontiguousarray(decoded, dtype=np.float64), glob, dp.joints, dp.columns, dp.steps, dp.axes,
             dp.axis_quats, dp.has_axis, dp.has_children,

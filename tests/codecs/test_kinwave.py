@@ -276,7 +276,7 @@ def test_frames_far_off_round_their_coefficients_plainly(walk_amc):
     constants = ConstantCoding(np.ones(8), np.zeros(8))
     knots, coeffs, scaled = enc.quantise(target, const, step, factors, constants)
     out = reconstruct(knots, coeffs, const, step, enc.lay, factors, constants)
-    _, rounded, closer = channelcode.code_rows(
+    _, rounded, closer, _ = channelcode.code_depth(
         target, const, step[:, 0], constants.fraction, constants.base, enc.lay, factors, enc.cfg["deadzone"],
         SEAM_LIMIT, SEAM_HALF_WIDTH, enc.far_steps,
     )  # fmt: skip

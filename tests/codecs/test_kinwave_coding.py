@@ -207,9 +207,9 @@ def test_compiled_wavelets_give_pywavelets_floats(wavelet):
 
 def test_compiled_rows_quantise_within_half_a_step_and_round_where_far():
     """rows.quantise then rows.reconstruct: plain rounding (dead zone 0.5) misses a smooth signal
-    by at most about half a step; a wide dead zone misses by more, and code_rows, which rounds
+    by at most about half a step; a wide dead zone misses by more, and code_depth, which rounds
     the coefficients reaching the frames it misses far to the nearest integer, brings them
-    closer; without far rounding code_rows is quantise then reconstruct."""
+    closer; without far rounding code_depth is quantise then reconstruct."""
     rng = np.random.default_rng(4)
     lay = trendwave.layout(300, 128, 4, 1)
     x = np.cumsum(rng.normal(size=(4, 300)), axis=1) * 3.0
@@ -226,14 +226,61 @@ def test_compiled_rows_quantise_within_half_a_step_and_round_where_far():
     _, coarse, coarse_scaled = channelcode.quantise(x, const, step, fraction, base, lay, factors, 0.2)
     assert np.count_nonzero(coarse) < np.count_nonzero(coeffs)
     rough = channelcode.reconstruct(knots, coarse, const, step, fraction, base, lay, factors, 1.0, 8)
-    plain = channelcode.code_rows(x, const, step, fraction, base, lay, factors, 0.2, 1.0, 8, 0.0)
+    plain = channelcode.code_depth(x, const, step, fraction, base, lay, factors, 0.2, 1.0, 8, 0.0)
     assert np.array_equal(plain[1], coarse) and np.array_equal(plain[2], rough)
-    _, nearest, fixed = channelcode.code_rows(x, const, step, fraction, base, lay, factors, 0.2, 1.0, 8, 0.7)
+    _, nearest, fixed, _ = channelcode.code_depth(x, const, step, fraction, base, lay, factors, 0.2, 1.0, 8, 0.7)
     changed = (nearest != coarse).any(axis=1)
     assert changed.any() and not changed[2]
     assert (np.abs(nearest - coarse_scaled)[nearest != coarse] <= 0.5).all()  # the nearest integers
     assert np.array_equal(fixed[~changed], rough[~changed])
     assert (np.abs(fixed - x).max(axis=1) < np.abs(rough - x).max(axis=1) + 1e-12).all()
+
+
+def test_a_depth_in_one_call_is_each_step_one_call_at_a_time():
+    """code_depth with coding forms (a rotation vector about a mean, another Tait-Bryan order,
+    a WORLD form turned by its parent), translations on the world's axes and isolated frames
+    gives the same integers and floats as the conversions, quantise, reconstruct and the
+    patches called one at a time (what the encoder did before)."""
+    from mocodec.codecs.kinwave.body import apply_patches, on_axes
+    from mocodec.codecs.shared import rotvec
+
+    rng = np.random.default_rng(11)
+    frames, lay = 90, trendwave.layout(90, 64, 3, 0)
+    angles = np.cumsum(rng.normal(0.0, 4.0, (9, frames)), axis=1)  # three joints, file order ZXY
+    translations = np.cumsum(rng.normal(0.0, 0.5, (3, frames)), axis=1)
+    values = np.vstack([translations, np.full((1, frames), 12.5), angles])  # row 3: a constant
+    orders, forms = ("ZXY",) * 3, np.array([rotvec.VECTOR, 2, rotvec.WORLD + 4])
+    means = rotvec.mean_quats(np.array([[10, -4, 3], [0, 0, 0], [0, 0, 0]]), 2.0)
+    pre = rotations.quat_normalize(rng.normal(size=(3, 4)))
+    turn = rotations.quat_normalize(rng.normal(size=4))
+    quats = rotvec.euler_quats(angles, orders)
+    cols, moved_rows, isolated = np.arange(4, 13), np.array([[0, 1, 2]]), np.array([1, 40, 41])
+    form_set = rotvec.FormSet(orders, forms, means)
+    const, step = np.arange(13) == 3, np.full(13, 0.3)
+    fraction, base = np.full(13, 0.125), np.zeros(13)
+    factors = (np.ones(lay.num_knots), np.ones(lay.num_coeffs), np.ones(lay.starts.size - 1))
+    knots, coeffs, out, patches = channelcode.code_depth(
+        values, const, step, fraction, base, lay, factors, 0.4, 1.0, 8, 0.0,
+        (cols, quats, form_set, pre), (moved_rows, turn[None]), isolated,
+    )  # fmt: skip
+
+    coded = values.copy()
+    coded[cols] = form_set.to_forms(angles, quats, pre)
+    coded[:3] = on_axes(coded[:3], turn)
+    wanted = coded[:, isolated]
+    coded[:, isolated] = (coded[:, isolated - 1] + coded[:, isolated + 1]) / 2.0
+    k_int, c_int, _ = channelcode.quantise(coded, const, step, fraction, base, lay, factors, 0.4)
+    rec = channelcode.reconstruct(k_int, c_int, const, step, fraction, base, lay, factors, 1.0, 8)
+    patch = np.round((wanted - rec[:, isolated]) / (step[:, None] * trendwave.KEYFRAME_QUANTUM)).astype(np.int64)
+    patch[const] = 0
+    apply_patches(rec, step[:, None], isolated, patch)
+    rec[:3] = on_axes(rec[:3], turn, inverse=True)
+    rec[cols] = form_set.from_forms(rec[cols], pre)
+    assert np.array_equal(knots, k_int) and np.array_equal(coeffs, c_int) and np.array_equal(patches, patch)
+    assert np.array_equal(out, rec)
+    assert patches.any() and np.abs(out[3] - 12.5).max() <= 0.3 * 0.125 / 2  # (its quantum)
+    assert np.abs(out[:3] - values[:3]).max() < 1.0  # (the steps are 0.3)
+    assert np.degrees(rotvec.mean_distances(quats, rotvec.euler_quats(out[cols], orders))).max() < 1.0
 
 
 def test_closed_loop_targets_restore_the_global_orientation(walk_bvh, walk_amc):

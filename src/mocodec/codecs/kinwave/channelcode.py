@@ -1,6 +1,7 @@
 """kinwave's rows in compiled loops: the quantisation of channels to knots and dead-zone wavelet
-coefficients, their reconstruction (trend, wavelet synthesis, seam smoothing) and the encoder's
-plain rounding where a frame misses its target far (docs/kinwave.md). Each row is coded alone,
+coefficients, their reconstruction (trend, wavelet synthesis, seam smoothing), the encoder's
+plain rounding where a frame misses its target far, and a tree depth's whole coding with its
+coding forms, world-axis translations and isolated frames (docs/kinwave.md). Each row is coded alone,
 with the same floats as the numpy expressions these loops replace term for term, so the bytes
 of every body are what they were; the wavelets are :mod:`.periodized`'s (PyWavelets' floats).
 """
@@ -10,6 +11,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from mocodec.codecs.shared import rotvec
 from mocodec.coding.transforms import periodized, seams, trendwave, wavelets
 
 
@@ -148,7 +150,7 @@ def _round_far(target, out, const, step, knot_f, far_steps, scaled, coeffs, lay,
 @numba.njit(cache=True)
 def _code_rows(target, const, step, fraction, base, factors, seam_limit, lay, dec, rec, weight, deadzone, far, reach):
     """:func:`_quantise`, :func:`_reconstruct` and, with ``far`` > 0, :func:`_round_far` and
-    the changed rows reconstructed again, in one call (:func:`code_rows`)."""
+    the changed rows reconstructed again, in one call (:func:`code_depth`)."""
     knot_f, coeff_f, seam_f = factors
     k_int, c_int, scaled = _quantise(
         target, const, step, fraction, base, knot_f, coeff_f, lay, dec[0], dec[1], deadzone
@@ -158,7 +160,7 @@ def _code_rows(target, const, step, fraction, base, factors, seam_limit, lay, de
     )
     if far <= 0.0:
         return k_int, c_int, out
-    changed = np.flatnonzero(_round_far(target, out, const, step, knot_f, far, scaled, c_int, lay, reach[0], reach[1]))
+    changed = np.flatnonzero(_round_far(target, out, const, step, knot_f, far, scaled, c_int, lay, *reach))
     if changed.size:
         again = _reconstruct(
             k_int[changed], c_int[changed], const[changed], step[changed], fraction[changed], base[changed],
@@ -244,7 +246,72 @@ def quantise(
     )
 
 
-def code_rows(
+@numba.njit(inline="always")
+def _turn_rows(values, rows, turn, sign):
+    """Translation rows ``values[rows]`` (three) turned in place by the unit quaternion
+    ``turn`` (``sign`` -1: its inverse), as :func:`rotvec.turn_vectors` turns them."""
+    a, b, c = rows[0], rows[1], rows[2]
+    for t in range(values.shape[1]):
+        values[a, t], values[b, t], values[c, t] = rotvec.rotate_vector(
+            turn[0], sign * turn[1], sign * turn[2], sign * turn[3], values[a, t], values[b, t], values[c, t]
+        )
+
+
+@numba.njit(cache=True)
+def _code_depth(
+    values, cols, quats, forms, moved_rows, moved_turns, iso, const, step, fraction, base, factors, seam_limit, lay,
+    dec, rec, weight, deadzone, far, reach,
+):  # fmt: skip
+    """:func:`code_depth`: ``forms`` are :meth:`rotvec.FormSet.kernel_arguments`."""
+    vector, means, form_axes, world, turns, file_axes = forms
+    n, rows, frames = cols.size // 3, values.shape[0], values.shape[1]
+    if n:
+        coded = rotvec.forms_of_quats(quats, vector, means, form_axes, world, turns)
+        for e in range(n):
+            for m in range(3):
+                for t in range(frames):
+                    values[cols[3 * e + m], t] = coded[t, e, m]
+    for i in range(moved_rows.shape[0]):
+        _turn_rows(values, moved_rows[i], moved_turns[i], 1.0)
+    wanted = np.empty((rows, iso.size))
+    between = np.empty((rows, iso.size))  # the wavelet sees the neighbours' mean there
+    for r in range(rows):
+        for i in range(iso.size):
+            wanted[r, i] = values[r, iso[i]]
+            between[r, i] = (values[r, iso[i] - 1] + values[r, iso[i] + 1]) / 2.0
+    for r in range(rows):
+        for i in range(iso.size):
+            values[r, iso[i]] = between[r, i]
+    k_int, c_int, out = _code_rows(
+        values, const, step, fraction, base, factors, seam_limit, lay, dec, rec, weight, deadzone, far, reach
+    )
+    patch = np.zeros((rows, iso.size), dtype=np.int64)
+    for r in range(rows):
+        quantum = step[r] * trendwave.KEYFRAME_QUANTUM
+        for i in range(iso.size):
+            if not const[r]:  # (a constant row takes no patch)
+                patch[r, i] = np.int64(np.rint((wanted[r, i] - out[r, iso[i]]) / quantum))
+            out[r, iso[i]] += patch[r, i] * quantum
+    for i in range(moved_rows.shape[0]):
+        _turn_rows(out, moved_rows[i], moved_turns[i], -1.0)
+    if n:
+        back = np.empty((frames, n, 3))
+        for e in range(n):
+            for m in range(3):
+                for t in range(frames):
+                    back[t, e, m] = out[cols[3 * e + m], t]
+        euler = rotvec.euler_of_quats(rotvec.quats_of_forms(back, form_axes, vector, means, world, turns), file_axes)
+        for e in range(n):
+            for m in range(3):
+                for t in range(frames):
+                    out[cols[3 * e + m], t] = euler[t, e, m]
+    return k_int, c_int, out, patch
+
+
+NO_FORMS = rotvec.FormSet((), np.zeros(0, dtype=np.int64), np.zeros((0, 4)))  # a depth without coding forms
+
+
+def code_depth(
     target: np.ndarray,
     const: np.ndarray,
     step: np.ndarray,
@@ -256,14 +323,32 @@ def code_rows(
     seam_limit: float,
     half_width: int,
     far_steps: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Knots, coefficients and reconstruction of ``target (k, T)`` in one compiled call: what
-    :func:`quantise` then :func:`reconstruct` give (arguments as theirs), and with ``far_steps``
-    > 0 the coefficients :func:`_round_far` rounds to the nearest and their rows' reconstruction
-    again (a pass's work on a tree depth)."""
+    forms: tuple[np.ndarray, np.ndarray, rotvec.FormSet, np.ndarray | None] | None = None,
+    moved: tuple[np.ndarray, np.ndarray] | None = None,
+    isolated: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A tree depth's rows ``target (k, T)`` (file-order angles and translations) coded in one
+    compiled call: :func:`quantise` (arguments as its), :func:`reconstruct`, and with
+    ``far_steps`` > 0 the coefficients :func:`_round_far` rounds to the nearest integer and
+    their rows reconstructed again. ``forms``: ``(cols, quats (T, n, 4), form_set, pre)``, the
+    three-angle joints whose rows are ``cols`` (three each) go in their coding forms from their
+    rotations (:class:`rotvec.FormSet`, WORLD turns ``pre``) and back; ``moved``: ``(rows (m,
+    3), turns (m, 4))``, translations on the world's axes; ``isolated`` frames are coded as
+    their neighbours' mean and a patch each. Returns knots, coefficients, the reconstruction
+    ``(k, T)`` in the file's angles and axes with the patches applied, and the patches ``(k,
+    isolated)``; the same floats as each step one call at a time."""
+    no_forms = (np.zeros(0, dtype=np.int64), np.zeros((target.shape[1], 0, 4)), NO_FORMS, None)
+    cols, quats, form_set, pre = forms or no_forms
+    moved_rows, moved_turns = moved or (np.zeros((0, 3), dtype=np.int64), np.zeros((0, 4)))
     const, step, fraction, base = _row_steps(const, step, fraction, base)
-    return _code_rows(
-        np.ascontiguousarray(target, dtype=np.float64),
+    return _code_depth(
+        np.array(target, dtype=np.float64, order="C"),
+        cols,
+        np.ascontiguousarray(quats, dtype=np.float64),
+        form_set.kernel_arguments(pre),
+        moved_rows,
+        np.ascontiguousarray(moved_turns, dtype=np.float64),
+        np.zeros(0, dtype=np.int64) if isolated is None else isolated,
         const,
         step,
         fraction,

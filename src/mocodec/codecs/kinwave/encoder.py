@@ -33,12 +33,10 @@ from mocodec.codecs.kinwave.body import (
     WAVELET_IDS,
     ZERO_CONSTANTS,
     ConstantCoding,
-    apply_patches,
     channel_steps,
     constant_coding,
     has_translation,
     levels_for,
-    on_axes,
     parent_orientations,
     parent_turns,
     reconstruct,
@@ -178,11 +176,12 @@ class DepthPlan:
     const: np.ndarray
     constants: ConstantCoding
     vectors: list[int]  # indices into three_angle_groups
-    cols: list[int]
+    cols: np.ndarray  # their rows, three a joint
     form_set: rotvec.FormSet
     world: bool  # a WORLD form among them
     vector_joints: list[tuple[int, list[int], str]]  # (joint, its rows, its order)
-    moved: list[tuple[int, list[int]]]  # (joint, its rows) on the world's axes
+    moved_joints: np.ndarray  # (m,) joints whose translations go on the world's axes
+    moved_rows: np.ndarray  # (m, 3) their rows
     turned: bool
 
     @classmethod
@@ -197,7 +196,7 @@ class DepthPlan:
             const=enc.const[channels],
             constants=ConstantCoding(enc.constants.fraction[channels], enc.constants.base[channels]),
             vectors=vectors,
-            cols=[column[c] for k in vectors for c in groups[k][0]],
+            cols=np.array([column[c] for k in vectors for c in groups[k][0]], dtype=np.int64),
             form_set=rotvec.FormSet(
                 tuple(groups[k][1] for k in vectors),
                 forms,
@@ -208,7 +207,8 @@ class DepthPlan:
                 (int(sk.channel_joints[groups[k][0][0]]), [column[c] for c in groups[k][0]], groups[k][1])
                 for k in vectors
             ],
-            moved=moved,
+            moved_joints=np.array([j for j, _ in moved], dtype=np.int64),
+            moved_rows=np.array([rows for _, rows in moved], dtype=np.int64).reshape(-1, 3),
             turned=bool(moved) or world,
         )
 
@@ -585,38 +585,21 @@ class Encoder:
 
         def code(channels: np.ndarray, targets: np.ndarray, exact: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
             plan = self._depth_plan(channels)
-            step, const, vectors = steps[channels], plan.const, plan.vectors
+            step, constants = steps[channels], plan.constants
             parents = (
                 parent_orientations(sk, decoded[:, 0]) if plan.turned else np.zeros((0, 4))
             )  # of the decoded rows above
-            values = targets.T.copy()
-            if vectors:
-                cols = plan.cols
-                pre = parent_turns(sk, parents)[vectors] if plan.world else None
-                quats = plan.quats(values, *exact)
-                values[cols] = plan.form_set.to_forms(values[cols], quats, pre)
-            for j, rows in plan.moved:
-                values[rows] = on_axes(values[rows], parents[j])
-            constants = plan.constants
-            iso = self.isolated
-            wanted = values[:, iso]
-            if iso.size:  # the wavelet sees the neighbours' mean there
-                values[:, iso] = (values[:, iso - 1] + values[:, iso + 1]) / 2.0
-            k_int, c_int, out = channelcode.code_rows(
-                values, const, step[:, 0], constants.fraction, constants.base, lay, factors, self.cfg["deadzone"],
-                SEAM_LIMIT, SEAM_HALF_WIDTH, self.far_steps,
+            values = targets.T
+            forms = None
+            if plan.vectors:
+                pre = parent_turns(sk, parents)[plan.vectors] if plan.world else None
+                forms = (plan.cols, plan.quats(values, *exact), plan.form_set, pre)
+            k_int, c_int, out, patch = channelcode.code_depth(
+                values, plan.const, step[:, 0], constants.fraction, constants.base, lay, factors,
+                self.cfg["deadzone"], SEAM_LIMIT, SEAM_HALF_WIDTH, self.far_steps, forms,
+                (plan.moved_rows, parents[plan.moved_joints]) if plan.moved_rows.size else None, self.isolated,
             )  # fmt: skip
-            knots[channels], coeffs[channels] = k_int, c_int
-            if iso.size:
-                patch = np.round((wanted - out[:, iso]) / (step * trendwave.KEYFRAME_QUANTUM)).astype(np.int64)
-                patch[const] = 0
-                apply_patches(out, step, iso, patch)
-                patches[channels] = patch
-            for j, rows in plan.moved:
-                out[rows] = on_axes(out[rows], parents[j], inverse=True)
-            if vectors:
-                out[cols] = plan.form_set.from_forms(out[cols], pre)
-            decoded[channels] = out
+            knots[channels], coeffs[channels], patches[channels], decoded[channels] = k_int, c_int, patch, out
             return out.T
 
         exact = np.zeros(len(sk), dtype=bool)
@@ -638,7 +621,7 @@ class Encoder:
     def far_steps(self) -> float:
         """Max bounds: where a depth's reconstruction misses its target by more than this many
         of the frame's steps (FAR_STEPS), the coefficients reaching that frame are rounded to
-        the nearest integer instead of through the dead zone (:func:`channelcode.code_rows`).
+        the nearest integer instead of through the dead zone (:func:`channelcode.code_depth`).
         A max bound is set by a few such frames (several zeroed coefficients adding up), and
         the whole clip's steps went finer for them; the dead zone keeps its savings everywhere
         else (docs/kinwave.md). Encoder only: the decoder reads the integers as ever. 0 (none)

@@ -173,7 +173,7 @@ def _euler_of(q, i, jj, k, proper, eps, angles, t):
 
 
 @numba.njit(cache=True)
-def _form_quats_kernel(values, form_axes, vector, means, world, pre):
+def quats_of_forms(values, form_axes, vector, means, world, pre):
     """Quaternions ``(T, n, 4)`` of rotations coded as rotation vectors (``vector[j]``) or Euler
     angles about ``form_axes[j]`` (degrees), each times its mean ``means[j]`` on the left, and
     where ``world[j]`` then by conj(``pre[j]``)."""
@@ -198,7 +198,7 @@ def _form_quats_kernel(values, form_axes, vector, means, world, pre):
 
 
 @numba.njit(cache=True)
-def _forms_kernel(quats, vector, means, axes, world, pre):
+def forms_of_quats(quats, vector, means, axes, world, pre):
     """Coding-form values ``(T, n, 3)`` of quaternions ``(T, n, 4)``: each joint's rotation,
     where ``world[j]`` first turned by ``pre[j]`` on the left, as a rotation vector about
     ``means[j]`` (``vector[j]``) or as Euler angles about ``axes[j]`` continuous in time."""
@@ -223,7 +223,7 @@ def _forms_kernel(quats, vector, means, axes, world, pre):
 
 
 @numba.njit(cache=True)
-def _quat_euler_kernel(quats, axes):
+def euler_of_quats(quats, axes):
     """Euler angles (degrees, each joint's triples continuous in time) of quaternions
     ``(T, n, 4)`` in the orders ``axes (n, 3)``."""
     frames, joints = quats.shape[0], quats.shape[1]
@@ -304,6 +304,13 @@ class FormSet:
             return self.unturned, self.means
         return self.world, np.ascontiguousarray(pre, dtype=np.float64)
 
+    def kernel_arguments(self, pre: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
+        """``(vector, means, form_axes, world, turns, file_axes)``: what :func:`forms_of_quats`,
+        :func:`quats_of_forms` and :func:`euler_of_quats` take for these joints, for a compiled
+        caller that converts them itself (:meth:`to_forms` and :meth:`from_forms` in one)."""
+        world, turns = self._turns(pre)
+        return self.vector, self.means, self.form_axes, world, turns, self.file_axes
+
     def to_forms(self, rows: np.ndarray, quats: np.ndarray | None = None, pre: np.ndarray | None = None) -> np.ndarray:
         """File-order Euler angle rows ``(3n, T)`` in each joint's coding form, continuous in
         time; ``pre (n, 4)`` the WORLD joints' turns. ``quats (T, n, 4)``, when given, are the
@@ -311,18 +318,18 @@ class FormSet:
         if quats is None:
             quats = _quats_kernel(_per_joint(rows), self.file_axes)
         world, turns = self._turns(pre)
-        return _rows(_forms_kernel(np.ascontiguousarray(quats), self.vector, self.means, self.form_axes, world, turns))
+        return _rows(forms_of_quats(np.ascontiguousarray(quats), self.vector, self.means, self.form_axes, world, turns))
 
     def quats(self, rows: np.ndarray, pre: np.ndarray | None = None) -> np.ndarray:
         """The rotations ``(T, n, 4)`` of rows in the coding forms (:meth:`from_forms` without
         the Euler angles: what a measure of rotation error needs)."""
         world, turns = self._turns(pre)
-        return _form_quats_kernel(_per_joint(rows), self.form_axes, self.vector, self.means, world, turns)
+        return quats_of_forms(_per_joint(rows), self.form_axes, self.vector, self.means, world, turns)
 
     def from_forms(self, rows: np.ndarray, pre: np.ndarray | None = None) -> np.ndarray:
         """Inverse of :meth:`to_forms`: file-order Euler angle rows, each joint's triples as
         continuous as the Euler form allows (frame 0 in the principal range)."""
-        return _rows(_quat_euler_kernel(self.quats(rows, pre), self.file_axes))
+        return _rows(euler_of_quats(self.quats(rows, pre), self.file_axes))
 
 
 def to_forms(

@@ -151,16 +151,29 @@ def bone_skeleton(skeleton: Skeleton, values: np.ndarray, const: np.ndarray) -> 
     levers (a MotionBuilder export keeps every bone in position channels). The constants are
     rounded to BONE_PLACES decimals of the skeleton's unit: a game export stores them with
     float32 noise that differs from clip to clip, and the allocation (cached per skeleton)
-    would otherwise be solved again for every clip of the same body."""
+    would otherwise be solved again for every clip of the same body; the clips of one body
+    share one such skeleton (made once)."""
+    if not values.shape[1]:
+        return skeleton
     plan = channel_plan(skeleton)
+    held = tuple(
+        (j, k, round(float(values[c, 0]), BONE_PLACES))
+        for j in range(1, len(skeleton))
+        for k, c in enumerate(plan.pos_index[j].tolist())
+        if c >= 0 and const[c]
+    )
+    return _with_bones(skeleton, held)
+
+
+@lru_cache(maxsize=64)
+def _with_bones(skeleton: Skeleton, held: tuple[tuple[int, int, float], ...]) -> Skeleton:
+    """:func:`bone_skeleton`'s skeleton: each ``(joint, axis, value)`` of ``held`` added to
+    that joint's offset."""
     joints = list(skeleton.joints)
-    for j in range(1, len(joints)):
-        held = [(k, c) for k, c in enumerate(plan.pos_index[j]) if c >= 0 and const[c]]
-        if held and values.shape[1]:
-            offset = list(joints[j].offset)
-            for k, c in held:
-                offset[k] += round(float(values[c, 0]), BONE_PLACES)
-            joints[j] = replace(joints[j], offset=tuple(offset))
+    for j, k, value in held:
+        offset = list(joints[j].offset)
+        offset[k] += value
+        joints[j] = replace(joints[j], offset=tuple(offset))
     if joints == list(skeleton.joints):
         return skeleton
     return Skeleton(tuple(joints), skeleton.units_per_metre, skeleton.name)

@@ -325,11 +325,12 @@ class Encoder:
         return constant_coding(self.output_skeleton, fine, turned.any(), about_zero)
 
     def _grid_phase(self) -> int | None:
-        """Where the wavelet grid goes (:func:`trendwave.grid_phase`, the channels in the
-        starting scale's steps, the two frames keyframes may take left out); None: after the
-        keyframes, as it would without a lead."""
+        """Where the wavelet grid goes (:func:`trendwave.grid_phase`, the moving channels in
+        the starting scale's steps, the two frames keyframes may take left out); None: after
+        the keyframes, as it would without a lead."""
         steps = channel_steps(self.skeleton, self.codes(self.first_scale()))
-        return trendwave.grid_phase(self.values / steps, self.cfg["wavelet"], skip=2)
+        moving = ~self.const
+        return trendwave.grid_phase(self.values[moving] / steps[moving], self.cfg["wavelet"], skip=2)
 
     def set_layout(self, keyframes: int) -> None:
         """Segments and knots with ``keyframes`` leading one-frame segments, the wavelet grid

@@ -183,7 +183,7 @@ def _with_bones(skeleton: Skeleton, held: tuple[tuple[int, int, float], ...]) ->
 class DepthPlan:
     """A depth's channels in a pass (:meth:`Encoder.run_pass`): which of its three-angle joints
     go in another coding form (their rows among the depth's, their :class:`rotvec.FormSet`, and
-    per joint its rows for its quaternion), which translations go on the world's axes, its
+    each one's joint and Euler order), which translations go on the world's axes, its
     constant flags and constants' coding, and whether it needs its parents' decoded turns."""
 
     const: np.ndarray
@@ -192,7 +192,7 @@ class DepthPlan:
     cols: np.ndarray  # their rows, three a joint
     form_set: rotvec.FormSet
     world: bool  # a WORLD form among them
-    vector_joints: list[tuple[int, list[int], str]]  # (joint, its rows, its order)
+    vector_joints: list[tuple[int, str]]  # (joint, its order)
     moved_joints: np.ndarray  # (m,) joints whose translations go on the world's axes
     moved_rows: np.ndarray  # (m, 3) their rows
     turned: bool
@@ -216,10 +216,7 @@ class DepthPlan:
                 rotvec.mean_quats(enc.means[vectors], MEAN_QUANTUM) if vectors else np.zeros((0, 4)),
             ),
             world=world,
-            vector_joints=[
-                (int(sk.channel_joints[groups[k][0][0]]), [column[c] for c in groups[k][0]], groups[k][1])
-                for k in vectors
-            ],
+            vector_joints=[(int(sk.channel_joints[groups[k][0][0]]), groups[k][1]) for k in vectors],
             moved_joints=np.array([j for j, _ in moved], dtype=np.int64),
             moved_rows=np.array([rows for _, rows in moved], dtype=np.int64).reshape(-1, 3),
             turned=bool(moved) or world,
@@ -230,10 +227,10 @@ class DepthPlan:
         them (``rotations (T, k, 4)`` of ``joints``), else those of their Euler angle rows in
         ``values``."""
         at = {j: i for i, j in enumerate(joints.tolist())}
-        index = [at.get(j, -1) for j, _, _ in self.vector_joints]
+        index = [at.get(j, -1) for j, _ in self.vector_joints]
         if min(index) >= 0:
             return rotations[:, index]
-        out = rotvec.euler_quats(values[self.cols], tuple(o for _, _, o in self.vector_joints))
+        out = rotvec.euler_quats(values[self.cols], tuple(o for _, o in self.vector_joints))
         found = [k for k, i in enumerate(index) if i >= 0]
         out[:, found] = rotations[:, [index[k] for k in found]]
         return out

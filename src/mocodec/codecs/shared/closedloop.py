@@ -323,7 +323,7 @@ def _depth_compose(decoded, glob, d_joints, columns, steps, axes, quats, has_axi
         _compose(angles, axes[i, :k], quats[i], has_axis[i], parent, glob[j])
 
 
-def _placing(skeleton: Skeleton, active: np.ndarray) -> tuple[np.ndarray, list[bool]]:
+def _placing(skeleton: Skeleton, active: np.ndarray) -> tuple[np.ndarray, tuple[bool, ...]]:
     """Joints whose decoded position closed-loop translations need (the ancestors of every
     non-root joint with an active translation channel), and per joint whether it is such a
     joint (its translations are targeted)."""
@@ -331,7 +331,7 @@ def _placing(skeleton: Skeleton, active: np.ndarray) -> tuple[np.ndarray, list[b
 
 
 @lru_cache(maxsize=256)
-def _placing_of(skeleton: Skeleton, active_flags: bytes) -> tuple[np.ndarray, list[bool]]:
+def _placing_of(skeleton: Skeleton, active_flags: bytes) -> tuple[np.ndarray, tuple[bool, ...]]:
     active = np.frombuffer(active_flags, dtype=np.bool_)
     plan = channel_plan(skeleton)
     out = np.zeros(len(skeleton), dtype=bool)
@@ -344,7 +344,7 @@ def _placing_of(skeleton: Skeleton, active_flags: bytes) -> tuple[np.ndarray, li
             out[p] = True
             p = skeleton.parents[p]
     out.setflags(write=False)
-    return out, targeted
+    return out, tuple(targeted)
 
 
 @numba.njit(cache=True)
@@ -411,7 +411,7 @@ def code_down_tree(
     flagged = np.zeros(len(skeleton), dtype=np.bool_) if exact is None else np.asarray(exact, dtype=np.bool_)
     skip = flagged if closed_loop else np.ones(len(skeleton), dtype=np.bool_)  # no target angles
     placing, targeted = (
-        _placing(skeleton, active) if closed_loop and goal_positions is not None else (np.zeros(0, bool), [])
+        _placing(skeleton, active) if closed_loop and goal_positions is not None else (np.zeros(0, bool), ())
     )
     where = np.zeros((len(skeleton), frames, 3)) if placing.any() else None
     for dp in _depth_plans(skeleton):

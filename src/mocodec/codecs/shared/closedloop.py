@@ -421,7 +421,7 @@ def code_down_tree(
             dp.axis_quats, dp.has_axis, skip, targets,
         )  # fmt: skip
         for i, (j, p) in enumerate(zip(dp.joints.tolist(), dp.parents.tolist()) if where is not None else ()):
-            if targeted[j] and goal_positions is not None:
+            if targeted[j] and goal_positions is not None and where is not None:
                 jp = plans[j]
                 wanted = turn_vectors(glob[p], goal_positions[:, j] - where[p], back=True) - jp.offset
                 cols = dp.move_columns[i]

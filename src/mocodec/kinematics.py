@@ -179,6 +179,23 @@ def _half_angles(channels: np.ndarray, columns: np.ndarray) -> tuple[np.ndarray,
     return cos_half, sin_half
 
 
+@numba.njit(cache=True)
+def frame_orientations(frame, rot_index, rot_axis, pos_index, axis_quat, has_axis, offsets, parents, rot_columns):
+    """Global orientations ``(joints, 4)`` of one frame of channels ``frame (C,)``, for a
+    compiled caller: :func:`forward_kinematics`' floats (the arguments are
+    :class:`ChannelPlan`'s fields, in its order)."""
+    channels = np.empty((1, frame.size))
+    channels[0, :] = frame
+    cos_half, sin_half = _half_angles(channels, rot_columns)
+    joints = parents.shape[0]
+    pos, quat = np.empty((1, joints, 3)), np.empty((1, joints, 4))
+    _fk_kernel(
+        channels, cos_half, sin_half, rot_index, rot_axis, pos_index, axis_quat, has_axis, offsets, parents, pos, quat,
+        np.empty((0, 0, 4)), False,
+    )  # fmt: skip
+    return quat[0]
+
+
 def _run(skeleton: Skeleton, channels: np.ndarray, want_local: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     channels = _checked(skeleton, channels)
     plan = channel_plan(skeleton)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mocodec import moc, ratecontrol
+from mocodec import moc, ratecontrol, reexpress
 from mocodec.codecs import get_codec
 from mocodec.codecs.kinwave import encoder as kinwave_encoder
 from mocodec.codecs.kinwave.body import three_angle_groups
@@ -43,12 +43,29 @@ def test_looser_bounds_give_smaller_files(walk_amc):
     assert sizes == sorted(sizes, reverse=True) and sizes[0] > 3 * sizes[-1]
 
 
-def test_encoder_model_is_the_decoders_output_bit_for_bit(walk_bvh):
-    codec = get_codec("kinwave", max_error_cm=0.3)
-    enc = BoundSearch(codec, walk_bvh)
+@pytest.mark.parametrize("layout", ["bvh", "dummy root", "turned root and a glitch"])
+def test_encoder_model_is_the_decoders_output_bit_for_bit(walk_bvh, layout):
+    """A pass's decoded channels (what the search measures) are the decoder's for its bytes,
+    also where the compiled pass turns coding forms and translations by the decoded rows above
+    (a dummy root with a constant turn and six channels, away from the origin) and codes an
+    isolated frame apart (a one-frame glitch)."""
+    motion = walk_bvh[:150]
+    if layout == "dummy root":
+        motion = reexpress.with_dummy_root(motion, (0.0, -90.0, 0.0), position_channels=True)
+    elif layout == "turned root and a glitch":
+        channels = motion.channels.copy()
+        channels[60] += 25.0
+        motion = reexpress.with_dummy_root(motion.with_channels(channels), (30.0, 20.0, 10.0), position_channels=True)
+        channels = motion.channels.copy()
+        channels[:, :3] = (12.0, -3.0, 7.0)  # the dummy root stands away from the origin
+        motion = motion.with_channels(channels)
+    enc = BoundSearch(get_codec("kinwave", max_error_cm=0.3), motion)
     ps = enc.run_pass(enc.codes(0.4))
-    decoded = enc.decoded_body(enc.body(ps))
-    assert np.array_equal(decoded, ps.decoded)
+    assert np.array_equal(enc.decoded_body(enc.body(ps)), ps.decoded)
+    assert enc.pass_error(ps) < 0.6  # and the closed loop aimed at the original (about 0.22 cm here)
+    if layout != "bvh":  # the turned paths ran
+        assert (enc.forms >= rotvec.WORLD).any() and enc.world_translations
+    assert enc.isolated.size == (layout == "turned root and a glitch")
 
 
 def test_same_input_same_bytes(walk_amc):

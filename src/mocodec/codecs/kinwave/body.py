@@ -160,7 +160,7 @@ def parent_turns(skeleton: Skeleton, parents: np.ndarray) -> np.ndarray:
     the turn a WORLD form (:mod:`mocodec.codecs.shared.rotvec`) puts on the joint's rotation ``M``,
     since ``G = G_p C M C^-1 = C (conj(C) G_p C M) C^-1``. Encoder and decoder compute it from
     the same decoded constants, so it is the same floats on both ends."""
-    joints, axis, c = _turn_setup(skeleton)
+    joints, axis, c = turn_setup(skeleton)
     out = parents[joints]
     if axis.any():
         out[axis] = rotations.quat_multiply(rotations.quat_conjugate(c), rotations.quat_multiply(out[axis], c))
@@ -168,7 +168,7 @@ def parent_turns(skeleton: Skeleton, parents: np.ndarray) -> np.ndarray:
 
 
 @lru_cache(maxsize=64)
-def _turn_setup(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def turn_setup(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """What :func:`parent_turns` needs of a skeleton (every pass of an encoder and every decode
     asks): the three-angle joints, which of them have a pre-rotation, and those pre-rotations
     ``C`` as quaternions."""

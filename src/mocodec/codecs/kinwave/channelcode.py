@@ -258,11 +258,12 @@ def _turn_rows(values, rows, turn, sign):
 
 
 @numba.njit(cache=True)
-def _code_depth(
+def depth_kernel(
     values, cols, quats, forms, moved_rows, moved_turns, iso, const, step, fraction, base, factors, seam_limit, lay,
     dec, rec, weight, deadzone, far, reach,
 ):  # fmt: skip
-    """:func:`code_depth`: ``forms`` are :meth:`rotvec.FormSet.kernel_arguments`."""
+    """:func:`code_depth` (``forms``: :meth:`rotvec.FormSet.kernel_arguments`), for compiled
+    callers."""
     vector, means, form_axes, world, turns, file_axes = forms
     n, rows, frames = cols.size // 3, values.shape[0], values.shape[1]
     if n:
@@ -336,12 +337,13 @@ def code_depth(
     3), turns (m, 4))``, translations on the world's axes; ``isolated`` frames are coded as
     their neighbours' mean and a patch each. Returns knots, coefficients, the reconstruction
     ``(k, T)`` in the file's angles and axes with the patches applied, and the patches ``(k,
-    isolated)``; the same floats as each step one call at a time."""
+    isolated)``; the same floats as each step one call at a time. (The encoder's compiled pass,
+    :mod:`.treepass`, calls :func:`depth_kernel` itself; this is its entry from Python.)"""
     no_forms = (np.zeros(0, dtype=np.int64), np.zeros((target.shape[1], 0, 4)), NO_FORMS, None)
     cols, quats, form_set, pre = forms or no_forms
     moved_rows, moved_turns = moved or (np.zeros((0, 3), dtype=np.int64), np.zeros((0, 4)))
     const, step, fraction, base = _row_steps(const, step, fraction, base)
-    return _code_depth(
+    return depth_kernel(
         np.array(target, dtype=np.float64, order="C"),
         cols,
         np.ascontiguousarray(quats, dtype=np.float64),

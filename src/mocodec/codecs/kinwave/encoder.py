@@ -12,7 +12,7 @@ import numpy as np
 
 from mocodec import rotations
 from mocodec.codecs.base import Codec
-from mocodec.codecs.kinwave import channelcode, kinalloc
+from mocodec.codecs.kinwave import channelcode, kinalloc, treepass
 from mocodec.codecs.kinwave.body import (
     CODER_REVISION,
     FINE_CONSTANTS,
@@ -50,7 +50,7 @@ from mocodec.codecs.kinwave.body import (
     with_more,
     world_translations,
 )
-from mocodec.codecs.shared import closedloop, rotvec
+from mocodec.codecs.shared import rotvec
 from mocodec.coding.entropy import coefcoder
 from mocodec.coding.transforms import trendwave
 from mocodec.kinematics import channel_plan, forward_kinematics
@@ -182,9 +182,10 @@ def _with_bones(skeleton: Skeleton, held: tuple[tuple[int, int, float], ...]) ->
 @dataclass
 class DepthPlan:
     """A depth's channels in a pass (:meth:`Encoder.run_pass`): which of its three-angle joints
-    go in another coding form (their rows among the depth's, their :class:`rotvec.FormSet`, and
-    each one's joint and Euler order), which translations go on the world's axes, its
-    constant flags and constants' coding, and whether it needs its parents' decoded turns."""
+    go in another coding form (their rows among the depth's, their :class:`rotvec.FormSet` and
+    joints), which translations go on the world's axes, its constant flags and constants'
+    coding, and whether it needs the decoded orientations above it (:mod:`.treepass` flattens
+    the depths' plans for its compiled pass)."""
 
     const: np.ndarray
     constants: ConstantCoding
@@ -192,7 +193,7 @@ class DepthPlan:
     cols: np.ndarray  # their rows, three a joint
     form_set: rotvec.FormSet
     world: bool  # a WORLD form among them
-    vector_joints: list[tuple[int, str]]  # (joint, its order)
+    form_joints: list[int]  # their joints
     moved_joints: np.ndarray  # (m,) joints whose translations go on the world's axes
     moved_rows: np.ndarray  # (m, 3) their rows
     turned: bool
@@ -216,24 +217,11 @@ class DepthPlan:
                 rotvec.mean_quats(enc.means[vectors], MEAN_QUANTUM) if vectors else np.zeros((0, 4)),
             ),
             world=world,
-            vector_joints=[(int(sk.channel_joints[groups[k][0][0]]), groups[k][1]) for k in vectors],
+            form_joints=[int(sk.channel_joints[groups[k][0][0]]) for k in vectors],
             moved_joints=np.array([j for j, _ in moved], dtype=np.int64),
             moved_rows=np.array([rows for _, rows in moved], dtype=np.int64).reshape(-1, 3),
             turned=bool(moved) or world,
         )
-
-    def quats(self, values: np.ndarray, joints: np.ndarray, rotations: np.ndarray) -> np.ndarray:
-        """The vector joints' rotations ``(T, n, 4)``: the closed loop's own where it gives
-        them (``rotations (T, k, 4)`` of ``joints``), else those of their Euler angle rows in
-        ``values``."""
-        at = {j: i for i, j in enumerate(joints.tolist())}
-        index = [at.get(j, -1) for j, _ in self.vector_joints]
-        if min(index) >= 0:
-            return rotations[:, index]
-        out = rotvec.euler_quats(values[self.cols], tuple(o for _, o in self.vector_joints))
-        found = [k for k, i in enumerate(index) if i >= 0]
-        out[:, found] = rotations[:, [index[k] for k in found]]
-        return out
 
 
 class Encoder:
@@ -256,6 +244,7 @@ class Encoder:
         self.constants = self._constant_coding()
         self.first_pass: Pass | None = None
         self._depth_plans: dict[bytes, DepthPlan] = {}
+        self._tree_pass: treepass.TreePass | None = None
         self.isolated = isolated_frames(self.positions, 2) if self.cfg["keyframes"] else np.zeros(0, np.int64)
         self.rot_joints = rotation_joints(sk)
         self.trans = has_translation(sk)
@@ -579,48 +568,22 @@ class Encoder:
         return np.clip(step_codes(steps) + self.joint_offsets, 0, 255).astype(np.uint8)
 
     def run_pass(self, codes: np.ndarray, offsets: np.ndarray | None = None) -> Pass:
-        """Quantise and reconstruct every channel down the tree (:func:`closedloop.code_down_tree`):
-        a joint's closed-loop target needs its parent's decoded orientation, and the joints of
-        one depth go through the transforms together (rows are independent, so each row's floats
-        are those of coding it alone)."""
-        sk, lay = self.skeleton, self.lay
+        """Quantise and reconstruct every channel down the tree in one compiled call
+        (:class:`treepass.TreePass`, the loop of :func:`closedloop.code_down_tree`): a joint's
+        closed-loop target needs its parent's decoded orientation, and the joints of one depth
+        go through the transforms together (rows are independent, so each row's floats are
+        those of coding it alone)."""
+        lay = self.lay
         offsets = np.zeros(lay.starts.size, dtype=np.int8) if offsets is None else offsets.astype(np.int8)
-        C = sk.num_channels
-        knots = np.zeros((C, lay.num_knots), dtype=np.int64)
-        coeffs = np.zeros((C, lay.num_coeffs), dtype=np.int64)
-        decoded = np.zeros((C, self.frames))  # zeros: a WORLD form's turn reads the rows above it
-        patches = np.zeros((C, self.isolated.size), dtype=np.int64)
-        steps = channel_steps(sk, codes)
-        factors = segment_factors(offsets, lay)
-        rotvec_groups = three_angle_groups(sk)
-
-        def code(channels: np.ndarray, targets: np.ndarray, exact: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
-            plan = self._depth_plan(channels)
-            step, constants = steps[channels], plan.constants
-            parents = (
-                parent_orientations(sk, decoded[:, 0]) if plan.turned else np.zeros((0, 4))
-            )  # of the decoded rows above
-            values = targets.T
-            forms = None
-            if plan.vectors:
-                pre = parent_turns(sk, parents)[plan.vectors] if plan.world else None
-                forms = (plan.cols, plan.quats(values, *exact), plan.form_set, pre)
-            k_int, c_int, out, patch = channelcode.code_depth(
-                values, plan.const, step[:, 0], constants.fraction, constants.base, lay, factors,
-                self.cfg["deadzone"], SEAM_LIMIT, SEAM_HALF_WIDTH, self.far_steps, forms,
-                (plan.moved_rows, parents[plan.moved_joints]) if plan.moved_rows.size else None, self.isolated,
-            )  # fmt: skip
-            knots[channels], coeffs[channels], patches[channels], decoded[channels] = k_int, c_int, patch, out
-            return out.T
-
-        exact = np.zeros(len(sk), dtype=bool)
-        exact[sk.channel_joints[[g[0] for form, (g, _) in zip(self.forms, rotvec_groups) if form]]] = True
-        closedloop.code_down_tree(
-            sk, self.by_frame, ~self.const, self.quats, code, self.cfg["closed_loop"], self.goal_positions, exact
-        )
+        if self._tree_pass is None:  # (the forms, constants and isolated frames are set by now)
+            self._tree_pass = treepass.TreePass(self)
+        knots, coeffs, decoded, patches = self._tree_pass.run(
+            channel_steps(self.skeleton, codes)[:, 0], segment_factors(offsets, lay), lay, self.cfg["deadzone"],
+            SEAM_LIMIT, SEAM_HALF_WIDTH, self.far_steps,
+        )  # fmt: skip
         return Pass(codes, self.const.astype(np.int64), knots, coeffs, decoded, offsets, patches)
 
-    def _depth_plan(self, channels: np.ndarray) -> DepthPlan:
+    def depth_plan(self, channels: np.ndarray) -> DepthPlan:
         """What a pass needs of a depth's ``channels`` that no pass changes (the forms, means,
         constant flags and world-axis translations are set before the first pass), made once."""
         key = channels.tobytes()

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -272,8 +273,66 @@ def _depth_plans(skeleton: Skeleton) -> tuple[_DepthPlan, ...]:
     return tuple(out)
 
 
+class TreeArrays(NamedTuple):
+    """The depth plans of a skeleton flattened for a compiled loop down the tree (one entry per
+    joint, depth by depth; a depth's entries and coded channels between consecutive pointers):
+    what :func:`code_down_tree` reads of them, as arrays a kernel takes at once."""
+
+    depth_ptr: np.ndarray  # (D + 1,) each depth's first entry
+    joints: np.ndarray
+    parents: np.ndarray
+    chans: np.ndarray  # (n, 3) rotation channels, -1 padded
+    columns: np.ndarray  # (n, 3) their columns among the depth's coded channels
+    steps: np.ndarray  # (n,) rotation steps
+    axes: np.ndarray  # (n, 3)
+    axis_quats: np.ndarray  # (n, 4)
+    has_axis: np.ndarray
+    has_children: np.ndarray
+    coded_ptr: np.ndarray  # (D + 1,) each depth's first coded channel
+    coded: np.ndarray  # each depth's channels, coded together
+    move_ptr: np.ndarray  # (n + 1,) each entry's first translation channel
+    moves: np.ndarray  # translation channels
+    move_axes: np.ndarray  # their axes
+    move_columns: np.ndarray  # their columns among the depth's coded channels
+    offsets: np.ndarray  # (joints, 3)
+
+
+@lru_cache(maxsize=64)
+def tree_arrays(skeleton: Skeleton) -> TreeArrays:
+    """:class:`TreeArrays` of ``skeleton`` (shared: read-only)."""
+    plans, depths = _joint_plans(skeleton), _depth_plans(skeleton)
+    joints = np.concatenate([dp.joints for dp in depths])
+    counts = np.array([plans[j].moves.size for j in joints.tolist()], dtype=np.int64)
+
+    def cat(name: str) -> np.ndarray:
+        return np.ascontiguousarray(np.concatenate([getattr(dp, name) for dp in depths]))
+
+    out = TreeArrays(
+        np.cumsum([0] + [dp.joints.size for dp in depths]).astype(np.int64),
+        joints,
+        cat("parents"),
+        cat("chans"),
+        cat("columns"),
+        cat("steps"),
+        cat("axes"),
+        cat("axis_quats"),
+        cat("has_axis"),
+        cat("has_children"),
+        np.cumsum([0] + [dp.coded.size for dp in depths]).astype(np.int64),
+        cat("coded"),
+        np.cumsum(np.concatenate([[0], counts])).astype(np.int64),
+        np.concatenate([np.zeros(0, np.int64)] + [plans[j].moves for j in joints.tolist()]).astype(np.int64),
+        np.concatenate([np.zeros(0, np.int64)] + [plans[j].move_axes for j in joints.tolist()]).astype(np.int64),
+        np.concatenate([np.zeros(0, np.int64)] + [c for dp in depths for c in dp.move_columns]).astype(np.int64),
+        np.ascontiguousarray([plans[j].offset for j in range(len(skeleton))], dtype=np.float64).reshape(-1, 3),
+    )
+    for a in out:
+        a.setflags(write=False)
+    return out
+
+
 @numba.njit(cache=True)
-def _depth_targets(
+def depth_targets(
     start, active, goal, glob, d_joints, d_parents, chans, columns, steps, axes, quats, has_axis, skip, out
 ):
     """A depth's joints at once: each joint's orientation starts as its parent's decoded one
@@ -306,7 +365,7 @@ def _depth_targets(
 
 
 @numba.njit(cache=True)
-def _depth_compose(decoded, glob, d_joints, columns, steps, axes, quats, has_axis, has_children):
+def depth_compose(decoded, glob, d_joints, columns, steps, axes, quats, has_axis, has_children):
     """The decoded orientation of each of a depth's joints with rotations and children, from
     the depth's decoded columns on top of its parent's (already in ``glob``)."""
     frames = decoded.shape[0]
@@ -323,7 +382,7 @@ def _depth_compose(decoded, glob, d_joints, columns, steps, axes, quats, has_axi
         _compose(angles, axes[i, :k], quats[i], has_axis[i], parent, glob[j])
 
 
-def _placing(skeleton: Skeleton, active: np.ndarray) -> tuple[np.ndarray, tuple[bool, ...]]:
+def placing_joints(skeleton: Skeleton, active: np.ndarray) -> tuple[np.ndarray, tuple[bool, ...]]:
     """Joints whose decoded position closed-loop translations need (the ancestors of every
     non-root joint with an active translation channel), and per joint whether it is such a
     joint (its translations are targeted)."""
@@ -367,17 +426,6 @@ def exact_rotation(axis_quat, has_axis, parent, goal):
     return out
 
 
-@numba.njit(cache=True)
-def _exact_rotations(rows, joints, axis_quats, has_axis, glob, goal):
-    """``(T, n, 4)``: :func:`exact_rotation` of the depth's joints ``joints[rows]``."""
-    out = np.empty((goal.shape[0], rows.size, 4))
-    for i in range(rows.size):
-        r = rows[i]
-        j = joints[r]
-        out[:, i, :] = exact_rotation(axis_quats[r], has_axis[r], glob[j], goal[:, j])
-    return out
-
-
 def code_down_tree(
     skeleton: Skeleton,
     start: np.ndarray,
@@ -386,7 +434,6 @@ def code_down_tree(
     code,
     closed_loop: bool = True,
     goal_positions: np.ndarray | None = None,
-    exact: np.ndarray | None = None,
 ) -> None:
     """Drive a coder down the tree, the joints of one depth at a time. ``start (T, C)`` holds
     the values each channel is coded from, ``active (C,)`` the channels the coder will change
@@ -397,26 +444,22 @@ def code_down_tree(
     by those that restore its original position from its parent's decoded position and
     orientation (a translated joint below a rotated dummy root), else translations go as they
     are. ``code(channels, targets (T, k))`` codes a depth's channels and returns what the
-    decoder will make of them ``(T, k)``; with ``exact (joints,)`` (joints of three axes, all
-    active) it is called as ``code(channels, targets, rotations)``, where ``rotations`` is
-    ``(joints, quaternions (T, n, 4))``: the depth's flagged joints below the root and their
-    :func:`exact_rotation`, their targets instead of the (then meaningless) angles in
-    ``targets``."""
+    decoder will make of them ``(T, k)``. (kinwave's encoder runs the same loop compiled,
+    :mod:`mocodec.codecs.kinwave.treepass`, from :func:`tree_arrays`.)"""
     plans = _joint_plans(skeleton)
     frames = start.shape[0]
     glob = np.empty((len(skeleton), frames, 4))
     start = np.ascontiguousarray(start, dtype=np.float64)
     goal = np.ascontiguousarray(goal, dtype=np.float64)
     active = np.ascontiguousarray(active, dtype=np.bool_)
-    flagged = np.zeros(len(skeleton), dtype=np.bool_) if exact is None else np.asarray(exact, dtype=np.bool_)
-    skip = flagged if closed_loop else np.ones(len(skeleton), dtype=np.bool_)  # no target angles
+    skip = np.zeros(len(skeleton), dtype=np.bool_) if closed_loop else np.ones(len(skeleton), dtype=np.bool_)
     placing, targeted = (
-        _placing(skeleton, active) if closed_loop and goal_positions is not None else (np.zeros(0, bool), ())
+        placing_joints(skeleton, active) if closed_loop and goal_positions is not None else (np.zeros(0, bool), ())
     )
     where = np.zeros((len(skeleton), frames, 3)) if placing.any() else None
     for dp in _depth_plans(skeleton):
         targets = np.ascontiguousarray(start[:, dp.coded])  # (one layout: one compiled kernel)
-        _depth_targets(
+        depth_targets(
             start, active, goal, glob, dp.joints, dp.parents, dp.chans, dp.columns, dp.steps, dp.axes,
             dp.axis_quats, dp.has_axis, skip, targets,
         )  # fmt: skip
@@ -428,13 +471,8 @@ def code_down_tree(
                 targets[:, cols] = np.where(active[jp.moves], wanted[:, jp.move_axes], targets[:, cols])
         if not dp.coded.size:
             continue
-        if exact is None:
-            decoded = code(dp.coded, targets)
-        else:
-            rows = np.flatnonzero(flagged[dp.joints] & (dp.parents >= 0)) if closed_loop else np.zeros(0, np.int64)
-            rotations = _exact_rotations(rows, dp.joints, dp.axis_quats, dp.has_axis, glob, goal)
-            decoded = code(dp.coded, targets, (dp.joints[rows], rotations))
-        _depth_compose(
+        decoded = code(dp.coded, targets)
+        depth_compose(
             np.ascontiguousarray(decoded, dtype=np.float64), glob, dp.joints, dp.columns, dp.steps, dp.axes,
             dp.axis_quats, dp.has_axis, dp.has_children,
         )  # fmt: skip

@@ -103,7 +103,8 @@ def turn_vectors(q: np.ndarray, v: np.ndarray, back: bool = False) -> np.ndarray
 
 
 @numba.njit(cache=True)
-def _quats_kernel(euler, axes):
+def quats_of_euler(euler, axes):
+    """Unit quaternions ``(T, n, 4)`` of Euler angles ``(T, n, 3)`` (degrees) about ``axes (n, 3)``."""
     frames, joints = euler.shape[0], euler.shape[1]
     out = np.empty((frames, joints, 4))
     for j in range(joints):
@@ -249,7 +250,7 @@ def _rows(values: np.ndarray) -> np.ndarray:
 
 def euler_quats(rows: np.ndarray, orders: tuple[str, ...]) -> np.ndarray:
     """Unit quaternions ``(T, n, 4)`` of the joints' Euler angle rows."""
-    return _quats_kernel(_per_joint(rows), _axes(orders))
+    return quats_of_euler(_per_joint(rows), _axes(orders))
 
 
 def _identity_means(n: int) -> np.ndarray:
@@ -316,7 +317,7 @@ class FormSet:
         time; ``pre (n, 4)`` the WORLD joints' turns. ``quats (T, n, 4)``, when given, are the
         rotations themselves (``rows`` is then unused)."""
         if quats is None:
-            quats = _quats_kernel(_per_joint(rows), self.file_axes)
+            quats = quats_of_euler(_per_joint(rows), self.file_axes)
         world, turns = self._turns(pre)
         return _rows(forms_of_quats(np.ascontiguousarray(quats), self.vector, self.means, self.form_axes, world, turns))
 

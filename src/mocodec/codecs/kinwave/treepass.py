@@ -1,0 +1,322 @@
+"""kinwave's pass down the tree in one compiled call: the loop of
+:func:`mocodec.codecs.shared.closedloop.code_down_tree` (closed-loop targets, translations
+restored from the parent's decoded position, decoded orientations composed for the children)
+with each depth's coding (:func:`channelcode.depth_kernel`: coding forms, world-axis
+translations, isolated frames, quantisation and reconstruction) inside it. The joints in a
+coding form take their closed-loop target as a rotation (:func:`closedloop.exact_rotation`)
+rather than as angles; a WORLD form's turn and a world-axis translation's come from the
+orientations of the decoded rows above at frame 0, as the decoder computes them
+(:func:`body.parent_orientations`, :func:`body.parent_turns`). The same floats as that loop
+driven from Python one depth at a time, without a Python call per depth: a short clip's pass
+was mostly calls (docs/kinwave.md)."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, NamedTuple
+
+import numba
+import numpy as np
+
+from mocodec.codecs.kinwave.body import turn_setup
+from mocodec.codecs.kinwave.channelcode import depth_kernel
+from mocodec.codecs.shared.closedloop import (
+    depth_compose,
+    depth_targets,
+    exact_rotation,
+    placing_joints,
+    tree_arrays,
+)
+from mocodec.codecs.shared.rotvec import quat_product, quats_of_euler, rotate_vector
+from mocodec.coding.transforms import seams, trendwave, wavelets
+from mocodec.kinematics import channel_plan, frame_orientations
+
+if TYPE_CHECKING:
+    from mocodec.codecs.kinwave.encoder import Encoder
+
+
+class DepthCoding(NamedTuple):
+    """What kinwave codes at each depth, flattened beside :class:`closedloop.TreeArrays`: per
+    coded channel its constant flag and constant's coding; per joint in a coding form (a
+    depth's between consecutive ``form_ptr``) its rows among the depth's, its form's arrays
+    (:meth:`rotvec.FormSet.kernel_arguments`), its joint, three-angle group and tree entry,
+    and whether the closed loop gives its rotation; per translation on the world's axes its
+    joint and rows; per depth whether it needs the decoded rows' orientations above it."""
+
+    const: np.ndarray
+    fraction: np.ndarray
+    base: np.ndarray
+    form_ptr: np.ndarray
+    form_rows: np.ndarray  # (3 n,)
+    vector: np.ndarray
+    means: np.ndarray
+    form_axes: np.ndarray
+    world: np.ndarray
+    file_axes: np.ndarray
+    form_group: np.ndarray
+    form_entry: np.ndarray
+    form_exact: np.ndarray
+    moved_ptr: np.ndarray
+    moved_joints: np.ndarray
+    moved_rows: np.ndarray  # (m, 3)
+    turned: np.ndarray  # (D,)
+    has_world: np.ndarray  # (D,)
+
+
+def depth_coding(enc: Encoder) -> DepthCoding:
+    """:class:`DepthCoding` of an encoder's body, from its depth plans (:class:`DepthPlan`)."""
+    sk, tree = enc.skeleton, tree_arrays(enc.skeleton)
+    entry = {j: e for e, j in enumerate(tree.joints.tolist())}
+    plans = [
+        enc.depth_plan(tree.coded[tree.coded_ptr[d] : tree.coded_ptr[d + 1]]) for d in range(tree.depth_ptr.size - 1)
+    ]
+    vectors = [(plan, v) for plan in plans for v in range(len(plan.vectors))]
+
+    joints = [j for plan in plans for j in plan.form_joints]
+    return DepthCoding(
+        np.ascontiguousarray(np.concatenate([plan.const for plan in plans]), dtype=np.bool_),
+        np.ascontiguousarray(np.concatenate([plan.constants.fraction for plan in plans]), dtype=np.float64),
+        np.ascontiguousarray(np.concatenate([plan.constants.base for plan in plans]), dtype=np.float64),
+        np.cumsum([0] + [len(plan.vectors) for plan in plans]).astype(np.int64),
+        np.concatenate([np.zeros(0, np.int64)] + [plan.cols for plan in plans]).astype(np.int64),
+        np.array([plan.form_set.vector[v] for plan, v in vectors], dtype=np.bool_),
+        np.array([plan.form_set.means[v] for plan, v in vectors], dtype=np.float64).reshape(-1, 4),
+        np.array([plan.form_set.form_axes[v] for plan, v in vectors], dtype=np.int64).reshape(-1, 3),
+        np.array([plan.form_set.world[v] for plan, v in vectors], dtype=np.bool_),
+        np.array([plan.form_set.file_axes[v] for plan, v in vectors], dtype=np.int64).reshape(-1, 3),
+        np.array([plan.vectors[v] for plan, v in vectors], dtype=np.int64),
+        np.array([entry[j] for j in joints], dtype=np.int64),
+        np.array([enc.cfg["closed_loop"] and sk.parents[j] >= 0 for j in joints], dtype=np.bool_),
+        np.cumsum([0] + [plan.moved_joints.size for plan in plans]).astype(np.int64),
+        np.concatenate([np.zeros(0, np.int64)] + [plan.moved_joints for plan in plans]).astype(np.int64),
+        np.concatenate([np.zeros((0, 3), np.int64)] + [plan.moved_rows for plan in plans]).astype(np.int64),
+        np.array([plan.turned for plan in plans], dtype=np.bool_),
+        np.array([plan.world for plan in plans], dtype=np.bool_),
+    )
+
+
+class TreePass:
+    """An encoder's passes in one compiled call each (:meth:`run`), with what no pass changes
+    set up once: the closed loop's arrays, the depths' coding, the skeleton's forward
+    kinematics and WORLD turns."""
+
+    def __init__(self, enc: Encoder):
+        sk = enc.skeleton
+        self.tree = tree_arrays(sk)
+        active = np.ascontiguousarray(~enc.const)
+        flagged = np.zeros(len(sk), dtype=np.bool_)  # the joints in a coding form: no target angles
+        flagged[[j for plan in map(enc.depth_plan, self._depths()) for j in plan.form_joints]] = True
+        closed = bool(enc.cfg["closed_loop"])
+        placing, targeted = placing_joints(sk, active) if closed else (np.zeros(len(sk), bool), (False,) * len(sk))
+        self.loop = (
+            enc.by_frame,
+            active,
+            np.ascontiguousarray(enc.quats, dtype=np.float64),
+            np.ascontiguousarray(enc.goal_positions, dtype=np.float64),
+            flagged if closed else np.ones(len(sk), dtype=np.bool_),
+            np.ascontiguousarray(placing, dtype=np.bool_),
+            np.array(targeted, dtype=np.bool_),
+        )
+        self.coding = depth_coding(enc)
+        plan = channel_plan(sk)
+        self.kinematics = (
+            plan.rot_index,
+            plan.rot_axis,
+            plan.pos_index,
+            plan.axis_quat,
+            plan.has_axis,
+            plan.offsets,
+            plan.parents,
+            plan.rot_columns,
+        )
+        group_joints, group_axis, c = turn_setup(sk)
+        turns = np.tile([1.0, 0.0, 0.0, 0.0], (group_joints.size, 1))
+        turns[group_axis] = c
+        self.turns = (group_joints, np.ascontiguousarray(group_axis), turns)
+        self.isolated = np.ascontiguousarray(enc.isolated, dtype=np.int64)
+
+    def _depths(self) -> list[np.ndarray]:
+        tree = self.tree
+        return [tree.coded[tree.coded_ptr[d] : tree.coded_ptr[d + 1]] for d in range(tree.depth_ptr.size - 1)]
+
+    def run(
+        self,
+        steps: np.ndarray,
+        factors: tuple[np.ndarray, np.ndarray, np.ndarray],
+        lay: trendwave.Layout,
+        deadzone: float,
+        seam_limit: float,
+        half_width: int,
+        far_steps: float,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """One pass at channel ``steps (C,)``: knots, coefficients, decoded channels ``(C, T)``
+        and the isolated frames' patches (:func:`channelcode.code_depth`'s arguments)."""
+        coder = (
+            float(seam_limit),
+            tuple(trendwave.flat(lay)),
+            wavelets.filters(lay.wavelet, "dec"),
+            wavelets.filters(lay.wavelet, "rec"),
+            seams.ramp(half_width),
+            float(deadzone),
+            float(far_steps),
+            trendwave.reaches(lay),
+            int(lay.num_knots),
+            int(lay.num_coeffs),
+        )
+        return _tree_pass(
+            self.tree,
+            self.loop,
+            self.coding,
+            self.kinematics,
+            self.turns,
+            np.ascontiguousarray(steps, dtype=np.float64),
+            (factors[0], factors[1], np.asarray(factors[2], dtype=np.float64)),
+            self.isolated,
+            coder,
+        )
+
+
+@numba.njit(cache=True)
+def _tree_pass(tree, loop, coding, kinematics, turns, steps, factors, isolated, coder):
+    """:meth:`TreePass.run`."""
+    depth_ptr, joints, parents, chans, columns, dsteps, axes, axis_quats, has_axis, has_children, coded_ptr, coded = (
+        tree.depth_ptr, tree.joints, tree.parents, tree.chans, tree.columns, tree.steps, tree.axes,
+        tree.axis_quats, tree.has_axis, tree.has_children, tree.coded_ptr, tree.coded,
+    )  # fmt: skip
+    move_ptr, moves, move_axes, move_columns, offsets = (
+        tree.move_ptr, tree.moves, tree.move_axes, tree.move_columns, tree.offsets
+    )  # fmt: skip
+    start, active, goal, goal_positions, skip, placing, targeted = loop
+    const, fraction, base, form_ptr, form_rows, vector, means, form_axes, world, file_axes = (
+        coding.const, coding.fraction, coding.base, coding.form_ptr, coding.form_rows, coding.vector, coding.means,
+        coding.form_axes, coding.world, coding.file_axes,
+    )  # fmt: skip
+    form_group, form_entry, form_exact, moved_ptr, moved_joints, moved_rows, turned, has_world = (
+        coding.form_group, coding.form_entry, coding.form_exact, coding.moved_ptr, coding.moved_joints,
+        coding.moved_rows, coding.turned, coding.has_world,
+    )  # fmt: skip
+    group_joints, group_axis, group_turns = turns
+    seam_limit, lay, dec, rec, weight, deadzone, far, reach, num_knots, num_coeffs = coder
+    frames, channels = start.shape
+    count = offsets.shape[0]
+    glob = np.empty((count, frames, 4))
+    knots = np.zeros((channels, num_knots), dtype=np.int64)
+    coeffs = np.zeros((channels, num_coeffs), dtype=np.int64)
+    decoded = np.zeros((channels, frames))  # zeros: a WORLD form's turn reads the rows above it
+    patches = np.zeros((channels, isolated.size), dtype=np.int64)
+    placed = placing.any()
+    where = np.zeros((count if placed else 0, frames, 3))
+    wanted = np.empty(3)
+    bone = np.empty(3)
+    for d in range(depth_ptr.size - 1):
+        a, b, ca, cb = depth_ptr[d], depth_ptr[d + 1], coded_ptr[d], coded_ptr[d + 1]
+        rows = cb - ca
+        targets = np.empty((frames, rows))
+        for f in range(frames):
+            for i in range(rows):
+                targets[f, i] = start[f, coded[ca + i]]
+        depth_targets(
+            start, active, goal, glob, joints[a:b], parents[a:b], chans[a:b], columns[a:b], dsteps[a:b], axes[a:b],
+            axis_quats[a:b], has_axis[a:b], skip, targets,
+        )  # fmt: skip
+        for e in range(a, b):
+            j, p = joints[e], parents[e]
+            if not placed or not targeted[j]:
+                continue
+            for f in range(frames):  # the translation that restores the joint's position
+                wanted[0], wanted[1], wanted[2] = rotate_vector(
+                    glob[p, f, 0], -glob[p, f, 1], -glob[p, f, 2], -glob[p, f, 3],
+                    goal_positions[f, j, 0] - where[p, f, 0],
+                    goal_positions[f, j, 1] - where[p, f, 1],
+                    goal_positions[f, j, 2] - where[p, f, 2],
+                )  # fmt: skip
+                for m in range(move_ptr[e], move_ptr[e + 1]):
+                    if active[moves[m]]:
+                        targets[f, move_columns[m]] = wanted[move_axes[m]] - offsets[j, move_axes[m]]
+        if rows == 0:
+            continue
+        fa, fb, ma, mb = form_ptr[d], form_ptr[d + 1], moved_ptr[d], moved_ptr[d + 1]
+        above = np.zeros((count, 4))  # the decoded rows' orientations above, at frame 0
+        if turned[d] and frames:
+            orientations = frame_orientations(decoded[:, 0].copy(), *kinematics)
+            for j in range(count):
+                p = kinematics[6][j]
+                if p >= 0:
+                    above[j, :] = orientations[p]
+                else:
+                    above[j, 0] = 1.0
+        values = np.empty((rows, frames))
+        for i in range(rows):
+            for f in range(frames):
+                values[i, f] = targets[f, i]
+        n = fb - fa
+        quats = np.empty((frames, n, 4))
+        if not form_exact[fa:fb].all():
+            euler = np.empty((frames, n, 3))
+            for v in range(n):
+                for m in range(3):
+                    for f in range(frames):
+                        euler[f, v, m] = values[form_rows[3 * (fa + v) + m], f]
+            quats = quats_of_euler(euler, file_axes[fa:fb])
+        for v in range(n):
+            if form_exact[fa + v]:
+                e = form_entry[fa + v]
+                quats[:, v, :] = exact_rotation(axis_quats[e], has_axis[e], glob[joints[e]], goal[:, joints[e]])
+        turned_forms = np.zeros(n, dtype=np.bool_)
+        pre = means[fa:fb].copy()
+        if has_world[d]:
+            turned_forms[:] = world[fa:fb]
+            for v in range(n):  # conj(C) G_p C (body.parent_turns)
+                g = form_group[fa + v]
+                q = above[group_joints[g]]
+                w, x, y, z = q[0], q[1], q[2], q[3]
+                if group_axis[g]:
+                    c = group_turns[g]
+                    w, x, y, z = quat_product(w, x, y, z, c[0], c[1], c[2], c[3])
+                    w, x, y, z = quat_product(c[0], -c[1], -c[2], -c[3], w, x, y, z)
+                pre[v, 0], pre[v, 1], pre[v, 2], pre[v, 3] = w, x, y, z
+        moved_turns = np.empty((mb - ma, 4))
+        for i in range(mb - ma):
+            moved_turns[i, :] = above[moved_joints[ma + i]]
+        step = np.empty(rows)
+        for i in range(rows):
+            step[i] = steps[coded[ca + i]]
+        k_int, c_int, out, patch = depth_kernel(
+            values, form_rows[3 * fa : 3 * fb], quats,
+            (vector[fa:fb], means[fa:fb], form_axes[fa:fb], turned_forms, pre, file_axes[fa:fb]),
+            moved_rows[ma:mb], moved_turns, isolated, const[ca:cb], step, fraction[ca:cb], base[ca:cb], factors,
+            seam_limit, lay, dec, rec, weight, deadzone, far, reach,
+        )  # fmt: skip
+        for i in range(rows):
+            c = coded[ca + i]
+            knots[c, :] = k_int[i]
+            coeffs[c, :] = c_int[i]
+            patches[c, :] = patch[i]
+            decoded[c, :] = out[i]
+        by_frame = np.empty((frames, rows))
+        for f in range(frames):
+            for i in range(rows):
+                by_frame[f, i] = out[i, f]
+        depth_compose(
+            by_frame, glob, joints[a:b], columns[a:b], dsteps[a:b], axes[a:b], axis_quats[a:b], has_axis[a:b],
+            has_children[a:b],
+        )  # fmt: skip
+        for e in range(a, b):
+            j, p = joints[e], parents[e]
+            if not placed or not placing[j]:
+                continue
+            for f in range(frames):  # the decoded position, for the joints below
+                bone[0], bone[1], bone[2] = offsets[j, 0], offsets[j, 1], offsets[j, 2]
+                for m in range(move_ptr[e], move_ptr[e + 1]):
+                    bone[move_axes[m]] += by_frame[f, move_columns[m]]
+                if p < 0:
+                    where[j, f, :] = bone
+                    continue
+                rx, ry, rz = rotate_vector(
+                    glob[p, f, 0], glob[p, f, 1], glob[p, f, 2], glob[p, f, 3], bone[0], bone[1], bone[2]
+                )
+                where[j, f, 0], where[j, f, 1], where[j, f, 2] = (
+                    where[p, f, 0] + rx,
+                    where[p, f, 1] + ry,
+                    where[p, f, 2] + rz,
+                )
+    return knots, coeffs, decoded, patches

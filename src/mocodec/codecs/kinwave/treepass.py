@@ -72,7 +72,7 @@ def depth_coding(enc: Encoder) -> DepthCoding:
     vectors = [(plan, v) for plan in plans for v in range(len(plan.vectors))]
 
     joints = [j for plan in plans for j in plan.form_joints]
-    return DepthCoding(
+    coding = DepthCoding(
         np.ascontiguousarray(np.concatenate([plan.const for plan in plans]), dtype=np.bool_),
         np.ascontiguousarray(np.concatenate([plan.constants.fraction for plan in plans]), dtype=np.float64),
         np.ascontiguousarray(np.concatenate([plan.constants.base for plan in plans]), dtype=np.float64),
@@ -92,6 +92,9 @@ def depth_coding(enc: Encoder) -> DepthCoding:
         np.array([plan.turned for plan in plans], dtype=np.bool_),
         np.array([plan.world for plan in plans], dtype=np.bool_),
     )
+    for axes in (coding.form_axes, coding.file_axes):  # read-only, as rotvec's: the kernels the
+        axes.setflags(write=False)  # form trial and the decoder use serve the pass too
+    return coding
 
 
 class TreePass:
@@ -176,28 +179,115 @@ class TreePass:
 
 
 @numba.njit(cache=True)
+def _translation_targets(targets, tree, a, b, active, glob, where, goal_positions, targeted):
+    """The active translations of the entries ``a:b`` that restore their joints' original
+    positions from their parents' decoded positions (``where``) and orientations."""
+    wanted = np.empty(3)
+    for e in range(a, b):
+        j, p = tree.joints[e], tree.parents[e]
+        if not targeted[j]:
+            continue
+        for f in range(targets.shape[0]):
+            wanted[0], wanted[1], wanted[2] = rotate_vector(
+                glob[p, f, 0], -glob[p, f, 1], -glob[p, f, 2], -glob[p, f, 3],
+                goal_positions[f, j, 0] - where[p, f, 0],
+                goal_positions[f, j, 1] - where[p, f, 1],
+                goal_positions[f, j, 2] - where[p, f, 2],
+            )  # fmt: skip
+            for m in range(tree.move_ptr[e], tree.move_ptr[e + 1]):
+                if active[tree.moves[m]]:
+                    axis = tree.move_axes[m]
+                    targets[f, tree.move_columns[m]] = wanted[axis] - tree.offsets[j, axis]
+
+
+@numba.njit(cache=True)
+def _placed(by_frame, tree, a, b, glob, where, placing):
+    """The decoded positions of the entries ``a:b`` that joints below need, from their decoded
+    translations ``by_frame (T, k)`` and their parents' decoded positions and orientations."""
+    bone = np.empty(3)
+    for e in range(a, b):
+        j, p = tree.joints[e], tree.parents[e]
+        if not placing[j]:
+            continue
+        for f in range(by_frame.shape[0]):
+            bone[0], bone[1], bone[2] = tree.offsets[j, 0], tree.offsets[j, 1], tree.offsets[j, 2]
+            for m in range(tree.move_ptr[e], tree.move_ptr[e + 1]):
+                bone[tree.move_axes[m]] += by_frame[f, tree.move_columns[m]]
+            if p < 0:
+                where[j, f, :] = bone
+                continue
+            q = glob[p, f]
+            x, y, z = rotate_vector(q[0], q[1], q[2], q[3], bone[0], bone[1], bone[2])
+            where[j, f, 0], where[j, f, 1], where[j, f, 2] = where[p, f, 0] + x, where[p, f, 1] + y, where[p, f, 2] + z
+
+
+@numba.njit(cache=True)
+def _orientations_above(decoded, kinematics):
+    """``(joints, 4)``: each joint's parent's orientation in frame 0 of the decoded rows so far
+    (the identity for a root), as :func:`body.parent_orientations` gives it."""
+    parents = kinematics[6]
+    above = np.zeros((parents.size, 4))
+    orientations = frame_orientations(decoded[:, 0].copy(), *kinematics)
+    for j in range(parents.size):
+        if parents[j] >= 0:
+            above[j, :] = orientations[parents[j]]
+        else:
+            above[j, 0] = 1.0
+    return above
+
+
+@numba.njit(cache=True)
+def _form_rotations(values, tree, coding, fa, fb, glob, goal):
+    """``(T, n, 4)``: the rotations of the depth's joints in coding forms ``fa:fb``: their
+    closed-loop targets where the loop gives them (:func:`closedloop.exact_rotation`), else
+    those of their file's angles in ``values (k, T)``."""
+    frames, n = values.shape[1], fb - fa
+    quats = np.empty((frames, n, 4))
+    if not coding.form_exact[fa:fb].all():
+        euler = np.empty((frames, n, 3))
+        for v in range(n):
+            for m in range(3):
+                for f in range(frames):
+                    euler[f, v, m] = values[coding.form_rows[3 * (fa + v) + m], f]
+        quats = quats_of_euler(euler, coding.file_axes[fa:fb])
+    for v in range(n):
+        if coding.form_exact[fa + v]:
+            e = coding.form_entry[fa + v]
+            j = tree.joints[e]
+            quats[:, v, :] = exact_rotation(tree.axis_quats[e], tree.has_axis[e], glob[j], goal[:, j])
+    return quats
+
+
+@numba.njit(cache=True)
+def _world_turns(coding, d, fa, fb, above, turns):
+    """Which of the depth's joints in coding forms ``fa:fb`` a WORLD form turns, and the turns
+    ``conj(C) G_p C`` (:func:`body.parent_turns`; the forms' means where none)."""
+    n = fb - fa
+    turned = np.zeros(n, dtype=np.bool_)
+    pre = coding.means[fa:fb].copy()
+    if not coding.has_world[d]:
+        return turned, pre
+    group_joints, group_axis, group_turns = turns
+    turned[:] = coding.world[fa:fb]
+    for v in range(n):
+        g = coding.form_group[fa + v]
+        q = above[group_joints[g]]
+        w, x, y, z = q[0], q[1], q[2], q[3]
+        if group_axis[g]:
+            c = group_turns[g]
+            w, x, y, z = quat_product(w, x, y, z, c[0], c[1], c[2], c[3])
+            w, x, y, z = quat_product(c[0], -c[1], -c[2], -c[3], w, x, y, z)
+        pre[v, 0], pre[v, 1], pre[v, 2], pre[v, 3] = w, x, y, z
+    return turned, pre
+
+
+@numba.njit(cache=True)
 def _tree_pass(tree, loop, coding, kinematics, turns, steps, factors, isolated, coder):
     """:meth:`TreePass.run`."""
-    depth_ptr, joints, parents, chans, columns, dsteps, axes, axis_quats, has_axis, has_children, coded_ptr, coded = (
-        tree.depth_ptr, tree.joints, tree.parents, tree.chans, tree.columns, tree.steps, tree.axes,
-        tree.axis_quats, tree.has_axis, tree.has_children, tree.coded_ptr, tree.coded,
-    )  # fmt: skip
-    move_ptr, moves, move_axes, move_columns, offsets = (
-        tree.move_ptr, tree.moves, tree.move_axes, tree.move_columns, tree.offsets
-    )  # fmt: skip
     start, active, goal, goal_positions, skip, placing, targeted = loop
-    const, fraction, base, form_ptr, form_rows, vector, means, form_axes, world, file_axes = (
-        coding.const, coding.fraction, coding.base, coding.form_ptr, coding.form_rows, coding.vector, coding.means,
-        coding.form_axes, coding.world, coding.file_axes,
-    )  # fmt: skip
-    form_group, form_entry, form_exact, moved_ptr, moved_joints, moved_rows, turned, has_world = (
-        coding.form_group, coding.form_entry, coding.form_exact, coding.moved_ptr, coding.moved_joints,
-        coding.moved_rows, coding.turned, coding.has_world,
-    )  # fmt: skip
-    group_joints, group_axis, group_turns = turns
     seam_limit, lay, dec, rec, weight, deadzone, far, reach, num_knots, num_coeffs = coder
     frames, channels = start.shape
-    count = offsets.shape[0]
+    count = tree.offsets.shape[0]
     glob = np.empty((count, frames, 4))
     knots = np.zeros((channels, num_knots), dtype=np.int64)
     coeffs = np.zeros((channels, num_coeffs), dtype=np.int64)
@@ -205,118 +295,49 @@ def _tree_pass(tree, loop, coding, kinematics, turns, steps, factors, isolated, 
     patches = np.zeros((channels, isolated.size), dtype=np.int64)
     placed = placing.any()
     where = np.zeros((count if placed else 0, frames, 3))
-    wanted = np.empty(3)
-    bone = np.empty(3)
-    for d in range(depth_ptr.size - 1):
-        a, b, ca, cb = depth_ptr[d], depth_ptr[d + 1], coded_ptr[d], coded_ptr[d + 1]
+    for d in range(tree.depth_ptr.size - 1):
+        a, b, ca, cb = tree.depth_ptr[d], tree.depth_ptr[d + 1], tree.coded_ptr[d], tree.coded_ptr[d + 1]
         rows = cb - ca
         targets = np.empty((frames, rows))
         for f in range(frames):
             for i in range(rows):
-                targets[f, i] = start[f, coded[ca + i]]
+                targets[f, i] = start[f, tree.coded[ca + i]]
         depth_targets(
-            start, active, goal, glob, joints[a:b], parents[a:b], chans[a:b], columns[a:b], dsteps[a:b], axes[a:b],
-            axis_quats[a:b], has_axis[a:b], skip, targets,
+            start, active, goal, glob, tree.joints[a:b], tree.parents[a:b], tree.chans[a:b], tree.columns[a:b],
+            tree.steps[a:b], tree.axes[a:b], tree.axis_quats[a:b], tree.has_axis[a:b], skip, targets,
         )  # fmt: skip
-        for e in range(a, b):
-            j, p = joints[e], parents[e]
-            if not placed or not targeted[j]:
-                continue
-            for f in range(frames):  # the translation that restores the joint's position
-                wanted[0], wanted[1], wanted[2] = rotate_vector(
-                    glob[p, f, 0], -glob[p, f, 1], -glob[p, f, 2], -glob[p, f, 3],
-                    goal_positions[f, j, 0] - where[p, f, 0],
-                    goal_positions[f, j, 1] - where[p, f, 1],
-                    goal_positions[f, j, 2] - where[p, f, 2],
-                )  # fmt: skip
-                for m in range(move_ptr[e], move_ptr[e + 1]):
-                    if active[moves[m]]:
-                        targets[f, move_columns[m]] = wanted[move_axes[m]] - offsets[j, move_axes[m]]
+        if placed:
+            _translation_targets(targets, tree, a, b, active, glob, where, goal_positions, targeted)
         if rows == 0:
             continue
-        fa, fb, ma, mb = form_ptr[d], form_ptr[d + 1], moved_ptr[d], moved_ptr[d + 1]
-        above = np.zeros((count, 4))  # the decoded rows' orientations above, at frame 0
-        if turned[d] and frames:
-            orientations = frame_orientations(decoded[:, 0].copy(), *kinematics)
-            for j in range(count):
-                p = kinematics[6][j]
-                if p >= 0:
-                    above[j, :] = orientations[p]
-                else:
-                    above[j, 0] = 1.0
-        values = np.empty((rows, frames))
-        for i in range(rows):
-            for f in range(frames):
-                values[i, f] = targets[f, i]
-        n = fb - fa
-        quats = np.empty((frames, n, 4))
-        if not form_exact[fa:fb].all():
-            euler = np.empty((frames, n, 3))
-            for v in range(n):
-                for m in range(3):
-                    for f in range(frames):
-                        euler[f, v, m] = values[form_rows[3 * (fa + v) + m], f]
-            quats = quats_of_euler(euler, file_axes[fa:fb])
-        for v in range(n):
-            if form_exact[fa + v]:
-                e = form_entry[fa + v]
-                quats[:, v, :] = exact_rotation(axis_quats[e], has_axis[e], glob[joints[e]], goal[:, joints[e]])
-        turned_forms = np.zeros(n, dtype=np.bool_)
-        pre = means[fa:fb].copy()
-        if has_world[d]:
-            turned_forms[:] = world[fa:fb]
-            for v in range(n):  # conj(C) G_p C (body.parent_turns)
-                g = form_group[fa + v]
-                q = above[group_joints[g]]
-                w, x, y, z = q[0], q[1], q[2], q[3]
-                if group_axis[g]:
-                    c = group_turns[g]
-                    w, x, y, z = quat_product(w, x, y, z, c[0], c[1], c[2], c[3])
-                    w, x, y, z = quat_product(c[0], -c[1], -c[2], -c[3], w, x, y, z)
-                pre[v, 0], pre[v, 1], pre[v, 2], pre[v, 3] = w, x, y, z
+        fa, fb, ma, mb = coding.form_ptr[d], coding.form_ptr[d + 1], coding.moved_ptr[d], coding.moved_ptr[d + 1]
+        above = _orientations_above(decoded, kinematics) if coding.turned[d] and frames else np.zeros((count, 4))
+        values = targets.T.copy()
+        quats = _form_rotations(values, tree, coding, fa, fb, glob, goal)
+        turned, pre = _world_turns(coding, d, fa, fb, above, turns)
         moved_turns = np.empty((mb - ma, 4))
         for i in range(mb - ma):
-            moved_turns[i, :] = above[moved_joints[ma + i]]
+            moved_turns[i, :] = above[coding.moved_joints[ma + i]]
         step = np.empty(rows)
         for i in range(rows):
-            step[i] = steps[coded[ca + i]]
+            step[i] = steps[tree.coded[ca + i]]
         k_int, c_int, out, patch = depth_kernel(
-            values, form_rows[3 * fa : 3 * fb], quats,
-            (vector[fa:fb], means[fa:fb], form_axes[fa:fb], turned_forms, pre, file_axes[fa:fb]),
-            moved_rows[ma:mb], moved_turns, isolated, const[ca:cb], step, fraction[ca:cb], base[ca:cb], factors,
-            seam_limit, lay, dec, rec, weight, deadzone, far, reach,
+            values, coding.form_rows[3 * fa : 3 * fb], quats,
+            (coding.vector[fa:fb], coding.means[fa:fb], coding.form_axes[fa:fb], turned, pre, coding.file_axes[fa:fb]),
+            coding.moved_rows[ma:mb], moved_turns, isolated, coding.const[ca:cb], step, coding.fraction[ca:cb],
+            coding.base[ca:cb], factors, seam_limit, lay, dec, rec, weight, deadzone, far, reach,
         )  # fmt: skip
         for i in range(rows):
-            c = coded[ca + i]
+            c = tree.coded[ca + i]
             knots[c, :] = k_int[i]
             coeffs[c, :] = c_int[i]
             patches[c, :] = patch[i]
             decoded[c, :] = out[i]
-        by_frame = np.empty((frames, rows))
-        for f in range(frames):
-            for i in range(rows):
-                by_frame[f, i] = out[i, f]
+        by_frame = out.T.copy()
         depth_compose(
-            by_frame, glob, joints[a:b], columns[a:b], dsteps[a:b], axes[a:b], axis_quats[a:b], has_axis[a:b],
-            has_children[a:b],
+            by_frame, glob, tree.joints[a:b], tree.columns[a:b], tree.steps[a:b], tree.axes[a:b],
+            tree.axis_quats[a:b], tree.has_axis[a:b], tree.has_children[a:b],
         )  # fmt: skip
-        for e in range(a, b):
-            j, p = joints[e], parents[e]
-            if not placed or not placing[j]:
-                continue
-            for f in range(frames):  # the decoded position, for the joints below
-                bone[0], bone[1], bone[2] = offsets[j, 0], offsets[j, 1], offsets[j, 2]
-                for m in range(move_ptr[e], move_ptr[e + 1]):
-                    bone[move_axes[m]] += by_frame[f, move_columns[m]]
-                if p < 0:
-                    where[j, f, :] = bone
-                    continue
-                rx, ry, rz = rotate_vector(
-                    glob[p, f, 0], glob[p, f, 1], glob[p, f, 2], glob[p, f, 3], bone[0], bone[1], bone[2]
-                )
-                where[j, f, 0], where[j, f, 1], where[j, f, 2] = (
-                    where[p, f, 0] + rx,
-                    where[p, f, 1] + ry,
-                    where[p, f, 2] + rz,
-                )
+        if placed:
+            _placed(by_frame, tree, a, b, glob, where, placing)
     return knots, coeffs, decoded, patches

@@ -43,6 +43,19 @@ class ChannelPlan:
     parents: np.ndarray  # (J,)
     rot_columns: np.ndarray  # the rotation channels, ascending
 
+    def arrays(self) -> tuple[np.ndarray, ...]:
+        """The fields in order, as the kernels take them (:func:`frame_orientations`)."""
+        return (
+            self.rot_index,
+            self.rot_axis,
+            self.pos_index,
+            self.axis_quat,
+            self.has_axis,
+            self.offsets,
+            self.parents,
+            self.rot_columns,
+        )
+
 
 @lru_cache(maxsize=64)
 def channel_plan(skeleton: Skeleton) -> ChannelPlan:
@@ -205,13 +218,7 @@ def _run(skeleton: Skeleton, channels: np.ndarray, want_local: bool) -> tuple[np
     _fk_kernel(
         channels,
         *_half_angles(channels, plan.rot_columns),
-        plan.rot_index,
-        plan.rot_axis,
-        plan.pos_index,
-        plan.axis_quat,
-        plan.has_axis,
-        plan.offsets,
-        plan.parents,
+        *plan.arrays()[:7],
         pos,
         quat,
         local,

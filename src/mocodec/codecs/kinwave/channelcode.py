@@ -258,13 +258,11 @@ def _turn_rows(values, rows, turn, sign):
 
 
 @numba.njit(cache=True)
-def depth_kernel(
-    values, cols, quats, forms, moved_rows, moved_turns, iso, const, step, fraction, base, factors, seam_limit, lay,
-    dec, rec, weight, deadzone, far, reach,
-):  # fmt: skip
+def depth_kernel(values, cols, quats, forms, moved_rows, moved_turns, iso, const, step, fraction, base, factors, coder):
     """:func:`code_depth` (``forms``: :meth:`rotvec.FormSet.kernel_arguments`), for compiled
     callers."""
     vector, means, form_axes, world, turns, file_axes = forms
+    seam_limit, lay, dec, rec, weight, deadzone, far, reach = coder
     n, rows, frames = cols.size // 3, values.shape[0], values.shape[1]
     if n:
         coded = rotvec.forms_of_quats(quats, vector, means, form_axes, world, turns)
@@ -356,6 +354,15 @@ def code_depth(
         fraction,
         base,
         (factors[0], factors[1], np.asarray(factors[2], dtype=np.float64)),
+        coder_arguments(lay, deadzone, seam_limit, half_width, far_steps),
+    )
+
+
+def coder_arguments(lay: trendwave.Layout, deadzone: float, seam_limit: float, half_width: int, far_steps: float):
+    """What :func:`depth_kernel` takes of the layout and the coder's settings, in its order:
+    the seam limit, the flat layout, the analysis and synthesis filters, the seams' ramp, the
+    dead zone, the far rounding's steps and the coefficients' reach."""
+    return (
         float(seam_limit),
         tuple(trendwave.flat(lay)),
         wavelets.filters(lay.wavelet, "dec"),

@@ -18,7 +18,7 @@ import numba
 import numpy as np
 
 from mocodec.codecs.kinwave.body import turn_setup
-from mocodec.codecs.kinwave.channelcode import depth_kernel
+from mocodec.codecs.kinwave.channelcode import coder_arguments, depth_kernel
 from mocodec.codecs.shared.closedloop import (
     depth_compose,
     depth_targets,
@@ -27,7 +27,7 @@ from mocodec.codecs.shared.closedloop import (
     tree_arrays,
 )
 from mocodec.codecs.shared.rotvec import quat_product, quats_of_euler, rotate_vector
-from mocodec.coding.transforms import seams, trendwave, wavelets
+from mocodec.coding.transforms import trendwave
 from mocodec.kinematics import channel_plan, frame_orientations
 
 if TYPE_CHECKING:
@@ -120,17 +120,7 @@ class TreePass:
             np.array(targeted, dtype=np.bool_),
         )
         self.coding = depth_coding(enc)
-        plan = channel_plan(sk)
-        self.kinematics = (
-            plan.rot_index,
-            plan.rot_axis,
-            plan.pos_index,
-            plan.axis_quat,
-            plan.has_axis,
-            plan.offsets,
-            plan.parents,
-            plan.rot_columns,
-        )
+        self.kinematics = channel_plan(sk).arrays()
         group_joints, group_axis, c = turn_setup(sk)
         turns = np.tile([1.0, 0.0, 0.0, 0.0], (group_joints.size, 1))
         turns[group_axis] = c
@@ -153,18 +143,6 @@ class TreePass:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """One pass at channel ``steps (C,)``: knots, coefficients, decoded channels ``(C, T)``
         and the isolated frames' patches (:func:`channelcode.code_depth`'s arguments)."""
-        coder = (
-            float(seam_limit),
-            tuple(trendwave.flat(lay)),
-            wavelets.filters(lay.wavelet, "dec"),
-            wavelets.filters(lay.wavelet, "rec"),
-            seams.ramp(half_width),
-            float(deadzone),
-            float(far_steps),
-            trendwave.reaches(lay),
-            int(lay.num_knots),
-            int(lay.num_coeffs),
-        )
         return _tree_pass(
             self.tree,
             self.loop,
@@ -174,7 +152,8 @@ class TreePass:
             np.ascontiguousarray(steps, dtype=np.float64),
             (factors[0], factors[1], np.asarray(factors[2], dtype=np.float64)),
             self.isolated,
-            coder,
+            coder_arguments(lay, deadzone, seam_limit, half_width, far_steps),
+            (int(lay.num_knots), int(lay.num_coeffs)),
         )
 
 
@@ -282,10 +261,11 @@ def _world_turns(coding, d, fa, fb, above, turns):
 
 
 @numba.njit(cache=True)
-def _tree_pass(tree, loop, coding, kinematics, turns, steps, factors, isolated, coder):
-    """:meth:`TreePass.run`."""
+def _tree_pass(tree, loop, coding, kinematics, turns, steps, factors, isolated, coder, sizes):
+    """:meth:`TreePass.run` (``coder``: :func:`channelcode.coder_arguments`, ``sizes``: the
+    layout's knots and coefficients)."""
     start, active, goal, goal_positions, skip, placing, targeted = loop
-    seam_limit, lay, dec, rec, weight, deadzone, far, reach, num_knots, num_coeffs = coder
+    num_knots, num_coeffs = sizes
     frames, channels = start.shape
     count = tree.offsets.shape[0]
     glob = np.empty((count, frames, 4))
@@ -325,7 +305,7 @@ def _tree_pass(tree, loop, coding, kinematics, turns, steps, factors, isolated, 
             values, coding.form_rows[3 * fa : 3 * fb], quats,
             (coding.vector[fa:fb], coding.means[fa:fb], coding.form_axes[fa:fb], turned, pre, coding.file_axes[fa:fb]),
             coding.moved_rows[ma:mb], moved_turns, isolated, coding.const[ca:cb], step, coding.fraction[ca:cb],
-            coding.base[ca:cb], factors, seam_limit, lay, dec, rec, weight, deadzone, far, reach,
+            coding.base[ca:cb], factors, coder,
         )  # fmt: skip
         for i in range(rows):
             c = tree.coded[ca + i]

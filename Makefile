@@ -13,10 +13,17 @@ $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
-# every extra, then the kernels of the demo's codec compiled once (numba caches them)
-$(STAMP): $(BIN)/python pyproject.toml
-	$(BIN)/python -m pip install --quiet -e ".[test,plot,bench,stream,view,lint,formats,zarr,docs]"
+# the package with its own dependencies (what the demo needs), then the kernels of the demo's
+# codec compiled once (numba caches them)
+BASE := $(VENV)/.installed-base
+$(BASE): $(BIN)/python pyproject.toml
+	$(BIN)/python -m pip install --quiet -e .
 	$(BIN)/mocodec warmup kinwave
+	touch $(BASE)
+
+# every extra, for the tests, benchmarks and tools
+$(STAMP): $(BASE) pyproject.toml
+	$(BIN)/python -m pip install --quiet -e ".[test,plot,bench,stream,view,lint,formats,zarr,docs]"
 	touch $(STAMP)
 
 # every codec's kernels, for the tests and benchmarks
@@ -40,7 +47,7 @@ vendor:
 	cp $(VENDOR).tmp/package/examples/jsm/loaders/GLTFLoader.js $(VENDOR)/addons/loaders/
 	rm -rf $(VENDOR).tmp
 
-demo: $(STAMP)
+demo: $(BASE)
 	$(BIN)/mocodec demo
 
 # the JavaScript tests (Node's own runner; tests/js/register.mjs resolves 'three' to the vendored copy)

@@ -215,15 +215,12 @@ def _run(skeleton: Skeleton, channels: np.ndarray, want_local: bool) -> tuple[np
     frames, joints = len(channels), len(skeleton)
     pos, quat = np.empty((frames, joints, 3)), np.empty((frames, joints, 4))
     local = np.empty((frames, joints, 4) if want_local else (0, 0, 4))
+    rot_index, rot_axis, pos_index, axis_quat, has_axis, offsets, parents, rot_columns = plan.arrays()
+    cos_half, sin_half = _half_angles(channels, rot_columns)
     _fk_kernel(
-        channels,
-        *_half_angles(channels, plan.rot_columns),
-        *plan.arrays()[:7],
-        pos,
-        quat,
-        local,
-        want_local,
-    )
+        channels, cos_half, sin_half, rot_index, rot_axis, pos_index, axis_quat, has_axis, offsets, parents, pos, quat,
+        local, want_local,
+    )  # fmt: skip
     return pos, quat, local
 
 

@@ -53,7 +53,7 @@ export function decodeCoefficients(data, channels, numKnots, segPad, segLevels, 
   for (let c = 0; c < channels; c++) {
     constant[c] = dec.get(state, CONST);
     let prev = 0;
-    const nk = constant[c] ? 1 : numKnots;
+    const nk = constant[c] ? Math.min(1, numKnots) : numKnots; // (a layout of no frames has no knot)
     for (let i = 0; i < nk; i++) {
       const first = i === 0 ? 1 : 0;
       prev += dec.getInt(state, KZ + 1 - first, KU + 24 * (1 - first), 24, KM, KS + 1 - first);

@@ -4,6 +4,10 @@ each technique the codec claims does what it claims."""
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -68,6 +72,40 @@ def test_encoder_model_is_the_decoders_output_bit_for_bit(walk_bvh, layout):
     assert enc.isolated.size == (layout == "turned root and a glitch")
 
 
+@pytest.mark.parametrize("dummy", [False, True])
+def test_a_clip_of_no_frames_codes_no_knots(walk_bvh, dummy):
+    """A body of no frames has a layout of no knots: its constant channels code their flag
+    only (before, the coder read and the decoder wrote one knot past their arrays), the same
+    bytes every time, and decode to no frames."""
+    from mocodec.coding.entropy import coefcoder
+
+    motion = reexpress.with_dummy_root(walk_bvh, (0.0, -90.0, 0.0), position_channels=True) if dummy else walk_bvh
+    empty, codec = motion[:0], get_codec("kinwave", max_error_cm=0.5)
+    body = codec.encode(empty)
+    assert body == codec.encode(motion[:0]) == codec.encode(empty.with_channels(empty.channels.copy()))
+    assert codec.decode(body, motion.skeleton, 0, motion.fps).channels.shape == (0, motion.skeleton.num_channels)
+    const, none = np.ones(3, dtype=np.int64), np.zeros((3, 0), dtype=np.int64)
+    flags_only = coefcoder.encode(const, none, none, np.zeros(0, np.int64), np.zeros(0, np.int64), revision=2)
+    decoded = coefcoder.decode(flags_only, 3, 0, np.zeros(0, np.int64), np.zeros(0, np.int64), revision=2)
+    assert decoded.const.tolist() == [1, 1, 1] and decoded.knots.shape == (3, 0)
+
+
+@pytest.mark.slow
+def test_the_coefficient_coder_stays_within_its_arrays_without_knots(tmp_path):
+    """The coder's loops with no knot, compiled with bounds checks (a fresh cache): an index
+    past an array raises instead of reading or writing memory that is not its own."""
+    script = (
+        "import numpy as np\n"
+        "from mocodec.coding.entropy import coefcoder\n"
+        "none, idx = np.zeros((3, 0), dtype=np.int64), np.zeros(0, dtype=np.int64)\n"
+        "data = coefcoder.encode(np.ones(3, dtype=np.int64), none, none, idx, idx, revision=2)\n"
+        "assert coefcoder.decode(data, 3, 0, idx, idx, revision=2).const.tolist() == [1, 1, 1]\n"
+    )
+    env = {**os.environ, "NUMBA_BOUNDSCHECK": "1", "NUMBA_CACHE_DIR": str(tmp_path)}
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, env=env, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+
+
 def test_same_input_same_bytes(walk_amc):
     a = get_codec("kinwave", max_error_cm=0.4).encode(walk_amc)
     b = get_codec("kinwave", max_error_cm=0.4).encode(walk_amc.with_channels(walk_amc.channels.copy()))
@@ -127,7 +165,7 @@ def test_the_default_sets_leading_jumps_as_keyframes_without_a_trial(walk_amc, j
     leads into it: a game export's bind frame after a first frame close to it), or in both
     frames, two; at the default effort without a trial pass (what won on the shared clips);
     effort 3 still runs the trial, and both hold the bound."""
-    from mocodec.codecs.kinwave.encoder import leading_jumps
+    from mocodec.codecs.kinwave.encoder import frame_moves, leading_jumps
 
     clip = walk_amc[:300]
     channels = clip.channels.copy()
@@ -137,7 +175,7 @@ def test_the_default_sets_leading_jumps_as_keyframes_without_a_trial(walk_amc, j
     channels[0] = np.where(rot, -20.0, channels[1]) if jumping[0] else channels[1] + np.where(rot, 0.5, 0.0)
     moved = clip.with_channels(channels)
     default = BoundSearch(get_codec("kinwave", max_error_cm=0.5), moved)
-    assert leading_jumps(default.positions).tolist() == list(jumping)
+    assert leading_jumps(frame_moves(default.positions)).tolist() == list(jumping)
     assert default.keyframes == (2 if jumping[1] else 1) and default.first_pass is None
     highest = BoundSearch(get_codec("kinwave", max_error_cm=0.5, effort=3), moved)
     assert highest.first_pass is not None

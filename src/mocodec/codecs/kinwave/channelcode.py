@@ -40,7 +40,8 @@ def _reconstruct(knots, coeffs, const, step, fraction, base, knot_f, coeff_f, se
     block, signal, a, b = np.empty(widest), np.empty(widest), np.empty(widest), np.empty(widest)
     for r in range(rows):
         if const[r]:  # (its trend is the value, its coefficients 0 and its seams without a step)
-            out[r, :] = base[r] + knots[r, 0] * (step[r] * fraction[r])
+            if frames:
+                out[r, :] = base[r] + knots[r, 0] * (step[r] * fraction[r])
             continue
         for k in range(knot_frames.size):
             values[k] = knots[r, k] * (step[r] * knot_quantum[k] * knot_f[k])
@@ -83,8 +84,9 @@ def _quantise(target, const, step, fraction, base, knot_f, coeff_f, lay, lo, hi,
     trend = np.empty(frames)
     block, coeffs, a, b = np.empty(widest), np.empty(widest), np.empty(widest), np.empty(widest)
     for r in range(rows):
-        if const[r]:
-            k_int[r, :] = np.int64(np.rint((target[r, 0] - base[r]) / (step[r] * fraction[r])))
+        if const[r]:  # (a body of no frames has nothing to read: knot 0, decoded as no frame)
+            first = target[r, 0] if frames else base[r]
+            k_int[r, :] = np.int64(np.rint((first - base[r]) / (step[r] * fraction[r])))
             continue
         for k in range(K):
             quantum = step[r] * knot_quantum[k] * knot_f[k]

@@ -98,13 +98,13 @@ def frame_moves(positions_cm: np.ndarray) -> np.ndarray:
     return np.linalg.norm(np.diff(positions_cm, axis=0), axis=2).max(axis=1)
 
 
-def leading_jumps(positions_cm: np.ndarray) -> np.ndarray:
-    """``(2,)`` bool: whether the first and the second frame jump far from the next one: twice
-    the clip's own largest frame-to-frame motion after them, and at least JUMP_CM (a bind pose,
-    a T-pose, or both, lead the clip; a walk's first step does not)."""
-    if len(positions_cm) < 8:
+def leading_jumps(moves: np.ndarray) -> np.ndarray:
+    """``(2,)`` bool: whether the first and the second frame jump far from the next one
+    (``moves``: :func:`frame_moves`): twice the clip's own largest frame-to-frame motion after
+    them, and at least JUMP_CM (a bind pose, a T-pose, or both, lead the clip; a walk's first
+    step does not)."""
+    if len(moves) < 7:
         return np.zeros(2, dtype=bool)
-    moves = frame_moves(positions_cm)
     return moves[:2] > max(2.0 * np.percentile(moves[2:], 99) + 1.0, JUMP_CM)
 
 
@@ -125,14 +125,13 @@ class Pass:
     errors: np.ndarray | None = None  # (frames, points) cm, once measured (Encoder.pass_errors)
 
 
-def isolated_frames(positions_cm: np.ndarray, skip: int) -> np.ndarray:
+def isolated_frames(positions_cm: np.ndarray, moves: np.ndarray, skip: int) -> np.ndarray:
     """Frames (after the first ``skip``) that jump far from both neighbours while the
-    neighbours are close to each other: a glitch, coded apart so it does not cost the wavelet
-    (what one spike costs otherwise: docs/kinwave.md)."""
+    neighbours are close to each other (``moves``: :func:`frame_moves`): a glitch, coded apart
+    so it does not cost the wavelet (what one spike costs otherwise: docs/kinwave.md)."""
     frames = len(positions_cm)
     if frames < 8:
         return np.zeros(0, dtype=np.int64)
-    moves = frame_moves(positions_cm)
     usual = np.percentile(moves, 90)
     across = np.linalg.norm(positions_cm[2:] - positions_cm[:-2], axis=2).max(axis=1)
     far = 4.0 * usual + 1.0
@@ -245,7 +244,8 @@ class Encoder:
         self.first_pass: Pass | None = None
         self._depth_plans: dict[bytes, DepthPlan] = {}
         self._tree_pass: treepass.TreePass | None = None
-        self.isolated = isolated_frames(self.positions, 2) if self.cfg["keyframes"] else np.zeros(0, np.int64)
+        moves = frame_moves(self.positions) if self.cfg["keyframes"] else np.zeros(0)
+        self.isolated = isolated_frames(self.positions, moves, 2) if self.cfg["keyframes"] else np.zeros(0, np.int64)
         self.rot_joints = rotation_joints(sk)
         self.trans = has_translation(sk)
         self.shape_rot, self.shape_trans = self._shape()
@@ -258,7 +258,7 @@ class Encoder:
         self._constant_in_forms()
         self.world_translations = world_translations(sk, self.const)
         if self.cfg["keyframes"]:
-            self._choose_keyframes(leading_jumps(self.positions))
+            self._choose_keyframes(leading_jumps(moves))
 
     def _constant_channels(self) -> np.ndarray:
         """Channels coded as one knot: a range below CONSTANT, or a translation whose range is

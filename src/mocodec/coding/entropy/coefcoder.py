@@ -92,7 +92,7 @@ def _encode(side, const, knots, coeffs, seg_pad, seg_lev, rev2, buf):
     for c in range(const.size):
         put(st, buf, state, _CONST, const[c])
         prev = 0
-        nk = 1 if const[c] else knots.shape[1]
+        nk = min(1, knots.shape[1]) if const[c] else knots.shape[1]  # (a layout of no frames has no knot)
         for i in range(nk):
             first = 1 if i == 0 else 0
             put_int(
@@ -167,7 +167,7 @@ def _decode(data, side, channels, num_knots, num_coeffs, seg_pad, seg_lev, rev2,
     for c in range(channels):
         const[c] = get(st, data, state, _CONST)
         prev = 0
-        nk = 1 if const[c] else num_knots
+        nk = min(1, num_knots) if const[c] else num_knots  # (a layout of no frames has no knot)
         for i in range(nk):
             first = 1 if i == 0 else 0
             prev += get_int(st, data, state, _KZ + 1 - first, _KU + 24 * (1 - first), 24, _KM, _KS + 1 - first)

@@ -31,7 +31,7 @@ from mocodec.coding.transforms import trendwave
 from mocodec.kinematics import channel_plan, frame_orientations
 
 if TYPE_CHECKING:
-    from mocodec.codecs.kinwave.encoder import Encoder
+    from mocodec.codecs.kinwave.encoder import DepthPlan, Encoder
 
 
 class DepthCoding(NamedTuple):
@@ -62,15 +62,11 @@ class DepthCoding(NamedTuple):
     has_world: np.ndarray  # (D,)
 
 
-def depth_coding(enc: Encoder) -> DepthCoding:
-    """:class:`DepthCoding` of an encoder's body, from its depth plans (:class:`DepthPlan`)."""
+def depth_coding(enc: Encoder, plans: list[DepthPlan]) -> DepthCoding:
+    """:class:`DepthCoding` of an encoder's body from its depths' ``plans``, depth by depth."""
     sk, tree = enc.skeleton, tree_arrays(enc.skeleton)
     entry = {j: e for e, j in enumerate(tree.joints.tolist())}
-    plans = [
-        enc.depth_plan(tree.coded[tree.coded_ptr[d] : tree.coded_ptr[d + 1]]) for d in range(tree.depth_ptr.size - 1)
-    ]
     vectors = [(plan, v) for plan in plans for v in range(len(plan.vectors))]
-
     joints = [j for plan in plans for j in plan.form_joints]
     coding = DepthCoding(
         np.ascontiguousarray(np.concatenate([plan.const for plan in plans]), dtype=np.bool_),
@@ -104,10 +100,12 @@ class TreePass:
 
     def __init__(self, enc: Encoder):
         sk = enc.skeleton
-        self.tree = tree_arrays(sk)
+        self.tree = tree = tree_arrays(sk)
+        ptr = tree.coded_ptr
+        plans = [enc.depth_plan(tree.coded[ptr[d] : ptr[d + 1]]) for d in range(ptr.size - 1)]
         active = np.ascontiguousarray(~enc.const)
         flagged = np.zeros(len(sk), dtype=np.bool_)  # the joints in a coding form: no target angles
-        flagged[[j for plan in map(enc.depth_plan, self._depths()) for j in plan.form_joints]] = True
+        flagged[[j for plan in plans for j in plan.form_joints]] = True
         closed = bool(enc.cfg["closed_loop"])
         placing, targeted = placing_joints(sk, active) if closed else (np.zeros(len(sk), bool), (False,) * len(sk))
         self.loop = (
@@ -119,17 +117,13 @@ class TreePass:
             np.ascontiguousarray(placing, dtype=np.bool_),
             np.array(targeted, dtype=np.bool_),
         )
-        self.coding = depth_coding(enc)
+        self.coding = depth_coding(enc, plans)
         self.kinematics = channel_plan(sk).arrays()
         group_joints, group_axis, c = turn_setup(sk)
         turns = np.tile([1.0, 0.0, 0.0, 0.0], (group_joints.size, 1))
         turns[group_axis] = c
         self.turns = (group_joints, np.ascontiguousarray(group_axis), turns)
         self.isolated = np.ascontiguousarray(enc.isolated, dtype=np.int64)
-
-    def _depths(self) -> list[np.ndarray]:
-        tree = self.tree
-        return [tree.coded[tree.coded_ptr[d] : tree.coded_ptr[d + 1]] for d in range(tree.depth_ptr.size - 1)]
 
     def run(
         self,

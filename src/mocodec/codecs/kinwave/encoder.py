@@ -178,51 +178,6 @@ def _with_bones(skeleton: Skeleton, held: tuple[tuple[int, int, float], ...]) ->
     return Skeleton(tuple(joints), skeleton.units_per_metre, skeleton.name)
 
 
-@dataclass
-class DepthPlan:
-    """A depth's channels in a pass (:meth:`Encoder.run_pass`): which of its three-angle joints
-    go in another coding form (their rows among the depth's, their :class:`rotvec.FormSet` and
-    joints), which translations go on the world's axes, its constant flags and constants'
-    coding, and whether it needs the decoded orientations above it (:mod:`.treepass` flattens
-    the depths' plans for its compiled pass)."""
-
-    const: np.ndarray
-    constants: ConstantCoding
-    vectors: list[int]  # indices into three_angle_groups
-    cols: np.ndarray  # their rows, three a joint
-    form_set: rotvec.FormSet
-    world: bool  # a WORLD form among them
-    form_joints: list[int]  # their joints
-    moved_joints: np.ndarray  # (m,) joints whose translations go on the world's axes
-    moved_rows: np.ndarray  # (m, 3) their rows
-    turned: bool
-
-    @classmethod
-    def of(cls, enc: Encoder, channels: np.ndarray) -> DepthPlan:
-        sk, groups = enc.skeleton, three_angle_groups(enc.skeleton)
-        column = {c: i for i, c in enumerate(channels)}
-        vectors = [k for k, (g, _) in enumerate(groups) if len(enc.forms) and enc.forms[k] and g[0] in column]
-        forms = enc.forms[vectors] if vectors else np.zeros(0, dtype=np.int64)
-        moved = [(j, [column[c] for c in pos]) for j, pos in enc.world_translations if pos[0] in column]
-        world = bool((forms >= rotvec.WORLD).any())
-        return cls(
-            const=enc.const[channels],
-            constants=ConstantCoding(enc.constants.fraction[channels], enc.constants.base[channels]),
-            vectors=vectors,
-            cols=np.array([column[c] for k in vectors for c in groups[k][0]], dtype=np.int64),
-            form_set=rotvec.FormSet(
-                tuple(groups[k][1] for k in vectors),
-                forms,
-                rotvec.mean_quats(enc.means[vectors], MEAN_QUANTUM) if vectors else np.zeros((0, 4)),
-            ),
-            world=world,
-            form_joints=[int(sk.channel_joints[groups[k][0][0]]) for k in vectors],
-            moved_joints=np.array([j for j, _ in moved], dtype=np.int64),
-            moved_rows=np.array([rows for _, rows in moved], dtype=np.int64).reshape(-1, 3),
-            turned=bool(moved) or world,
-        )
-
-
 class Encoder:
     """One body: the passes of the scale search and the final bytes."""
 
@@ -242,7 +197,6 @@ class Encoder:
         self.const = self._constant_channels() if self.frames else np.ones(sk.num_channels, bool)
         self.constants = self._constant_coding()
         self.first_pass: Pass | None = None
-        self._depth_plans: dict[bytes, DepthPlan] = {}
         self._tree_pass: treepass.TreePass | None = None
         moves = frame_moves(self.positions) if self.cfg["keyframes"] else np.zeros(0)
         self.isolated = isolated_frames(self.positions, moves, 2) if self.cfg["keyframes"] else np.zeros(0, np.int64)
@@ -582,14 +536,6 @@ class Encoder:
             SEAM_LIMIT, SEAM_HALF_WIDTH, self.far_steps,
         )  # fmt: skip
         return Pass(codes, self.const.astype(np.int64), knots, coeffs, decoded, offsets, patches)
-
-    def depth_plan(self, channels: np.ndarray) -> DepthPlan:
-        """What a pass needs of a depth's ``channels`` that no pass changes (the forms, means,
-        constant flags and world-axis translations are set before the first pass), made once."""
-        key = channels.tobytes()
-        if key not in self._depth_plans:
-            self._depth_plans[key] = DepthPlan.of(self, channels)
-        return self._depth_plans[key]
 
     @property
     def far_steps(self) -> float:

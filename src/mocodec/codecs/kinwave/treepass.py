@@ -17,8 +17,9 @@ from typing import TYPE_CHECKING, NamedTuple
 import numba
 import numpy as np
 
-from mocodec.codecs.kinwave.body import turn_setup
+from mocodec.codecs.kinwave.body import MEAN_QUANTUM, three_angle_groups, turn_setup
 from mocodec.codecs.kinwave.channelcode import coder_arguments, depth_kernel
+from mocodec.codecs.shared import rotvec
 from mocodec.codecs.shared.closedloop import (
     depth_compose,
     depth_targets,
@@ -31,7 +32,7 @@ from mocodec.coding.transforms import trendwave
 from mocodec.kinematics import channel_plan, frame_orientations
 
 if TYPE_CHECKING:
-    from mocodec.codecs.kinwave.encoder import DepthPlan, Encoder
+    from mocodec.codecs.kinwave.encoder import Encoder
 
 
 class DepthCoding(NamedTuple):
@@ -62,35 +63,53 @@ class DepthCoding(NamedTuple):
     has_world: np.ndarray  # (D,)
 
 
-def depth_coding(enc: Encoder, plans: list[DepthPlan]) -> DepthCoding:
-    """:class:`DepthCoding` of an encoder's body from its depths' ``plans``, depth by depth."""
+def depth_coding(enc: Encoder) -> DepthCoding:
+    """:class:`DepthCoding` of an encoder's body: its constants, its three-angle joints in
+    another form than their file's angles (:class:`rotvec.FormSet`, depth by depth, in the
+    order of :func:`body.three_angle_groups`) and its translations on the world's axes, each
+    placed among its depth's coded channels."""
     sk, tree = enc.skeleton, tree_arrays(enc.skeleton)
+    depth_of = np.repeat(np.arange(tree.coded_ptr.size - 1), np.diff(tree.coded_ptr))
+    depth, row = np.empty(sk.num_channels, dtype=np.int64), np.empty(sk.num_channels, dtype=np.int64)
+    depth[tree.coded], row[tree.coded] = depth_of, np.arange(tree.coded.size) - tree.coded_ptr[depth_of]
+    groups = three_angle_groups(sk)
+    coded = [k for k in range(len(groups)) if len(enc.forms) and enc.forms[k]]
+    coded.sort(key=lambda k: depth[groups[k][0][0]])  # (stable: group order within a depth)
+    forms = rotvec.FormSet(
+        tuple(groups[k][1] for k in coded),
+        enc.forms[coded] if coded else np.zeros(0, dtype=np.int64),
+        rotvec.mean_quats(enc.means[coded], MEAN_QUANTUM) if coded else np.zeros((0, 4)),
+    )
+    joints = [int(sk.channel_joints[groups[k][0][0]]) for k in coded]
     entry = {j: e for e, j in enumerate(tree.joints.tolist())}
-    vectors = [(plan, v) for plan in plans for v in range(len(plan.vectors))]
-    joints = [j for plan in plans for j in plan.form_joints]
-    coding = DepthCoding(
-        np.ascontiguousarray(np.concatenate([plan.const for plan in plans]), dtype=np.bool_),
-        np.ascontiguousarray(np.concatenate([plan.constants.fraction for plan in plans]), dtype=np.float64),
-        np.ascontiguousarray(np.concatenate([plan.constants.base for plan in plans]), dtype=np.float64),
-        np.cumsum([0] + [len(plan.vectors) for plan in plans]).astype(np.int64),
-        np.concatenate([np.zeros(0, np.int64)] + [plan.cols for plan in plans]).astype(np.int64),
-        np.array([plan.form_set.vector[v] for plan, v in vectors], dtype=np.bool_),
-        np.array([plan.form_set.means[v] for plan, v in vectors], dtype=np.float64).reshape(-1, 4),
-        np.array([plan.form_set.form_axes[v] for plan, v in vectors], dtype=np.int64).reshape(-1, 3),
-        np.array([plan.form_set.world[v] for plan, v in vectors], dtype=np.bool_),
-        np.array([plan.form_set.file_axes[v] for plan, v in vectors], dtype=np.int64).reshape(-1, 3),
-        np.array([plan.vectors[v] for plan, v in vectors], dtype=np.int64),
+    moved = sorted(enc.world_translations, key=lambda jp: depth[jp[1][0]])
+    depths = tree.coded_ptr.size - 1
+    form_depths = np.array([depth[groups[k][0][0]] for k in coded], dtype=np.int64)
+    moved_depths = np.array([depth[pos[0]] for _, pos in moved], dtype=np.int64)
+    has_world = np.zeros(depths, dtype=np.bool_)
+    has_world[form_depths[forms.world]] = True
+    turned = has_world.copy()
+    turned[moved_depths] = True
+    return DepthCoding(
+        np.ascontiguousarray(enc.const[tree.coded], dtype=np.bool_),
+        np.ascontiguousarray(enc.constants.fraction[tree.coded], dtype=np.float64),
+        np.ascontiguousarray(enc.constants.base[tree.coded], dtype=np.float64),
+        np.searchsorted(form_depths, np.arange(depths + 1)).astype(np.int64),
+        np.array([row[c] for k in coded for c in groups[k][0]], dtype=np.int64),
+        forms.vector,
+        forms.means,
+        forms.form_axes,
+        forms.world,
+        forms.file_axes,
+        np.array(coded, dtype=np.int64),
         np.array([entry[j] for j in joints], dtype=np.int64),
         np.array([enc.cfg["closed_loop"] and sk.parents[j] >= 0 for j in joints], dtype=np.bool_),
-        np.cumsum([0] + [plan.moved_joints.size for plan in plans]).astype(np.int64),
-        np.concatenate([np.zeros(0, np.int64)] + [plan.moved_joints for plan in plans]).astype(np.int64),
-        np.concatenate([np.zeros((0, 3), np.int64)] + [plan.moved_rows for plan in plans]).astype(np.int64),
-        np.array([plan.turned for plan in plans], dtype=np.bool_),
-        np.array([plan.world for plan in plans], dtype=np.bool_),
+        np.searchsorted(moved_depths, np.arange(depths + 1)).astype(np.int64),
+        np.array([j for j, _ in moved], dtype=np.int64),
+        np.array([[row[c] for c in pos] for _, pos in moved], dtype=np.int64).reshape(-1, 3),
+        turned,
+        has_world,
     )
-    for axes in (coding.form_axes, coding.file_axes):  # read-only, as rotvec's: the kernels the
-        axes.setflags(write=False)  # form trial and the decoder use serve the pass too
-    return coding
 
 
 class TreePass:
@@ -101,11 +120,10 @@ class TreePass:
     def __init__(self, enc: Encoder):
         sk = enc.skeleton
         self.tree = tree = tree_arrays(sk)
-        ptr = tree.coded_ptr
-        plans = [enc.depth_plan(tree.coded[ptr[d] : ptr[d + 1]]) for d in range(ptr.size - 1)]
+        self.coding = depth_coding(enc)
         active = np.ascontiguousarray(~enc.const)
         flagged = np.zeros(len(sk), dtype=np.bool_)  # the joints in a coding form: no target angles
-        flagged[[j for plan in plans for j in plan.form_joints]] = True
+        flagged[tree.joints[self.coding.form_entry]] = True
         closed = bool(enc.cfg["closed_loop"])
         placing, targeted = placing_joints(sk, active) if closed else (np.zeros(len(sk), bool), (False,) * len(sk))
         self.loop = (
@@ -117,7 +135,6 @@ class TreePass:
             np.ascontiguousarray(placing, dtype=np.bool_),
             np.array(targeted, dtype=np.bool_),
         )
-        self.coding = depth_coding(enc, plans)
         self.kinematics = channel_plan(sk).arrays()
         group_joints, group_axis, c = turn_setup(sk)
         turns = np.tile([1.0, 0.0, 0.0, 0.0], (group_joints.size, 1))

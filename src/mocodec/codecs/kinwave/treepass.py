@@ -24,10 +24,12 @@ from mocodec.codecs.shared.closedloop import (
     depth_compose,
     depth_targets,
     exact_rotation,
+    place_joints,
     placing_joints,
+    translation_targets,
     tree_arrays,
 )
-from mocodec.codecs.shared.rotvec import quat_product, quats_of_euler, rotate_vector
+from mocodec.codecs.shared.rotvec import quat_product, quats_of_euler
 from mocodec.coding.transforms import trendwave
 from mocodec.kinematics import channel_plan, frame_orientations
 
@@ -125,15 +127,15 @@ class TreePass:
         flagged = np.zeros(len(sk), dtype=np.bool_)  # the joints in a coding form: no target angles
         flagged[tree.joints[self.coding.form_entry]] = True
         closed = bool(enc.cfg["closed_loop"])
-        placing, targeted = placing_joints(sk, active) if closed else (np.zeros(len(sk), bool), (False,) * len(sk))
+        placing, targeted = placing_joints(sk, active if closed else np.zeros_like(active))  # (open: none)
         self.loop = (
             enc.by_frame,
             active,
             np.ascontiguousarray(enc.quats, dtype=np.float64),
             np.ascontiguousarray(enc.goal_positions, dtype=np.float64),
             flagged if closed else np.ones(len(sk), dtype=np.bool_),
-            np.ascontiguousarray(placing, dtype=np.bool_),
-            np.array(targeted, dtype=np.bool_),
+            placing,
+            targeted,
         )
         self.kinematics = channel_plan(sk).arrays()
         group_joints, group_axis, c = turn_setup(sk)
@@ -166,49 +168,6 @@ class TreePass:
             coder_arguments(lay, deadzone, seam_limit, half_width, far_steps),
             (int(lay.num_knots), int(lay.num_coeffs)),
         )
-
-
-@numba.njit(cache=True)
-def _translation_targets(targets, tree, a, b, active, glob, where, goal_positions, targeted):
-    """The active translations of the entries ``a:b`` that restore their joints' original
-    positions from their parents' decoded positions (``where``) and orientations."""
-    wanted = np.empty(3)
-    for e in range(a, b):
-        j, p = tree.joints[e], tree.parents[e]
-        if not targeted[j]:
-            continue
-        for f in range(targets.shape[0]):
-            wanted[0], wanted[1], wanted[2] = rotate_vector(
-                glob[p, f, 0], -glob[p, f, 1], -glob[p, f, 2], -glob[p, f, 3],
-                goal_positions[f, j, 0] - where[p, f, 0],
-                goal_positions[f, j, 1] - where[p, f, 1],
-                goal_positions[f, j, 2] - where[p, f, 2],
-            )  # fmt: skip
-            for m in range(tree.move_ptr[e], tree.move_ptr[e + 1]):
-                if active[tree.moves[m]]:
-                    axis = tree.move_axes[m]
-                    targets[f, tree.move_columns[m]] = wanted[axis] - tree.offsets[j, axis]
-
-
-@numba.njit(cache=True)
-def _placed(by_frame, tree, a, b, glob, where, placing):
-    """The decoded positions of the entries ``a:b`` that joints below need, from their decoded
-    translations ``by_frame (T, k)`` and their parents' decoded positions and orientations."""
-    bone = np.empty(3)
-    for e in range(a, b):
-        j, p = tree.joints[e], tree.parents[e]
-        if not placing[j]:
-            continue
-        for f in range(by_frame.shape[0]):
-            bone[0], bone[1], bone[2] = tree.offsets[j, 0], tree.offsets[j, 1], tree.offsets[j, 2]
-            for m in range(tree.move_ptr[e], tree.move_ptr[e + 1]):
-                bone[tree.move_axes[m]] += by_frame[f, tree.move_columns[m]]
-            if p < 0:
-                where[j, f, :] = bone
-                continue
-            q = glob[p, f]
-            x, y, z = rotate_vector(q[0], q[1], q[2], q[3], bone[0], bone[1], bone[2])
-            where[j, f, 0], where[j, f, 1], where[j, f, 2] = where[p, f, 0] + x, where[p, f, 1] + y, where[p, f, 2] + z
 
 
 @numba.njit(cache=True)
@@ -298,7 +257,7 @@ def _tree_pass(tree, loop, coding, kinematics, turns, steps, factors, isolated, 
             tree.steps[a:b], tree.axes[a:b], tree.axis_quats[a:b], tree.has_axis[a:b], skip, targets,
         )  # fmt: skip
         if placed:
-            _translation_targets(targets, tree, a, b, active, glob, where, goal_positions, targeted)
+            translation_targets(targets, tree, a, b, active, glob, where, goal_positions, targeted)
         if rows == 0:
             continue
         fa, fb, ma, mb = coding.form_ptr[d], coding.form_ptr[d + 1], coding.moved_ptr[d], coding.moved_ptr[d + 1]
@@ -330,5 +289,5 @@ def _tree_pass(tree, loop, coding, kinematics, turns, steps, factors, isolated, 
             tree.axis_quats[a:b], tree.has_axis[a:b], tree.has_children[a:b],
         )  # fmt: skip
         if placed:
-            _placed(by_frame, tree, a, b, glob, where, placing)
+            place_joints(by_frame, tree, a, b, glob, where, placing)
     return knots, coeffs, decoded, patches

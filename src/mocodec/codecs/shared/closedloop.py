@@ -24,7 +24,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from mocodec.codecs.shared.rotvec import quat_product, rotate_vector, turn_vectors
+from mocodec.codecs.shared.rotvec import quat_product, rotate_vector
 from mocodec.kinematics import channel_plan
 from mocodec.skeleton import Skeleton
 
@@ -382,28 +382,74 @@ def depth_compose(decoded, glob, d_joints, columns, steps, axes, quats, has_axis
         _compose(angles, axes[i, :k], quats[i], has_axis[i], parent, glob[j])
 
 
-def placing_joints(skeleton: Skeleton, active: np.ndarray) -> tuple[np.ndarray, tuple[bool, ...]]:
-    """Joints whose decoded position closed-loop translations need (the ancestors of every
-    non-root joint with an active translation channel), and per joint whether it is such a
-    joint (its translations are targeted)."""
-    return _placing_of(skeleton, active.tobytes())
+def placing_joints(skeleton: Skeleton, active: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per joint: whether closed-loop translations need its decoded position (an ancestor of a
+    non-root joint with an active translation channel), and whether it is such a joint (its
+    translations are targeted); shared, read-only."""
+    return _placing_of(skeleton, np.ascontiguousarray(active, dtype=np.bool_).tobytes())
 
 
 @lru_cache(maxsize=256)
-def _placing_of(skeleton: Skeleton, active_flags: bytes) -> tuple[np.ndarray, tuple[bool, ...]]:
+def _placing_of(skeleton: Skeleton, active_flags: bytes) -> tuple[np.ndarray, np.ndarray]:
     active = np.frombuffer(active_flags, dtype=np.bool_)
     plan = channel_plan(skeleton)
-    out = np.zeros(len(skeleton), dtype=bool)
-    targeted = [False] * len(skeleton)
+    placing, targeted = np.zeros(len(skeleton), dtype=np.bool_), np.zeros(len(skeleton), dtype=np.bool_)
     for j in range(1, len(skeleton)):
         moves = plan.pos_index[j][plan.pos_index[j] >= 0]
         targeted[j] = bool(active[moves].any()) and skeleton.parents[j] >= 0
         p = skeleton.parents[j]
-        while active[moves].any() and p >= 0 and not out[p]:
-            out[p] = True
+        while active[moves].any() and p >= 0 and not placing[p]:
+            placing[p] = True
             p = skeleton.parents[p]
-    out.setflags(write=False)
-    return out, tuple(targeted)
+    for flags in (placing, targeted):
+        flags.setflags(write=False)
+    return placing, targeted
+
+
+@numba.njit(cache=True)
+def translation_targets(targets, tree, a, b, active, glob, where, goal_positions, targeted):
+    """The active translations (columns of a depth's ``targets (T, k)``) of the tree entries
+    ``a:b`` (:class:`TreeArrays`) whose joints are ``targeted``: the ones that restore each
+    joint's original position ``goal_positions (T, joints, 3)`` from its parent's decoded
+    position ``where`` and orientation ``glob``."""
+    wanted = np.empty(3)
+    for e in range(a, b):
+        j, p = tree.joints[e], tree.parents[e]
+        if not targeted[j]:
+            continue
+        for f in range(targets.shape[0]):
+            wanted[0], wanted[1], wanted[2] = rotate_vector(
+                glob[p, f, 0], -glob[p, f, 1], -glob[p, f, 2], -glob[p, f, 3],
+                goal_positions[f, j, 0] - where[p, f, 0],
+                goal_positions[f, j, 1] - where[p, f, 1],
+                goal_positions[f, j, 2] - where[p, f, 2],
+            )  # fmt: skip
+            for m in range(tree.move_ptr[e], tree.move_ptr[e + 1]):
+                if active[tree.moves[m]]:
+                    axis = tree.move_axes[m]
+                    targets[f, tree.move_columns[m]] = wanted[axis] - tree.offsets[j, axis]
+
+
+@numba.njit(cache=True)
+def place_joints(decoded, tree, a, b, glob, where, placing):
+    """The decoded positions ``where`` of the tree entries ``a:b`` whose joints are
+    ``placing``: from their decoded translations (columns of the depth's ``decoded (T, k)``) and
+    their parents' decoded positions and orientations."""
+    bone = np.empty(3)
+    for e in range(a, b):
+        j, p = tree.joints[e], tree.parents[e]
+        if not placing[j]:
+            continue
+        for f in range(decoded.shape[0]):
+            bone[0], bone[1], bone[2] = tree.offsets[j, 0], tree.offsets[j, 1], tree.offsets[j, 2]
+            for m in range(tree.move_ptr[e], tree.move_ptr[e + 1]):
+                bone[tree.move_axes[m]] += decoded[f, tree.move_columns[m]]
+            if p < 0:
+                where[j, f, :] = bone
+                continue
+            q = glob[p, f]
+            x, y, z = rotate_vector(q[0], q[1], q[2], q[3], bone[0], bone[1], bone[2])
+            where[j, f, 0], where[j, f, 1], where[j, f, 2] = where[p, f, 0] + x, where[p, f, 1] + y, where[p, f, 2] + z
 
 
 @numba.njit(cache=True)
@@ -446,42 +492,33 @@ def code_down_tree(
     are. ``code(channels, targets (T, k))`` codes a depth's channels and returns what the
     decoder will make of them ``(T, k)``. (kinwave's encoder runs the same loop compiled,
     :mod:`mocodec.codecs.kinwave.treepass`, from :func:`tree_arrays`.)"""
-    plans = _joint_plans(skeleton)
-    frames = start.shape[0]
+    tree, frames = tree_arrays(skeleton), start.shape[0]
     glob = np.empty((len(skeleton), frames, 4))
     start = np.ascontiguousarray(start, dtype=np.float64)
     goal = np.ascontiguousarray(goal, dtype=np.float64)
     active = np.ascontiguousarray(active, dtype=np.bool_)
     skip = np.zeros(len(skeleton), dtype=np.bool_) if closed_loop else np.ones(len(skeleton), dtype=np.bool_)
-    placing, targeted = (
-        placing_joints(skeleton, active) if closed_loop and goal_positions is not None else (np.zeros(0, bool), ())
-    )
-    where = np.zeros((len(skeleton), frames, 3)) if placing.any() else None
-    for dp in _depth_plans(skeleton):
-        targets = np.ascontiguousarray(start[:, dp.coded])  # (one layout: one compiled kernel)
+    placing, targeted = np.zeros(len(skeleton), dtype=np.bool_), np.zeros(len(skeleton), dtype=np.bool_)
+    if closed_loop and goal_positions is not None:
+        placing, targeted = placing_joints(skeleton, active)
+        goal_positions = np.ascontiguousarray(goal_positions, dtype=np.float64)
+    placed = bool(placing.any())
+    where = np.zeros((len(skeleton) if placed else 0, frames, 3))
+    for d in range(tree.depth_ptr.size - 1):
+        a, b, coded = tree.depth_ptr[d], tree.depth_ptr[d + 1], tree.coded[tree.coded_ptr[d] : tree.coded_ptr[d + 1]]
+        targets = np.ascontiguousarray(start[:, coded])  # (one layout: one compiled kernel)
         depth_targets(
-            start, active, goal, glob, dp.joints, dp.parents, dp.chans, dp.columns, dp.steps, dp.axes,
-            dp.axis_quats, dp.has_axis, skip, targets,
+            start, active, goal, glob, tree.joints[a:b], tree.parents[a:b], tree.chans[a:b], tree.columns[a:b],
+            tree.steps[a:b], tree.axes[a:b], tree.axis_quats[a:b], tree.has_axis[a:b], skip, targets,
         )  # fmt: skip
-        for i, (j, p) in enumerate(zip(dp.joints.tolist(), dp.parents.tolist()) if where is not None else ()):
-            if targeted[j] and goal_positions is not None and where is not None:
-                jp = plans[j]
-                wanted = turn_vectors(glob[p], goal_positions[:, j] - where[p], back=True) - jp.offset
-                cols = dp.move_columns[i]
-                targets[:, cols] = np.where(active[jp.moves], wanted[:, jp.move_axes], targets[:, cols])
-        if not dp.coded.size:
+        if placed:
+            translation_targets(targets, tree, a, b, active, glob, where, goal_positions, targeted)
+        if not coded.size:
             continue
-        decoded = code(dp.coded, targets)
+        decoded = np.ascontiguousarray(code(coded.copy(), targets), dtype=np.float64)  # (the coder's own channels)
         depth_compose(
-            np.ascontiguousarray(decoded, dtype=np.float64), glob, dp.joints, dp.columns, dp.steps, dp.axes,
-            dp.axis_quats, dp.has_axis, dp.has_children,
+            decoded, glob, tree.joints[a:b], tree.columns[a:b], tree.steps[a:b], tree.axes[a:b],
+            tree.axis_quats[a:b], tree.has_axis[a:b], tree.has_children[a:b],
         )  # fmt: skip
-        if where is None:
-            continue
-        for i, (j, p) in enumerate(zip(dp.joints.tolist(), dp.parents.tolist())):
-            if placing[j]:
-                jp = plans[j]
-                bone = np.tile(jp.offset, (frames, 1))
-                for axis, column in zip(jp.move_axes.tolist(), dp.move_columns[i].tolist()):
-                    bone[:, axis] += decoded[:, column]
-                where[j] = bone if p < 0 else where[p] + turn_vectors(glob[p], bone)
+        if placed:
+            place_joints(decoded, tree, a, b, glob, where, placing)

@@ -1,7 +1,8 @@
 """kinwave's pass down the tree in one compiled call: the loop of
-:func:`mocodec.codecs.shared.closedloop.code_down_tree` (closed-loop targets, translations
-restored from the parent's decoded position, decoded orientations composed for the children)
-with each depth's coding (:func:`channelcode.depth_kernel`: coding forms, world-axis
+:func:`mocodec.codecs.shared.closedloop.code_down_tree` (its steps before and after a depth's
+coding, :func:`closedloop.depth_start` and :func:`closedloop.depth_end`: closed-loop targets,
+translations restored from the parent's decoded position, decoded orientations and positions
+for the children) with each depth's coding (:func:`channelcode.depth_kernel`: coding forms, world-axis
 translations, isolated frames, quantisation and reconstruction) inside it. The joints in a
 coding form take their closed-loop target as a rotation (:func:`closedloop.exact_rotation`)
 rather than as angles; a WORLD form's turn and a world-axis translation's come from the
@@ -20,15 +21,7 @@ import numpy as np
 from mocodec.codecs.kinwave.body import MEAN_QUANTUM, three_angle_groups, turn_setup
 from mocodec.codecs.kinwave.channelcode import coder_arguments, depth_kernel
 from mocodec.codecs.shared import rotvec
-from mocodec.codecs.shared.closedloop import (
-    depth_compose,
-    depth_targets,
-    exact_rotation,
-    place_joints,
-    placing_joints,
-    translation_targets,
-    tree_arrays,
-)
+from mocodec.codecs.shared.closedloop import depth_end, depth_start, exact_rotation, placing_joints, tree_arrays
 from mocodec.codecs.shared.rotvec import quat_product, quats_of_euler
 from mocodec.coding.transforms import trendwave
 from mocodec.kinematics import channel_plan, frame_orientations
@@ -243,21 +236,11 @@ def _tree_pass(tree, loop, coding, kinematics, turns, steps, factors, isolated, 
     coeffs = np.zeros((channels, num_coeffs), dtype=np.int64)
     decoded = np.zeros((channels, frames))  # zeros: a WORLD form's turn reads the rows above it
     patches = np.zeros((channels, isolated.size), dtype=np.int64)
-    placed = placing.any()
-    where = np.zeros((count if placed else 0, frames, 3))
+    where = np.zeros((count if placing.any() else 0, frames, 3))  # (kept only where translations need it)
     for d in range(tree.depth_ptr.size - 1):
-        a, b, ca, cb = tree.depth_ptr[d], tree.depth_ptr[d + 1], tree.coded_ptr[d], tree.coded_ptr[d + 1]
+        ca, cb = tree.coded_ptr[d], tree.coded_ptr[d + 1]
         rows = cb - ca
-        targets = np.empty((frames, rows))
-        for f in range(frames):
-            for i in range(rows):
-                targets[f, i] = start[f, tree.coded[ca + i]]
-        depth_targets(
-            start, active, goal, glob, tree.joints[a:b], tree.parents[a:b], tree.chans[a:b], tree.columns[a:b],
-            tree.steps[a:b], tree.axes[a:b], tree.axis_quats[a:b], tree.has_axis[a:b], skip, targets,
-        )  # fmt: skip
-        if placed:
-            translation_targets(targets, tree, a, b, active, glob, where, goal_positions, targeted)
+        targets = depth_start(tree, d, start, active, goal, glob, skip, where, goal_positions, targeted)
         if rows == 0:
             continue
         fa, fb, ma, mb = coding.form_ptr[d], coding.form_ptr[d + 1], coding.moved_ptr[d], coding.moved_ptr[d + 1]
@@ -283,11 +266,5 @@ def _tree_pass(tree, loop, coding, kinematics, turns, steps, factors, isolated, 
             coeffs[c, :] = c_int[i]
             patches[c, :] = patch[i]
             decoded[c, :] = out[i]
-        by_frame = out.T.copy()
-        depth_compose(
-            by_frame, glob, tree.joints[a:b], tree.columns[a:b], tree.steps[a:b], tree.axes[a:b],
-            tree.axis_quats[a:b], tree.has_axis[a:b], tree.has_children[a:b],
-        )  # fmt: skip
-        if placed:
-            place_joints(by_frame, tree, a, b, glob, where, placing)
+        depth_end(tree, d, out.T.copy(), glob, where, placing)
     return knots, coeffs, decoded, patches

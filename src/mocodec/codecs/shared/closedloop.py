@@ -472,6 +472,39 @@ def exact_rotation(axis_quat, has_axis, parent, goal):
     return out
 
 
+@numba.njit(cache=True)
+def depth_start(tree, d, start, active, goal, glob, skip, where, goal_positions, targeted):
+    """``(T, k)``: what depth ``d`` of ``tree`` (:class:`TreeArrays`) codes its channels from:
+    their start values, the closed-loop target angles (:func:`depth_targets`, not for ``skip``
+    joints) and, where ``where`` holds the decoded positions, the translations that restore the
+    ``targeted`` joints' positions (:func:`translation_targets`)."""
+    a, b, ca, cb = tree.depth_ptr[d], tree.depth_ptr[d + 1], tree.coded_ptr[d], tree.coded_ptr[d + 1]
+    targets = np.empty((start.shape[0], cb - ca))
+    for f in range(start.shape[0]):
+        for i in range(cb - ca):
+            targets[f, i] = start[f, tree.coded[ca + i]]
+    depth_targets(
+        start, active, goal, glob, tree.joints[a:b], tree.parents[a:b], tree.chans[a:b], tree.columns[a:b],
+        tree.steps[a:b], tree.axes[a:b], tree.axis_quats[a:b], tree.has_axis[a:b], skip, targets,
+    )  # fmt: skip
+    if where.shape[0]:
+        translation_targets(targets, tree, a, b, active, glob, where, goal_positions, targeted)
+    return targets
+
+
+@numba.njit(cache=True)
+def depth_end(tree, d, decoded, glob, where, placing):
+    """After depth ``d`` is coded (``decoded (T, k)``): its joints' decoded orientations
+    (:func:`depth_compose`) and, where ``where`` is kept, positions (:func:`place_joints`)."""
+    a, b = tree.depth_ptr[d], tree.depth_ptr[d + 1]
+    depth_compose(
+        decoded, glob, tree.joints[a:b], tree.columns[a:b], tree.steps[a:b], tree.axes[a:b], tree.axis_quats[a:b],
+        tree.has_axis[a:b], tree.has_children[a:b],
+    )  # fmt: skip
+    if where.shape[0]:
+        place_joints(decoded, tree, a, b, glob, where, placing)
+
+
 def code_down_tree(
     skeleton: Skeleton,
     start: np.ndarray,
@@ -498,27 +531,13 @@ def code_down_tree(
     goal = np.ascontiguousarray(goal, dtype=np.float64)
     active = np.ascontiguousarray(active, dtype=np.bool_)
     skip = np.zeros(len(skeleton), dtype=np.bool_) if closed_loop else np.ones(len(skeleton), dtype=np.bool_)
-    placing, targeted = np.zeros(len(skeleton), dtype=np.bool_), np.zeros(len(skeleton), dtype=np.bool_)
-    if closed_loop and goal_positions is not None:
-        placing, targeted = placing_joints(skeleton, active)
-        goal_positions = np.ascontiguousarray(goal_positions, dtype=np.float64)
-    placed = bool(placing.any())
-    where = np.zeros((len(skeleton) if placed else 0, frames, 3))
+    placed = closed_loop and goal_positions is not None
+    placing, targeted = placing_joints(skeleton, active if placed else np.zeros_like(active))
+    where = np.zeros((len(skeleton) if placing.any() else 0, frames, 3))
+    positions = np.ascontiguousarray(goal_positions if placed else np.zeros((frames, 0, 3)), dtype=np.float64)
     for d in range(tree.depth_ptr.size - 1):
-        a, b, coded = tree.depth_ptr[d], tree.depth_ptr[d + 1], tree.coded[tree.coded_ptr[d] : tree.coded_ptr[d + 1]]
-        targets = np.ascontiguousarray(start[:, coded])  # (one layout: one compiled kernel)
-        depth_targets(
-            start, active, goal, glob, tree.joints[a:b], tree.parents[a:b], tree.chans[a:b], tree.columns[a:b],
-            tree.steps[a:b], tree.axes[a:b], tree.axis_quats[a:b], tree.has_axis[a:b], skip, targets,
-        )  # fmt: skip
-        if placed:
-            translation_targets(targets, tree, a, b, active, glob, where, goal_positions, targeted)
-        if not coded.size:
+        targets = depth_start(tree, d, start, active, goal, glob, skip, where, positions, targeted)
+        if not targets.shape[1]:
             continue
-        decoded = np.ascontiguousarray(code(coded.copy(), targets), dtype=np.float64)  # (the coder's own channels)
-        depth_compose(
-            decoded, glob, tree.joints[a:b], tree.columns[a:b], tree.steps[a:b], tree.axes[a:b],
-            tree.axis_quats[a:b], tree.has_axis[a:b], tree.has_children[a:b],
-        )  # fmt: skip
-        if placed:
-            place_joints(decoded, tree, a, b, glob, where, placing)
+        coded = tree.coded[tree.coded_ptr[d] : tree.coded_ptr[d + 1]].copy()  # (the coder's own)
+        depth_end(tree, d, np.ascontiguousarray(code(coded, targets), dtype=np.float64), glob, where, placing)

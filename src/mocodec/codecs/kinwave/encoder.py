@@ -64,6 +64,7 @@ FLOAT32_STEPS = 16  # ... and a translation whose range is this many float32 ste
 NOISE_SHARE = 1.0 / 64.0  # ... if that range is under this share of a max bound
 JUMP_CM = 10.0  # a leading frame jumping less than this is not tried as a keyframe
 TRIAL_FRAMES = 1024  # frames the choice of forms codes each form of every joint on (effort 3)
+TRIAL_RATE = 60.0  # frames/s the trial keeps of a faster body (effort < 3; Encoder._trial_stride)
 TRIAL_SAMPLE = 512  # ... below it, of a longer body, this many (Encoder._trial_frames)
 FAR_STEPS = 0.7  # a frame missing its target by more than this many steps rounds its coefficients plainly
 CONST_AWAY_CM = 0.1  # a constant translation this far from its joint's offset takes fine constants
@@ -363,7 +364,8 @@ class Encoder:
         groups = three_angle_groups(self.skeleton)
         choice = np.zeros(len(groups), dtype=np.int64)
         moving = [k for k, (channels, _) in enumerate(groups) if not self.const[channels].all()]
-        if self.cfg["error_measure"] == "mean" or not any(j.has_axis for j in self.skeleton.joints):
+        every_joint = self.cfg["error_measure"] == "mean" or not any(j.has_axis for j in self.skeleton.joints)
+        if every_joint:
             live = moving
         else:  # ASF: the body's root (under a dummy root too) and joints near their gimbal lock
             locked = (
@@ -380,11 +382,11 @@ class Encoder:
             return choice
         channels = np.concatenate([groups[k][0] for k in live])
         orders = tuple(groups[k][1] for k in live)
-        sample = self._trial_frames()
+        stride = self._trial_stride() if every_joint else 1
+        sample = self._trial_frames()[::stride]
         euler = self.values[channels][:, sample]
-        lay = trendwave.layout(
-            euler.shape[1], self.cfg["window"], int(self.lay.levels.max(initial=1)), 0, self.cfg["wavelet"]
-        )
+        levels = max(1, int(self.lay.levels.max(initial=1)) - stride.bit_length() + 1)
+        lay = trendwave.layout(euler.shape[1], self.cfg["window"], levels, 0, self.cfg["wavelet"])
         step = channel_steps(self.skeleton, self.codes(self.first_scale()))[channels]
         factors = segment_factors(np.zeros(lay.starts.size), lay)
         pre = self.turns[live]
@@ -480,6 +482,16 @@ class Encoder:
         half = TRIAL_SAMPLE // 2
         starts = (self.frames * np.array([1, 2]) // 3 - half // 2).clip(0, self.frames - half)
         return (starts[:, None] + np.arange(half)).ravel()
+
+    def _trial_stride(self) -> int:
+        """Below the highest effort, a trial of every joint codes every n-th frame of a body
+        faster than TRIAL_RATE (n a power of 2, the trial's wavelet a level shallower per
+        halving): at 120 frames/s every other frame tells the forms apart as well, for half the
+        trial's work. A trial of the few ASF joints that may change form is cheap, and its
+        choice is delicate there: it keeps every frame (docs/kinwave.md)."""
+        if self.cfg["effort"] >= 3:
+            return 1
+        return 1 << max(0, int(math.floor(math.log2(max(self.motion.fps, 1.0) / TRIAL_RATE) + 0.5)))
 
     @staticmethod
     def _quiet(quats: np.ndarray, euler: np.ndarray) -> np.ndarray:

@@ -23,7 +23,7 @@ from mocodec.kinematics import forward_kinematics
 from mocodec.metrics.pose import worst_error
 
 LEVELS = (3, 4, 5, 6)
-WINDOWS = (128, 256)
+WINDOWS = (256, 512, 1024)
 GRID = tuple(itertools.product(LEVELS, WINDOWS))
 
 

@@ -86,9 +86,10 @@ class KinwaveCodec(Codec):
         Knob(
             "window",
             int,
-            256,
-            "segment length in frames (a power of two): the streaming delay (128 halves it, "
-            "for a few per cent more bytes)",
+            1024,
+            "segment length in frames (a power of two): a .moc chunk's 1024 by default, where "
+            "files are smallest (fewer seams); a stream sends a packet per segment, so "
+            "streaming wants 64-256 (the delay)",
             8,
             4096,
         ),

@@ -505,6 +505,50 @@ def depth_end(tree, d, decoded, glob, where, placing):
         place_joints(decoded, tree, a, b, glob, where, placing)
 
 
+class TreeLoop(NamedTuple):
+    """What a loop down the tree reads and keeps (:func:`tree_loop`), in the order
+    :func:`depth_start` and :func:`depth_end` take them: for a compiled loop that codes the
+    depths itself (kinwave-live's packets)."""
+
+    tree: TreeArrays
+    start: np.ndarray  # (T, C) the values each channel is coded from
+    active: np.ndarray  # (C,) the channels the coder changes
+    goal: np.ndarray  # (T, joints, 4) the original global orientations
+    glob: np.ndarray  # (joints, T, 4) the decoded ones, filled depth by depth
+    skip: np.ndarray  # (joints,) joints without a closed-loop target
+    where: np.ndarray  # (joints or 0, T, 3) the decoded positions kept for the joints below
+    goal_positions: np.ndarray  # (T, joints or 0, 3)
+    targeted: np.ndarray  # (joints,) joints whose active translations restore their positions
+    placing: np.ndarray  # (joints,) joints whose decoded positions are kept
+
+
+def tree_loop(
+    skeleton: Skeleton,
+    start: np.ndarray,
+    active: np.ndarray,
+    goal: np.ndarray,
+    closed_loop: bool = True,
+    goal_positions: np.ndarray | None = None,
+) -> TreeLoop:
+    """The arrays of :func:`code_down_tree`'s loop (its arguments as there)."""
+    frames = start.shape[0]
+    placed = closed_loop and goal_positions is not None
+    active = np.ascontiguousarray(active, dtype=np.bool_)
+    placing, targeted = placing_joints(skeleton, active if placed else np.zeros_like(active))
+    return TreeLoop(
+        tree_arrays(skeleton),
+        np.ascontiguousarray(start, dtype=np.float64),
+        active,
+        np.ascontiguousarray(goal, dtype=np.float64),
+        np.empty((len(skeleton), frames, 4)),
+        np.zeros(len(skeleton), dtype=np.bool_) if closed_loop else np.ones(len(skeleton), dtype=np.bool_),
+        np.zeros((len(skeleton) if placing.any() else 0, frames, 3)),
+        np.ascontiguousarray(goal_positions if placed else np.zeros((frames, 0, 3)), dtype=np.float64),
+        targeted,
+        placing,
+    )
+
+
 def code_down_tree(
     skeleton: Skeleton,
     start: np.ndarray,
@@ -523,21 +567,15 @@ def code_down_tree(
     by those that restore its original position from its parent's decoded position and
     orientation (a translated joint below a rotated dummy root), else translations go as they
     are. ``code(channels, targets (T, k))`` codes a depth's channels and returns what the
-    decoder will make of them ``(T, k)``. (kinwave's encoder runs the same loop compiled,
-    :mod:`mocodec.codecs.kinwave.treepass`, from :func:`tree_arrays`.)"""
-    tree, frames = tree_arrays(skeleton), start.shape[0]
-    glob = np.empty((len(skeleton), frames, 4))
-    start = np.ascontiguousarray(start, dtype=np.float64)
-    goal = np.ascontiguousarray(goal, dtype=np.float64)
-    active = np.ascontiguousarray(active, dtype=np.bool_)
-    skip = np.zeros(len(skeleton), dtype=np.bool_) if closed_loop else np.ones(len(skeleton), dtype=np.bool_)
-    placed = closed_loop and goal_positions is not None
-    placing, targeted = placing_joints(skeleton, active if placed else np.zeros_like(active))
-    where = np.zeros((len(skeleton) if placing.any() else 0, frames, 3))
-    positions = np.ascontiguousarray(goal_positions if placed else np.zeros((frames, 0, 3)), dtype=np.float64)
+    decoder will make of them ``(T, k)``. (kinwave's encoder and kinwave-live run the same loop
+    compiled, from :func:`tree_arrays` and :func:`tree_loop`: :mod:`mocodec.codecs.kinwave.treepass`,
+    :func:`mocodec.codecs.kinwave.live.predict.predict_tree`.)"""
+    loop = tree_loop(skeleton, start, active, goal, closed_loop, goal_positions)
+    tree = loop.tree
     for d in range(tree.depth_ptr.size - 1):
-        targets = depth_start(tree, d, start, active, goal, glob, skip, where, positions, targeted)
+        targets = depth_start(tree, d, *loop[1:9])
         if not targets.shape[1]:
             continue
         coded = tree.coded[tree.coded_ptr[d] : tree.coded_ptr[d + 1]].copy()  # (the coder's own)
-        depth_end(tree, d, np.ascontiguousarray(code(coded, targets), dtype=np.float64), glob, where, placing)
+        decoded = np.ascontiguousarray(code(coded, targets), dtype=np.float64)
+        depth_end(tree, d, decoded, loop.glob, loop.where, loop.placing)

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from mocodec.codecs.base import Coded, StreamEncoder, continuous_frames
-from mocodec.codecs.kinwave.live.predict import Cells, Layer, advance, fill, predict_columns, stream_layers
+from mocodec.codecs.kinwave.live.predict import Cells, Layer, advance, fill, predict_tree, stream_layers
 from mocodec.codecs.kinwave.live.syntax import (
     DRIFT,
     MAX_OFFSET,
@@ -93,27 +93,11 @@ class LiveEncoder(StreamEncoder):
 
         history, trust = np.ascontiguousarray(layer.history), np.ascontiguousarray(layer.trust)
         lo, hi = np.ascontiguousarray(lo), np.ascontiguousarray(hi)
-
-        def code(channels: np.ndarray, targets: np.ndarray) -> np.ndarray:
-            return predict_columns(
-                channels,
-                np.ascontiguousarray(targets),
-                history,
-                layer.count_history,
-                layer.gap,
-                stride,
-                steps,
-                order,
-                trust,
-                lo,
-                hi,
-                ints,
-                decoded,
-                cell_lo,
-                cell_hi,
-            )
-
-        closedloop.code_down_tree(self.skeleton, coded, retarget, quats, code, True, pos)
+        loop = closedloop.tree_loop(self.skeleton, coded, retarget, quats, True, pos)
+        predict_tree(
+            loop, history, layer.count_history, layer.gap, stride, steps, order, trust, lo, hi, ints, decoded,
+            cell_lo, cell_hi,
+        )  # fmt: skip
         return ints, decoded, (cell_lo, cell_hi), fill(layer.history[1], decoded, stride)
 
     def _error(self, goal: tuple[np.ndarray, np.ndarray], decoded: np.ndarray) -> float:

@@ -12,6 +12,7 @@ import numpy as np
 
 from mocodec.codecs.kinwave.body import channel_steps
 from mocodec.codecs.kinwave.live.syntax import contexts
+from mocodec.codecs.shared.closedloop import depth_end, depth_start
 from mocodec.coding.entropy import binarycoder as bc
 from mocodec.kinematics import channel_plan
 from mocodec.skeleton import Skeleton
@@ -107,6 +108,27 @@ def predict_columns(
             ints[t, c], decoded[t, c] = sub[t, i], out[t, i]
             cell_lo[t, c], cell_hi[t, c] = c_lo[t, i], c_hi[t, i]
     return out
+
+
+@numba.njit(cache=True)
+def predict_tree(loop, history, count, gap, stride, steps, order, trust, lo, hi, ints, decoded, cell_lo, cell_hi):
+    """:func:`~mocodec.codecs.shared.closedloop.code_down_tree`'s loop over ``loop``
+    (:func:`~mocodec.codecs.shared.closedloop.tree_loop`) with :func:`predict_columns` coding
+    each depth, in one compiled call: a packet of a few frames spent most of its time in the
+    Python loop's calls per depth and layer. The same floats as that loop."""
+    tree = loop.tree
+    for d in range(tree.depth_ptr.size - 1):
+        targets = depth_start(
+            tree, d, loop.start, loop.active, loop.goal, loop.glob, loop.skip, loop.where, loop.goal_positions,
+            loop.targeted,
+        )  # fmt: skip
+        if targets.shape[1] == 0:
+            continue
+        coded = tree.coded[tree.coded_ptr[d] : tree.coded_ptr[d + 1]].copy()
+        out = predict_columns(
+            coded, targets, history, count, gap, stride, steps, order, trust, lo, hi, ints, decoded, cell_lo, cell_hi
+        )
+        depth_end(tree, d, out, loop.glob, loop.where, loop.placing)
 
 
 @numba.njit(cache=True)

@@ -383,3 +383,41 @@ def test_hostile_base_codes_are_refused(walk_bvh, codes):
     assert len(codec.layer_codes(walk_bvh.skeleton)[0]) == 44
     with pytest.raises(CorruptStreamError, match="base_codes"):
         codec.for_stream(walk_bvh.skeleton, {"base_codes": codes})
+
+
+def test_a_packet_layer_down_the_tree_in_one_call_is_the_python_loop(walk_bvh):
+    """predict_tree codes a packet layer's depths as closedloop.code_down_tree does with
+    predict_columns as its coder, to the same integers and floats (a dummy root's translated
+    child makes the loop restore positions too)."""
+    from mocodec import reexpress
+    from mocodec.codecs.kinwave.live.predict import predict_columns, predict_tree
+    from mocodec.codecs.shared import closedloop
+
+    clip = reexpress.with_dummy_root(walk_bvh[:7], (0.0, -90.0, 0.0), position_channels=True)
+    frames, channels = clip.channels.shape
+    positions, quats = forward_kinematics(clip.skeleton, clip.channels)
+    rng = np.random.default_rng(7)
+    history, steps = rng.normal(size=(2, channels)), rng.uniform(0.05, 0.5, channels)
+    order, trust = rng.integers(1, 3, channels), rng.random(channels) < 0.5
+    lo, hi = np.full((frames, channels), -1e9), np.full((frames, channels), 1e9)
+    active = np.ones(channels, dtype=bool)
+    runs = []
+    for compiled in (True, False):
+        out = [np.zeros((frames, channels), dtype=np.int64)] + [np.zeros((frames, channels)) for _ in range(3)]
+        coding = (history, 2, 1, 1, steps, order, trust, lo, hi, *out)
+        if compiled:
+            predict_tree(closedloop.tree_loop(clip.skeleton, clip.channels, active, quats, True, positions), *coding)
+        else:
+            closedloop.code_down_tree(
+                clip.skeleton,
+                clip.channels,
+                active,
+                quats,
+                lambda coded, targets: predict_columns(coded, np.ascontiguousarray(targets), *coding),
+                True,
+                positions,
+            )
+        runs.append(out)
+    for compiled, looped in zip(*runs):
+        assert np.array_equal(compiled, looped)
+    assert runs[0][0].any()

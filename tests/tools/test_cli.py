@@ -273,3 +273,16 @@ def test_codecs_lists_each_id_in_a_column_of_its_own(capsys):
     assert [line[:width].rstrip() for line in heads] == codec_ids()
     assert all(line[width] != " " for line in heads)  # the description starts in one column
     assert len(lines) == 2 * len(heads)
+
+
+def test_publishing_with_a_codec_that_holds_frames_back_says_how_late():
+    """kinwave sends a packet per segment (1024 frames by default): publishing with it names
+    the delay viewers will see; a short window or kinwave-live says nothing."""
+    pytest.importorskip("aiohttp")
+    from mocodec.cli.stream import late_notice
+    from mocodec.codecs import get_codec
+
+    assert "1024 frames" in late_notice(get_codec("kinwave"), 120.0)
+    assert "8.5 s late" in late_notice(get_codec("kinwave"), 120.0)
+    assert late_notice(get_codec("kinwave", window=64), 120.0) is None
+    assert late_notice(get_codec("kinwave-live"), 120.0) is None

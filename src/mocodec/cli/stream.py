@@ -22,6 +22,7 @@ from mocodec.stream.relay import TICK_HZ, Limits  # noqa: E402
 from mocodec.stream.relay.server import run  # noqa: E402
 
 PUBLISH_CODEC = "kinwave-live"  # guaranteed error, 50 ms of coding delay, decodes in the browser
+LATE_S = 1.0  # a codec that holds frames back longer than this is named when it publishes
 
 
 SECRET_ENV = "MOCODEC_RELAY_SECRET"
@@ -100,9 +101,26 @@ def cmd_token(args) -> int:
     return 0
 
 
+def late_notice(codec, fps: float) -> str | None:
+    """A line for a publisher whose codec holds each frame back more than LATE_S (a codec
+    that sends a packet per segment, such as kinwave's 1024 frames): what viewers will see."""
+    if codec.variable_delay or fps <= 0:
+        return None
+    frames = codec.delay_frames()
+    if frames / fps <= LATE_S:
+        return None
+    return (
+        f"note: {codec.id} sends a packet every {frames} frames, so viewers see each frame up to "
+        f"{frames / fps:.1f} s late ({PUBLISH_CODEC} codes with 50 ms)"
+    )
+
+
 def cmd_publish(args) -> int:
     motion = load_input(args.file, args)
     codec, _ = configured(args, motion)
+    notice = late_notice(codec, motion.fps)
+    if notice:
+        print(notice, file=sys.stderr)
     stats = asyncio.run(
         client.publish_clip(
             args.url,

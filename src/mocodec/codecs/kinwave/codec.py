@@ -124,7 +124,8 @@ class KinwaveCodec(Codec):
             bool,
             False,
             "under a max-error bound, give each segment its own step offset (time-"
-            "adaptive steps, from 4 segments on): quiet stretches get coarser steps "
+            "adaptive steps, from 4 segments on: pair it with a window of 256 or less): quiet "
+            "stretches get coarser steps "
             "(off: since coefficients round plainly where a frame is far off, one scale is smaller)",
         ),
         Knob(

@@ -21,7 +21,7 @@ import numpy as np
 from mocodec.codecs.kinwave.body import MEAN_QUANTUM, three_angle_groups, turn_setup
 from mocodec.codecs.kinwave.channelcode import coder_arguments, depth_kernel
 from mocodec.codecs.shared import rotvec
-from mocodec.codecs.shared.closedloop import depth_end, depth_start, exact_rotation, placing_joints, tree_arrays
+from mocodec.codecs.shared.closedloop import depth_end, depth_start, exact_rotation, tree_arrays, tree_loop
 from mocodec.codecs.shared.rotvec import quat_product, quats_of_euler
 from mocodec.coding.transforms import trendwave
 from mocodec.kinematics import channel_plan, frame_orientations
@@ -114,22 +114,13 @@ class TreePass:
 
     def __init__(self, enc: Encoder):
         sk = enc.skeleton
-        self.tree = tree = tree_arrays(sk)
         self.coding = depth_coding(enc)
-        active = np.ascontiguousarray(~enc.const)
-        flagged = np.zeros(len(sk), dtype=np.bool_)  # the joints in a coding form: no target angles
-        flagged[tree.joints[self.coding.form_entry]] = True
         closed = bool(enc.cfg["closed_loop"])
-        placing, targeted = placing_joints(sk, active if closed else np.zeros_like(active))  # (open: none)
-        self.loop = (
-            enc.by_frame,
-            active,
-            np.ascontiguousarray(enc.quats, dtype=np.float64),
-            np.ascontiguousarray(enc.goal_positions, dtype=np.float64),
-            flagged if closed else np.ones(len(sk), dtype=np.bool_),
-            placing,
-            targeted,
-        )
+        self.loop = tree_loop(sk, enc.by_frame, ~enc.const, enc.quats, closed, enc.goal_positions)
+        if closed:  # the joints in a coding form: no target angles (their rotations instead)
+            flagged = np.zeros(len(sk), dtype=np.bool_)
+            flagged[self.loop.tree.joints[self.coding.form_entry]] = True
+            self.loop = self.loop._replace(skip=flagged)
         self.kinematics = channel_plan(sk).arrays()
         group_joints, group_axis, c = turn_setup(sk)
         turns = np.tile([1.0, 0.0, 0.0, 0.0], (group_joints.size, 1))
@@ -150,7 +141,6 @@ class TreePass:
         """One pass at channel ``steps (C,)``: knots, coefficients, decoded channels ``(C, T)``
         and the isolated frames' patches (:func:`channelcode.code_depth`'s arguments)."""
         return _tree_pass(
-            self.tree,
             self.loop,
             self.coding,
             self.kinematics,
@@ -224,19 +214,18 @@ def _world_turns(coding, d, fa, fb, above, turns):
 
 
 @numba.njit(cache=True)
-def _tree_pass(tree, loop, coding, kinematics, turns, steps, factors, isolated, coder, sizes):
-    """:meth:`TreePass.run` (``coder``: :func:`channelcode.coder_arguments`, ``sizes``: the
-    layout's knots and coefficients)."""
-    start, active, goal, goal_positions, skip, placing, targeted = loop
+def _tree_pass(loop, coding, kinematics, turns, steps, factors, isolated, coder, sizes):
+    """:meth:`TreePass.run` (``loop``: :func:`closedloop.tree_loop`'s arrays, whose decoded
+    orientations and positions each pass writes before it reads them; ``coder``:
+    :func:`channelcode.coder_arguments`, ``sizes``: the layout's knots and coefficients)."""
+    tree, start, active, goal, glob, skip, where, goal_positions, targeted, placing = loop
     num_knots, num_coeffs = sizes
     frames, channels = start.shape
     count = tree.offsets.shape[0]
-    glob = np.empty((count, frames, 4))
     knots = np.zeros((channels, num_knots), dtype=np.int64)
     coeffs = np.zeros((channels, num_coeffs), dtype=np.int64)
     decoded = np.zeros((channels, frames))  # zeros: a WORLD form's turn reads the rows above it
     patches = np.zeros((channels, isolated.size), dtype=np.int64)
-    where = np.zeros((count if placing.any() else 0, frames, 3))  # (kept only where translations need it)
     for d in range(tree.depth_ptr.size - 1):
         ca, cb = tree.coded_ptr[d], tree.coded_ptr[d + 1]
         rows = cb - ca

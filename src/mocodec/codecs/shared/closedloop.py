@@ -508,7 +508,7 @@ def depth_end(tree, d, decoded, glob, where, placing):
 class TreeLoop(NamedTuple):
     """What a loop down the tree reads and keeps (:func:`tree_loop`), in the order
     :func:`depth_start` and :func:`depth_end` take them: for a compiled loop that codes the
-    depths itself (kinwave-live's packets)."""
+    depths itself (kinwave's passes, kinwave-live's packets)."""
 
     tree: TreeArrays
     start: np.ndarray  # (T, C) the values each channel is coded from

@@ -412,6 +412,7 @@ def test_the_commands_end_to_end(tmp_path):
     )
     try:
         assert "relay on" in server.stdout.readline()
+        socket.create_connection(("127.0.0.1", port), timeout=5).close()  # the line means "listening"
         tok = subprocess.run(
             mocodec + ["token", "--secret", SECRET, "--room", "r"], capture_output=True, text=True, check=True
         ).stdout.strip()

@@ -87,12 +87,11 @@ def cmd_serve(args) -> int:
         from mocodec.stream.bus import NatsBus
 
         bus = NatsBus(args.bus)
-    print(
-        f"mocodec relay on http://{args.host}:{args.port} (WebSocket /ws, status /status)"
-        + (f", bus {args.bus}" if bus else ""),
-        flush=True,
+    line = f"mocodec relay on http://{args.host}:{args.port} (WebSocket /ws, status /status)" + (
+        f", bus {args.bus}" if bus else ""
     )
-    run(args.host, args.port, secret, limits, bus, args.tick_hz)
+    # Printed once the port takes connections: scripts and tests read this line as "ready".
+    run(args.host, args.port, secret, limits, bus, args.tick_hz, listening=lambda: print(line, flush=True))
     return 0
 
 

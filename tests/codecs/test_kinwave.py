@@ -187,13 +187,49 @@ def test_the_default_sets_leading_jumps_as_keyframes_without_a_trial(walk_amc, j
 def test_a_mean_bound_searches_as_closely_at_the_default_as_at_the_highest_effort(walk_amc, monkeypatch):
     """The default's wider acceptance (90-100%) is for max bounds, whose slack rounds take the
     rest back; a mean bound has none, so the default lands where effort 3 does (this clip has no
-    leading jump, and with no joint counted quiet and every frame in the trial the forms' trials
-    are the same): the same bytes."""
+    leading jump, and with no joint counted quiet, every frame in the trial and every Euler
+    order coded the forms' trials are the same): the same bytes."""
     monkeypatch.setattr(kinwave_encoder, "QUIET_TURN", 0.0)
     monkeypatch.setattr(kinwave_encoder, "TRIAL_RATE", 1e9)
+    monkeypatch.setattr(kinwave_encoder, "smoothest_orders", lambda values, forms, joints, usable: usable)
     clip = walk_amc[:300]
     default, highest = (get_codec("kinwave", max_error_cm=0.5, error_measure="mean", effort=e) for e in (2, 3))
     assert default.encode(clip) == highest.encode(clip)
+
+
+def test_below_the_highest_effort_the_trial_codes_one_euler_order_per_joint_and_frame_of_reference():
+    """Of each joint's usable Tait-Bryan orders, per frame of reference (its own, WORLD), only the
+    one whose angles bend least (sum of absolute second differences) is coded; the file's
+    angles and the vector always are, an unusable order (near its lock) never."""
+    t = np.arange(40.0)
+    line, bend = np.tile(t, (3, 1)), np.tile(np.sin(t), (3, 1))  # no bend / some bend
+    entries = [  # (form, joint, rows, usable)
+        (0, 0, bend, True),
+        (rotvec.VECTOR, 0, bend, True),
+        (2, 0, 2 * bend, True),
+        (3, 0, bend, True),  # joint 0's smoothest local order
+        (4, 0, line, False),  # smoother, but near its lock
+        (rotvec.WORLD + 2, 0, line, True),  # joint 0's only WORLD order
+        (5, 1, line, True),  # joint 1's smoothest
+        (6, 1, bend, True),
+    ]
+    forms = np.array([e[0] for e in entries])
+    joints = np.array([e[1] for e in entries])
+    values = np.concatenate([e[2] for e in entries])
+    usable = np.array([e[3] for e in entries])
+    kept = kinwave_encoder.smoothest_orders(values, forms, joints, usable)
+    assert kept.tolist() == [True, True, False, True, False, True, True, False]
+
+
+def test_the_default_search_stops_at_its_first_pass_within_80_to_100_percent_of_the_bound(walk_amc, monkeypatch):
+    """At effort 2 (max bounds) a pass at 85% of the bound ends the scale search, which aims at
+    95%: the slack rounds take the rest back. A stop of 1 (effort 3) goes on."""
+    search = BoundSearch(get_codec("kinwave", max_error_cm=0.5), walk_amc[:60])
+    for stop, landing in ((0.8, 0.85), (1.0, 0.97)):
+        errors = iter([0.85, 0.97, 0.93])
+        monkeypatch.setattr(search, "run_pass", lambda codes, offsets=None: next(errors))
+        best, _ = search._search(lambda value: value, 1.0, 0.9, 1.0, 1.0, stop=stop)
+        assert best == landing
 
 
 def test_quiet_joints_try_no_other_euler_order_below_the_highest_effort(walk_bvh):

@@ -109,6 +109,23 @@ def leading_jumps(moves: np.ndarray) -> np.ndarray:
     return moves[:2] > max(2.0 * np.percentile(moves[2:], 99) + 1.0, JUMP_CM)
 
 
+def smoothest_orders(values: np.ndarray, forms: np.ndarray, joints: np.ndarray, usable: np.ndarray) -> np.ndarray:
+    """Per trial entry (a joint ``joints[e]`` in ``forms[e]``, its angles rows ``3e..3e+2`` of
+    ``values (3n, T)``): whether it is to be coded. Of a joint's ``usable`` Tait-Bryan orders,
+    per frame of reference (the joint's or its parent's), only the one whose angles change
+    least in slope (the sum of their absolute second differences); every other form. Coding
+    only that order costs about 0.1% of the trial's bytes, for under half of its work
+    (docs/kinwave.md)."""
+    euler = (forms % rotvec.WORLD >= 2) & usable
+    bend = np.abs(np.diff(values, 2, axis=1)).sum(axis=1).reshape(-1, 3).sum(axis=1)
+    key = np.where(euler, 2 * joints + (forms >= rotvec.WORLD), -1)
+    least = np.full(2 * (int(joints.max(initial=0)) + 1), np.inf)
+    np.minimum.at(least, key[euler], bend[euler])
+    keep = ~euler & usable
+    keep[euler] = bend[euler] == least[key[euler]]
+    return keep
+
+
 def _angle_rows(joints: np.ndarray) -> np.ndarray:
     """The rows of three-angle joints ``joints`` in an array of their angles, three a joint."""
     return (3 * joints[:, None] + np.arange(3)).ravel()
@@ -416,10 +433,11 @@ class Encoder:
             lock_orders = tuple(o if f == 0 else rotvec.CODING_ORDERS[max(f - 2, 0)] for o, f in zip(kept, base))
             locked = rotvec.near_lock(values, lock_orders, GIMBAL_MARGIN) & (base != rotvec.VECTOR)
             sizes, nonzero, err = np.full(idx.size, np.inf), np.zeros(idx.size, dtype=np.int64), np.ones(idx.size)
-            coded = np.flatnonzero(~locked | (base == 0))  # (the file's angles give the reference error)
+            tried = ~locked if self.cfg["effort"] >= 3 else smoothest_orders(values, forms, idx, ~locked)
+            coded = np.flatnonzero(tried | (base == 0))  # (the file's angles give the reference error)
             if coded.size:
                 sizes[coded], nonzero[coded], err[coded] = code(forms[coded], idx[coded], values[_angle_rows(coded)])
-            return np.where(locked, np.inf, sizes), nonzero, err
+            return np.where(tried, sizes, np.inf), nonzero, err
 
         def code(forms: np.ndarray, idx: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             """The trial's entries ``idx`` in ``forms``, their rows ``values`` in those forms,

@@ -30,6 +30,7 @@ SLACK_TRIES = 3  # passes a round tries, halving the codes that move the points 
 SEGMENT_SLACK_BELOW = 0.9  # ... with time-adaptive steps only when its worst error is under this share
 ACCEPT = 0.95  # a max-error bound is met well enough at 95-100% of it
 DEFAULT_ACCEPT = 0.9  # ... at effort 2, whose slack rounds take most of the rest back
+DEFAULT_STOP = 0.8  # ... where its scale search stops (it aims at the middle of the accepted range)
 LOW_EFFORT_ACCEPT = 0.85  # ... at effort 1 (any bound), which stops its search sooner and skips the slack rounds
 MEAN_ACCEPT = 0.97  # a mean-error bound (smooth in the scale, so the search can aim closer)
 SEGMENT_PASSES = 2  # passes of the per-segment search before the combination is fixed
@@ -100,11 +101,14 @@ class BoundSearch(Encoder):
         self.feedback_share, self.joint_offsets = share, np.zeros_like(self.joint_offsets)
         return self._to_bound(self.cfg["max_error_cm"])
 
-    def _search(self, measure, goal: float, accept: float, scale: float, exponent: float, sign: float = 1.0):
+    def _search(
+        self, measure, goal: float, accept: float, scale: float, exponent: float, sign: float = 1.0, stop: float = 1.0
+    ):
         """Find x = log(scale) / sign with ``measure`` (rising with x) in [accept * goal, goal]:
         extrapolate until the target is bracketed (first with ``exponent``, the model's
         d log measure / dx, then with the slope the last two passes measured), then secant steps
-        inside the bracket. Returns (best pass meeting the goal or None, last x)."""
+        inside the bracket, aiming at the range's middle; a pass in [min(stop, accept) * goal,
+        goal] ends the search too. Returns (best pass meeting the goal or None, last x)."""
         lo = hi = None  # (x, log value, pass)
         previous = None  # the last (x, log value) before bracketing
         seen: dict[bytes, tuple[float, Pass]] = {}
@@ -120,7 +124,7 @@ class BoundSearch(Encoder):
             if value <= goal:
                 if lo is None or x > lo[0]:
                     lo = (x, y, ps)
-                if value >= accept * goal:
+                if value >= min(stop, accept) * goal:
                     break
             elif hi is None or x < hi[0]:
                 hi = (x, y, ps)
@@ -233,7 +237,10 @@ class BoundSearch(Encoder):
             accept = ACCEPT if self.cfg["effort"] >= 3 else DEFAULT_ACCEPT
         if self.cfg["effort"] <= 1:
             accept = min(accept, LOW_EFFORT_ACCEPT)
-        best, x = self._search(self.pass_error, bound, accept, guess, 1.0)
+        # at effort 2 the slack rounds take the rest back: the secant steps that come closer
+        # cost a pass each and bought 0.1-0.8% of the bytes (docs/kinwave.md)
+        stop = DEFAULT_STOP if self.cfg["effort"] == 2 and self.cfg["error_measure"] != "mean" else 1.0
+        best, x = self._search(self.pass_error, bound, accept, guess, 1.0, stop=stop)
         for _ in range(60):
             if best is not None:
                 body = self.body(self.use_slack(best, bound) if self.cfg["effort"] >= 2 else best)

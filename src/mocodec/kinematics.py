@@ -209,6 +209,52 @@ def frame_orientations(frame, rot_index, rot_axis, pos_index, axis_quat, has_axi
     return quat[0]
 
 
+@numba.njit(cache=True)
+def _place_kernel(channels, orientations, pos_index, offsets, parents, pos, quat):
+    for f in range(channels.shape[1]):
+        for j in range(parents.shape[0]):
+            quat[f, j, 0], quat[f, j, 1] = orientations[j, f, 0], orientations[j, f, 1]
+            quat[f, j, 2], quat[f, j, 3] = orientations[j, f, 2], orientations[j, f, 3]
+            tx, ty, tz = offsets[j, 0], offsets[j, 1], offsets[j, 2]
+            if pos_index[j, 0] >= 0:
+                tx += channels[pos_index[j, 0], f]
+            if pos_index[j, 1] >= 0:
+                ty += channels[pos_index[j, 1], f]
+            if pos_index[j, 2] >= 0:
+                tz += channels[pos_index[j, 2], f]
+            p = parents[j]
+            if p < 0:
+                pos[f, j, 0], pos[f, j, 1], pos[f, j, 2] = tx, ty, tz
+                continue
+            pw, px, py, pz = orientations[p, f, 0], orientations[p, f, 1], orientations[p, f, 2], orientations[p, f, 3]
+            ux, uy, uz = 2.0 * (py * tz - pz * ty), 2.0 * (pz * tx - px * tz), 2.0 * (px * ty - py * tx)
+            pos[f, j, 0] = pos[f, p, 0] + tx + pw * ux + py * uz - pz * uy
+            pos[f, j, 1] = pos[f, p, 1] + ty + pw * uy + pz * ux - px * uz
+            pos[f, j, 2] = pos[f, p, 2] + tz + pw * uz + px * uy - py * ux
+
+
+def positions_from_orientations(
+    skeleton: Skeleton, rows: np.ndarray, orientations: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`forward_kinematics` of channel rows ``(channels, frames)`` whose joints' global
+    orientations ``(joints, frames, 4)`` are known already (kinwave's passes compose them for
+    the closed loop): the positions from the parents' orientations and the translations, as
+    the kernel places them, without the rotations' trigonometry. An orientation only a leaf's
+    own rotation changes places no joint, so may be left as its parent's."""
+    pos, quat = np.empty((rows.shape[1], len(skeleton), 3)), np.empty((rows.shape[1], len(skeleton), 4))
+    plan = channel_plan(skeleton)
+    _place_kernel(
+        np.ascontiguousarray(rows, dtype=np.float64),
+        orientations,
+        plan.pos_index,
+        plan.offsets,
+        plan.parents,
+        pos,
+        quat,
+    )
+    return pos, quat
+
+
 def _run(skeleton: Skeleton, channels: np.ndarray, want_local: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     channels = _checked(skeleton, channels)
     plan = channel_plan(skeleton)

@@ -904,3 +904,17 @@ def test_every_effort_level_is_pinned_and_keeps_the_bound():
         assert shell_errors(sk, p0 * cm, q0, p1 * cm, q1).max <= golden.CONFIGS["kinwave"]["max_error_cm"]
         sizes[knobs["effort"]] = len(stored)
     assert sizes[1] >= max(sizes[2], sizes[3]) and sizes[2] <= 1.03 * sizes[3]
+
+
+@pytest.mark.parametrize("measure", ["joint", "shell"])
+def test_a_pass_is_measured_from_the_closed_loop_as_forward_kinematics_measures_it(walk_bvh, walk_amc, measure):
+    """A bound's pass is measured as it runs, from the closed loop's decoded orientations and
+    the decoded translations: the errors forward kinematics gives of its decoded channels, on
+    BVH, ASF (axes, coding forms) and a turned dummy root with translations on every joint."""
+    turned = reexpress.with_dummy_root(walk_bvh[:90], (0.0, -90.0, 0.0), position_channels=True)
+    for clip in (walk_bvh[:90], walk_amc[:90], turned):
+        search = BoundSearch(get_codec("kinwave", max_error_cm=0.5, error_measure=measure), clip)
+        for scale in (0.5, 4.0):
+            ps = search.run_pass(search.codes(scale))
+            np.testing.assert_allclose(ps.errors, search.joint_errors(ps.decoded), rtol=0, atol=1e-9)
+            assert ps.errors.max() > 0.01

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from mocodec import Joint, Motion, Skeleton
-from mocodec.kinematics import forward_kinematics, global_matrices
+from mocodec.kinematics import forward_kinematics, global_matrices, positions_from_orientations
 
 
 def two_joint_arm():
@@ -65,3 +65,19 @@ def test_wrong_width_is_rejected():
         forward_kinematics(two_joint_arm(), np.zeros((3, 4)))
     with pytest.raises(ValueError):
         Motion(two_joint_arm(), 30, np.zeros((3, 4)))
+
+
+def test_positions_from_known_orientations_are_forward_kinematics_own(walk_bvh, walk_amc):
+    """Given forward kinematics' own orientations, the positions are its positions to the bit
+    (the same translations and formula), on a BVH and an ASF skeleton; and the planar arm's
+    known answer."""
+    for motion in (
+        walk_bvh[:50],
+        walk_amc[:50],
+        Motion(two_joint_arm(), 30.0, np.array([[1.0, 2.0, 3.0, 30.0, 45.0]])),
+    ):
+        pos, quat = forward_kinematics(motion.skeleton, motion.channels)
+        placed, same = positions_from_orientations(
+            motion.skeleton, motion.channels.T, np.ascontiguousarray(quat.transpose(1, 0, 2))
+        )
+        assert np.array_equal(placed, pos) and np.array_equal(same, quat)

@@ -53,7 +53,7 @@ from mocodec.codecs.kinwave.body import (
 from mocodec.codecs.shared import rotvec
 from mocodec.coding.entropy import coefcoder
 from mocodec.coding.transforms import trendwave
-from mocodec.kinematics import channel_plan, forward_kinematics
+from mocodec.kinematics import channel_plan, forward_kinematics, positions_from_orientations
 from mocodec.metrics.pose import bone_joints, joint_errors as distances, shell_errors
 from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
@@ -565,7 +565,13 @@ class Encoder:
             channel_steps(self.skeleton, codes)[:, 0], segment_factors(offsets, lay), lay, self.cfg["deadzone"],
             SEAM_LIMIT, SEAM_HALF_WIDTH, self.far_steps,
         )  # fmt: skip
-        return Pass(codes, self.const.astype(np.int64), knots, coeffs, decoded, offsets, patches)
+        ps = Pass(codes, self.const.astype(np.int64), knots, coeffs, decoded, offsets, patches)
+        if self.cfg["bits_per_second"] <= 0:  # a bound's search measures every pass, here while
+            # the loop's decoded orientations are this pass's (the next pass writes over them)
+            ps.errors = self._errors_at(
+                *positions_from_orientations(self.output_skeleton, decoded, self._tree_pass.loop.glob)
+            )
+        return ps
 
     @property
     def far_steps(self) -> float:
@@ -607,7 +613,10 @@ class Encoder:
     def joint_errors(self, decoded: np.ndarray) -> np.ndarray:
         """``(frames, points)`` cm: the decoded output's error at every joint, or at the worst
         shell point of every bone."""
-        pos, quat = forward_kinematics(self.output_skeleton, decoded.T)
+        return self._errors_at(*forward_kinematics(self.output_skeleton, decoded.T))
+
+    def _errors_at(self, pos: np.ndarray, quat: np.ndarray) -> np.ndarray:
+        """:meth:`joint_errors` of decoded positions and orientations (skeleton units)."""
         if self.cfg["error_measure"] == "shell":
             return shell_errors(self.skeleton, self.positions, self.quats, pos * self.cm, quat).per_frame
         return distances(self.positions, pos, self.cm).per_frame
@@ -619,7 +628,8 @@ class Encoder:
         return float(err.mean() if self.cfg["error_measure"] == "mean" else err.max())
 
     def pass_errors(self, ps: Pass) -> np.ndarray:
-        """:meth:`joint_errors` of a pass's output, measured once (the search reads them again)."""
+        """:meth:`joint_errors` of a pass's output, measured once (the search reads them again;
+        a bound's pass is measured as it is run, from the closed loop's decoded orientations)."""
         if ps.errors is None:
             ps.errors = self.joint_errors(ps.decoded)
         return ps.errors

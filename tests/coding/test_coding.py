@@ -159,3 +159,15 @@ def test_zero_runs_round_trip(x):
     runs = rle.encode_zero_runs(x)
     assert runs.length == x.size and np.all(runs.values != 0)
     assert np.array_equal(rle.decode_zero_runs(runs), x)
+
+
+@pytest.mark.parametrize("wavelet", ["cdf97", "haar", "db4"])
+def test_a_blocks_reach_is_its_synthesis_matrix_thresholded(wavelet):
+    """Which coefficients reach each frame (at least 5% of their synthesis function's peak):
+    the rolled first function of every band gives what the whole synthesis matrix gives."""
+    from mocodec.coding.transforms import trendwave, wavelets
+
+    for n, levels in ((16, 1), (96, 3), (192, 3), (256, 4)):
+        synthesis = np.abs(wavelets.matrices(n, wavelet, levels)[1])
+        expected = (synthesis > 0.05 * synthesis.max(axis=0)).astype(np.float64)
+        assert np.array_equal(trendwave._reach(n, levels, wavelet), expected)

@@ -133,9 +133,19 @@ def grid_phase(scaled: np.ndarray, wavelet: str, skip: int = 0) -> int | None:
 @lru_cache(maxsize=64)
 def _reach(n: int, levels: int, wavelet: str) -> np.ndarray:
     """``(frames, coefficients)`` 0/1 of a block: which coefficients' synthesis functions
-    carry at least 5% of their peak at each frame."""
-    synthesis = np.abs(wavelets.matrices(n, wavelet, levels)[1])
-    reach = (synthesis > 0.05 * synthesis.max(axis=0)).astype(np.float64)
+    carry at least 5% of their peak at each frame. A periodized band's functions are one
+    function shifted round the block by the band's stride, so each band's first one is
+    synthesised and the others are its rolls (the same floats: the other samples are zeros)."""
+    bands = wavelets.band_lengths(n, wavelet, levels)
+    firsts = np.concatenate([[0], np.cumsum(bands)[:-1]])
+    impulses = np.zeros((len(bands), int(sum(bands))))
+    impulses[np.arange(len(bands)), firsts] = 1.0
+    first = np.abs(wavelets.inverse(impulses, n, wavelet, levels))
+    first = first > 0.05 * first.max(axis=1, keepdims=True)
+    reach = np.empty((n, impulses.shape[1]))
+    frames = np.arange(n)[:, None]
+    for band, (at, length) in enumerate(zip(firsts, bands)):
+        reach[:, at : at + length] = first[band][(frames - np.arange(length) * (n // length)) % n]
     reach.setflags(write=False)
     return reach
 

@@ -172,12 +172,13 @@ def bone_skeleton(skeleton: Skeleton, values: np.ndarray, const: np.ndarray) -> 
     share one such skeleton (made once)."""
     if not values.shape[1]:
         return skeleton
-    plan = channel_plan(skeleton)
+    index = channel_plan(skeleton).pos_index
+    channel = np.where(index >= 0, index, 0)
+    joints, axes = np.nonzero((index >= 0) & const[channel])
+    kept = joints > 0
+    joints, axes, channels = joints[kept], axes[kept], channel[joints[kept], axes[kept]]
     held = tuple(
-        (j, k, round(float(values[c, 0]), BONE_PLACES))
-        for j in range(1, len(skeleton))
-        for k, c in enumerate(plan.pos_index[j].tolist())
-        if c >= 0 and const[c]
+        (j, k, round(v, BONE_PLACES)) for j, k, v in zip(joints.tolist(), axes.tolist(), values[channels, 0].tolist())
     )
     return _with_bones(skeleton, held)
 

@@ -187,11 +187,13 @@ def bone_skeleton(skeleton: Skeleton, values: np.ndarray, const: np.ndarray) -> 
 def _with_bones(skeleton: Skeleton, held: tuple[tuple[int, int, float], ...]) -> Skeleton:
     """:func:`bone_skeleton`'s skeleton: each ``(joint, axis, value)`` of ``held`` added to
     that joint's offset."""
-    joints = list(skeleton.joints)
+    offsets: dict[int, list[float]] = {}
     for j, k, value in held:
-        offset = list(joints[j].offset)
-        offset[k] += value
-        joints[j] = replace(joints[j], offset=tuple(offset))
+        offsets.setdefault(j, list(skeleton.joints[j].offset))[k] += value
+    joints = list(skeleton.joints)
+    for j, offset in offsets.items():  # (one replace a joint: each checks the joint again)
+        if tuple(offset) != joints[j].offset:
+            joints[j] = replace(joints[j], offset=tuple(offset))
     if joints == list(skeleton.joints):
         return skeleton
     return Skeleton(tuple(joints), skeleton.units_per_metre, skeleton.name)

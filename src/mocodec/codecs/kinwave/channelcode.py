@@ -260,9 +260,14 @@ def _turn_rows(values, rows, turn, sign):
 
 
 @numba.njit(cache=True)
-def depth_kernel(values, cols, quats, forms, moved_rows, moved_turns, iso, const, step, fraction, base, factors, coder):
+def depth_kernel(
+    values, cols, quats, forms, moved_rows, moved_turns, iso, const, step, fraction, base, factors, coder, every_frame
+):
     """:func:`code_depth` (``forms``: :meth:`rotvec.FormSet.kernel_arguments`), for compiled
-    callers."""
+    callers; also returns the decoded rotations ``(T, n, 4)`` of the joints in coding forms
+    (:func:`rotvec.quats_of_forms`). Without ``every_frame`` their rows go back to the file's
+    Euler angles at frame 0 only (what the rows' orientations above are taken from; a caller
+    that composes the joints' orientations from their rotations needs no more)."""
     vector, means, form_axes, world, turns, file_axes = forms
     seam_limit, lay, dec, rec, weight, deadzone, far, reach = coder
     n, rows, frames = cols.size // 3, values.shape[0], values.shape[1]
@@ -295,18 +300,21 @@ def depth_kernel(values, cols, quats, forms, moved_rows, moved_turns, iso, const
             out[r, iso[i]] += patch[r, i] * quantum
     for i in range(moved_rows.shape[0]):
         _turn_rows(out, moved_rows[i], moved_turns[i], -1.0)
+    decoded = np.empty((frames, n, 4))
     if n:
         back = np.empty((frames, n, 3))
         for e in range(n):
             for m in range(3):
                 for t in range(frames):
                     back[t, e, m] = out[cols[3 * e + m], t]
-        euler = rotvec.euler_of_quats(rotvec.quats_of_forms(back, form_axes, vector, means, world, turns), file_axes)
+        decoded = rotvec.quats_of_forms(back, form_axes, vector, means, world, turns)
+        written = frames if every_frame else min(frames, 1)
+        euler = rotvec.euler_of_quats(decoded[:written], file_axes)
         for e in range(n):
             for m in range(3):
-                for t in range(frames):
+                for t in range(written):
                     out[cols[3 * e + m], t] = euler[t, e, m]
-    return k_int, c_int, out, patch
+    return k_int, c_int, out, patch, decoded
 
 
 NO_FORMS = rotvec.FormSet((), np.zeros(0, dtype=np.int64), np.zeros((0, 4)))  # a depth without coding forms
@@ -357,7 +365,8 @@ def code_depth(
         base,
         (factors[0], factors[1], np.asarray(factors[2], dtype=np.float64)),
         coder_arguments(lay, deadzone, seam_limit, half_width, far_steps),
-    )
+        True,
+    )[:4]
 
 
 def coder_arguments(lay: trendwave.Layout, deadzone: float, seam_limit: float, half_width: int, far_steps: float):

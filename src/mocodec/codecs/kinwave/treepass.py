@@ -21,7 +21,14 @@ import numpy as np
 from mocodec.codecs.kinwave.body import MEAN_QUANTUM, three_angle_groups, turn_setup
 from mocodec.codecs.kinwave.channelcode import coder_arguments, depth_kernel
 from mocodec.codecs.shared import rotvec
-from mocodec.codecs.shared.closedloop import depth_end, depth_start, exact_rotation, tree_arrays, tree_loop
+from mocodec.codecs.shared.closedloop import (
+    depth_compose,
+    depth_start,
+    exact_rotation,
+    place_joints,
+    tree_arrays,
+    tree_loop,
+)
 from mocodec.codecs.shared.rotvec import quat_product, quats_of_euler
 from mocodec.coding.transforms import trendwave
 from mocodec.kinematics import channel_plan, frame_orientations
@@ -127,6 +134,9 @@ class TreePass:
         turns[group_axis] = c
         self.turns = (group_joints, np.ascontiguousarray(group_axis), turns)
         self.isolated = np.ascontiguousarray(enc.isolated, dtype=np.int64)
+        steps = self.loop.tree.steps.copy()  # what depth_compose composes from decoded angles:
+        steps[self.coding.form_entry] = 0  # not the joints in a coding form (_compose_forms)
+        self.compose_steps = steps
 
     def run(
         self,
@@ -137,9 +147,12 @@ class TreePass:
         seam_limit: float,
         half_width: int,
         far_steps: float,
+        every_frame: bool,
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """One pass at channel ``steps (C,)``: knots, coefficients, decoded channels ``(C, T)``
-        and the isolated frames' patches (:func:`channelcode.code_depth`'s arguments)."""
+        and the isolated frames' patches (:func:`channelcode.code_depth`'s arguments). Without
+        ``every_frame`` the rows of the joints in a coding form are decoded at frame 0 only:
+        a pass measured from the loop's decoded orientations (``loop.glob``) needs no more."""
         return _tree_pass(
             self.loop,
             self.coding,
@@ -150,6 +163,8 @@ class TreePass:
             self.isolated,
             coder_arguments(lay, deadzone, seam_limit, half_width, far_steps),
             (int(lay.num_knots), int(lay.num_coeffs)),
+            self.compose_steps,
+            every_frame,
         )
 
 
@@ -214,10 +229,37 @@ def _world_turns(coding, d, fa, fb, above, turns):
 
 
 @numba.njit(cache=True)
-def _tree_pass(loop, coding, kinematics, turns, steps, factors, isolated, coder, sizes):
+def _compose_forms(glob, rotations, tree, coding, fa, fb):
+    """The decoded orientations of a depth's joints in coding forms ``fa:fb`` (with children)
+    from their decoded rotations ``(T, n, 4)`` (:func:`rotvec.quats_of_forms`, the rotation
+    their Euler angles make without the axis pre-rotation C): ``G_j = G_p C q C^-1``, what
+    :func:`closedloop.depth_compose` makes of the angles the decoder writes, up to rounding
+    (the pass's errors are checked against forward kinematics in the tests, the final bytes
+    on the real decoder), without going to the angles and back."""
+    for v in range(fb - fa):
+        e = coding.form_entry[fa + v]
+        if not tree.has_children[e]:
+            continue
+        j = tree.joints[e]
+        cw, cx, cy, cz = tree.axis_quats[e, 0], tree.axis_quats[e, 1], tree.axis_quats[e, 2], tree.axis_quats[e, 3]
+        for f in range(rotations.shape[0]):
+            w, x, y, z = rotations[f, v, 0], rotations[f, v, 1], rotations[f, v, 2], rotations[f, v, 3]
+            if tree.has_axis[e]:
+                w, x, y, z = quat_product(cw, cx, cy, cz, w, x, y, z)
+                w, x, y, z = quat_product(w, x, y, z, cw, -cx, -cy, -cz)
+            glob[j, f, 0], glob[j, f, 1], glob[j, f, 2], glob[j, f, 3] = quat_product(
+                glob[j, f, 0], glob[j, f, 1], glob[j, f, 2], glob[j, f, 3], w, x, y, z
+            )
+
+
+@numba.njit(cache=True)
+def _tree_pass(loop, coding, kinematics, turns, steps, factors, isolated, coder, sizes, compose_steps, every_frame):
     """:meth:`TreePass.run` (``loop``: :func:`closedloop.tree_loop`'s arrays, whose decoded
     orientations and positions each pass writes before it reads them; ``coder``:
-    :func:`channelcode.coder_arguments`, ``sizes``: the layout's knots and coefficients)."""
+    :func:`channelcode.coder_arguments`, ``sizes``: the layout's knots and coefficients;
+    ``compose_steps``: the tree's rotation steps, 0 for the joints in a coding form, whose
+    orientations come from their decoded rotations, :func:`_compose_forms`). Each depth's
+    end is :func:`closedloop.depth_end` with that split."""
     tree, start, active, goal, glob, skip, where, goal_positions, targeted, placing = loop
     num_knots, num_coeffs = sizes
     frames, channels = start.shape
@@ -243,11 +285,11 @@ def _tree_pass(loop, coding, kinematics, turns, steps, factors, isolated, coder,
         step = np.empty(rows)
         for i in range(rows):
             step[i] = steps[tree.coded[ca + i]]
-        k_int, c_int, out, patch = depth_kernel(
+        k_int, c_int, out, patch, rotations = depth_kernel(
             values, coding.form_rows[3 * fa : 3 * fb], quats,
             (coding.vector[fa:fb], coding.means[fa:fb], coding.form_axes[fa:fb], turned, pre, coding.file_axes[fa:fb]),
             coding.moved_rows[ma:mb], moved_turns, isolated, coding.const[ca:cb], step, coding.fraction[ca:cb],
-            coding.base[ca:cb], factors, coder,
+            coding.base[ca:cb], factors, coder, every_frame,
         )  # fmt: skip
         for i in range(rows):
             c = tree.coded[ca + i]
@@ -255,5 +297,12 @@ def _tree_pass(loop, coding, kinematics, turns, steps, factors, isolated, coder,
             coeffs[c, :] = c_int[i]
             patches[c, :] = patch[i]
             decoded[c, :] = out[i]
-        depth_end(tree, d, out.T.copy(), glob, where, placing)
+        a, b, by_frame = tree.depth_ptr[d], tree.depth_ptr[d + 1], out.T.copy()
+        depth_compose(
+            by_frame, glob, tree.joints[a:b], tree.columns[a:b], compose_steps[a:b], tree.axes[a:b],
+            tree.axis_quats[a:b], tree.has_axis[a:b], tree.has_children[a:b],
+        )  # fmt: skip
+        _compose_forms(glob, rotations, tree, coding, fa, fb)
+        if where.shape[0]:
+            place_joints(by_frame, tree, a, b, glob, where, placing)
     return knots, coeffs, decoded, patches

@@ -270,19 +270,25 @@ def test_the_form_trial_codes_the_clips_thirds_below_the_highest_effort(walk_bvh
     assert np.array_equal(short, np.arange(TRIAL_FRAMES))
 
 
-def test_a_trial_of_every_joint_codes_sixty_frames_a_second_below_the_highest_effort(walk_bvh, walk_amc, monkeypatch):
-    """Below the highest effort the form trial of every joint codes every other frame of a 120
-    fps body (every fourth at 240 fps, every frame at 30 fps); ASF skeletons' trial (the root
-    and joints near their lock) keeps every frame, and so does effort 3."""
+def test_a_trial_of_every_joint_codes_about_twenty_frames_a_second_below_the_highest_effort(
+    walk_bvh, walk_amc, monkeypatch
+):
+    """Below the highest effort the form trial of every joint codes every eighth frame of a 120
+    fps body (every 16th at 240 fps, every other at 30 fps, every frame at 24 fps); ASF
+    skeletons' trial (the root and joints near their lock) keeps every frame, and so does
+    effort 3."""
     from mocodec.coding.entropy import coefcoder
 
     clip = walk_bvh[:240]
     strides = {
         (fps, effort): BoundSearch(get_codec("kinwave", effort=effort), clip.resample(fps))._trial_stride()
-        for fps in (30.0, 120.0, 240.0)
+        for fps in (24.0, 30.0, 120.0, 240.0)
         for effort in (2, 3)
     }
-    assert strides == {(30.0, 2): 1, (30.0, 3): 1, (120.0, 2): 2, (120.0, 3): 1, (240.0, 2): 4, (240.0, 3): 1}
+    assert strides == {
+        **{(fps, 3): 1 for fps in (24.0, 30.0, 120.0, 240.0)},
+        **{(24.0, 2): 1, (30.0, 2): 2, (120.0, 2): 8, (240.0, 2): 16},
+    }
     trial_lengths, group_sizes = [], coefcoder.group_sizes
 
     def recording(knots, coeffs, *args, **kwargs):
@@ -293,7 +299,7 @@ def test_a_trial_of_every_joint_codes_sixty_frames_a_second_below_the_highest_ef
     for motion in (clip, walk_amc[:240]):
         for effort in (2, 3):
             BoundSearch(get_codec("kinwave", effort=effort), motion)
-    assert 120 <= trial_lengths[0] < 240 <= min(trial_lengths[1:])  # (padded to the wavelet's multiple)
+    assert 30 <= trial_lengths[0] < 240 <= min(trial_lengths[1:])  # (padded to the wavelet's multiple)
 
 
 def test_constant_channels_cost_almost_nothing(walk_amc):

@@ -64,7 +64,7 @@ FLOAT32_STEPS = 16  # ... and a translation whose range is this many float32 ste
 NOISE_SHARE = 1.0 / 64.0  # ... if that range is under this share of a max bound
 JUMP_CM = 10.0  # a leading frame jumping less than this is not tried as a keyframe
 TRIAL_FRAMES = 1024  # frames the choice of forms codes each form of every joint on (effort 3)
-TRIAL_RATE = 20.0  # frames/s the trial keeps of a faster body (effort < 3; Encoder._trial_stride)
+TRIAL_RATE = 15.0  # frames/s the trial keeps of a faster body (effort < 3; Encoder._trial_stride)
 TRIAL_SAMPLE = 512  # ... below it, of a longer body, this many (Encoder._trial_frames)
 FAR_STEPS = 0.7  # a frame missing its target by more than this many steps rounds its coefficients plainly
 CONST_AWAY_CM = 0.1  # a constant translation this far from its joint's offset takes fine constants
@@ -507,9 +507,9 @@ class Encoder:
     def _trial_stride(self) -> int:
         """Below the highest effort, a trial of every joint codes every n-th frame of a body
         faster than TRIAL_RATE (n a power of 2, the nearest in octaves; the trial's wavelet a
-        level shallower per halving): the forms' costs against each other show at 15-20
-        frames/s as well as at 120 (every eighth frame there, every other at 30 frames/s, every
-        frame at 24), for a fraction of the trial's work. A trial of the few ASF joints that
+        level shallower per halving): the forms' costs against each other show at 12-15
+        frames/s as well as at 120 (every eighth frame there, every other at 24 and 30
+        frames/s), for a fraction of the trial's work. A trial of the few ASF joints that
         may change form is cheap, and its choice is delicate there: it keeps every frame
         (docs/kinwave.md)."""
         if self.cfg["effort"] >= 3:

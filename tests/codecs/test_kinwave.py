@@ -64,7 +64,7 @@ def test_encoder_model_is_the_decoders_output_bit_for_bit(walk_bvh, layout):
         channels[:, :3] = (12.0, -3.0, 7.0)  # the dummy root stands away from the origin
         motion = motion.with_channels(channels)
     enc = BoundSearch(get_codec("kinwave", max_error_cm=0.3), motion)
-    ps = enc.run_pass(enc.codes(0.4), every_row=True)
+    ps = enc.run_pass(enc.codes(0.4), every_frame=True)
     assert np.array_equal(enc.decoded_body(enc.body(ps)), ps.decoded)
     assert enc.pass_error(ps) < 0.6  # and the closed loop aimed at the original (about 0.22 cm here)
     if layout != "bvh":  # the turned paths ran
@@ -519,7 +519,7 @@ def test_coding_forms_shrink_files_within_the_bound(walk_amc):
 def test_segment_offsets_keep_the_encoder_bit_exact(walk_bvh):
     enc = BoundSearch(get_codec("kinwave", max_error_cm=0.3), walk_bvh)
     offsets = np.arange(enc.lay.starts.size) * 3 - 4
-    ps = enc.run_pass(enc.codes(0.4), offsets, every_row=True)
+    ps = enc.run_pass(enc.codes(0.4), offsets, every_frame=True)
     body = enc.body(ps)
     assert body[1] & 8 and np.array_equal(enc.decoded_body(body), ps.decoded)
 

@@ -556,30 +556,31 @@ class Encoder:
         steps = np.append(self.shape_rot * scale, self.shape_trans * scale if self.trans else [])
         return np.clip(step_codes(steps) + self.joint_offsets, 0, 255).astype(np.uint8)
 
-    def run_pass(self, codes: np.ndarray, offsets: np.ndarray | None = None, every_row: bool = False) -> Pass:
+    def run_pass(self, codes: np.ndarray, offsets: np.ndarray | None = None, every_frame: bool = False) -> Pass:
         """Quantise and reconstruct every channel down the tree in one compiled call
         (:class:`treepass.TreePass`, the loop of :func:`closedloop.code_down_tree`): a joint's
         closed-loop target needs its parent's decoded orientation, and the joints of one depth
         go through the transforms together (rows are independent, so each row's floats are
         those of coding it alone). A bound's pass is measured here, from the loop's decoded
-        orientations (the next pass writes over them), and keeps no decoded rows unless
-        ``every_row`` (what the decoder will make of them, bit for bit): the rows of the joints
-        in a coding form go back to the file's angles only then (at frame 0 otherwise)."""
+        orientations (the next pass writes over them), and keeps its decoded rows (what the
+        decoder will make of them, bit for bit) only with ``every_frame``: the rows of the
+        joints in a coding form go back to the file's angles at every frame only then (at
+        frame 0 otherwise)."""
         lay = self.lay
         offsets = np.zeros(lay.starts.size, dtype=np.int8) if offsets is None else offsets.astype(np.int8)
         if self._tree_pass is None:  # (the forms, constants and isolated frames are set by now)
             self._tree_pass = treepass.TreePass(self)
         measured = self.cfg["bits_per_second"] <= 0  # a bound's search measures every pass
-        every_row = every_row or not measured
+        every_frame = every_frame or not measured  # (a bit rate's search reads no errors)
         knots, coeffs, decoded, patches = self._tree_pass.run(
             channel_steps(self.skeleton, codes)[:, 0], segment_factors(offsets, lay), lay, self.cfg["deadzone"],
-            SEAM_LIMIT, SEAM_HALF_WIDTH, self.far_steps, every_row,
+            SEAM_LIMIT, SEAM_HALF_WIDTH, self.far_steps, every_frame,
         )  # fmt: skip
         errors = None
         if measured:
             pose = positions_from_orientations(self.output_skeleton, decoded, self._tree_pass.loop.glob)
             errors = self._errors_at(*pose)
-        kept = decoded if every_row else None
+        kept = decoded if every_frame else None
         return Pass(codes, self.const.astype(np.int64), knots, coeffs, kept, offsets, patches, errors)
 
     @property

@@ -234,8 +234,8 @@ def _compose_forms(glob, rotations, tree, coding, fa, fb):
     from their decoded rotations ``(T, n, 4)`` (:func:`rotvec.quats_of_forms`, the rotation
     their Euler angles make without the axis pre-rotation C): ``G_j = G_p C q C^-1``, what
     :func:`closedloop.depth_compose` makes of the angles the decoder writes, up to rounding
-    (the pass's errors are checked against forward kinematics in the tests, the final bytes
-    on the real decoder), without going to the angles and back."""
+    (a test checks a pass's errors against the decoder's output, and every final body is
+    checked on the real decoder), without going to the angles and back."""
     for v in range(fb - fa):
         e = coding.form_entry[fa + v]
         if not tree.has_children[e]:

@@ -926,3 +926,21 @@ def test_a_pass_is_measured_from_the_closed_loop_as_the_decoder_measures_it(walk
             decoded = search.decoded_body(search.body(ps))
             np.testing.assert_allclose(ps.errors, search.joint_errors(decoded), rtol=0, atol=1e-9)
             assert ps.errors.max() > 0.01
+
+
+def test_passes_that_keep_their_joints_linearisations_code_as_passes_that_make_them_anew(walk_amc, monkeypatch):
+    """A loop keeps each joint's linearisation at its start angles (closedloop._linearise) from
+    its first pass for the next: the same integers and errors, pass after pass, as a loop too
+    long to keep them (which makes them on every pass)."""
+    from mocodec.codecs.shared import closedloop
+
+    clip = reexpress.with_dummy_root(walk_amc[:200], (0.0, -90.0, 0.0), position_channels=True)
+    runs = []
+    for limit in (closedloop.PLAN_ENTRY_FRAMES, 0):
+        monkeypatch.setattr(closedloop, "PLAN_ENTRY_FRAMES", limit)
+        search = BoundSearch(get_codec("kinwave", max_error_cm=0.5), clip)
+        runs.append([search.run_pass(search.codes(scale)) for scale in (1.0, 0.3, 2.0)])
+        assert search._tree_pass.loop.plan[1].shape[0] == (len(clip.skeleton) if limit else 0)
+    for kept, anew in zip(*runs):
+        assert np.array_equal(kept.knots, anew.knots) and np.array_equal(kept.coeffs, anew.coeffs)
+        assert np.array_equal(kept.errors, anew.errors)

@@ -260,7 +260,7 @@ def _tree_pass(loop, coding, kinematics, turns, steps, factors, isolated, coder,
     ``compose_steps``: the tree's rotation steps, 0 for the joints in a coding form, whose
     orientations come from their decoded rotations, :func:`_compose_forms`). Each depth's
     end is :func:`closedloop.depth_end` with that split."""
-    tree, start, active, goal, glob, skip, where, goal_positions, targeted, placing = loop
+    tree, start, active, goal, glob, skip, where, goal_positions, targeted, placing, plan = loop
     num_knots, num_coeffs = sizes
     frames, channels = start.shape
     count = tree.offsets.shape[0]
@@ -271,7 +271,7 @@ def _tree_pass(loop, coding, kinematics, turns, steps, factors, isolated, coder,
     for d in range(tree.depth_ptr.size - 1):
         ca, cb = tree.coded_ptr[d], tree.coded_ptr[d + 1]
         rows = cb - ca
-        targets = depth_start(tree, d, start, active, goal, glob, skip, where, goal_positions, targeted)
+        targets = depth_start(tree, d, start, active, goal, glob, skip, where, goal_positions, targeted, plan)
         if rows == 0:
             continue
         fa, fb, ma, mb = coding.form_ptr[d], coding.form_ptr[d + 1], coding.moved_ptr[d], coding.moved_ptr[d + 1]

@@ -29,7 +29,7 @@ from mocodec.kinematics import channel_plan
 from mocodec.skeleton import Skeleton
 
 _DAMPING = 1e-9
-_ITERATIONS = 1
+PLAN_ENTRY_FRAMES = 1 << 20  # a loop keeps its joints' linearisations up to this many joint-frames (109 MB)
 
 
 @numba.njit(inline="always")
@@ -43,11 +43,41 @@ def _axis_quat(axis, angle):
 
 
 @numba.njit(cache=True)
-def _targets(angles, axes, active, cq, has_axis, parent, goal, out):
+def _linearise(angles, axes, cq, has_axis, lq, jac):
+    """What a Gauss-Newton step from ``angles (T, k)`` reads, whatever its target: per frame the
+    local rotation ``L = C R_1 .. R_k C^-1`` the angles make, into ``lq (T, 4)``, and each
+    step's axis in the body frame (the Jacobian's rows), into ``jac (T, 3, 3)``."""
     k = axes.size
-    theta = np.empty(3)
     steps = np.empty((3, 4))
-    jac = np.empty((3, 3))
+    for f in range(angles.shape[0]):
+        for i in range(k):
+            steps[i, 0], steps[i, 1], steps[i, 2], steps[i, 3] = _axis_quat(axes[i], angles[f, i] * (np.pi / 180.0))
+        # suffix products S_i = R_{i+1} ... R_k give the body-frame axis of step i
+        sw, sx, sy, sz = 1.0, 0.0, 0.0, 0.0
+        for i in range(k - 1, -1, -1):
+            ex, ey, ez = (
+                (1.0 if axes[i] == 0 else 0.0),
+                (1.0 if axes[i] == 1 else 0.0),
+                (1.0 if axes[i] == 2 else 0.0),
+            )
+            jx, jy, jz = rotate_vector(sw, -sx, -sy, -sz, ex, ey, ez)
+            if has_axis:
+                jx, jy, jz = rotate_vector(cq[0], cq[1], cq[2], cq[3], jx, jy, jz)
+            jac[f, i, 0], jac[f, i, 1], jac[f, i, 2] = jx, jy, jz
+            sw, sx, sy, sz = quat_product(steps[i, 0], steps[i, 1], steps[i, 2], steps[i, 3], sw, sx, sy, sz)
+        lw, lx, ly, lz = sw, sx, sy, sz
+        if has_axis:
+            lw, lx, ly, lz = quat_product(cq[0], cq[1], cq[2], cq[3], lw, lx, ly, lz)
+            lw, lx, ly, lz = quat_product(lw, lx, ly, lz, cq[0], -cq[1], -cq[2], -cq[3])
+        lq[f, 0], lq[f, 1], lq[f, 2], lq[f, 3] = lw, lx, ly, lz
+
+
+@numba.njit(cache=True)
+def _step(angles, active, lq, jac, parent, goal, out):
+    """One damped Gauss-Newton step per frame from ``angles (T, k)`` (degrees) towards the
+    local rotation ``conj(parent) goal``, given the angles' :func:`_linearise`."""
+    k = angles.shape[1]
+    theta = np.empty(3)
     a = np.empty((3, 4))  # normal equations | right-hand side
     for f in range(angles.shape[0]):
         for i in range(k):
@@ -56,65 +86,52 @@ def _targets(angles, axes, active, cq, has_axis, parent, goal, out):
         mw, mx, my, mz = quat_product(
             parent[f, 0], -parent[f, 1], -parent[f, 2], -parent[f, 3], goal[f, 0], goal[f, 1], goal[f, 2], goal[f, 3]
         )
-        for _ in range(_ITERATIONS):
-            for i in range(k):
-                steps[i, 0], steps[i, 1], steps[i, 2], steps[i, 3] = _axis_quat(axes[i], theta[i])
-            # suffix products S_i = R_{i+1} ... R_k give the body-frame axis of step i
-            sw, sx, sy, sz = 1.0, 0.0, 0.0, 0.0
-            for i in range(k - 1, -1, -1):
-                ex, ey, ez = (
-                    (1.0 if axes[i] == 0 else 0.0),
-                    (1.0 if axes[i] == 1 else 0.0),
-                    (1.0 if axes[i] == 2 else 0.0),
-                )
-                jx, jy, jz = rotate_vector(sw, -sx, -sy, -sz, ex, ey, ez)
-                if has_axis:
-                    jx, jy, jz = rotate_vector(cq[0], cq[1], cq[2], cq[3], jx, jy, jz)
-                jac[i, 0], jac[i, 1], jac[i, 2] = jx, jy, jz
-                sw, sx, sy, sz = quat_product(steps[i, 0], steps[i, 1], steps[i, 2], steps[i, 3], sw, sx, sy, sz)
-            lw, lx, ly, lz = sw, sx, sy, sz
-            if has_axis:
-                lw, lx, ly, lz = quat_product(cq[0], cq[1], cq[2], cq[3], lw, lx, ly, lz)
-                lw, lx, ly, lz = quat_product(lw, lx, ly, lz, cq[0], -cq[1], -cq[2], -cq[3])
-            # remaining rotation in the body frame: E = conj(L) M, as a rotation vector r
-            ew, ex, ey, ez = quat_product(lw, -lx, -ly, -lz, mw, mx, my, mz)
-            if ew < 0.0:
-                ew, ex, ey, ez = -ew, -ex, -ey, -ez
-            norm = np.sqrt(ex * ex + ey * ey + ez * ez)
-            scale = 2.0 if norm < 1e-12 else 2.0 * np.arctan2(norm, ew) / norm
-            rx, ry, rz = ex * scale, ey * scale, ez * scale
-            # damped normal equations over the active steps: (J^T J + d I) delta = J^T r
-            a[:] = 0.0
-            for i in range(k):
-                if not active[i]:
-                    a[i, i] = 1.0
-                    continue
-                for m in range(k):
-                    if active[m]:
-                        a[i, m] = jac[i, 0] * jac[m, 0] + jac[i, 1] * jac[m, 1] + jac[i, 2] * jac[m, 2]
-                a[i, i] += _DAMPING
-                a[i, 3] = jac[i, 0] * rx + jac[i, 1] * ry + jac[i, 2] * rz
-            for i in range(k):  # Gaussian elimination with partial pivoting
-                piv = i
-                for m in range(i + 1, k):
-                    if abs(a[m, i]) > abs(a[piv, i]):
-                        piv = m
-                if piv != i:
-                    for col in range(4):
-                        a[i, col], a[piv, col] = a[piv, col], a[i, col]
-                for m in range(i + 1, k):
-                    factor = a[m, i] / a[i, i]
-                    for col in range(i, 4):
-                        a[m, col] -= factor * a[i, col]
-            for i in range(k - 1, -1, -1):
-                v = a[i, 3]
-                for m in range(i + 1, k):
-                    v -= a[i, m] * a[m, 3]
-                a[i, 3] = v / a[i, i]
-                if active[i]:
-                    theta[i] += a[i, 3]
+        # remaining rotation in the body frame: E = conj(L) M, as a rotation vector r
+        ew, ex, ey, ez = quat_product(lq[f, 0], -lq[f, 1], -lq[f, 2], -lq[f, 3], mw, mx, my, mz)
+        if ew < 0.0:
+            ew, ex, ey, ez = -ew, -ex, -ey, -ez
+        norm = np.sqrt(ex * ex + ey * ey + ez * ez)
+        scale = 2.0 if norm < 1e-12 else 2.0 * np.arctan2(norm, ew) / norm
+        rx, ry, rz = ex * scale, ey * scale, ez * scale
+        # damped normal equations over the active steps: (J^T J + d I) delta = J^T r
+        a[:] = 0.0
+        for i in range(k):
+            if not active[i]:
+                a[i, i] = 1.0
+                continue
+            for m in range(k):
+                if active[m]:
+                    a[i, m] = jac[f, i, 0] * jac[f, m, 0] + jac[f, i, 1] * jac[f, m, 1] + jac[f, i, 2] * jac[f, m, 2]
+            a[i, i] += _DAMPING
+            a[i, 3] = jac[f, i, 0] * rx + jac[f, i, 1] * ry + jac[f, i, 2] * rz
+        for i in range(k):  # Gaussian elimination with partial pivoting
+            piv = i
+            for m in range(i + 1, k):
+                if abs(a[m, i]) > abs(a[piv, i]):
+                    piv = m
+            if piv != i:
+                for col in range(4):
+                    a[i, col], a[piv, col] = a[piv, col], a[i, col]
+            for m in range(i + 1, k):
+                factor = a[m, i] / a[i, i]
+                for col in range(i, 4):
+                    a[m, col] -= factor * a[i, col]
+        for i in range(k - 1, -1, -1):
+            v = a[i, 3]
+            for m in range(i + 1, k):
+                v -= a[i, m] * a[m, 3]
+            a[i, 3] = v / a[i, i]
+            if active[i]:
+                theta[i] += a[i, 3]
         for i in range(k):
             out[f, i] = theta[i] * (180.0 / np.pi)
+
+
+@numba.njit(cache=True)
+def _targets(angles, axes, active, cq, has_axis, parent, goal, out):
+    lq, jac = np.empty((angles.shape[0], 4)), np.empty((angles.shape[0], 3, 3))
+    _linearise(angles, axes, cq, has_axis, lq, jac)
+    _step(angles, active, lq, jac, parent, goal, out)
 
 
 @numba.njit(cache=True)
@@ -333,12 +350,15 @@ def tree_arrays(skeleton: Skeleton) -> TreeArrays:
 
 @numba.njit(cache=True)
 def depth_targets(
-    start, active, goal, glob, d_joints, d_parents, chans, columns, steps, axes, quats, has_axis, skip, out
+    start, active, goal, glob, d_joints, d_parents, chans, columns, steps, axes, quats, has_axis, skip, out, a, plan
 ):
-    """A depth's joints at once: each joint's orientation starts as its parent's decoded one
-    (``glob``), and the rotation columns of ``out`` (the start values of the coded channels)
-    of a non-root joint with an active channel, not ``skip``-ped, become :func:`target_angles`."""
+    """A depth's joints at once (tree entries ``a:``): each joint's orientation starts as its
+    parent's decoded one (``glob``), and the rotation columns of ``out`` (the start values of
+    the coded channels) of a non-root joint with an active channel, not ``skip``-ped, become
+    :func:`target_angles`. ``plan``: :class:`TreeLoop`'s linearisations of the start angles,
+    made at a joint's first pass and read at the next (empty: made every time)."""
     frames = start.shape[0]
+    ready, kept_lq, kept_jac = plan
     for i in range(d_joints.size):
         j, p, k = d_joints[i], d_parents[i], steps[i]
         for f in range(frames):
@@ -358,7 +378,15 @@ def depth_targets(
             for m in range(k):
                 angles[f, m] = start[f, chans[i, m]]
         target = np.empty((frames, k))
-        _targets(angles, axes[i, :k], act, quats[i], has_axis[i], glob[p], goal[:, j], target)
+        if kept_lq.shape[0]:
+            lq, jac = kept_lq[a + i], kept_jac[a + i]
+            if not ready[a + i]:
+                _linearise(angles, axes[i, :k], quats[i], has_axis[i], lq, jac)
+                ready[a + i] = True
+        else:
+            lq, jac = np.empty((frames, 4)), np.empty((frames, 3, 3))
+            _linearise(angles, axes[i, :k], quats[i], has_axis[i], lq, jac)
+        _step(angles, act, lq, jac, glob[p], goal[:, j], target)
         for f in range(frames):
             for m in range(k):
                 out[f, columns[i, m]] = target[f, m]
@@ -473,7 +501,7 @@ def exact_rotation(axis_quat, has_axis, parent, goal):
 
 
 @numba.njit(cache=True)
-def depth_start(tree, d, start, active, goal, glob, skip, where, goal_positions, targeted):
+def depth_start(tree, d, start, active, goal, glob, skip, where, goal_positions, targeted, plan):
     """``(T, k)``: what depth ``d`` of ``tree`` (:class:`TreeArrays`) codes its channels from:
     their start values, the closed-loop target angles (:func:`depth_targets`, not for ``skip``
     joints) and, where ``where`` holds the decoded positions, the translations that restore the
@@ -485,7 +513,7 @@ def depth_start(tree, d, start, active, goal, glob, skip, where, goal_positions,
             targets[f, i] = start[f, tree.coded[ca + i]]
     depth_targets(
         start, active, goal, glob, tree.joints[a:b], tree.parents[a:b], tree.chans[a:b], tree.columns[a:b],
-        tree.steps[a:b], tree.axes[a:b], tree.axis_quats[a:b], tree.has_axis[a:b], skip, targets,
+        tree.steps[a:b], tree.axes[a:b], tree.axis_quats[a:b], tree.has_axis[a:b], skip, targets, a, plan,
     )  # fmt: skip
     if where.shape[0]:
         translation_targets(targets, tree, a, b, active, glob, where, goal_positions, targeted)
@@ -520,6 +548,7 @@ class TreeLoop(NamedTuple):
     goal_positions: np.ndarray  # (T, joints or 0, 3)
     targeted: np.ndarray  # (joints,) joints whose active translations restore their positions
     placing: np.ndarray  # (joints,) joints whose decoded positions are kept
+    plan: tuple  # per tree entry: made yet, and its start angles' linearisation (T, 4), (T, 3, 3)
 
 
 def tree_loop(
@@ -546,6 +575,19 @@ def tree_loop(
         np.ascontiguousarray(goal_positions if placed else np.zeros((frames, 0, 3)), dtype=np.float64),
         targeted,
         placing,
+        _plan(len(skeleton), frames),
+    )
+
+
+def _plan(entries: int, frames: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Room for every tree entry's :func:`_linearise` of its start angles (the same on every
+    pass down the tree: a joint's target changes with its parent's decoded orientation only),
+    or none where the loop is longer than PLAN_ENTRY_FRAMES joint-frames."""
+    kept = entries if entries * frames <= PLAN_ENTRY_FRAMES else 0
+    return (
+        np.zeros(entries, dtype=np.bool_),
+        np.empty((kept, frames if kept else 0, 4)),
+        np.empty((kept, frames if kept else 0, 3, 3)),
     )
 
 
@@ -573,7 +615,7 @@ def code_down_tree(
     loop = tree_loop(skeleton, start, active, goal, closed_loop, goal_positions)
     tree = loop.tree
     for d in range(tree.depth_ptr.size - 1):
-        targets = depth_start(tree, d, *loop[1:9])
+        targets = depth_start(tree, d, *loop[1:9], loop.plan)
         if not targets.shape[1]:
             continue
         coded = tree.coded[tree.coded_ptr[d] : tree.coded_ptr[d + 1]].copy()  # (the coder's own)

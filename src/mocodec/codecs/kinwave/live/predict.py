@@ -120,7 +120,7 @@ def predict_tree(loop, history, count, gap, stride, steps, order, trust, lo, hi,
     for d in range(tree.depth_ptr.size - 1):
         targets = depth_start(
             tree, d, loop.start, loop.active, loop.goal, loop.glob, loop.skip, loop.where, loop.goal_positions,
-            loop.targeted,
+            loop.targeted, loop.plan,
         )  # fmt: skip
         if targets.shape[1] == 0:
             continue

@@ -224,11 +224,11 @@ def test_below_the_highest_effort_the_trial_codes_one_euler_order_per_joint_and_
 def test_the_default_search_stops_at_its_first_pass_within_80_to_100_percent_of_the_bound(walk_amc, monkeypatch):
     """At effort 2 (max bounds) a pass at 85% of the bound ends the scale search, which aims at
     95%: the slack rounds take the rest back. A stop of 1 (effort 3) goes on."""
-    search = BoundSearch(get_codec("kinwave", max_error_cm=0.5), walk_amc[:60])
+    enc = BoundSearch(get_codec("kinwave", max_error_cm=0.5), walk_amc[:60])
     for stop, landing in ((0.8, 0.85), (1.0, 0.97)):
         errors = iter([0.85, 0.97, 0.93])
-        monkeypatch.setattr(search, "run_pass", lambda codes, offsets=None: next(errors))
-        best, _ = search._search(lambda value: value, 1.0, 0.9, 1.0, 1.0, stop=stop)
+        monkeypatch.setattr(enc, "run_pass", lambda codes, offsets=None: next(errors))
+        best, _ = enc._search(lambda value: value, 1.0, 0.9, 1.0, 1.0, stop=stop)
         assert best == landing
 
 
@@ -920,11 +920,11 @@ def test_a_pass_is_measured_from_the_closed_loop_as_the_decoder_measures_it(walk
     coding forms) and a turned dummy root with translations on every joint."""
     turned = reexpress.with_dummy_root(walk_bvh[:90], (0.0, -90.0, 0.0), position_channels=True)
     for clip in (walk_bvh[:90], walk_amc[:90], turned):
-        search = BoundSearch(get_codec("kinwave", max_error_cm=0.5, error_measure=measure), clip)
+        enc = BoundSearch(get_codec("kinwave", max_error_cm=0.5, error_measure=measure), clip)
         for scale in (0.5, 4.0):
-            ps = search.run_pass(search.codes(scale))
-            decoded = search.decoded_body(search.body(ps))
-            np.testing.assert_allclose(ps.errors, search.joint_errors(decoded), rtol=0, atol=1e-9)
+            ps = enc.run_pass(enc.codes(scale))
+            decoded = enc.decoded_body(enc.body(ps))
+            np.testing.assert_allclose(ps.errors, enc.joint_errors(decoded), rtol=0, atol=1e-9)
             assert ps.errors.max() > 0.01
 
 
@@ -938,9 +938,9 @@ def test_passes_that_keep_their_joints_linearisations_code_as_passes_that_make_t
     runs = []
     for limit in (closedloop.PLAN_ENTRY_FRAMES, 0):
         monkeypatch.setattr(closedloop, "PLAN_ENTRY_FRAMES", limit)
-        search = BoundSearch(get_codec("kinwave", max_error_cm=0.5), clip)
-        runs.append([search.run_pass(search.codes(scale)) for scale in (1.0, 0.3, 2.0)])
-        assert search._tree_pass.loop.plan[1].shape[0] == (len(clip.skeleton) if limit else 0)
+        enc = BoundSearch(get_codec("kinwave", max_error_cm=0.5), clip)
+        runs.append([enc.run_pass(enc.codes(scale)) for scale in (1.0, 0.3, 2.0)])
+        assert enc._tree_pass.loop.plan[1].shape[0] == (len(clip.skeleton) if limit else 0)
     for kept, anew in zip(*runs):
         assert np.array_equal(kept.knots, anew.knots) and np.array_equal(kept.coeffs, anew.coeffs)
         assert np.array_equal(kept.errors, anew.errors)

@@ -168,6 +168,9 @@ def test_a_blocks_reach_is_its_synthesis_matrix_thresholded(wavelet):
     from mocodec.coding.transforms import trendwave, wavelets
 
     for n, levels in ((16, 1), (96, 3), (192, 3), (256, 4)):
+        lay = trendwave.layout(n, n, levels, 0, wavelet)  # one block of n frames
+        assert lay.padded.tolist() == [n]
         synthesis = np.abs(wavelets.matrices(n, wavelet, levels)[1])
-        expected = (synthesis > 0.05 * synthesis.max(axis=0)).astype(np.float64)
-        assert np.array_equal(trendwave._reach(n, levels, wavelet), expected)
+        expected = (synthesis > 0.05 * synthesis.max(axis=0)).astype(np.uint8)
+        reach, at = trendwave.reaches(lay)
+        assert at.tolist() == [0] and np.array_equal(reach.reshape(n, n), expected)

@@ -138,6 +138,23 @@ def test_demo_runs(capsys):
         assert word in out
 
 
+def test_warmup_compiles_a_codecs_shared_parts_in_a_second_process(capsys):
+    """`mocodec warmup kinwave` codes a second of the bundled clip while a second process
+    compiles kinwave's warm parts (the coefficient coder); every codec's parts are module-level
+    functions, which a spawned process can be handed."""
+    import pickle
+
+    from mocodec.codecs import codec_class, codec_ids
+    from mocodec.coding.entropy import coefcoder
+
+    assert coefcoder.warm in codec_class("kinwave").warm_parts
+    for cid in codec_ids():
+        for part in codec_class(cid).warm_parts:
+            assert pickle.loads(pickle.dumps(part)) is part
+    assert main(["warmup", "kinwave"]) == 0
+    assert "compiled or loaded the kernels of 1 codecs" in capsys.readouterr().out
+
+
 def test_encode_decode_eval_codecs(tmp_path, capsys):
     out = tmp_path / "walk.moc"
     assert main(["encode", str(DATA / "07_03.amc"), "-o", str(out)]) == 0

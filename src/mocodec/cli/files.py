@@ -182,7 +182,9 @@ def cmd_warmup(args) -> int:
     """Code one second of the bundled clip with the codecs named, by default every built-in
     codec that needs no trained model or optional library: numba compiles each kernel once and
     caches it (beside the package, or in the user's cache directory when it is read-only)."""
+    import multiprocessing
     import time
+    from concurrent.futures import ProcessPoolExecutor
 
     from mocodec import moc
     from mocodec.codecs import codec_class, codec_ids, get_codec
@@ -192,14 +194,24 @@ def cmd_warmup(args) -> int:
     clip = motion[: int(motion.fps)]
     t0 = time.perf_counter()
     warmed, skipped = [], []
-    for cid in args.codecs or codec_ids():
-        if not args.codecs and (codec_class(cid).baseline or any(k.path for k in codec_class(cid).knobs)):
-            continue
-        try:
-            moc.round_trip(clip, get_codec(cid))
-            warmed.append(cid)
-        except CodecError:
-            skipped.append(cid)
+    ids = [
+        cid
+        for cid in args.codecs or codec_ids()
+        if args.codecs or not (codec_class(cid).baseline or any(k.path for k in codec_class(cid).knobs))
+    ]
+    parts = dict.fromkeys(part for cid in ids for part in codec_class(cid).warm_parts)
+    # a second process compiles the codecs' shared parts (numba caches them) while this one
+    # codes the clip: the kernels compile one at a time in a process, and a machine has cores
+    with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as side:
+        compiling = [side.submit(part) for part in parts]
+        for cid in ids:
+            try:
+                moc.round_trip(clip, get_codec(cid))
+                warmed.append(cid)
+            except CodecError:
+                skipped.append(cid)
+        for done in compiling:
+            done.result()
     motion.positions_m()
     print(
         f"compiled or loaded the kernels of {len(warmed)} codecs in {time.perf_counter() - t0:.1f} s"

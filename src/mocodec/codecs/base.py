@@ -192,6 +192,9 @@ class Codec:
     embedded: ClassVar[bool] = False
     variable_delay: ClassVar[bool] = False  # the delay depends on the motion (000 ch. 8)
     baseline: ClassVar[bool] = False  # a generic float compressor, for comparison
+    # kernels of the codec's that a second process may compile while ``mocodec warmup`` codes a
+    # clip (module-level functions of no arguments)
+    warm_parts: ClassVar[tuple[Callable[[], None], ...]] = ()
     native_decoder: ClassVar[bool] = False  # hands the body to a C library: untrusted bodies decode in a child
     # the revision of the codec's body and packet format; a config above 1 says it, and a reader
     # refuses another (docs/formats.md)

@@ -56,6 +56,7 @@ from mocodec.codecs.kinwave.body import (
 )
 from mocodec.codecs.kinwave.search import BoundSearch
 from mocodec.codecs.registry import register
+from mocodec.coding.entropy import coefcoder
 from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.formats import varint
 from mocodec.kinematics import forward_kinematics
@@ -68,6 +69,7 @@ from mocodec.skeleton import Skeleton
 class KinwaveCodec(Codec):
     id = "kinwave"
     packet_number = 9
+    warm_parts = (coefcoder.warm,)
     description = (
         "project codec: closed-loop wavelet coding down the kinematic tree, convex step allocation, "
         "context-adaptive arithmetic coding, guaranteed error bound (kinwave.md)"

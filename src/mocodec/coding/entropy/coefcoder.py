@@ -337,3 +337,15 @@ def decode(
     )
     cuts = np.cumsum(side_sizes)[:-1] if side_sizes else np.zeros(0, dtype=np.int64)
     return Decoded(const, knots, coeffs, tuple(np.cumsum(q) for q in np.split(side, cuts)), int(used))
+
+
+def warm() -> None:
+    """Compile (or load) this coder's kernels on a tiny input, with the argument types its
+    callers pass: ``mocodec warmup`` runs it in a second process while the first compiles
+    the rest of a codec (the coder's kernels are among the largest)."""
+    knots, coeffs = np.zeros((3, 2), dtype=np.int64), np.zeros((3, 16), dtype=np.int64)
+    knots[:, 1], coeffs[:, ::3] = 5, -2
+    layout = (np.array([16]), np.array([2]))
+    group_sizes(knots, coeffs, *layout, 3, revision=2)
+    data = encode(np.zeros(3, dtype=np.int64), knots, coeffs, *layout, revision=2, side=(np.arange(2),))
+    decode(data, 3, 2, *layout, revision=2, side_sizes=(2,))

@@ -21,14 +21,7 @@ import numpy as np
 from mocodec.codecs.kinwave.body import MEAN_QUANTUM, three_angle_groups, turn_setup
 from mocodec.codecs.kinwave.channelcode import coder_arguments, depth_kernel
 from mocodec.codecs.shared import rotvec
-from mocodec.codecs.shared.closedloop import (
-    depth_compose,
-    depth_start,
-    exact_rotation,
-    place_joints,
-    tree_arrays,
-    tree_loop,
-)
+from mocodec.codecs.shared.closedloop import depth_end, depth_start, exact_rotation, tree_arrays, tree_loop
 from mocodec.codecs.shared.rotvec import quat_product, quats_of_euler
 from mocodec.coding.transforms import trendwave
 from mocodec.kinematics import channel_plan, frame_orientations
@@ -258,8 +251,7 @@ def _tree_pass(loop, coding, kinematics, turns, steps, factors, isolated, coder,
     orientations and positions each pass writes before it reads them; ``coder``:
     :func:`channelcode.coder_arguments`, ``sizes``: the layout's knots and coefficients;
     ``compose_steps``: the tree's rotation steps, 0 for the joints in a coding form, whose
-    orientations come from their decoded rotations, :func:`_compose_forms`). Each depth's
-    end is :func:`closedloop.depth_end` with that split."""
+    orientations come from their decoded rotations, :func:`_compose_forms`)."""
     tree, start, active, goal, glob, skip, where, goal_positions, targeted, placing, plan = loop
     num_knots, num_coeffs = sizes
     frames, channels = start.shape
@@ -297,12 +289,6 @@ def _tree_pass(loop, coding, kinematics, turns, steps, factors, isolated, coder,
             coeffs[c, :] = c_int[i]
             patches[c, :] = patch[i]
             decoded[c, :] = out[i]
-        a, b, by_frame = tree.depth_ptr[d], tree.depth_ptr[d + 1], out.T.copy()
-        depth_compose(
-            by_frame, glob, tree.joints[a:b], tree.columns[a:b], compose_steps[a:b], tree.axes[a:b],
-            tree.axis_quats[a:b], tree.has_axis[a:b], tree.has_children[a:b],
-        )  # fmt: skip
-        _compose_forms(glob, rotations, tree, coding, fa, fb)
-        if where.shape[0]:
-            place_joints(by_frame, tree, a, b, glob, where, placing)
+        depth_end(tree, d, out.T.copy(), glob, where, placing, compose_steps)
+        _compose_forms(glob, rotations, tree, coding, fa, fb)  # (placing reads the depths above only)
     return knots, coeffs, decoded, patches

@@ -521,12 +521,14 @@ def depth_start(tree, d, start, active, goal, glob, skip, where, goal_positions,
 
 
 @numba.njit(cache=True)
-def depth_end(tree, d, decoded, glob, where, placing):
+def depth_end(tree, d, decoded, glob, where, placing, steps):
     """After depth ``d`` is coded (``decoded (T, k)``): its joints' decoded orientations
-    (:func:`depth_compose`) and, where ``where`` is kept, positions (:func:`place_joints`)."""
+    (:func:`depth_compose` of the joints whose rotation ``steps`` are not 0: ``tree.steps``,
+    or fewer where a caller composes some joints itself) and, where ``where`` is kept,
+    positions (:func:`place_joints`)."""
     a, b = tree.depth_ptr[d], tree.depth_ptr[d + 1]
     depth_compose(
-        decoded, glob, tree.joints[a:b], tree.columns[a:b], tree.steps[a:b], tree.axes[a:b], tree.axis_quats[a:b],
+        decoded, glob, tree.joints[a:b], tree.columns[a:b], steps[a:b], tree.axes[a:b], tree.axis_quats[a:b],
         tree.has_axis[a:b], tree.has_children[a:b],
     )  # fmt: skip
     if where.shape[0]:
@@ -620,4 +622,4 @@ def code_down_tree(
             continue
         coded = tree.coded[tree.coded_ptr[d] : tree.coded_ptr[d + 1]].copy()  # (the coder's own)
         decoded = np.ascontiguousarray(code(coded, targets), dtype=np.float64)
-        depth_end(tree, d, decoded, loop.glob, loop.where, loop.placing)
+        depth_end(tree, d, decoded, loop.glob, loop.where, loop.placing, tree.steps)

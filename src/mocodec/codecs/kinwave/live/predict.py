@@ -128,7 +128,7 @@ def predict_tree(loop, history, count, gap, stride, steps, order, trust, lo, hi,
         out = predict_columns(
             coded, targets, history, count, gap, stride, steps, order, trust, lo, hi, ints, decoded, cell_lo, cell_hi
         )
-        depth_end(tree, d, out, loop.glob, loop.where, loop.placing)
+        depth_end(tree, d, out, loop.glob, loop.where, loop.placing, tree.steps)
 
 
 @numba.njit(cache=True)

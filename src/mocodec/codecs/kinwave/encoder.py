@@ -137,7 +137,7 @@ class Pass:
     const: np.ndarray
     knots: np.ndarray
     coeffs: np.ndarray
-    decoded: np.ndarray | None  # (C, T); None for a bound's pass (Encoder.run_pass)
+    decoded: np.ndarray | None  # (C, T); None for a bound's pass unless every_frame (Encoder.run_pass)
     offsets: np.ndarray  # i8 per segment: its steps are 2^(offset/8) times the joints'
     patches: np.ndarray  # (C, isolated frames): each isolated frame's correction (apply_patches)
     errors: np.ndarray | None = None  # (frames, points) cm, once measured (Encoder.pass_errors)
@@ -192,8 +192,7 @@ def _with_bones(skeleton: Skeleton, held: tuple[tuple[int, int, float], ...]) ->
         offsets.setdefault(j, list(skeleton.joints[j].offset))[k] += value
     joints = list(skeleton.joints)
     for j, offset in offsets.items():  # (one replace a joint: each checks the joint again)
-        if tuple(offset) != joints[j].offset:
-            joints[j] = replace(joints[j], offset=tuple(offset))
+        joints[j] = replace(joints[j], offset=tuple(offset))
     if joints == list(skeleton.joints):
         return skeleton
     return Skeleton(tuple(joints), skeleton.units_per_metre, skeleton.name)

@@ -7,7 +7,8 @@ is the relay's own work, free of the load generators that share the machine in r
 Avatars replay the live stream of tests/data/07_03.bvh (kinwave-live, 3 layers, keyframes every
 0.5 s) at random phases on a 2 m grid; viewers stand at random places (seeded). Prints the
 median, 90th percentile and maximum time of a tick's dispatch after 50 warm-up ticks, and the
-time to take in a tick's packets.
+time to take in a tick's packets. The cyclic collector is set as in a relay process
+(:func:`~mocodec.stream.relay.server.quiet_collector`).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ import numpy as np
 
 from mocodec.stream.packets import pack_batch
 from mocodec.stream.relay import RelayCore, Viewer
+from mocodec.stream.relay.server import quiet_collector
 from relay_load import place, restamp, templates
 
 SEED = 29
@@ -65,6 +67,7 @@ def main() -> None:
     parser.add_argument("--budget", type=float, default=3e6, help="bit/s per viewer (0: no budgets)")
     parser.add_argument("--ticks", type=int, default=200)
     args = parser.parse_args()
+    quiet_collector()  # as a relay process runs
     dispatch, ingest = run(args.avatars, args.viewers, args.budget, args.ticks)
     print(
         f"relay tick, {args.avatars} layered avatars, {args.viewers} viewers at {args.budget:g} bit/s: "

@@ -24,6 +24,24 @@ def ingested(core: RelayCore, packets, room: Room | None = None) -> Room:
     return room
 
 
+@pytest.mark.parametrize("compact_from", [0, 5, None])
+def test_a_message_of_full_packets_reads_as_one_with_compact_ones(walk_bvh, compact_from):
+    """A sender's message is read alike whether its packets are full, compact, or both (a
+    compact packet follows on from the full one before it in the same message)."""
+    packets = stream_clip(walk_bvh[:40], get_codec("kinwave-live", layers=3), keyframe_s=60.0)[:-1]
+    head, data = packets[0], packets[1:]
+    wire = [replace(p, compact=compact_from is not None and k >= compact_from).to_bytes() for k, p in enumerate(data)]
+    core = RelayCore()
+    room = core.room("lobby")
+    core.ingest(room, pack_batch([head.to_bytes()]), owner=1)
+    core.ingest(room, pack_batch(wire), owner=1)
+    kept, _ = room.streams[0].history.since(0, float("inf"))
+    assert [(f.packet.sequence, f.packet.first_frame, f.packet.payload) for f in kept] == [
+        (p.sequence, p.first_frame, p.codec_payload) for p in data
+    ]
+    assert room.streams[0].next_sequence == data[-1].sequence + 1
+
+
 def test_repair_requests_are_checked_and_limited(walk_bvh):
     packets = stream_clip(walk_bvh, get_codec("kinwave-live", refresh_s=0.5), keyframe_s=60.0)[:-1]
     core, viewer = RelayCore(), Viewer()

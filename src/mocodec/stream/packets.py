@@ -50,7 +50,7 @@ HEADER, DATA = 0, 1
 KEYFRAME, END, CUTS, RESTART = 1, 2, 4, 8  # RESTART: the codec stream's base restarts here
 
 _FIELDS = struct.Struct("<2sBBBBIIQIH3fI")
-_CRC = struct.Struct("<I")
+_CRC = _U32 = struct.Struct("<I")
 _U16 = struct.Struct("<H")
 _POSITION = struct.Struct("<3h")
 COMPACT = 0x80  # the tag bit of a compact data packet (a full packet starts with "M")
@@ -111,15 +111,20 @@ class Packet:
         return self.payload[_U16.size : _U16.size + self._cuts_size()] if self.flags & CUTS else b""
 
     def _cuts_size(self) -> int:
-        if len(self.payload) < _U16.size or _U16.unpack_from(self.payload)[0] > len(self.payload) - _U16.size:
+        size = _U16.unpack_from(self.payload)[0] if len(self.payload) >= _U16.size else -1
+        if not 0 <= size <= len(self.payload) - _U16.size:
             raise CorruptStreamError(f"packet {self.sequence} of stream {self.stream}: its cut table overruns it")
-        return _U16.unpack_from(self.payload)[0]
+        return size
 
     def with_payload(self, payload: bytes, flags: int | None = None) -> Packet:
         """The packet with another payload (and flags): ``replace`` without its checks, as a
         relay makes one of every packet it takes in."""
         other = object.__new__(Packet)
-        other.__dict__.update(self.__dict__, payload=payload, flags=self.flags if flags is None else flags)
+        fields = other.__dict__
+        fields.update(self.__dict__)
+        fields["payload"] = payload
+        if flags is not None:
+            fields["flags"] = flags
         return other
 
     def without_cuts(self) -> Packet:
@@ -536,11 +541,11 @@ def truncated(p: Packet, data: bytes, size: int, dropped: int) -> bytes:
 def _reframed(data: bytes | memoryview, body: bytes, dropped: int, flags: int | None = None) -> bytes:
     """A full packet's wire bytes ``data`` with the payload ``body`` (and ``flags``): its header
     kept, the payload length set anew, the check made from the start that says ``dropped``."""
-    fields = bytearray(data[: _FIELDS.size])
+    head = bytes(data[: _FIELDS.size - _U32.size])
     if flags is not None:
-        fields[4] = flags
-    struct.pack_into("<I", fields, _FIELDS.size - 4, len(body))
-    return bytes(fields) + body + _CRC.pack(zlib.crc32(body, zlib.crc32(fields, CRC32_STARTS[dropped])))
+        head = head[:4] + bytes((flags,)) + head[5:]
+    head += _U32.pack(len(body))
+    return b"".join((head, body, _CRC.pack(zlib.crc32(body, zlib.crc32(head, CRC32_STARTS[dropped])))))
 
 
 def split_batch(data: bytes | memoryview, where: str = "batch") -> list[memoryview]:

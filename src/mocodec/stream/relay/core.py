@@ -30,7 +30,7 @@ from mocodec.stream.packets import (
 from mocodec.stream.relay.cutting import choose_layers, crowd_of, cut_for, layout_of, resent
 from mocodec.stream.relay.limits import BAD_MESSAGE, QUEUED_S, RATE_LIMIT, TAKEN, TICK_HZ, Bucket, Closing, Limits
 from mocodec.stream.relay.retention import RoomHistory
-from mocodec.stream.relay.rooms import Cursors, Forward, Room, StreamState, Viewer, caps_of, stream_setup
+from mocodec.stream.relay.rooms import Forward, Room, StreamState, Viewer, caps_of, read_message, stream_setup
 
 log = logging.getLogger("mocodec.relay")
 
@@ -81,8 +81,7 @@ class RelayCore:
         """The packets of one sender message into the room; Closing if it is malformed."""
         try:
             raw = split_batch(data) if is_batch(data) else [memoryview(data)]
-            cursors = Cursors(room)
-            packets = [cursors.read(r, f"packet {k}") for k, r in enumerate(raw)]
+            packets = read_message(room, raw)
         except MocodecError as e:
             raise Closing(BAD_MESSAGE, f"bad message: {e}") from None
         for p, r in zip(packets, raw):

@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import logging
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass
+from operator import itemgetter
 
 import numpy as np
 
@@ -246,10 +248,19 @@ def cut_for(
     if together:
         assert chosen is not None
         for group, picks in zip(crowd.rounds, chosen):
-            indices = picks.tolist()
-            heads += map(group.heads.__getitem__, indices)
-            out += map(group.variants.__getitem__, indices)
+            pick = _picker(picks.tolist())
+            heads += pick(group.heads)
+            out += pick(group.variants)
     return out, heads
+
+
+def _picker(indices: list[int]) -> Callable[[list], tuple]:
+    """A function that takes the items at ``indices`` of a list, as a tuple (in one C call:
+    ``itemgetter`` of one index gives the item, not a tuple)."""
+    if len(indices) == 1:
+        (only,) = indices
+        return lambda items: (items[only],)
+    return itemgetter(*indices)
 
 
 def layers_for(viewer: Viewer, f: Forward, state: StreamState, fits: int) -> int:

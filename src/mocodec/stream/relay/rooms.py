@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from mocodec.stream.packets import DATA, END, Cursor, Packet, StreamInfo, parse
+from mocodec.stream.packets import COMPACT, DATA, END, Cursor, Packet, StreamInfo, parse
 from mocodec.stream.relay.limits import Bucket, Limits
 from mocodec.stream.relay.retention import Caps, RoomHistory, StreamHistory
 
@@ -169,6 +169,16 @@ class Room:
         for viewer in self.viewers:
             viewer.set_layer(state.slot, 0)
         self.free_slots.append(state.slot)
+
+
+def read_message(room: Room, raw: list[memoryview]) -> list[Packet]:
+    """The packets of one sender message (``raw``: each one's bytes), in order. A compact
+    packet follows on from its stream's state (:class:`Cursors`); a message of full packets
+    only is read without cursors, which none of them needs."""
+    if any(r[:1] and r[0] & COMPACT for r in raw):
+        cursors = Cursors(room)
+        return [cursors.read(r, f"packet {k}") for k, r in enumerate(raw)]
+    return [parse(r, f"packet {k}") for k, r in enumerate(raw)]
 
 
 class Cursors:

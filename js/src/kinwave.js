@@ -17,6 +17,7 @@ const FORMAT = 1;
 const FORMAT_MORE = 2; // format 1 with a byte of more flags after the header
 const REST = 1; // more flags: frame 0 is the rest pose (rotations 0), its translations frame 1's
 const REST_AT_ZERO = 2; // ... with every translation 0 too
+const REST_TURNED = 3; // ... as REST under the root's turn of frame 1, its children turned back by it
 const LEAD_SHIFT = 2; // more flags bits 2-3: the layout's lead (trendwave.layout)
 const FINE_CONSTANTS = 16; // more flags bit 4: constant translations at FINE_CONST_FRACTION of their step
 const FINE_TURNS = 32; // more flags bit 5: constant rotations of joints above translation channels, the same
@@ -175,7 +176,7 @@ function withoutMore(body, frames) {
   const fine = (more & FINE_CONSTANTS) !== 0;
   const fineTurns = (more & FINE_TURNS) !== 0;
   const aboutZero = (more & ZERO_CONSTANTS) !== 0;
-  if (!more || more >> 7 || ![0, REST, REST_AT_ZERO].includes(rest) || frames < 1 + (rest ? 1 : 0)) {
+  if (!more || more >> 7 || frames < 1 + (rest ? 1 : 0)) {
     throw damaged(`its more flags are damaged (${more} for ${frames} frames)`, HEAD_SIZE);
   }
   const inner = new Uint8Array(body.length - 1);
@@ -269,9 +270,31 @@ export function decodeKinwave(body, skeleton, allFrames) {
   for (let c = 0; c < C; c++) {
     const row = rows[c];
     for (let t = 0; t < frames; t++) out[(t + first) * C + c] = row[t];
-    if (first) out[c] = read.rest === REST && plan.isTranslation[c] ? row[0] : 0.0;
   }
+  if (first) restFrame(skeleton, plan, rows, read.rest, out.subarray(0, C));
   return out;
+}
+
+// The rest pose of frame 0 (payload.rest_pose, kinematics.rest_frame) into `out`: every rotation
+// 0 and the translations decoded frame 1's (REST), or 0 (REST_AT_ZERO); REST_TURNED as REST
+// with the root's rotations frame 1's, and each joint right below it with three rotation channels
+// and no axis pre-rotation turned back by them.
+function restFrame(skeleton, plan, rows, rest, out) {
+  for (let c = 0; c < out.length; c++) out[c] = (rest === REST || rest === REST_TURNED) && plan.isTranslation[c] ? rows[c][0] : 0.0;
+  if (rest !== REST_TURNED || !skeleton.joints.length) return;
+  for (let step = 0; step < 3; step++) {
+    const c = skeleton.rotIndex[step];
+    if (c >= 0) out[c] = rows[c][0];
+  }
+  const turn = new Float64Array(4 * skeleton.joints.length);
+  forwardKinematics(skeleton, out, turn);
+  const root = turn.slice(0, 4);
+  skeleton.joints.forEach((joint, j) => {
+    if (skeleton.parents[j] !== 0 || joint.rotationOrder.length !== 3 || skeleton.hasAxis[j]) return;
+    const back = [0, 1, 2].map(() => Float64Array.of(0.0));
+    fromForm(back, 1, joint.rotationOrder, WORLD, Float64Array.of(1.0, 0.0, 0.0, 0.0), root);
+    for (let step = 0; step < 3; step++) out[skeleton.rotIndex[3 * j + step]] = back[step][0];
+  });
 }
 
 // payload.reconstruct: per channel its trend plus its blocks' residual, then the seams smoothed.

@@ -287,6 +287,26 @@ def local_quaternions(skeleton: Skeleton, channels: np.ndarray) -> np.ndarray:
     return _run(skeleton, channels, True)[2]
 
 
+def rest_frame(skeleton: Skeleton, frame: np.ndarray, turned: bool = False) -> np.ndarray:
+    """The skeleton's rest pose as one frame ``(C,)``: every rotation 0, the translations
+    ``frame``'s. ``turned``: a game export's rotation-only root turns the axes, the rest pose
+    with them, and the body stands as it does at rest: the root joint's rotations are
+    ``frame``'s, and each joint right below it with three rotation channels (and no axis
+    pre-rotation) turns back by them (its Euler angles in its own order)."""
+    out = np.where(skeleton.rotation_mask, 0.0, frame)
+    if not turned or not len(skeleton):
+        return out
+    turn = skeleton.root_turn_mask
+    out[turn] = frame[turn]
+    back = rotations.quat_conjugate(local_quaternions(skeleton, out[None])[0, 0])
+    for j in np.flatnonzero(skeleton.parents == 0):
+        joint = skeleton.joints[j]
+        if len(joint.rotation_order) == 3 and not joint.has_axis:
+            angles = rotations.quat_to_euler(back, joint.rotation_order)
+            out[skeleton.channel_offsets[j] + np.array(joint.rotation_channel_indices())] = angles
+    return out
+
+
 def forward_kinematics(skeleton: Skeleton, channels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Global pivot positions ``(frames, joints, 3)`` (skeleton units) and global orientations
     as unit quaternions ``(frames, joints, 4)`` for a ``(frames, channels)`` array."""

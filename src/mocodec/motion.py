@@ -18,6 +18,16 @@ def wrap_degrees(x: np.ndarray) -> np.ndarray:
     return x - 360.0 * np.floor((x + 180.0) / 360.0)
 
 
+#: Under a turned root, a joint's rotation in frame 0 is its rest pose's to within this cosine
+#: of half the angle between them (about 1.6e-4 degrees: a float32 file's rounding).
+REST_COSINE = 1.0 - 1e-12
+
+
+def _same_turns(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether the unit quaternions ``a`` and ``b`` (joints, 4) turn alike (REST_COSINE)."""
+    return bool(np.abs(np.sum(a * b, axis=-1)).min(initial=1.0) >= REST_COSINE)
+
+
 @dataclass(frozen=True, eq=False)
 class Motion:
     """``channels`` is float64 ``(frames, skeleton.num_channels)``: degrees for rotations,
@@ -81,12 +91,23 @@ class Motion:
 
     @property
     def starts_at_rest(self) -> bool:
-        """Whether frame 0 is the skeleton's rest pose (every rotation exactly 0) and frame 1
-        is not: the bind pose exporters write before a take."""
-        rot = self.skeleton.rotation_mask
-        return (
-            self.num_frames >= 2 and bool(rot.any()) and not self.channels[0, rot].any() and self.channels[1, rot].any()
-        )
+        """Whether frame 0 is the skeleton's rest pose and frame 1 is not: the bind pose
+        exporters write before a take. Every rotation is exactly 0 there; or a game export's
+        rotation-only root turns it to the engine's axes (its rotations,
+        :attr:`Skeleton.root_turn_mask`, frame 1's) and every joint below stands as at rest
+        (:func:`kinematics.rest_frame`, to REST_COSINE)."""
+        sk = self.skeleton
+        rot, turn = sk.rotation_mask, sk.root_turn_mask
+        if self.num_frames < 2 or not rot.any():
+            return False
+        first, second = self.channels[0], self.channels[1]
+        if not first[turn].any():
+            return not first[rot].any() and bool(second[rot].any())
+        if not np.array_equal(first[turn], second[turn]):
+            return False
+        frames = np.vstack((kinematics.rest_frame(sk, second, turned=True), first, second))
+        rest, zero, one = kinematics.local_quaternions(sk, frames)
+        return _same_turns(rest[1:], zero[1:]) and not _same_turns(rest[1:], one[1:])
 
     def channel_indices(self, keys) -> np.ndarray:
         """Channel indices for ``keys``: ints, ``"joint.Xrotation"`` names or joint names (all

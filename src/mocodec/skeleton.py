@@ -206,6 +206,14 @@ class Skeleton:
         return np.array([c in ROTATION_CHANNELS for j in self.joints for c in j.channels], dtype=bool)
 
     @cached_property
+    def root_turn_mask(self) -> np.ndarray:
+        """True for the root joint's rotation channels: the turn a game export's rotation-only
+        root gives the whole skeleton (to the engine's axes), which its rest pose keeps."""
+        mask = self.rotation_mask.copy()
+        mask[self.channel_offsets[1] if len(self) else 0 :] = False
+        return mask
+
+    @cached_property
     def limits(self) -> np.ndarray:
         """Joint limits per channel, shape ``(channels, 2)``; +-inf where there is none."""
         if self.num_channels == 0:

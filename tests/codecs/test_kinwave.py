@@ -583,6 +583,48 @@ def test_a_leading_rest_pose_costs_a_flag(walk_bvh, walk_amc, measure, at_zero):
             np.testing.assert_array_equal(decoded.channels[0, ~rot], decoded.channels[1, ~rot])
 
 
+@pytest.mark.parametrize("turn", [(0.0, -90.0, 0.0), (13.7, 21.1, -7.9)])
+def test_a_rest_pose_under_a_turned_root_costs_a_flag(walk_bvh, walk_amc, turn):
+    """A game export turns a rotation-only root to the engine's axes in every frame, its bind
+    pose in frame 0 included, and the joint below it back (the body stands as at rest), with
+    float32 noise on every bone's translation: frame 0 is still the rest pose (REST_TURNED),
+    not coded, and decodes to it (the root's turn and the translations frame 1's)."""
+    from mocodec.codecs.kinwave.body import REST_TURNED, rest_kind, with_more
+    from mocodec.kinematics import forward_kinematics
+    from mocodec.reexpress import with_bind_frame, with_dummy_root, with_position_channels
+
+    for motion in (walk_bvh[:150], walk_amc[:150]):
+        game = with_dummy_root(with_position_channels(with_bind_frame(motion)), turn)
+        channels = game.channels.astype(np.float32).astype(np.float64)
+        bones = ~game.skeleton.rotation_mask
+        bones[: game.skeleton.channel_offsets[2]] = False
+        channels[:, bones] *= 1.0 + 1e-7 * np.random.default_rng(5).integers(-3, 4, size=channels[:, bones].shape)
+        game = game.with_channels(channels)
+        assert game.starts_at_rest and rest_kind(game) == REST_TURNED
+        codec = get_codec("kinwave", max_error_cm=0.5)
+        body = codec.encode(game)
+        assert body == with_more(codec.encode(game[1:]), REST_TURNED)
+        decoded = codec.decode(body, game.skeleton, game.num_frames, game.fps)
+        assert _errors(game, decoded)["joint"] <= 0.5
+        turn_mask = game.skeleton.root_turn_mask
+        np.testing.assert_array_equal(decoded.channels[0, turn_mask], decoded.channels[1, turn_mask])
+        _, orientations = forward_kinematics(game.skeleton, decoded.channels[:1])
+        np.testing.assert_allclose(np.abs(orientations[0, 1:, 0]), 1.0, atol=1e-12)  # below the root: as at rest
+
+
+def test_a_turned_root_whose_child_does_not_turn_back_is_no_rest_pose(walk_bvh):
+    """Under a turned root, a frame 0 whose joints below keep their rest angles (0) does not
+    stand as at rest: it is coded as a frame."""
+    from mocodec.codecs.kinwave.body import rest_kind
+    from mocodec.reexpress import with_bind_frame, with_dummy_root
+
+    game = with_dummy_root(with_bind_frame(walk_bvh[:100]), (0.0, -90.0, 0.0))
+    channels = game.channels.copy()
+    channels[0, ~game.skeleton.root_turn_mask & game.skeleton.rotation_mask] = 0.0
+    plain = game.with_channels(channels)
+    assert game.starts_at_rest and not plain.starts_at_rest and rest_kind(plain) == 0
+
+
 def test_a_rest_pose_leaves_the_chunks_of_a_file_as_they_were(walk_bvh):
     """With a rest pose before the take, the first chunk of a .moc file takes it along: every
     chunk codes the take's frames it coded without it, in the very same bytes but the first
@@ -778,7 +820,6 @@ def test_a_damaged_rest_pose_flag_is_refused(walk_bvh):
     frames = rest.num_frames
     for bad, count in (
         (body[:6] + b"\0" + body[7:], frames),
-        (body[:6] + b"\3" + body[7:], frames),
         (body[:6] + b"\x81" + body[7:], frames),  # bit 7
         (body, 1),
         (body[:6], frames),

@@ -163,6 +163,7 @@ MOC_CASES = (
     ("glitch", "09_02.bvh", 300, None, "glitch", {}, 1024),
     ("rest-pose", "07_03.bvh", 300, None, "rest", {"max_error_cm": 1.0, "error_measure": "shell"}, 256),
     ("rest-at-zero", "135_08.amc", 200, None, "rest-at-zero", {}, 1024),
+    ("turned-root-bind", "07_03.bvh", 200, None, "turned-bind", {"max_error_cm": 1.0}, 1024),
     ("lead", "07_03.bvh", 400, None, "cut", {"max_error_cm": 0.2, "window": 128}, 256),
     ("bones-in-channels", "07_03.amc", 200, None, "bones-in-channels", {"max_error_cm": 1.0, "effort": 3}, 1024),
     ("offsets-in-channels", "07_03.amc", 200, None, "offsets-in-channels", {"max_error_cm": 1.0}, 1024),
@@ -178,6 +179,8 @@ def _reexpressed(motion, how):
         return reexpress.with_position_channels(reexpress.with_dummy_root(motion, (30.0, 20.0, 10.0)))
     if how == "dummy-bind":
         return reexpress.with_bind_frame(reexpress.with_dummy_root(motion, (0.0, -90.0, 0.0), position_channels=True))
+    if how == "turned-bind":  # a game export: the bind pose under a rotation-only root turned to the engine's axes
+        return reexpress.with_dummy_root(reexpress.with_bind_frame(motion), (0.0, -90.0, 0.0))
     if how == "rest":
         return reexpress.with_bind_frame(motion)
     if how == "rest-at-zero":

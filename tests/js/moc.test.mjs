@@ -16,7 +16,7 @@ import { crc32, u32 } from '../../js/src/bytes.js';
 import { seeded } from './seeded.mjs';
 
 const MOC = new URL('../data/moc/', import.meta.url);
-const CASES = ['bvh-joint', 'asf-30fps-shell', 'dummy-root', 'dummy-root-bind', 'zxz-d4', 'haar-bitrate', 'glitch', 'rest-pose', 'rest-at-zero', 'lead', 'bones-in-channels', 'offsets-in-channels'];
+const CASES = ['bvh-joint', 'asf-30fps-shell', 'dummy-root', 'dummy-root-bind', 'zxz-d4', 'haar-bitrate', 'glitch', 'rest-pose', 'rest-at-zero', 'turned-root-bind', 'lead', 'bones-in-channels', 'offsets-in-channels'];
 
 async function fixture(name) {
   const data = new Uint8Array(await readFile(new URL(`${name}.moc`, MOC)));

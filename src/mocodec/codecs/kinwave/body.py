@@ -13,7 +13,8 @@ bit 3 one step offset per segment, with bit 4 a coding form per three-angle join
 (:mod:`mocodec.codecs.shared.rotvec`) and with bit 6 three mean-rotation integers per such joint.
 Format 2 is format 1 with a byte of more flags after the header: bit 0, frame 0 is the
 skeleton's rest pose (every rotation 0, the translations frame 1's), bit 1, the rest pose with
-every translation 0 too; that frame is not coded, and the rest is a format 1 body of the other
+every translation 0 too, both bits, the rest pose with the root's rotations frame 1's as well
+as the translations; that frame is not coded, and the rest is a format 1 body of the other
 frames (:func:`rest_kind`); bits 2-3, the lead of the layout (:func:`trendwave.layout`); bit 4,
 constant translations at a finer quantum, bit 5 constant turns above translations too, bit 6
 constant translations about 0 instead of their joints' offsets (:class:`ConstantCoding`).
@@ -35,7 +36,7 @@ from mocodec.codecs.shared import rotvec
 from mocodec.coding.entropy import coefcoder
 from mocodec.coding.transforms import trendwave
 from mocodec.errors import CorruptStreamError
-from mocodec.kinematics import channel_plan, forward_kinematics, position_offsets
+from mocodec.kinematics import channel_plan, forward_kinematics, position_offsets, rest_frame
 from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
@@ -43,6 +44,11 @@ FORMAT = 1  # the body format (docs/formats.md), pinned by the golden fixtures
 FORMAT_MORE = 2  # format 1 with a byte of more flags after the header
 REST = 1  # more flags bit 0: frame 0 is the rest pose, its translations frame 1's (not coded)
 REST_AT_ZERO = 2  # more flags bit 1: frame 0 is the rest pose with every translation 0 (not coded)
+REST_TURNED = 3  # more flags bits 0-1 both: the rest pose as REST, the root's turn frame 1's too (not coded)
+#: A rest pose's translations are frame 1's within this share of their size: a float32 export
+#: writes each frame's with noise in the last places (the bound at frame 0 is checked on the
+#: decoder's output).
+REST_RTOL = 1e-5
 LEAD_SHIFT = 2  # more flags bits 2-3: the layout's lead (trendwave.layout), in frames
 FINE_CONSTANTS = 16  # more flags bit 4: constant translations at FINE_CONST_FRACTION of their step
 FINE_TURNS = 32  # more flags bit 5: constant rotations of joints above translation channels, the same
@@ -374,19 +380,23 @@ def apply_patches(out: np.ndarray, steps: np.ndarray, frames: np.ndarray, patche
 def rest_kind(motion: Motion) -> int:
     """Whether frame 0 of ``motion`` is its skeleton's rest pose, which exporters write before
     a take (a bind pose, :attr:`Motion.starts_at_rest`), with the translations of frame 1
-    (REST) or all 0 (REST_AT_ZERO). Such a frame costs a flag instead of a keyframe and the
-    wavelet starts after it; 0 if not."""
+    (REST), all 0 (REST_AT_ZERO), or frame 1's under the root's turn of frame 1 (REST_TURNED,
+    a game export's rotation-only root turned to the engine's axes). Such a frame costs a flag
+    instead of a keyframe and the wavelet starts after it; 0 if not."""
     if not motion.starts_at_rest:
         return 0
     channels, rot = motion.channels, motion.skeleton.rotation_mask
-    if np.array_equal(channels[0, ~rot], channels[1, ~rot]):
-        return REST
-    return REST_AT_ZERO if not channels[0, ~rot].any() else 0
+    turned = bool(channels[0, motion.skeleton.root_turn_mask].any())
+    if np.allclose(channels[0, ~rot], channels[1, ~rot], rtol=REST_RTOL, atol=0.0):
+        return REST_TURNED if turned else REST
+    return REST_AT_ZERO if not turned and not channels[0, ~rot].any() else 0
 
 
 def rest_pose(skeleton: Skeleton, kind: int, frame1: np.ndarray) -> np.ndarray:
     """Frame 0 of a body whose more flags say ``kind``, from its decoded frame 1 ``(C,)``."""
-    return np.where(skeleton.rotation_mask, 0.0, frame1) if kind == REST else np.zeros_like(frame1)
+    if kind == REST_AT_ZERO:
+        return np.zeros_like(frame1)
+    return rest_frame(skeleton, frame1, turned=kind == REST_TURNED)
 
 
 def with_more(body: bytes, more: int) -> bytes:
@@ -429,7 +439,7 @@ def decode_body(body: bytes, skeleton: Skeleton, frames: int) -> np.ndarray:
         raise CorruptStreamError(f"kinwave body of {len(body)} bytes is shorter than its {HEAD.size + 1}-byte header")
     more = body[HEAD.size]
     kind, lead = more & 3, (more >> LEAD_SHIFT) & 3
-    if not more or more >> 7 or kind not in (0, REST, REST_AT_ZERO) or frames < 1 + bool(kind):
+    if not more or more >> 7 or frames < 1 + bool(kind):
         raise CorruptStreamError(
             f"kinwave body's more flags at byte {HEAD.size} are damaged ({more} for {frames} frames)"
         )

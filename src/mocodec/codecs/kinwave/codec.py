@@ -47,7 +47,7 @@ import numpy as np
 from mocodec.codecs.base import Codec, Coded, Knob, QualityKnob, StreamDecoder, StreamEncoder
 from mocodec.codecs.kinwave import kinalloc
 from mocodec.codecs.kinwave.body import (
-    REST,
+    REST_AT_ZERO,
     WAVELET_IDS,
     decode_body,
     rest_kind,
@@ -204,22 +204,23 @@ class KinwaveCodec(Codec):
         kind = rest_kind(motion) if self.config["keyframes"] else 0
         if kind:
             body = BoundSearch(self, Motion(motion.skeleton, motion.fps, motion.channels[1:]), output_skeleton).run()
-            if kind != REST or self._rest_holds(
-                motion, decode_body(body, output_skeleton, motion.num_frames - 1)[0], output_skeleton
+            if kind == REST_AT_ZERO or self._rest_holds(
+                motion, decode_body(body, output_skeleton, motion.num_frames - 1)[0], output_skeleton, kind
             ):
                 return with_more(body, kind)
         return BoundSearch(self, motion, output_skeleton).run()
 
-    def _rest_holds(self, motion: Motion, frame1: np.ndarray, output_skeleton: Skeleton) -> bool:
-        """Whether the rest pose that takes its translations from the decoded ``frame1`` holds
-        the bound at frame 0 (its rotations are exact, its translations those of frame 1, whose
-        errors the joints below may add up differently there)."""
+    def _rest_holds(self, motion: Motion, frame1: np.ndarray, output_skeleton: Skeleton, kind: int) -> bool:
+        """Whether the rest pose of ``kind`` that takes its translations (and a turned root's
+        angles) from the decoded ``frame1`` holds the bound at frame 0 (its other rotations
+        are exact, the rest those of frame 1, whose errors the joints below may add up
+        differently there)."""
         bound = self.config["max_error_cm"]
         if self.config["bits_per_second"] > 0:
             return True
         cm = 100.0 / motion.skeleton.units_per_metre
         p0, q0 = forward_kinematics(motion.skeleton, motion.channels[:1])
-        p1, q1 = forward_kinematics(output_skeleton, rest_pose(output_skeleton, REST, frame1)[None])
+        p1, q1 = forward_kinematics(output_skeleton, rest_pose(output_skeleton, kind, frame1)[None])
         return worst_error(motion.skeleton, p0 * cm, q0, p1 * cm, q1, self.config["error_measure"]) <= bound
 
     # ----- decoding -----------------------------------------------------------------------

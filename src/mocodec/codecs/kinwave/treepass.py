@@ -32,15 +32,22 @@ if TYPE_CHECKING:
 
 class DepthCoding(NamedTuple):
     """What kinwave codes at each depth, flattened beside :class:`closedloop.TreeArrays`: per
-    coded channel its constant flag and constant's coding; per joint in a coding form (a
-    depth's between consecutive ``form_ptr``) its rows among the depth's, its form's arrays
+    coded channel its constant flag and constant's coding; per depth the rows (among its
+    channels) that go through :func:`channelcode.depth_kernel` (``kernel_ptr``) and the
+    constant ones held at their first knot beside it (``held_ptr``: not in a coding form nor
+    on the world's axes); per joint in a coding form (a depth's between consecutive
+    ``form_ptr``) its rows among the depth's kernel rows, its form's arrays
     (:meth:`rotvec.FormSet.kernel_arguments`), its joint, three-angle group and tree entry,
     and whether the closed loop gives its rotation; per translation on the world's axes its
-    joint and rows; per depth whether it needs the decoded rows' orientations above it."""
+    joint and kernel rows; per depth whether it needs the decoded rows' orientations above it."""
 
     const: np.ndarray
     fraction: np.ndarray
     base: np.ndarray
+    kernel_ptr: np.ndarray
+    kernel_rows: np.ndarray
+    held_ptr: np.ndarray
+    held_rows: np.ndarray
     form_ptr: np.ndarray
     form_rows: np.ndarray  # (3 n,)
     vector: np.ndarray
@@ -85,12 +92,24 @@ def depth_coding(enc: Encoder) -> DepthCoding:
     has_world[form_depths[forms.world]] = True
     turned = has_world.copy()
     turned[moved_depths] = True
+    const = np.ascontiguousarray(enc.const[tree.coded], dtype=np.bool_)
+    place = np.empty(sk.num_channels, dtype=np.int64)  # each channel's place in tree.coded
+    place[tree.coded] = np.arange(tree.coded.size)
+    kernel = ~const
+    kernel[place[[c for k in coded for c in groups[k][0]]]] = True
+    kernel[place[[c for _, pos in moved for c in pos]]] = True
+    before: np.ndarray = np.cumsum(kernel) - kernel  # each row's place among the kernel rows so far...
+    kernel_row: np.ndarray = before - before[tree.coded_ptr[depth_of]]  # ... of its depth
     return DepthCoding(
-        np.ascontiguousarray(enc.const[tree.coded], dtype=np.bool_),
+        const,
         np.ascontiguousarray(enc.constants.fraction[tree.coded], dtype=np.float64),
         np.ascontiguousarray(enc.constants.base[tree.coded], dtype=np.float64),
+        np.concatenate(([0], np.cumsum(np.bincount(depth_of[kernel], minlength=depths)))).astype(np.int64),
+        row[tree.coded][kernel],
+        np.concatenate(([0], np.cumsum(np.bincount(depth_of[~kernel], minlength=depths)))).astype(np.int64),
+        row[tree.coded][~kernel],
         np.searchsorted(form_depths, np.arange(depths + 1)).astype(np.int64),
-        np.array([row[c] for k in coded for c in groups[k][0]], dtype=np.int64),
+        np.array([kernel_row[place[c]] for k in coded for c in groups[k][0]], dtype=np.int64),
         forms.vector,
         forms.means,
         forms.form_axes,
@@ -101,7 +120,7 @@ def depth_coding(enc: Encoder) -> DepthCoding:
         np.array([enc.cfg["closed_loop"] and sk.parents[j] >= 0 for j in joints], dtype=np.bool_),
         np.searchsorted(moved_depths, np.arange(depths + 1)).astype(np.int64),
         np.array([j for j, _ in moved], dtype=np.int64),
-        np.array([[row[c] for c in pos] for _, pos in moved], dtype=np.int64).reshape(-1, 3),
+        np.array([[kernel_row[place[c]] for c in pos] for _, pos in moved], dtype=np.int64).reshape(-1, 3),
         turned,
         has_world,
     )
@@ -262,33 +281,50 @@ def _tree_pass(loop, coding, kinematics, turns, steps, factors, isolated, coder,
     patches = np.zeros((channels, isolated.size), dtype=np.int64)
     for d in range(tree.depth_ptr.size - 1):
         ca, cb = tree.coded_ptr[d], tree.coded_ptr[d + 1]
-        rows = cb - ca
         targets = depth_start(tree, d, start, active, goal, glob, skip, where, goal_positions, targeted, plan)
-        if rows == 0:
+        if cb == ca:
             continue
         fa, fb, ma, mb = coding.form_ptr[d], coding.form_ptr[d + 1], coding.moved_ptr[d], coding.moved_ptr[d + 1]
         above = _orientations_above(decoded, kinematics) if coding.turned[d] and frames else np.zeros((count, 4))
-        values = targets.T.copy()
+        rows = coding.kernel_rows[coding.kernel_ptr[d] : coding.kernel_ptr[d + 1]] + ca  # (in tree.coded)
+        values = np.empty((rows.size, frames))
+        for i in range(rows.size):
+            values[i, :] = targets[:, rows[i] - ca]
         quats = _form_rotations(values, tree, coding, fa, fb, glob, goal)
         turned, pre = _world_turns(coding, d, fa, fb, above, turns)
         moved_turns = np.empty((mb - ma, 4))
         for i in range(mb - ma):
             moved_turns[i, :] = above[coding.moved_joints[ma + i]]
-        step = np.empty(rows)
-        for i in range(rows):
-            step[i] = steps[tree.coded[ca + i]]
         k_int, c_int, out, patch, rotations = depth_kernel(
             values, coding.form_rows[3 * fa : 3 * fb], quats,
             (coding.vector[fa:fb], coding.means[fa:fb], coding.form_axes[fa:fb], turned, pre, coding.file_axes[fa:fb]),
-            coding.moved_rows[ma:mb], moved_turns, isolated, coding.const[ca:cb], step, coding.fraction[ca:cb],
-            coding.base[ca:cb], factors, coder, every_frame,
+            coding.moved_rows[ma:mb], moved_turns, isolated, coding.const[rows], steps[tree.coded[rows]],
+            coding.fraction[rows], coding.base[rows], factors, coder, every_frame,
         )  # fmt: skip
-        for i in range(rows):
-            c = tree.coded[ca + i]
+        depth = np.empty((frames, cb - ca))  # the depth's decoded rows, for depth_end
+        for i in range(rows.size):
+            c = tree.coded[rows[i]]
             knots[c, :] = k_int[i]
             coeffs[c, :] = c_int[i]
             patches[c, :] = patch[i]
             decoded[c, :] = out[i]
-        depth_end(tree, d, out.T.copy(), glob, where, placing, compose_steps)
+            depth[:, rows[i] - ca] = out[i]
+        for r in coding.held_rows[coding.held_ptr[d] : coding.held_ptr[d + 1]]:
+            c, at = tree.coded[ca + r], ca + r
+            _hold(knots, decoded, depth, r, c, targets, steps[c] * coding.fraction[at], coding.base[at])
+        depth_end(tree, d, depth, glob, where, placing, compose_steps)
         _compose_forms(glob, rotations, tree, coding, fa, fb)  # (placing reads the depths above only)
     return knots, coeffs, decoded, patches
+
+
+@numba.njit(cache=True)
+def _hold(knots, decoded, depth, r, c, targets, quantum, base):
+    """A constant row outside the depth kernel (row ``r`` of the depth, channel ``c``): its
+    knots and decoded value as :func:`channelcode.quantise` and :func:`channelcode.reconstruct`
+    make them (its first target's nearest multiple of ``quantum``, its step's constant
+    fraction, about ``base``; no coefficients, no patches, nothing at a seam)."""
+    first = targets[0, r] if targets.shape[0] else base
+    knots[c, :] = np.int64(np.rint((first - base) / quantum))
+    value = base + knots[c, 0] * quantum
+    decoded[c, :] = value
+    depth[:, r] = value

@@ -298,13 +298,26 @@ def rest_frame(skeleton: Skeleton, frame: np.ndarray, turned: bool = False) -> n
         return out
     turn = skeleton.root_turn_mask
     out[turn] = frame[turn]
-    back = rotations.quat_conjugate(local_quaternions(skeleton, out[None])[0, 0])
+    for channels, angles in _turned_back(skeleton, tuple(frame[turn].tolist())):
+        out[channels] = angles
+    return out
+
+
+@lru_cache(maxsize=64)
+def _turned_back(skeleton: Skeleton, turn: tuple[float, ...]) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
+    """For :func:`rest_frame`: each joint right below the root that can turn back (three
+    rotation channels, no axis pre-rotation), its rotation channels and the angles that undo
+    the root's rotation channels' ``turn`` (the clips of one export share them)."""
+    frame = np.zeros(skeleton.num_channels)
+    frame[skeleton.root_turn_mask] = turn
+    back = rotations.quat_conjugate(local_quaternions(skeleton, frame[None])[0, 0])
+    out = []
     for j in np.flatnonzero(skeleton.parents == 0):
         joint = skeleton.joints[j]
         if len(joint.rotation_order) == 3 and not joint.has_axis:
-            angles = rotations.quat_to_euler(back, joint.rotation_order)
-            out[skeleton.channel_offsets[j] + np.array(joint.rotation_channel_indices())] = angles
-    return out
+            channels = skeleton.channel_offsets[j] + np.array(joint.rotation_channel_indices())
+            out.append((channels, rotations.quat_to_euler(back, joint.rotation_order)))
+    return tuple(out)
 
 
 def forward_kinematics(skeleton: Skeleton, channels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

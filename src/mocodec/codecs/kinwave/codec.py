@@ -203,10 +203,9 @@ class KinwaveCodec(Codec):
         body, where frame 0 then holds the bound; else the whole motion is the body."""
         kind = rest_kind(motion) if self.config["keyframes"] else 0
         if kind:
-            body = BoundSearch(self, Motion(motion.skeleton, motion.fps, motion.channels[1:]), output_skeleton).run()
-            if kind == REST_AT_ZERO or self._rest_holds(
-                motion, decode_body(body, output_skeleton, motion.num_frames - 1)[0], output_skeleton, kind
-            ):
+            search = BoundSearch(self, Motion(motion.skeleton, motion.fps, motion.channels[1:]), output_skeleton)
+            body = search.run()
+            if kind == REST_AT_ZERO or self._rest_holds(motion, search.decoded_frame(body, 0), output_skeleton, kind):
                 return with_more(body, kind)
         return BoundSearch(self, motion, output_skeleton).run()
 

@@ -46,6 +46,7 @@ class BoundSearch(Encoder):
     """The encoder's search for the steps that meet a bound (or a bit rate) on the decoded output."""
 
     feedback_share = JOINT_FEEDBACK
+    checked: tuple[bytes, np.ndarray] | None = None  # the body the bound was last checked on, decoded
 
     @cached_property
     def moved_points(self) -> np.ndarray:
@@ -70,7 +71,9 @@ class BoundSearch(Encoder):
         """Per step code, the 1/8 octaves (times ``share``, floored) between ``reference`` and
         the worst of ``errors (points,)`` among the points the code moves (the joints below it,
         and with ``shell`` its own bone's shell; the translations: all)."""
-        own = np.array([errors[row].max() if row.any() else errors.max() for row in self.moved_points])
+        moved = self.moved_points
+        own = np.where(moved, errors, -np.inf).max(axis=1, initial=-np.inf)
+        own[~moved.any(axis=1)] = errors.max()
         return np.floor(8.0 * share * np.log2(reference / np.maximum(own, reference * 2.0**-8)))
 
     def run(self) -> bytes:
@@ -319,9 +322,19 @@ class BoundSearch(Encoder):
         return self._to_bound(bound)  # what the segments cannot fix (constant channels): one scale
 
     def decoded_body(self, body: bytes) -> np.ndarray:
-        """What the decoder makes of ``body`` on the skeleton it will be given (a constant
-        translation is coded about that skeleton's offsets)."""
-        return decode_body(body, self.output_skeleton, self.frames).T
+        """What the decoder makes of ``body`` ``(C, T)`` on the skeleton it will be given (a
+        constant translation is coded about that skeleton's offsets); kept for
+        :meth:`decoded_frame`."""
+        decoded = decode_body(body, self.output_skeleton, self.frames).T
+        self.checked = (body, decoded)
+        return decoded
+
+    def decoded_frame(self, body: bytes, frame: int) -> np.ndarray:
+        """Frame ``frame`` ``(C,)`` of what the decoder makes of ``body``: from the bound's
+        check when that decoded this body, else decoded anew."""
+        if self.checked is not None and self.checked[0] is body:
+            return self.checked[1][:, frame]
+        return decode_body(body, self.output_skeleton, self.frames)[frame]
 
     def _to_rate(self, budget_bytes: float) -> bytes:
         # size / budget falls as the scale rises: search on x = -log(scale)

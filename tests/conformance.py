@@ -55,6 +55,23 @@ def test_round_trip(cid, clip, bodies):
 
 
 @pytest.mark.parametrize("cid", CODECS)
+def test_a_rig_without_channels_round_trips(cid, clip):
+    """Some exporters write a rig whose joints never move: no channels, a few frames (Blender
+    2.79's, in ../shared/data/fbx). Every codec codes it, as an empty body, through a file."""
+    from dataclasses import replace
+
+    from mocodec import Motion, Skeleton
+
+    sk = clip.skeleton
+    joints = tuple(replace(j, channels=(), rotation_order="", limits=()) for j in sk.joints)
+    still = Skeleton(joints, sk.units_per_metre, sk.name)
+    motion = Motion(still, clip.fps, np.zeros((2, 0)))
+    back = moc.unpack(moc.pack(motion, get_codec(cid)))
+    assert back.num_frames == 2 and back.channels.shape == (2, 0)
+    assert get_codec(cid).encode(motion) == b""
+
+
+@pytest.mark.parametrize("cid", CODECS)
 def test_config_round_trips_and_decides_equality(cid):
     codec = get_codec(cid)
     config = json.loads(json.dumps(codec.get_config()))

@@ -155,6 +155,19 @@ def test_warmup_compiles_a_codecs_shared_parts_in_a_second_process(capsys):
     assert "compiled or loaded the kernels of 1 codecs" in capsys.readouterr().out
 
 
+def test_a_rig_without_channels_encodes_decodes_and_is_not_evaluated(tmp_path, capsys):
+    """A rig whose joints never move (no channels) codes to a file and back; ``eval`` says there
+    is nothing to measure, in one line, with a non-zero exit."""
+    still = tmp_path / "still.bvh"
+    still.write_text("HIERARCHY\nROOT hip\n{\n OFFSET 0 0 0\n CHANNELS 0\n}\nMOTION\nFrames: 2\nFrame Time: 0.04\n\n\n")
+    assert main(["encode", str(still), "-o", str(tmp_path / "still.moc")]) == 0
+    assert main(["decode", str(tmp_path / "still.moc"), "-o", str(tmp_path / "back.bvh")]) == 0
+    assert load(tmp_path / "back.bvh").num_frames == 2
+    capsys.readouterr()
+    assert main(["eval", str(still)]) == 2
+    assert "no channels" in capsys.readouterr().err
+
+
 def test_encode_decode_eval_codecs(tmp_path, capsys):
     out = tmp_path / "walk.moc"
     assert main(["encode", str(DATA / "07_03.amc"), "-o", str(out)]) == 0

@@ -6,7 +6,9 @@ one row per point. A row holds the size, ratio vs 32-bit floats (whole file, ske
 included), bit rate, bits per DOF-sample, the quality measures of
 :func:`mocodec.metrics.compare` and the encode and decode time per frame. A point a codec
 cannot reach (rate control says so) gives a row with status ``unreachable``; a clip that
-fails to load or a codec that crashes gives status ``failed`` and the run goes on.
+fails to load or a codec that crashes gives status ``failed`` and the run goes on; a clip
+without channels (a rig whose joints never move: nothing to measure) gives one row with
+status ``skipped``.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ from pathlib import Path
 from mocodec import moc
 from mocodec.bench.points import Point, sweep_range
 from mocodec.codecs import codec_class, get_codec
-from mocodec.errors import MocodecError
+from mocodec.errors import CodecError, MocodecError
 from mocodec.formats import READABLE, load
 from mocodec.metrics import compare
 from mocodec.motion import Motion
@@ -191,6 +193,9 @@ def run_task(task: Task) -> list[dict]:
         motion = load(task.path)
     except Exception as e:  # noqa: BLE001 - the clip is reported and the run goes on
         return [failed_row(task, None, Point("knob", math.nan), "failed", e)]
+    if not motion.skeleton.num_channels:
+        nothing = CodecError("the clip has no channels (a rig whose joints never move): nothing to measure")
+        return [failed_row(task, motion, Point("knob", math.nan), "skipped", nothing)]
     _warm(task, motion)
     rows = []
     for point in task.points:

@@ -119,6 +119,8 @@ FIRST_USE_FRAMES = 128
 
 def evaluate(motion: Motion, args) -> str:
     """Encode and decode in memory; the table of ``eval``."""
+    if not motion.skeleton.num_channels:
+        raise CodecError("nothing to evaluate: the clip has no channels (a rig whose joints never move)")
     codec, _ = configured(args, motion)
     t0 = time.perf_counter()
     moc.round_trip(motion[:FIRST_USE_FRAMES], codec)  # compiles (or loads) the codec's kernels

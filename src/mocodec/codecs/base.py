@@ -305,7 +305,10 @@ class Codec:
         or the stream's). ``output_skeleton``: the skeleton the decoder will be given when it
         is not quite ``motion``'s own (a lossy .moc file stores offsets rounded,
         :func:`mocodec.moc.pack`); a codec that verifies an error bound verifies it on the
-        joints that skeleton gives."""
+        joints that skeleton gives. A motion without channels (a rig whose joints never move,
+        as some exporters write one) is an empty body."""
+        if not motion.skeleton.num_channels:
+            return b""
         if not np.isfinite(motion.channels).all():
             f, c = np.argwhere(~np.isfinite(motion.channels))[0]
             raise CodecError(
@@ -339,6 +342,8 @@ class Codec:
                 f"{self.id} body of {frames} frames of {skeleton.num_channels} channels is "
                 f"over the limit of {max_values:,} values (raise it with --max-values)"
             )
+        if not skeleton.num_channels and not body:  # (a motion without channels)
+            return Motion(skeleton, fps, np.zeros((frames, 0)))
         try:
             if self.native_decoder and not trusted:
                 channels = sandbox.call_isolated(self._decode, body, skeleton, frames, fps, what=f"{self.id} body")

@@ -90,9 +90,16 @@ class GroupSeries:
         return {g: {"mean": float(m), "max": float(x)} for g, m, x in zip(self.groups, self.mean, self.max)}
 
 
+def _per_group(values: np.ndarray, groups: dict[str, np.ndarray], reduce) -> np.ndarray:
+    """``(frames, groups)``: ``reduce`` over each group's columns of ``values`` (no columns
+    for a rig without channels, which has no groups)."""
+    if not groups:
+        return np.zeros((values.shape[0], 0))
+    return np.stack([reduce(values[:, idx], axis=1) for idx in groups.values()], axis=1)
+
+
 def _weighted_mean_square(err: np.ndarray, a: np.ndarray, b: np.ndarray, groups: dict[str, np.ndarray]) -> np.ndarray:
-    norm = a * np.square(err / b)
-    return np.stack([norm[:, idx].mean(axis=1) for idx in groups.values()], axis=1)
+    return _per_group(a * np.square(err / b), groups, np.mean)
 
 
 def vector_error(skeleton: Skeleton, original: np.ndarray, error: np.ndarray, weights=None, ranges=None) -> GroupSeries:
@@ -112,8 +119,7 @@ def max_vector_error(
     names = skeleton.channel_names
     a = per_item(weights, names, np.ones(len(names)), "channel")
     b = per_item(ranges, names, default_ranges(skeleton, original), "channel")
-    norm = a * np.abs(error) / b
-    return GroupSeries(tuple(groups), np.stack([norm[:, idx].max(axis=1) for idx in groups.values()], axis=1))
+    return GroupSeries(tuple(groups), _per_group(a * np.abs(error) / b, groups, np.max))
 
 
 def joint_position_error(

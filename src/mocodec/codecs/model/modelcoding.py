@@ -66,7 +66,7 @@ def decode_root(data: bytes, frames: np.ndarray, n: int, width: int, step: float
     q = decode_ints(data)
     if q.size != frames.size * width:
         raise CorruptStreamError(f"{where}: {q.size} root values for {frames.size} samples of {width} channels")
-    return animate.hermite(frames, np.cumsum(q.reshape(-1, width), axis=0) * step, n)
+    return animate.hermite(frames, np.cumsum(q.reshape(frames.size, width), axis=0) * step, n)
 
 
 def tables_for(

@@ -44,11 +44,7 @@ def paths(root: np.ndarray, lengths: np.ndarray) -> np.ndarray:
     out = []
     for k, length in enumerate(lengths):
         at = np.linspace(0, quatseg.NORMAL_FRAMES - 1, length)
-        out.append(
-            np.column_stack(
-                [np.interp(at, np.arange(quatseg.NORMAL_FRAMES), root[k, :, c]) for c in range(root.shape[2])]
-            ).reshape(length, root.shape[2])
-        )
+        out.append(quatseg.interpolate_columns(at, np.arange(quatseg.NORMAL_FRAMES), root[k]))
     return np.concatenate(out) if out else np.zeros((0, root.shape[2]))
 
 
@@ -110,7 +106,7 @@ def keyed_root(path: np.ndarray, lengths: np.ndarray, keys: np.ndarray) -> np.nd
     firsts = np.cumsum(lengths) - lengths
     at = np.append(firsts, len(path) - 1)
     frames = np.arange(len(path))
-    out = np.column_stack([np.interp(frames, at, keys[:, c]) for c in range(keys.shape[1])]).reshape(path.shape)
+    out = quatseg.interpolate_columns(frames, at, keys).reshape(path.shape)
     seg = np.repeat(np.arange(len(lengths)), lengths)
     ends = firsts + lengths - 1
     u = ((frames - firsts[seg]) / np.maximum(lengths[seg] - 1, 1))[:, None]

@@ -156,6 +156,15 @@ def chop(g: np.ndarray, starts: np.ndarray, max_len: int, final: bool) -> list[t
     return out
 
 
+def interpolate_columns(at: np.ndarray, xp: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """``(len(at), T)``: each column of ``values (len(xp), T)`` linearly at ``at`` (a root
+    trajectory resampled; a root without translations has no column)."""
+    out = np.empty((len(at), values.shape[1]))
+    for c in range(values.shape[1]):
+        out[:, c] = np.interp(at, xp, values[:, c])
+    return out
+
+
 def normalise(q: np.ndarray, segments: np.ndarray) -> np.ndarray:
     """``(n, 16, 4)`` time-normalised segments of joint signals ``q (frames, R, 4)`` for
     ``segments (n, 3)`` rows (joint, start, end), by slerp between neighbouring frames."""

@@ -73,7 +73,7 @@ def normal_root(t: np.ndarray, cuts: np.ndarray, up: np.ndarray) -> np.ndarray:
     out = np.empty((len(cuts), quatseg.NORMAL_FRAMES, t.shape[1]))
     for k, (s, e) in enumerate(cuts):
         pos = np.linspace(s, e - 1, quatseg.NORMAL_FRAMES)
-        out[k] = np.column_stack([np.interp(pos, np.arange(s, e), t[s:e, c]) for c in range(t.shape[1])])
+        out[k] = quatseg.interpolate_columns(pos, np.arange(s, e), t[s:e])
         out[k][:, ~up] -= t[s, ~up]
     return out
 

@@ -111,7 +111,7 @@ class RhythmicCodec(Codec):
             keys = decode_ints(parts[2])
             if keys.size != width * (len(lengths) + 1):
                 raise CorruptStreamError(f"{where}: {keys.size} root key values for {len(lengths)} segments")
-            keys = np.cumsum(keys.reshape(-1, width), axis=0) * _key_step(skeleton)
+            keys = np.cumsum(keys.reshape(len(lengths) + 1, width), axis=0) * _key_step(skeleton)
             translation = blend.keyed_root(path, lengths, keys)
         else:
             if len(parts[2]) != 4 * width:

@@ -372,8 +372,11 @@ class Codec:
 
     def _encode_for(self, motion: Motion, output_skeleton: Skeleton) -> bytes:
         """The body for a decoder given ``output_skeleton`` (same structure as ``motion``'s, offsets
-        rounded): the same as :meth:`_encode` for codecs that do not check the joints' error."""
-        return self._encode(motion)
+        rounded): for codecs that do not check the joints' error, :meth:`_encode` of the
+        motion on that skeleton, so that whatever the codec derives from the skeleton (body
+        parts, groups, lever arms) is what its decoder derives (rounding an offset of 1e-7 to
+        0 can move a joint to another body part)."""
+        return self._encode(Motion(output_skeleton, motion.fps, motion.channels))
 
     def _decode(self, body: bytes, skeleton: Skeleton, frames: int, fps: float) -> np.ndarray:
         raise NotImplementedError

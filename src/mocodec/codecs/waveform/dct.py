@@ -50,7 +50,8 @@ class _State:
         return 2.0 * self.dc_range / 2.0 ** self.bits[0] * mult_row
 
     def rebuild(self, coeffs: np.ndarray, frames: int) -> np.ndarray:
-        x = blockdct.inverse(coeffs).reshape(-1, self.active.size)[:frames]
+        blocks = blockdct.inverse(coeffs)  # (blocks, n, active): none active if all hold still
+        x = blocks.reshape(blocks.shape[0] * blocks.shape[1], self.active.size)[:frames]
         out = np.empty((frames, self.params.centre.size))
         out[:] = self.params.centre
         out[:, self.active] = x
@@ -111,7 +112,7 @@ class DctCodec(BlockwiseCodec):
             step = state.dc_step(mult[b])
             codes[b, 0] = blockdct.mid_tread(coeffs[b, 0] - state.dc, step, state.dc_range)
             state.dc = state.dc + codes[b, 0] * step
-        return [classes, codes.reshape(-1, x.shape[1])], frames
+        return [classes, codes.reshape(codes.shape[0] * codes.shape[1], x.shape[1])], frames
 
     def _uncode(self, state, n, read, last):
         k = state.active.size

@@ -72,13 +72,14 @@ class _State:
 
     def band_signal(self, coeffs: np.ndarray, b: int) -> np.ndarray:
         a, z = self.bounds[b]
-        return np.ascontiguousarray(coeffs[:, a:z].reshape(-1, coeffs.shape[2]))
+        return np.ascontiguousarray(coeffs[:, a:z].reshape(coeffs.shape[0] * (z - a), coeffs.shape[2]))
 
     def run(self, b: int, x: np.ndarray, codes: np.ndarray, decode: bool) -> np.ndarray:
         return run_uniform(x, codes, decode, self.prev[b], self.coefficients[b], self.steps[b])
 
     def rebuild(self, coeffs: np.ndarray, frames: int) -> np.ndarray:
-        x = subbands.inverse(coeffs, self.levels).reshape(-1, self.active.size)[:frames]
+        blocks = subbands.inverse(coeffs, self.levels)  # (blocks, n, active): none active if all hold still
+        x = blocks.reshape(blocks.shape[0] * blocks.shape[1], self.active.size)[:frames]
         out = np.empty((frames, self.params.centre.size))
         out[:] = self.params.centre
         out[:, self.active] = x + self.params.centre[self.active]

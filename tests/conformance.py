@@ -71,12 +71,10 @@ def test_a_rig_without_channels_round_trips(cid, clip):
     assert get_codec(cid).encode(motion) == b""
 
 
-@pytest.mark.parametrize("cid", CODECS)
-@pytest.mark.parametrize("turns", [True, False])
-def test_a_rig_without_translations_round_trips(cid, clip, turns):
-    """glTF rigs often have no translation channel at all, their root turning or not even that
-    (the shared RiggedFigure; Fox and SimpleSkin): every codec codes such a clip and decodes
-    what it wrote."""
+def without_translations(clip, turns: bool):
+    """``clip`` on a rig without translation channels, as glTF rigs often are: its root joint
+    keeping its rotations (``turns``, the shared RiggedFigure) or no channel at all (Fox,
+    SimpleSkin)."""
     from dataclasses import replace
 
     from mocodec import Motion, Skeleton
@@ -86,7 +84,14 @@ def test_a_rig_without_translations_round_trips(cid, clip, turns):
     root = replace(sk.joints[0], channels=tuple(turning), rotation_order="".join(c[0] for c in turning), limits=())
     later = np.arange(sk.num_channels) >= sk.channel_offsets[1]
     keep = later | (sk.rotation_mask if turns else False)
-    motion = Motion(Skeleton((root, *sk.joints[1:]), sk.units_per_metre, sk.name), clip.fps, clip.channels[:, keep])
+    return Motion(Skeleton((root, *sk.joints[1:]), sk.units_per_metre, sk.name), clip.fps, clip.channels[:, keep])
+
+
+@pytest.mark.parametrize("cid", CODECS)
+@pytest.mark.parametrize("turns", [True, False])
+def test_a_rig_without_translations_round_trips(cid, clip, turns):
+    """Every codec codes a clip on a rig without translations and decodes what it wrote."""
+    motion = without_translations(clip, turns)
     back = moc.unpack(moc.pack(motion, get_codec(cid)))
     assert back.channels.shape == motion.channels.shape and np.isfinite(back.channels).all()
 
@@ -285,6 +290,32 @@ def test_every_streaming_codec_goes_through_live_packets(walk_bvh, cid):
         return
     # a keyframe every second costs some quality against one uninterrupted stream, within a small factor
     assert wrapped_error(got.channels, walk_bvh.channels) < 3 * wrapped_error(batch.channels, walk_bvh.channels) + 1
+
+
+@pytest.mark.parametrize("cid", STREAMING)
+@pytest.mark.parametrize("rig", ["walk", "bone"])
+def test_a_rig_without_translations_streams_every_frame(cid, walk_amc, rig):
+    """Every frame of such a rig comes through live packets at 30 frames/s: a walk, and one
+    bone swinging under a root of no channels (the shared SimpleSkin, whose frames a decoder
+    that failed on each packet concealed into silence)."""
+    from mocodec import Motion, Skeleton
+    from mocodec.skeleton import Joint
+    from mocodec.stream.live import LiveDecoder
+    from mocodec.stream.packets import StreamInfo
+
+    if rig == "walk":
+        motion = without_translations(walk_amc.resample(30.0), turns=False)
+    else:
+        turns = ("Zrotation", "Yrotation", "Xrotation")
+        bone = Skeleton((Joint("root", -1, (0.0, 0.0, 0.0)), Joint("bone", 0, (0.0, 1.0, 0.0), turns, "ZYX")), 1.0)
+        swing = np.zeros((166, 3))
+        swing[:, 0] = 90.0 * np.sin(np.arange(166) / 166 * 2 * np.pi)
+        motion = Motion(bone, 30.0, swing)
+    packets = stream_clip(motion, get_codec(cid))
+    decoder = LiveDecoder(StreamInfo.from_payload(packets[0].payload))
+    got = np.vstack([decoder.push(p) for p in packets[1:]])
+    assert len(got) == motion.num_frames and np.isfinite(got).all()
+    assert decoder.stats.dropped == 0 and decoder.stats.concealed_frames == 0
 
 
 @pytest.mark.parametrize("cid", STREAMING)

@@ -16,6 +16,7 @@ from mocodec.stream.packets import (
     Packet,
     StreamInfo,
     batch_offsets,
+    header_packet,
     pack_batch,
     parse,
     read_u32,
@@ -75,6 +76,31 @@ def test_stream_header_carries_skeleton_and_codec(walk_bvh):
     assert back.skeleton.isclose(walk_bvh.skeleton) and back.fps == 120.0 and back.codec == info.codec
     with pytest.raises(CorruptStreamError, match="stream header"):
         StreamInfo.from_payload(b"not zlib")
+
+
+def test_a_skeleton_without_channels_is_not_streamed(walk_bvh):
+    """A rig whose joints never move has nothing to stream: the sender says so, and a header
+    that claims one (hostile, or from another tool) is refused as damaged, not divided by."""
+    from dataclasses import replace
+
+    from mocodec import Skeleton
+    from mocodec.errors import CodecError
+    from mocodec.stream.live import LiveEncoder
+    from mocodec.stream.relay import BAD_MESSAGE, Closing, RelayCore
+
+    sk = walk_bvh.skeleton
+    still = Skeleton(
+        tuple(replace(j, channels=(), rotation_order="", limits=()) for j in sk.joints), sk.units_per_metre
+    )
+    with pytest.raises(CodecError, match="nothing to stream"):
+        LiveEncoder(get_codec("dpcm"), still, 30.0, 0)
+    header = header_packet(0, StreamInfo(still, 30.0, get_codec("dpcm").get_config()))
+    with pytest.raises(CorruptStreamError, match="nothing to stream"):
+        StreamInfo.from_payload(header.payload)
+    core = RelayCore()
+    with pytest.raises(Closing) as closed:
+        core.ingest(core.room("lobby"), pack_batch([header.to_bytes()]), owner=1)
+    assert closed.value.code == BAD_MESSAGE
 
 
 # ----- live streams ------------------------------------------------------------------------------

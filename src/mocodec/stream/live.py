@@ -113,6 +113,8 @@ class LiveEncoder:
             )
         if not keyframe_s > 0:
             raise CodecError(f"keyframe interval must be positive, got {keyframe_s}")
+        if not skeleton.num_channels:
+            raise CodecError("a skeleton without channels has nothing to stream (its joints never move)")
         primer = None if primer is None else checked_frames(codec.id, skeleton, primer)
         tables = codec.decoder_tables(skeleton, primer)
         self.codec = codec.for_stream(skeleton, tables)

@@ -459,8 +459,11 @@ class StreamInfo:
             if not limits.fps_ok(fps):
                 raise ValueError(f"frame rate {fps} is outside {limits.FPS_RANGE}")
             extra = doc.get("extra", {})
+            skeleton = skeleton_from_dict(doc["skeleton"])
+            if not skeleton.num_channels:
+                raise ValueError("a skeleton without channels has nothing to stream")
             return cls(
-                skeleton_from_dict(doc["skeleton"]),
+                skeleton,
                 fps,
                 doc["codec"],
                 str(doc.get("name", "")),

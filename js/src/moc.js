@@ -133,7 +133,8 @@ export async function decodeMoc(data, { frames = null, maxValues = MAX_DECODED_V
     const body = chunkBody(data, e, k);
     let decoded;
     try {
-      decoded = decodeKinwave(body, file.skeleton, e.count);
+      // a rig without channels is an empty body (Python's Codec.encode)
+      decoded = C === 0 && body.length === 0 ? new Float64Array(0) : decodeKinwave(body, file.skeleton, e.count);
     } catch (err) {
       if (err instanceof DecodeError) throw new DecodeError(`chunk ${k} at byte ${e.offset}: ${err.message}`);
       throw err;

@@ -270,6 +270,25 @@ def moc_fixtures() -> dict[str, bytes]:
     return out
 
 
+def still_rig_fixture() -> dict[str, bytes]:
+    """``still-rig.moc`` and ``.json``: a rig whose joints never move (no channels, as Blender
+    2.79 exports one), kinwave's empty body; the JavaScript decoder opens it as Python's does."""
+    from dataclasses import replace
+
+    import numpy as np
+
+    from mocodec import Motion, Skeleton, load, moc
+    from mocodec.codecs import get_codec
+
+    sk = load(DATA / "07_03.bvh").skeleton
+    still = Skeleton(
+        tuple(replace(j, channels=(), rotation_order="", limits=()) for j in sk.joints), sk.units_per_metre
+    )
+    data = moc.pack(Motion(still, 30.0, np.zeros((FRAMES, 0))), get_codec("kinwave"))
+    meta = {"frames": FRAMES, "joints": len(still), "fps": 30.0}
+    return {"still-rig.moc": data, "still-rig.json": (json.dumps(meta, indent=1) + "\n").encode()}
+
+
 def steps_table() -> bytes:
     """Python's quantiser steps of every kinwave step code and segment offset factors, which the
     JavaScript decoder makes from eight constants (js/src/steps.js)."""
@@ -335,7 +354,8 @@ def main() -> int:
         (FORMATS / f"{name}.glb").write_bytes(glb)
         (FORMATS / f"{name}.glb.json").write_text(expected)
         print(f"wrote {FORMATS / (name + '.glb')} ({len(glb)} bytes) and {name}.glb.json")
-    for folder, files in (("live", live_fixtures()), ("moc", {**moc_fixtures(), "steps.json": steps_table()})):
+    moc_files = {**moc_fixtures(), **still_rig_fixture(), "steps.json": steps_table()}
+    for folder, files in (("live", live_fixtures()), ("moc", moc_files)):
         (DATA / folder).mkdir(exist_ok=True)
         for name, data in files.items():
             (DATA / folder / name).write_bytes(data)

@@ -102,6 +102,16 @@ test('the lead case has chunks whose wavelet grid starts early, the bones case f
   }
 });
 
+test('a rig without channels (an empty kinwave body) opens with its frames and joints', async () => {
+  const data = new Uint8Array(await readFile(new URL('still-rig.moc', MOC)));
+  const meta = JSON.parse(await readFile(new URL('still-rig.json', MOC), 'utf8'));
+  const decoded = await decodeMoc(data);
+  assert.equal(decoded.frames, meta.frames);
+  assert.equal(decoded.fps, meta.fps);
+  assert.equal(decoded.skeleton.joints.length, meta.joints);
+  assert.equal(decoded.channels.length, 0);
+});
+
 test('a frame range decodes only its chunks and equals the whole file\'s frames', async () => {
   const { data, meta } = await fixture('bvh-joint');
   const whole = await decodeMoc(data);

@@ -19,6 +19,7 @@ from make_fixtures import (  # noqa: E402
     live_fixture,
     moc_fixture,
     steps_table,
+    still_rig_fixture,
 )
 
 LIVE = DATA / "live"
@@ -66,6 +67,8 @@ def test_moc_fixtures_are_current(case):
 
 def test_the_javascript_step_table_and_header_dictionary_are_current():
     assert (MOC / "steps.json").read_bytes() == steps_table()
+    for name, data in still_rig_fixture().items():
+        assert (MOC / name).read_bytes() == data, name
     module = DATA.parent.parent / "js" / "src" / "header-dict.js"
     assert module.read_text() == header_dictionary_module(), "js/src/header-dict.js is stale"
 

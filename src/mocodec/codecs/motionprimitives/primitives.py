@@ -425,7 +425,8 @@ class _Decoder(StreamDecoder, _Shared):
             have.append(len(self.pending_t))
         n = max(min(have) - (0 if self.final else self.cfg["smooth"]), 0) if have else 0
         q = np.stack([p[:n] for p in self.pending], axis=1) if self.pending else np.zeros((n, 0, 4))
-        translation = self.pending_t[:n] if len(self.lay.translation) else np.zeros((n, 0))  # (none to wait for)
+        # a rig without translations sends no translation window: there are none to wait for
+        translation = self.pending_t[:n] if len(self.lay.translation) else np.zeros((n, 0))
         channels = quatseg.quaternions_to_channels(self.lay, q, translation, self.skeleton.num_channels)
         self.pending = [p[n:] for p in self.pending]
         self.last_start -= n

@@ -379,14 +379,12 @@ def depth_targets(
                 angles[f, m] = start[f, chans[i, m]]
         target = np.empty((frames, k))
         if kept_lq.shape[0]:
-            lq, jac = kept_lq[a + i], kept_jac[a + i]
             if not ready[a + i]:
-                _linearise(angles, axes[i, :k], quats[i], has_axis[i], lq, jac)
+                _linearise(angles, axes[i, :k], quats[i], has_axis[i], kept_lq[a + i], kept_jac[a + i])
                 ready[a + i] = True
+            _step(angles, act, kept_lq[a + i], kept_jac[a + i], glob[p], goal[:, j], target)
         else:
-            lq, jac = np.empty((frames, 4)), np.empty((frames, 3, 3))
-            _linearise(angles, axes[i, :k], quats[i], has_axis[i], lq, jac)
-        _step(angles, act, lq, jac, glob[p], goal[:, j], target)
+            _targets(angles, axes[i, :k], act, quats[i], has_axis[i], glob[p], goal[:, j], target)
         for f in range(frames):
             for m in range(k):
                 out[f, columns[i, m]] = target[f, m]

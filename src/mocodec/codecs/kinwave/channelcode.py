@@ -28,6 +28,21 @@ def _trend_row(values, left, frac, out):
         out[t] = a + (b - a) * frac[t]
 
 
+@numba.njit(inline="always")
+def constant_knot(row, base, quantum):
+    """A constant row's knot from its values ``row``: the first one's nearest multiple of
+    ``quantum`` (its step's constant fraction) about ``base`` (a row of no frames: 0)."""
+    first = row[0] if row.size else base
+    return np.int64(np.rint((first - base) / quantum))
+
+
+@numba.njit(inline="always")
+def constant_value(knot, base, quantum):
+    """What a constant row decodes to at every frame (its trend is the value, its
+    coefficients 0 and its seams without a step)."""
+    return base + knot * quantum
+
+
 @numba.njit(cache=True)
 def _reconstruct(knots, coeffs, const, step, fraction, base, knot_f, coeff_f, seam_f, seam_limit, lay, lo, hi, weight):
     """Decoded rows ``(k, T)`` from their integers (:func:`reconstruct`)."""
@@ -39,9 +54,9 @@ def _reconstruct(knots, coeffs, const, step, fraction, base, knot_f, coeff_f, se
     trend = np.empty(frames)
     block, signal, a, b = np.empty(widest), np.empty(widest), np.empty(widest), np.empty(widest)
     for r in range(rows):
-        if const[r]:  # (its trend is the value, its coefficients 0 and its seams without a step)
+        if const[r]:
             if frames:
-                out[r, :] = base[r] + knots[r, 0] * (step[r] * fraction[r])
+                out[r, :] = constant_value(knots[r, 0], base[r], step[r] * fraction[r])
             continue
         for k in range(knot_frames.size):
             values[k] = knots[r, k] * (step[r] * knot_quantum[k] * knot_f[k])
@@ -85,8 +100,7 @@ def _quantise(target, const, step, fraction, base, knot_f, coeff_f, lay, lo, hi,
     block, coeffs, a, b = np.empty(widest), np.empty(widest), np.empty(widest), np.empty(widest)
     for r in range(rows):
         if const[r]:  # (a body of no frames has nothing to read: knot 0, decoded as no frame)
-            first = target[r, 0] if frames else base[r]
-            k_int[r, :] = np.int64(np.rint((first - base[r]) / (step[r] * fraction[r])))
+            k_int[r, :] = constant_knot(target[r], base[r], step[r] * fraction[r])
             continue
         for k in range(K):
             quantum = step[r] * knot_quantum[k] * knot_f[k]

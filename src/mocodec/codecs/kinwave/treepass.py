@@ -19,7 +19,7 @@ import numba
 import numpy as np
 
 from mocodec.codecs.kinwave.body import MEAN_QUANTUM, three_angle_groups, turn_setup
-from mocodec.codecs.kinwave.channelcode import coder_arguments, depth_kernel
+from mocodec.codecs.kinwave.channelcode import coder_arguments, constant_knot, constant_value, depth_kernel
 from mocodec.codecs.shared import rotvec
 from mocodec.codecs.shared.closedloop import depth_end, depth_start, exact_rotation, tree_arrays, tree_loop
 from mocodec.codecs.shared.rotvec import quat_product, quats_of_euler
@@ -98,15 +98,15 @@ def depth_coding(enc: Encoder) -> DepthCoding:
     kernel = ~const
     kernel[place[[c for k in coded for c in groups[k][0]]]] = True
     kernel[place[[c for _, pos in moved for c in pos]]] = True
-    before: np.ndarray = np.cumsum(kernel) - kernel  # each row's place among the kernel rows so far...
-    kernel_row: np.ndarray = before - before[tree.coded_ptr[depth_of]]  # ... of its depth
+    kernel_ptr = np.concatenate(([0], np.cumsum(np.bincount(depth_of[kernel], minlength=depths)))).astype(np.int64)
+    kernel_row: np.ndarray = np.cumsum(kernel) - kernel - kernel_ptr[depth_of]  # among its depth's kernel rows
     return DepthCoding(
         const,
         np.ascontiguousarray(enc.constants.fraction[tree.coded], dtype=np.float64),
         np.ascontiguousarray(enc.constants.base[tree.coded], dtype=np.float64),
-        np.concatenate(([0], np.cumsum(np.bincount(depth_of[kernel], minlength=depths)))).astype(np.int64),
+        kernel_ptr,
         row[tree.coded][kernel],
-        np.concatenate(([0], np.cumsum(np.bincount(depth_of[~kernel], minlength=depths)))).astype(np.int64),
+        tree.coded_ptr - kernel_ptr,  # the held rows before each depth
         row[tree.coded][~kernel],
         np.searchsorted(form_depths, np.arange(depths + 1)).astype(np.int64),
         np.array([kernel_row[place[c]] for k in coded for c in groups[k][0]], dtype=np.int64),
@@ -321,10 +321,8 @@ def _tree_pass(loop, coding, kinematics, turns, steps, factors, isolated, coder,
 def _hold(knots, decoded, depth, r, c, targets, quantum, base):
     """A constant row outside the depth kernel (row ``r`` of the depth, channel ``c``): its
     knots and decoded value as :func:`channelcode.quantise` and :func:`channelcode.reconstruct`
-    make them (its first target's nearest multiple of ``quantum``, its step's constant
-    fraction, about ``base``; no coefficients, no patches, nothing at a seam)."""
-    first = targets[0, r] if targets.shape[0] else base
-    knots[c, :] = np.int64(np.rint((first - base) / quantum))
-    value = base + knots[c, 0] * quantum
+    make them (no coefficients, no patches, nothing at a seam)."""
+    knots[c, :] = constant_knot(targets[:, r], base, quantum)
+    value = constant_value(knots[c, 0], base, quantum)
     decoded[c, :] = value
     depth[:, r] = value

@@ -205,7 +205,12 @@ class KinwaveCodec(Codec):
         if kind:
             search = BoundSearch(self, Motion(motion.skeleton, motion.fps, motion.channels[1:]), output_skeleton)
             body = search.run()
-            if kind == REST_AT_ZERO or self._rest_holds(motion, search.decoded_frame(body, 0), output_skeleton, kind):
+            # (a bit rate's search checks no bound: frame 0's is not checked either)
+            if (
+                kind == REST_AT_ZERO
+                or self.config["bits_per_second"] > 0
+                or self._rest_holds(motion, search.decoded_frame(body, 0), output_skeleton, kind)
+            ):
                 return with_more(body, kind)
         return BoundSearch(self, motion, output_skeleton).run()
 
@@ -215,8 +220,6 @@ class KinwaveCodec(Codec):
         are exact, the rest those of frame 1, whose errors the joints below may add up
         differently there)."""
         bound = self.config["max_error_cm"]
-        if self.config["bits_per_second"] > 0:
-            return True
         cm = 100.0 / motion.skeleton.units_per_metre
         p0, q0 = forward_kinematics(motion.skeleton, motion.channels[:1])
         p1, q1 = forward_kinematics(output_skeleton, rest_pose(output_skeleton, kind, frame1)[None])

@@ -39,7 +39,7 @@ function eulerOf(q, o, out) {
   const b = o.proper ? qi : qi + qk * o.eps;
   const c = o.proper ? qj : qj + w;
   const d = o.proper ? qk * o.eps : qk * o.eps - qi;
-  const theta2 = 2.0 * Math.atan2(Math.hypot(c, d), Math.hypot(a, b));
+  const theta2 = 2.0 * Math.atan2(Math.sqrt(c * c + d * d), Math.sqrt(a * a + b * b));
   const plus = Math.atan2(b, a);
   const minus = Math.atan2(d, c);
   out[0] = o.proper ? plus + minus : (plus + minus) * o.eps;

@@ -214,7 +214,7 @@ def quat_to_euler(q: np.ndarray, order: str, degrees: bool = True) -> np.ndarray
         a, b, c, d = w, qi, qj, qk * eps
     else:
         a, b, c, d = w - qj, qi + qk * eps, qj + w, qk * eps - qi
-    theta2 = 2.0 * np.arctan2(np.hypot(c, d), np.hypot(a, b))
+    theta2 = 2.0 * np.arctan2(np.sqrt(c * c + d * d), np.sqrt(a * a + b * b))
     half_plus = np.arctan2(b, a)
     half_minus = np.arctan2(d, c)
     theta1 = half_plus - half_minus

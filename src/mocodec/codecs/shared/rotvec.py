@@ -157,7 +157,7 @@ def _euler_of(q, i, jj, k, proper, eps, angles, t):
         a, b, c, d = w, qi, qj, qk * eps
     else:
         a, b, c, d = w - qj, qi + qk * eps, qj + w, qk * eps - qi
-    theta2 = 2.0 * math.atan2(math.hypot(c, d), math.hypot(a, b))
+    theta2 = 2.0 * math.atan2(math.sqrt(c * c + d * d), math.sqrt(a * a + b * b))
     plus, minus = math.atan2(b, a), math.atan2(d, c)
     if proper:
         triple = (plus + minus, theta2, plus - minus)

@@ -131,6 +131,26 @@ def test_a_packet_cut_from_its_bytes_is_the_packet_with_the_shorter_payload(pack
     assert parse(header).dropped == 0
 
 
+def test_packets_cut_together_are_the_packets_cut_one_by_one(packets):
+    """``truncated_many`` (one compiled call, as a relay cuts a tick's variants) gives each
+    packet's cut as ``truncated`` makes it, full and compact packets mixed, at every layer count
+    and every size from none to all of the payload."""
+    from dataclasses import replace
+
+    from mocodec.stream.packets import truncated, truncated_many
+
+    data_packets = [q for q in packets if q.kind != HEADER][:30]
+    cuts = [
+        (p, p.to_bytes(), size, dropped)
+        for k, q in enumerate(data_packets)
+        for p in [replace(q, compact=k % 2 == 0)]
+        for size, dropped in ((0, 3), (1, 2), (len(p.payload) // 3, 1), (len(p.payload), 0))
+    ]
+    assert {data[0] >= 0x80 for _, data, _, _ in cuts} == {True, False}
+    assert truncated_many(cuts) == [truncated(*cut) for cut in cuts]
+    assert truncated_many([]) == []
+
+
 @pytest.mark.parametrize("compact", [True, False])
 def test_a_packet_stripped_of_its_cut_table_is_the_packet_without_it(packets, compact):
     """What a relay forwards (``stripped``, made from the bytes as they came) is the packet

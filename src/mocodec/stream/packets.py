@@ -41,6 +41,7 @@ from mocodec.errors import CorruptStreamError, OutOfStepError
 from mocodec.formats import varint
 from mocodec.formats.container import inflate_capped, skeleton_from_dict, skeleton_to_dict
 from mocodec.skeleton import Skeleton
+from mocodec.stream import framing
 
 MAGIC = b"MP"
 BATCH_MAGIC = b"Mb"  # a batch of format 2 (varint lengths)
@@ -539,6 +540,30 @@ def truncated(p: Packet, data: bytes, size: int, dropped: int) -> bytes:
         out = head + body
         return out + _U16.pack(binascii.crc_hqx(out, CRC16_STARTS[dropped]))
     return _reframed(data, body, dropped)
+
+
+def truncated_many(cuts: list[tuple[Packet, bytes, int, int]]) -> list[bytes]:
+    """:func:`truncated` of every ``(p, data, size, dropped)`` in ``cuts``, the same bytes, in
+    one compiled call (:func:`.framing.cut_packets`): a relay's tick cuts hundreds."""
+    if not cuts:
+        return []
+    datas = [data for _, data, _, _ in cuts]
+    lengths = np.fromiter(map(len, datas), dtype=np.int64, count=len(datas))
+    payloads = np.fromiter((len(p.payload) for p, _, _, _ in cuts), dtype=np.int64, count=len(cuts))
+    full = np.fromiter((not data[0] & COMPACT for data in datas), dtype=np.bool_, count=len(cuts))
+    dropped = np.fromiter((d for _, _, _, d in cuts), dtype=np.int64, count=len(cuts))
+    starts = np.concatenate(([0], np.cumsum(lengths)[:-1]))
+    out, ends = framing.cut_packets(
+        np.frombuffer(b"".join(datas), dtype=np.uint8),
+        starts,
+        np.where(full, _FIELDS.size - _U32.size, lengths - _U16.size - payloads),
+        np.fromiter((size for _, _, size, _ in cuts), dtype=np.int64, count=len(cuts)),
+        full,
+        np.where(full, np.take(CRC32_STARTS, dropped), np.take(CRC16_STARTS, dropped)),
+    )
+    whole = out.tobytes()
+    bounds = ends.tolist()
+    return [whole[a:b] for a, b in zip(bounds, bounds[1:])]
 
 
 def _reframed(data: bytes | memoryview, body: bytes, dropped: int, flags: int | None = None) -> bytes:

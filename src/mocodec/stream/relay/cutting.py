@@ -16,7 +16,7 @@ import numpy as np
 
 from mocodec.crowd import layers_within, on_ladder, viewer_shares
 from mocodec.errors import MocodecError
-from mocodec.stream.packets import length_varint, truncated
+from mocodec.stream.packets import length_varint, truncated, truncated_many
 from mocodec.stream.relay.rooms import Forward, Room, StreamState, Viewer
 
 log = logging.getLogger("mocodec.relay")
@@ -142,12 +142,18 @@ def _round(room: Room, row: dict[int, int], width: int, layered: list[Forward]) 
 
 
 def _cut_variants(r: Round, width: int, packets: list[int]) -> None:
-    """Cut the variants with fewer layers of the round's ``packets`` (some viewer gets one)."""
+    """Cut the variants with fewer layers of the round's ``packets`` (some viewer gets one), all
+    in one call (:func:`truncated_many`: :func:`drop_layers` of each)."""
+    places, cuts = [], []
     for i in packets:
         f = r.layered[i]
-        for keep in range(1, int(r.layer_counts[i])):
-            variant = drop_layers(f, keep)
-            r.variants[i * width + keep - 1], r.heads[i * width + keep - 1] = variant, length_varint(len(variant))
+        assert f.layer_ends is not None
+        layers = len(f.layer_ends)
+        for keep in range(1, layers):
+            places.append(i * width + keep - 1)
+            cuts.append((f.packet, f.data, f.layer_ends[keep - 1], layers - keep))
+    for at, variant in zip(places, truncated_many(cuts)):
+        r.variants[at], r.heads[at] = variant, length_varint(len(variant))
 
 
 def choose_layers(room: Room, crowd: Crowd, viewers: list[Viewer], fits: np.ndarray) -> list[np.ndarray]:

@@ -78,3 +78,10 @@ def cut_packets(source, starts, heads, sizes, full, checks):
             crc = crc16(out, checks[k], o, e)
             out[e], out[e + 1] = crc & 0xFF, crc >> 8
     return out, ends
+
+
+def warm() -> None:
+    """Compile (or load from numba's cache) :func:`cut_packets` before a relay takes
+    connections, so that its first tick does not pay for it."""
+    one = np.zeros(1, dtype=np.int64)
+    cut_packets(np.frombuffer(bytes(8), dtype=np.uint8), one * 0, one, one, np.ones(1, dtype=np.bool_), one)  # (read-only, as a relay passes it)

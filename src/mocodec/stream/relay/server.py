@@ -28,7 +28,7 @@ from aiohttp.abc import AbstractAccessLogger
 from mocodec.data import PAGES, THREE
 from mocodec.errors import MocodecError
 from mocodec.formats.pagejson import Mannequins
-from mocodec.stream import tokens
+from mocodec.stream import framing, tokens
 from mocodec.stream.relay.core import RelayCore
 from mocodec.stream.relay.limits import BAD_MESSAGE, BAD_TOKEN, RATE_LIMIT, TICK_HZ, Bucket, Closing, Limits
 from mocodec.stream.relay.rooms import Room, Viewer
@@ -396,6 +396,7 @@ def run(
     """Serve until interrupted (``mocodec serve``; a worker of ``--workers`` with ``reuse_port``);
     ``listening`` is called once the port takes connections."""
     raise_descriptor_limit()
+    framing.warm()
     quiet_collector()
 
     async def serve() -> None:

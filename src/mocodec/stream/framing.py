@@ -49,11 +49,12 @@ def crc16(data, start, a, b):
 
 
 @numba.njit(cache=True)
-def cut_packets(source, starts, heads, sizes, full, checks):
+def cut_packets(source, starts, heads, skips, sizes, full, checks, flags):
     """Each cut ``k`` of a packet at ``source[starts[k]:]`` whose header takes ``heads[k]``
-    bytes: the header, the first ``sizes[k]`` bytes of the payload and a check of all before
-    it started from ``checks[k]``. A ``full`` packet's header is followed by its payload length
-    (u32, set anew) and its check is a CRC-32; a compact one's a CRC-16. Returns the cuts end to
+    bytes: the header, ``sizes[k]`` bytes of the payload from its byte ``skips[k]``, and a check
+    of all before it started from ``checks[k]``. A ``full`` packet's header is followed by its
+    payload length (u32, set anew), its flags byte (byte 4) becomes ``flags[k]`` where that is
+    not negative, and its check is a CRC-32; a compact one's a CRC-16. Returns the cuts end to
     end and where each ends."""
     ends = np.empty(starts.size + 1, dtype=np.int64)
     ends[0] = 0
@@ -63,8 +64,10 @@ def cut_packets(source, starts, heads, sizes, full, checks):
     for k in range(starts.size):
         at, o, h, n = starts[k], ends[k], heads[k], sizes[k]
         out[o : o + h] = source[at : at + h]
-        body = at + h + (4 if full[k] else 0)  # where the payload starts in the source
+        body = at + h + (4 if full[k] else 0) + skips[k]  # where the kept payload starts in the source
         if full[k]:
+            if flags[k] >= 0:
+                out[o + 4] = flags[k]
             for i in range(4):
                 out[o + h + i] = (n >> (8 * i)) & 0xFF
             h += 4
@@ -80,8 +83,69 @@ def cut_packets(source, starts, heads, sizes, full, checks):
     return out, ends
 
 
+#: The most ends :func:`read_full` reads of a cut table (a longer one is left to the caller).
+MAX_TABLE = 8
+
+
+@numba.njit(cache=True)
+def read_full(source, starts, stops, head_size, crc_starts, tables):
+    """Full packets ``source[starts[k]:stops[k]]`` (their frames checked by the caller), their
+    checks and cut tables: per packet the CRC-32 start its check was made from (its index in
+    ``crc_starts``; -1: none, a damaged packet) and, where ``tables[k]``, its cut table's ends
+    (varints of at most 4 bytes, in order, within the codec payload, ending where the table's
+    u16 length says: -1 ends where it is not so, or longer than MAX_TABLE) and where the codec
+    payload starts in the payload."""
+    count = starts.size
+    dropped = np.full(count, -1, dtype=np.int64)
+    table_ends = np.full(count, -1, dtype=np.int64)
+    values = np.zeros((count, MAX_TABLE), dtype=np.int64)
+    codec_at = np.zeros(count, dtype=np.int64)
+    for k in range(count):
+        a, e = starts[k], stops[k] - 4
+        stored = 0
+        for i in range(4):
+            stored |= np.int64(source[e + i]) << (8 * i)
+        for c in range(crc_starts.size):
+            if crc32(source, crc_starts[c], a, e) == stored:
+                dropped[k] = c
+                break
+        if not tables[k]:
+            continue
+        p, length = a + head_size, e - a - head_size  # the payload
+        if length < 2:
+            continue
+        size = np.int64(source[p]) | np.int64(source[p + 1]) << 8
+        end, whole = 2 + size, length - 2 - size
+        if whole < 0:
+            continue
+        pos, n, last, ok = 2, 0, 0, True
+        while pos < end and ok:
+            value, shift, done = 0, 0, False
+            for _ in range(4):
+                if pos >= length:
+                    break
+                byte = source[p + pos]
+                pos += 1
+                value |= np.int64(byte & 0x7F) << shift
+                shift += 7
+                if byte < 0x80:
+                    done = True
+                    break
+            ok = done and n < MAX_TABLE and last <= value <= whole
+            if ok:
+                values[k, n] = value
+                n += 1
+                last = value
+        if ok and pos == end:
+            table_ends[k] = n
+            codec_at[k] = end
+    return dropped, table_ends, values, codec_at
+
+
 def warm() -> None:
-    """Compile (or load from numba's cache) :func:`cut_packets` before a relay takes
+    """Compile (or load from numba's cache) the kernels before a relay takes
     connections, so that its first tick does not pay for it."""
     one = np.zeros(1, dtype=np.int64)
-    cut_packets(np.frombuffer(bytes(8), dtype=np.uint8), one * 0, one, one, np.ones(1, dtype=np.bool_), one)  # (read-only, as a relay passes it)
+    source = np.frombuffer(bytes(8), dtype=np.uint8)  # (read-only, as a relay passes it)
+    cut_packets(source, one * 0, one, one * 0, one, np.ones(1, dtype=np.bool_), one, -one)
+    read_full(source, one * 0, one * 8, 2, one, np.ones(1, dtype=np.bool_))

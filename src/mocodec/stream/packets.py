@@ -66,6 +66,7 @@ COMPACT_MIN = 4
 CRC16_STARTS = (0xFFFF, 0x5A5A, 0xA5A5, 0x0F0F)
 CRC32_STARTS = (0, 0x5A5A5A5A, 0xA5A5A5A5, 0x0F0F0F0F)
 OVERHEAD = _FIELDS.size + _CRC.size
+_CRC_STARTS = np.array(CRC32_STARTS, dtype=np.int64)
 MAX_REPAIRS = 256  # packets a viewer's repair request may name (docs/streaming.md)
 #: Where the timestamp, stream id and sequence number sit in a packet (read in bulk by the load test).
 STREAM_OFFSET, SEQUENCE_OFFSET, TIMESTAMP_OFFSET = 6, 10, 14
@@ -401,6 +402,79 @@ def parse(
     )
 
 
+#: A full packet's fields before its payload, as numpy reads them from many packets at once.
+_HEAD = np.dtype(
+    [
+        ("magic", "S2"), ("version", "u1"), ("kind", "u1"), ("flags", "u1"), ("codec", "u1"),
+        ("stream", "<u4"), ("sequence", "<u4"), ("timestamp", "<u8"), ("first", "<u4"),
+        ("frames", "<u2"), ("position", "<f4", (3,)), ("length", "<u4"),
+    ]
+)  # fmt: skip
+#: A packet read together with its batch whose cut table read well: the table's ends, the
+#: packet without the table and its wire bytes (what :func:`stripped` makes of it).
+Prepared = tuple[list[int], Packet, bytes]
+
+
+def read_batch(data: bytes, offsets: np.ndarray) -> tuple[list[Packet], dict[int, Prepared]] | None:
+    """The packets of a batch (``offsets``: :func:`batch_offsets`) all in the full form, read
+    together: their frames and fields checked in arrays, their checks and cut tables in one
+    compiled call (:func:`.framing.read_full`), the same packets :func:`parse` gives; and, by
+    their place in the batch, the whole packets whose cut table reads well, stripped of it
+    (:data:`Prepared`). None where a packet is compact or does not parse: the caller reads them
+    one at a time, which says what is wrong where."""
+    data = data if isinstance(data, bytes) else bytes(data)
+    starts, stops = offsets[:-1], offsets[1:]
+    raw = np.frombuffer(data, dtype=np.uint8)
+    if not starts.size or (stops - starts < OVERHEAD).any() or (raw[starts] & COMPACT).any():
+        return None
+    heads = raw[starts[:, None] + np.arange(_FIELDS.size)].view(_HEAD).ravel()
+    codecs = packet_codecs()
+    if not (
+        (heads["magic"] == MAGIC).all()
+        and (heads["version"] == VERSION).all()
+        and (heads["kind"] <= DATA).all()
+        and (heads["codec"] < len(codecs)).all()
+        and (heads["length"].astype(np.int64) + OVERHEAD == stops - starts).all()
+    ):
+        return None
+    kinds, flags = heads["kind"].astype(np.int64), heads["flags"].astype(np.int64)
+    dropped, table_ends, values, codec_at = framing.read_full(
+        raw, starts, stops, _FIELDS.size, _CRC_STARTS, (flags & CUTS) != 0
+    )
+    if (dropped < 0).any() or ((dropped > 0) & (kinds != DATA)).any():
+        return None
+    packets = [
+        _parsed(stream, seq, ts, codecs[number], first, frames, data[a + _FIELDS.size : b - _CRC.size], kind, f,
+                tuple(position), (False, True, 0, d))
+        for stream, seq, ts, number, first, frames, a, b, kind, f, position, d in zip(
+            heads["stream"].tolist(), heads["sequence"].tolist(), heads["timestamp"].tolist(),
+            heads["codec"].tolist(), heads["first"].tolist(), heads["frames"].tolist(), starts.tolist(),
+            stops.tolist(), kinds.tolist(), flags.tolist(), heads["position"].tolist(), dropped.tolist(),
+        )
+    ]  # fmt: skip
+    tabled = np.flatnonzero((table_ends >= 0) & (dropped == 0))
+    if not tabled.size:
+        return packets, {}
+    skips = codec_at[tabled]
+    out, ends = framing.cut_packets(
+        raw,
+        starts[tabled],
+        np.full(tabled.size, _FIELDS.size - _U32.size),
+        skips,
+        heads["length"][tabled].astype(np.int64) - skips,
+        np.ones(tabled.size, dtype=np.bool_),
+        np.zeros(tabled.size, dtype=np.int64),
+        flags[tabled] & ~CUTS,
+    )
+    whole, bounds = out.tobytes(), ends.tolist()
+    prepared = {}
+    for i, n, skip, a, b in zip(tabled.tolist(), table_ends[tabled].tolist(), skips.tolist(), bounds, bounds[1:]):
+        p = packets[i]
+        plain = p.with_payload(p.payload[skip:], p.flags & ~CUTS)
+        prepared[i] = (values[i, :n].tolist(), plain, whole[a:b])
+    return packets, prepared
+
+
 class Reader:
     """A receiver's reading of packets, full or compact: it keeps every stream's
     :class:`Cursor`, made by the stream's header and moved by each data packet read."""
@@ -557,9 +631,11 @@ def truncated_many(cuts: list[tuple[Packet, bytes, int, int]]) -> list[bytes]:
         np.frombuffer(b"".join(datas), dtype=np.uint8),
         starts,
         np.where(full, _FIELDS.size - _U32.size, lengths - _U16.size - payloads),
+        np.zeros(len(cuts), dtype=np.int64),
         np.fromiter((size for _, _, size, _ in cuts), dtype=np.int64, count=len(cuts)),
         full,
         np.where(full, np.take(CRC32_STARTS, dropped), np.take(CRC16_STARTS, dropped)),
+        np.full(len(cuts), -1, dtype=np.int64),
     )
     whole = out.tobytes()
     bounds = ends.tolist()
@@ -578,9 +654,13 @@ def _reframed(data: bytes | memoryview, body: bytes, dropped: int, flags: int | 
 
 def split_batch(data: bytes | memoryview, where: str = "batch") -> list[memoryview]:
     """The packets of a batch, unparsed (views into ``data``)."""
-    view = memoryview(data)
-    offsets = batch_offsets(view, where).tolist()
-    return [view[a:b] for a, b in zip(offsets, offsets[1:])]
+    return packet_views(data, batch_offsets(data, where))
+
+
+def packet_views(data: bytes | memoryview, offsets: np.ndarray) -> list[memoryview]:
+    """Views into ``data`` of the packets starting at ``offsets`` (:func:`batch_offsets`)."""
+    view, at = memoryview(data), offsets.tolist()
+    return [view[a:b] for a, b in zip(at, at[1:])]
 
 
 def batch_offsets(data: bytes | memoryview, where: str = "batch") -> np.ndarray:

@@ -19,12 +19,11 @@ from mocodec.stream.packets import (
     HEADER,
     MAX_REPAIRS,
     Packet,
+    Prepared,
     batch_of,
     cut_table,
-    is_batch,
     layer_ends,
     pack_batch,
-    split_batch,
     stripped,
 )
 from mocodec.stream.relay.cutting import choose_layers, crowd_of, cut_for, layout_of, resent
@@ -80,11 +79,10 @@ class RelayCore:
     def ingest(self, room: Room, data: bytes, owner: object) -> None:
         """The packets of one sender message into the room; Closing if it is malformed."""
         try:
-            raw = split_batch(data) if is_batch(data) else [memoryview(data)]
-            packets = read_message(room, raw)
+            packets, raw, prepared = read_message(room, data)
         except MocodecError as e:
             raise Closing(BAD_MESSAGE, f"bad message: {e}") from None
-        for p, r in zip(packets, raw):
+        for k, (p, r) in enumerate(zip(packets, raw)):
             self.counters["packets_in"] += 1
             state = room.streams.get(p.stream)
             if state is not None and state.owner is not owner:
@@ -108,7 +106,7 @@ class RelayCore:
                 raise Closing(BAD_MESSAGE, f"stream {p.stream}: data before its header")
             if p.dropped:
                 raise Closing(BAD_MESSAGE, f"stream {p.stream}: packet {p.sequence}: a sender's packet is whole")
-            forward = _forwarded(p, r, state)
+            forward = _forwarded(p, r, state, prepared.get(k))
             if forward.layer_ends is not None:
                 state.measure_layers(p, forward.layer_ends)
             state.position = p.position
@@ -322,12 +320,16 @@ def apply_settings(viewer: Viewer, text: str) -> dict:
     return doc
 
 
-def _forwarded(p: Packet, raw: memoryview, state: StreamState) -> Forward:
+def _forwarded(p: Packet, raw: memoryview, state: StreamState, prepared: Prepared | None) -> Forward:
     """The packet as forwarded, its cut table stripped and read: where a layered packet's
     layers end (a layered stream's data needs one), or an embedded codec's channel streams'
-    lengths; Closing if it does not parse."""
+    lengths; Closing if it does not parse. A layered packet whose table was read with its
+    batch (``prepared``) and has the stream's count of ends is forwarded as read there."""
     try:
         if state.layered and p.frames:
+            if prepared is not None and len(prepared[0]) == state.layers - 1:
+                table, plain, data = prepared
+                return Forward(plain, data, layer_ends=[*table, len(plain.payload)])
             ends = layer_ends(p, state.layers)
             return Forward(*stripped(p, raw), layer_ends=ends)
         cuts = cut_table(p) if p.flags & CUTS and not state.layered else None

@@ -14,7 +14,20 @@ from typing import Any
 
 import numpy as np
 
-from mocodec.stream.packets import COMPACT, DATA, END, Cursor, Packet, StreamInfo, parse
+from mocodec.stream.packets import (
+    COMPACT,
+    DATA,
+    END,
+    Cursor,
+    Packet,
+    Prepared,
+    StreamInfo,
+    batch_offsets,
+    is_batch,
+    packet_views,
+    parse,
+    read_batch,
+)
 from mocodec.stream.relay.limits import Bucket, Limits
 from mocodec.stream.relay.retention import Caps, RoomHistory, StreamHistory
 
@@ -79,9 +92,9 @@ class StreamState:
         viewers start with more layers and drop those that do not fit."""
         scale = 8.0 * self.info.fps / p.frames
         weight = min(p.frames / (self.info.fps * LAYER_RATE_S), 1.0)
-        for k in range(self.layers):
-            rate = ends[min(k, len(ends) - 1)] * scale
-            self.layer_rates[k] += weight * (rate - self.layer_rates[k])
+        rates = self.layer_rates
+        for k, end in enumerate(ends):  # (one end a layer: layer_ends)
+            rates[k] += weight * (end * scale - rates[k])
 
     def end_packet(self, stream: int) -> Packet:
         """The packet that ends this stream for its receivers when its sender vanishes."""
@@ -171,14 +184,24 @@ class Room:
         self.free_slots.append(state.slot)
 
 
-def read_message(room: Room, raw: list[memoryview]) -> list[Packet]:
-    """The packets of one sender message (``raw``: each one's bytes), in order. A compact
-    packet follows on from its stream's state (:class:`Cursors`); a message of full packets
-    only is read without cursors, which none of them needs."""
+def read_message(room: Room, data: bytes) -> tuple[list[Packet], list[memoryview], dict[int, Prepared]]:
+    """The packets of one sender message in order, each one's bytes, and by their place the
+    packets whose cut table was read with them (:data:`~mocodec.stream.packets.Prepared`). A
+    batch of full packets is read together (:func:`read_batch`); a compact packet follows on
+    from its stream's state (:class:`Cursors`); where a packet does not parse, they are read
+    one at a time, which says what is wrong where (CorruptStreamError)."""
+    if not is_batch(data):
+        raw = [memoryview(data)]
+    else:
+        offsets = batch_offsets(data)
+        raw = packet_views(data, offsets)
+        together = read_batch(data, offsets)
+        if together is not None:
+            return together[0], raw, together[1]
     if any(r[:1] and r[0] & COMPACT for r in raw):
         cursors = Cursors(room)
-        return [cursors.read(r, f"packet {k}") for k, r in enumerate(raw)]
-    return [parse(r, f"packet {k}") for k, r in enumerate(raw)]
+        return [cursors.read(r, f"packet {k}") for k, r in enumerate(raw)], raw, {}
+    return [parse(r, f"packet {k}") for k, r in enumerate(raw)], raw, {}
 
 
 class Cursors:

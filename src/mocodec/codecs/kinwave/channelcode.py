@@ -127,11 +127,11 @@ def _quantise(target, const, step, fraction, base, knot_f, coeff_f, lay, lo, hi,
 
 
 @numba.njit(cache=True)
-def _round_far(target, out, const, step, knot_f, far_steps, scaled, coeffs, lay, reach, reach_at):
+def _round_far(target, out, const, step, knot_f, far_steps, scaled, coeffs, lay, reach_ptr, reached, reach_at):
     """Round to the nearest integer, in place in ``coeffs``, the coefficients whose synthesis
     reaches a frame where ``out`` misses ``target`` by more than ``far_steps`` of the frame's
-    step (``reach``: :func:`trendwave.reaches`; ``scaled``: the coefficients in steps before
-    rounding). Returns ``(k,)`` bool: the rows that changed."""
+    step (``reach_ptr``, ``reached``, ``reach_at``: :func:`trendwave.reaches`' lists; ``scaled``:
+    the coefficients in steps before rounding). Returns ``(k,)`` bool: the rows that changed."""
     knot_frames, left, frac, knot_quantum, starts, lengths, leads, padded, levels, offsets = lay
     rows = target.shape[0]
     marked = np.zeros(int(padded.sum()), dtype=np.bool_)
@@ -148,10 +148,9 @@ def _round_far(target, out, const, step, knot_f, far_steps, scaled, coeffs, lay,
             for t in range(lengths[s]):
                 f = starts[s] + t
                 if abs(out[r, f] - target[r, f]) > far_steps * step[r] * knot_f[left[f]]:
-                    row = at + (leads[s] + t) * n
-                    for i in range(n):
-                        if reach[row + i]:
-                            marked[o + i] = True
+                    row = at + leads[s] + t
+                    for j in range(reach_ptr[row], reach_ptr[row + 1]):
+                        marked[o + reached[j]] = True
         for i in range(marked.size):
             if marked[i]:
                 c = scaled[r, i]

@@ -184,21 +184,34 @@ def flat(lay: Layout) -> Flat:
 
 
 @lru_cache(maxsize=256)
-def reaches(lay: Layout) -> tuple[np.ndarray, np.ndarray]:
-    """Every block's :func:`_reach` (u8, ``(frames, coefficients)`` flattened, one copy per block
-    shape) and where each segment's starts (-1: no block): which coefficients a frame's error
-    reaches, for compiled kernels."""
-    parts: list[np.ndarray] = []
+def reaches(lay: Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every block's :func:`_reach` as lists, for compiled kernels: per frame of each block
+    shape (one copy per shape), where its list of the coefficients its error reaches starts
+    and ends in the second array (``(frames + 1,)`` per shape, end to end), the lists, and
+    where each segment's block shape starts in the first array (-1: no block)."""
+    ptrs: list[np.ndarray] = []
+    lists: list[np.ndarray] = []
     at = np.full(lay.starts.size, -1, dtype=np.int64)
     first: dict[tuple[int, int], int] = {}
-    size = 0
+    rows = listed = 0
     for s in np.flatnonzero(lay.padded):
         key = (int(lay.padded[s]), int(lay.levels[s]))
         if key not in first:
-            parts.append(_reach(*key, lay.wavelet).astype(np.uint8).ravel())
-            first[key], size = size, size + parts[-1].size
+            ptr, coefficients = _reach_lists(*key, lay.wavelet)
+            ptrs.append(ptr + listed)
+            lists.append(coefficients)
+            first[key], rows, listed = rows, rows + ptr.size, listed + coefficients.size
         at[s] = first[key]
-    reach = np.concatenate(parts) if parts else np.zeros(0, dtype=np.uint8)
-    for table in (reach, at):
-        table.setflags(write=False)  # (cached: shared)
-    return reach, at
+    ptr = np.concatenate(ptrs) if ptrs else np.zeros(0, dtype=np.int64)
+    reached = np.concatenate(lists) if lists else np.zeros(0, dtype=np.int64)
+    for table in (ptr, reached, at):
+        table.setflags(write=False)  # (shared by the passes of a layout)
+    return ptr, reached, at
+
+
+@lru_cache(maxsize=64)
+def _reach_lists(n: int, levels: int, wavelet: str) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_reach` of a block as lists: per frame, where its coefficients start and end in
+    the second array (``(n + 1,)``), and the coefficients, in order."""
+    frames, coefficients = np.nonzero(_reach(n, levels, wavelet))
+    return np.searchsorted(frames, np.arange(n + 1)).astype(np.int64), coefficients.astype(np.int64)

@@ -37,7 +37,7 @@ MODES = ("shell", "joint", "mean")
 #: The max program's dual rounds stop where the duality gap is under MAX_GAP of the rate
 #: weights' sum (the steps are then within about that share of the optimum's), checked every
 #: GAP_EVERY rounds, or after MAX_ROUNDS.
-MAX_GAP = 1e-9
+MAX_GAP = 1e-6
 GAP_EVERY = 8
 MAX_ROUNDS = 20_000
 SHELL_CM = 3.0

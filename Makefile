@@ -81,6 +81,7 @@ bench: $(WARM)
 	$(BIN)/python benchmarks/bench_streaming.py
 	$(BIN)/python benchmarks/bench_capture.py
 	$(BIN)/python benchmarks/relay_load.py
+	$(BIN)/python benchmarks/ab_speed.py relay --base HEAD --ticks 150  # (the committed tree against the working one)
 	$(BIN)/python benchmarks/fig_viewer.py
 
 # the API reference from the docstrings: build/api/index.html (pdoc)

@@ -180,8 +180,9 @@ def cmd_demo(args) -> int:
 
 def cmd_warmup(args) -> int:
     """Code one second of the bundled clip with the codecs named, by default every built-in
-    codec that needs no trained model or optional library: numba compiles each kernel once and
-    caches it (beside the package, or in the user's cache directory when it is read-only)."""
+    codec that needs no trained model or optional library and the relay's packet kernels:
+    numba compiles each kernel once and caches it (beside the package, or in the user's cache
+    directory when it is read-only)."""
     import multiprocessing
     import time
     from concurrent.futures import ProcessPoolExecutor
@@ -189,6 +190,7 @@ def cmd_warmup(args) -> int:
     from mocodec import moc
     from mocodec.codecs import codec_class, codec_ids, get_codec
     from mocodec.errors import CodecError
+    from mocodec.stream import framing
 
     motion = _sample()
     clip = motion[: int(motion.fps)]
@@ -200,6 +202,8 @@ def cmd_warmup(args) -> int:
         if args.codecs or not (codec_class(cid).baseline or any(k.path for k in codec_class(cid).knobs))
     ]
     parts = dict.fromkeys(part for cid in ids for part in codec_class(cid).warm_parts)
+    if not args.codecs:  # everything: the relay's packet kernels too
+        parts[framing.warm] = None
     # a second process compiles the codecs' shared parts (numba caches them) while this one
     # codes the clip: the kernels compile one at a time in a process, and a machine has cores
     with ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as side:

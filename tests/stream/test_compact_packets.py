@@ -160,7 +160,15 @@ def test_a_batch_read_together_is_its_packets_read_one_by_one(walk_bvh):
     checks included."""
     from dataclasses import replace
 
-    from mocodec.stream.packets import batch_offsets, layer_ends, pack_batch, read_batch, split_batch, stripped
+    from mocodec.stream.packets import (
+        CUTS,
+        batch_offsets,
+        layer_ends,
+        pack_batch,
+        read_batch,
+        split_batch,
+        stripped,
+    )
 
     packets = stream_clip(walk_bvh[:300], get_codec("kinwave-live", layers=3))
     full = [replace(p, compact=False) for p in packets[:40]]
@@ -180,10 +188,14 @@ def test_a_batch_read_together_is_its_packets_read_one_by_one(walk_bvh):
         assert read == alone
         raw = split_batch(data)
         for k, p in enumerate(read):
-            if k in prepared:  # (any other is read by layer_ends, for its stream's layer count)
+            if k in prepared:
                 table, plain, wire = prepared[k]
                 assert [*table, len(plain.payload)] == layer_ends(p, len(table) + 1)
                 assert (plain, wire) == stripped(p, raw[k])
+            elif p.flags & CUTS and not p.dropped:  # a table that does not read, for any layer count
+                for layers in range(2, 10):
+                    with pytest.raises(CorruptStreamError):
+                        layer_ends(p, layers)
         return True
 
     assert check(batch) and len(read_batch(batch, batch_offsets(batch))[1]) > 30

@@ -331,11 +331,11 @@ def layer_ends(p: Packet, layers: int) -> list[int]:
     pos, last = _U16.size, 0
     try:
         while 0 <= whole and pos < end and len(ends) < layers:
-            value, pos = varint.unpack(payload, pos, 4)
+            value, after = varint.unpack(payload, pos, 4)
             if not last <= value <= whole:
-                break
+                break  # (before it moves on: a table with an end out of order does not read)
             ends.append(value)
-            last = value
+            last, pos = value, after
     except ValueError:
         pass
     if size < 0 or whole < 0 or pos != end or len(ends) != layers - 1:

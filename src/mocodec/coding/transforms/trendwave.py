@@ -130,26 +130,6 @@ def grid_phase(scaled: np.ndarray, wavelet: str, skip: int = 0) -> int | None:
     return best if costs[best] < LEAD_GAIN * costs.max() else None
 
 
-@lru_cache(maxsize=64)
-def _reach(n: int, levels: int, wavelet: str) -> np.ndarray:
-    """``(frames, coefficients)`` 0/1 of a block: which coefficients' synthesis functions
-    carry at least 5% of their peak at each frame. A periodized band's functions are one
-    function shifted round the block by the band's stride, so each band's first one is
-    synthesised and the others are its rolls (the same floats: the other samples are zeros)."""
-    bands = wavelets.band_lengths(n, wavelet, levels)
-    firsts = np.concatenate([[0], np.cumsum(bands)[:-1]])
-    impulses = np.zeros((len(bands), int(sum(bands))))
-    impulses[np.arange(len(bands)), firsts] = 1.0
-    first = np.abs(wavelets.inverse(impulses, n, wavelet, levels))
-    first = first > 0.05 * first.max(axis=1, keepdims=True)
-    reach = np.empty((n, impulses.shape[1]))
-    frames = np.arange(n)[:, None]
-    for band, (at, length) in enumerate(zip(firsts, bands)):
-        reach[:, at : at + length] = first[band][(frames - np.arange(length) * (n // length)) % n]
-    reach.setflags(write=False)
-    return reach
-
-
 class Flat(NamedTuple):
     """A :class:`Layout` as the arrays compiled kernels take (:func:`flat`)."""
 
@@ -185,9 +165,9 @@ def flat(lay: Layout) -> Flat:
 
 @lru_cache(maxsize=256)
 def reaches(lay: Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Every block's :func:`_reach` as lists, for compiled kernels: per frame of each block
-    shape (one copy per shape), where its list of the coefficients its error reaches starts
-    and ends in the second array (``(frames + 1,)`` per shape, end to end), the lists, and
+    """Which coefficients each frame's error reaches (:func:`_reach_lists`), for compiled
+    kernels: per frame of each block shape (one copy per shape), where its list starts and
+    ends in the second array (``(frames + 1,)`` per shape, end to end), the lists, and
     where each segment's block shape starts in the first array (-1: no block)."""
     ptrs: list[np.ndarray] = []
     lists: list[np.ndarray] = []
@@ -211,7 +191,23 @@ def reaches(lay: Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 @lru_cache(maxsize=64)
 def _reach_lists(n: int, levels: int, wavelet: str) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_reach` of a block as lists: per frame, where its coefficients start and end in
-    the second array (``(n + 1,)``), and the coefficients, in order."""
-    frames, coefficients = np.nonzero(_reach(n, levels, wavelet))
-    return np.searchsorted(frames, np.arange(n + 1)).astype(np.int64), coefficients.astype(np.int64)
+    """Per frame of a block, the coefficients whose synthesis functions carry at least 5% of
+    their peak there: where its list starts and ends in the second array (``(n + 1,)``), and
+    the lists, each in order. A periodized band's functions are one function shifted round
+    the block by the band's stride, so each band's first one is synthesised and the others'
+    frames are its frames shifted (no table of every frame and coefficient)."""
+    bands = wavelets.band_lengths(n, wavelet, levels)
+    firsts = np.concatenate([[0], np.cumsum(bands)[:-1]])
+    impulses = np.zeros((len(bands), int(sum(bands))))
+    impulses[np.arange(len(bands)), firsts] = 1.0
+    first = np.abs(wavelets.inverse(impulses, n, wavelet, levels))
+    first = first > 0.05 * first.max(axis=1, keepdims=True)
+    frames, coefficients = [], []
+    for band, (at, length) in enumerate(zip(firsts, bands)):
+        support, shifts = np.flatnonzero(first[band]), np.arange(length)
+        frames.append(((support[:, None] + shifts * (n // length)) % n).ravel())
+        coefficients.append(np.broadcast_to(at + shifts, (support.size, length)).ravel())
+    frame, coefficient = np.concatenate(frames), np.concatenate(coefficients)
+    order = np.lexsort((coefficient, frame))
+    ptr = np.searchsorted(frame[order], np.arange(n + 1)).astype(np.int64)
+    return ptr, coefficient[order].astype(np.int64)

@@ -18,7 +18,6 @@ from __future__ import annotations
 import argparse
 import importlib
 import re
-import struct
 import subprocess
 import sys
 import tarfile
@@ -56,19 +55,16 @@ def revision_package(ref: str) -> str:
     return str(folder)
 
 
-def _codecs(knobs: dict) -> dict:
-    import mocodec.codecs
-
-    base = importlib.import_module(f"{NAME}.codecs")
-    return {"base": base.get_codec("kinwave", **knobs), "tree": mocodec.codecs.get_codec("kinwave", **knobs)}
-
-
 def kinwave(what: str, source: str, rounds: int) -> None:
     import mocodec
+    import mocodec.codecs
 
     base = importlib.import_module(NAME)
     paths = shared_sources(0)[source]
-    codecs = _codecs({})
+    codecs = {
+        "base": importlib.import_module(f"{NAME}.codecs").get_codec("kinwave"),
+        "tree": mocodec.codecs.get_codec("kinwave"),
+    }
     clips = {"base": [base.load(p) for p in paths], "tree": [mocodec.load(p) for p in paths]}
     bodies = {k: [codecs[k].encode(m) for m in clips[k]] for k in codecs}
     times = {k: np.full((rounds, len(paths)), np.inf) for k in codecs}
@@ -90,48 +86,26 @@ def kinwave(what: str, source: str, rounds: int) -> None:
 
 
 def relay(ticks: int) -> None:
-    import mocodec.stream.packets
-    import mocodec.stream.relay
-    from bench_relay_tick import SEED, WARM_UP
+    from bench_relay_tick import WARM_UP, room_of
     from mocodec.stream.relay.server import quiet_collector
-    from relay_load import place, restamp, templates
 
     quiet_collector()
     avatars, viewers, budget = 500, 50, 3e6
-    header, data, clip_ticks, clip_frames = templates(("kinwave-live", 0.0, 3, 0.0), 0.5)
-    by_tick: dict[int, list] = {}
-    for idx, (k, d) in enumerate(data):
-        by_tick.setdefault(k, []).append((idx, d, struct.unpack_from("<I", d, 22)[0]))
-    trees = {
-        "base": (importlib.import_module(f"{NAME}.stream.relay"), importlib.import_module(f"{NAME}.stream.packets")),
-        "tree": (mocodec.stream.relay, mocodec.stream.packets),
+    rooms = {
+        "base": room_of(
+            avatars, viewers, budget, *(importlib.import_module(f"{NAME}.stream.{m}") for m in ("relay", "packets"))
+        ),
+        "tree": room_of(avatars, viewers, budget),
     }
-    rooms = {}
-    for k, (relay_module, packets) in trees.items():
-        core, owner = relay_module.RelayCore(), object()
-        room = core.room("bench")
-        rng = np.random.default_rng(SEED)
-        for _ in range(viewers):
-            camera = (float(rng.uniform(0, 48)), 1.6, float(rng.uniform(0, 2 * avatars / 25)))
-            core.join(room, relay_module.Viewer(budget=budget, camera=camera))
-        core.ingest(room, packets.pack_batch([restamp(header, s, 0, 0, 0, *place(s)) for s in range(avatars)]), owner)
-        rooms[k] = (core, room, owner, packets)
-    phase = np.random.default_rng(SEED).integers(clip_ticks, size=avatars)
-    taken = {k: ([], []) for k in trees}
+    taken = {k: ([], []) for k in rooms}
     same = True
     for tick in range(ticks):
-        batch = [
-            restamp(d, s, loop * len(data) + idx + 1, 0, loop * clip_frames + first, *place(s))
-            for s in range(avatars)
-            for loop, k in [divmod(int(phase[s]) + tick, clip_ticks)]
-            for idx, d, first in by_tick.get(k, ())
-        ]
         sent = {}
         for k in ("base", "tree") if tick % 2 else ("tree", "base"):
-            core, room, owner, packets = rooms[k]
-            message = packets.pack_batch(batch)
+            core, room, owner, message = rooms[k]
+            data = message(tick)
             t0 = time.perf_counter()
-            core.ingest(room, message, owner)
+            core.ingest(room, data, owner)
             t1 = time.perf_counter()
             core.dispatch(room)
             t2 = time.perf_counter()
@@ -143,7 +117,7 @@ def relay(ticks: int) -> None:
                 v.outbox.clear()
         same = same and sent["base"] == sent["tree"]
     print(f"relay tick, {avatars} layered avatars, {viewers} viewers at {budget:g} bit/s; the same batches: {same}")
-    for k in trees:
+    for k in rooms:
         ingest, dispatch = (np.median(x) * 1e3 for x in taken[k])
         print(f"  {k}: taking in a tick's packets median {ingest:.2f} ms, dispatch median {dispatch:.2f} ms")
 

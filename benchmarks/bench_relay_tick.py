@@ -19,8 +19,8 @@ import time
 
 import numpy as np
 
-from mocodec.stream.packets import pack_batch
-from mocodec.stream.relay import RelayCore, Viewer
+import mocodec.stream.packets
+import mocodec.stream.relay
 from mocodec.stream.relay.server import quiet_collector
 from relay_load import place, restamp, templates
 
@@ -28,28 +28,41 @@ SEED = 29
 WARM_UP = 50
 
 
-def run(avatars: int, viewers: int, budget: float, ticks: int) -> tuple[np.ndarray, np.ndarray]:
+def room_of(avatars: int, viewers: int, budget: float, relay=mocodec.stream.relay, packets=mocodec.stream.packets):
+    """A relay core and its room: ``viewers`` viewers of ``budget`` bit/s at seeded cameras, the
+    avatars' stream headers taken in; and a function giving each tick's sender message.
+    ``relay`` and ``packets``: the modules to build it with (another tree's, in ab_speed.py)."""
     header, data, clip_ticks, clip_frames = templates(("kinwave-live", 0.0, 3, 0.0), 0.5)
     by_tick: dict[int, list[tuple[int, bytes, int]]] = {}
     for idx, (k, d) in enumerate(data):
         by_tick.setdefault(k, []).append((idx, d, struct.unpack_from("<I", d, 22)[0]))
-    relay, owner = RelayCore(), object()
-    room = relay.room("bench")
+    core, owner = relay.RelayCore(), object()
+    room = core.room("bench")
     rng = np.random.default_rng(SEED)
     for _ in range(viewers):
         camera = (float(rng.uniform(0, 48)), 1.6, float(rng.uniform(0, 2 * avatars / 25)))
-        relay.join(room, Viewer(budget=budget, camera=camera))
-    relay.ingest(room, pack_batch([restamp(header, s, 0, 0, 0, *place(s)) for s in range(avatars)]), owner)
+        core.join(room, relay.Viewer(budget=budget, camera=camera))
+    core.ingest(room, packets.pack_batch([restamp(header, s, 0, 0, 0, *place(s)) for s in range(avatars)]), owner)
     phase = rng.integers(clip_ticks, size=avatars)
-    dispatch, ingest = [], []
-    for tick in range(ticks):
+
+    def message(tick: int) -> bytes:
         batch = []
         for s in range(avatars):
             loop, k = divmod(int(phase[s]) + tick, clip_ticks)
             for idx, d, first in by_tick.get(k, ()):
                 batch.append(restamp(d, s, loop * len(data) + idx + 1, 0, loop * clip_frames + first, *place(s)))
+        return packets.pack_batch(batch)
+
+    return core, room, owner, message
+
+
+def run(avatars: int, viewers: int, budget: float, ticks: int) -> tuple[np.ndarray, np.ndarray]:
+    relay, room, owner, message = room_of(avatars, viewers, budget)
+    dispatch, ingest = [], []
+    for tick in range(ticks):
+        data = message(tick)
         t0 = time.perf_counter()
-        relay.ingest(room, pack_batch(batch), owner)
+        relay.ingest(room, data, owner)
         t1 = time.perf_counter()
         relay.dispatch(room)
         t2 = time.perf_counter()

@@ -634,7 +634,7 @@ def truncated_many(cuts: list[tuple[Packet, bytes, int, int]]) -> list[bytes]:
         np.zeros(len(cuts), dtype=np.int64),
         np.fromiter((size for _, _, size, _ in cuts), dtype=np.int64, count=len(cuts)),
         full,
-        np.where(full, np.take(CRC32_STARTS, dropped), np.take(CRC16_STARTS, dropped)),
+        np.where(full, _CRC_STARTS[dropped], np.take(CRC16_STARTS, dropped)),
         np.full(len(cuts), -1, dtype=np.int64),
     )
     whole = out.tobytes()

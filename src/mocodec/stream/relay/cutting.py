@@ -16,7 +16,7 @@ import numpy as np
 
 from mocodec.crowd import layers_within, on_ladder, viewer_shares
 from mocodec.errors import MocodecError
-from mocodec.stream.packets import length_varint, truncated, truncated_many
+from mocodec.stream.packets import Packet, length_varint, truncated, truncated_many
 from mocodec.stream.relay.rooms import Forward, Room, StreamState, Viewer
 
 log = logging.getLogger("mocodec.relay")
@@ -147,11 +147,9 @@ def _cut_variants(r: Round, width: int, packets: list[int]) -> None:
     places, cuts = [], []
     for i in packets:
         f = r.layered[i]
-        assert f.layer_ends is not None
-        layers = len(f.layer_ends)
-        for keep in range(1, layers):
+        for keep in range(1, int(r.layer_counts[i])):
             places.append(i * width + keep - 1)
-            cuts.append((f.packet, f.data, f.layer_ends[keep - 1], layers - keep))
+            cuts.append(_layers_cut(f, keep))
     for at, variant in zip(places, truncated_many(cuts)):
         r.variants[at], r.heads[at] = variant, length_varint(len(variant))
 
@@ -292,7 +290,14 @@ def drop_layers(f: Forward, keep: int) -> bytes:
     assert f.layer_ends is not None
     if keep >= len(f.layer_ends):
         return f.data
-    return truncated(f.packet, f.data, f.layer_ends[keep - 1], len(f.layer_ends) - keep)
+    return truncated(*_layers_cut(f, keep))
+
+
+def _layers_cut(f: Forward, keep: int) -> tuple[Packet, bytes, int, int]:
+    """:func:`truncated`'s arguments for a layered packet's lowest ``keep`` layers (fewer than
+    it has): the payload up to where layer ``keep`` ends, the layers above it dropped."""
+    assert f.layer_ends is not None
+    return f.packet, f.data, f.layer_ends[keep - 1], len(f.layer_ends) - keep
 
 
 def cut_embedded(f: Forward, state: StreamState, rate: float) -> bytes:

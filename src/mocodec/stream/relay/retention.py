@@ -78,7 +78,7 @@ class StreamHistory:
     def add(self, forward: Any, restart: bool) -> None:
         """Keep a packet; drop what neither a late viewer nor a repair needs, then the oldest
         past the caps (the newest packet stays, unless the room's cap takes it)."""
-        ordinal, size, caps = self.first + len(self.kept), len(forward.data), self.room.caps  # (self.end)
+        ordinal, size, caps = self.end, len(forward.data), self.room.caps
         if restart:
             self.restart = ordinal
         self.kept.append(forward)

@@ -131,43 +131,25 @@ def test_a_packet_cut_from_its_bytes_is_the_packet_with_the_shorter_payload(pack
     assert parse(header).dropped == 0
 
 
-def test_packets_cut_together_are_the_packets_cut_one_by_one(packets):
-    """``truncated_many`` (one compiled call, as a relay cuts a tick's variants) gives each
-    packet's cut as ``truncated`` makes it, full and compact packets mixed, at every layer count
-    and every size from none to all of the payload."""
-    from dataclasses import replace
-
-    from mocodec.stream.packets import truncated, truncated_many
-
-    data_packets = [q for q in packets if q.kind != HEADER][:30]
-    cuts = [
-        (p, p.to_bytes(), size, dropped)
-        for k, q in enumerate(data_packets)
-        for p in [replace(q, compact=k % 2 == 0)]
-        for size, dropped in ((0, 3), (1, 2), (len(p.payload) // 3, 1), (len(p.payload), 0))
-    ]
-    assert {data[0] >= 0x80 for _, data, _, _ in cuts} == {True, False}
-    assert truncated_many(cuts) == [truncated(*cut) for cut in cuts]
-    assert truncated_many([]) == []
-
-
 def test_a_batch_read_together_is_its_packets_read_one_by_one(walk_bvh):
-    """``read_batch`` (a relay's reading of a sender's batch in arrays and one compiled call)
-    gives the packets ``parse`` gives one at a time, and the layered ones stripped of their cut
-    tables as ``stripped`` and ``layer_ends`` make them; where one packet would not parse, or is
-    compact, it gives None (the caller reads them one by one and says what is wrong). Checked
-    on a real batch and on 300 copies of it with a byte changed (seeded), headers, tables and
-    checks included."""
+    """``read_batch`` (a relay's reading of a sender's batch in arrays and compiled calls)
+    gives the packets ``parse`` gives one at a time, and the layered ones (for their stream's
+    layer count) stripped of their cut tables with their layers, as ``stripped``, ``layer_ends``
+    and ``truncated`` make them; where one packet would not parse, or is compact, it gives None
+    (the caller reads them one by one and says what is wrong). Checked on a real batch and on
+    300 copies of it with a byte changed (seeded), headers, tables and checks included."""
     from dataclasses import replace
 
     from mocodec.stream.packets import (
         CUTS,
+        DATA,
         batch_offsets,
         layer_ends,
         pack_batch,
         read_batch,
         split_batch,
         stripped,
+        truncated,
     )
 
     packets = stream_clip(walk_bvh[:300], get_codec("kinwave-live", layers=3))
@@ -180,25 +162,33 @@ def test_a_batch_read_together_is_its_packets_read_one_by_one(walk_bvh):
         except CorruptStreamError:
             return None
 
+    def three(streams: list[int]) -> list[int]:
+        return [3] * len(streams)
+
     def check(data: bytes) -> bool:
-        together, alone = read_batch(data, batch_offsets(data)), one_by_one(data)
+        together, alone = read_batch(data, batch_offsets(data), three), one_by_one(data)
         if together is None:
             return alone is None or any(r[0] >= 0x80 for r in split_batch(data))
+        assert read_batch(data, batch_offsets(data)) == (alone, {})  # no layer counts: nothing peeled
         read, prepared = together
-        assert read == alone
+        assert len(read) == len(alone)
         raw = split_batch(data)
-        for k, p in enumerate(read):
+        for k, (p, q) in enumerate(zip(read, alone)):
             if k in prepared:
-                table, plain, wire = prepared[k]
-                assert [*table, len(plain.payload)] == layer_ends(p, len(table) + 1)
-                assert (plain, wire) == stripped(p, raw[k])
-            elif p.flags & CUTS and not p.dropped:  # a table that does not read, for any layer count
-                for layers in range(2, 10):
+                ends, variants = prepared[k]
+                plain, wire = stripped(q, raw[k])
+                assert (p, variants[-1]) == (plain, wire)
+                assert ends == layer_ends(q, 3)
+                assert variants[:-1] == tuple(truncated(plain, wire, ends[n - 1], 3 - n) for n in (1, 2))
+            else:
+                assert p == q
+                if q.flags & CUTS and not q.dropped and q.kind == DATA and q.frames:  # a table that does not read
                     with pytest.raises(CorruptStreamError):
-                        layer_ends(p, layers)
+                        layer_ends(q, 3)
         return True
 
-    assert check(batch) and len(read_batch(batch, batch_offsets(batch))[1]) > 30
+    assert check(batch) and len(read_batch(batch, batch_offsets(batch), three)[1]) > 30
+    assert not read_batch(batch, batch_offsets(batch), lambda streams: [2] * len(streams))[1]  # another count
     rng = np.random.default_rng(7)
     start = len(batch) - sum(len(p.to_bytes()) for p in full)  # (the lengths stay: the batch still splits)
     for _ in range(300):
@@ -215,10 +205,10 @@ def test_a_batch_read_together_is_its_packets_read_one_by_one(walk_bvh):
         changed = [p.to_bytes() for p in full[:k]] + [replace(full[k], payload=bytes(payload)).to_bytes()]
         data = pack_batch(changed)
         assert check(data)
-        tables += k not in read_batch(data, batch_offsets(data))[1]
+        tables += k not in read_batch(data, batch_offsets(data), three)[1]
     assert 30 < tables < 270  # both ways, often
     mixed = pack_batch([full[0].to_bytes(), replace(packets[1], compact=True).to_bytes()])
-    assert read_batch(mixed, batch_offsets(mixed)) is None
+    assert read_batch(mixed, batch_offsets(mixed), three) is None
 
 
 @pytest.mark.parametrize("compact", [True, False])

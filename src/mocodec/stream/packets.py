@@ -410,18 +410,24 @@ _HEAD = np.dtype(
         ("frames", "<u2"), ("position", "<f4", (3,)), ("length", "<u4"),
     ]
 )  # fmt: skip
-#: A packet read together with its batch whose cut table read well: the table's ends, the
-#: packet without the table and its wire bytes (what :func:`stripped` makes of it).
-Prepared = tuple[list[int], Packet, bytes]
+#: A layered packet read together with its batch (:func:`read_batch`): where each of its
+#: layers ends in its payload (the top one at its end: :func:`layer_ends`), and its wire bytes
+#: with its lowest 1, 2, ... layers, the last the whole packet (what :func:`stripped` and
+#: :func:`truncated` make of it): a relay's viewers get one of them each.
+Prepared = tuple[list[int], tuple[bytes, ...]]
 
 
-def read_batch(data: bytes, offsets: np.ndarray) -> tuple[list[Packet], dict[int, Prepared]] | None:
+def read_batch(
+    data: bytes, offsets: np.ndarray, layers: Callable[[list[int]], list[int]] | None = None
+) -> tuple[list[Packet], dict[int, Prepared]] | None:
     """The packets of a batch (``offsets``: :func:`batch_offsets`) all in the full form, read
-    together: their frames and fields checked in arrays, their checks and cut tables in one
-    compiled call (:func:`.framing.read_full`), the same packets :func:`parse` gives; and, by
-    their place in the batch, the whole packets whose cut table reads well, stripped of it
-    (:data:`Prepared`). None where a packet is compact or does not parse: the caller reads them
-    one at a time, which says what is wrong where."""
+    together: their frames and fields checked in arrays, their checks, cut tables and layers
+    in two compiled calls (:func:`.framing.read_full`, :func:`.framing.cut_packets`). The
+    packets are those :func:`parse` gives, except the layered ones (``layers``: the layer count
+    of each packet's stream, from their stream ids; 1 where not layered) whose cut table reads
+    with that count less one: those come stripped of it (:func:`stripped`), and by their place
+    in the batch with their layers (:data:`Prepared`). None where a packet is compact or does
+    not parse: the caller reads them one at a time, which says what is wrong where."""
     data = data if isinstance(data, bytes) else bytes(data)
     starts, stops = offsets[:-1], offsets[1:]
     raw = np.frombuffer(data, dtype=np.uint8)
@@ -443,36 +449,60 @@ def read_batch(data: bytes, offsets: np.ndarray) -> tuple[list[Packet], dict[int
     )
     if (dropped < 0).any() or ((dropped > 0) & (kinds != DATA)).any():
         return None
+    streams = heads["stream"].tolist()
+    counts = np.asarray(layers(streams) if layers is not None else np.ones(len(streams)), dtype=np.int64)
+    peeled = (
+        (counts > 1)
+        & (counts <= _CRC_STARTS.size)
+        & (table_ends + 1 == counts)
+        & (dropped == 0)
+        & (kinds == DATA)
+        & (heads["frames"] > 0)
+    )
+    skips = np.where(peeled, codec_at, 0)
+    flags = np.where(peeled, flags & ~CUTS, flags)
     packets = [
-        _parsed(stream, seq, ts, codecs[number], first, frames, data[a + _FIELDS.size : b - _CRC.size], kind, f,
-                tuple(position), (False, True, 0, d))
-        for stream, seq, ts, number, first, frames, a, b, kind, f, position, d in zip(
-            heads["stream"].tolist(), heads["sequence"].tolist(), heads["timestamp"].tolist(),
-            heads["codec"].tolist(), heads["first"].tolist(), heads["frames"].tolist(), starts.tolist(),
-            stops.tolist(), kinds.tolist(), flags.tolist(), heads["position"].tolist(), dropped.tolist(),
+        _parsed(stream, seq, ts, codecs[number], first, frames, data[a + _FIELDS.size + skip : b - _CRC.size], kind,
+                f, tuple(position), (False, True, 0, d))
+        for stream, seq, ts, number, first, frames, a, b, skip, kind, f, position, d in zip(
+            streams, heads["sequence"].tolist(), heads["timestamp"].tolist(), heads["codec"].tolist(),
+            heads["first"].tolist(), heads["frames"].tolist(), starts.tolist(), stops.tolist(), skips.tolist(),
+            kinds.tolist(), flags.tolist(), heads["position"].tolist(), dropped.tolist(),
         )
     ]  # fmt: skip
-    tabled = np.flatnonzero((table_ends >= 0) & (dropped == 0))
-    if not tabled.size:
+    layered = np.flatnonzero(peeled)
+    if not layered.size:
         return packets, {}
-    skips = codec_at[tabled]
-    out, ends = framing.cut_packets(
-        raw,
-        starts[tabled],
-        np.full(tabled.size, _FIELDS.size - _U32.size),
-        skips,
-        heads["length"][tabled].astype(np.int64) - skips,
-        np.ones(tabled.size, dtype=np.bool_),
-        np.zeros(tabled.size, dtype=np.int64),
-        flags[tabled] & ~CUTS,
+    return packets, _layers_of(raw, starts, heads["length"], layered, counts[layered], values, skips, flags)
+
+
+def _layers_of(raw, starts, lengths, layered, counts, values, skips, flags) -> dict[int, Prepared]:
+    """:func:`read_batch`'s layered packets' layers: every packet's variants (its lowest 1, 2,
+    ... layers, the ones above dropped, its cut table's ends ``values`` in its payload after
+    ``skips``) cut in one compiled call."""
+    rows = np.repeat(layered, counts)
+    firsts = np.cumsum(counts) - counts
+    keep = np.arange(rows.size) - np.repeat(firsts, counts) + 1  # layers kept, 1 to the packet's count
+    top = np.repeat(counts, counts)
+    sizes = np.where(
+        keep < top, values[rows, np.minimum(keep, top - 1) - 1], lengths[rows].astype(np.int64) - skips[rows]
     )
-    whole, bounds = out.tobytes(), ends.tolist()
-    prepared = {}
-    for i, n, skip, a, b in zip(tabled.tolist(), table_ends[tabled].tolist(), skips.tolist(), bounds, bounds[1:]):
-        p = packets[i]
-        plain = p.with_payload(p.payload[skip:], p.flags & ~CUTS)
-        prepared[i] = (values[i, :n].tolist(), plain, whole[a:b])
-    return packets, prepared
+    out, bounds = framing.cut_packets(
+        raw,
+        starts[rows],
+        np.full(rows.size, _FIELDS.size - _U32.size),
+        skips[rows],
+        sizes,
+        np.ones(rows.size, dtype=np.bool_),
+        _CRC_STARTS[top - keep],
+        flags[rows],
+    )
+    wire, at, ends = out.tobytes(), bounds.tolist(), sizes.tolist()
+    cuts = [wire[a:b] for a, b in zip(at, at[1:])]
+    return {
+        i: (ends[first : first + n], tuple(cuts[first : first + n]))
+        for i, first, n in zip(layered.tolist(), firsts.tolist(), counts.tolist())
+    }
 
 
 class Reader:
@@ -614,32 +644,6 @@ def truncated(p: Packet, data: bytes, size: int, dropped: int) -> bytes:
         out = head + body
         return out + _U16.pack(binascii.crc_hqx(out, CRC16_STARTS[dropped]))
     return _reframed(data, body, dropped)
-
-
-def truncated_many(cuts: list[tuple[Packet, bytes, int, int]]) -> list[bytes]:
-    """:func:`truncated` of every ``(p, data, size, dropped)`` in ``cuts``, the same bytes, in
-    one compiled call (:func:`.framing.cut_packets`): a relay's tick cuts hundreds."""
-    if not cuts:
-        return []
-    datas = [data for _, data, _, _ in cuts]
-    lengths = np.fromiter(map(len, datas), dtype=np.int64, count=len(datas))
-    payloads = np.fromiter((len(p.payload) for p, _, _, _ in cuts), dtype=np.int64, count=len(cuts))
-    full = np.fromiter((not data[0] & COMPACT for data in datas), dtype=np.bool_, count=len(cuts))
-    dropped = np.fromiter((d for _, _, _, d in cuts), dtype=np.int64, count=len(cuts))
-    starts = np.concatenate(([0], np.cumsum(lengths)[:-1]))
-    out, ends = framing.cut_packets(
-        np.frombuffer(b"".join(datas), dtype=np.uint8),
-        starts,
-        np.where(full, _FIELDS.size - _U32.size, lengths - _U16.size - payloads),
-        np.zeros(len(cuts), dtype=np.int64),
-        np.fromiter((size for _, _, size, _ in cuts), dtype=np.int64, count=len(cuts)),
-        full,
-        np.where(full, _CRC_STARTS[dropped], np.take(CRC16_STARTS, dropped)),
-        np.full(len(cuts), -1, dtype=np.int64),
-    )
-    whole = out.tobytes()
-    bounds = ends.tolist()
-    return [whole[a:b] for a, b in zip(bounds, bounds[1:])]
 
 
 def _reframed(data: bytes | memoryview, body: bytes, dropped: int, flags: int | None = None) -> bytes:

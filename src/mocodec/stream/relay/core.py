@@ -24,7 +24,9 @@ from mocodec.stream.packets import (
     cut_table,
     layer_ends,
     pack_batch,
+    parse,
     stripped,
+    truncated,
 )
 from mocodec.stream.relay.cutting import choose_layers, crowd_of, cut_for, layout_of, resent
 from mocodec.stream.relay.limits import BAD_MESSAGE, QUEUED_S, RATE_LIMIT, TAKEN, TICK_HZ, Bucket, Closing, Limits
@@ -321,17 +323,23 @@ def apply_settings(viewer: Viewer, text: str) -> dict:
 
 
 def _forwarded(p: Packet, raw: memoryview, state: StreamState, prepared: Prepared | None) -> Forward:
-    """The packet as forwarded, its cut table stripped and read: where a layered packet's
-    layers end (a layered stream's data needs one), or an embedded codec's channel streams'
-    lengths; Closing if it does not parse. A layered packet whose table was read with its
-    batch (``prepared``) and has the stream's count of ends is forwarded as read there."""
+    """The packet as forwarded, its cut table stripped and read: a layered packet's layers
+    (where each ends, and its bytes with its lowest 1, 2, ... layers: a layered stream's data
+    needs a table of them), or an embedded codec's channel streams' lengths; Closing if it does
+    not parse. A packet read with its layers (``prepared``, for the stream's layer count when
+    its message was read) is forwarded as read; one read for another count (a header before it
+    in its message changed the stream) is read again."""
     try:
+        if prepared is not None:
+            ends, variants = prepared
+            if state.layered and len(ends) == state.layers:
+                return Forward(p, variants[-1], layer_ends=ends, layer_variants=variants)
+            p = parse(raw, "packet")
         if state.layered and p.frames:
-            if prepared is not None and len(prepared[0]) == state.layers - 1:
-                table, plain, data = prepared
-                return Forward(plain, data, layer_ends=[*table, len(plain.payload)])
             ends = layer_ends(p, state.layers)
-            return Forward(*stripped(p, raw), layer_ends=ends)
+            plain, data = stripped(p, raw)
+            variants = [truncated(plain, data, end, len(ends) - keep) for keep, end in enumerate(ends[:-1], 1)]
+            return Forward(plain, data, layer_ends=ends, layer_variants=(*variants, data))
         cuts = cut_table(p) if p.flags & CUTS and not state.layered else None
         return Forward(*stripped(p, raw), cuts=cuts)
     except CorruptStreamError as e:

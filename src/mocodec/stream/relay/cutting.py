@@ -16,7 +16,7 @@ import numpy as np
 
 from mocodec.crowd import layers_within, on_ladder, viewer_shares
 from mocodec.errors import MocodecError
-from mocodec.stream.packets import Packet, length_varint, truncated, truncated_many
+from mocodec.stream.packets import length_varint
 from mocodec.stream.relay.rooms import Forward, Room, StreamState, Viewer
 
 log = logging.getLogger("mocodec.relay")
@@ -25,8 +25,8 @@ log = logging.getLogger("mocodec.relay")
 @dataclass
 class Round:
     """The tick's fresh layered packets that are the ``k``-th of their stream this tick (a
-    stream's packets go in order, one round each): their streams, rows in the crowd, slots,
-    keyframe flags and layers, and their variants with 1, 2, ... layers (``variants[i * width +
+    stream's packets go in order, one round each): their streams, rows in the crowd, slots and
+    keyframe flags, and their variants with 1, 2, ... layers (``variants[i * width +
     k - 1]``, the whole packet from its own layer count on) with the varint of each one's
     length (``heads``)."""
 
@@ -35,7 +35,6 @@ class Round:
     rows: np.ndarray
     slots: np.ndarray
     keyframes: np.ndarray
-    layer_counts: np.ndarray
     variants: list[bytes]
     heads: list[bytes]
 
@@ -125,33 +124,19 @@ def crowd_of(room: Room, fresh: list[Forward], layout: Layout) -> Crowd:
 
 
 def _round(room: Room, row: dict[int, int], width: int, layered: list[Forward]) -> Round:
-    """A round's arrays, every variant the whole packet until a viewer needs a cut one
-    (:func:`_cut_variants`)."""
+    """A round's arrays, and every packet's variants with 1 to ``width`` layers (those past its
+    own count the whole packet)."""
     streams = [f.packet.stream for f in layered]
-    heads = [length_varint(len(f.data)) for f in layered]
+    variants = [f.layer_variants[min(keep, len(f.layer_variants)) - 1] for f in layered for keep in range(1, width + 1)]
     return Round(
         layered,
         streams,
         np.array([row[k] for k in streams], dtype=np.int64),
         np.array([room.streams[k].slot for k in streams], dtype=np.int64),
         np.array([f.packet.keyframe for f in layered], dtype=bool),
-        np.array([len(f.layer_ends or ()) for f in layered], dtype=np.int64),
-        [f.data for f in layered for _ in range(width)],
-        [h for h in heads for _ in range(width)],
+        variants,
+        [length_varint(len(v)) for v in variants],
     )
-
-
-def _cut_variants(r: Round, width: int, packets: list[int]) -> None:
-    """Cut the variants with fewer layers of the round's ``packets`` (some viewer gets one), all
-    in one call (:func:`truncated_many`: :func:`drop_layers` of each)."""
-    places, cuts = [], []
-    for i in packets:
-        f = r.layered[i]
-        for keep in range(1, int(r.layer_counts[i])):
-            places.append(i * width + keep - 1)
-            cuts.append(_layers_cut(f, keep))
-    for at, variant in zip(places, truncated_many(cuts)):
-        r.variants[at], r.heads[at] = variant, length_varint(len(variant))
 
 
 def choose_layers(room: Room, crowd: Crowd, viewers: list[Viewer], fits: np.ndarray) -> list[np.ndarray]:
@@ -179,7 +164,6 @@ def _choose_round(room: Room, width: int, r: Round, viewers: list[Viewer], fits:
         keep[grow] = np.minimum(fit[grow], reach[grow[0], had[grow]])
     for k, viewer in enumerate(viewers):
         viewer.layers[r.slots] = keep[:, k]
-    _cut_variants(r, width, np.flatnonzero((keep < r.layer_counts[:, None]).any(axis=1)).tolist())
     return np.arange(count)[:, None] * width + keep - 1
 
 
@@ -237,11 +221,7 @@ def cut_for(
         if r is None or (f.cuts is None and f.layer_ends is None):
             out.append(f.data)
         elif f.layer_ends is not None:
-            keep = layers_for(viewer, f, room.streams[f.packet.stream], int(fits[r]))
-            key: tuple[int, float] = (id(f), -keep)
-            if key not in cache:
-                cache[key] = drop_layers(f, keep)
-            out.append(cache[key])
+            out.append(drop_layers(f, layers_for(viewer, f, room.streams[f.packet.stream], int(fits[r]))))
         else:
             rate = on_ladder(float(shares[r]))
             key = (id(f), rate)
@@ -287,17 +267,7 @@ def resent(viewer: Viewer, f: Forward, state: StreamState | None) -> bytes:
 
 def drop_layers(f: Forward, keep: int) -> bytes:
     """A layered packet with its lowest ``keep`` layers."""
-    assert f.layer_ends is not None
-    if keep >= len(f.layer_ends):
-        return f.data
-    return truncated(*_layers_cut(f, keep))
-
-
-def _layers_cut(f: Forward, keep: int) -> tuple[Packet, bytes, int, int]:
-    """:func:`truncated`'s arguments for a layered packet's lowest ``keep`` layers (fewer than
-    it has): the payload up to where layer ``keep`` ends, the layers above it dropped."""
-    assert f.layer_ends is not None
-    return f.packet, f.data, f.layer_ends[keep - 1], len(f.layer_ends) - keep
+    return f.layer_variants[min(keep, len(f.layer_variants)) - 1]
 
 
 def cut_embedded(f: Forward, state: StreamState, rate: float) -> bytes:

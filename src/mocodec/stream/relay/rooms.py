@@ -44,6 +44,7 @@ class Forward:
     cuts: np.ndarray | None = None
     cutter: Callable[[float], bytes] | None = None  # the codec's packet cutter, made at the first cut
     layer_ends: list[int] | None = None  # a layered stream's data packet: where each layer ends
+    layer_variants: tuple[bytes, ...] = ()  # ... and its bytes with its lowest 1, 2, ... layers (the last: data)
     layer_starts: list[bool] | None = None  # ... and which restart in it (read when a viewer may gain one)
 
     @property
@@ -186,16 +187,20 @@ class Room:
 
 def read_message(room: Room, data: bytes) -> tuple[list[Packet], list[memoryview], dict[int, Prepared]]:
     """The packets of one sender message in order, each one's bytes, and by their place the
-    packets whose cut table was read with them (:data:`~mocodec.stream.packets.Prepared`). A
-    batch of full packets is read together (:func:`read_batch`); a compact packet follows on
-    from its stream's state (:class:`Cursors`); where a packet does not parse, they are read
-    one at a time, which says what is wrong where (CorruptStreamError)."""
+    layered packets read with their layers (:data:`~mocodec.stream.packets.Prepared`: those
+    come stripped of their cut tables). A batch of full packets is read together
+    (:func:`read_batch`, the layer counts of the room's streams); a compact packet follows on
+    from its stream's state (:class:`Cursors`); where a packet does not parse, they are read one
+    at a time, which says what is wrong where (CorruptStreamError)."""
     if not is_batch(data):
         raw = [memoryview(data)]
     else:
         offsets = batch_offsets(data)
         raw = packet_views(data, offsets)
-        together = read_batch(data, offsets)
+        streams = room.streams
+        together = read_batch(
+            data, offsets, lambda keys: [s.layers if (s := streams.get(k)) is not None else 1 for k in keys]
+        )
         if together is not None:
             return together[0], raw, together[1]
     if any(r[:1] and r[0] & COMPACT for r in raw):

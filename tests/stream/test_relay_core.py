@@ -3,13 +3,14 @@ retention and settings, called through its public API (:mod:`mocodec.stream.rela
 
 from __future__ import annotations
 
+import copy
 from dataclasses import replace
 
 import pytest
 
 from mocodec.codecs import get_codec
 from mocodec.stream.live import stream_clip
-from mocodec.stream.packets import pack_batch, split_batch
+from mocodec.stream.packets import Reader, pack_batch, split_batch
 from mocodec.stream.relay import BAD_MESSAGE, Bucket, Closing, Limits, RelayCore, Room, Viewer
 from mocodec.stream.relay.core import apply_settings
 from mocodec.stream.relay.cutting import layers_for
@@ -27,7 +28,9 @@ def ingested(core: RelayCore, packets, room: Room | None = None) -> Room:
 @pytest.mark.parametrize("compact_from", [0, 5, None])
 def test_a_message_of_full_packets_reads_as_one_with_compact_ones(walk_bvh, compact_from):
     """A sender's message is read alike whether its packets are full, compact, or both (a
-    compact packet follows on from the full one before it in the same message)."""
+    compact packet follows on from the full one before it in the same message), and each
+    layered packet's variants (read with its batch, or one by one) are the packet with its
+    lowest 1, 2 and 3 layers, as a receiver reads them."""
     packets = stream_clip(walk_bvh[:40], get_codec("kinwave-live", layers=3), keyframe_s=60.0)[:-1]
     head, data = packets[0], packets[1:]
     wire = [replace(p, compact=compact_from is not None and k >= compact_from).to_bytes() for k, p in enumerate(data)]
@@ -40,6 +43,14 @@ def test_a_message_of_full_packets_reads_as_one_with_compact_ones(walk_bvh, comp
         (p.sequence, p.first_frame, p.codec_payload) for p in data
     ]
     assert room.streams[0].next_sequence == data[-1].sequence + 1
+    reader = Reader()
+    reader.read(head.to_bytes())
+    for f in kept:
+        assert len(f.layer_variants) == 3 and f.layer_variants[-1] == f.data
+        for keep, variant in enumerate(f.layer_variants, 1):
+            cut = copy.deepcopy(reader).read(variant)
+            assert (cut.payload, cut.dropped) == (f.packet.payload[: f.layer_ends[keep - 1]], 3 - keep)
+        reader.read(f.data)
 
 
 def test_repair_requests_are_checked_and_limited(walk_bvh):

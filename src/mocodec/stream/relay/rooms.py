@@ -35,7 +35,7 @@ from mocodec.stream.relay.retention import Caps, RoomHistory, StreamHistory
 LAYER_RATE_S = 1.0
 
 
-@dataclass
+@dataclass(slots=True)
 class Forward:
     """A packet on its way to viewers: the bytes as forwarded, and what cutting needs."""
 
@@ -61,7 +61,7 @@ def stream_setup(header_payload: bytes) -> tuple[StreamInfo, Any]:
     return info, info.stream_codec()
 
 
-@dataclass
+@dataclass(slots=True)
 class StreamState:
     owner: object  # the sending connection, or the bus
     header: Forward

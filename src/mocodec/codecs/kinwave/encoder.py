@@ -33,6 +33,7 @@ from mocodec.codecs.kinwave.body import (
     WAVELET_IDS,
     ZERO_CONSTANTS,
     ConstantCoding,
+    channel_codes,
     channel_steps,
     constant_coding,
     has_translation,
@@ -43,7 +44,6 @@ from mocodec.codecs.kinwave.body import (
     rotation_joints,
     segment_factors,
     step_codes,
-    step_groups,
     still_rotations,
     three_angle_groups,
     turns_over_translations,
@@ -342,14 +342,11 @@ class Encoder:
         whose angles are all constant takes the step the model would give it if they moved:
         its constants turn everything below it (a dummy root: the whole body)."""
         sk = bone_skeleton(self.skeleton, self.values, self.const)
-        coded, rotating = [0] * len(sk), [0] * len(sk)
-        translations = 0
-        for g in step_groups(self.skeleton):
-            n = int((~self.const[g.channels]).sum())
-            if g.rotation:
-                coded[g.joint], rotating[g.joint] = n, g.channels.size
-            else:
-                translations += n
+        _, translation = channel_codes(self.skeleton)
+        joint_of, moving = self.skeleton.channel_joints, ~self.const
+        coded = np.bincount(joint_of[moving & ~translation], minlength=len(sk)).tolist()
+        rotating = np.bincount(joint_of[~translation], minlength=len(sk)).tolist()
+        translations = int(np.count_nonzero(moving & translation))
         measure, closed = self.cfg["error_measure"], self.cfg["closed_loop"]
         if self.cfg["allocation"] == "uniform":
             rot, trans = kinalloc.steps(sk, tuple(int(c > 0) for c in coded), int(translations > 0), measure, closed)
@@ -382,7 +379,7 @@ class Encoder:
         other than the body's root tries only its file's angles and a vector."""
         groups = three_angle_groups(self.skeleton)
         choice = np.zeros(len(groups), dtype=np.int64)
-        moving = [k for k, (channels, _) in enumerate(groups) if not self.const[channels].all()]
+        moving = np.flatnonzero(~self.const[np.array([c for c, _ in groups]).reshape(-1, 3)].all(axis=1)).tolist()
         every_joint = self.cfg["error_measure"] == "mean" or not any(j.has_axis for j in self.skeleton.joints)
         if every_joint:
             live = moving

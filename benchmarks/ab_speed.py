@@ -4,7 +4,7 @@ On a shared machine single runs move by 10-40% from minute to minute; two trees 
 turn, item by item, see the same machine.
 
     NUMBA_NUM_THREADS=1 python benchmarks/ab_speed.py [encode|decode|relay] [--base REF]
-        [--source NAME] [--rounds N] [--ticks N]
+        [--source NAME] [--rounds N] [--ticks N] [--compact]
 
 The revision is a copy of its ``src/mocodec`` under another package name (``git archive``
 into .cache/ab/, imports renamed; its NamedTuple classes too, or numba's types would mix the
@@ -85,7 +85,7 @@ def kinwave(what: str, source: str, rounds: int) -> None:
     print(f"  time, tree / base: {times['tree'].min(axis=0).sum() / times['base'].min(axis=0).sum():.3f}")
 
 
-def relay(ticks: int) -> None:
+def relay(ticks: int, compact: bool) -> None:
     from bench_relay_tick import WARM_UP, room_of
     from mocodec.stream.relay.server import quiet_collector
 
@@ -93,9 +93,13 @@ def relay(ticks: int) -> None:
     avatars, viewers, budget = 500, 50, 3e6
     rooms = {
         "base": room_of(
-            avatars, viewers, budget, *(importlib.import_module(f"{NAME}.stream.{m}") for m in ("relay", "packets"))
+            avatars,
+            viewers,
+            budget,
+            *(importlib.import_module(f"{NAME}.stream.{m}") for m in ("relay", "packets")),
+            compact=compact,
         ),
-        "tree": room_of(avatars, viewers, budget),
+        "tree": room_of(avatars, viewers, budget, compact=compact),
     }
     taken = {k: ([], []) for k in rooms}
     same = True
@@ -116,7 +120,11 @@ def relay(ticks: int) -> None:
             for v in room.viewers:
                 v.outbox.clear()
         same = same and sent["base"] == sent["tree"]
-    print(f"relay tick, {avatars} layered avatars, {viewers} viewers at {budget:g} bit/s; the same batches: {same}")
+    form = "compact" if compact else "full"
+    print(
+        f"relay tick, {avatars} layered avatars ({form} packets), {viewers} viewers at {budget:g} bit/s; "
+        f"the same batches: {same}"
+    )
     for k in rooms:
         ingest, dispatch = (np.median(x) * 1e3 for x in taken[k])
         print(f"  {k}: taking in a tick's packets median {ingest:.2f} ms, dispatch median {dispatch:.2f} ms")
@@ -129,10 +137,11 @@ def main() -> None:
     parser.add_argument("--source", default="game export", help="a source of shared_sources (game export)")
     parser.add_argument("--rounds", type=int, default=3, help="rounds over the clips (3)")
     parser.add_argument("--ticks", type=int, default=300, help="relay ticks (300)")
+    parser.add_argument("--compact", action="store_true", help="relay: senders' packets in the compact form")
     args = parser.parse_args()
     sys.path.insert(0, revision_package(args.base))
     if args.what == "relay":
-        relay(args.ticks)
+        relay(args.ticks, args.compact)
     else:
         kinwave(args.what, args.source, args.rounds)
 

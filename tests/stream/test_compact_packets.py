@@ -211,6 +211,84 @@ def test_a_batch_read_together_is_its_packets_read_one_by_one(walk_bvh):
     assert read_batch(mixed, batch_offsets(mixed), three) is None
 
 
+def test_a_batch_of_compact_packets_read_together_is_its_packets_read_one_by_one(walk_bvh):
+    """``read_batch`` of compact packets (given their streams' cursors, which it leaves as
+    they are) gives the packets a receiver's cursors give reading them one at a time, placed
+    by the cursors in order (two streams, two packets of each a batch at places), and the
+    layered ones stripped of their cut tables with their layers, as ``stripped``,
+    ``layer_ends`` and ``truncated`` make them; None where one would not parse (300 copies with
+    a byte changed, seeded) or would need a cursor it has not got."""
+    import copy
+    from dataclasses import replace
+
+    from mocodec.stream.packets import (
+        CUTS,
+        RESTART,
+        batch_offsets,
+        layer_ends,
+        pack_batch,
+        read_batch,
+        split_batch,
+        stripped,
+        truncated,
+    )
+
+    clip = stream_clip(walk_bvh[:400], get_codec("kinwave-live", layers=3, refresh_s=0.1), keyframe_s=0.5)
+    header, data = clip[0], clip[1:-1]
+    twin = [replace(p, stream=7) for p in data]  # a second stream of the same packets
+    reader = Reader()
+    for p in (header, replace(header, stream=7), *data[:3], *twin[:5]):
+        reader.read(p.to_bytes())
+    sent = [p for pair in zip(data[3:23], twin[5:25]) for p in pair if p.sequence % 7]  # some lost on the way
+    wire = [p.to_bytes() for p in sent]
+    batch = pack_batch(wire)
+    assert all(w[0] >= 0x80 for w in wire) and sum(1 for p in sent if p.flags & CUTS) > 20
+    assert {p.restart for p in sent} == {True, False} and any(p.flags & RESTART and not p.keyframe for p in sent)
+
+    def one_by_one(message: bytes):
+        try:
+            cursors = copy.deepcopy(reader)
+            return [cursors.read(r, "packet") for r in split_batch(message)]
+        except CorruptStreamError:
+            return None
+
+    def three(streams: list[int]) -> list[int]:
+        return [3] * len(streams)
+
+    def check(message: bytes) -> bool:
+        before = copy.deepcopy(reader.cursors)
+        together, alone = read_batch(message, batch_offsets(message), three, reader.cursors.get), one_by_one(message)
+        assert reader.cursors == before  # (read, not moved)
+        if together is None:
+            return alone is None or any(r[0] < 0x80 for r in split_batch(message))
+        read, prepared = together
+        assert len(read) == len(alone)
+        raw = split_batch(message)
+        for k, (p, q) in enumerate(zip(read, alone)):
+            if k in prepared:
+                ends, variants = prepared[k]
+                plain, whole = stripped(q, raw[k])
+                assert (p, variants[-1]) == (plain, whole)
+                assert ends == layer_ends(q, 3)
+                assert variants[:-1] == tuple(truncated(plain, whole, ends[n - 1], 3 - n) for n in (1, 2))
+            else:
+                assert p == q
+        return True
+
+    assert check(batch) and len(read_batch(batch, batch_offsets(batch), three, reader.cursors.get)[1]) > 20
+    assert read_batch(batch, batch_offsets(batch)) is None  # no cursors: one by one
+    assert read_batch(batch, batch_offsets(batch), three, {0: reader.cursors[0]}.get) is None  # stream 7's missing
+    doubled = pack_batch(wire[:2] + [p.to_bytes() for p in (data[23], data[24], twin[25], data[23], data[26])])
+    assert check(doubled)  # a stream's next packet follows on from the one before (a late one moves nothing)
+    rng = np.random.default_rng(11)
+    start = len(batch) - sum(map(len, wire))
+    for _ in range(300):
+        damaged = bytearray(batch)
+        at = int(rng.integers(start, len(batch)))
+        damaged[at] ^= int(rng.integers(1, 256))
+        assert check(bytes(damaged))
+
+
 @pytest.mark.parametrize("compact", [True, False])
 def test_a_packet_stripped_of_its_cut_table_is_the_packet_without_it(packets, compact):
     """What a relay forwards (``stripped``, made from the bytes as they came) is the packet

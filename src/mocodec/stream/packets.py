@@ -67,6 +67,7 @@ CRC16_STARTS = (0xFFFF, 0x5A5A, 0xA5A5, 0x0F0F)
 CRC32_STARTS = (0, 0x5A5A5A5A, 0xA5A5A5A5, 0x0F0F0F0F)
 OVERHEAD = _FIELDS.size + _CRC.size
 _CRC_STARTS = np.array(CRC32_STARTS, dtype=np.int64)
+_CRC16_STARTS = np.array(CRC16_STARTS, dtype=np.int64)
 MAX_REPAIRS = 256  # packets a viewer's repair request may name (docs/streaming.md)
 #: Where the timestamp, stream id and sequence number sit in a packet (read in bulk by the load test).
 STREAM_OFFSET, SEQUENCE_OFFSET, TIMESTAMP_OFFSET = 6, 10, 14
@@ -418,20 +419,29 @@ Prepared = tuple[list[int], tuple[bytes, ...]]
 
 
 def read_batch(
-    data: bytes, offsets: np.ndarray, layers: Callable[[list[int]], list[int]] | None = None
+    data: bytes,
+    offsets: np.ndarray,
+    layers: Callable[[list[int]], list[int]] | None = None,
+    cursor_of: Callable[[int], Cursor | None] | None = None,
 ) -> tuple[list[Packet], dict[int, Prepared]] | None:
-    """The packets of a batch (``offsets``: :func:`batch_offsets`) all in the full form, read
-    together: their frames and fields checked in arrays, their checks, cut tables and layers
-    in two compiled calls (:func:`.framing.read_full`, :func:`.framing.cut_packets`). The
-    packets are those :func:`parse` gives, except the layered ones (``layers``: the layer count
-    of each packet's stream, from their stream ids; 1 where not layered) whose cut table reads
-    with that count less one: those come stripped of it (:func:`stripped`), and by their place
-    in the batch with their layers (:data:`Prepared`). None where a packet is compact or does
-    not parse: the caller reads them one at a time, which says what is wrong where."""
+    """The packets of a batch (``offsets``: :func:`batch_offsets`) all in the full form, or all
+    compact data packets of streams ``cursor_of`` knows, read together: their frames and
+    fields checked in arrays, their checks, cut tables and layers in compiled calls
+    (:mod:`.framing`). The packets are those :func:`parse` gives, except the layered ones
+    (``layers``: the layer count of each packet's stream, from their stream ids; 1 where not
+    layered) whose cut table reads with that count less one: those come stripped of it
+    (:func:`stripped`), and by their place in the batch with their layers (:data:`Prepared`).
+    None where the forms mix, or a packet does not parse: the caller reads them one at a time,
+    which says what is wrong where."""
     data = data if isinstance(data, bytes) else bytes(data)
     starts, stops = offsets[:-1], offsets[1:]
     raw = np.frombuffer(data, dtype=np.uint8)
-    if not starts.size or (stops - starts < OVERHEAD).any() or (raw[starts] & COMPACT).any():
+    if not starts.size or (stops - starts < COMPACT_MIN).any():
+        return None
+    compact = (raw[starts] & COMPACT) != 0
+    if compact.all() and cursor_of is not None:
+        return _read_compact(data, raw, starts, stops, layers, cursor_of)
+    if compact.any() or (stops - starts < OVERHEAD).any():
         return None
     heads = raw[starts[:, None] + np.arange(_FIELDS.size)].view(_HEAD).ravel()
     codecs = packet_codecs()
@@ -473,30 +483,96 @@ def read_batch(
     layered = np.flatnonzero(peeled)
     if not layered.size:
         return packets, {}
-    return packets, _layers_of(raw, starts, heads["length"], layered, counts[layered], values, skips, flags)
+    head = _FIELDS.size - _U32.size  # (cut_packets sets the payload length after it)
+    return packets, _layers_of(
+        layered, counts[layered], values, heads["length"].astype(np.int64) - skips, _CRC_STARTS,
+        lambda rows, sizes, checks: framing.cut_packets(
+            raw, starts[rows], np.full(rows.size, head), skips[rows], sizes, np.ones(rows.size, dtype=np.bool_),
+            checks, flags[rows],
+        ),
+    )  # fmt: skip
 
 
-def _layers_of(raw, starts, lengths, layered, counts, values, skips, flags) -> dict[int, Prepared]:
+def _read_compact(data, raw, starts, stops, layers, cursor_of) -> tuple[list[Packet], dict[int, Prepared]] | None:
+    """:func:`read_batch` of compact data packets: their fields and checks read in one compiled
+    call (:func:`.framing.read_compact`), then placed by their streams' cursors in order
+    (:func:`.framing.follow_cursors`, the cursors as the batch leaves them not kept)."""
+    dropped, fields, cm, payload_at, table_ends, values, codec_at = framing.read_compact(
+        raw, starts, stops, _CRC16_STARTS
+    )
+    if (dropped < 0).any():
+        return None
+    tags, streams, frames = fields[:, 0], fields[:, 1], fields[:, 3]
+    keys, local = np.unique(streams, return_inverse=True)
+    cursors = [cursor_of(k) for k in keys.tolist()]
+    if any(c is None or not c.synced for c in cursors):
+        return None
+    short, explicit = (tags & C_SHORT) != 0, (tags & (C_SHORT | C_EXPLICIT)) == C_EXPLICIT
+    usual = np.array([c.usual_frames for c in cursors], dtype=np.int64)[local]
+    frames = np.where(short, usual, frames)
+    given = fields[:, 4:6]
+    misplaced = ((given[:, 0] & 0xFF) != fields[:, 2]) | (given[:, 0] > 0xFFFFFFFF)  # (a sequence number given)
+    if (short & (usual == 0)).any() or misplaced[explicit].any():
+        return None
+    with_position = ~short & ((tags & C_POSITION) != 0)
+    sequence, first, position_of = framing.follow_cursors(
+        local, explicit, short, fields[:, 2], frames, np.ascontiguousarray(given),
+        np.array([c.next_sequence for c in cursors], dtype=np.int64),
+        np.array([c.next_frame for c in cursors], dtype=np.int64), with_position,
+    )  # fmt: skip
+    if (frames > limits.MAX_PAYLOAD_FRAMES).any() or (first > 1 << 40).any():
+        return None
+    kept = np.array([c.position for c in cursors], dtype=np.float64).reshape(-1, 3)[local]
+    where = np.where((position_of >= 0)[:, None], cm[np.maximum(position_of, 0)] / 100.0, kept)
+    flags = np.where(short, 0, (tags & 7) | np.where(tags & C_RESTART, RESTART, 0))
+    counts = np.asarray(layers(keys.tolist()) if layers is not None else np.ones(keys.size), dtype=np.int64)[local]
+    peeled = (counts > 1) & (counts <= len(CRC16_STARTS)) & (table_ends + 1 == counts) & (dropped == 0) & (frames > 0)
+    skips = np.where(peeled, codec_at, 0)
+    flags = np.where(peeled, flags & ~CUTS, flags)
+    codecs = [c.codec for c in cursors]
+    packets = [
+        _parsed(stream, seq, 0, codecs[u], f0, n, data[a + skip : b - _U16.size], DATA, f, tuple(xyz),
+                (True, sends, usual_frames, d))
+        for stream, seq, u, f0, n, a, b, skip, f, xyz, sends, usual_frames, d in zip(
+            streams.tolist(), sequence.tolist(), local.tolist(), first.tolist(), frames.tolist(),
+            payload_at.tolist(), stops.tolist(), skips.tolist(), flags.tolist(), where.tolist(),
+            with_position.tolist(), usual.tolist(), dropped.tolist(),
+        )
+    ]  # fmt: skip
+    layered = np.flatnonzero(peeled)
+    if not layered.size:
+        return packets, {}
+    restart = (flags & (KEYFRAME | RESTART)) != 0
+    explicit = restart | (sequence == 0)
+    short = (usual > 0) & (frames == usual) & ~(explicit | with_position | (flags != 0))
+    tags = np.where(
+        short,
+        COMPACT | C_SHORT | (sequence & SHORT_SEQUENCE),
+        COMPACT
+        | (flags & 7)
+        | np.where(explicit, C_EXPLICIT, 0)
+        | np.where(with_position, C_POSITION, 0)
+        | np.where(flags & RESTART, C_RESTART, 0),
+    )  # the stripped packets' tags, as to_compact writes them
+    heads = np.column_stack((tags, streams, sequence, frames, sequence, first, cm))
+    lengths = stops - _U16.size - payload_at
+    return packets, _layers_of(
+        layered, counts[layered], values, lengths - skips, _CRC16_STARTS,
+        lambda rows, sizes, checks: framing.cut_compact(raw, payload_at[rows], skips[rows], sizes, checks, heads[rows]),
+    )  # fmt: skip
+
+
+def _layers_of(layered, counts, values, wholes, crc_starts, cut) -> dict[int, Prepared]:
     """:func:`read_batch`'s layered packets' layers: every packet's variants (its lowest 1, 2,
-    ... layers, the ones above dropped, its cut table's ends ``values`` in its payload after
-    ``skips``) cut in one compiled call."""
+    ... layers, the ones above dropped: its cut table's ends ``values``, then its codec
+    payload's size ``wholes``) made in one compiled call, ``cut(rows, sizes, checks)``, with
+    the check of each started from ``crc_starts``, by the layers it drops."""
     rows = np.repeat(layered, counts)
     firsts = np.cumsum(counts) - counts
     keep = np.arange(rows.size) - np.repeat(firsts, counts) + 1  # layers kept, 1 to the packet's count
     top = np.repeat(counts, counts)
-    sizes = np.where(
-        keep < top, values[rows, np.minimum(keep, top - 1) - 1], lengths[rows].astype(np.int64) - skips[rows]
-    )
-    out, bounds = framing.cut_packets(
-        raw,
-        starts[rows],
-        np.full(rows.size, _FIELDS.size - _U32.size),
-        skips[rows],
-        sizes,
-        np.ones(rows.size, dtype=np.bool_),
-        _CRC_STARTS[top - keep],
-        flags[rows],
-    )
+    sizes = np.where(keep < top, values[rows, np.minimum(keep, top - 1) - 1], wholes[rows])
+    out, bounds = cut(rows, sizes, crc_starts[top - keep])
     wire, at, ends = out.tobytes(), bounds.tolist(), sizes.tolist()
     cuts = [wire[a:b] for a, b in zip(at, at[1:])]
     return {

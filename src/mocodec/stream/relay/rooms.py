@@ -188,10 +188,11 @@ class Room:
 def read_message(room: Room, data: bytes) -> tuple[list[Packet], list[memoryview], dict[int, Prepared]]:
     """The packets of one sender message in order, each one's bytes, and by their place the
     layered packets read with their layers (:data:`~mocodec.stream.packets.Prepared`: those
-    come stripped of their cut tables). A batch of full packets is read together
-    (:func:`read_batch`, the layer counts of the room's streams); a compact packet follows on
-    from its stream's state (:class:`Cursors`); where a packet does not parse, they are read one
-    at a time, which says what is wrong where (CorruptStreamError)."""
+    come stripped of their cut tables). A batch of full packets, or of compact ones of the
+    room's streams, is read together (:func:`read_batch`, the layer counts and cursors of the
+    room's streams); where the forms mix (a new stream's header before its packets) or a
+    packet does not parse, they are read one at a time, a compact packet following on from its
+    stream's state (:class:`Cursors`), which says what is wrong where (CorruptStreamError)."""
     if not is_batch(data):
         raw = [memoryview(data)]
     else:
@@ -199,7 +200,10 @@ def read_message(room: Room, data: bytes) -> tuple[list[Packet], list[memoryview
         raw = packet_views(data, offsets)
         streams = room.streams
         together = read_batch(
-            data, offsets, lambda keys: [s.layers if (s := streams.get(k)) is not None else 1 for k in keys]
+            data,
+            offsets,
+            lambda keys: [s.layers if (s := streams.get(k)) is not None else 1 for k in keys],
+            Cursors(room).cursor,
         )
         if together is not None:
             return together[0], raw, together[1]

@@ -1,6 +1,8 @@
-"""Packets cut in one compiled call: a relay makes a tick's layered variants (a packet's lowest
-layers, docs/streaming.md) for hundreds of packets at once, each one's header kept, its payload
-cut and its check made anew, where a call per packet cost a row of small Python steps.
+"""Packets read and cut in compiled calls: a relay checks a sender's message of hundreds of
+packets (full or compact: their checks, fields and cut tables, a compact packet placed by its
+stream's cursor) and makes their layered variants (a packet's lowest layers,
+docs/streaming.md) at once, each one's header kept or written anew, its payload cut and its
+check made anew, where a call per packet cost a row of small Python steps.
 
 The checks are zlib's CRC-32 (:func:`zlib.crc32`, a full packet's) and binascii's CRC-CCITT
 (:func:`binascii.crc_hqx`, a compact packet's), table-driven, the same values bit for bit.

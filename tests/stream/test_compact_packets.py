@@ -131,6 +131,38 @@ def test_a_packet_cut_from_its_bytes_is_the_packet_with_the_shorter_payload(pack
     assert parse(header).dropped == 0
 
 
+def _three(streams: list[int]) -> list[int]:
+    """Every stream's layer count: 3."""
+    return [3] * len(streams)
+
+
+def _same_as_one_by_one(read, prepared, alone, raw) -> None:
+    """``read_batch``'s packets and layers are those read one by one (``alone``, from their
+    bytes ``raw``): the layered ones stripped, as ``stripped`` gives them, their layer ends as
+    ``layer_ends`` reads them, their variants as ``truncated`` cuts them."""
+    from mocodec.stream.packets import layer_ends, stripped, truncated
+
+    assert len(read) == len(alone)
+    for k, (p, q) in enumerate(zip(read, alone)):
+        if k in prepared:
+            ends, variants = prepared[k]
+            plain, whole = stripped(q, raw[k])
+            assert (p, variants[-1]) == (plain, whole)
+            assert ends == layer_ends(q, 3)
+            assert variants[:-1] == tuple(truncated(plain, whole, ends[n - 1], 3 - n) for n in (1, 2))
+        else:
+            assert p == q
+
+
+def _damaged(batch: bytes, start: int, rng, copies: int = 300):
+    """``copies`` of ``batch`` with one byte from ``start`` on changed (the packet lengths before
+    it stay, so each still splits)."""
+    for _ in range(copies):
+        damaged = bytearray(batch)
+        damaged[int(rng.integers(start, len(batch)))] ^= int(rng.integers(1, 256))
+        yield bytes(damaged)
+
+
 def test_a_batch_read_together_is_its_packets_read_one_by_one(walk_bvh):
     """``read_batch`` (a relay's reading of a sender's batch in arrays and compiled calls)
     gives the packets ``parse`` gives one at a time, and the layered ones (for their stream's
@@ -148,8 +180,6 @@ def test_a_batch_read_together_is_its_packets_read_one_by_one(walk_bvh):
         pack_batch,
         read_batch,
         split_batch,
-        stripped,
-        truncated,
     )
 
     packets = stream_clip(walk_bvh[:300], get_codec("kinwave-live", layers=3))
@@ -162,40 +192,22 @@ def test_a_batch_read_together_is_its_packets_read_one_by_one(walk_bvh):
         except CorruptStreamError:
             return None
 
-    def three(streams: list[int]) -> list[int]:
-        return [3] * len(streams)
-
     def check(data: bytes) -> bool:
-        together, alone = read_batch(data, batch_offsets(data), three), one_by_one(data)
+        together, alone = read_batch(data, batch_offsets(data), _three), one_by_one(data)
         if together is None:
             return alone is None or any(r[0] >= 0x80 for r in split_batch(data))
         assert read_batch(data, batch_offsets(data)) == (alone, {})  # no layer counts: nothing peeled
-        read, prepared = together
-        assert len(read) == len(alone)
-        raw = split_batch(data)
-        for k, (p, q) in enumerate(zip(read, alone)):
-            if k in prepared:
-                ends, variants = prepared[k]
-                plain, wire = stripped(q, raw[k])
-                assert (p, variants[-1]) == (plain, wire)
-                assert ends == layer_ends(q, 3)
-                assert variants[:-1] == tuple(truncated(plain, wire, ends[n - 1], 3 - n) for n in (1, 2))
-            else:
-                assert p == q
-                if q.flags & CUTS and not q.dropped and q.kind == DATA and q.frames:  # a table that does not read
-                    with pytest.raises(CorruptStreamError):
-                        layer_ends(q, 3)
+        _same_as_one_by_one(*together, alone, split_batch(data))
+        for k, q in enumerate(alone):
+            if k not in together[1] and q.flags & CUTS and not q.dropped and q.kind == DATA and q.frames:
+                with pytest.raises(CorruptStreamError):  # a table that does not read
+                    layer_ends(q, 3)
         return True
 
-    assert check(batch) and len(read_batch(batch, batch_offsets(batch), three)[1]) > 30
+    assert check(batch) and len(read_batch(batch, batch_offsets(batch), _three)[1]) > 30
     assert not read_batch(batch, batch_offsets(batch), lambda streams: [2] * len(streams))[1]  # another count
     rng = np.random.default_rng(7)
-    start = len(batch) - sum(len(p.to_bytes()) for p in full)  # (the lengths stay: the batch still splits)
-    for _ in range(300):
-        damaged = bytearray(batch)
-        at = int(rng.integers(start, len(batch)))
-        damaged[at] ^= int(rng.integers(1, 256))
-        assert check(bytes(damaged))
+    assert all(map(check, _damaged(batch, len(batch) - sum(len(p.to_bytes()) for p in full), rng)))
     tables = 0  # a cut table changed under a good check: prepared as layer_ends reads it, or not
     for _ in range(300):
         k = int(rng.integers(1, len(full)))
@@ -205,10 +217,10 @@ def test_a_batch_read_together_is_its_packets_read_one_by_one(walk_bvh):
         changed = [p.to_bytes() for p in full[:k]] + [replace(full[k], payload=bytes(payload)).to_bytes()]
         data = pack_batch(changed)
         assert check(data)
-        tables += k not in read_batch(data, batch_offsets(data), three)[1]
+        tables += k not in read_batch(data, batch_offsets(data), _three)[1]
     assert 30 < tables < 270  # both ways, often
     mixed = pack_batch([full[0].to_bytes(), replace(packets[1], compact=True).to_bytes()])
-    assert read_batch(mixed, batch_offsets(mixed), three) is None
+    assert read_batch(mixed, batch_offsets(mixed), _three) is None
 
 
 def test_a_batch_of_compact_packets_read_together_is_its_packets_read_one_by_one(walk_bvh):
@@ -225,12 +237,9 @@ def test_a_batch_of_compact_packets_read_together_is_its_packets_read_one_by_one
         CUTS,
         RESTART,
         batch_offsets,
-        layer_ends,
         pack_batch,
         read_batch,
         split_batch,
-        stripped,
-        truncated,
     )
 
     clip = stream_clip(walk_bvh[:400], get_codec("kinwave-live", layers=3, refresh_s=0.1), keyframe_s=0.5)
@@ -252,41 +261,21 @@ def test_a_batch_of_compact_packets_read_together_is_its_packets_read_one_by_one
         except CorruptStreamError:
             return None
 
-    def three(streams: list[int]) -> list[int]:
-        return [3] * len(streams)
-
     def check(message: bytes) -> bool:
         before = copy.deepcopy(reader.cursors)
-        together, alone = read_batch(message, batch_offsets(message), three, reader.cursors.get), one_by_one(message)
+        together, alone = read_batch(message, batch_offsets(message), _three, reader.cursors.get), one_by_one(message)
         assert reader.cursors == before  # (read, not moved)
         if together is None:
             return alone is None or any(r[0] < 0x80 for r in split_batch(message))
-        read, prepared = together
-        assert len(read) == len(alone)
-        raw = split_batch(message)
-        for k, (p, q) in enumerate(zip(read, alone)):
-            if k in prepared:
-                ends, variants = prepared[k]
-                plain, whole = stripped(q, raw[k])
-                assert (p, variants[-1]) == (plain, whole)
-                assert ends == layer_ends(q, 3)
-                assert variants[:-1] == tuple(truncated(plain, whole, ends[n - 1], 3 - n) for n in (1, 2))
-            else:
-                assert p == q
+        _same_as_one_by_one(*together, alone, split_batch(message))
         return True
 
-    assert check(batch) and len(read_batch(batch, batch_offsets(batch), three, reader.cursors.get)[1]) > 20
+    assert check(batch) and len(read_batch(batch, batch_offsets(batch), _three, reader.cursors.get)[1]) > 20
     assert read_batch(batch, batch_offsets(batch)) is None  # no cursors: one by one
-    assert read_batch(batch, batch_offsets(batch), three, {0: reader.cursors[0]}.get) is None  # stream 7's missing
+    assert read_batch(batch, batch_offsets(batch), _three, {0: reader.cursors[0]}.get) is None  # stream 7's missing
     doubled = pack_batch(wire[:2] + [p.to_bytes() for p in (data[23], data[24], twin[25], data[23], data[26])])
     assert check(doubled)  # a stream's next packet follows on from the one before (a late one moves nothing)
-    rng = np.random.default_rng(11)
-    start = len(batch) - sum(map(len, wire))
-    for _ in range(300):
-        damaged = bytearray(batch)
-        at = int(rng.integers(start, len(batch)))
-        damaged[at] ^= int(rng.integers(1, 256))
-        assert check(bytes(damaged))
+    assert all(map(check, _damaged(batch, len(batch) - sum(map(len, wire)), np.random.default_rng(11))))
 
 
 @pytest.mark.parametrize("compact", [True, False])

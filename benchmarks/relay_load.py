@@ -28,6 +28,7 @@ import asyncio
 import contextlib
 import json
 import multiprocessing as mp
+import os
 import queue
 import shutil
 import socket
@@ -348,6 +349,21 @@ def percentile(hist: np.ndarray, q: float) -> float:
     return float(np.searchsorted(c, q * c[-1]) * BINS_MS) if c[-1] else float("nan")
 
 
+def relay_cores(args) -> int:
+    """How many relay processes a run has (--pin gives each a core of its own)."""
+    return 2 if args.nats else args.workers
+
+
+def pin(args, pids: list[int], relay: bool) -> None:
+    """With --pin, the relay's processes on its cores (0, 1, ...; a process's children inherit
+    them), anything else on the rest."""
+    if not args.pin:
+        return
+    n = relay_cores(args)
+    for pid in pids:
+        os.sched_setaffinity(pid, args.cores[:n] if relay else args.cores[n:])
+
+
 def relay_processes(pr) -> list:
     """A relay's processes: ``mocodec serve`` itself, or with --workers its workers (not the
     NATS server it started, whose CPU is reported apart)."""
@@ -398,6 +414,7 @@ def drive(args, token: str, relays: list) -> tuple[list, list, list]:
     time.sleep(1.0)
     for w in workers[: args.publishers]:
         w.start()
+    pin(args, [w.pid for w in workers], relay=False)
     time.sleep(3.0)
     clients = [psutil.Process(w.pid) for w in workers]
     serving = [relay_processes(pr) for _, pr in relays]  # each relay's processes (its workers)
@@ -467,6 +484,12 @@ def main() -> None:
         help="two relays sharing the room through a NATS server: senders on the first, viewers split over both",
     )
     ap.add_argument(
+        "--pin",
+        action="store_true",
+        help="the relay's processes on cores of their own (one each: cores 0, 1, ...), the load generators "
+        "on the others (sched_setaffinity; needs more cores than relay processes)",
+    )
+    ap.add_argument(
         "--capacity",
         action="store_true",
         help="the largest room that keeps p99 under 50 ms with nothing lost: runs with 25, 50, 75, 100, "
@@ -475,6 +498,9 @@ def main() -> None:
     args = ap.parse_args()
     if args.nats:
         args.viewer_procs = max(args.viewer_procs, 2)  # viewers on both relays
+    args.cores = sorted(os.sched_getaffinity(0))  # (before --pin moves this process)
+    if args.pin and len(args.cores) <= relay_cores(args):
+        raise SystemExit(f"--pin needs more than {relay_cores(args)} cores (one a relay process, one for the load)")
 
     if not args.capacity:
         run_once(args)
@@ -503,6 +529,7 @@ def run_once(args) -> tuple[float, int]:
     from mocodec.stream import tokens
 
     token = tokens.issue(SECRET, "load", ttl_s=3600)
+    pin(args, [os.getpid()], relay=False)  # (this process, and the NATS server it starts)
     procs, relays = [], []
     nats_url = None
     if args.nats:
@@ -540,6 +567,7 @@ def run_once(args) -> tuple[float, int]:
         if args.workers > 1:
             cmd += ["--workers", str(args.workers)]
         p = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
+        pin(args, [p.pid], relay=True)
         procs.append(p)
         assert p.stdout is not None
         for _ in range(2 if args.workers > 1 else 1):  # its address; with workers, that all listen
@@ -564,12 +592,15 @@ def run_once(args) -> tuple[float, int]:
         + (f" of {args.budget:g} bit/s each" if args.budget else "")
         + (", two relays over NATS" if args.nats else "")
         + (f", {args.workers} workers" if args.workers > 1 else "")
+        + (", relay processes pinned to cores of their own" if args.pin else "")
     )
     print(
         f"relay load: {setup}, {args.seconds:g} s measured, loss {args.loss:.0%}, keyframes every {args.keyframe_s:g} s"
     )
     print(
-        f"  packets sent {sent:,}; delivered to viewers {tally['received']:,} in {tally['batches']:,} batches; "
+        f"  packets sent {sent:,}; delivered to viewers {tally['received']:,} in {tally['batches']:,} batches "
+        f"({tally['batches'] / (args.viewers * args.tick_hz * args.seconds):.0%} of the ticks: a tick with nothing "
+        "new sends none); "
         f"lost on the way {tally['lost']:,}"
         + (f"; dropped by the emulated link {tally['dropped']:,}" if args.loss else "")
         + (f"; resent on request {tally['resent']:,}" if args.repair else "")

@@ -338,8 +338,8 @@ def _forwarded(p: Packet, raw: memoryview, state: StreamState, prepared: Prepare
         if state.layered and p.frames:
             ends = layer_ends(p, state.layers)
             plain, data = stripped(p, raw)
-            variants = [truncated(plain, data, end, len(ends) - keep) for keep, end in enumerate(ends[:-1], 1)]
-            return Forward(plain, data, layer_ends=ends, layer_variants=(*variants, data))
+            cut = (truncated(plain, data, end, len(ends) - keep) for keep, end in enumerate(ends[:-1], 1))
+            return Forward(plain, data, layer_ends=ends, layer_variants=(*cut, data))
         cuts = cut_table(p) if p.flags & CUTS and not state.layered else None
         return Forward(*stripped(p, raw), cuts=cuts)
     except CorruptStreamError as e:

@@ -53,6 +53,38 @@ def test_a_message_of_full_packets_reads_as_one_with_compact_ones(walk_bvh, comp
         reader.read(f.data)
 
 
+@pytest.mark.parametrize(("before", "after"), [(3, 2), (2, 3), (3, 3), (3, 0)])
+def test_a_header_that_changes_a_streams_layers_reads_its_packets_for_the_new_count(walk_bvh, before, after):
+    """A message with a new header for a stream (other layers, or a codec without them: 0) and
+    then packets of the old layer count: the batch was read for the old count, the packets are
+    read again for the new one, and taken or refused as they are one message at a time."""
+
+    def clip(layers):
+        codec = get_codec("kinwave-live", layers=layers) if layers else get_codec("dpcm")
+        return [replace(p, compact=False) for p in stream_clip(walk_bvh[:40], codec, keyframe_s=60.0)[:-1]]
+
+    old, new = clip(before), clip(after)
+
+    def outcome(messages):
+        core = RelayCore()
+        room = core.room("lobby")
+        try:
+            for m in messages:
+                core.ingest(room, m, owner=1)
+        except Closing as c:
+            return c.reason
+        kept, _ = room.streams[0].history.since(0, float("inf"))
+        return [(f.data, f.layer_ends, f.layer_variants) for f in kept]
+
+    first, switch, stale = pack_batch([old[0].to_bytes()]), new[0].to_bytes(), [p.to_bytes() for p in old[1:4]]
+    together = outcome([first, pack_batch([switch, *stale])])
+    assert together == outcome([first, pack_batch([switch]), *(pack_batch([p]) for p in stale)])
+    if before == after:
+        assert together == outcome([pack_batch([switch, *stale])])
+    elif after:
+        assert "cut table" in together
+
+
 def test_repair_requests_are_checked_and_limited(walk_bvh):
     packets = stream_clip(walk_bvh, get_codec("kinwave-live", refresh_s=0.5), keyframe_s=60.0)[:-1]
     core, viewer = RelayCore(), Viewer()

@@ -27,6 +27,7 @@ import argparse
 import asyncio
 import contextlib
 import json
+import math
 import multiprocessing as mp
 import os
 import queue
@@ -112,7 +113,11 @@ def place(stream: int) -> tuple[float, float]:
 
 
 # ----- publishers ------------------------------------------------------------------------------------
-def publisher(url: str, token: str, streams: list[int], seconds: float, template: tuple, out) -> None:
+def publisher(url: str, token: str, streams: list[int], seconds: float, template: tuple, out, offset: float) -> None:
+    """Send ``streams``' packets at 30 Hz for ``seconds``, at ``offset`` (0..1) of each 30 Hz
+    period of the wall clock: the publishers spread their sends over the period, as
+    independent senders do (all in step, every other 60 Hz tick of the relay had nothing new
+    in some runs and not in others, and its sends moved by half)."""
     import aiohttp
 
     from mocodec.stream.packets import pack_batch
@@ -131,6 +136,8 @@ def publisher(url: str, token: str, streams: list[int], seconds: float, template
             )
             await ws.receive()  # welcome
             await ws.send_bytes(pack_batch([restamp(header, s, 0, 0, 0, *place(s)) for s in streams]))
+            now = time.time()
+            await asyncio.sleep((math.floor(now * 30.0) + 1.0 + offset) / 30.0 - now)
             start = time.monotonic()
             tick, sent = 0, 0
             while time.monotonic() - start < seconds:
@@ -372,8 +379,7 @@ def relay_processes(pr) -> list:
 
 
 def drive(args, token: str, relays: list) -> tuple[list, list, list]:
-    """Start the publishers and viewers, watch the relays, collect what the workers report."""
-    import psutil
+    """Start the publishers and viewers, watch the relays (:func:`_watch`), collect what they report."""
 
     out = mp.Queue()
     total = args.seconds + 3.0
@@ -383,7 +389,7 @@ def drive(args, token: str, relays: list) -> tuple[list, list, list]:
     workers = [
         mp.Process(
             target=publisher,
-            args=(relays[0][0], token, ids[k :: args.publishers], total + 1.0, template, out),
+            args=(relays[0][0], token, ids[k :: args.publishers], total + 1.0, template, out, k / args.publishers),
         )
         for k in range(args.publishers)
     ]
@@ -414,6 +420,21 @@ def drive(args, token: str, relays: list) -> tuple[list, list, list]:
     time.sleep(1.0)
     for w in workers[: args.publishers]:
         w.start()
+    try:
+        results, cpu, peak_rss = _watch(args, workers, relays, out)
+    except BaseException:  # (a worker that failed: the others would keep this process from ending)
+        for w in workers:
+            w.terminate()
+        raise
+    for w in workers:
+        w.join(30)
+    return results, cpu, peak_rss
+
+
+def _watch(args, workers: list, relays: list, out) -> tuple[list, list, list]:
+    """Measure the relays while the load runs; what the publishers and viewers report."""
+    import psutil
+
     pin(args, [w.pid for w in workers], relay=False)
     time.sleep(3.0)
     clients = [psutil.Process(w.pid) for w in workers]
@@ -436,8 +457,6 @@ def drive(args, token: str, relays: list) -> tuple[list, list, list]:
         results = [out.get(timeout=60) for _ in workers]
     except queue.Empty:
         raise SystemExit("a publisher or viewer failed (see above)") from None
-    for w in workers:
-        w.join(30)
     return results, cpu, peak_rss
 
 

@@ -86,7 +86,7 @@ def kinwave(what: str, source: str, rounds: int) -> None:
 
 
 def relay(ticks: int, compact: bool) -> None:
-    from bench_relay_tick import WARM_UP, room_of
+    from bench_relay_tick import WARM_UP, room_of, timed_tick
     from mocodec.stream.relay.server import quiet_collector
 
     quiet_collector()
@@ -107,18 +107,10 @@ def relay(ticks: int, compact: bool) -> None:
         sent = {}
         for k in ("base", "tree") if tick % 2 else ("tree", "base"):
             core, room, owner, message = rooms[k]
-            data = message(tick)
-            t0 = time.perf_counter()
-            core.ingest(room, data, owner)
-            t1 = time.perf_counter()
-            core.dispatch(room)
-            t2 = time.perf_counter()
+            ingest, dispatch, sent[k] = timed_tick(core, room, owner, message(tick))
             if tick >= WARM_UP:
-                taken[k][0].append(t1 - t0)
-                taken[k][1].append(t2 - t1)
-            sent[k] = [item for v in room.viewers for item in v.outbox]
-            for v in room.viewers:
-                v.outbox.clear()
+                taken[k][0].append(ingest)
+                taken[k][1].append(dispatch)
         same = same and sent["base"] == sent["tree"]
     form = "compact" if compact else "full"
     print(

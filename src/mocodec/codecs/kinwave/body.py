@@ -411,14 +411,14 @@ def with_more(body: bytes, more: int) -> bytes:
 def channel_steps(skeleton: Skeleton, codes: np.ndarray) -> np.ndarray:
     """``(C, 1)``: every channel's quantiser step from the body's step codes (the values of
     :func:`group_step`, looked up at once)."""
-    code_of, translation = channel_codes(skeleton)
+    code_of, translation = _channel_codes(skeleton)
     steps = _CODE_STEPS[np.asarray(codes, dtype=np.int64)[code_of]]
     steps[translation] = steps[translation] * skeleton.units_per_metre / 100.0  # as group_step rounds
     return steps[:, None]
 
 
 @lru_cache(maxsize=64)
-def channel_codes(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
+def _channel_codes(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
     """Each channel's index into the step codes (its rotation joint's, or the last for a
     translation), and which channels are translations."""
     code_of = np.zeros(skeleton.num_channels, dtype=np.int64)

@@ -33,7 +33,6 @@ from mocodec.codecs.kinwave.body import (
     WAVELET_IDS,
     ZERO_CONSTANTS,
     ConstantCoding,
-    channel_codes,
     channel_steps,
     constant_coding,
     has_translation,
@@ -342,8 +341,7 @@ class Encoder:
         whose angles are all constant takes the step the model would give it if they moved:
         its constants turn everything below it (a dummy root: the whole body)."""
         sk = bone_skeleton(self.skeleton, self.values, self.const)
-        _, translation = channel_codes(self.skeleton)
-        joint_of, moving = self.skeleton.channel_joints, ~self.const
+        joint_of, moving, translation = self.skeleton.channel_joints, ~self.const, ~self.skeleton.rotation_mask
         coded = np.bincount(joint_of[moving & ~translation], minlength=len(sk)).tolist()
         rotating = np.bincount(joint_of[~translation], minlength=len(sk)).tolist()
         translations = int(np.count_nonzero(moving & translation))

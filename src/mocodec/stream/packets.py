@@ -542,10 +542,21 @@ def _read_compact(data, raw, starts, stops, layers, cursor_of) -> tuple[list[Pac
     layered = np.flatnonzero(peeled)
     if not layered.size:
         return packets, {}
-    restart = (flags & (KEYFRAME | RESTART)) != 0
-    explicit = restart | (sequence == 0)
+    tags = _compact_tags(flags, sequence, frames, usual, with_position)  # (of the packets stripped)
+    heads = np.column_stack((tags, streams, sequence, frames, sequence, first, cm))
+    lengths = stops - _U16.size - payload_at
+    return packets, _layers_of(
+        layered, counts[layered], values, lengths - skips, _CRC16_STARTS,
+        lambda rows, sizes, checks: framing.cut_compact(raw, payload_at[rows], skips[rows], sizes, checks, heads[rows]),
+    )  # fmt: skip
+
+
+def _compact_tags(flags, sequence, frames, usual, with_position) -> np.ndarray:
+    """The tags :meth:`Packet.to_compact` writes for packets of these fields (arrays): a short
+    one where the frame count is the usual one and nothing is flagged, given or sent."""
+    explicit = ((flags & (KEYFRAME | RESTART)) != 0) | (sequence == 0)
     short = (usual > 0) & (frames == usual) & ~(explicit | with_position | (flags != 0))
-    tags = np.where(
+    return np.where(
         short,
         COMPACT | C_SHORT | (sequence & SHORT_SEQUENCE),
         COMPACT
@@ -553,13 +564,7 @@ def _read_compact(data, raw, starts, stops, layers, cursor_of) -> tuple[list[Pac
         | np.where(explicit, C_EXPLICIT, 0)
         | np.where(with_position, C_POSITION, 0)
         | np.where(flags & RESTART, C_RESTART, 0),
-    )  # the stripped packets' tags, as to_compact writes them
-    heads = np.column_stack((tags, streams, sequence, frames, sequence, first, cm))
-    lengths = stops - _U16.size - payload_at
-    return packets, _layers_of(
-        layered, counts[layered], values, lengths - skips, _CRC16_STARTS,
-        lambda rows, sizes, checks: framing.cut_compact(raw, payload_at[rows], skips[rows], sizes, checks, heads[rows]),
-    )  # fmt: skip
+    )
 
 
 def _layers_of(layered, counts, values, wholes, crc_starts, cut) -> dict[int, Prepared]:

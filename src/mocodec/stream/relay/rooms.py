@@ -45,7 +45,7 @@ class Forward:
     cutter: Callable[[float], bytes] | None = None  # the codec's packet cutter, made at the first cut
     layer_ends: list[int] | None = None  # a layered stream's data packet: where each layer ends
     layer_variants: tuple[bytes, ...] = ()  # ... and its bytes with its lowest 1, 2, ... layers (the last: data)
-    layer_starts: list[bool] | None = None  # ... and which restart in it (read when a viewer may gain one)
+    layer_starts: list[bool] | None = None  # which of its layers restart in it (read when a viewer may gain one)
 
     @property
     def scalable(self) -> bool:

@@ -159,6 +159,22 @@ def test_keyframes_are_chosen_by_cost_and_keep_the_bound(walk_amc):
     assert _errors(bound, decoded)["joint"] <= 0.3
 
 
+def test_the_frame_measures_are_numpys(walk_bvh):
+    """The keyframe and glitch measures' compiled loops and percentile give numpy's floats:
+    the largest joint move between frames 1 and 2 apart, and np.percentile (ties, ends,
+    every length up to 40)."""
+    positions = forward_kinematics(walk_bvh.skeleton, walk_bvh.channels[:200])[0]
+    moves = np.linalg.norm(np.diff(positions, axis=0), axis=2).max(axis=1)
+    assert np.array_equal(kinwave_encoder.frame_moves(positions), moves)
+    across = np.linalg.norm(positions[2:] - positions[:-2], axis=2).max(axis=1)
+    assert np.array_equal(kinwave_encoder._farthest(positions, 2), across)
+    rng = np.random.default_rng(7)
+    for n in range(1, 41):
+        for values in (rng.normal(size=n) ** 2, np.round(rng.normal(size=n), 1)):
+            for q in (0, 12.5, 50, 90, 99, 100):
+                assert kinwave_encoder.linear_percentile(values, q) == np.percentile(values, q)
+
+
 @pytest.mark.parametrize("jumping", [(True, False), (False, True), (True, True)])
 def test_the_default_sets_leading_jumps_as_keyframes_without_a_trial(walk_amc, jumping):
     """A bind pose in frame 0 alone (a cgspeed T-pose) takes one keyframe; in frame 1 (frame 0

@@ -8,6 +8,7 @@ import math
 from dataclasses import dataclass, replace
 from functools import lru_cache
 
+import numba
 import numpy as np
 
 from mocodec import rotations
@@ -95,7 +96,37 @@ def influence(skeleton: Skeleton, measure: str) -> np.ndarray:
 
 def frame_moves(positions_cm: np.ndarray) -> np.ndarray:
     """``(T - 1,)`` cm: how far the farthest-moving joint goes from each frame to the next."""
-    return np.linalg.norm(np.diff(positions_cm, axis=0), axis=2).max(axis=1)
+    return _farthest(np.ascontiguousarray(positions_cm, dtype=np.float64), 1)
+
+
+@numba.njit(cache=True)
+def _farthest(positions, gap):
+    """``(T - gap,)``: the largest distance a joint of ``positions (T, J, 3)`` goes from frame
+    t to frame t + gap, in one loop (the floats of numpy's norm of the differences)."""
+    frames = max(positions.shape[0] - gap, 0)
+    out = np.zeros(frames)
+    for t in range(frames):
+        far = 0.0
+        for j in range(positions.shape[1]):
+            dx = positions[t + gap, j, 0] - positions[t, j, 0]
+            dy = positions[t + gap, j, 1] - positions[t, j, 1]
+            dz = positions[t + gap, j, 2] - positions[t, j, 2]
+            far = max(far, math.sqrt(dx * dx + dy * dy + dz * dz))
+        out[t] = far
+    return out
+
+
+def linear_percentile(values: np.ndarray, q: float) -> float:
+    """``np.percentile(values, q)`` of a 1-D array (linear interpolation, its default), from the
+    two values around it: the same float, without the general machinery that a short clip's
+    set-up paid for twice."""
+    n = values.size
+    index = (n - 1) * (q / 100.0)
+    below = math.floor(index)
+    above = min(below + 1, n - 1)
+    a, b = np.partition(values, (below, above))[[below, above]].tolist()
+    t, d = index - below, b - a
+    return b - d * (1.0 - t) if t >= 0.5 else a + d * t
 
 
 def leading_jumps(moves: np.ndarray) -> np.ndarray:
@@ -105,7 +136,7 @@ def leading_jumps(moves: np.ndarray) -> np.ndarray:
     step does not)."""
     if len(moves) < 7:
         return np.zeros(2, dtype=bool)
-    return moves[:2] > max(2.0 * np.percentile(moves[2:], 99) + 1.0, JUMP_CM)
+    return moves[:2] > max(2.0 * linear_percentile(moves[2:], 99) + 1.0, JUMP_CM)
 
 
 def smoothest_orders(values: np.ndarray, forms: np.ndarray, joints: np.ndarray, usable: np.ndarray) -> np.ndarray:
@@ -149,8 +180,8 @@ def isolated_frames(positions_cm: np.ndarray, moves: np.ndarray, skip: int) -> n
     frames = len(positions_cm)
     if frames < 8:
         return np.zeros(0, dtype=np.int64)
-    usual = np.percentile(moves, 90)
-    across = np.linalg.norm(positions_cm[2:] - positions_cm[:-2], axis=2).max(axis=1)
+    usual = linear_percentile(moves, 90)
+    across = _farthest(np.ascontiguousarray(positions_cm, dtype=np.float64), 2)
     far = 4.0 * usual + 1.0
     t = np.arange(1, frames - 1)
     found = t[(moves[:-1] > far) & (moves[1:] > far) & (across <= 2.0 * usual + 1.0) & (t >= max(skip, 1))]

@@ -33,14 +33,14 @@ from mocodec.coding.entropy.binarycoder import (
     MAX_CLASS,
     WARM_DONE,
     buffer_for,
-    encoder_state,
-    finish,
-    get,
-    get_int,
+    encoder_start,
+    finish_s,
+    get_int_s,
+    get_s,
     int_decisions,
-    put,
-    put_int,
-    start_decoder,
+    put_int_s,
+    put_s,
+    start_decoder_s,
 )
 
 # context layout
@@ -84,19 +84,33 @@ def _parent_class(v):
 # ----- payloads -----------------------------------------------------------------------------
 @numba.njit(cache=True)
 def _encode(side, const, knots, coeffs, seg_pad, seg_lev, rev2, buf):
-    st = encoder_state()
+    low, rng, cache, size, pos = encoder_start()
     state = np.full((3, _CONTEXTS), INIT, dtype=np.int64)
     state[2, :] = 0 if rev2 else WARM_DONE  # revision 2: contexts warm up (binarycoder.new_state)
     for v in side:
-        put_int(st, buf, state, v, _SIDE, _SIDE + 2, _SIDE_UNARY, _KM, _SIDE + 1)
+        low, rng, cache, size, pos = put_int_s(
+            low, rng, cache, size, pos, buf, state, v, _SIDE, _SIDE + 2, _SIDE_UNARY, _KM, _SIDE + 1
+        )
     for c in range(const.size):
-        put(st, buf, state, _CONST, const[c])
+        low, rng, cache, size, pos = put_s(low, rng, cache, size, pos, buf, state, _CONST, const[c])
         prev = 0
         nk = min(1, knots.shape[1]) if const[c] else knots.shape[1]  # (a layout of no frames has no knot)
         for i in range(nk):
             first = 1 if i == 0 else 0
-            put_int(
-                st, buf, state, knots[c, i] - prev, _KZ + 1 - first, _KU + 24 * (1 - first), 24, _KM, _KS + 1 - first
+            low, rng, cache, size, pos = put_int_s(
+                low,
+                rng,
+                cache,
+                size,
+                pos,
+                buf,
+                state,
+                knots[c, i] - prev,
+                _KZ + 1 - first,
+                _KU + 24 * (1 - first),
+                24,
+                _KM,
+                _KS + 1 - first,
             )
             prev = knots[c, i]
         if const[c]:
@@ -112,7 +126,7 @@ def _encode(side, const, knots, coeffs, seg_pad, seg_lev, rev2, buf):
                 if coeffs[c, i] != 0:
                     nz = 1
                     break
-            put(st, buf, state, _BLOCK + last_nz, nz)
+            low, rng, cache, size, pos = put_s(low, rng, cache, size, pos, buf, state, _BLOCK + last_nz, nz)
             last_nz = nz
             if nz:
                 L = seg_lev[s]
@@ -137,8 +151,12 @@ def _encode(side, const, knots, coeffs, seg_pad, seg_lev, rev2, buf):
                             par = _parent_class(pv)
                         act = _activity(p1, p2)
                         sctx = _S2 + (band * 3 + _sign_class(p1)) * 3 + _sign_class(pv) if rev2 else _S0 + band
-                        put_int(
-                            st,
+                        low, rng, cache, size, pos = put_int_s(
+                            low,
+                            rng,
+                            cache,
+                            size,
+                            pos,
                             buf,
                             state,
                             v,
@@ -154,23 +172,26 @@ def _encode(side, const, knots, coeffs, seg_pad, seg_lev, rev2, buf):
                     if b > 0:
                         blen <<= 1
             off += n
-    return finish(st, buf)
+    return finish_s(low, cache, size, pos, buf)
 
 
 @numba.njit(cache=True)
 def _decode(data, side, channels, num_knots, num_coeffs, seg_pad, seg_lev, rev2, const, knots, coeffs):
-    st = start_decoder(data)
+    code, rng, pos = start_decoder_s(data)
     state = np.full((3, _CONTEXTS), INIT, dtype=np.int64)
     state[2, :] = 0 if rev2 else WARM_DONE  # revision 2: contexts warm up (binarycoder.new_state)
     for i in range(side.size):
-        side[i] = get_int(st, data, state, _SIDE, _SIDE + 2, _SIDE_UNARY, _KM, _SIDE + 1)
+        side[i], code, rng, pos = get_int_s(code, rng, pos, data, state, _SIDE, _SIDE + 2, _SIDE_UNARY, _KM, _SIDE + 1)
     for c in range(channels):
-        const[c] = get(st, data, state, _CONST)
+        const[c], code, rng, pos = get_s(code, rng, pos, data, state, _CONST)
         prev = 0
         nk = min(1, num_knots) if const[c] else num_knots  # (a layout of no frames has no knot)
         for i in range(nk):
             first = 1 if i == 0 else 0
-            prev += get_int(st, data, state, _KZ + 1 - first, _KU + 24 * (1 - first), 24, _KM, _KS + 1 - first)
+            step, code, rng, pos = get_int_s(
+                code, rng, pos, data, state, _KZ + 1 - first, _KU + 24 * (1 - first), 24, _KM, _KS + 1 - first
+            )
+            prev += step
             knots[c, i] = prev
         if const[c]:
             continue
@@ -180,7 +201,7 @@ def _decode(data, side, channels, num_knots, num_coeffs, seg_pad, seg_lev, rev2,
             n = seg_pad[s]
             if n == 0:
                 continue
-            nz = get(st, data, state, _BLOCK + last_nz)
+            nz, code, rng, pos = get_s(code, rng, pos, data, state, _BLOCK + last_nz)
             last_nz = nz
             if nz:
                 L = seg_lev[s]
@@ -200,8 +221,10 @@ def _decode(data, side, channels, num_knots, num_coeffs, seg_pad, seg_lev, rev2,
                             par = _parent_class(pv)
                         act = _activity(p1, p2)
                         sctx = _S2 + (band * 3 + _sign_class(p1)) * 3 + _sign_class(pv) if rev2 else _S0 + band
-                        v = get_int(
-                            st,
+                        v, code, rng, pos = get_int_s(
+                            code,
+                            rng,
+                            pos,
                             data,
                             state,
                             _Z0 + (band * _ACT + act) * _PAR + par,
@@ -220,7 +243,7 @@ def _decode(data, side, channels, num_knots, num_coeffs, seg_pad, seg_lev, rev2,
                     if b > 0:
                         blen <<= 1
             off += n
-    return st[2]
+    return pos
 
 
 def _approx_differences(coeffs: np.ndarray, seg_pad: np.ndarray, seg_lev: np.ndarray) -> np.ndarray:

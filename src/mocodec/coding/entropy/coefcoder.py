@@ -23,6 +23,7 @@ reads outside its buffer.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numba
@@ -358,8 +359,10 @@ def decode(
         knots,
         coeffs,
     )
-    cuts = np.cumsum(side_sizes)[:-1] if side_sizes else np.zeros(0, dtype=np.int64)
-    return Decoded(const, knots, coeffs, tuple(np.cumsum(q) for q in np.split(side, cuts)), int(used))
+    running = np.concatenate(([0], np.cumsum(side)))  # each sequence's sums: one running sum, less its start
+    starts = [0, *itertools.accumulate(side_sizes)]
+    sequences = tuple(running[a + 1 : b + 1] - running[a] for a, b in zip(starts, starts[1:]))
+    return Decoded(const, knots, coeffs, sequences, int(used))
 
 
 def warm() -> None:

@@ -47,10 +47,12 @@ def synthesis_add(x, n, h, out):
     for i in range(start, n + start):
         o = 2 * (i - start) + shift
         if half - 1 <= i < n:  # no wrap (nor of the output: i < n)
+            even, odd = out[np.uintp(o)], out[np.uintp(o + 1)]  # (summed in registers)
             for g in range(half):
                 v = x[np.uintp(i - g)]
-                out[np.uintp(o)] += h[2 * g] * v
-                out[np.uintp(o + 1)] += h[2 * g + 1] * v
+                even += h[2 * g] * v
+                odd += h[2 * g + 1] * v
+            out[np.uintp(o)], out[np.uintp(o + 1)] = even, odd
             continue
         even, odd = o % size, (o + 1) % size
         g0 = 0

@@ -25,6 +25,7 @@ MAX_PASSES = 8  # secant passes before falling back to halving
 JOINT_FEEDBACK = 1.0  # share of a joint's measured slack (in octaves) its steps take on
 SHORT_FRAMES = 512  # a body this short searches once per share of SHORT_SHARES, the smallest wins
 SHORT_SHARES = (JOINT_FEEDBACK, 0.5, 0.0)
+CORRECTIONS = 3  # passes that make the codes to blame for a first pass over a max bound finer (the default)
 SLACK_PASSES = 1  # rounds in which a max bound's final pass gives its slack away (use_slack)
 SLACK_TRIES = 3  # passes a round tries, halving the codes that move the points over the bound
 SEGMENT_SLACK_BELOW = 0.9  # ... with time-adaptive steps only when its worst error is under this share
@@ -105,16 +106,25 @@ class BoundSearch(Encoder):
         return self._to_bound(self.cfg["max_error_cm"])
 
     def _search(
-        self, measure, goal: float, accept: float, scale: float, exponent: float, sign: float = 1.0, stop: float = 1.0
+        self,
+        measure,
+        goal: float,
+        accept: float,
+        scale: float,
+        exponent: float,
+        sign: float = 1.0,
+        stop: float = 1.0,
+        seen: dict[bytes, tuple[float, Pass]] | None = None,
     ):
         """Find x = log(scale) / sign with ``measure`` (rising with x) in [accept * goal, goal]:
         extrapolate until the target is bracketed (first with ``exponent``, the model's
         d log measure / dx, then with the slope the last two passes measured), then secant steps
         inside the bracket, aiming at the range's middle; a pass in [min(stop, accept) * goal,
-        goal] ends the search too. Returns (best pass meeting the goal or None, last x)."""
+        goal] ends the search too. ``seen``: passes run already, by their codes. Returns (best
+        pass meeting the goal or None, last x)."""
         lo = hi = None  # (x, log value, pass)
         previous = None  # the last (x, log value) before bracketing
-        seen: dict[bytes, tuple[float, Pass]] = {}
+        seen = {} if seen is None else seen
         x = math.log(scale) / sign
         aim = math.log(goal * (1.0 + accept) / 2.0)
         for _ in range(MAX_PASSES):
@@ -146,6 +156,27 @@ class BoundSearch(Encoder):
                 previous = (x, y)
                 x = x + float(np.clip((aim - y) / slope, -3.0, 3.0))
         return (lo[2] if lo else None), x
+
+    def _corrected_first(self, scale: float, bound: float, seen: dict[bytes, tuple[float, Pass]]) -> Pass | None:
+        """At the default effort, the scale search's first pass at ``scale`` (kept in ``seen``
+        for the search), and where it breaks a max bound, up to CORRECTIONS passes in which
+        each code that moves a point over the bound goes finer by the 1/8 octaves of that
+        point's overshoot, the others as they were: the first of them that meets the bound, else
+        None (the scale search goes on). The max error jumps with single step codes, so a
+        first pass aimed near the bound breaks it on most clips; the codes to blame then move,
+        not every code, and the file lands smaller than where the scale search's next passes
+        take it (docs/kinwave.md)."""
+        codes = self.codes(scale)
+        ps = self.run_pass(codes)
+        seen[codes.tobytes()] = (self.pass_error(ps), ps)
+        if self.pass_error(ps) <= bound:
+            return None
+        for _ in range(CORRECTIONS):
+            finer = np.minimum(self._slack_codes(self.pass_errors(ps).max(axis=0), bound), 0)
+            ps = self.run_pass(np.clip(ps.steps + finer, 0, 255).astype(np.uint8), ps.offsets)
+            if self.pass_error(ps) <= bound:
+                return ps
+        return None
 
     def use_slack(self, best: Pass, bound: float, below: float = math.inf) -> Pass:
         """Under a max bound, the final pass gives the slack to the codes whose points have it:
@@ -243,7 +274,11 @@ class BoundSearch(Encoder):
         # at effort 2 the slack rounds take the rest back: the secant steps that come closer
         # cost a pass each and bought 0.1-0.8% of the bytes (docs/kinwave.md)
         stop = DEFAULT_STOP if self.cfg["effort"] == 2 and self.cfg["error_measure"] != "mean" else 1.0
-        best, x = self._search(self.pass_error, bound, accept, guess, 1.0, stop=stop)
+        seen: dict[bytes, tuple[float, Pass]] = {}
+        best = self._corrected_first(guess, bound, seen) if stop < 1.0 else None
+        x = math.log(guess)
+        if best is None:
+            best, x = self._search(self.pass_error, bound, accept, guess, 1.0, stop=stop, seen=seen)
         for _ in range(60):
             if best is not None:
                 body = self.body(self.use_slack(best, bound) if self.cfg["effort"] >= 2 else best)

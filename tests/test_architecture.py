@@ -15,7 +15,7 @@ PACKAGE = Path(__file__).parent.parent / "src" / "mocodec"
 # the layers of docs/architecture.md, lowest first: a module imports only from its own area
 # (a top-level module or package of mocodec) or from areas of lower layers
 LAYERS = [
-    {"version", "errors", "limits", "jsonable", "data"},
+    {"version", "errors", "limits", "jsonable", "data", "kernels"},
     {"extras", "sandbox", "rotations", "bodyparts", "crowd"},
     {"skeleton"},
     {"kinematics"},

@@ -20,10 +20,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import lru_cache
 
-import numba
 import numpy as np
 
 from mocodec import rotations
+from mocodec.kernels import kernel
 from mocodec.skeleton import Skeleton
 
 _AXIS_ID = {"X": 0, "Y": 1, "Z": 2}
@@ -88,7 +88,7 @@ def channel_plan(skeleton: Skeleton) -> ChannelPlan:
     )
 
 
-@numba.njit(cache=True)
+@kernel
 def _fk_kernel(
     channels,
     cos_half,
@@ -179,7 +179,7 @@ def _checked(skeleton: Skeleton, channels: np.ndarray) -> np.ndarray:
     return channels
 
 
-@numba.njit(cache=True)
+@kernel
 def _half_angles(channels: np.ndarray, columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """cos and sin of the half angle of the rotation ``columns`` of every frame (the other
     columns are left unset: translations need no trigonometry, and are half of a
@@ -192,7 +192,7 @@ def _half_angles(channels: np.ndarray, columns: np.ndarray) -> tuple[np.ndarray,
     return cos_half, sin_half
 
 
-@numba.njit(cache=True)
+@kernel
 def frame_orientations(frame, rot_index, rot_axis, pos_index, axis_quat, has_axis, offsets, parents, rot_columns):
     """Global orientations ``(joints, 4)`` of one frame of channels ``frame (C,)``, for a
     compiled caller: :func:`forward_kinematics`' floats (the arguments are
@@ -209,7 +209,7 @@ def frame_orientations(frame, rot_index, rot_axis, pos_index, axis_quat, has_axi
     return quat[0]
 
 
-@numba.njit(cache=True)
+@kernel
 def _place_kernel(channels, orientations, pos_index, offsets, parents, pos, quat):
     for f in range(channels.shape[1]):
         for j in range(parents.shape[0]):

@@ -5,10 +5,10 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from functools import lru_cache
 
-import numba
 import numpy as np
 
 from mocodec import kinematics, rotations
+from mocodec.kernels import kernel
 from mocodec.skeleton import Skeleton
 
 
@@ -271,7 +271,7 @@ def _followed_triples(sk: Skeleton) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     return idx, proper, unwrapped
 
 
-@numba.njit(cache=True)
+@kernel
 def _follow_all(channels, idx, proper, out):
     """:func:`follow_nearest` of each joint's triple ``channels[:, idx[j]]`` into ``out``."""
     for j in range(idx.shape[0]):
@@ -290,7 +290,7 @@ def continuous_triples(angles: np.ndarray, order: str) -> np.ndarray:
     return follow_nearest(np.ascontiguousarray(angles, dtype=np.float64), order[0] == order[2])
 
 
-@numba.njit(cache=True)
+@kernel
 def follow_nearest(angles, proper):
     """Frame by frame, of the triple and its equivalent (a+180, 180-b, c+180), or (a+180, -b,
     c+180) for a ``proper`` Euler order, shifted by turns of 360, the one nearest the previous."""

@@ -15,9 +15,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
+from mocodec.kernels import kernel
 from mocodec.skeleton import Skeleton
 
 SHELL_CM = 3.0
@@ -61,7 +61,7 @@ def joint_errors(positions_cm: np.ndarray, decoded_positions_cm: np.ndarray, sca
     return JointErrors(out)
 
 
-@numba.njit(cache=True)
+@kernel
 def _distance_kernel(pos, dpos, scale, out):
     """|scale dpos - pos| of every frame and joint, in one loop (no temporaries)."""
     for f in range(pos.shape[0]):
@@ -116,7 +116,7 @@ def worst_error(
     return joint_errors(positions_cm, decoded_positions_cm).max
 
 
-@numba.njit(cache=True)
+@kernel
 def _shell_kernel(pos, quat, dpos, dquat, joints, d, out):
     """For each frame and bone joint: max over k of |dp + d (R'_k - R_k)|, with R_k the k-th
     column of the rotation matrix of the joint's global quaternion."""

@@ -13,6 +13,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from mocodec.kernels import kernel
+
 
 def _crc32_table() -> np.ndarray:
     table = np.arange(256, dtype=np.int64)
@@ -32,7 +34,7 @@ CRC32_TABLE = _crc32_table()
 CRC16_TABLE = _crc16_table()
 
 
-@numba.njit(cache=True)
+@kernel
 def crc32(data, start, a, b):
     """:func:`zlib.crc32` of ``data[a:b]`` (uint8) continued from ``start``."""
     crc = start ^ 0xFFFFFFFF
@@ -41,7 +43,7 @@ def crc32(data, start, a, b):
     return crc ^ 0xFFFFFFFF
 
 
-@numba.njit(cache=True)
+@kernel
 def crc16(data, start, a, b):
     """:func:`binascii.crc_hqx` of ``data[a:b]`` (uint8) from ``start``."""
     crc = start
@@ -50,7 +52,7 @@ def crc16(data, start, a, b):
     return crc
 
 
-@numba.njit(cache=True)
+@kernel
 def cut_packets(source, starts, heads, skips, sizes, full, checks, flags):
     """Each cut ``k`` of a packet at ``source[starts[k]:]`` whose header takes ``heads[k]``
     bytes: the header, ``sizes[k]`` bytes of the payload from its byte ``skips[k]``, and a check
@@ -125,7 +127,7 @@ def _cut_table(source, p, length, values, k):
     return -1, 0
 
 
-@numba.njit(cache=True)
+@kernel
 def read_full(source, starts, stops, head_size, crc_starts, tables):
     """Full packets ``source[starts[k]:stops[k]]`` (their frames checked by the caller), their
     checks and cut tables: per packet the CRC-32 start its check was made from (its index in
@@ -172,7 +174,7 @@ def _varint(source, pos, end, max_bytes):
     return 0, -1
 
 
-@numba.njit(cache=True)
+@kernel
 def read_compact(source, starts, stops, crc_starts):
     """Compact data packets ``source[starts[k]:stops[k]]`` (docs/formats.md), as
     ``packets.parse`` reads them up to what their streams' cursors give: per packet its check's
@@ -231,7 +233,7 @@ def read_compact(source, starts, stops, crc_starts):
     return dropped, fields, positions, payload_at, table_ends, values, codec_at
 
 
-@numba.njit(cache=True)
+@kernel
 def follow_cursors(cursor, explicit, short, low, frames, given, next_sequence, next_frame, with_position):
     """The sequence numbers and first frames of compact packets read in order (``cursor[k]``:
     their stream's cursor, whose ``next_sequence`` and ``next_frame`` they move as
@@ -291,7 +293,7 @@ def _compact_head(out, o, head):
     return at - o
 
 
-@numba.njit(cache=True)
+@kernel
 def cut_compact(source, payload_at, skips, sizes, checks, heads):
     """Compact packets made anew, as ``Packet.to_compact`` writes them: per cut ``k`` the header
     of ``heads[k]`` (tag, stream id, the sequence number's low byte, frame count, sequence

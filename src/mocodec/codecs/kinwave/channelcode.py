@@ -13,6 +13,7 @@ import numpy as np
 
 from mocodec.codecs.shared import rotvec
 from mocodec.coding.transforms import periodized, seams, trendwave, wavelets
+from mocodec.kernels import kernel
 
 
 @numba.njit(inline="always")
@@ -43,7 +44,7 @@ def constant_value(knot, base, quantum):
     return base + knot * quantum
 
 
-@numba.njit(cache=True)
+@kernel
 def _reconstruct(knots, coeffs, const, step, fraction, base, knot_f, coeff_f, seam_f, seam_limit, lay, lo, hi, weight):
     """Decoded rows ``(k, T)`` from their integers (:func:`reconstruct`)."""
     knot_frames, left, frac, knot_quantum, starts, lengths, leads, padded, levels, offsets = lay
@@ -84,7 +85,7 @@ def _reconstruct(knots, coeffs, const, step, fraction, base, knot_f, coeff_f, se
     return out
 
 
-@numba.njit(cache=True)
+@kernel
 def _quantise(target, const, step, fraction, base, knot_f, coeff_f, lay, lo, hi, deadzone):
     """Knots, dead-zone coefficients and the coefficients in steps of ``target (k, T)``
     (:func:`quantise`)."""
@@ -126,7 +127,7 @@ def _quantise(target, const, step, fraction, base, knot_f, coeff_f, lay, lo, hi,
     return k_int, c_int, scaled
 
 
-@numba.njit(cache=True)
+@kernel
 def _round_far(target, out, const, step, knot_f, far_steps, scaled, coeffs, lay, reach_ptr, reached, reach_at):
     """Round to the nearest integer, in place in ``coeffs``, the coefficients whose synthesis
     reaches a frame where ``out`` misses ``target`` by more than ``far_steps`` of the frame's
@@ -162,7 +163,7 @@ def _round_far(target, out, const, step, knot_f, far_steps, scaled, coeffs, lay,
     return changed
 
 
-@numba.njit(cache=True)
+@kernel
 def _code_rows(target, const, step, fraction, base, factors, seam_limit, lay, dec, rec, weight, deadzone, far, reach):
     """:func:`_quantise`, :func:`_reconstruct` and, with ``far`` > 0, :func:`_round_far` and
     the changed rows reconstructed again, in one call (:func:`code_depth`)."""
@@ -272,7 +273,7 @@ def _turn_rows(values, rows, turn, sign):
         )
 
 
-@numba.njit(cache=True)
+@kernel
 def depth_kernel(
     values, cols, quats, forms, moved_rows, moved_turns, iso, const, step, fraction, base, factors, coder, every_frame
 ):

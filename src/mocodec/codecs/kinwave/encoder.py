@@ -8,7 +8,6 @@ import math
 from dataclasses import dataclass, replace
 from functools import lru_cache
 
-import numba
 import numpy as np
 
 from mocodec import rotations
@@ -53,6 +52,7 @@ from mocodec.codecs.kinwave.body import (
 from mocodec.codecs.shared import rotvec
 from mocodec.coding.entropy import coefcoder
 from mocodec.coding.transforms import trendwave
+from mocodec.kernels import kernel
 from mocodec.kinematics import channel_plan, forward_kinematics, positions_from_orientations
 from mocodec.metrics.pose import bone_joints, joint_errors as distances, shell_errors
 from mocodec.motion import Motion
@@ -99,7 +99,7 @@ def frame_moves(positions_cm: np.ndarray) -> np.ndarray:
     return _farthest(np.ascontiguousarray(positions_cm, dtype=np.float64), 1)
 
 
-@numba.njit(cache=True)
+@kernel
 def _farthest(positions, gap):
     """``(T - gap,)``: the largest distance a joint of ``positions (T, J, 3)`` goes from frame
     t to frame t + gap, in one loop (the floats of numpy's norm of the differences)."""

@@ -27,10 +27,10 @@ from __future__ import annotations
 
 from functools import lru_cache
 
-import numba
 import numpy as np
 from scipy.optimize import minimize
 
+from mocodec.kernels import kernel
 from mocodec.skeleton import Skeleton
 
 MODES = ("shell", "joint", "mean")
@@ -143,7 +143,7 @@ def _mean_program(weight: np.ndarray, lever2: np.ndarray, start: np.ndarray) -> 
     return u / np.sqrt(lever2.T @ u).mean() ** 2  # the bound met whatever SLSQP returned
 
 
-@numba.njit(cache=True)
+@kernel
 def _dual_rounds(weight, lever2, start):
     """:func:`_max_program`'s prices: the rounds from equal prices ``start`` (compiled: a round
     is two small products, and a skeleton can take a thousand). The gap is the dual's value

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, NamedTuple
 
-import numba
 import numpy as np
 
 from mocodec.codecs.kinwave.body import MEAN_QUANTUM, three_angle_groups, turn_setup
@@ -24,6 +23,7 @@ from mocodec.codecs.shared import rotvec
 from mocodec.codecs.shared.closedloop import depth_end, depth_start, exact_rotation, tree_arrays, tree_loop
 from mocodec.codecs.shared.rotvec import quat_product, quats_of_euler
 from mocodec.coding.transforms import trendwave
+from mocodec.kernels import kernel
 from mocodec.kinematics import channel_plan, frame_orientations
 
 if TYPE_CHECKING:
@@ -180,7 +180,7 @@ class TreePass:
         )
 
 
-@numba.njit(cache=True)
+@kernel
 def _orientations_above(decoded, kinematics):
     """``(joints, 4)``: each joint's parent's orientation in frame 0 of the decoded rows so far
     (the identity for a root), as :func:`body.parent_orientations` gives it."""
@@ -195,7 +195,7 @@ def _orientations_above(decoded, kinematics):
     return above
 
 
-@numba.njit(cache=True)
+@kernel
 def _form_rotations(values, tree, coding, fa, fb, glob, goal):
     """``(T, n, 4)``: the rotations of the depth's joints in coding forms ``fa:fb``: their
     closed-loop targets where the loop gives them (:func:`closedloop.exact_rotation`), else
@@ -217,7 +217,7 @@ def _form_rotations(values, tree, coding, fa, fb, glob, goal):
     return quats
 
 
-@numba.njit(cache=True)
+@kernel
 def _world_turns(coding, d, fa, fb, above, turns):
     """Which of the depth's joints in coding forms ``fa:fb`` a WORLD form turns, and the turns
     ``conj(C) G_p C`` (:func:`body.parent_turns`; the forms' means where none)."""
@@ -240,7 +240,7 @@ def _world_turns(coding, d, fa, fb, above, turns):
     return turned, pre
 
 
-@numba.njit(cache=True)
+@kernel
 def _compose_forms(glob, rotations, tree, coding, fa, fb):
     """The decoded orientations of a depth's joints in coding forms ``fa:fb`` (with children)
     from their decoded rotations ``(T, n, 4)`` (:func:`rotvec.quats_of_forms`, the rotation
@@ -264,7 +264,7 @@ def _compose_forms(glob, rotations, tree, coding, fa, fb):
             )
 
 
-@numba.njit(cache=True)
+@kernel
 def _tree_pass(loop, coding, kinematics, turns, steps, factors, isolated, coder, sizes, compose_steps, every_frame):
     """:meth:`TreePass.run` (``loop``: :func:`closedloop.tree_loop`'s arrays, whose decoded
     orientations and positions each pass writes before it reads them; ``coder``:
@@ -317,7 +317,7 @@ def _tree_pass(loop, coding, kinematics, turns, steps, factors, isolated, coder,
     return knots, coeffs, decoded, patches
 
 
-@numba.njit(cache=True)
+@kernel
 def _hold(knots, decoded, depth, r, c, targets, quantum, base):
     """A constant row outside the depth kernel (row ``r`` of the depth, channel ``c``): its
     knots and decoded value as :func:`channelcode.quantise` and :func:`channelcode.reconstruct`

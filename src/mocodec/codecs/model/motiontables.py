@@ -27,7 +27,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numba
 import numpy as np
 
 from mocodec.codecs.model.animate import stretch
@@ -37,6 +36,7 @@ from mocodec.codecs.shared import modelfile
 from mocodec.coding.entropy.parts import join_parts, split_parts
 from mocodec.coding.entropy.rangecoder import decode_ints, encode_ints
 from mocodec.errors import CodecError, CorruptStreamError
+from mocodec.kernels import kernel
 from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
@@ -58,7 +58,7 @@ def similarity_weights(norm: int, interior: float, width: int) -> np.ndarray:
     return np.repeat(w / (w.sum() * max(width, 1)), width)
 
 
-@numba.njit(cache=True)
+@kernel
 def _spaced(vectors, weights, limit):
     """Indices of the vectors kept by the greedy spacing search: each at a weighted distance
     of at least ``limit`` from every one kept before it."""

@@ -21,12 +21,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numba
 import numpy as np
 
 from mocodec.codecs.motionprimitives import quatseg
 from mocodec.codecs.shared import modelfile
 from mocodec.errors import CodecError
+from mocodec.kernels import kernel
 from mocodec.motion import Motion
 
 MAGIC = b"MOCPD"
@@ -38,7 +38,7 @@ MAX_SEGMENTS = 3000  # training segments per joint, evenly taken
 MAX_ITERATIONS = 30
 
 
-@numba.njit(cache=True)
+@kernel
 def _assign(segs, centres, labels, best):
     """Nearest centre (5.4) of every segment; ``best`` = its smallest frame |dot| there."""
     for i in range(segs.shape[0]):
@@ -57,7 +57,7 @@ def _assign(segs, centres, labels, best):
                 labels[i] = k
 
 
-@numba.njit(cache=True)
+@kernel
 def _centres(segs, labels, centres):
     """Incremental slerp centres: member m (from 0, in data order) enters with weight 1 against
     the centre's m, i.e. ``c = slerp(c, member, 1 / (m + 1))``; empty clusters keep theirs."""

@@ -55,6 +55,7 @@ from mocodec.coding.entropy.parts import join_parts, split_parts
 from mocodec.coding.entropy.rangecoder import decode_ints, encode_ints
 from mocodec.coding.entropy.rle import ZeroRuns, decode_zero_runs, encode_zero_runs
 from mocodec.errors import CodecError, CorruptStreamError
+from mocodec.kernels import kernel
 from mocodec.skeleton import Skeleton
 
 TRANSLATION_WINDOW = 32
@@ -161,7 +162,7 @@ class _Candidates:
         )
 
 
-@numba.njit(cache=True)
+@kernel
 def _rebuild(joints, index, decoded, cand, valid, filled, history):
     """The decoder's side of the candidates, in place: each segment's residual rotations
     ``decoded`` become the segment (5.8), ``cand[joint, index] * residual``, which then updates
@@ -183,7 +184,7 @@ def _rebuild(joints, index, decoded, cand, valid, filled, history):
     return -1
 
 
-@numba.njit(cache=True)
+@kernel
 def _remember_all(joints, decoded, cand, valid, filled, history):
     for s in range(len(joints)):
         _remember(joints[s], decoded[s], cand, valid, filled, history)

@@ -29,6 +29,7 @@ import numba
 import numpy as np
 
 from mocodec import rotations
+from mocodec.kernels import kernel
 from mocodec.skeleton import Skeleton
 
 NORMAL_FRAMES = 16
@@ -109,7 +110,7 @@ def speed_change(q: np.ndarray, fps: float) -> np.ndarray:
     return out
 
 
-@numba.njit(cache=True)
+@kernel
 def _chop(g, starts, available, max_len, final, ends_out, joint_out):
     """Segments of every joint from its open start, as far as ``available`` frames decide:
     (joint, end) pairs written to the outputs; returns their count and updates ``starts``."""
@@ -203,7 +204,7 @@ def slerp_into(out, a, b, t):
         out[c] /= norm
 
 
-@numba.njit(cache=True)
+@kernel
 def _denormalise(normal, lengths, out):
     f = 0
     for k in range(len(lengths)):
@@ -240,7 +241,7 @@ def segment_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return distance_of_dot(min_abs_dot(a, b))
 
 
-@numba.njit(cache=True)
+@kernel
 def _smooth_seams(q, lefts, cuts, rights, m, jump):
     for s in range(len(cuts)):
         cut = cuts[s]

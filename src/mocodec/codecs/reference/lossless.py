@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import struct
 
-import numba
 import numpy as np
 import zstandard
 
@@ -29,6 +28,7 @@ from mocodec.codecs.registry import register
 from mocodec.coding.entropy.parts import join_parts, split_parts
 from mocodec.coding.entropy.rangecoder import decode_ints, encode_ints
 from mocodec.errors import CorruptStreamError
+from mocodec.kernels import kernel
 from mocodec.skeleton import Skeleton
 
 MAX_DECIMALS = 22  # 10^22 is the largest exact power of ten in float64
@@ -54,12 +54,12 @@ def _granularity(exponent: np.ndarray) -> np.ndarray:
     return np.power(10, np.minimum(exponent, 18), dtype=np.int64)
 
 
-@numba.njit(cache=True)
+@kernel
 def _round_to(p, g):
     return ((p + g // 2) // g) * g
 
 
-@numba.njit(cache=True)
+@kernel
 def _predict(v, i, order):
     if i == 0 or order == 0:
         return 0
@@ -68,7 +68,7 @@ def _predict(v, i, order):
     return 2 * v[i - 1] - v[i - 2]
 
 
-@numba.njit(cache=True)
+@kernel
 def _residuals(v, gran, exception, order):
     r = np.zeros(v.size, dtype=np.int64)
     for i in range(v.size):
@@ -77,7 +77,7 @@ def _residuals(v, gran, exception, order):
     return r
 
 
-@numba.njit(cache=True)
+@kernel
 def _rebuild(r, gran, exception, exception_v, order):
     v = np.empty(gran.size, dtype=np.int64)
     k = 0

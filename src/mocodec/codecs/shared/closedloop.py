@@ -25,6 +25,7 @@ import numba
 import numpy as np
 
 from mocodec.codecs.shared.rotvec import quat_product, rotate_vector
+from mocodec.kernels import kernel
 from mocodec.kinematics import channel_plan
 from mocodec.skeleton import Skeleton
 
@@ -42,7 +43,7 @@ def _axis_quat(axis, angle):
     return c, 0.0, 0.0, s
 
 
-@numba.njit(cache=True)
+@kernel
 def _linearise(angles, axes, cq, has_axis, lq, jac):
     """What a Gauss-Newton step from ``angles (T, k)`` reads, whatever its target: per frame the
     local rotation ``L = C R_1 .. R_k C^-1`` the angles make, into ``lq (T, 4)``, and each
@@ -72,7 +73,7 @@ def _linearise(angles, axes, cq, has_axis, lq, jac):
         lq[f, 0], lq[f, 1], lq[f, 2], lq[f, 3] = lw, lx, ly, lz
 
 
-@numba.njit(cache=True)
+@kernel
 def _step(angles, active, lq, jac, parent, goal, out):
     """One damped Gauss-Newton step per frame from ``angles (T, k)`` (degrees) towards the
     local rotation ``conj(parent) goal``, given the angles' :func:`_linearise`."""
@@ -127,14 +128,14 @@ def _step(angles, active, lq, jac, parent, goal, out):
             out[f, i] = theta[i] * (180.0 / np.pi)
 
 
-@numba.njit(cache=True)
+@kernel
 def _targets(angles, axes, active, cq, has_axis, parent, goal, out):
     lq, jac = np.empty((angles.shape[0], 4)), np.empty((angles.shape[0], 3, 3))
     _linearise(angles, axes, cq, has_axis, lq, jac)
     _step(angles, active, lq, jac, parent, goal, out)
 
 
-@numba.njit(cache=True)
+@kernel
 def _compose(angles, axes, cq, has_axis, parent, out):
     for f in range(angles.shape[0]):
         w, x, y, z = 1.0, 0.0, 0.0, 0.0
@@ -348,7 +349,7 @@ def tree_arrays(skeleton: Skeleton) -> TreeArrays:
     return out
 
 
-@numba.njit(cache=True)
+@kernel
 def depth_targets(
     start, active, goal, glob, d_joints, d_parents, chans, columns, steps, axes, quats, has_axis, skip, out, a, plan
 ):
@@ -390,7 +391,7 @@ def depth_targets(
                 out[f, columns[i, m]] = target[f, m]
 
 
-@numba.njit(cache=True)
+@kernel
 def depth_compose(decoded, glob, d_joints, columns, steps, axes, quats, has_axis, has_children):
     """The decoded orientation of each of a depth's joints with rotations and children, from
     the depth's decoded columns on top of its parent's (already in ``glob``)."""
@@ -432,7 +433,7 @@ def _placing_of(skeleton: Skeleton, active_flags: bytes) -> tuple[np.ndarray, np
     return placing, targeted
 
 
-@numba.njit(cache=True)
+@kernel
 def translation_targets(targets, tree, a, b, active, glob, where, goal_positions, targeted):
     """The active translations (columns of a depth's ``targets (T, k)``) of the tree entries
     ``a:b`` (:class:`TreeArrays`) whose joints are ``targeted``: the ones that restore each
@@ -456,7 +457,7 @@ def translation_targets(targets, tree, a, b, active, glob, where, goal_positions
                     targets[f, tree.move_columns[m]] = wanted[axis] - tree.offsets[j, axis]
 
 
-@numba.njit(cache=True)
+@kernel
 def place_joints(decoded, tree, a, b, glob, where, placing):
     """The decoded positions ``where`` of the tree entries ``a:b`` whose joints are
     ``placing``: from their decoded translations (columns of the depth's ``decoded (T, k)``) and
@@ -478,7 +479,7 @@ def place_joints(decoded, tree, a, b, glob, where, placing):
             where[j, f, 0], where[j, f, 1], where[j, f, 2] = where[p, f, 0] + x, where[p, f, 1] + y, where[p, f, 2] + z
 
 
-@numba.njit(cache=True)
+@kernel
 def exact_rotation(axis_quat, has_axis, parent, goal):
     """Quaternions ``(T, 4)`` of exactly the local rotation (the one its Euler angles make,
     without the axis pre-rotation) that restores ``goal`` on top of ``parent``:
@@ -498,7 +499,7 @@ def exact_rotation(axis_quat, has_axis, parent, goal):
     return out
 
 
-@numba.njit(cache=True)
+@kernel
 def depth_start(tree, d, start, active, goal, glob, skip, where, goal_positions, targeted, plan):
     """``(T, k)``: what depth ``d`` of ``tree`` (:class:`TreeArrays`) codes its channels from:
     their start values, the closed-loop target angles (:func:`depth_targets`, not for ``skip``
@@ -518,7 +519,7 @@ def depth_start(tree, d, start, active, goal, glob, skip, where, goal_positions,
     return targets
 
 
-@numba.njit(cache=True)
+@kernel
 def depth_end(tree, d, decoded, glob, where, placing, steps):
     """After depth ``d`` is coded (``decoded (T, k)``): its joints' decoded orientations
     (:func:`depth_compose` of the joints whose rotation ``steps`` are not 0: ``tree.steps``,

@@ -30,6 +30,7 @@ import numba
 import numpy as np
 
 from mocodec import rotations
+from mocodec.kernels import kernel
 from mocodec.motion import follow_nearest
 
 _DEG = math.pi / 180.0
@@ -86,7 +87,7 @@ def rotate_vector(w, x, y, z, vx, vy, vz):
     return vx + w * tx + y * tz - z * ty, vy + w * ty + z * tx - x * tz, vz + w * tz + x * ty - y * tx
 
 
-@numba.njit(cache=True)
+@kernel
 def _turn_vectors_kernel(q, v, sign, out):
     for t in range(v.shape[0]):
         out[t, 0], out[t, 1], out[t, 2] = rotate_vector(
@@ -102,7 +103,7 @@ def turn_vectors(q: np.ndarray, v: np.ndarray, back: bool = False) -> np.ndarray
     return out
 
 
-@numba.njit(cache=True)
+@kernel
 def quats_of_euler(euler, axes):
     """Unit quaternions ``(T, n, 4)`` of Euler angles ``(T, n, 3)`` (degrees) about ``axes (n, 3)``."""
     frames, joints = euler.shape[0], euler.shape[1]
@@ -173,7 +174,7 @@ def _euler_of(q, i, jj, k, proper, eps, angles, t):
         angles[t, m] = (wrapped - math.pi) / _DEG
 
 
-@numba.njit(cache=True)
+@kernel
 def quats_of_forms(values, form_axes, vector, means, world, pre):
     """Quaternions ``(T, n, 4)`` of rotations coded as rotation vectors (``vector[j]``) or Euler
     angles about ``form_axes[j]`` (degrees), each times its mean ``means[j]`` on the left, and
@@ -198,7 +199,7 @@ def quats_of_forms(values, form_axes, vector, means, world, pre):
     return out
 
 
-@numba.njit(cache=True)
+@kernel
 def forms_of_quats(quats, vector, means, axes, world, pre):
     """Coding-form values ``(T, n, 3)`` of quaternions ``(T, n, 4)``: each joint's rotation,
     where ``world[j]`` first turned by ``pre[j]`` on the left, as a rotation vector about
@@ -223,7 +224,7 @@ def forms_of_quats(quats, vector, means, axes, world, pre):
     return out
 
 
-@numba.njit(cache=True)
+@kernel
 def euler_of_quats(quats, axes):
     """Euler angles (degrees, each joint's triples continuous in time) of quaternions
     ``(T, n, 4)`` in the orders ``axes (n, 3)``."""
@@ -369,7 +370,7 @@ def near_lock(rows: np.ndarray, orders: tuple[str, ...], margin_deg: float) -> n
     return closeness.min(axis=1, initial=1.0) < math.sin(math.radians(margin_deg))
 
 
-@numba.njit(cache=True)
+@kernel
 def _mean_distances_kernel(a, b, out):
     for e in range(a.shape[1]):
         total = 0.0

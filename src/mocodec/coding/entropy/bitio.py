@@ -8,15 +8,15 @@ into garbage values.
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
 from mocodec.errors import CorruptStreamError
+from mocodec.kernels import kernel
 
 MAX_WIDTH = 64
 
 
-@numba.njit(cache=True)
+@kernel
 def _pack(values, widths, total_bits):
     out = np.zeros((total_bits + 7) // 8, dtype=np.uint8)
     pos = 0
@@ -29,7 +29,7 @@ def _pack(values, widths, total_bits):
     return out
 
 
-@numba.njit(cache=True)
+@kernel
 def _unpack(data, start, widths):
     out = np.empty(widths.size, dtype=np.uint64)
     pos = start

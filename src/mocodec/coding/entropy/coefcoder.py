@@ -43,6 +43,7 @@ from mocodec.coding.entropy.binarycoder import (
     put_s,
     start_decoder_s,
 )
+from mocodec.kernels import kernel
 
 # context layout
 _BANDS = 6  # approximation, detail 1 (finest) .. detail 5+ (coarser)
@@ -83,7 +84,7 @@ def _parent_class(v):
 
 
 # ----- payloads -----------------------------------------------------------------------------
-@numba.njit(cache=True)
+@kernel
 def _encode(side, const, knots, coeffs, seg_pad, seg_lev, rev2, buf):
     low, rng, cache, size, pos = encoder_start()
     state = np.full((3, _CONTEXTS), INIT, dtype=np.int64)
@@ -176,7 +177,7 @@ def _encode(side, const, knots, coeffs, seg_pad, seg_lev, rev2, buf):
     return finish_s(low, cache, size, pos, buf)
 
 
-@numba.njit(cache=True)
+@kernel
 def _decode(data, side, channels, num_knots, num_coeffs, seg_pad, seg_lev, rev2, const, knots, coeffs):
     code, rng, pos = start_decoder_s(data)
     state = np.full((3, _CONTEXTS), INIT, dtype=np.int64)
@@ -310,7 +311,7 @@ def group_sizes(
     return _group_sizes(knots, coeffs, seg_pad, seg_lev, rows, revision >= 2, buf)
 
 
-@numba.njit(cache=True)
+@kernel
 def _group_sizes(knots, coeffs, seg_pad, seg_lev, rows, rev2, buf):
     groups = knots.shape[0] // rows
     out = np.empty(groups, dtype=np.int64)

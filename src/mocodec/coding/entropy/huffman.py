@@ -14,11 +14,11 @@ from __future__ import annotations
 
 import heapq
 
-import numba
 import numpy as np
 
 from mocodec.coding.entropy.bitio import BitReader, BitWriter
 from mocodec.errors import CorruptStreamError
+from mocodec.kernels import kernel
 
 MAX_CODE_LENGTH = 48
 MAX_ALPHABET = 1 << 20
@@ -46,7 +46,7 @@ def code_lengths(counts: np.ndarray) -> np.ndarray:
     return lengths
 
 
-@numba.njit(cache=True)
+@kernel
 def _canonical(lengths):
     """Canonical codes for the lengths, and the decoding tables: per length the first code,
     the index of its first symbol in ``order`` and how many symbols have it."""
@@ -80,7 +80,7 @@ def _canonical(lengths):
     return codes, first, start, count, order
 
 
-@numba.njit(cache=True)
+@kernel
 def _decode_one(data, pos, end, first, start, count, order):
     code = 0
     for n in range(1, first.size - 1):
@@ -93,7 +93,7 @@ def _decode_one(data, pos, end, first, start, count, order):
     return -2, pos
 
 
-@numba.njit(cache=True)
+@kernel
 def _decode_static(data, pos, n, first, start, count, order):
     out = np.empty(n, dtype=np.int64)
     end = data.size * 8
@@ -165,7 +165,7 @@ def _check(symbols: np.ndarray, alphabet_size: int) -> None:
         raise ValueError(f"symbols must be in 0..{alphabet_size - 1}")
 
 
-@numba.njit(cache=True)
+@kernel
 def _adaptive_lengths(counts):
     """Huffman code lengths of all symbols (counts all positive) by the two-queue method."""
     n = counts.size
@@ -199,7 +199,7 @@ def _adaptive_lengths(counts):
     return lengths
 
 
-@numba.njit(cache=True)
+@kernel
 def _adaptive_encode(symbols, alphabet, rebuild_every):
     counts = np.ones(alphabet, dtype=np.int64)
     lengths = _adaptive_lengths(counts)
@@ -217,7 +217,7 @@ def _adaptive_encode(symbols, alphabet, rebuild_every):
     return out_codes, out_lens
 
 
-@numba.njit(cache=True)
+@kernel
 def _adaptive_decode(data, pos, n, alphabet, rebuild_every):
     counts = np.ones(alphabet, dtype=np.int64)
     _, first, start, count, order = _canonical(_adaptive_lengths(counts))

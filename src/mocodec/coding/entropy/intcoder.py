@@ -38,6 +38,7 @@ from mocodec.coding.entropy.binarycoder import (
     put_int,
     start_decoder,
 )
+from mocodec.kernels import kernel
 
 _ACT = 3  # previous value: zero, |v| <= 2, larger
 _UNARY = 8
@@ -85,7 +86,7 @@ class Model:
         return other
 
 
-@numba.njit(cache=True)
+@kernel
 def _encode(values, buf, state, prev):
     frames, channels = values.shape
     st = encoder_state()
@@ -98,7 +99,7 @@ def _encode(values, buf, state, prev):
     return finish(st, buf)
 
 
-@numba.njit(cache=True)
+@kernel
 def _decode(data, frames, channels, out, state, prev):
     st = start_decoder(data)
     for t in range(frames):
@@ -116,7 +117,7 @@ def _tree_base(c, prev_u, shift, size):
     return MAX_CLASS + (c * _PREV_SETS + (prev_u >> shift)) * size
 
 
-@numba.njit(cache=True)
+@kernel
 def _encode_tree(values, buf, state, prev, half, bits, tree_bits):
     frames, channels = values.shape
     st = encoder_state()
@@ -137,7 +138,7 @@ def _encode_tree(values, buf, state, prev, half, bits, tree_bits):
     return finish(st, buf)
 
 
-@numba.njit(cache=True)
+@kernel
 def _decode_tree(data, out, state, prev, half, bits, tree_bits):
     frames, channels = out.shape
     st = start_decoder(data)

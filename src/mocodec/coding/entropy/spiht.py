@@ -22,11 +22,12 @@ and the top plane n0 (-1 when every coefficient is zero).
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 
+from mocodec.kernels import kernel
 
-@numba.njit(cache=True)
+
+@kernel
 def _children(j, n, approx):
     """(first child, count) of node j."""
     if j < approx:
@@ -36,7 +37,7 @@ def _children(j, n, approx):
     return (0, 0)
 
 
-@numba.njit(cache=True)
+@kernel
 def _descendant_maxima(mag, approx):
     """max |c| over D(j) and over L(j), for every node."""
     n = mag.size
@@ -50,7 +51,7 @@ def _descendant_maxima(mag, approx):
     return max_d, max_l
 
 
-@numba.njit(cache=True)
+@kernel
 def top_plane(coeffs):
     m = 0
     for v in coeffs:
@@ -62,7 +63,7 @@ def top_plane(coeffs):
     return n0
 
 
-@numba.njit(cache=True)
+@kernel
 def encode(coeffs, approx, budget):
     """SPIHT bits (uint8, one bit each, at most ``budget``) of integer ``coeffs``, and n0."""
     n = coeffs.size
@@ -175,7 +176,7 @@ def encode(coeffs, approx, budget):
     return out[:nb], n0
 
 
-@numba.njit(cache=True)
+@kernel
 def decode(bits, start, budget, n, approx, n0):
     """Coefficients (float, in quantum units) from ``bits[start:start + budget]``, the number
     of bits used, and the bit plane the stream stopped in (-1 when it was complete): every

@@ -15,8 +15,9 @@ each frame is sent as a flag per group and frame (the update timestamps), range 
 
 from __future__ import annotations
 
-import numba
 import numpy as np
+
+from mocodec.kernels import kernel
 
 HALF_WINDOW = 3
 # derivatives of the least-squares quadratic through 7 samples, at the centre
@@ -24,7 +25,7 @@ VELOCITY_TAPS = np.array([-3.0, -2.0, -1.0, 0.0, 1.0, 2.0, 3.0]) / 28.0
 ACCELERATION_TAPS = np.array([5.0, 0.0, -3.0, -4.0, -3.0, 0.0, 5.0]) / 42.0
 
 
-@numba.njit(cache=True)
+@kernel
 def run(
     x_ext, flags, values, decode, groups, group_start, thr, pstep, vstep, astep, use_acc, base, vel, acc, age, hist
 ):

@@ -26,9 +26,10 @@ import numba
 import numpy as np
 
 from mocodec.errors import CorruptStreamError
+from mocodec.kernels import kernel
 
 
-@numba.njit(cache=True)
+@kernel
 def run_table(x, codes, decode, prev, centre, scale, a, decisions, levels_out):
     """Code (or, with ``decode``, decode) ``x (n, K)`` / ``codes (n, K)``; ``prev (K,)`` is the
     last decoded sample and is advanced. ``decisions`` are the N-1 inner decision levels and
@@ -78,7 +79,7 @@ def _coefficients(hist, filled, pos, c, order):
     return m, (r1 * r0 - r1 * r2) / det, (r0 * r2 - r1 * r1) / det
 
 
-@numba.njit(cache=True)
+@kernel
 def run_adaptive(x, codes, decode, hist, counters, coef, step, centre, step_lo, step_hi, beta, levels, order, update):
     """Code (or decode) with the adaptive quantiser and predictor. State the caller keeps:
     ``hist (W, K)`` ring of decoded samples, ``counters`` = [write position, samples seen],
@@ -308,7 +309,7 @@ class AdaptiveCoder(_SampleCoder):
         )
 
 
-@numba.njit(cache=True)
+@kernel
 def run_uniform(x, codes, decode, prev, a, step):
     """First-order closed-loop prediction ``p = a y(n-1)`` (7-12) and a uniform mid-tread
     quantiser without overload (its codes are entropy coded, so large ones are rare, not

@@ -19,8 +19,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numba
 import numpy as np
+
+from mocodec.kernels import kernel
 
 NO_STEP = -(1 << 20)  # step exponent of a row with nothing to quantise
 FINEST_STEP = -40  # 2^(-40/4) = 0.001 degree (or unit): rows that vary less
@@ -139,7 +140,7 @@ def multipliers(levels: int) -> np.ndarray:
     return np.r_[np.full(low, 0.9), np.geomspace(1.1, 2.4, half - low)]
 
 
-@numba.njit(cache=True)
+@kernel
 def _adaptive(x, levels, step0, step_min, step_max, beta, decode_codes):
     """Shared loop: quantise x (or, with decode_codes, only follow the given codes)."""
     n = decode_codes.size if decode_codes.size else x.size

@@ -20,6 +20,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from mocodec.kernels import kernel
+
 _CHUNK = 8192
 LLOYD_ITERATIONS = 8
 
@@ -118,7 +120,7 @@ def _closest(v, book, rows):
     return best
 
 
-@numba.njit(cache=True)
+@kernel
 def run_temporal(x, codes, decode, predictive, prev, book):
     """Temporal VQ (7.9.2) of ``x (blocks, L, K)``: per block and channel the vector of its L
     samples, minus the channel's last decoded sample (``predictive``; else the vector itself);
@@ -143,7 +145,7 @@ def run_temporal(x, codes, decode, predictive, prev, book):
     return out
 
 
-@numba.njit(cache=True)
+@kernel
 def run_spatial(x, codes, decode, predictive, prev, columns, starts, books, book_starts):
     """Spatial VQ (7.9.1) of ``x (n, C)``: per frame and group g the vector of its channels
     ``columns[starts[g]:starts[g + 1]]``, minus their last decoded values (``predictive``; else

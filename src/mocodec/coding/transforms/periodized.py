@@ -15,6 +15,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from mocodec.kernels import kernel
+
 
 @numba.njit(inline="always")
 def analysis_sum(x, n, i, h):
@@ -68,7 +70,7 @@ def synthesis_add(x, n, h, out):
             out[odd] += h[2 * g + 1] * v
 
 
-@numba.njit(cache=True)
+@kernel
 def forward_one(x, n, levels, lo, hi, out, a, b):
     """Coefficients of ``x[:n]`` (n a multiple of 2^levels) into ``out[:n]``, coarsest band
     first: [approximation, coarsest details, ..., finest details]; ``a`` and ``b`` are scratch
@@ -89,7 +91,7 @@ def forward_one(x, n, levels, lo, hi, out, a, b):
         out[t] = a[t]
 
 
-@numba.njit(cache=True)
+@kernel
 def inverse_one(c, n, levels, lo, hi, out, a, b):
     """Inverse of :func:`forward_one`: the signal of ``c[:n]`` into ``out[:n]``; ``a`` and ``b``
     are scratch of n values (``c`` may not be ``out``)."""
@@ -108,7 +110,7 @@ def inverse_one(c, n, levels, lo, hi, out, a, b):
         out[t] = a[t]
 
 
-@numba.njit(cache=True)
+@kernel
 def forward_rows(x, levels, lo, hi):
     """:func:`forward_one` of every row of ``x (rows, n)``."""
     rows, n = x.shape
@@ -119,7 +121,7 @@ def forward_rows(x, levels, lo, hi):
     return out
 
 
-@numba.njit(cache=True)
+@kernel
 def inverse_rows(c, levels, lo, hi):
     """:func:`inverse_one` of every row of ``c (rows, n)``."""
     rows, n = c.shape

@@ -15,6 +15,8 @@ from functools import lru_cache
 import numba
 import numpy as np
 
+from mocodec.kernels import kernel
+
 _EXTRAPOLATE = np.array([0.375, -1.25, 1.875])  # quadratic through 3 frames, half a frame on
 _PROBES = np.array([-8, -6, -4, 4, 6, 8], dtype=np.int64)  # frames from a seam its motion's own step is read at
 CONTEXT = 11  # frames each side of a seam the estimates read
@@ -48,7 +50,7 @@ def ramp(half_width: int) -> np.ndarray:
     return weight
 
 
-@numba.njit(cache=True)
+@kernel
 def smooth_rows(rows, seams, limits, weight):
     """:func:`smooth_seams` in place on ``rows (channels, frames)`` (a compiled caller's layout),
     the step at seam ``seams[k]`` at most ``limits[k, channel]``, the ramp ``weight``
@@ -68,7 +70,7 @@ def _step_at(x, s, col, abc):
     return right - left
 
 
-@numba.njit(cache=True)
+@kernel
 def _smooth(out, where, bound, weight, abc, probes):
     """:func:`smooth_seams` on the rows ``out (channels, frames)`` in place, seams ``where`` all
     inside: every step measured first, then the ramps added (every seam's left side, then every

@@ -7,13 +7,13 @@ from __future__ import annotations
 from functools import lru_cache
 from typing import TYPE_CHECKING
 
-import numba
 import numpy as np
 
 from mocodec.codecs.kinwave.body import channel_steps
 from mocodec.codecs.kinwave.live.syntax import contexts
 from mocodec.codecs.shared.closedloop import depth_end, depth_start
 from mocodec.coding.entropy import binarycoder as bc
+from mocodec.kernels import kernel
 from mocodec.kinematics import channel_plan
 from mocodec.skeleton import Skeleton
 
@@ -25,7 +25,7 @@ ROUNDING = 0.25  # the quantiser's rounding offset (0.5: to the nearest; less: a
 MISS_DECAY = 0.5  # what a predictor's miss weighs one coded frame later (exact in binary)
 
 
-@numba.njit(cache=True)
+@kernel
 def predict(targets, history, count, gap, stride, steps, order, trust, lo, hi, out, ints, cell_lo, cell_hi, quantise):
     """Closed-loop prediction of the coded frames ``targets (T, k)``, ``stride`` frames apart,
     from the two last coded frames ``history (2, k)`` (``count`` of them valid, ``gap`` frames
@@ -66,7 +66,7 @@ def predict(targets, history, count, gap, stride, steps, order, trust, lo, hi, o
         g = stride
 
 
-@numba.njit(cache=True)
+@kernel
 def predict_columns(
     channels, targets, history, count, gap, stride, steps, order, trust, lo, hi, ints, decoded, cell_lo, cell_hi
 ):
@@ -110,7 +110,7 @@ def predict_columns(
     return out
 
 
-@numba.njit(cache=True)
+@kernel
 def predict_tree(loop, history, count, gap, stride, steps, order, trust, lo, hi, ints, decoded, cell_lo, cell_hi):
     """:func:`~mocodec.codecs.shared.closedloop.code_down_tree`'s loop over ``loop``
     (:func:`~mocodec.codecs.shared.closedloop.tree_loop`) with :func:`predict_columns` coding
@@ -131,7 +131,7 @@ def predict_tree(loop, history, count, gap, stride, steps, order, trust, lo, hi,
         depth_end(tree, d, out, loop.glob, loop.where, loop.placing, tree.steps)
 
 
-@numba.njit(cache=True)
+@kernel
 def update_misses(misses, history, count, gap, stride, coded):
     """After a layer's packet, on both ends: each channel's recent miss of the order-1 and the
     order-2 prediction (``misses (2, C)``) of its decoded coded frames ``coded (T, C)``,

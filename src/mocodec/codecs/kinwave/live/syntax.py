@@ -12,6 +12,7 @@ import numba
 import numpy as np
 
 from mocodec.coding.entropy import binarycoder as bc
+from mocodec.kernels import kernel
 
 if TYPE_CHECKING:
     from mocodec.codecs.kinwave.live.predict import Layer
@@ -102,14 +103,14 @@ def _restart_context():
     return state
 
 
-@numba.njit(cache=True)
+@kernel
 def code_restarts(st, buf, restarts):
     """Each layer's restart flag (0 or 1) at the head of a packet, in the fixed context."""
     for flag in restarts:
         bc.put(st, buf, _restart_context(), 0, flag)
 
 
-@numba.njit(cache=True)
+@kernel
 def read_restarts(st, data, layers):
     out = np.zeros(layers, dtype=np.int64)
     for k in range(layers):
@@ -117,7 +118,7 @@ def read_restarts(st, data, layers):
     return out
 
 
-@numba.njit(cache=True)
+@kernel
 def code_layer(st, buf, ints, frames, full, offset_change, stride, first, count, state, last_nonzero):
     """Arithmetic-code one layer of a packet: its head (:func:`_put_head`), then per joint
     (channels ``first[j]`` to ``first[j] + count[j]``) an "any nonzero" flag, then the integers
@@ -148,7 +149,7 @@ def code_layer(st, buf, ints, frames, full, offset_change, stride, first, count,
                 last_nonzero[c] = 0
 
 
-@numba.njit(cache=True)
+@kernel
 def finish(st, buf):
     """:func:`~mocodec.coding.entropy.binarycoder.finish_short`, compiled once and cached."""
     return bc.finish_short(st, buf)
@@ -160,13 +161,13 @@ def coder_buffer(layers: list[tuple[Layer, np.ndarray]]) -> np.ndarray:
     return bc.buffer_for(sum(bc.int_decisions(ints) + 2 * layer.first.size for layer, ints in layers) + 64)
 
 
-@numba.njit(cache=True)
+@kernel
 def decode_head(st, data, full, state):
     frames, change, stride = _get_head(st, data, state, full)
     return frames, change, stride
 
 
-@numba.njit(cache=True)
+@kernel
 def decode_ints(st, data, frames, first, count, state, last_nonzero, ints):
     J = first.size
     per = PER_CHANNEL

@@ -99,20 +99,9 @@ def _encode(side, const, knots, coeffs, seg_pad, seg_lev, rev2, buf):
         nk = min(1, knots.shape[1]) if const[c] else knots.shape[1]  # (a layout of no frames has no knot)
         for i in range(nk):
             first = 1 if i == 0 else 0
+            step, zctx, uctx, sctx = knots[c, i] - prev, _KZ + 1 - first, _KU + 24 * (1 - first), _KS + 1 - first
             low, rng, cache, size, pos = put_int_s(
-                low,
-                rng,
-                cache,
-                size,
-                pos,
-                buf,
-                state,
-                knots[c, i] - prev,
-                _KZ + 1 - first,
-                _KU + 24 * (1 - first),
-                24,
-                _KM,
-                _KS + 1 - first,
+                low, rng, cache, size, pos, buf, state, step, zctx, uctx, 24, _KM, sctx
             )
             prev = knots[c, i]
         if const[c]:
@@ -153,20 +142,9 @@ def _encode(side, const, knots, coeffs, seg_pad, seg_lev, rev2, buf):
                             par = _parent_class(pv)
                         act = _activity(p1, p2)
                         sctx = _S2 + (band * 3 + _sign_class(p1)) * 3 + _sign_class(pv) if rev2 else _S0 + band
+                        zctx, uctx = _Z0 + (band * _ACT + act) * _PAR + par, _U0 + (band * _ACT + act) * _UNARY
                         low, rng, cache, size, pos = put_int_s(
-                            low,
-                            rng,
-                            cache,
-                            size,
-                            pos,
-                            buf,
-                            state,
-                            v,
-                            _Z0 + (band * _ACT + act) * _PAR + par,
-                            _U0 + (band * _ACT + act) * _UNARY,
-                            _UNARY,
-                            _M0,
-                            sctx,
+                            low, rng, cache, size, pos, buf, state, v, zctx, uctx, _UNARY, _M0, sctx
                         )
                         p2 = p1
                         p1 = v

@@ -168,8 +168,8 @@ class BoundSearch(Encoder):
         take it (docs/kinwave.md)."""
         codes = self.codes(scale)
         ps = self.run_pass(codes)
-        seen[codes.tobytes()] = (self.pass_error(ps), ps)
-        if self.pass_error(ps) <= bound:
+        seen[codes.tobytes()] = (error := self.pass_error(ps), ps)
+        if error <= bound:
             return None
         for _ in range(CORRECTIONS):
             finer = np.minimum(self._slack_codes(self.pass_errors(ps).max(axis=0), bound), 0)

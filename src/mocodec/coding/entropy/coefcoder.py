@@ -99,9 +99,9 @@ def _encode(side, const, knots, coeffs, seg_pad, seg_lev, rev2, buf):
         nk = min(1, knots.shape[1]) if const[c] else knots.shape[1]  # (a layout of no frames has no knot)
         for i in range(nk):
             first = 1 if i == 0 else 0
-            step, zctx, uctx, sctx = knots[c, i] - prev, _KZ + 1 - first, _KU + 24 * (1 - first), _KS + 1 - first
+            delta, zctx, uctx, sctx = knots[c, i] - prev, _KZ + 1 - first, _KU + 24 * (1 - first), _KS + 1 - first
             low, rng, cache, size, pos = put_int_s(
-                low, rng, cache, size, pos, buf, state, step, zctx, uctx, 24, _KM, sctx
+                low, rng, cache, size, pos, buf, state, delta, zctx, uctx, 24, _KM, sctx
             )
             prev = knots[c, i]
         if const[c]:
@@ -168,10 +168,10 @@ def _decode(data, side, channels, num_knots, num_coeffs, seg_pad, seg_lev, rev2,
         nk = min(1, num_knots) if const[c] else num_knots  # (a layout of no frames has no knot)
         for i in range(nk):
             first = 1 if i == 0 else 0
-            step, code, rng, pos = get_int_s(
+            delta, code, rng, pos = get_int_s(
                 code, rng, pos, data, state, _KZ + 1 - first, _KU + 24 * (1 - first), 24, _KM, _KS + 1 - first
             )
-            prev += step
+            prev += delta
             knots[c, i] = prev
         if const[c]:
             continue

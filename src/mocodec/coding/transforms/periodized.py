@@ -49,12 +49,12 @@ def synthesis_add(x, n, h, out):
     for i in range(start, n + start):
         o = 2 * (i - start) + shift
         if half - 1 <= i < n:  # no wrap (nor of the output: i < n)
-            even, odd = out[np.uintp(o)], out[np.uintp(o + 1)]  # (summed in registers)
+            sum_even, sum_odd = out[np.uintp(o)], out[np.uintp(o + 1)]  # (summed in registers)
             for g in range(half):
                 v = x[np.uintp(i - g)]
-                even += h[2 * g] * v
-                odd += h[2 * g + 1] * v
-            out[np.uintp(o)], out[np.uintp(o + 1)] = even, odd
+                sum_even += h[2 * g] * v
+                sum_odd += h[2 * g + 1] * v
+            out[np.uintp(o)], out[np.uintp(o + 1)] = sum_even, sum_odd
             continue
         even, odd = o % size, (o + 1) % size
         g0 = 0

@@ -159,6 +159,30 @@ def test_keyframes_are_chosen_by_cost_and_keep_the_bound(walk_amc):
     assert _errors(bound, decoded)["joint"] <= 0.3
 
 
+def test_the_highest_effort_keeps_the_smaller_of_two_segment_lengths(walk_bvh):
+    """At effort 3 a body longer than a quarter window is coded in segments of the window and
+    of a quarter of it, and the smaller body wins; it names its own window, so it decodes
+    within the bound. On 264 frames of the walk the quarter window (256 + 8 frames) wins; on
+    the whole walk (416) the window does; below effort 3 and on a body of a quarter window
+    or less there is no second coding."""
+    from mocodec.codecs.kinwave.codec import SHORTER_WINDOW
+
+    for frames, wins in ((264, 256), (416, 1024)):
+        clip = walk_bvh[:frames]
+        codec = get_codec("kinwave", max_error_cm=0.5, effort=3)
+        bodies = {
+            w: get_codec("kinwave", max_error_cm=0.5, effort=3, window=w)._encode_body(clip, clip.skeleton)
+            for w in (1024, 1024 // SHORTER_WINDOW)
+        }
+        assert len(bodies[wins]) == min(map(len, bodies.values()))
+        data = codec.encode(clip)
+        assert data == bodies[wins] and data[2] == wins.bit_length() - 1  # the body's window byte
+        decoded = codec.decode(data, clip.skeleton, frames, clip.fps)
+        assert _errors(clip, decoded)["joint"] <= 0.5
+    assert get_codec("kinwave", max_error_cm=0.5).encode(walk_bvh[:264])[2] == 10
+    assert get_codec("kinwave", max_error_cm=0.5, effort=3).encode(walk_bvh[:256])[2] == 10
+
+
 def test_the_default_corrects_a_first_pass_over_the_bound_by_the_codes_to_blame(walk_amc):
     """At the default effort a first search pass over a max bound is followed by passes in
     which the codes moving a point over it go finer by its overshoot, the others as they were:

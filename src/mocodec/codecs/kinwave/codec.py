@@ -65,6 +65,9 @@ from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
 
+SHORTER_WINDOW = 4  # the highest effort also tries segments this many times shorter
+
+
 @register
 class KinwaveCodec(Codec):
     id = "kinwave"
@@ -144,8 +147,8 @@ class KinwaveCodec(Codec):
             2,
             "how hard a max-error bound's search works: 1 one search aiming at 85-100% of the bound, "
             "no slack rounds (fastest); 2 one search at 95-100% and the slack rounds; 3 also three "
-            "landings of a short body's joint feedback, the smallest kept (smallest files; "
-            "bytes and speed per level: docs/kinwave.md)",
+            "landings of a short body's joint feedback and segments of a quarter window, the "
+            "smallest kept (smallest files; bytes and speed per level: docs/kinwave.md)",
             1,
             3,
         ),
@@ -199,6 +202,18 @@ class KinwaveCodec(Codec):
         return self._encode_for(motion, motion.skeleton)
 
     def _encode_for(self, motion: Motion, output_skeleton: Skeleton) -> bytes:
+        """:meth:`_encode_body`; at the highest effort under a bound, a body longer than a
+        quarter window is also coded in segments of a quarter window, and the smaller wins
+        (a seam where the motion changes can cost less than one long segment whose search
+        lands worse: docs/kinwave.md). Each body names its own window, so both decode."""
+        body = self._encode_body(motion, output_skeleton)
+        short = self.config["window"] // SHORTER_WINDOW
+        if self.config["effort"] < 3 or self.config["bits_per_second"] > 0 or motion.num_frames <= short or short < 8:
+            return body
+        other = KinwaveCodec(**{**self.config, "window": short})._encode_body(motion, output_skeleton)
+        return other if len(other) < len(body) else body
+
+    def _encode_body(self, motion: Motion, output_skeleton: Skeleton) -> bytes:
         """A leading rest pose (:func:`.body.rest_kind`) is a flag, the other frames the
         body, where frame 0 then holds the bound; else the whole motion is the body."""
         kind = rest_kind(motion) if self.config["keyframes"] else 0

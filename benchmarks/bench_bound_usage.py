@@ -1,13 +1,13 @@
 """How much of a max bound kinwave uses, and what its files weigh, on every shared clip.
 
-    python benchmarks/bench_bound_usage.py [--clips N] [--jobs 2] [--save F] [--against F]
+    python benchmarks/bench_bound_usage.py [--clips N] [--jobs 2] [--effort E] [--save F] [--against F]
 
 For the first N clips (sorted; 0 = all) of CMU BVH, CMU ASF/AMC and Bandai Namco, whole .moc
 files (skeleton included) at max shell 1 cm, max shell 0.1 cm and max joint 0.5 cm: per source
 and bound the total bytes, the median and least share of the bound the decoded file's measured
 error uses, how many encodings use less than 85% of it (the issue's floor) and how many go over;
 with every Bandai Namco clip, the sums over the issue's 22 (every fourth, sorted) at shell 1
-and 0.1 cm. ``--save F`` writes every clip's bytes per setting to F (JSON); ``--against F``
+and 0.1 cm, at kinwave's default effort or ``--effort E``. ``--save F`` writes every clip's bytes per setting to F (JSON); ``--against F``
 compares every clip with such a file (another commit's: ``PYTHONPATH=<its src>``) and prints,
 per source, the median and largest change and the clip-and-setting pairs more than 1% larger.
 """
@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import json
 from concurrent.futures import ProcessPoolExecutor
+from functools import partial
 
 import numpy as np
 
@@ -33,15 +34,15 @@ GREW = 0.01  # a clip this much larger than the saved run's is listed
 ISSUE_SOURCE, ISSUE_CLIPS = "Bandai Namco", 22  # the issue's targets: every fourth clip from the first
 
 
-def _clip(path) -> list[tuple[int, float]]:
-    """(bytes, measured error / bound) per setting."""
+def _clip(path, knobs: dict) -> list[tuple[int, float]]:
+    """(bytes, measured error / bound) per setting, with kinwave's other ``knobs``."""
     motion = load(path)
     sk = motion.skeleton
     cm = 100.0 / sk.units_per_metre
     p0, q0 = forward_kinematics(sk, motion.channels)
     out = []
     for measure, bound in SETTINGS:
-        data = moc.pack(motion, get_codec("kinwave", max_error_cm=bound, error_measure=measure))
+        data = moc.pack(motion, get_codec("kinwave", max_error_cm=bound, error_measure=measure, **knobs))
         decoded = moc.unpack(data)
         p1, q1 = forward_kinematics(decoded.skeleton, decoded.channels)
         if measure == "shell":
@@ -56,16 +57,18 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--clips", type=int, default=0, help="clips per source (0 = all)")
     parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--effort", type=int, help="kinwave's effort level (default: the codec's)")
     parser.add_argument("--save", help="write every clip's bytes per setting to this JSON file")
     parser.add_argument("--against", help="compare every clip with a --save file of another run")
     args = parser.parse_args()
     sizes_by_clip: dict[str, dict[str, list[int]]] = {}
+    knobs = {} if args.effort is None else {"effort": args.effort}
     print("| source | clips | bound | bytes | median share of the bound | least | under 85% | over |")
     print("|---|---|---|---|---|---|---|---|")
     issue_sums = None  # bytes at shell 1 and 0.1 cm over the issue's clips
     with ProcessPoolExecutor(args.jobs) as pool:
         for name, paths in shared_sources(args.clips).items():
-            rows = list(pool.map(_clip, paths))
+            rows = list(pool.map(partial(_clip, knobs=knobs), paths))
             sizes_by_clip[name] = {p.name: [r[0] for r in row] for p, row in zip(paths, rows)}
             for k, (measure, bound) in enumerate(SETTINGS):
                 sizes = np.array([r[k][0] for r in rows])

@@ -365,8 +365,10 @@ def near_lock(rows: np.ndarray, orders: tuple[str, ...], margin_deg: float) -> n
     within ``margin_deg`` of its order's gimbal lock (90 for Tait-Bryan orders, 0 or 180 for
     proper ones, which sit there at rest)."""
     middle = np.radians(rows[1::3])
-    proper = np.array([o[0] == o[2] for o in orders])[:, None]
-    closeness = np.where(proper, np.abs(np.sin(middle)), np.abs(np.cos(middle)))
+    proper = np.array([o[0] == o[2] for o in orders], dtype=bool)
+    closeness = np.empty_like(middle)
+    closeness[proper] = np.abs(np.sin(middle[proper]))  # (each joint's one function only)
+    closeness[~proper] = np.abs(np.cos(middle[~proper]))
     return closeness.min(axis=1, initial=1.0) < math.sin(math.radians(margin_deg))
 
 

@@ -7,9 +7,10 @@ files (skeleton included) at max shell 1 cm, max shell 0.1 cm and max joint 0.5 
 and bound the total bytes, the median and least share of the bound the decoded file's measured
 error uses, how many encodings use less than 85% of it (the issue's floor) and how many go over;
 with every Bandai Namco clip, the sums over the issue's 22 (every fourth, sorted) at shell 1
-and 0.1 cm, at kinwave's default effort or ``--effort E``. ``--save F`` writes every clip's bytes per setting to F (JSON); ``--against F``
-compares every clip with such a file (another commit's: ``PYTHONPATH=<its src>``) and prints,
-per source, the median and largest change and the clip-and-setting pairs more than 1% larger.
+and 0.1 cm; at kinwave's default effort, or at ``--effort E``. ``--save F`` writes every
+clip's bytes per setting to F (JSON); ``--against F`` compares every clip with such a file
+(another commit's: ``PYTHONPATH=<its src>``) and prints, per source, the median and largest
+change and the clip-and-setting pairs more than 1% larger.
 """
 
 from __future__ import annotations

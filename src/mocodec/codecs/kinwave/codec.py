@@ -64,7 +64,6 @@ from mocodec.metrics.pose import worst_error
 from mocodec.motion import Motion
 from mocodec.skeleton import Skeleton
 
-
 SHORTER_WINDOW = 4  # the highest effort also tries segments this many times shorter
 
 

@@ -575,11 +575,11 @@ class Encoder:
             )
             return np.ptp(values, axis=1) <= CONSTANT
 
-        const = still(coded, slice(None, None, CONSTANT_SPOT)).reshape(-1, 3)
-        maybe = const.any(axis=1)
+        per_joint = still(coded, slice(None, None, CONSTANT_SPOT)).reshape(-1, 3)
+        maybe = per_joint.any(axis=1)
         if maybe.any():
-            const[maybe] = still(coded[maybe], slice(None)).reshape(-1, 3)
-        const = const.ravel()
+            per_joint[maybe] = still(coded[maybe], slice(None)).reshape(-1, 3)
+        const = per_joint.ravel()
         if (const != self.const[rows]).any():
             self.const[rows] = const
             self.shape_rot, self.shape_trans = self._shape()

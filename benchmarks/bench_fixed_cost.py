@@ -19,12 +19,12 @@ from common import SHARED
 from mocodec import load, moc
 from mocodec.codecs import get_codec
 from mocodec.formats import container
-from mocodec.formats.header_dict import DICTIONARY
+from mocodec.formats.header_dict import DICTIONARIES
 from mocodec.formats.skeleton_bin import pack_skeleton
 
 
 def deflated(data: bytes) -> int:
-    z = zlib.compressobj(9, zdict=DICTIONARY)
+    z = zlib.compressobj(9, zdict=DICTIONARIES[container.VERSION])
     return len(z.compress(data) + z.flush())
 
 

@@ -33,7 +33,7 @@ from mocodec.errors import CorruptStreamError, MocodecError  # noqa: E402
 from mocodec.formats import container  # noqa: E402
 from mocodec.formats.amc import read_amc  # noqa: E402
 from mocodec.formats.asf import read_asf  # noqa: E402
-from mocodec.formats.header_dict import DICTIONARY  # noqa: E402
+from mocodec.formats.header_dict import DICTIONARIES  # noqa: E402
 from mocodec.stream.live import LiveDecoder, stream_clip  # noqa: E402
 from mocodec.stream.packets import HEADER, Packet, Reader, StreamInfo, pack_batch, parse, split_batch  # noqa: E402
 from mocodec.stream.relay import Bucket, Closing, Limits, RelayCore, Room, Viewer  # noqa: E402
@@ -143,7 +143,7 @@ def fuzz_container(run: Run) -> None:
         run.check("moc file", lambda: moc.unpack(mutate(data, run.rng)))
         start = container.START.unpack_from(data)
         head = data[container.START.size : container.START.size + start[3]]
-        text = zlib.decompressobj(zdict=DICTIONARY).decompress(head)
+        text = zlib.decompressobj(zdict=DICTIONARIES[start[1]]).decompress(head)
         meta, _, compact = text.partition(b"\0")
         choice = run.rng.integers(3)
         if choice == 0:
@@ -166,7 +166,7 @@ def fuzz_container(run: Run) -> None:
             )
             doc[key] = values[int(run.rng.integers(len(values)))]
             new_text = json.dumps(doc).encode() + b"\0" + compact
-        deflate = zlib.compressobj(9, zdict=DICTIONARY)
+        deflate = zlib.compressobj(9, zdict=DICTIONARIES[start[1]])
         new_head = deflate.compress(new_text) + deflate.flush()
         forged = (
             container.START.pack(start[0], start[1], start[2], len(new_head))

@@ -1,4 +1,4 @@
-// .moc files (formats/container.py, version 1): the header (deflated with the preset dictionary,
+// .moc files (formats/container.py, versions 1 and 2): the header (deflated with the version's preset dictionary,
 // CRC-32 checked) with the codec's config, frame rate, frame count and the compact skeleton; chunks
 // of a codec body each, CRC-32 checked; the index and footer at the end. Chunks decode on their own,
 // so a frame range costs only its chunks. The JavaScript decoder reads kinwave files that hold
@@ -6,14 +6,13 @@
 import { crc32, readVarint, u16, u32 } from './bytes.js';
 import { unpackSkeleton } from './compact-skeleton.js';
 import { DecodeError } from './errors.js';
-import { HEADER_DICTIONARY } from './header-dict.js';
+import { HEADER_DICTIONARIES } from './header-dict.js';
 import { inflate } from './inflate.js';
 import { decodeKinwave } from './kinwave.js';
 import { MAX_DECODED_VALUES, MAX_FPS, MAX_HEADER_TEXT, MAX_PAYLOAD_FRAMES, MIN_FPS } from './limits.js';
 
 const MAGIC = 'MOC1';
 const FOOTER_MAGIC = 'MOCX';
-const VERSION = 1;
 const FLAG_SKELETON = 1;
 const START = 12;
 const FOOTER = 8;
@@ -38,12 +37,13 @@ export async function openMoc(data) {
   const version = u16(data, 4);
   const flags = u16(data, 6);
   const headLength = u32(data, 8);
-  if (version !== VERSION) throw new DecodeError(`.moc version ${version}; this decoder reads version ${VERSION}`, 4);
+  const dictionary = HEADER_DICTIONARIES[version];
+  if (!dictionary) throw new DecodeError(`.moc version ${version}; this decoder reads versions ${Object.keys(HEADER_DICTIONARIES).join(' and ')}`, 4);
   if (flags & ~FLAG_SKELETON) throw new DecodeError(`flags ${flags} set bits this version does not define`, 6);
   if (headLength > MAX_HEADER || START + headLength + 4 > data.length) throw new DecodeError(`a header of ${headLength} bytes does not fit in the file`, 8);
   const head = data.subarray(START, START + headLength);
   if (crc32(head, 0, head.length) !== u32(data, START + headLength)) throw new DecodeError('header CRC mismatch, the header is damaged', START);
-  const text = await inflate(head, { limit: MAX_HEADER_TEXT, dictionary: HEADER_DICTIONARY, what: `header at byte ${START}` });
+  const text = await inflate(head, { limit: MAX_HEADER_TEXT, dictionary, what: `header at byte ${START}` });
   const split = flags & FLAG_SKELETON ? text.indexOf(0) : text.length;
   if (split < 0) throw new DecodeError('the header has no compact skeleton after its JSON', START);
   let header;

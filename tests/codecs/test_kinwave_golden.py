@@ -1,4 +1,4 @@
-"""A whole .moc file pinned (container version 1, kinwave payload format 2: the rest pose, a
+"""A whole .moc file pinned (container version 2, kinwave payload format 2: the rest pose, a
 lead of 2 frames and fine turns in its more flags): a checked-in
 file (a CMU walk re-expressed as another pipeline writes it: a MotionBuilder dummy root at
 (0, -90, 0), a bind pose in frame 0, a proper Euler order on the legs) must decode to the
@@ -49,7 +49,7 @@ def test_the_golden_file_decodes_to_the_same_channels_within_its_bound():
     p0, q0 = forward_kinematics(sk, original.channels)
     p1, q1 = forward_kinematics(decoded.skeleton, decoded.channels)
     assert shell_errors(sk, p0 * cm, q0, p1 * cm, q1).max <= KNOBS["max_error_cm"]
-    assert data[4] == 1  # .moc version 1
+    assert data[4] == 2  # .moc version 2
     chunk = container.open_container(io.BytesIO(data), len(data), "golden").read_chunk(0)
     assert chunk[0] == 2 and chunk[6] == REST | 2 << LEAD_SHIFT | FINE_TURNS  # payload format 2
 

@@ -129,15 +129,47 @@ def test_skeleton_by_reference(walk_amc, tmp_path):
         moc.unpack(ref, skeleton=load(DATA / "135_08.amc").skeleton)
 
 
-def test_the_header_dictionary_never_changes():
-    """The preset dictionary is part of the format: files written with it need these bytes."""
+def test_the_header_dictionaries_never_change():
+    """Each version's preset dictionary is part of the format: files written with it need
+    these bytes. Version 2's is version 1's with kinwave's current settings after it."""
     import hashlib
 
-    from mocodec.formats.header_dict import DICTIONARY
+    from mocodec.formats.header_dict import DICTIONARIES
 
-    assert hashlib.sha256(DICTIONARY).hexdigest() == (
-        "fa16a5c4da355da4b2481bff71f69fe0fc2fce99e1b69dbf02ea2352496ff950"
+    assert {v: hashlib.sha256(d).hexdigest() for v, d in DICTIONARIES.items()} == {
+        1: "fa16a5c4da355da4b2481bff71f69fe0fc2fce99e1b69dbf02ea2352496ff950",
+        2: "89467d50e04087e1cca088665075390e4794022d2138237d9b9b0cbebbe5c8c9",
+    }
+    assert DICTIONARIES[2].startswith(DICTIONARIES[1])
+
+
+def test_a_version_1_file_reads_as_it_did(walk_bvh):
+    """A file of version 1 (its header deflated with version 1's dictionary) reads to the same
+    motion as the version 2 file of the same chunks, whose header the newer dictionary makes
+    smaller for kinwave's settings."""
+    import io
+    import zlib
+
+    from mocodec.formats.header_dict import DICTIONARIES
+
+    data = moc.pack(walk_bvh[:40], get_codec("kinwave", max_error_cm=1.0, error_measure="shell"))
+    assert data[4:6] == bytes([2, 0])
+    start = container.START.unpack_from(data)
+    head = data[container.START.size : container.START.size + start[3]]
+    text = zlib.decompressobj(zdict=DICTIONARIES[2]).decompress(head)
+    deflate = zlib.compressobj(9, zdict=DICTIONARIES[1])
+    old_head = deflate.compress(text) + deflate.flush()
+    version_1 = (
+        container.START.pack(container.MAGIC, 1, start[2], len(old_head))
+        + old_head
+        + zlib.crc32(old_head).to_bytes(4, "little")
+        + data[container.START.size + start[3] + 4 :]
     )
+    assert len(version_1) > len(data) + 10
+    old, new = moc.unpack(version_1), moc.unpack(data)
+    assert np.array_equal(old.channels, new.channels) and old.skeleton == new.skeleton
+    c = container.open_container(io.BytesIO(version_1), len(version_1), "old.moc")
+    assert c.read_chunk(0) == container.open_container(io.BytesIO(data), len(data), "new.moc").read_chunk(0)
 
 
 def test_framing_costs_38_bytes(walk_bvh):
@@ -184,8 +216,9 @@ def test_lossy_files_round_the_skeleton_offsets(walk_bvh, walk_amc):
 
 def test_other_versions_and_unknown_flags_are_refused(walk_bvh):
     data = moc.pack(walk_bvh[:8], get_codec("raw"))
-    assert data[4:6] == bytes([1, 0])  # .moc version 1
-    with pytest.raises(CorruptStreamError, match="version 2; this mocodec reads version 1"):
-        moc.unpack(data[:4] + bytes([2, 0]) + data[6:])
+    assert data[4:6] == bytes([2, 0])  # .moc version 2
+    for version in (0, 3):
+        with pytest.raises(CorruptStreamError, match=f"version {version}; this mocodec reads versions 1 and 2"):
+            moc.unpack(data[:4] + bytes([version, 0]) + data[6:])
     with pytest.raises(CorruptStreamError, match="flags"):
         moc.unpack(data[:6] + bytes([data[6] | 2]) + data[7:])

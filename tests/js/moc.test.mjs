@@ -8,7 +8,7 @@ import assert from 'node:assert/strict';
 import { readFile } from 'node:fs/promises';
 import { deflateSync, gunzipSync, inflateSync } from 'node:zlib';
 import { DecodeError, decodeMoc, forwardKinematics, openMoc } from '../../js/src/index.js';
-import { HEADER_DICTIONARY } from '../../js/src/header-dict.js';
+import { HEADER_DICTIONARIES } from '../../js/src/header-dict.js';
 import { chunkBody } from '../../js/src/moc.js';
 import { readKinwave } from '../../js/src/kinwave.js';
 import { CODE_STEP, twoToEighths } from '../../js/src/steps.js';
@@ -136,15 +136,17 @@ async function expectDecodeError(data, pattern = null) {
   return null;
 }
 
-// A .moc with its header's JSON replaced (deflated with the dictionary, CRC recomputed).
-function withHeader(data, edit) {
+// A .moc with its header's JSON replaced (deflated with the dictionary of ``version``, the
+// file's own by default, which the file then says; CRC recomputed).
+function withHeader(data, edit, version = data[4]) {
   const headLength = u32(data, 8);
-  const text = inflateSync(data.subarray(12, 12 + headLength), { dictionary: HEADER_DICTIONARY });
+  const text = inflateSync(data.subarray(12, 12 + headLength), { dictionary: HEADER_DICTIONARIES[data[4]] });
   const split = text.indexOf(0);
   const doc = edit(JSON.parse(text.subarray(0, split).toString()));
-  const head = deflateSync(Buffer.concat([Buffer.from(JSON.stringify(doc)), text.subarray(split)]), { dictionary: HEADER_DICTIONARY });
+  const head = deflateSync(Buffer.concat([Buffer.from(JSON.stringify(doc)), text.subarray(split)]), { dictionary: HEADER_DICTIONARIES[version] });
   const out = new Uint8Array(data.length - headLength + head.length);
   out.set(data.subarray(0, 8));
+  out[4] = version;
   new DataView(out.buffer).setUint32(8, head.length, true);
   out.set(head, 12);
   new DataView(out.buffer).setUint32(12 + head.length, crc32(head, 0, head.length), true);
@@ -162,7 +164,18 @@ test('hostile headers: clear errors naming what is wrong', async () => {
   const decoded = await decodeMoc(withHeader(data, (h) => h));
   assert.equal(decoded.frames, (await decodeMoc(data)).frames);
   await expectDecodeError(data.subarray(0, 10), /not a .moc file/);
-  await expectDecodeError(Uint8Array.from(data, (b, i) => (i === 4 ? 2 : b)), /version 2/);
+  await expectDecodeError(Uint8Array.from(data, (b, i) => (i === 4 ? 3 : b)), /version 3; this decoder reads versions 1 and 2/);
+});
+
+test('a version 1 file (its header deflated with the first dictionary) decodes as the version 2 file', async () => {
+  const { data } = await fixture('asf-30fps-shell');
+  assert.equal(data[4], 2);
+  const old = withHeader(data, (h) => h, 1);
+  assert.equal(old[4], 1);
+  assert.ok(old.length > data.length, 'the newer dictionary holds kinwave\'s settings');
+  const [a, b] = [await decodeMoc(old), await decodeMoc(data)];
+  assert.equal(a.frames, b.frames);
+  assert.deepEqual(Array.from(a.channels), Array.from(b.channels));
 });
 
 test('an index claiming more chunks than its bytes hold is refused before it is read', async () => {

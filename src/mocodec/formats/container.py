@@ -1,9 +1,10 @@
 """The .moc container: a coded motion that decodes on its own, with random access.
 
-Layout (little-endian; version 1, docs/formats.md gives it byte by byte)::
+Layout (little-endian; version 2, docs/formats.md gives it byte by byte; version 1 differs only
+in its header's dictionary, and is read as well)::
 
     "MOC1"  u16 version  u16 flags (bit 0: the header holds a compact skeleton)
-    u32 header length, header (zlib, deflated with the preset dictionary of
+    u32 header length, header (zlib, deflated with the version's preset dictionary of
         :mod:`mocodec.formats.header_dict`), holding JSON with the codec
         config, fps, frame count, chunk size and, without flag 0, the skeleton's id; with
         flag 0, a zero byte and the compact skeleton of :mod:`mocodec.formats.skeleton_bin`
@@ -43,13 +44,13 @@ from typing import BinaryIO
 from mocodec import limits
 from mocodec.errors import CorruptStreamError, SkeletonMismatchError
 from mocodec.formats import varint
-from mocodec.formats.header_dict import DICTIONARY
+from mocodec.formats.header_dict import DICTIONARIES
 from mocodec.formats.skeleton_bin import pack_skeleton, unpack_skeleton
 from mocodec.skeleton import Joint, Skeleton
 
 MAGIC = b"MOC1"
 FOOTER_MAGIC = b"MOCX"
-VERSION = 1
+VERSION = 2  # what is written; every version of DICTIONARIES is read (2: a newer header dictionary)
 MAX_HEADER = 1 << 24
 MAX_CHUNKS = 1 << 20
 #: The smallest chunk: a one-byte length, no body, a CRC-32.
@@ -135,7 +136,7 @@ def pack(header: dict, chunks: list[Chunk], embed_skeleton: bool = True) -> byte
     text = json.dumps(meta, separators=(",", ":"), allow_nan=False).encode()
     if embed_skeleton:
         text += b"\0" + pack_skeleton(skeleton)
-    deflate = zlib.compressobj(9, zdict=DICTIONARY)
+    deflate = zlib.compressobj(9, zdict=DICTIONARIES[VERSION])
     head = deflate.compress(text) + deflate.flush()
     flags = FLAG_SKELETON if embed_skeleton else 0
     out = bytearray(START.pack(MAGIC, VERSION, flags, len(head)) + head + _U32.pack(zlib.crc32(head)))
@@ -240,8 +241,9 @@ def open_container(source: BinaryIO, size: int, name: str, skeleton: Skeleton | 
     magic, version, flags, head_len = START.unpack(start)
     if magic != MAGIC:
         raise CorruptStreamError(f"{name}: not a .moc file (starts with {magic!r}, expected {MAGIC!r})")
-    if version != VERSION:
-        raise CorruptStreamError(f"{name}: .moc version {version}; this mocodec reads version {VERSION}")
+    if version not in DICTIONARIES:
+        known = " and ".join(map(str, DICTIONARIES))
+        raise CorruptStreamError(f"{name}: .moc version {version}; this mocodec reads versions {known}")
     if flags & ~FLAG_SKELETON:
         raise CorruptStreamError(f"{name}: flags {flags:#06x} at byte 6 set bits this version does not define")
     if head_len > MAX_HEADER:
@@ -250,7 +252,7 @@ def open_container(source: BinaryIO, size: int, name: str, skeleton: Skeleton | 
     if zlib.crc32(head[:-4]) != _U32.unpack(head[-4:])[0]:
         raise CorruptStreamError(f"{name}: header CRC mismatch at byte {START.size}, the header is damaged")
     try:
-        text = inflate_capped(head[:-4], DICTIONARY, limits.MAX_HEADER_TEXT)
+        text = inflate_capped(head[:-4], DICTIONARIES[version], limits.MAX_HEADER_TEXT)
         if flags & FLAG_SKELETON:
             text, _, compact = text.partition(b"\0")
         header = json.loads(text)

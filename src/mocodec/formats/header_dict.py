@@ -7,8 +7,11 @@ dictionary holds the name columns of the skeletons users have most (CMU ASF, the
 conversions of CMU, Mixamo-style names, mocodec's built-in human model) laid out as
 :func:`~mocodec.formats.skeleton_bin.pack_skeleton` writes them, and typical codec settings.
 
-Both ends must hold the very same bytes: the dictionary is part of the file format and must
-never change (a new one needs a new container version); a test checks its hash.
+Both ends must hold the very same bytes: a dictionary is part of the file format and must
+never change (a new one needs a new container version); a test checks their hashes.
+:data:`DICTIONARIES` gives each container version's: version 2's ends with the settings of
+kinwave's knobs as they are since its effort levels and chunk-long segments (in version 1's,
+a kinwave header cost 16-35 bytes more).
 """
 
 from __future__ import annotations
@@ -208,3 +211,35 @@ DICTIONARY = b"".join(
         _settings(_SETTINGS_KEYFRAMES),
     ]
 )
+
+# .moc version 2: kinwave's knobs as they are since the effort levels and the segments as long
+# as a chunk (version 1's strings predate both), at a max shell bound at 30 fps and at the
+# defaults at 120 fps, last: the nearest strings cost the fewest bits
+_KINWAVE_KNOBS_2 = {
+    "max_error_cm": 0.5,
+    "error_measure": "joint",
+    "bits_per_second": 0.0,
+    "window": 1024,
+    "levels": 0,
+    "wavelet": "cdf97",
+    "deadzone": 0.4,
+    "closed_loop": True,
+    "allocation": "convex",
+    "joint_feedback": True,
+    "segment_steps": False,
+    "rotation_vectors": True,
+    "effort": 2,
+    "keyframes": True,
+}
+_SETTINGS_2 = [
+    {
+        "codec": {"codec": "kinwave", "knobs": {**_KINWAVE_KNOBS_2, "max_error_cm": 1.0, "error_measure": "shell"}},
+        "fps": 30.0,
+        "frames": 1000,
+        "chunk_frames": 1024,
+    },
+    {"codec": {"codec": "kinwave", "knobs": _KINWAVE_KNOBS_2}, "fps": 120.0, "frames": 1000, "chunk_frames": 1024},
+]
+
+#: Each .moc container version's preset dictionary.
+DICTIONARIES = {1: DICTIONARY, 2: DICTIONARY + _settings(_SETTINGS_2)}

@@ -21,6 +21,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from mocodec.kernels import kernel
+
 TOP = 1 << 24
 HALF = 1 << 15
 FAST, SLOW = 4, 7
@@ -65,6 +67,7 @@ def shift_low(st, buf):
     st[0], st[2], st[3], st[4] = shift_low_s(st[0], st[2], st[3], st[4], buf)
 
 
+@kernel
 def new_state(contexts: int, warm: bool = False) -> np.ndarray:
     """Adaptive state of ``contexts`` binary contexts: rows fast probability, slow probability
     (of a 0, out of 65536) and decisions seen. ``warm`` contexts start adapting at 1/4 and slow

@@ -30,15 +30,14 @@ import numba
 import numpy as np
 
 from mocodec.coding.entropy.binarycoder import (
-    INIT,
     MAX_CLASS,
-    WARM_DONE,
     buffer_for,
     encoder_start,
     finish_s,
     get_int_s,
     get_s,
     int_decisions,
+    new_state,
     put_int_s,
     put_s,
     start_decoder_s,
@@ -87,8 +86,7 @@ def _parent_class(v):
 @kernel
 def _encode(side, const, knots, coeffs, seg_pad, seg_lev, rev2, buf):
     low, rng, cache, size, pos = encoder_start()
-    state = np.full((3, _CONTEXTS), INIT, dtype=np.int64)
-    state[2, :] = 0 if rev2 else WARM_DONE  # revision 2: contexts warm up (binarycoder.new_state)
+    state = new_state(_CONTEXTS, rev2)  # revision 2: contexts warm up
     for v in side:
         low, rng, cache, size, pos = put_int_s(
             low, rng, cache, size, pos, buf, state, v, _SIDE, _SIDE + 2, _SIDE_UNARY, _KM, _SIDE + 1
@@ -158,8 +156,7 @@ def _encode(side, const, knots, coeffs, seg_pad, seg_lev, rev2, buf):
 @kernel
 def _decode(data, side, channels, num_knots, num_coeffs, seg_pad, seg_lev, rev2, const, knots, coeffs):
     code, rng, pos = start_decoder_s(data)
-    state = np.full((3, _CONTEXTS), INIT, dtype=np.int64)
-    state[2, :] = 0 if rev2 else WARM_DONE  # revision 2: contexts warm up (binarycoder.new_state)
+    state = new_state(_CONTEXTS, rev2)  # revision 2: contexts warm up
     for i in range(side.size):
         side[i], code, rng, pos = get_int_s(code, rng, pos, data, state, _SIDE, _SIDE + 2, _SIDE_UNARY, _KM, _SIDE + 1)
     for c in range(channels):

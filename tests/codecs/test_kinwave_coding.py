@@ -44,6 +44,7 @@ def test_coefficient_coder_round_trips(seed, frames, keyframe, spread, rev):
     out = coefcoder.decode(data, channels, lay.num_knots, lay.padded, lay.levels, rev, tuple(map(len, side)))
     c2, k2, co2, used = out.const, out.knots, out.coeffs, out.used
     assert all(np.array_equal(a, b) for a, b in zip(out.side, side))
+    assert all(np.array_equal(t, np.diff(q, prepend=0)) for t, q in zip(out.terms, side))  # as coded
     assert used >= len(data) - 1 and np.array_equal(c2, const)
     live = const == 0
     assert np.array_equal(k2[live], knots[live]) and np.array_equal(k2[~live, 0], knots[~live, 0])

@@ -224,8 +224,7 @@ def moc_fixture(name, clip, frames, fps, how, knobs, chunk_frames) -> dict[str, 
 
     def recording(*args, **kwargs):
         coded = original(*args, **kwargs)
-        side = [np.diff(q, prepend=0) for q in coded.side]
-        parts = [*side, coded.const, coded.knots.ravel(), coded.coeffs.ravel()]
+        parts = [*coded.terms, coded.const, coded.knots.ravel(), coded.coeffs.ravel()]
         read.append(np.concatenate([np.asarray(p, dtype=np.int64) for p in parts]))
         return coded
 

@@ -453,14 +453,6 @@ def decode_body(body: bytes, skeleton: Skeleton, frames: int) -> np.ndarray:
     return np.vstack((rest_pose(skeleton, kind, rest[0]), rest))
 
 
-def _terms(running: np.ndarray) -> np.ndarray:
-    """The integers a running sum (a side sequence sent as one) adds up, in place of
-    ``np.diff(running, prepend=0)``, which costs a short clip's decode several times more."""
-    terms = running.copy()
-    terms[1:] -= running[:-1]
-    return terms
-
-
 def _decode_frames(body: bytes, skeleton: Skeleton, frames: int, lead: int, constants: ConstantCoding) -> np.ndarray:
     """Channels ``(frames, C)`` of a format 1 body whose layout has ``lead``, its constant
     channels coded as ``constants`` says."""
@@ -497,9 +489,9 @@ def _decode_frames(body: bytes, skeleton: Skeleton, frames: int, lead: int, cons
         CODER_REVISION,
         (num_codes, num_offsets, num_vectors, num_means, num_isolated, num_isolated * skeleton.num_channels),
     )
-    codes, offsets, forms, running, isolated, patched = coded.side
-    means = _terms(running).reshape(-1, 3)
-    patches = _terms(patched).reshape(skeleton.num_channels, num_isolated)
+    codes, offsets, forms, _, isolated, _ = coded.side
+    means = coded.terms[3].reshape(-1, 3)  # (sent as running sums: the terms are the values)
+    patches = coded.terms[5].reshape(skeleton.num_channels, num_isolated)
     if num_isolated and not (1 <= isolated[0] and (np.diff(isolated) > 1).all() and isolated[-1] < frames - 1):
         raise CorruptStreamError("kinwave body's isolated frames are damaged")
     if (

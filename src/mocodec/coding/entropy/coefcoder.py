@@ -304,6 +304,7 @@ class Decoded:
     coeffs: np.ndarray
     side: tuple  # the side sequences
     used: int  # bytes read
+    terms: tuple  # each side sequence's differences as coded (a caller that sent running sums reads its values here)
 
 
 def decode(
@@ -338,7 +339,8 @@ def decode(
     running = np.concatenate(([0], np.cumsum(side)))  # each sequence's sums: one running sum, less its start
     starts = [0, *itertools.accumulate(side_sizes)]
     sequences = tuple(running[a + 1 : b + 1] - running[a] for a, b in zip(starts, starts[1:]))
-    return Decoded(const, knots, coeffs, sequences, int(used))
+    terms = tuple(side[a:b] for a, b in zip(starts, starts[1:]))
+    return Decoded(const, knots, coeffs, sequences, int(used), terms)
 
 
 def warm() -> None:

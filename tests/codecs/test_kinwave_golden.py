@@ -4,7 +4,7 @@ file (a CMU walk re-expressed as another pipeline writes it: a MotionBuilder dum
 (0, -90, 0), a bind pose in frame 0, a proper Euler order on the legs) must decode to the
 same channels, and encoding its input with the same settings must give the very same bytes.
 
-Regenerate, after a deliberate format change only: ``python tests/codecs/test_kinwave_golden.py``.
+Regenerate, after a deliberate format change only: ``PYTHONPATH=tests python tests/codecs/test_kinwave_golden.py``.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-// The decoder of a kinwave body (codecs/kinwave/payload.py, formats 1 and 2; docs/formats.md): header,
+// The decoder of a kinwave body (codecs/kinwave/payload.py, formats 1 to 3; docs/formats.md): header,
 // the integers of the coefficient coder, then per channel the trend through its knots plus the
 // inverse wavelet of each segment's block, seams smoothed, isolated frames patched, translations
 // coded on the world's axes turned back and three-angle joints brought back from their coding
@@ -15,6 +15,7 @@ import { WAVELET_IDS, inverseWavelet } from './wavelets.js';
 
 const FORMAT = 1;
 const FORMAT_MORE = 2; // format 1 with a byte of more flags after the header
+const FORMAT_MIRRORED = 3; // format 2 with a byte m after them: m joints' constant translations against earlier joints'
 const REST = 1; // more flags: frame 0 is the rest pose (rotations 0), its translations frame 1's
 const REST_AT_ZERO = 2; // ... with every translation 0 too
 const REST_TURNED = 3; // ... as REST under the root's turn of frame 1, its children turned back by it
@@ -160,14 +161,15 @@ function damaged(what, offset = null) {
   return new DecodeError(`kinwave payload: ${what}`, offset);
 }
 
-// A format 2 body as { body, frames, rest, lead, fine, fineTurns, aboutZero }: the format 1 body
-// of the frames after a rest pose in frame 0 (payload.rest_kind), which is not coded, its layout's
-// lead, whether its constant translations and its constant rotations of joints above translation
-// channels are fine and whether its constant translations are coded about 0 instead of the
-// offsets (body.ConstantCoding); a format 1 body as it is, rest 0, lead 0, none of them.
-function withoutMore(body, frames) {
-  if (body[0] !== FORMAT_MORE) {
-    return { body, frames, rest: 0, lead: 0, fine: false, fineTurns: false, aboutZero: false };
+// A format 2 or 3 body as { body, frames, rest, lead, fine, fineTurns, aboutZero, mirrored }: the
+// format 1 body of the frames after a rest pose in frame 0 (payload.rest_kind), which is not
+// coded, its layout's lead, whether its constant translations and its constant rotations of
+// joints above translation channels are fine and whether its constant translations are coded
+// about 0 instead of the offsets (body.ConstantCoding), and (format 3) how many joints' constant
+// translations are mirrored; a format 1 body as it is, rest 0, lead 0, none of them.
+function withoutMore(body, frames, skeleton) {
+  if (body[0] !== FORMAT_MORE && body[0] !== FORMAT_MIRRORED) {
+    return { body, frames, rest: 0, lead: 0, fine: false, fineTurns: false, aboutZero: false, mirrored: 0 };
   }
   if (body.length <= HEAD_SIZE) throw damaged(`${body.length} bytes is shorter than its ${HEAD_SIZE + 1}-byte header`, 0);
   const more = body[HEAD_SIZE];
@@ -176,28 +178,71 @@ function withoutMore(body, frames) {
   const fine = (more & FINE_CONSTANTS) !== 0;
   const fineTurns = (more & FINE_TURNS) !== 0;
   const aboutZero = (more & ZERO_CONSTANTS) !== 0;
-  if (!more || more >> 7 || frames < 1 + (rest ? 1 : 0)) {
+  const mirroring = body[0] === FORMAT_MIRRORED;
+  if ((!more && !mirroring) || more >> 7 || frames < 1 + (rest ? 1 : 0)) {
     throw damaged(`its more flags are damaged (${more} for ${frames} frames)`, HEAD_SIZE);
   }
-  const inner = new Uint8Array(body.length - 1);
+  let after = HEAD_SIZE + 1;
+  let mirrored = 0;
+  if (mirroring) {
+    if (body.length <= after || body[after] < 1 || body[after] > translationTriples(skeleton).length) {
+      throw damaged('its mirrored joint count is damaged', after);
+    }
+    mirrored = body[after];
+    after += 1;
+  }
+  const inner = new Uint8Array(body.length - (after - HEAD_SIZE));
   inner[0] = FORMAT;
   inner.set(body.subarray(1, HEAD_SIZE), 1);
-  inner.set(body.subarray(HEAD_SIZE + 1), HEAD_SIZE);
-  return { body: inner, frames: rest ? frames - 1 : frames, rest, lead, fine, fineTurns, aboutZero };
+  inner.set(body.subarray(after), HEAD_SIZE);
+  return { body: inner, frames: rest ? frames - 1 : frames, rest, lead, fine, fineTurns, aboutZero, mirrored };
+}
+
+// body.translation_triples: per joint with three translation channels, { joint, channels } (in
+// channel order).
+function translationTriples(skeleton) {
+  const triples = [];
+  skeleton.joints.forEach((_, j) => {
+    const channels = [0, 1, 2].map((a) => skeleton.posIndex[3 * j + a]).filter((c) => c >= 0);
+    if (channels.length === 3) triples.push({ joint: j, channels: channels.sort((a, b) => a - b) });
+  });
+  return triples;
+}
+
+// body.unmirror: the knots with each mirrored joint's constant knots plus its reference's, some
+// axes negated (a reference `back << 3 | signs`: `back` joints earlier, bit a negating axis a).
+function unmirror(skeleton, coded, K, joints, refs, offset) {
+  const knots = Float64Array.from(coded.knots);
+  const triples = new Map(translationTriples(skeleton).map((t) => [t.joint, t.channels]));
+  const held = (channels) => channels.every((c) => coded.constant[c]);
+  let previous = -1;
+  joints.forEach((j, k) => {
+    const back = Math.floor(refs[k] / 8);
+    const signs = refs[k] - 8 * back;
+    const target = triples.get(j);
+    const source = triples.get(j - back);
+    if (!(j > previous) || back < 1 || !target || !source || !held(target) || !held(source)) {
+      throw damaged('its mirrored joints are damaged', offset);
+    }
+    for (let a = 0; a < 3; a++) knots[target[a] * K] += ((signs >> a) & 1 ? -1 : 1) * knots[source[a] * K];
+    previous = j;
+  });
+  return knots;
 }
 
 // The header and integers of a kinwave body, every field checked: { lay, wavelet, coded (side,
-// constant, knots, coeffs), codes, offsets, forms, means, isolated, patches } of its coded
-// frames (a rest pose in frame 0 is not coded: rest, payload.rest_kind).
+// constant, knots, coeffs as the coder read them), knots (mirrored constants added back), codes,
+// offsets, forms, means, isolated, patches } of its coded frames (a rest pose in frame 0 is not
+// coded: rest, payload.rest_kind).
 export function readKinwave(whole, skeleton, allFrames) {
-  const { body, frames, rest, lead, fine, fineTurns, aboutZero } = withoutMore(whole, allFrames);
+  const { body, frames, rest, lead, fine, fineTurns, aboutZero, mirrored } = withoutMore(whole, allFrames, skeleton);
   const plan = planOf(skeleton);
   const C = skeleton.numChannels;
   const numCodes = plan.rotationJoints.length + (plan.translation.length ? 1 : 0);
   if (body.length < HEAD_SIZE) throw damaged(`${body.length} bytes is shorter than its ${HEAD_SIZE}-byte header`, 0);
   const [version, flags, logWindow, levels] = body;
   const channels = body[4] | (body[5] << 8);
-  if (version !== FORMAT) throw damaged(`format ${version}, this decoder reads ${FORMAT} and ${FORMAT_MORE}`, 0);
+  if (version !== FORMAT) throw damaged(`format ${version}, this decoder reads ${FORMAT}, ${FORMAT_MORE} and ${FORMAT_MIRRORED}`, 0);
   if (channels !== C) throw damaged(`${channels} channels, the skeleton has ${C}: wrong skeleton?`, 4);
   if (logWindow > 16 || levels < 1 || levels > 10 || ((flags >> 1) & 3) >= WAVELET_IDS.length) {
     throw damaged(`header is damaged (window 2^${logWindow}, levels ${levels})`, 1);
@@ -215,7 +260,7 @@ export function readKinwave(whole, skeleton, allFrames) {
     numIsolated = body[start];
     start += 1;
   }
-  const sizes = [numCodes, numOffsets, numVectors, numMeans, numIsolated, numIsolated * C];
+  const sizes = [numCodes, numOffsets, numVectors, numMeans, numIsolated, numIsolated * C, mirrored, mirrored];
   let coded;
   try {
     coded = decodeCoefficients(body.subarray(start), C, lay.knotFrames.length, lay.padded, lay.segLevels, CODER_REVISION,
@@ -225,6 +270,10 @@ export function readKinwave(whole, skeleton, allFrames) {
     throw e;
   }
   const at = sizes.map((_, k) => sizes.slice(0, k).reduce((a, b) => a + b, 0));
+  const knots = mirrored
+    ? unmirror(skeleton, coded, lay.knotFrames.length, Array.from(cumulative(coded.side, at[6], mirrored)),
+      coded.side.subarray(at[7], at[7] + mirrored), start)
+    : coded.knots;
   const read = {
     rest,
     fine,
@@ -233,6 +282,7 @@ export function readKinwave(whole, skeleton, allFrames) {
     lay,
     wavelet: WAVELET_IDS[(flags >> 1) & 3],
     coded,
+    knots,
     codes: cumulative(coded.side, at[0], numCodes),
     offsets: numOffsets ? cumulative(coded.side, at[1], numOffsets) : new Float64Array(S),
     forms: cumulative(coded.side, at[2], numVectors),
@@ -298,7 +348,7 @@ function restFrame(skeleton, plan, rows, rest, out) {
 }
 
 // payload.reconstruct: per channel its trend plus its blocks' residual, then the seams smoothed.
-function reconstruct(skeleton, plan, { coded, offsets, lay, wavelet, fine, fineTurns, aboutZero }, steps) {
+function reconstruct(skeleton, plan, { coded, knots, offsets, lay, wavelet, fine, fineTurns, aboutZero }, steps) {
   const C = skeleton.numChannels;
   const { frames, starts, lengths, leads, padded, segLevels, left, frac, quantum } = lay;
   const S = starts.length;
@@ -322,10 +372,10 @@ function reconstruct(skeleton, plan, { coded, offsets, lay, wavelet, fine, fineT
     if (coded.constant[c]) {
       const isFine = plan.isTranslation[c] ? fine : fineTurns && plan.turnOverTranslation[c];
       const fraction = isFine ? FINE_CONST_FRACTION : CONST_FRACTION;
-      row.fill((aboutZero ? 0.0 : plan.base[c]) + coded.knots[c * K] * (step * fraction));
+      row.fill((aboutZero ? 0.0 : plan.base[c]) + knots[c * K] * (step * fraction));
       continue;
     }
-    for (let k = 0; k < K; k++) values[k] = coded.knots[c * K + k] * (step * quantum[k] * knotFactor[k]);
+    for (let k = 0; k < K; k++) values[k] = knots[c * K + k] * (step * quantum[k] * knotFactor[k]);
     for (let t = 0; t < frames; t++) {
       const a = values[left[t]];
       const b = values[Math.min(left[t] + 1, K - 1)];

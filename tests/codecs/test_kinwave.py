@@ -770,7 +770,7 @@ def test_bones_in_position_channels_cost_only_their_constants(walk_amc):
     assert abs(errors[1] / errors[0] - 1) < 0.02 and sizes[0] < sizes[1] <= sizes[0] + 2 * constants
     body = codec.encode(moved)
     own = codec.encode(clip)
-    assert body[0] == 2 and body[6] & FINE_CONSTANTS and (own[0] == 1 or not own[6] & FINE_CONSTANTS)
+    assert body[0] in (2, 3) and body[6] & FINE_CONSTANTS and (own[0] == 1 or not own[6] & FINE_CONSTANTS)
     assert _errors(moved, codec.decode(body, moved.skeleton, moved.num_frames, moved.fps))["shell"] <= 1.0
     default = get_codec("kinwave", max_error_cm=1.0, error_measure="shell")
     assert not BoundSearch(default, moved).constants.fine
@@ -819,7 +819,7 @@ def test_motionbuilder_bones_cost_what_a_plain_skeleton_costs(walk_amc):
     repeated, moved = with_position_channels(plain, keep_offsets=True), with_position_channels(plain)
     for layout, about_zero in ((repeated, True), (moved, False)):
         body = codec.encode(layout)
-        assert body[0] == 2 and bool(body[HEAD.size] & ZERO_CONSTANTS) == about_zero
+        assert body[0] in (2, 3) and bool(body[HEAD.size] & ZERO_CONSTANTS) == about_zero
         decoded = codec.decode(body, layout.skeleton, layout.num_frames, layout.fps)
         assert _errors(layout, decoded)["shell"] <= 1.0
     assert len(codec.encode(repeated)) <= len(codec.encode(plain)) + repeated.skeleton.num_channels // 3
@@ -1045,3 +1045,68 @@ def test_passes_that_keep_their_joints_linearisations_code_as_passes_that_make_t
     for kept, anew in zip(*runs):
         assert np.array_equal(kept.knots, anew.knots) and np.array_equal(kept.coeffs, anew.coeffs)
         assert np.array_equal(kept.errors, anew.errors)
+
+
+def test_bones_held_in_channels_code_a_mirrored_bone_against_its_other_side(walk_bvh, monkeypatch):
+    """A skeleton whose bones are held in translation channels (offsets 0) codes each constant
+    bone that mirrors an earlier one (the left leg's the right's, axes negated) as its
+    difference from that bone: the body is format 3 and holds the bound, and a pass's body is
+    smaller than with no bone mirrored."""
+    from mocodec.codecs.kinwave.body import FORMAT_MIRRORED
+
+    motion = reexpress.with_position_channels(walk_bvh[:120])
+    codec = get_codec("kinwave", max_error_cm=1.0)
+    data = codec.encode(motion)
+    assert data[0] == FORMAT_MIRRORED and data[7] >= 8  # the joints' count after the more flags
+    decoded = codec.decode(data, motion.skeleton, motion.num_frames, motion.fps)
+    assert _errors(motion, decoded)["joint"] <= 1.0
+    search = BoundSearch(codec, motion)
+    first = search.starting_pass()
+    mirrored = search.body(first)
+    monkeypatch.setattr(kinwave_encoder, "MIRROR_SLACK", -1)  # no bone close enough
+    plain = search.body(first)
+    assert plain[0] != FORMAT_MIRRORED and len(mirrored) < 0.97 * len(plain)
+
+
+def test_mirrored_constants_come_back_whole_and_damaged_references_are_refused(walk_amc):
+    """:func:`unmirror` undoes :func:`mirrored_constants` exactly (each bone's knots, a chain of
+    references too); a reference to no joint, to a later one, or to a joint whose translations
+    move, and a damaged count byte, are a CorruptStreamError."""
+    from mocodec.codecs.kinwave.body import (
+        FORMAT_MIRRORED,
+        decode_body,
+        mirrored_constants,
+        translation_triples,
+        unmirror,
+    )
+    from mocodec.errors import CorruptStreamError
+
+    sk = reexpress.with_position_channels(walk_amc[:2]).skeleton
+    joints, rows = translation_triples(sk)
+    const = np.zeros(sk.num_channels, dtype=np.int64)
+    const[rows.ravel()] = 1
+    knots = np.random.default_rng(3).integers(-900, 900, (sk.num_channels, 2))
+    knots[rows[2], 0] = knots[rows[1], 0] * [-1, 1, 1]  # a mirrored pair, and a chain after it
+    knots[rows[3], 0] = knots[rows[2], 0] * [1, -1, 1] + [0, 1, 0]
+    mirrored, refs, coded = mirrored_constants(sk, const, knots, 1)
+    assert mirrored.tolist()[:2] == [joints[2], joints[3]] and (refs[:2] & 7).tolist() == [1, 2]
+    assert (coded[rows[2], 0] == 0).all() and np.abs(coded[rows[3], 0]).max() == 1
+    unmirror(sk, const, coded, mirrored, refs)
+    np.testing.assert_array_equal(coded, knots)
+    moving = const.copy()
+    moving[rows[1]] = 0
+    for bad_joints, bad_refs, flags in (
+        ([joints[2]], [0 << 3 | 1], const),  # back 0: itself
+        ([joints[2]], [(joints[2] + 5) << 3], const),  # before the first joint
+        ([joints[3], joints[2]], refs[:2][::-1], const),  # out of order
+        ([joints[2]], [refs[0]], moving),  # its reference's translations move
+    ):
+        with pytest.raises(CorruptStreamError, match="mirrored joints are damaged"):
+            unmirror(sk, flags, knots.copy(), np.array(bad_joints), np.array(bad_refs))
+    motion = reexpress.with_position_channels(walk_amc[:60])
+    data = bytearray(get_codec("kinwave", max_error_cm=1.0).encode(motion))
+    assert data[0] == FORMAT_MIRRORED
+    for count in (0, len(joints) + 1):
+        data[7] = count
+        with pytest.raises(CorruptStreamError, match="mirrored joint count at byte 7"):
+            decode_body(bytes(data), motion.skeleton, motion.num_frames)

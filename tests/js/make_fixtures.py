@@ -248,7 +248,12 @@ def moc_fixture(name, clip, frames, fps, how, knobs, chunk_frames) -> dict[str, 
         if knobs.get("bits_per_second") or knobs.get("error_measure", "joint") != "joint"
         else knobs.get("max_error_cm", 0.5),
         "chunks": [
-            {"flags": int(body[1]), "more": int(body[6]) if body[0] == 2 else 0, "ints": int(x.size)}
+            {
+                "format": int(body[0]),
+                "flags": int(body[1]),
+                "more": int(body[6]) if body[0] > 1 else 0,
+                "ints": int(x.size),
+            }
             for body, x in ((info.read_chunk(k), x) for k, x in enumerate(read))
         ],
         "positions": {str(f): positions[f].round(9).tolist() for f in frames_shown},

@@ -50,7 +50,8 @@ for (const name of CASES) {
     file.chunks.forEach((chunk, k) => {
       const body = chunkBody(data, chunk, k);
       assert.equal(body[1], meta.chunks[k].flags, `chunk ${k}: flags`);
-      assert.equal(body[0] === 2 ? body[6] : 0, meta.chunks[k].more, `chunk ${k}: more flags`);
+      assert.equal(body[0], meta.chunks[k].format, `chunk ${k}: format`);
+      assert.equal(body[0] > 1 ? body[6] : 0, meta.chunks[k].more, `chunk ${k}: more flags`);
       const read = readKinwave(body, file.skeleton, chunk.count);
       read.forms.forEach((f) => formsSeen.add(f));
       const got = integersRead(read.coded);
@@ -89,11 +90,11 @@ test('the cases use every coding form: Euler, vector, coding orders and WORLD on
   assert.ok([...formsSeen].some((f) => f >= 8), 'a WORLD form');
 });
 
-test('the lead case has chunks whose wavelet grid starts early, the bones case fine constants, the offsets case constants about 0, the dummy roots fine turns', async () => {
+test('the lead case has chunks whose wavelet grid starts early, the bones case fine and mirrored constants, the offsets case constants about 0, the dummy roots fine turns', async () => {
   const { meta } = await fixture('lead');
   assert.ok(meta.chunks.some((c) => (c.more >> 2) & 3), JSON.stringify(meta.chunks));
   const bones = (await fixture('bones-in-channels')).meta;
-  assert.ok(bones.chunks.every((c) => c.more & 16 && !(c.more & 64)), JSON.stringify(bones.chunks));
+  assert.ok(bones.chunks.every((c) => c.format === 3 && c.more & 16 && !(c.more & 64)), JSON.stringify(bones.chunks));
   const offsets = (await fixture('offsets-in-channels')).meta;
   assert.ok(offsets.chunks.every((c) => c.more & 64), JSON.stringify(offsets.chunks));
   for (const name of ['dummy-root', 'dummy-root-bind']) {
@@ -208,19 +209,21 @@ test('damaged and truncated files end in DecodeError, never another error or a h
 });
 
 test('damaged kinwave bodies (past the CRC) end in DecodeError or decode to finite values', async () => {
-  const { data } = await fixture('glitch');
-  const file = await openMoc(data);
-  const body = chunkBody(data, file.chunks[0], 0);
-  const random = seeded(99);
   const { decodeKinwave } = await import('../../js/src/kinwave.js');
-  for (let trial = 0; trial < 400; trial++) {
-    const damaged = Uint8Array.from(body.subarray(0, random() < 0.2 ? Math.floor(random() * body.length) : body.length));
-    for (let n = 0; n < 1 + random() * 4; n++) damaged[Math.floor(random() * damaged.length)] = Math.floor(random() * 256);
-    try {
-      const out = decodeKinwave(damaged, file.skeleton, file.chunks[0].count);
-      assert.ok(out.every((v) => !Number.isNaN(v)));
-    } catch (e) {
-      if (!(e instanceof DecodeError)) throw new Error(`trial ${trial}: ${e.stack}`);
+  for (const name of ['glitch', 'bones-in-channels']) { // (isolated frames; mirrored constants)
+    const { data } = await fixture(name);
+    const file = await openMoc(data);
+    const body = chunkBody(data, file.chunks[0], 0);
+    const random = seeded(99);
+    for (let trial = 0; trial < 400; trial++) {
+      const damaged = Uint8Array.from(body.subarray(0, random() < 0.2 ? Math.floor(random() * body.length) : body.length));
+      for (let n = 0; n < 1 + random() * 4; n++) damaged[Math.floor(random() * damaged.length)] = Math.floor(random() * 256);
+      try {
+        const out = decodeKinwave(damaged, file.skeleton, file.chunks[0].count);
+        assert.ok(out.every((v) => !Number.isNaN(v)));
+      } catch (e) {
+        if (!(e instanceof DecodeError)) throw new Error(`${name}, trial ${trial}: ${e.stack}`);
+      }
     }
   }
 });

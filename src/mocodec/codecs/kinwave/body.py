@@ -42,6 +42,8 @@ from mocodec.skeleton import Skeleton
 
 FORMAT = 1  # the body format (docs/formats.md), pinned by the golden fixtures
 FORMAT_MORE = 2  # format 1 with a byte of more flags after the header
+FORMAT_MIRRORED = 3  # format 2 with a byte m after the more flags: m joints' constant
+# translations coded against an earlier joint's, axes negated (mirrored_constants)
 REST = 1  # more flags bit 0: frame 0 is the rest pose, its translations frame 1's (not coded)
 REST_AT_ZERO = 2  # more flags bit 1: frame 0 is the rest pose with every translation 0 (not coded)
 REST_TURNED = 3  # more flags bits 0-1 both: the rest pose as REST, the root's turn frame 1's too (not coded)
@@ -53,6 +55,8 @@ LEAD_SHIFT = 2  # more flags bits 2-3: the layout's lead (trendwave.layout), in 
 FINE_CONSTANTS = 16  # more flags bit 4: constant translations at FINE_CONST_FRACTION of their step
 FINE_TURNS = 32  # more flags bit 5: constant rotations of joints above translation channels, the same
 ZERO_CONSTANTS = 64  # more flags bit 6: constant translations coded about 0, not about their joints' offsets
+MAX_MIRRORED = 255  # joints a body codes against earlier ones at most
+MIRROR_ENTRY_BITS = 6.0  # about the bits a mirrored joint's index costs (the step from the previous one)
 CODER_REVISION = 2  # the coefficient coder's revision (coefcoder: differences in the approximation band)
 HEAD = struct.Struct("<BBBBH")  # format, flags, log2 window, levels, channels
 FLAG_OFFSETS = 8  # flags bit 3: a signed step offset per segment follows the step codes
@@ -400,12 +404,19 @@ def rest_pose(skeleton: Skeleton, kind: int, frame1: np.ndarray) -> np.ndarray:
 
 
 def with_more(body: bytes, more: int) -> bytes:
-    """``body`` (format 1, or 2 whose more flags are kept) as format 2 with the more flags ``more``
-    set too: a rest pose before its frames (REST, REST_AT_ZERO), its layout's lead, fine
-    constants (FINE_CONSTANTS, FINE_TURNS)."""
-    if body[:1] == bytes([FORMAT_MORE]):
+    """``body`` (format 1, or 2 or 3 whose more flags are kept) as format 2 (or 3) with the more
+    flags ``more`` set too: a rest pose before its frames (REST, REST_AT_ZERO), its layout's
+    lead, fine constants (FINE_CONSTANTS, FINE_TURNS)."""
+    if body[0] in (FORMAT_MORE, FORMAT_MIRRORED):
         return body[: HEAD.size] + bytes([body[HEAD.size] | more]) + body[HEAD.size + 1 :]
     return bytes([FORMAT_MORE]) + body[1 : HEAD.size] + bytes([more]) + body[HEAD.size :]
+
+
+def with_mirrored(body: bytes, count: int) -> bytes:
+    """``body`` (format 1 or 2 whose side sequences end with ``count`` mirrored joints and their
+    references) as format 3: the count after the more flags (:func:`mirrored_constants`)."""
+    more = with_more(body, 0) if body[0] == FORMAT else body
+    return bytes([FORMAT_MIRRORED]) + more[1 : HEAD.size + 1] + bytes([count]) + more[HEAD.size + 1 :]
 
 
 def channel_steps(skeleton: Skeleton, codes: np.ndarray) -> np.ndarray:
@@ -431,31 +442,40 @@ def _channel_codes(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
 
 
 def decode_body(body: bytes, skeleton: Skeleton, frames: int) -> np.ndarray:
-    """Channels ``(frames, C)`` of a kinwave body (format 1 or 2, docs/formats.md), every field
-    checked."""
-    if body[:1] != bytes([FORMAT_MORE]):
+    """Channels ``(frames, C)`` of a kinwave body (format 1, 2 or 3, docs/formats.md), every
+    field checked."""
+    if body[:1] not in (bytes([FORMAT_MORE]), bytes([FORMAT_MIRRORED])):
         return _decode_frames(body, skeleton, frames, 0, constant_coding(skeleton))
     if len(body) <= HEAD.size:
         raise CorruptStreamError(f"kinwave body of {len(body)} bytes is shorter than its {HEAD.size + 1}-byte header")
-    more = body[HEAD.size]
+    more, mirroring = body[HEAD.size], body[0] == FORMAT_MIRRORED
     kind, lead = more & 3, (more >> LEAD_SHIFT) & 3
-    if not more or more >> 7 or frames < 1 + bool(kind):
+    if (not more and not mirroring) or more >> 7 or frames < 1 + bool(kind):
         raise CorruptStreamError(
             f"kinwave body's more flags at byte {HEAD.size} are damaged ({more} for {frames} frames)"
         )
     constants = constant_coding(
         skeleton, bool(more & FINE_CONSTANTS), bool(more & FINE_TURNS), bool(more & ZERO_CONSTANTS)
     )
-    inner = bytes([FORMAT]) + body[1 : HEAD.size] + body[HEAD.size + 1 :]
+    after = HEAD.size + 1
+    mirrored = 0
+    if mirroring:
+        if len(body) <= after or not 1 <= body[after] <= len(translation_triples(skeleton)[0]):
+            raise CorruptStreamError(f"kinwave body's mirrored joint count at byte {after} is damaged")
+        mirrored, after = body[after], after + 1
+    inner = bytes([FORMAT]) + body[1 : HEAD.size] + body[after:]
     if not kind:
-        return _decode_frames(inner, skeleton, frames, lead, constants)
-    rest = _decode_frames(inner, skeleton, frames - 1, lead, constants)
+        return _decode_frames(inner, skeleton, frames, lead, constants, mirrored)
+    rest = _decode_frames(inner, skeleton, frames - 1, lead, constants, mirrored)
     return np.vstack((rest_pose(skeleton, kind, rest[0]), rest))
 
 
-def _decode_frames(body: bytes, skeleton: Skeleton, frames: int, lead: int, constants: ConstantCoding) -> np.ndarray:
+def _decode_frames(
+    body: bytes, skeleton: Skeleton, frames: int, lead: int, constants: ConstantCoding, mirrored: int = 0
+) -> np.ndarray:
     """Channels ``(frames, C)`` of a format 1 body whose layout has ``lead``, its constant
-    channels coded as ``constants`` says."""
+    channels coded as ``constants`` says, ``mirrored`` joints' constant translations against
+    earlier joints' (:func:`mirrored_constants`)."""
     rot_joints = rotation_joints(skeleton)
     trans = has_translation(skeleton)
     num_codes = len(rot_joints) + trans
@@ -463,7 +483,9 @@ def _decode_frames(body: bytes, skeleton: Skeleton, frames: int, lead: int, cons
         raise CorruptStreamError(f"kinwave body of {len(body)} bytes is shorter than its {HEAD.size}-byte header")
     version, flags, log_w, levels, channels = HEAD.unpack_from(body)
     if version != FORMAT:
-        raise CorruptStreamError(f"kinwave body format {version}, this mocodec reads {FORMAT} and {FORMAT_MORE}")
+        raise CorruptStreamError(
+            f"kinwave body format {version}, this mocodec reads {FORMAT}, {FORMAT_MORE} and {FORMAT_MIRRORED}"
+        )
     if channels != skeleton.num_channels:
         raise CorruptStreamError(
             f"kinwave body has {channels} channels, the skeleton {skeleton.num_channels}: wrong skeleton?"
@@ -487,9 +509,20 @@ def _decode_frames(body: bytes, skeleton: Skeleton, frames: int, lead: int, cons
         lay.padded,
         lay.levels,
         CODER_REVISION,
-        (num_codes, num_offsets, num_vectors, num_means, num_isolated, num_isolated * skeleton.num_channels),
+        (
+            num_codes,
+            num_offsets,
+            num_vectors,
+            num_means,
+            num_isolated,
+            num_isolated * skeleton.num_channels,
+            mirrored,
+            mirrored,
+        ),
     )
-    codes, offsets, forms, _, isolated, _ = coded.side
+    codes, offsets, forms, _, isolated, _, targets, _ = coded.side
+    if mirrored:
+        unmirror(skeleton, coded.const, coded.knots, targets, coded.terms[7])
     means = coded.terms[3].reshape(-1, 3)  # (sent as running sums: the terms are the values)
     patches = coded.terms[5].reshape(skeleton.num_channels, num_isolated)
     if num_isolated and not (1 <= isolated[0] and (np.diff(isolated) > 1).all() and isolated[-1] < frames - 1):
@@ -518,3 +551,87 @@ def _decode_frames(body: bytes, skeleton: Skeleton, frames: int, lead: int, cons
         means,
         (isolated, patches),
     ).T
+
+
+@lru_cache(maxsize=64)
+def translation_triples(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
+    """The joints with three translation channels (the joints whose constant translations may
+    be mirrored), and those channels ``(J3, 3)``."""
+    trans = ~skeleton.rotation_mask
+    joints, rows = [], []
+    for j in range(len(skeleton.joints)):
+        own = np.flatnonzero((skeleton.channel_joints == j) & trans)
+        if own.size == 3:
+            joints.append(j)
+            rows.append(own)
+    return np.array(joints, dtype=np.int64), np.array(rows, dtype=np.int64).reshape(-1, 3)
+
+
+_SIGNS = 1 - 2 * ((np.arange(8)[:, None] >> np.arange(3)) & 1)  # (8, 3): bit a negates axis a
+
+
+def _bits(values: np.ndarray) -> np.ndarray:
+    """About the bits the coefficient coder spends on integers, summed over the last axis (an
+    adaptive Elias-gamma code: two per binary digit)."""
+    return 2.0 * np.log2(1.0 + np.abs(values)).sum(axis=-1)
+
+
+def mirrored_constants(
+    skeleton: Skeleton, const: np.ndarray, knots: np.ndarray, slack: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A symmetric skeleton's bones held in translation channels come in mirrored pairs: per
+    joint whose three translations are constant, the earlier such joint whose knots, some axes
+    negated, are within ``slack`` of its own on every axis (the nearest of the closest), taken
+    where coding the difference and the reference costs fewer bits than the knots (and all
+    together more than the count byte; MAX_MIRRORED joints at most). Returns the joints,
+    ``back << 3 | signs`` per joint (the reference ``back`` joints earlier, bit a set where
+    translation a is negated) and the knots with each of those joints' constant knots less
+    its reference's (what the coder then codes; :func:`unmirror` undoes it)."""
+    coded, none = knots.copy(), np.zeros(0, dtype=np.int64)
+    joints, rows = translation_triples(skeleton)
+    held = const[rows].all(axis=1)
+    joints, rows = joints[held], rows[held]
+    if not knots.shape[1] or joints.size < 2:  # (a body of no frames has no knot)
+        return none, none, coded
+    own = knots[rows, 0]  # (T, 3)
+    apart = (np.abs(own[:, None] - own[None]), np.abs(own[:, None] + own[None]))  # (T, T, 3): axis kept, negated
+    misses = np.stack(  # (T, T, 8): the largest miss over the axes, per sign pattern
+        [np.maximum.reduce([apart[sign >> a & 1][..., a] for a in range(3)]) for sign in range(8)], axis=2
+    )
+    misses[np.triu_indices(len(joints))] = slack + 1  # earlier joints only
+    closest = misses.min(axis=(1, 2), initial=slack + 1)
+    picked = np.flatnonzero(closest <= slack)
+    if not picked.size:
+        return none, none, coded
+    hits = misses[picked] == closest[picked, None, None]  # (P, T, 8)
+    earlier = hits.shape[1] - 1 - np.argmax(hits.any(axis=2)[:, ::-1], axis=1)  # the nearest of the closest
+    sign = np.argmax(hits[np.arange(picked.size), earlier], axis=1)  # its first signs
+    refs = (joints[picked] - joints[earlier]) << 3 | sign
+    differences = own[picked] - _SIGNS[sign] * own[earlier]
+    gains = _bits(own[picked]) - _bits(differences) - _bits(refs[:, None]) - MIRROR_ENTRY_BITS
+    kept = np.flatnonzero(gains > 0)[:MAX_MIRRORED]
+    if gains[kept].sum() <= 8.0:  # (the count byte)
+        return none, none, coded
+    coded[rows[picked[kept]], 0] = differences[kept]
+    return joints[picked[kept]], refs[kept], coded
+
+
+def unmirror(skeleton: Skeleton, const: np.ndarray, knots: np.ndarray, joints: np.ndarray, refs: np.ndarray) -> None:
+    """Add back, in place in ``knots``, the references' constant knots that
+    :func:`mirrored_constants` took off, every joint and reference checked."""
+    with_three, rows = translation_triples(skeleton)
+    where = {int(j): k for k, j in enumerate(with_three.tolist())}
+    previous = -1
+    for j, ref in zip(joints.tolist(), refs.tolist()):
+        back, sign = ref >> 3, ref & 7
+        target, source = where.get(j), where.get(j - back)
+        if (
+            j <= previous
+            or back < 1
+            or target is None
+            or source is None
+            or not (const[rows[target]].all() and const[rows[source]].all())
+        ):
+            raise CorruptStreamError("kinwave body's mirrored joints are damaged")
+        knots[rows[target], 0] += _SIGNS[sign] * knots[rows[source], 0]
+        previous = j

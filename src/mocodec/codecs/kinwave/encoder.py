@@ -37,6 +37,7 @@ from mocodec.codecs.kinwave.body import (
     constant_coding,
     has_translation,
     levels_for,
+    mirrored_constants,
     parent_orientations,
     parent_turns,
     reconstruct,
@@ -46,6 +47,7 @@ from mocodec.codecs.kinwave.body import (
     still_rotations,
     three_angle_groups,
     turns_over_translations,
+    with_mirrored,
     with_more,
     world_translations,
 )
@@ -69,6 +71,7 @@ TRIAL_RATE = 15.0  # frames/s the trial keeps of a faster body (effort < 3; Enco
 TRIAL_SAMPLE = 512  # ... below it, of a longer body, this many (Encoder._trial_frames)
 FAR_STEPS = 0.7  # a frame missing its target by more than this many steps rounds its coefficients plainly
 CONST_AWAY_CM = 0.1  # a constant translation this far from its joint's offset takes fine constants
+MIRROR_SLACK = 1  # knots: a constant bone mirrors an earlier one this close (body.mirrored_constants)
 GIMBAL_MARGIN = 15.0  # degrees from an Euler order's lock within which a joint goes as a vector
 BONE_PLACES = 4  # decimals of a bone held in translation channels that the allocation sees
 QUIET_TURN, QUIET_ANGLES = 20.0, 30.0  # degrees: a joint within both tries no other Euler order (effort < 3)
@@ -689,6 +692,7 @@ class Encoder:
     def body(self, ps: Pass) -> bytes:
         flags = self.header[1]
         side: tuple[np.ndarray, ...] = (ps.steps,)
+        mirrored, refs, knots = mirrored_constants(self.skeleton, ps.const, ps.knots, MIRROR_SLACK)
         if ps.offsets.any():
             flags, side = flags | FLAG_OFFSETS, side + (ps.offsets,)
         if self.forms.any():
@@ -699,11 +703,14 @@ class Encoder:
         if self.isolated.size:
             flags, count = flags | FLAG_ISOLATED, bytes([self.isolated.size])
             side = side + (self.isolated, np.cumsum(ps.patches.ravel()))
+        if mirrored.size:
+            side = side + (mirrored, np.cumsum(refs))
         head = self.header[:1] + bytes([flags]) + self.header[2:] + count
         body = head + coefcoder.encode(
-            ps.const, ps.knots, ps.coeffs, self.lay.padded, self.lay.levels, revision=CODER_REVISION, side=side
+            ps.const, knots, ps.coeffs, self.lay.padded, self.lay.levels, revision=CODER_REVISION, side=side
         )
         more = self.lead << LEAD_SHIFT | (FINE_CONSTANTS if self.constants.fine else 0)
         more |= FINE_TURNS if self.constants.fine_turns else 0
         more |= ZERO_CONSTANTS if self.constants.about_zero else 0
-        return with_more(body, more) if more else body
+        body = with_more(body, more) if more else body
+        return with_mirrored(body, mirrored.size) if mirrored.size else body

@@ -616,22 +616,35 @@ def mirrored_constants(
     return joints[picked[kept]], refs[kept], coded
 
 
+@lru_cache(maxsize=64)
+def _triple_of(skeleton: Skeleton) -> np.ndarray:
+    """Per joint, its index among :func:`translation_triples` (-1: not one of them)."""
+    index = np.full(len(skeleton.joints), -1, dtype=np.int64)
+    with_three, _ = translation_triples(skeleton)
+    index[with_three] = np.arange(with_three.size)
+    return index
+
+
 def unmirror(skeleton: Skeleton, const: np.ndarray, knots: np.ndarray, joints: np.ndarray, refs: np.ndarray) -> None:
     """Add back, in place in ``knots``, the references' constant knots that
-    :func:`mirrored_constants` took off, every joint and reference checked."""
-    with_three, rows = translation_triples(skeleton)
-    where = {int(j): k for k, j in enumerate(with_three.tolist())}
-    previous = -1
+    :func:`mirrored_constants` took off (a reference mirrored itself first), every joint and
+    reference checked."""
+    _, rows = translation_triples(skeleton)
+    index = _triple_of(skeleton).tolist()
+    at, source_at, previous = [], [], -1
     for j, ref in zip(joints.tolist(), refs.tolist()):
-        back, sign = ref >> 3, ref & 7
-        target, source = where.get(j), where.get(j - back)
-        if (
-            j <= previous
-            or back < 1
-            or target is None
-            or source is None
-            or not (const[rows[target]].all() and const[rows[source]].all())
-        ):
+        source = j - (ref >> 3)
+        if not (previous < j < len(index) and 0 <= source < j) or index[j] < 0 or index[source] < 0:
             raise CorruptStreamError("kinwave body's mirrored joints are damaged")
-        knots[rows[target], 0] += _SIGNS[sign] * knots[rows[source], 0]
+        at.append(index[j])
+        source_at.append(index[source])
         previous = j
+    targets, sources = rows[at], rows[source_at]
+    if not (const[targets].all() and const[sources].all()):
+        raise CorruptStreamError("kinwave body's mirrored joints are damaged")
+    signs = _SIGNS[refs & 7]
+    if set(at).isdisjoint(source_at):
+        knots[targets, 0] += signs * knots[sources, 0]
+        return
+    for k in range(len(at)):  # a reference mirrored itself comes back first: it is earlier
+        knots[targets[k], 0] += signs[k] * knots[sources[k], 0]

@@ -1,4 +1,4 @@
-"""kinwave's body, formats 1 and 2: what encoder and decoder share (the step codes, the
+"""kinwave's body, formats 1 to 3: what encoder and decoder share (the step codes, the
 reconstruction of channels from their integers, the coding forms and world-axis translations)
 and the decoder of a body.
 
@@ -18,6 +18,9 @@ as the translations; that frame is not coded, and the rest is a format 1 body of
 frames (:func:`rest_kind`); bits 2-3, the lead of the layout (:func:`trendwave.layout`); bit 4,
 constant translations at a finer quantum, bit 5 constant turns above translations too, bit 6
 constant translations about 0 instead of their joints' offsets (:class:`ConstantCoding`).
+Format 3 is format 2 with a count byte after the more flags: that many joints' constant
+translations are coded against an earlier joint's, some axes negated (the bones of a symmetric
+skeleton held in translation channels: :func:`mirrored_constants`).
 docs/formats.md gives the layout byte by byte.
 """
 

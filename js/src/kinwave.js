@@ -212,6 +212,7 @@ function translationTriples(skeleton) {
 // body.unmirror: the knots with each mirrored joint's constant knots plus its reference's, some
 // axes negated (a reference `back << 3 | signs`: `back` joints earlier, bit a negating axis a).
 function unmirror(skeleton, coded, K, joints, refs, offset) {
+  if (!K) throw damaged('its mirrored joints are damaged: it has no frame', offset);
   const knots = Float64Array.from(coded.knots);
   const triples = new Map(translationTriples(skeleton).map((t) => [t.joint, t.channels]));
   const held = (channels) => channels.every((c) => coded.constant[c]);

@@ -1103,6 +1103,8 @@ def test_mirrored_constants_come_back_whole_and_damaged_references_are_refused(w
     ):
         with pytest.raises(CorruptStreamError, match="mirrored joints are damaged"):
             unmirror(sk, flags, knots.copy(), np.array(bad_joints), np.array(bad_refs))
+    with pytest.raises(CorruptStreamError, match="it has no frame"):
+        unmirror(sk, const, knots[:, :0].copy(), mirrored, refs)
     motion = reexpress.with_position_channels(walk_amc[:60])
     data = bytearray(get_codec("kinwave", max_error_cm=1.0).encode(motion))
     assert data[0] == FORMAT_MIRRORED

@@ -634,6 +634,8 @@ def unmirror(skeleton: Skeleton, const: np.ndarray, knots: np.ndarray, joints: n
     reference checked."""
     _, rows = translation_triples(skeleton)
     index = _triple_of(skeleton).tolist()
+    if not knots.shape[1]:  # (a body of no frames has no knot to mirror)
+        raise CorruptStreamError("kinwave body's mirrored joints are damaged: it has no frame")
     at, source_at, previous = [], [], -1
     for j, ref in zip(joints.tolist(), refs.tolist()):
         source = j - (ref >> 3)

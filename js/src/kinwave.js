@@ -50,6 +50,9 @@ function planOf(skeleton) {
   const translation = [];
   const threeAngle = [];
   const base = new Float64Array(skeleton.numChannels);
+  // body.translation_triples: per joint with three translation channels, those channels in
+  // channel order (the joints whose constant translations a format 3 body may mirror).
+  const mirrorable = new Map();
   for (let j = 0; j < J; j++) {
     for (let a = 0; a < 3; a++) {
       const c = skeleton.posIndex[3 * j + a];
@@ -58,6 +61,8 @@ function planOf(skeleton) {
         base[c] = skeleton.offsets[3 * j + a];
       }
     }
+    const position = [0, 1, 2].map((a) => skeleton.posIndex[3 * j + a]);
+    if (position.every((c) => c >= 0)) mirrorable.set(j, position.sort((a, b) => a - b));
     const rot = [0, 1, 2].map((s) => skeleton.rotIndex[3 * j + s]).filter((c) => c >= 0);
     if (rot.length) rotationJoints.push({ joint: j, channels: rot });
     if (rot.length === 3) threeAngle.push({ joint: j, channels: rot, order: skeleton.joints[j].rotationOrder });
@@ -72,7 +77,7 @@ function planOf(skeleton) {
   }
   const turnOverTranslation = new Uint8Array(skeleton.numChannels);
   for (const { joint, channels } of rotationJoints) for (const c of channels) turnOverTranslation[c] = below[joint];
-  plan = { rotationJoints, translation, isTranslation, turnOverTranslation, threeAngle, base };
+  plan = { rotationJoints, translation, isTranslation, turnOverTranslation, threeAngle, base, mirrorable };
   plans.set(skeleton, plan);
   return plan;
 }
@@ -185,7 +190,7 @@ function withoutMore(body, frames, skeleton) {
   let after = HEAD_SIZE + 1;
   let mirrored = 0;
   if (mirroring) {
-    if (body.length <= after || body[after] < 1 || body[after] > translationTriples(skeleton).length) {
+    if (body.length <= after || body[after] < 1 || body[after] > planOf(skeleton).mirrorable.size) {
       throw damaged('its mirrored joint count is damaged', after);
     }
     mirrored = body[after];
@@ -198,23 +203,12 @@ function withoutMore(body, frames, skeleton) {
   return { body: inner, frames: rest ? frames - 1 : frames, rest, lead, fine, fineTurns, aboutZero, mirrored };
 }
 
-// body.translation_triples: per joint with three translation channels, { joint, channels } (in
-// channel order).
-function translationTriples(skeleton) {
-  const triples = [];
-  skeleton.joints.forEach((_, j) => {
-    const channels = [0, 1, 2].map((a) => skeleton.posIndex[3 * j + a]).filter((c) => c >= 0);
-    if (channels.length === 3) triples.push({ joint: j, channels: channels.sort((a, b) => a - b) });
-  });
-  return triples;
-}
-
 // body.unmirror: the knots with each mirrored joint's constant knots plus its reference's, some
 // axes negated (a reference `back << 3 | signs`: `back` joints earlier, bit a negating axis a).
-function unmirror(skeleton, coded, K, joints, refs, offset) {
+function unmirror(plan, coded, K, joints, refs, offset) {
   if (!K) throw damaged('its mirrored joints are damaged: it has no frame', offset);
   const knots = Float64Array.from(coded.knots);
-  const triples = new Map(translationTriples(skeleton).map((t) => [t.joint, t.channels]));
+  const triples = plan.mirrorable;
   const held = (channels) => channels.every((c) => coded.constant[c]);
   let previous = -1;
   joints.forEach((j, k) => {
@@ -272,7 +266,7 @@ export function readKinwave(whole, skeleton, allFrames) {
   }
   const at = sizes.map((_, k) => sizes.slice(0, k).reduce((a, b) => a + b, 0));
   const knots = mirrored
-    ? unmirror(skeleton, coded, lay.knotFrames.length, Array.from(cumulative(coded.side, at[6], mirrored)),
+    ? unmirror(plan, coded, lay.knotFrames.length, Array.from(cumulative(coded.side, at[6], mirrored)),
       coded.side.subarray(at[7], at[7] + mirrored), start)
     : coded.knots;
   const read = {

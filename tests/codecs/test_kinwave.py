@@ -1082,7 +1082,7 @@ def test_mirrored_constants_come_back_whole_and_damaged_references_are_refused(w
     from mocodec.errors import CorruptStreamError
 
     sk = reexpress.with_position_channels(walk_amc[:2]).skeleton
-    joints, rows = translation_triples(sk)
+    joints, rows, _ = translation_triples(sk)
     const = np.zeros(sk.num_channels, dtype=np.int64)
     const[rows.ravel()] = 1
     knots = np.random.default_rng(3).integers(-900, 900, (sk.num_channels, 2))

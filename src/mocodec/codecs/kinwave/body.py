@@ -557,17 +557,15 @@ def _decode_frames(
 
 
 @lru_cache(maxsize=64)
-def translation_triples(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
+def translation_triples(skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The joints with three translation channels (the joints whose constant translations may
-    be mirrored), and those channels ``(J3, 3)``."""
-    trans = ~skeleton.rotation_mask
-    joints, rows = [], []
-    for j in range(len(skeleton.joints)):
-        own = np.flatnonzero((skeleton.channel_joints == j) & trans)
-        if own.size == 3:
-            joints.append(j)
-            rows.append(own)
-    return np.array(joints, dtype=np.int64), np.array(rows, dtype=np.int64).reshape(-1, 3)
+    be mirrored), those channels in channel order ``(J3, 3)``, and per joint its index among
+    them (-1: not one of them)."""
+    positions = channel_plan(skeleton).pos_index
+    joints = np.flatnonzero((positions >= 0).all(axis=1))
+    index = np.full(len(positions), -1, dtype=np.int64)
+    index[joints] = np.arange(joints.size)
+    return joints, np.sort(positions[joints], axis=1), index
 
 
 _SIGNS = 1 - 2 * ((np.arange(8)[:, None] >> np.arange(3)) & 1)  # (8, 3): bit a negates axis a
@@ -591,7 +589,7 @@ def mirrored_constants(
     translation a is negated) and the knots with each of those joints' constant knots less
     its reference's (what the coder then codes; :func:`unmirror` undoes it)."""
     coded, none = knots.copy(), np.zeros(0, dtype=np.int64)
-    joints, rows = translation_triples(skeleton)
+    joints, rows, _ = translation_triples(skeleton)
     held = const[rows].all(axis=1)
     joints, rows = joints[held], rows[held]
     if not knots.shape[1] or joints.size < 2:  # (a body of no frames has no knot)
@@ -619,21 +617,12 @@ def mirrored_constants(
     return joints[picked[kept]], refs[kept], coded
 
 
-@lru_cache(maxsize=64)
-def _triple_of(skeleton: Skeleton) -> np.ndarray:
-    """Per joint, its index among :func:`translation_triples` (-1: not one of them)."""
-    index = np.full(len(skeleton.joints), -1, dtype=np.int64)
-    with_three, _ = translation_triples(skeleton)
-    index[with_three] = np.arange(with_three.size)
-    return index
-
-
 def unmirror(skeleton: Skeleton, const: np.ndarray, knots: np.ndarray, joints: np.ndarray, refs: np.ndarray) -> None:
     """Add back, in place in ``knots``, the references' constant knots that
     :func:`mirrored_constants` took off (a reference mirrored itself first), every joint and
     reference checked."""
-    _, rows = translation_triples(skeleton)
-    index = _triple_of(skeleton).tolist()
+    _, rows, index_of = translation_triples(skeleton)
+    index = index_of.tolist()
     if not knots.shape[1]:  # (a body of no frames has no knot to mirror)
         raise CorruptStreamError("kinwave body's mirrored joints are damaged: it has no frame")
     at, source_at, previous = [], [], -1

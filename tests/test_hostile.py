@@ -156,10 +156,11 @@ def test_a_spiht_packet_with_a_short_last_part_raises_a_mocodec_error(walk_bvh):
 
 # ----- 6, 7, 8, 14: crafted .moc files ------------------------------------------------------------------
 def test_a_moc_header_bomb_is_refused(walk_bvh):
-    data = bytearray(moc.pack(walk_bvh[:10], get_codec("raw")))
+    data = moc.pack(walk_bvh[:10], get_codec("raw"))
+    _, flags, head_at, head_len = container.read_opening(io.BytesIO(data), len(data), "x")
     head = bomb(4 * limits.MAX_HEADER_TEXT)
-    start = container.START.pack(container.MAGIC, container.VERSION, 0, len(head))
-    forged = start + head + struct.pack("<I", zlib.crc32(head)) + bytes(data[12:])
+    start = container.opening(container.VERSION, flags, len(head))
+    forged = start + head + struct.pack("<I", zlib.crc32(head)) + data[head_at + head_len + 4 :]
     with pytest.raises(CorruptStreamError, match="inflates to over"):
         moc.unpack(forged)
 

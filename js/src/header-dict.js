@@ -76,7 +76,7 @@ const BASE64 = [
 ].join('');
 const NEWEST = Uint8Array.from(atob(BASE64), (c) => c.charCodeAt(0));
 
-const LENGTHS = { 1: 4615, 2: 5304 };
+const LENGTHS = { 1: 4615, 2: 5304, 3: 5304 };
 export const HEADER_DICTIONARIES = Object.fromEntries(
   Object.entries(LENGTHS).map(([version, length]) => [version, NEWEST.subarray(0, length)]),
 );

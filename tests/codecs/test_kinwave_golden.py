@@ -1,8 +1,10 @@
-"""A whole .moc file pinned (container version 2, kinwave payload format 2: the rest pose, a
+"""A whole .moc file pinned (container version 3, kinwave payload format 2: the rest pose, a
 lead of 2 frames and fine turns in its more flags): a checked-in
 file (a CMU walk re-expressed as another pipeline writes it: a MotionBuilder dummy root at
 (0, -90, 0), a bind pose in frame 0, a proper Euler order on the legs) must decode to the
 same channels, and encoding its input with the same settings must give the very same bytes.
+The same file as container version 2 wrote it (an index and a footer after its one chunk) is
+kept too, and must decode to the same channels.
 
 Regenerate, after a deliberate format change only: ``PYTHONPATH=tests python tests/codecs/test_kinwave_golden.py``.
 """
@@ -23,6 +25,7 @@ from mocodec.kinematics import forward_kinematics
 from mocodec.metrics.pose import shell_errors
 
 GOLDEN = DATA / "kinwave_reexpressed.moc"
+GOLDEN_V2 = DATA / "kinwave_reexpressed_v2.moc"  # (regenerating GOLDEN leaves it as it is)
 KNOBS = {"max_error_cm": 0.5, "error_measure": "shell", "effort": 3}
 DECODED_SHA256 = "25281ad3604ef833a7b0859384d818652808dba2227c0a1b084e754bd48520f8"
 
@@ -49,9 +52,19 @@ def test_the_golden_file_decodes_to_the_same_channels_within_its_bound():
     p0, q0 = forward_kinematics(sk, original.channels)
     p1, q1 = forward_kinematics(decoded.skeleton, decoded.channels)
     assert shell_errors(sk, p0 * cm, q0, p1 * cm, q1).max <= KNOBS["max_error_cm"]
-    assert data[4] == 2  # .moc version 2
+    assert data[4] == 3  # .moc version 3
     chunk = container.open_container(io.BytesIO(data), len(data), "golden").read_chunk(0)
     assert chunk[0] == 2 and chunk[6] == REST | 2 << LEAD_SHIFT | FINE_TURNS  # payload format 2
+
+
+def test_the_version_2_golden_file_decodes_as_it_did():
+    old = GOLDEN_V2.read_bytes()
+    assert old[4] == 2 and old[-4:] == container.FOOTER_MAGIC
+    assert _decoded_digest(old) == DECODED_SHA256
+    files = (old, GOLDEN.read_bytes())
+    chunks = [container.open_container(io.BytesIO(d), len(d), "golden").read_chunk(0) for d in files]
+    # 3 bytes of start, the chunk's 2-byte length, a 9-byte index and the footer
+    assert chunks[0] == chunks[1] and len(old) == len(GOLDEN.read_bytes()) + 22
 
 
 def test_encoding_the_golden_input_gives_the_same_bytes():

@@ -139,48 +139,55 @@ def test_the_header_dictionaries_never_change():
     assert {v: hashlib.sha256(d).hexdigest() for v, d in DICTIONARIES.items()} == {
         1: "fa16a5c4da355da4b2481bff71f69fe0fc2fce99e1b69dbf02ea2352496ff950",
         2: "89467d50e04087e1cca088665075390e4794022d2138237d9b9b0cbebbe5c8c9",
+        3: "89467d50e04087e1cca088665075390e4794022d2138237d9b9b0cbebbe5c8c9",
     }
     assert DICTIONARIES[2].startswith(DICTIONARIES[1])
 
 
-def test_a_version_1_file_reads_as_it_did(walk_bvh):
-    """A file of version 1 (its header deflated with version 1's dictionary) reads to the same
-    motion as the version 2 file of the same chunks, whose header the newer dictionary makes
-    smaller for kinwave's settings."""
+def test_files_of_versions_1_and_2_read_as_they_did(walk_bvh):
+    """The same chunks written as versions 1 and 2 (fixed-width start, index and footer; version
+    1's header deflated with an older dictionary) read to the same motion as the version 3
+    file, whose header the newer dictionary makes smaller for kinwave's settings and whose one
+    chunk needs neither its length, an index nor a footer."""
     import io
-    import zlib
-
-    from mocodec.formats.header_dict import DICTIONARIES
 
     data = moc.pack(walk_bvh[:40], get_codec("kinwave", max_error_cm=1.0, error_measure="shell"))
-    assert data[4:6] == bytes([2, 0])
-    start = container.START.unpack_from(data)
-    head = data[container.START.size : container.START.size + start[3]]
-    text = zlib.decompressobj(zdict=DICTIONARIES[2]).decompress(head)
-    deflate = zlib.compressobj(9, zdict=DICTIONARIES[1])
-    old_head = deflate.compress(text) + deflate.flush()
-    version_1 = (
-        container.START.pack(container.MAGIC, 1, start[2], len(old_head))
-        + old_head
-        + zlib.crc32(old_head).to_bytes(4, "little")
-        + data[container.START.size + start[3] + 4 :]
-    )
-    assert len(version_1) > len(data) + 10
-    old, new = moc.unpack(version_1), moc.unpack(data)
-    assert np.array_equal(old.channels, new.channels) and old.skeleton == new.skeleton
-    c = container.open_container(io.BytesIO(version_1), len(version_1), "old.moc")
-    assert c.read_chunk(0) == container.open_container(io.BytesIO(data), len(data), "new.moc").read_chunk(0)
+    assert data[4:6] == bytes([3, 0])
+    c = container.open_container(io.BytesIO(data), len(data), "new.moc")
+    header = {**c.header, "skeleton": c.skeleton}
+    chunks = [container.Chunk(0, c.frames, c.read_chunk(0))]
+    older = {v: container.pack(header, chunks, version=v) for v in (1, 2)}
+    assert older[1][4:6] == bytes([1, 0]) and older[2][4:6] == bytes([2, 0])
+    assert len(older[1]) > len(older[2]) + 10 and len(older[2]) == len(data) + 21
+    new = moc.unpack(data)
+    for old_data in older.values():
+        old = moc.unpack(old_data)
+        assert np.array_equal(old.channels, new.channels) and old.skeleton == new.skeleton
+        assert container.open_container(io.BytesIO(old_data), len(old_data), "old.moc").read_chunk(0) == chunks[0].body
+    with pytest.raises(ValueError, match="version 4 is not one"):
+        container.pack(header, chunks, version=4)
 
 
-def test_framing_costs_38_bytes(walk_bvh):
-    """Start and header CRC (16 bytes), one chunk's length and CRC (6 for a body under 16 KB),
-    the index (8) and the footer (8): 30 bytes fewer than version 2's 68, which also kept each
-    payload's 17-byte envelope."""
+def test_framing_costs_17_bytes_for_one_chunk(walk_bvh, long_walk):
+    """Version 3: the start (magic, version, one-byte flags, the header's length: 8 bytes under
+    128 header bytes, 9 under 16 KB), the header's CRC and the one chunk's CRC: 38 bytes in
+    version 2, with the chunk's length, the index and the footer. A file of more chunks keeps
+    them, with version 2's framing but for the start (6 bytes a chunk under 16 KB)."""
+    import io
+
     clip = walk_bvh[:20]
     data = moc.pack(clip, get_codec("raw"), embed_skeleton=False)
-    c = container.open_container(__import__("io").BytesIO(data), len(data), "f.moc", clip.skeleton)
-    head_len = int.from_bytes(data[8:12], "little")
-    assert len(data) - head_len - len(c.read_chunk(0)) == 38
+    version, flags, head_at, head_len = container.read_opening(io.BytesIO(data), len(data), "f.moc")
+    assert (version, flags, head_at) == (3, container.FLAG_ONE_CHUNK, 8) and head_len < 128
+    c = container.open_container(io.BytesIO(data), len(data), "f.moc", clip.skeleton)
+    assert len(data) - head_len - len(c.read_chunk(0)) == 16
+    two = moc.pack(long_walk[:64], get_codec("kinwave"), chunk_frames=32, embed_skeleton=False)
+    version, flags, head_at, head_len = container.read_opening(io.BytesIO(two), len(two), "f.moc")
+    c = container.open_container(io.BytesIO(two), len(two), "f.moc", long_walk.skeleton)
+    assert flags == 0 and len(c.index) == 2
+    bodies = sum(len(c.read_chunk(k)) for k in range(2))
+    index = 1 + 2 * 3 + 4  # a count, each chunk's frames and bytes, a CRC
+    assert len(two) - head_len - bodies == head_at + 4 + 2 * 6 + index + 8
 
 
 def test_common_skeletons_cost_a_few_hundred_bytes(walk_bvh, walk_amc):
@@ -216,9 +223,13 @@ def test_lossy_files_round_the_skeleton_offsets(walk_bvh, walk_amc):
 
 def test_other_versions_and_unknown_flags_are_refused(walk_bvh):
     data = moc.pack(walk_bvh[:8], get_codec("raw"))
-    assert data[4:6] == bytes([2, 0])  # .moc version 2
-    for version in (0, 3):
-        with pytest.raises(CorruptStreamError, match=f"version {version}; this mocodec reads versions 1 and 2"):
+    assert data[4:6] == bytes([3, 0])  # .moc version 3
+    for version in (0, 4):
+        with pytest.raises(CorruptStreamError, match=f"version {version}; this mocodec reads versions 1, 2, 3"):
             moc.unpack(data[:4] + bytes([version, 0]) + data[6:])
-    with pytest.raises(CorruptStreamError, match="flags"):
-        moc.unpack(data[:6] + bytes([data[6] | 2]) + data[7:])
+    with pytest.raises(CorruptStreamError, match="flags 0x0007 at byte 6 set bits version 3 does not define"):
+        moc.unpack(data[:6] + bytes([data[6] | 4]) + data[7:])
+    old = moc.pack(walk_bvh[:8], get_codec("raw"), chunk_frames=4)
+    version_2 = data[:4] + bytes([2, 0]) + old[6:]  # version 2 knows no flag 1 (one chunk)
+    with pytest.raises(CorruptStreamError, match="set bits version 2 does not define"):
+        moc.unpack(version_2[:6] + bytes([3, 0]) + version_2[8:])

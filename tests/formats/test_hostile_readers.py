@@ -141,7 +141,7 @@ def test_deep_json_is_a_one_line_error(tmp_path, walk_bvh):
         load(tmp_path / "deep.gltf")
     header = json.dumps({"codec": {"codec": "raw"}, "deep": "X"}).replace('"X"', "[" * 8000 + "]" * 8000)
     head = zlib.compress(header.encode())
-    start = container.START.pack(container.MAGIC, container.VERSION, 0, len(head))
+    start = container.opening(container.VERSION, 0, len(head))
     data = start + head + zlib.crc32(head).to_bytes(4, "little") + b"\0" * 16
     with pytest.raises(CorruptStreamError, match="does not parse"):
         moc.unpack(data)

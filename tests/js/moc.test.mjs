@@ -12,7 +12,7 @@ import { HEADER_DICTIONARIES } from '../../js/src/header-dict.js';
 import { chunkBody } from '../../js/src/moc.js';
 import { readKinwave } from '../../js/src/kinwave.js';
 import { CODE_STEP, twoToEighths } from '../../js/src/steps.js';
-import { crc32, u32 } from '../../js/src/bytes.js';
+import { crc32, readVarint, u16, u32 } from '../../js/src/bytes.js';
 import { seeded } from './seeded.mjs';
 
 const MOC = new URL('../data/moc/', import.meta.url);
@@ -137,22 +137,53 @@ async function expectDecodeError(data, pattern = null) {
   return null;
 }
 
-// A .moc with its header's JSON replaced (deflated with the dictionary of ``version``, the
-// file's own by default, which the file then says; CRC recomputed).
-function withHeader(data, edit, version = data[4]) {
-  const headLength = u32(data, 8);
-  const text = inflateSync(data.subarray(12, 12 + headLength), { dictionary: HEADER_DICTIONARIES[data[4]] });
-  const split = text.indexOf(0);
-  const doc = edit(JSON.parse(text.subarray(0, split).toString()));
-  const head = deflateSync(Buffer.concat([Buffer.from(JSON.stringify(doc)), text.subarray(split)]), { dictionary: HEADER_DICTIONARIES[version] });
-  const out = new Uint8Array(data.length - headLength + head.length);
-  out.set(data.subarray(0, 8));
-  out[4] = version;
-  new DataView(out.buffer).setUint32(8, head.length, true);
-  out.set(head, 12);
-  new DataView(out.buffer).setUint32(12 + head.length, crc32(head, 0, head.length), true);
-  out.set(data.subarray(16 + headLength), 16 + head.length);
+function varint(value) {
+  const out = [];
+  for (; value > 0x7f; value = Math.floor(value / 128)) out.push((value & 0x7f) | 0x80);
+  out.push(value);
+  return Uint8Array.from(out);
+}
+
+function withCrc(bytes) {
+  const out = new Uint8Array(bytes.length + 4);
+  out.set(bytes);
+  new DataView(out.buffer).setUint32(bytes.length, crc32(bytes, 0, bytes.length), true);
   return out;
+}
+
+// A .moc with its header's JSON replaced, deflated with the dictionary of ``version`` (the file's
+// own by default), in that version's layout: versions 1 and 2 have a fixed-width start, and a
+// one-chunk file of version 3 gets back its chunk's length, index and footer (CRCs recomputed).
+function withHeader(data, edit, version = data[4]) {
+  let [flags, headAt, headLength] = [u16(data, 6), 12, u32(data, 8)];
+  if (data[4] >= 3) {
+    let pos;
+    [flags, pos] = readVarint(data, 6);
+    [headLength, headAt] = readVarint(data, pos);
+  }
+  const text = inflateSync(data.subarray(headAt, headAt + headLength), { dictionary: HEADER_DICTIONARIES[data[4]] });
+  const split = text.indexOf(0);
+  const json = JSON.parse(text.subarray(0, split).toString());
+  const head = deflateSync(Buffer.concat([Buffer.from(JSON.stringify(edit(json))), text.subarray(split)]), { dictionary: HEADER_DICTIONARIES[version] });
+  let chunks = data.subarray(headAt + headLength + 4);
+  if (flags & 2 && version < 3) {
+    const body = chunks.subarray(0, chunks.length - 4);
+    const chunk = withCrc(Buffer.concat([varint(body.length), body]));
+    const index = withCrc(Buffer.concat([varint(1), varint(json.frames), varint(chunk.length)]));
+    const footer = Buffer.alloc(8);
+    footer.writeUInt32LE(index.length);
+    footer.write('MOCX', 4);
+    [flags, chunks] = [flags & 1, Buffer.concat([chunk, index, footer])];
+  }
+  const start = Buffer.alloc(version >= 3 ? 6 : 12);
+  start.write('MOC1');
+  start.writeUInt16LE(version, 4);
+  if (version < 3) {
+    start.writeUInt16LE(flags, 6);
+    start.writeUInt32LE(head.length, 8);
+  }
+  const sizes = version >= 3 ? [varint(flags), varint(head.length)] : [];
+  return Uint8Array.from(Buffer.concat([start, ...sizes, withCrc(head), chunks]));
 }
 
 test('hostile headers: clear errors naming what is wrong', async () => {
@@ -164,23 +195,34 @@ test('hostile headers: clear errors naming what is wrong', async () => {
   await expectDecodeError(withHeader(data, (h) => ({ ...h, codec: 3 })), /codec/);
   const decoded = await decodeMoc(withHeader(data, (h) => h));
   assert.equal(decoded.frames, (await decodeMoc(data)).frames);
-  await expectDecodeError(data.subarray(0, 10), /not a .moc file/);
-  await expectDecodeError(Uint8Array.from(data, (b, i) => (i === 4 ? 3 : b)), /version 3; this decoder reads versions 1 and 2/);
+  await expectDecodeError(data.subarray(0, 5), /not a .moc file/);
+  await expectDecodeError(data.subarray(0, 10), /a header of \d+ bytes does not fit in the file/);
+  await expectDecodeError(Uint8Array.from(data, (b, i) => (i === 4 ? 4 : b)), /version 4; this decoder reads versions 1, 2, 3/);
+  await expectDecodeError(Uint8Array.from(data, (b, i) => (i === 6 ? b | 4 : b)), /flags 7 set bits version 3 does not define/);
+  const older = withHeader(data, (h) => h, 2);
+  await expectDecodeError(Uint8Array.from(older, (b, i) => (i === 6 ? b | 2 : b)), /flags 3 set bits version 2 does not define/);
 });
 
-test('a version 1 file (its header deflated with the first dictionary) decodes as the version 2 file', async () => {
-  const { data } = await fixture('asf-30fps-shell');
-  assert.equal(data[4], 2);
-  const old = withHeader(data, (h) => h, 1);
-  assert.equal(old[4], 1);
-  assert.ok(old.length > data.length, 'the newer dictionary holds kinwave\'s settings');
-  const [a, b] = [await decodeMoc(old), await decodeMoc(data)];
-  assert.equal(a.frames, b.frames);
-  assert.deepEqual(Array.from(a.channels), Array.from(b.channels));
+test('files of versions 1 and 2 (a fixed-width start, an index; version 1\'s first dictionary) decode as the version 3 file', async () => {
+  for (const name of ['asf-30fps-shell', 'bvh-joint']) {
+    const { data } = await fixture(name);
+    assert.equal(data[4], 3);
+    const b = await decodeMoc(data);
+    const sizes = [];
+    for (const version of [1, 2]) {
+      const old = withHeader(data, (h) => h, version);
+      assert.equal(old[4], version);
+      sizes.push(old.length);
+      const a = await decodeMoc(old);
+      assert.equal(a.frames, b.frames);
+      assert.deepEqual(Array.from(a.channels), Array.from(b.channels));
+    }
+    assert.ok(sizes[0] > sizes[1] && sizes[1] > data.length, 'the newer dictionary holds kinwave\'s settings; version 3 frames one chunk in fewer bytes');
+  }
 });
 
 test('an index claiming more chunks than its bytes hold is refused before it is read', async () => {
-  const { data } = await fixture('asf-30fps-shell');
+  const { data } = await fixture('bvh-joint');
   const file = await openMoc(data);
   const last = file.chunks.at(-1);
   const indexAt = last.offset + last.size;

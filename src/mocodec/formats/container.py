@@ -1,23 +1,29 @@
 """The .moc container: a coded motion that decodes on its own, with random access.
 
-Layout (little-endian; version 2, docs/formats.md gives it byte by byte; version 1 differs only
-in its header's dictionary, and is read as well)::
+Layout (little-endian; version 3, docs/formats.md gives it byte by byte; versions 1 and 2
+are read as well)::
 
-    "MOC1"  u16 version  u16 flags (bit 0: the header holds a compact skeleton)
-    u32 header length, header (zlib, deflated with the version's preset dictionary of
+    "MOC1"  u16 version  varint flags (bit 0: the header holds a compact skeleton; bit 1: one
+        chunk, without framing or index)
+    varint header length, header (zlib, deflated with the version's preset dictionary of
         :mod:`mocodec.formats.header_dict`), holding JSON with the codec
         config, fps, frame count, chunk size and, without flag 0, the skeleton's id; with
         flag 0, a zero byte and the compact skeleton of :mod:`mocodec.formats.skeleton_bin`
         follow the JSON;
         u32 CRC32 of the header bytes
+    with flag 1, the one chunk: the codec's body of every frame, u32 CRC32 of the body, to the
+        end of the file; else
     chunks: varint body length, the codec's body (:meth:`Codec.encode`: its frame count and
             rate are the index's and the header's), u32 CRC32 of the length and the body
     index:  varint chunk count, per chunk (varint frame count, varint bytes of the chunk),
             u32 CRC32 of the index
     footer: u32 index length, "MOCX"
 
-Chunks follow the header back to back, so the index's sizes give every chunk's offset and its
-frame counts every chunk's first frame. The index at the end lets a reader fetch only the
+Versions 1 and 2 have a u16 flags and a u32 header length, and no flag 1; version 1's header
+dictionary is another. A clip of one chunk (up to ``chunk_frames`` frames) pays 17 bytes of
+framing, the smallest that still checks each part (38 in version 2, which a short clip
+feels). Chunks follow the header back to back, so the index's sizes give every chunk's offset
+and its frame counts every chunk's first frame. The index at the end lets a reader fetch only the
 chunks that cover a frame range. Every part is length-checked and CRC-checked before it is
 used, and a failure raises :class:`~mocodec.errors.CorruptStreamError` naming the part (chunk
 number) and byte offset.
@@ -50,13 +56,16 @@ from mocodec.skeleton import Joint, Skeleton
 
 MAGIC = b"MOC1"
 FOOTER_MAGIC = b"MOCX"
-VERSION = 2  # what is written; every version of DICTIONARIES is read (2: a newer header dictionary)
+VERSION = 3  # what is written; every version of DICTIONARIES is read (3: varint start, one-chunk files)
+VARINT_START = 3  # the first version whose flags and header length are varints
 MAX_HEADER = 1 << 24
 MAX_CHUNKS = 1 << 20
 #: The smallest chunk: a one-byte length, no body, a CRC-32.
 MIN_CHUNK_BYTES = 5
 FLAG_SKELETON = 1
-START = struct.Struct("<4sHHI")  # magic, version, flags, header length
+FLAG_ONE_CHUNK = 2
+START = struct.Struct("<4sHHI")  # versions 1 and 2: magic, version, flags, header length
+OPENING = struct.Struct("<4sH")  # every version: magic, version
 FOOTER = struct.Struct("<I4s")  # index length, footer magic
 _U32 = struct.Struct("<I")
 
@@ -125,10 +134,13 @@ class Chunk:
     body: bytes
 
 
-def pack(header: dict, chunks: list[Chunk], embed_skeleton: bool = True) -> bytes:
+def pack(header: dict, chunks: list[Chunk], embed_skeleton: bool = True, version: int = VERSION) -> bytes:
     """The whole container as bytes. ``header`` holds codec, fps, frames, chunk_frames and
     ``skeleton`` (a :class:`Skeleton`), which is stored whole or, with ``embed_skeleton=False``,
-    as its id."""
+    as its id. ``version``: an older one for an older reader (a one-chunk file then keeps
+    its index)."""
+    if version not in DICTIONARIES:
+        raise ValueError(f".moc version {version} is not one this mocodec writes")
     skeleton = header["skeleton"]
     meta = {k: v for k, v in header.items() if k != "skeleton"}
     if not embed_skeleton:
@@ -136,22 +148,34 @@ def pack(header: dict, chunks: list[Chunk], embed_skeleton: bool = True) -> byte
     text = json.dumps(meta, separators=(",", ":"), allow_nan=False).encode()
     if embed_skeleton:
         text += b"\0" + pack_skeleton(skeleton)
-    deflate = zlib.compressobj(9, zdict=DICTIONARIES[VERSION])
+    deflate = zlib.compressobj(9, zdict=DICTIONARIES[version])
     head = deflate.compress(text) + deflate.flush()
-    flags = FLAG_SKELETON if embed_skeleton else 0
-    out = bytearray(START.pack(MAGIC, VERSION, flags, len(head)) + head + _U32.pack(zlib.crc32(head)))
-    index = bytearray(varint.pack(len(chunks)))
     expected = 0
     for chunk in chunks:
         if chunk.first != expected or chunk.count < 1:
             raise ValueError(f"chunk of frames {chunk.first}+{chunk.count} does not follow frame {expected}")
         expected += chunk.count
+    one_chunk = len(chunks) == 1 and version >= VARINT_START
+    flags = (FLAG_SKELETON if embed_skeleton else 0) | (FLAG_ONE_CHUNK if one_chunk else 0)
+    out = bytearray(opening(version, flags, len(head)) + head + _U32.pack(zlib.crc32(head)))
+    if flags & FLAG_ONE_CHUNK:
+        return bytes(out + chunks[0].body + _U32.pack(zlib.crc32(chunks[0].body)))
+    index = bytearray(varint.pack(len(chunks)))
+    for chunk in chunks:
         framed = varint.pack(len(chunk.body)) + chunk.body
         index += varint.pack(chunk.count) + varint.pack(len(framed) + 4)
         out += framed + _U32.pack(zlib.crc32(framed))
     index += _U32.pack(zlib.crc32(index))
     out += index + FOOTER.pack(len(index), FOOTER_MAGIC)
     return bytes(out)
+
+
+def opening(version: int, flags: int, head_len: int) -> bytes:
+    """A file's first bytes, up to its header: magic, version, flags and header length (fixed
+    widths before VARINT_START, varints from it)."""
+    if version < VARINT_START:
+        return START.pack(MAGIC, version, flags, head_len)
+    return OPENING.pack(MAGIC, version) + varint.pack(flags) + varint.pack(head_len)
 
 
 def inflate_capped(data: bytes, zdict: bytes, limit: int) -> bytes:
@@ -196,6 +220,7 @@ class Container:
     header: dict
     skeleton: Skeleton
     index: tuple[IndexEntry, ...]
+    one_chunk: bool = False  # the file's one chunk is the body and its CRC, without a length
 
     @property
     def frames(self) -> int:
@@ -214,7 +239,7 @@ class Container:
         e = self.index[k]
         where = f"{self.name}: chunk {k} at byte {e.offset}"
         body = _read_at(self.source, e.offset, e.size, self.size, where)
-        length, start = _read_varint(body, 0, where)
+        length, start = (e.size - 4, 0) if self.one_chunk else _read_varint(body, 0, where)
         if start + length + 4 != e.size:
             raise CorruptStreamError(
                 f"{where}: a {length}-byte body does not fill the {e.size} bytes the index gives the chunk"
@@ -237,20 +262,12 @@ def _read_at(source: BinaryIO, offset: int, length: int, size: int, where: str) 
 def open_container(source: BinaryIO, size: int, name: str, skeleton: Skeleton | None = None) -> Container:
     """Read and check the header, footer and index of a container. ``skeleton`` is needed for
     a file that holds only its skeleton's id (and is ignored for one that holds the skeleton)."""
-    start = _read_at(source, 0, START.size, size, f"{name}: header")
-    magic, version, flags, head_len = START.unpack(start)
-    if magic != MAGIC:
-        raise CorruptStreamError(f"{name}: not a .moc file (starts with {magic!r}, expected {MAGIC!r})")
-    if version not in DICTIONARIES:
-        known = " and ".join(map(str, DICTIONARIES))
-        raise CorruptStreamError(f"{name}: .moc version {version}; this mocodec reads versions {known}")
-    if flags & ~FLAG_SKELETON:
-        raise CorruptStreamError(f"{name}: flags {flags:#06x} at byte 6 set bits this version does not define")
+    version, flags, head_at, head_len = read_opening(source, size, name)
     if head_len > MAX_HEADER:
-        raise CorruptStreamError(f"{name}: header length {head_len} at byte 8 is implausible")
-    head = _read_at(source, START.size, head_len + 4, size, f"{name}: header")
+        raise CorruptStreamError(f"{name}: header length {head_len} before byte {head_at} is implausible")
+    head = _read_at(source, head_at, head_len + 4, size, f"{name}: header")
     if zlib.crc32(head[:-4]) != _U32.unpack(head[-4:])[0]:
-        raise CorruptStreamError(f"{name}: header CRC mismatch at byte {START.size}, the header is damaged")
+        raise CorruptStreamError(f"{name}: header CRC mismatch at byte {head_at}, the header is damaged")
     try:
         text = inflate_capped(head[:-4], DICTIONARIES[version], limits.MAX_HEADER_TEXT)
         if flags & FLAG_SKELETON:
@@ -266,7 +283,7 @@ def open_container(source: BinaryIO, size: int, name: str, skeleton: Skeleton | 
         if not isinstance(header["codec"], dict):
             raise ValueError("the codec config is not an object")
     except (ValueError, KeyError, TypeError, AttributeError, OverflowError, RecursionError, zlib.error) as e:
-        raise CorruptStreamError(f"{name}: header at byte {START.size} does not parse ({e})") from None
+        raise CorruptStreamError(f"{name}: header at byte {head_at} does not parse ({e})") from None
     if embedded is None:
         if skeleton is None:
             raise SkeletonMismatchError(
@@ -281,13 +298,44 @@ def open_container(source: BinaryIO, size: int, name: str, skeleton: Skeleton | 
     assert skeleton is not None  # a file without its skeleton was given one above
     if frames < 0 or not limits.fps_ok(fps):
         raise CorruptStreamError(f"{name}: header says {frames} frames at {fps} fps")
-    chunks_at = START.size + head_len + 4
+    chunks_at = head_at + head_len + 4
+    if flags & FLAG_ONE_CHUNK:
+        if not 0 < frames <= limits.MAX_PAYLOAD_FRAMES or size - chunks_at < 4:
+            raise CorruptStreamError(
+                f"{name}: a chunk of {frames} frames in the {size - chunks_at} bytes from byte {chunks_at} is invalid"
+            )
+        whole = IndexEntry(chunks_at, 0, frames, size - chunks_at)
+        return Container(source, size, name, header, skeleton, (whole,), one_chunk=True)
     index = _index(source, size, name, chunks_at)
     if sum(e.count for e in index) != frames:
         raise CorruptStreamError(
             f"{name}: the index's chunks cover {sum(e.count for e in index)} frames, the header says {frames}"
         )
     return Container(source, size, name, header, skeleton, index)
+
+
+def read_opening(source: BinaryIO, size: int, name: str) -> tuple[int, int, int, int]:
+    """(version, flags, where the header starts, its length) from a file's first bytes, checked."""
+    magic, version = OPENING.unpack(_read_at(source, 0, OPENING.size, size, f"{name}: header"))
+    if magic != MAGIC:
+        raise CorruptStreamError(f"{name}: not a .moc file (starts with {magic!r}, expected {MAGIC!r})")
+    if version not in DICTIONARIES:
+        known = ", ".join(map(str, DICTIONARIES))
+        raise CorruptStreamError(f"{name}: .moc version {version}; this mocodec reads versions {known}")
+    if version < VARINT_START:
+        _, _, flags, head_len = START.unpack(_read_at(source, 0, START.size, size, f"{name}: header"))
+        head_at, defined = START.size, FLAG_SKELETON
+    else:
+        where = f"{name}: start"
+        start = _read_at(source, 0, min(size, OPENING.size + 8), size, where)
+        flags, pos = _read_varint(start, OPENING.size, where)
+        head_len, head_at = _read_varint(start, pos, where)
+        defined = FLAG_SKELETON | FLAG_ONE_CHUNK
+    if flags & ~defined:
+        raise CorruptStreamError(
+            f"{name}: flags {flags:#06x} at byte {OPENING.size} set bits version {version} does not define"
+        )
+    return version, flags, head_at, head_len
 
 
 def _index(source: BinaryIO, size: int, name: str, chunks_at: int) -> tuple[IndexEntry, ...]:

@@ -11,7 +11,7 @@ Both ends must hold the very same bytes: a dictionary is part of the file format
 never change (a new one needs a new container version); a test checks their hashes.
 :data:`DICTIONARIES` gives each container version's: version 2's ends with the settings of
 kinwave's knobs as they are since its effort levels and chunk-long segments (in version 1's,
-a kinwave header cost 16-35 bytes more).
+a kinwave header cost 16-35 bytes more); version 3 keeps version 2's.
 """
 
 from __future__ import annotations
@@ -241,5 +241,6 @@ _SETTINGS_2 = [
     {"codec": {"codec": "kinwave", "knobs": _KINWAVE_KNOBS_2}, "fps": 120.0, "frames": 1000, "chunk_frames": 1024},
 ]
 
-#: Each .moc container version's preset dictionary.
+#: Each .moc container version's preset dictionary (version 3 changed the framing, not this).
 DICTIONARIES = {1: DICTIONARY, 2: DICTIONARY + _settings(_SETTINGS_2)}
+DICTIONARIES[3] = DICTIONARIES[2]

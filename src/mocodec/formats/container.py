@@ -19,17 +19,17 @@ are read as well)::
             u32 CRC32 of the index
     footer: u32 index length, "MOCX"
 
-Versions 1 and 2 have a u16 flags and a u32 header length, and no flag 1; version 1's header
-dictionary is another. A clip of one chunk (up to ``chunk_frames`` frames) pays 17 bytes of
-framing, the smallest that still checks each part (38 in version 2, which a short clip
-feels). Chunks follow the header back to back, so the index's sizes give every chunk's offset
-and its frame counts every chunk's first frame. The index at the end lets a reader fetch only the
-chunks that cover a frame range. Every part is length-checked and CRC-checked before it is
-used, and a failure raises :class:`~mocodec.errors.CorruptStreamError` naming the part (chunk
+Versions 1 and 2 have a u16 flags and a u32 header length, and no flag 1; each version has
+its header dictionary (:data:`~mocodec.formats.header_dict.DICTIONARIES`). A clip of one
+chunk (up to ``chunk_frames`` frames) pays 17 bytes of framing, the smallest that still checks
+each part (38 in version 2, which a short clip feels). Chunks follow the header back to back,
+so the index's sizes give every chunk's offset and its frame counts every chunk's first frame.
+The index at the end lets a reader fetch only the chunks that cover a frame range. Every part
+is length-checked and CRC-checked before it is used, and a failure raises :class:`~mocodec.errors.CorruptStreamError` naming the part (chunk
 number) and byte offset.
 
-A file can hold its skeleton (self-contained: about 310 bytes for the 57 joints of the CMU BVH
-skeletons in a lossy file, 530 for CMU ASF ones) or only the skeleton's id, a hash of its
+A file can hold its skeleton (self-contained: about 250 bytes for the 57 joints of the CMU BVH
+skeletons in a lossy file, 460 for CMU ASF ones) or only the skeleton's id, a hash of its
 canonical form: a library of clips on one skeleton, or a stream whose receiver already has it,
 then pays 32 bytes instead; the reader must be given the skeleton, and a skeleton with another
 id is refused.

@@ -11,7 +11,8 @@ Both ends must hold the very same bytes: a dictionary is part of the file format
 never change (a new one needs a new container version); a test checks their hashes.
 :data:`DICTIONARIES` gives each container version's: version 2's ends with the settings of
 kinwave's knobs as they are since its effort levels and chunk-long segments (in version 1's,
-a kinwave header cost 16-35 bytes more); version 3 keeps version 2's.
+a kinwave header cost 16-35 bytes more); version 3's ends with the parent and channel columns
+of common skeletons (about 50 bytes less for a CMU skeleton's header).
 """
 
 from __future__ import annotations
@@ -22,6 +23,19 @@ import json
 def _name_column(names: str) -> bytes:
     """Names as the compact skeleton writes them: each preceded by its length (one byte)."""
     return b"".join(bytes([len(n)]) + n.encode() for n in names.split())
+
+
+def _parent_column(distances: str) -> bytes:
+    """Parents as the compact skeleton writes them: each joint's distance back to its parent
+    (0 for a root), a one-byte varint each."""
+    return bytes(int(d) for d in distances.split())
+
+
+def _channel_column(lists: str) -> bytes:
+    """Channel lists as the compact skeleton writes them: a count, then each channel's index
+    in ``Xposition Yposition Zposition Xrotation Yrotation Zrotation``; one word per joint,
+    ``xyz`` for positions, ``XYZ`` for rotations, in their order, ``-`` for none."""
+    return b"".join(bytes([len(w.strip("-"))] + ["xyzXYZ".index(c) for c in w.strip("-")]) for w in lists.split())
 
 
 def _end_sites(names: str, ends: str) -> str:
@@ -241,6 +255,46 @@ _SETTINGS_2 = [
     {"codec": {"codec": "kinwave", "knobs": _KINWAVE_KNOBS_2}, "fps": 120.0, "frames": 1000, "chunk_frames": 1024},
 ]
 
-#: Each .moc container version's preset dictionary (version 3 changed the framing, not this).
+# .moc version 3: the hierarchies and channel lists of the common skeletons above, as the
+# compact skeleton's parent and channel columns (their names cost a few bytes already; without
+# these a parent column cost about 25 bytes and a channel column up to 30, of a 6-frame clip's
+# 600-byte file). The CMU skeletons as the cgspeed BVH conversion writes them (end sites, ZXY),
+# as Blender's FBX export of those writes them (no end sites, ZYX) and as an FBX pipeline into
+# a game engine writes them (a rotation-only root above the hips, every joint translating:
+# benchmarks/common.py's game exports); the CMU ASF skeletons; the Bandai Namco MotionBuilder
+# skeleton (Unity's names with _L/_R suffixes). The most common last.
+_CGSPEED_NO_ENDS = " ".join(n for n in _CMU_DAZ.split() if not n.endswith("_end"))
+_CGSPEED_PARENTS = (
+    "0 1 1 1 1 1 1 3 1 7 1 1 1 1 1 1 4 1 1 7 1 1 10 1 1 13 1 1 26 1 1 1 1 1 1 4 1 1 7 1 1 10 1 1 13 1 1 47 "
+    "1 1 1 1 52 1 1 1 1"
+)
+_CGSPEED_CHANNELS = "xyzZYX ZXY ZXY ZXY ZXY ZXY - ZXY - " + " ".join(
+    ["ZXY ZXY ZXY ZXY " + "ZXY ZXY - " * 5] * 2 + ["ZXY ZXY ZXY ZXY -"] * 2
+)
+_BLENDER_CMU_PARENTS = "0 1 1 1 1 1 2 5 1 1 1 1 1 3 1 5 1 7 1 9 1 19 1 1 1 1 1 3 1 5 1 7 1 9 1 35 1 1 1 39 1 1 1"
+_GAME_CMU_CHANNELS = "ZXY xyzZYX " + " ".join("xyzZXY" if w != "-" else w for w in _CGSPEED_CHANNELS.split()[1:])
+_CMU_ASF_PARENTS = "0 1 1 1 1 1 1 7 1 1 1 1 1 13 1 1 1 1 1 1 5 1 1 1 1 1 1 4 1 14 1 1 1 1 1 1 4 1"
+_CMU_ASF_CHANNELS = (
+    "xyzXYZ - XYZ X XZ X - - XYZ X XZ X - XYZ XYZ XYZ XYZ XYZ XYZ - YZ XYZ X Y XZ X - XZ - YZ XYZ X Y XZ X - XZ -"
+)
+_BANDAI_PARENTS = "0 1 1 1 1 1 1 4 1 1 1 1 9 1 1 1 1 16 1 1 1 1 21 1 1 1 1"
+_BANDAI_CHANNELS = " ".join(["xyzZXY"] * 6 + ["-"] + (["xyzZXY"] * 4 + ["-"]) * 4)
+_HIERARCHIES_3 = b"".join(
+    [
+        _parent_column(_CMU_ASF_PARENTS),
+        _channel_column(_CMU_ASF_CHANNELS),
+        _parent_column(_BANDAI_PARENTS),
+        _channel_column(_BANDAI_CHANNELS),
+        _name_column(_CGSPEED_NO_ENDS),
+        _parent_column(_BLENDER_CMU_PARENTS),
+        _channel_column(" ".join(["xyzZYX"] + ["ZYX"] * 42)),
+        _parent_column("0 1" + _CGSPEED_PARENTS[1:]),  # a root above the hips
+        _channel_column(_GAME_CMU_CHANNELS),
+        _parent_column(_CGSPEED_PARENTS),
+        _channel_column(_CGSPEED_CHANNELS),
+    ]
+)
+
+#: Each .moc container version's preset dictionary.
 DICTIONARIES = {1: DICTIONARY, 2: DICTIONARY + _settings(_SETTINGS_2)}
-DICTIONARIES[3] = DICTIONARIES[2]
+DICTIONARIES[3] = DICTIONARIES[2] + _HIERARCHIES_3

@@ -25,8 +25,8 @@ chunk (up to ``chunk_frames`` frames) pays 17 bytes of framing, the smallest tha
 each part (38 in version 2, which a short clip feels). Chunks follow the header back to back,
 so the index's sizes give every chunk's offset and its frame counts every chunk's first frame.
 The index at the end lets a reader fetch only the chunks that cover a frame range. Every part
-is length-checked and CRC-checked before it is used, and a failure raises :class:`~mocodec.errors.CorruptStreamError` naming the part (chunk
-number) and byte offset.
+is length-checked and CRC-checked before it is used, and a failure raises
+:class:`~mocodec.errors.CorruptStreamError` naming the part (chunk number) and byte offset.
 
 A file can hold its skeleton (self-contained: about 250 bytes for the 57 joints of the CMU BVH
 skeletons in a lossy file, 460 for CMU ASF ones) or only the skeleton's id, a hash of its

@@ -40,7 +40,7 @@ def main() -> None:
         data = moc.pack(motion, codec)
         c = container.open_container(io.BytesIO(data), len(data), name)
         motion_bytes = sum(len(c.read_chunk(k)) for k in range(len(c.index)))
-        header = int.from_bytes(data[8:12], "little")
+        header = container.read_opening(io.BytesIO(data), len(data), name)[3]
         meta = {
             "codec": codec.get_config(),
             "fps": float(motion.fps),

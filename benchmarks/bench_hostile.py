@@ -64,7 +64,7 @@ def main() -> None:
     measured("compact skeleton of 2,001 joints (pack)", lambda: pack_skeleton(Skeleton(big.joints[:2001])))
     bomb = zlib.compress(b" " * (900 << 20), 9)
     measured(f"stream header bomb ({len(bomb) / 1e6:.2f} MB -> 900 MB)", lambda: StreamInfo.from_payload(bomb))
-    head = container.START.pack(container.MAGIC, 4, 0, len(bomb)) + bomb + zlib.crc32(bomb).to_bytes(4, "little")
+    head = container.opening(container.VERSION, 0, len(bomb)) + bomb + zlib.crc32(bomb).to_bytes(4, "little")
     measured(".moc header bomb (same)", lambda: moc.unpack(head + bytes(40)))
     claim = container.pack(
         {

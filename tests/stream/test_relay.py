@@ -229,6 +229,41 @@ def test_bad_tokens_are_refused_with_the_reason(walk_bvh, bad, why):
     asyncio.run(go())
 
 
+def test_a_relay_that_never_welcomes_is_refused_in_time(monkeypatch):
+    """A server that takes the WebSocket but says nothing: the client gives up after WELCOME_S
+    with a one-line reason instead of waiting for ever."""
+    from aiohttp import web
+
+    from mocodec.stream import client
+
+    monkeypatch.setattr(client, "WELCOME_S", 0.2)
+
+    async def silent(request):
+        ws = web.WebSocketResponse()
+        await ws.prepare(request)
+        await asyncio.sleep(5)
+        return ws
+
+    async def go():
+        app = web.Application()
+        app.router.add_get("/ws", silent)
+        runner = web.AppRunner(app, shutdown_timeout=0.1)
+        await runner.setup()
+        site = web.TCPSite(runner, "127.0.0.1", 0)
+        await site.start()
+        port = runner.addresses[0][1]
+        try:
+            started = time.monotonic()
+            with pytest.raises(RelayRefused, match="sent no welcome within 0.2 s"):
+                async with connect(f"ws://127.0.0.1:{port}", "lobby", token(), "subscribe"):
+                    pass
+            assert time.monotonic() - started < 3.0
+        finally:
+            await runner.cleanup()
+
+    asyncio.run(go())
+
+
 def test_a_malformed_message_closes_that_connection_only(walk_bvh):
     async def go():
         async with serving() as url:

@@ -29,6 +29,9 @@ from mocodec.stream.live import TICK_HZ, LiveDecoder, clip_encoder, tick_frames
 from mocodec.stream.packets import HEADER, MAX_REPAIRS, Packet, Reader, StreamInfo, pack_batch, split_batch
 
 
+WELCOME_S = 10.0  # seconds a client waits for the relay's welcome
+
+
 class RelayRefused(MocodecError):
     """The relay refused the connection, closed it, or could not be reached."""
 
@@ -43,7 +46,8 @@ def ws_url(url: str, room: str, role: str) -> str:
 
 @contextlib.asynccontextmanager
 async def connect(url: str, room: str, token: str, role: str, max_msg_size: int = 64 << 20):
-    """An open WebSocket to the relay, past its welcome."""
+    """An open WebSocket to the relay, past its welcome (RelayRefused if none comes within
+    WELCOME_S: a relay that took the connection but never answers would hold the client)."""
     async with aiohttp.ClientSession() as session:
         try:
             ws = await session.ws_connect(
@@ -55,7 +59,10 @@ async def connect(url: str, room: str, token: str, role: str, max_msg_size: int 
         except (aiohttp.ClientError, OSError) as e:
             raise RelayRefused(f"cannot reach the relay at {url}: {e}") from None
         async with ws:
-            msg = await ws.receive()
+            try:
+                msg = await ws.receive(timeout=WELCOME_S)
+            except TimeoutError:
+                raise RelayRefused(f"the relay at {url} sent no welcome within {WELCOME_S:g} s") from None
             if msg.type != aiohttp.WSMsgType.TEXT or "welcome" not in msg.data:
                 raise RelayRefused(f"the relay at {url} refused room {room!r}: {closed_reason(ws, msg)}")
             yield ws

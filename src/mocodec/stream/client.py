@@ -28,7 +28,6 @@ from mocodec.stream.jitter import JitterBuffer
 from mocodec.stream.live import TICK_HZ, LiveDecoder, clip_encoder, tick_frames
 from mocodec.stream.packets import HEADER, MAX_REPAIRS, Packet, Reader, StreamInfo, pack_batch, split_batch
 
-
 WELCOME_S = 10.0  # seconds a client waits for the relay's welcome
 
 

@@ -81,14 +81,16 @@ export class Avatar {
 export class RelayClient {
   /**
    * @param {string} url the relay's ws:// or wss:// address
-   * @param {{room: string, token: string, budget?: number, camera?: number[], WebSocketClass?: Function}} options
-   *   `budget` (bit/s) and `camera` ([x, y, z] m): what the relay cuts the streams to
+   * @param {{room: string, token: string, budget?: number, camera?: number[], welcomeS?: number, WebSocketClass?: Function}} options
+   *   `budget` (bit/s) and `camera` ([x, y, z] m): what the relay cuts the streams to; `welcomeS`:
+   *   how long `connect` waits for the relay's welcome (as Python's client.WELCOME_S)
    */
-  constructor(url, { room, token, budget = 0, camera = [0, 0, 0], WebSocketClass = globalThis.WebSocket } = {}) {
+  constructor(url, { room, token, budget = 0, camera = [0, 0, 0], welcomeS = 10, WebSocketClass = globalThis.WebSocket } = {}) {
     this.url = url;
     this.room = room;
     this.token = token;
     this.settings = { budget, camera };
+    this.welcomeS = welcomeS;
     this.decodeMs = 0; // time spent decoding packets so far (ms)
     this.WebSocketClass = WebSocketClass;
     this.avatars = new Map();
@@ -101,17 +103,22 @@ export class RelayClient {
     this.closed = null;
   }
 
-  /** @returns {Promise<void>} once the relay has let the viewer in */
+  /** @returns {Promise<void>} once the relay has let the viewer in (rejected if no welcome comes within `welcomeS`) */
   connect() {
     const query = new URLSearchParams({ room: this.room, role: 'subscribe', token: this.token });
     const ws = new this.WebSocketClass(`${this.url.replace(/\/$/, '')}/ws?${query}`);
     ws.binaryType = 'arraybuffer';
     this.ws = ws;
     return new Promise((resolve, reject) => {
+      const waiting = setTimeout(() => {
+        reject(new Error(`the relay at ${this.url} sent no welcome within ${this.welcomeS} s`));
+        ws.close();
+      }, this.welcomeS * 1000);
       ws.onmessage = (event) => {
         if (typeof event.data === 'string') {
           const message = JSON.parse(event.data);
           if (message.welcome !== undefined) {
+            clearTimeout(waiting);
             this.send(this.settings);
             resolve(this);
           } else if (typeof message.status === 'string') {
@@ -124,10 +131,14 @@ export class RelayClient {
         this.queue = this.queue.then(() => this.#batch(data, arrival)).catch(() => { this.errors += 1; });
       };
       ws.onclose = (event) => {
+        clearTimeout(waiting);
         this.closed = { code: event.code, reason: event.reason };
         reject(new Error(`the relay closed the connection (${event.code} ${event.reason})`));
       };
-      ws.onerror = () => reject(new Error(`cannot connect to ${this.url}`));
+      ws.onerror = () => {
+        clearTimeout(waiting);
+        reject(new Error(`cannot connect to ${this.url}`));
+      };
     });
   }
 

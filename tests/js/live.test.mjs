@@ -133,6 +133,20 @@ test('a relay client asks for a packet its link lost and decodes the stream whol
   assert.equal(avatar.frames * avatar.skeleton.numChannels, frames.reduce((n, f) => n + f.length, 0));
 });
 
+test('a relay that takes the socket but sends no welcome is given up on after welcomeS', async () => {
+  let closed = 0;
+  class SilentSocket {
+    constructor() { this.readyState = 1; }
+    send() {}
+    close() { closed += 1; }
+  }
+  const client = new RelayClient('ws://relay', { room: 'r', token: 't', welcomeS: 0.05, WebSocketClass: SilentSocket });
+  const started = Date.now();
+  await assert.rejects(client.connect(), /sent no welcome within 0.05 s/);
+  assert.ok(Date.now() - started < 2000);
+  assert.equal(closed, 1);
+});
+
 test('damaged streams end in DecodeError, never another error or a hang', async () => {
   const { stream } = await fixture('walk-layers');
   const random = seeded(2026);

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from mocodec import Motion, moc
+from mocodec import Motion, limits, moc
 from mocodec.codecs import get_codec
 from mocodec.errors import CodecError, CorruptStreamError
 from mocodec.formats import container
@@ -68,21 +68,49 @@ def small_file(walk_amc):
     return moc.pack(walk_amc[:50], get_codec("lossless"), chunk_frames=20)
 
 
+@pytest.fixture
+def one_chunk_file(walk_amc):
+    return moc.pack(walk_amc[:50], get_codec("lossless"))
+
+
 @pytest.mark.slow
-def test_every_truncation_is_caught(small_file):
-    for cut in range(len(small_file)):
+@pytest.mark.parametrize("layout", ["small_file", "one_chunk_file"])
+def test_every_truncation_is_caught(layout, request):
+    data = request.getfixturevalue(layout)
+    for cut in range(len(data)):
         with pytest.raises(CorruptStreamError):
-            moc.unpack(small_file[:cut])
+            moc.unpack(data[:cut])
 
 
-def test_bit_flips_name_the_damaged_part(small_file):
+@pytest.mark.parametrize("layout", ["small_file", "one_chunk_file"])
+def test_bit_flips_name_the_damaged_part(layout, request):
+    whole = request.getfixturevalue(layout)
     rng = np.random.default_rng(2)
-    for bit in rng.choice(len(small_file) * 8, size=400, replace=False):
-        data = bytearray(small_file)
+    for bit in rng.choice(len(whole) * 8, size=400, replace=False):
+        data = bytearray(whole)
         data[bit // 8] ^= 1 << (bit % 8)
         with pytest.raises(CorruptStreamError) as err:
             moc.unpack(bytes(data), name="f.moc")
         assert str(err.value).startswith("f.moc: ")
+
+
+def test_a_one_chunk_file_is_checked_like_an_indexed_one(one_chunk_file, walk_amc):
+    """The one chunk of a version 3 file has no length or index to check: its CRC covers it,
+    and its frames (the header's) must be a chunk's."""
+    import io
+
+    c = container.open_container(io.BytesIO(one_chunk_file), len(one_chunk_file), "f.moc")
+    assert c.one_chunk and len(c.index) == 1 and c.index[0].count == 50
+    assert c.index[0].offset + c.index[0].size == len(one_chunk_file)
+    data = bytearray(one_chunk_file)
+    data[c.index[0].offset + 3] ^= 0x10
+    with pytest.raises(CorruptStreamError, match=f"f.moc: chunk 0 at byte {c.index[0].offset}: CRC mismatch"):
+        moc.unpack(bytes(data), name="f.moc")
+    header = {**c.header, "skeleton": c.skeleton}
+    for frames in (0, limits.MAX_PAYLOAD_FRAMES + 1):
+        forged = container.pack({**header, "frames": frames}, [container.Chunk(0, 50, c.read_chunk(0))])
+        with pytest.raises(CorruptStreamError, match=f"a chunk of {frames} frames in the"):
+            moc.unpack(forged)
 
 
 def test_damaged_chunk_is_reported_with_its_number_and_offset(small_file):

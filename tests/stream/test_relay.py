@@ -355,7 +355,9 @@ def test_two_relays_share_a_room_over_nats(walk_bvh, nats_server):
 
     async def go():
         relay_b = Relay(SECRET, bus=NatsBus(nats_server))
+        # (it once waited for 9 minutes in the full suite: the timeout's traceback says where)
         async with (
+            asyncio.timeout(120),
             serving(Relay(SECRET, bus=NatsBus(nats_server))) as a,
             serving(relay_b) as b,
         ):

@@ -341,13 +341,35 @@ def nats_server():
         pytest.skip("nats-server is not installed (.ci/run installs Debian's nats-server)")
     port = free_port()
     proc = subprocess.Popen([binary, "-a", "127.0.0.1", "-p", str(port)], stderr=subprocess.PIPE, text=True)
+    log = []
     for line in proc.stderr:  # its log: ready once it says so
+        log.append(line)
         if "Server is ready" in line:
             break
+    else:  # it ended without (the port taken by another test in the meantime)
+        pytest.fail(f"nats-server did not start on port {port}: {''.join(log[-3:])}")
     threading.Thread(target=proc.stderr.read, daemon=True).start()  # the rest of its log, unread
     yield f"nats://127.0.0.1:{port}"
     proc.terminate()
     proc.wait(5)
+
+
+def test_a_relay_whose_nats_server_is_down_says_so(monkeypatch):
+    """The NATS client retries a first connection for ever (its reconnect attempts apply to it
+    too): the relay gives up after CONNECT_S with a one-line error instead of hanging."""
+    from mocodec.errors import MocodecError
+    from mocodec.stream import bus
+
+    monkeypatch.setattr(bus, "CONNECT_S", 0.5)
+    url = f"nats://127.0.0.1:{free_port()}"
+
+    async def go():
+        started = time.monotonic()
+        with pytest.raises(MocodecError, match=f"cannot reach the NATS server at {url} within 0.5 s"):
+            await NatsBus(url).start(lambda room, data: asyncio.sleep(0))
+        assert time.monotonic() - started < 3.0
+
+    asyncio.run(go())
 
 
 def test_two_relays_share_a_room_over_nats(walk_bvh, nats_server):

@@ -8,6 +8,7 @@ relay never receives its own messages back.
 
 from __future__ import annotations
 
+import asyncio
 import base64
 import logging
 from collections.abc import Awaitable, Callable
@@ -17,6 +18,7 @@ from mocodec.errors import MocodecError
 from mocodec.extras import require
 
 PREFIX = "mocodec.room."
+CONNECT_S = 10.0  # seconds a relay tries to reach its NATS server at start (then it reconnects for ever)
 log = logging.getLogger("mocodec.relay")
 
 
@@ -56,16 +58,19 @@ class NatsBus:
             if not self.stopping:
                 log.warning("NATS %s: disconnected, reconnecting", self.url)
 
-        try:
-            self.nc = await nats.connect(
-                servers=[self.url],
-                no_echo=True,
-                connect_timeout=5,
-                max_reconnect_attempts=-1,
-                allow_reconnect=True,
-                error_cb=on_error,
-                disconnected_cb=on_disconnect,
-            )
+        try:  # (the client applies its reconnect attempts, for ever, to the first connection too)
+            async with asyncio.timeout(CONNECT_S):
+                self.nc = await nats.connect(
+                    servers=[self.url],
+                    no_echo=True,
+                    connect_timeout=5,
+                    max_reconnect_attempts=-1,
+                    allow_reconnect=True,
+                    error_cb=on_error,
+                    disconnected_cb=on_disconnect,
+                )
+        except TimeoutError:
+            raise MocodecError(f"cannot reach the NATS server at {self.url} within {CONNECT_S:g} s") from None
         except (NoServersError, OSError) as e:
             raise MocodecError(f"cannot reach the NATS server at {self.url}: {e}") from None
         await self.nc.subscribe(PREFIX + "*", cb=on_message)

@@ -3,7 +3,8 @@
 For each source (CMU BVH, CMU ASF/AMC, Bandai Namco, and the CMU BVH clips resampled to 24 fps
 as a stand-in for game-engine exports) and each effort level: encode frames/s over all frames,
 on the median clip and on the slowest clip (each clip's time the least of ENCODE_ROUNDS
-encodings); decode frames/s over all frames (the best of DECODE_ROUNDS passes); total bytes
+encodings); decode frames/s over all frames (each clip's time the least of DECODE_ROUNDS
+decodings); total bytes
 against the highest level. Then kinwave-live's encode frames/s with 1 and 3 layers, and the first use's
 compile time (a fresh process, the numba cache dropped).
 
@@ -27,8 +28,8 @@ from mocodec.codecs.kinwave import kinalloc
 
 _EFFORT = next(k for k in codec_class("kinwave").knobs if k.name == "effort")
 LEVELS = tuple(range(int(_EFFORT.low), int(_EFFORT.high) + 1))
-#: Decode frames/s is the best of this many passes over a source's bodies: a pass takes a
-#: fraction of a second, which another job on a shared machine can halve.
+#: Each clip's decode time is the least of this many decodings: one takes a fraction of a
+#: millisecond, which another job on a shared machine can stretch several times.
 DECODE_ROUNDS = 3
 #: Each clip's encode time is the least of this many encodings (the same bytes each time):
 #: one encoding of a short clip takes milliseconds, which another job can stretch as much.
@@ -61,12 +62,13 @@ def _row(name: str, level: int, motions, codec, top_bytes: int | None) -> tuple[
     total, seconds, bodies = _encode_all(codec, motions)
     frames = [m.num_frames for m in motions]
     rates = [f / s for f, s in zip(frames, seconds)]
-    decode = 0.0
+    decode_seconds = [float("inf")] * len(motions)
     for _ in range(DECODE_ROUNDS):
-        t0 = time.perf_counter()
-        for m, body in zip(motions, bodies):
+        for k, (m, body) in enumerate(zip(motions, bodies)):
+            t0 = time.perf_counter()
             codec.decode(body, m.skeleton, m.num_frames, m.fps)
-        decode = max(decode, sum(frames) / (time.perf_counter() - t0))
+            decode_seconds[k] = min(decode_seconds[k], time.perf_counter() - t0)
+    decode = sum(frames) / sum(decode_seconds)
     versus = f"{100.0 * (total / top_bytes - 1):+.1f}%" if top_bytes else "(highest)"
     return total, (
         f"| {name} | {level} | {sum(frames) / sum(seconds):,.0f} | {statistics.median(rates):,.0f} | "

@@ -272,6 +272,7 @@ _CGSPEED_CHANNELS = "xyzZYX ZXY ZXY ZXY ZXY ZXY - ZXY - " + " ".join(
     ["ZXY ZXY ZXY ZXY " + "ZXY ZXY - " * 5] * 2 + ["ZXY ZXY ZXY ZXY -"] * 2
 )
 _BLENDER_CMU_PARENTS = "0 1 1 1 1 1 2 5 1 1 1 1 1 3 1 5 1 7 1 9 1 19 1 1 1 1 1 3 1 5 1 7 1 9 1 35 1 1 1 39 1 1 1"
+_BLENDER_CMU_CHANNELS = " ".join(["xyzZYX"] + ["ZYX"] * 42)
 _GAME_CMU_CHANNELS = "ZXY xyzZYX " + " ".join("xyzZXY" if w != "-" else w for w in _CGSPEED_CHANNELS.split()[1:])
 _CMU_ASF_PARENTS = "0 1 1 1 1 1 1 7 1 1 1 1 1 13 1 1 1 1 1 1 5 1 1 1 1 1 1 4 1 14 1 1 1 1 1 1 4 1"
 _CMU_ASF_CHANNELS = (
@@ -287,7 +288,7 @@ _HIERARCHIES_3 = b"".join(
         _channel_column(_BANDAI_CHANNELS),
         _name_column(_CGSPEED_NO_ENDS),
         _parent_column(_BLENDER_CMU_PARENTS),
-        _channel_column(" ".join(["xyzZYX"] + ["ZYX"] * 42)),
+        _channel_column(_BLENDER_CMU_CHANNELS),
         _parent_column("0 1" + _CGSPEED_PARENTS[1:]),  # a root above the hips
         _channel_column(_GAME_CMU_CHANNELS),
         _parent_column(_CGSPEED_PARENTS),

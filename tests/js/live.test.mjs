@@ -9,6 +9,7 @@ import {
   DecodeError, HoldingDecoder, Reader, RelayClient, LiveDecoder, forwardKinematics, parseStreamHeader, splitBatch,
 } from '../../js/src/index.js';
 import { seeded } from './seeded.mjs';
+import { varint } from './varint.mjs';
 import { crc16 } from '../../js/src/bytes.js';
 
 const LIVE = new URL('../data/live/', import.meta.url);
@@ -102,11 +103,7 @@ test('a relay client asks for a packet its link lost and decodes the stream whol
   const raws = splitBatch(stream);
   const reader = new Reader();
   const { stream: id, sequence: lost } = raws.map((raw) => reader.read(raw))[11];
-  const batchOf = (raw) => { // "Mb", one packet, its length (a varint)
-    const length = [];
-    for (let n = raw.length; ; n >>>= 7) { if (n < 128) { length.push(n); break; } length.push((n & 127) | 128); }
-    return Uint8Array.from([0x4d, 0x62, 1, ...length, ...raw]);
-  };
+  const batchOf = (raw) => Uint8Array.from([0x4d, 0x62, 1, ...varint(raw.length), ...raw]); // "Mb", one packet, its length
   class FakeSocket {
     constructor() { this.sent = []; this.readyState = 1; FakeSocket.last = this; }
     send(text) { this.sent.push(JSON.parse(text)); }

@@ -14,6 +14,7 @@ import { readKinwave } from '../../js/src/kinwave.js';
 import { CODE_STEP, twoToEighths } from '../../js/src/steps.js';
 import { crc32, readVarint, u16, u32 } from '../../js/src/bytes.js';
 import { seeded } from './seeded.mjs';
+import { varint } from './varint.mjs';
 
 const MOC = new URL('../data/moc/', import.meta.url);
 const CASES = ['bvh-joint', 'asf-30fps-shell', 'dummy-root', 'dummy-root-bind', 'zxz-d4', 'haar-bitrate', 'glitch', 'rest-pose', 'rest-at-zero', 'turned-root-bind', 'lead', 'bones-in-channels', 'offsets-in-channels'];
@@ -135,13 +136,6 @@ async function expectDecodeError(data, pattern = null) {
     return e;
   }
   return null;
-}
-
-function varint(value) {
-  const out = [];
-  for (; value > 0x7f; value = Math.floor(value / 128)) out.push((value & 0x7f) | 0x80);
-  out.push(value);
-  return Uint8Array.from(out);
 }
 
 function withCrc(bytes) {

@@ -12,6 +12,7 @@ import stat
 import struct
 import threading
 import time
+import warnings
 import zlib
 
 import numpy as np
@@ -209,6 +210,24 @@ def test_a_payload_that_decodes_to_nan_is_refused(walk_bvh):
     values[2, 5] = np.nan
     with pytest.raises(CorruptStreamError, match="frame 2"):
         get_codec("raw").decode(values.tobytes(), walk_bvh.skeleton, 4, 120.0)
+
+
+def test_a_signalling_nan_gets_one_line_from_the_command_line(walk_bvh, tmp_path, capsys):
+    """A float32 signalling NaN warns in numpy's cast to float64 before the finiteness check
+    refuses it: the command line prints the refusal alone."""
+    data = moc.pack(walk_bvh[:4], get_codec("raw"))
+    _, _, head_at, head_len = container.read_opening(io.BytesIO(data), len(data), "x")
+    body_at = head_at + head_len + 4
+    body = b"\xff\xff\xbf\x7f" + data[body_at + 4 : -4]
+    damaged = tmp_path / "snan.moc"
+    damaged.write_bytes(data[:body_at] + body + struct.pack("<I", zlib.crc32(body)))
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        assert main(["decode", str(damaged), "-o", str(tmp_path / "out.bvh")]) == 2
+    assert not [w for w in seen if issubclass(w.category, RuntimeWarning)]
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "decodes to nan at frame 0" in err, err
+    assert not (tmp_path / "out.bvh").exists()
 
 
 # ----- 9, 12: writing files -------------------------------------------------------------------------------

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 from importlib import import_module
 
 from mocodec.errors import MocodecError
@@ -38,6 +39,9 @@ COMMANDS = {
     "warmup": ("files", "compile the numerical kernels once, so the first real command runs at full speed"),
     "demo": ("files", "run the main job on the bundled sample clip"),
 }
+#: numpy's floating-point warnings, which a damaged file's signalling NaN or huge value raises
+#: in a cast or a sum on its way to the finiteness checks that then refuse it in one line
+FLOAT_WARNINGS = r"(invalid value|overflow|divide by zero) encountered"
 
 
 class _Commands:
@@ -76,6 +80,12 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     command = next((a for a in argv if not a.startswith("-")), None)
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", FLOAT_WARNINGS, RuntimeWarning)
+        return _run(argv, command)
+
+
+def _run(argv: list[str], command: str | None) -> int:
     try:
         from mocodec.cli.options import knobs_from
 

@@ -2,7 +2,8 @@ import numpy as np
 import pytest
 
 from conftest import DATA
-from mocodec import ConversionError, FormatError, load, save
+from mocodec import ConversionError, FormatError, load, moc, save
+from mocodec.codecs import get_codec
 from mocodec.formats import read_asf, to_asf_form, to_bvh_form, write_bvh
 from mocodec.formats.bvh import guess_units_per_metre
 
@@ -51,6 +52,26 @@ def test_bvh_any_order_position_channels_end_sites_tabs(tmp_path):
     out = tmp_path / "b.bvh"
     write_bvh(m, out)
     assert load(out).isclose(m)
+
+
+def test_bvh_written_back_keeps_each_joints_channel_order(tmp_path):
+    """A root whose rotations come before its positions (as some exporters write it) is BVH
+    already: saved again, and through a .moc file, its channels keep their order, so the file
+    has the layout its pipeline wrote and compares with the original joint for joint."""
+    text = SMALL_BVH.replace(
+        "CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation",
+        "CHANNELS 6 Zrotation Xrotation Yrotation Xposition Yposition Zposition",
+    )
+    m = load(write(tmp_path, "rotations_first.bvh", text))
+    assert m.skeleton.joints[0].channels[:3] == ("Zrotation", "Xrotation", "Yrotation")
+    save(m, tmp_path / "again.bvh")
+    assert (tmp_path / "again.bvh").read_text().splitlines()[4].split() == text.splitlines()[4].split()
+    again = load(tmp_path / "again.bvh")
+    assert again.skeleton == m.skeleton
+    np.testing.assert_allclose(again.channels, m.channels, atol=1e-6)
+    coded = moc.unpack(moc.pack(m, get_codec("raw")))
+    save(coded, tmp_path / "decoded.bvh")
+    assert load(tmp_path / "decoded.bvh").skeleton == m.skeleton
 
 
 def test_bvh_crlf_and_spaces(tmp_path):

@@ -1,6 +1,7 @@
 """Re-express a motion so a given file format can hold it, keeping every pose exactly.
 
-* :func:`to_bvh_form`: BVH applies rotations in channel order and has no bone ``axis``. Joints
+* :func:`to_bvh_form`: BVH applies rotations in channel order and has no bone ``axis``. A joint
+  BVH can hold keeps its channels in their order; joints
   whose rotation order differs from their channel order get their channels reordered; joints
   with an ASF axis ``C`` or a repeated axis (``YZY``) get three rotation channels (``ZYX``)
   holding ``C M C^-1``, with angles unwrapped over time. Limits of re-expressed joints are dropped (their axes changed).
@@ -81,6 +82,7 @@ def to_bvh_form(motion: Motion) -> Motion:
         positions = [c for c in j.channels if c in POSITION_CHANNELS]
         parent = b.index[j.parent] if i else -1
         proper_euler = len(set(j.rotation_order)) < len(j.rotation_order)
+        rotation_axes = "".join(c[0] for c in _rotation_channels(j))
         if (j.has_axis or proper_euler) and j.rotation_order:
             if local_q is None:
                 local_q = kinematics.local_quaternions(sk, motion.channels)
@@ -88,6 +90,10 @@ def to_bvh_form(motion: Motion) -> Motion:
             channels = tuple(positions) + tuple(f"{a}rotation" for a in _ASF_ORDER)
             values = np.concatenate((b.old_columns(i, positions), euler), axis=1)
             new = Joint(j.name, parent, j.offset, channels, _ASF_ORDER, body_part=j.body_part)
+        elif not j.has_axis and rotation_axes == j.rotation_order and len(rotation_axes) in (0, 3):
+            # BVH's already: its channels keep their order (a root's rotations before its positions too)
+            values = b.old_columns(i, j.channels)
+            new = Joint(j.name, parent, j.offset, j.channels, j.rotation_order, limits=j.limits, body_part=j.body_part)
         else:
             kept = tuple(positions) + tuple(f"{a}rotation" for a in j.rotation_order)
             # one or two rotation channels get the others at zero (the identity, wherever it

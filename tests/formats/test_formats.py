@@ -74,6 +74,30 @@ def test_bvh_written_back_keeps_each_joints_channel_order(tmp_path):
     assert load(tmp_path / "decoded.bvh").skeleton == m.skeleton
 
 
+@pytest.mark.parametrize(
+    "encode",
+    [
+        lambda t: b"\xef\xbb\xbf" + t.encode(),  # a UTF-8 byte-order mark
+        lambda t: t.encode("utf-16"),  # a Windows editor's "Unicode"
+        lambda t: b"\xfe\xff" + t.encode("utf-16-be"),
+    ],
+    ids=["utf-8 bom", "utf-16", "utf-16 big-endian"],
+)
+def test_text_with_a_byte_order_mark_reads_as_without(tmp_path, encode, walk_amc):
+    plain = load(write(tmp_path, "plain.bvh", SMALL_BVH))
+    (tmp_path / "marked.bvh").write_bytes(encode(SMALL_BVH))
+    assert load(tmp_path / "marked.bvh").isclose(plain)
+    (tmp_path / "marked.asf").write_bytes(encode((DATA / "07.asf").read_text()))
+    (tmp_path / "marked.amc").write_bytes(encode((DATA / "07_03.amc").read_text()))
+    assert load(tmp_path / "marked.amc", asf=tmp_path / "marked.asf").isclose(walk_amc)
+
+
+def test_utf16_that_does_not_decode_names_its_byte(tmp_path):
+    (tmp_path / "bad.bvh").write_bytes(b"\xff\xfe" + SMALL_BVH.encode("utf-16-le") + b"\x00\xd8")
+    with pytest.raises(FormatError, match=r"bad.bvh: not UTF-16 text after its byte-order mark \(at byte \d+\)"):
+        load(tmp_path / "bad.bvh")
+
+
 def test_bvh_crlf_and_spaces(tmp_path):
     text = SMALL_BVH.replace("\t", "    ").replace("\n", "\r\n")
     assert load(write(tmp_path, "crlf.bvh", text)).isclose(load(write(tmp_path, "lf.bvh", SMALL_BVH)))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import codecs
 import os
 import re
 import stat
@@ -31,9 +32,17 @@ def read_bytes(path: str | os.PathLike, limit: int | None = None) -> bytes:
 
 
 def read_text(path: str | os.PathLike) -> str:
-    """The whole file as text; FormatError if it is missing, empty or binary."""
+    """The whole file as text (UTF-8, else Latin-1; UTF-16 after its byte-order mark, which a
+    Windows editor writes; a UTF-8 byte-order mark dropped); FormatError if it is missing, empty
+    or binary."""
     path = Path(path)
     data = read_bytes(path)
+    if data.startswith((codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)):
+        try:
+            data = data.decode("utf-16").encode("utf-8")
+        except UnicodeDecodeError as e:
+            raise FormatError(path, None, f"not UTF-16 text after its byte-order mark (at byte {e.start})") from None
+    data = data.removeprefix(codecs.BOM_UTF8)
     if not data.strip():
         raise FormatError(path, None, "empty file")
     if b"\0" in data[:65536]:

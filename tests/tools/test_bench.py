@@ -139,14 +139,22 @@ def test_a_bad_clip_is_reported_and_the_run_goes_on(tmp_path):
     assert suite.run([data], tmp_path / "out", ["zstd"], report=False, jobs=1).meta["tasks_run"] == 1
 
 
-def test_a_clip_without_channels_is_skipped(tmp_path):
-    """A rig whose joints never move (no channels: Blender 2.79 writes such files) has nothing
-    to measure: one row says so, and the run neither fails nor tries it again."""
+@pytest.mark.parametrize(
+    "root, frames, why",
+    [
+        (" CHANNELS 0", "Frames: 2\nFrame Time: 0.04\n\n\n", "no channels"),
+        (" CHANNELS 3 Zrotation Xrotation Yrotation", "Frames: 0\nFrame Time: 0.04\n", "no frames"),
+    ],
+)
+def test_a_clip_without_channels_or_frames_is_skipped(tmp_path, root, frames, why):
+    """A rig whose joints never move (no channels: Blender 2.79 writes such files) or a rig
+    without a take (no frames) has nothing to measure: one row says so, and the run neither
+    fails nor tries it again."""
     still = tmp_path / "still.bvh"
-    still.write_text("HIERARCHY\nROOT hip\n{\n OFFSET 0 0 0\n CHANNELS 0\n}\nMOTION\nFrames: 2\nFrame Time: 0.04\n\n\n")
+    still.write_text(f"HIERARCHY\nROOT hip\n{{\n OFFSET 0 0 0\n{root}\n}}\nMOTION\n{frames}")
     result = suite.run([still], tmp_path / "out", ["zstd", "kinwave"], report=False, jobs=1)
     assert [(r["codec"], r["status"]) for r in result.rows] == [("zstd", "skipped"), ("kinwave", "skipped")]
-    assert "no channels" in result.rows[0]["message"] and not result.failures
+    assert why in result.rows[0]["message"] and not result.failures
 
 
 def test_an_unreachable_target_is_a_row_not_a_failure(tmp_path):

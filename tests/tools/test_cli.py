@@ -168,6 +168,27 @@ def test_a_rig_without_channels_encodes_decodes_and_is_not_evaluated(tmp_path, c
     assert "no channels" in capsys.readouterr().err
 
 
+def test_a_clip_of_no_frames_codes_decodes_and_converts(tmp_path, capsys):
+    """A BVH of "Frames: 0" (a rig and no take) codes to a file and back and converts to AMC and
+    back; the encode line says it has no frames instead of dividing by its duration, and
+    ``eval`` says there is nothing to compare, in one line."""
+    empty = tmp_path / "empty.bvh"
+    text = (DATA / "07_03.bvh").read_text()
+    empty.write_text(text[: text.index("Frames:")] + "Frames: 0\nFrame Time: 0.0083333\n")
+    for codec in ("kinwave", "raw"):
+        assert main(["encode", str(empty), "-o", str(tmp_path / f"{codec}.moc"), "--codec", codec]) == 0
+        assert "0 frames" in capsys.readouterr().out
+        assert main(["decode", str(tmp_path / f"{codec}.moc"), "-o", str(tmp_path / f"{codec}.bvh")]) == 0
+        back = load(tmp_path / f"{codec}.bvh")
+        assert back.num_frames == 0 and back.skeleton.names == load(empty).skeleton.names
+    assert main(["convert", str(empty), str(tmp_path / "empty.amc")]) == 0
+    assert main(["convert", str(tmp_path / "empty.amc"), str(tmp_path / "again.bvh")]) == 0
+    assert load(tmp_path / "again.bvh").num_frames == 0
+    capsys.readouterr()
+    assert main(["eval", str(empty)]) == 2
+    assert capsys.readouterr().err.count("\n") == 1
+
+
 def test_encode_decode_eval_codecs(tmp_path, capsys):
     out = tmp_path / "walk.moc"
     assert main(["encode", str(DATA / "07_03.amc"), "-o", str(out)]) == 0

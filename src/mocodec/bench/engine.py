@@ -193,8 +193,9 @@ def run_task(task: Task) -> list[dict]:
         motion = load(task.path)
     except Exception as e:  # noqa: BLE001 - the clip is reported and the run goes on
         return [failed_row(task, None, Point("knob", math.nan), "failed", e)]
-    if not motion.skeleton.num_channels:
-        nothing = CodecError("the clip has no channels (a rig whose joints never move): nothing to measure")
+    if not motion.skeleton.num_channels or not motion.num_frames:
+        empty = "no channels (a rig whose joints never move)" if motion.num_frames else "no frames"
+        nothing = CodecError(f"the clip has {empty}: nothing to measure")
         return [failed_row(task, motion, Point("knob", math.nan), "skipped", nothing)]
     _warm(task, motion)
     rows = []

@@ -61,10 +61,10 @@ def cmd_encode(args) -> int:
             exact_skeleton=args.exact_skeleton,
             jobs=args.jobs,
         )
+        rate = f"{size * 8 / motion.duration / 1000:.2f} kbit/s" if motion.duration else "no frames"
         line = (
             f"{target}: {motion.num_frames} frames, {size:,} bytes, ratio {motion.raw_bits / 8 / size:.2f} "
-            f"vs 32-bit floats, {size * 8 / motion.duration / 1000:.2f} kbit/s, {codec!r}, "
-            f"{time.perf_counter() - t0:.2f} s"
+            f"vs 32-bit floats, {rate}, {codec!r}, {time.perf_counter() - t0:.2f} s"
         )
         _progress(k, len(inputs), src.name)
         print(line)

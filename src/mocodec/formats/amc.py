@@ -56,8 +56,8 @@ def read_amc(
             n += 1
             continue
         break
-    if n == len(lines):
-        raise FormatError(path, None, "no frames in the AMC file")
+    if n == len(lines):  # a header alone: a motion of no frames, as a BVH of "Frames: 0"
+        return Motion(skeleton, fps, np.zeros((0, skeleton.num_channels)))
     layout = _frame_layout(skeleton)
     channels = _fast_frames(lines, n, layout, path)
     if channels is None:

@@ -59,7 +59,7 @@ class _Builder:
 
     def add(self, joint: Joint, values: np.ndarray) -> int:
         self.joints.append(joint)
-        self.columns.append(values.reshape(len(self.motion.channels), -1))
+        self.columns.append(values.reshape(len(self.motion.channels), len(joint.channels)))
         return len(self.joints) - 1
 
     def motion_out(self) -> Motion:

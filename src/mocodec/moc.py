@@ -251,7 +251,8 @@ def truncate(
     if len(data) <= target:
         return data
     high = codec.config["bits_per_second"]
-    low, best = 0.0, None
+    least = next(k.low for k in codec.knobs if k.name == "bits_per_second") or 0.0  # the knob's floor
+    low, best = least, None
     for _ in range(40):
         mid = (low + high) / 2
         out = at(mid)

@@ -8,8 +8,10 @@ import numpy as np
 import pytest
 
 from conftest import DATA
+from mocodec import save
 from mocodec.analysis import analyze, density, spectrum, stats, temporal
 from mocodec.cli import main
+from mocodec.errors import MocodecError
 
 FPS = 120.0
 
@@ -105,3 +107,15 @@ def test_cli_analyze_bad_file(tmp_path, capsys):
     bad.write_text("HIERARCHY\nROOT x\n{\n")
     assert main(["analyze", str(bad)]) == 2
     assert "bad.bvh" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("frames", [0, 2, 23])
+def test_a_clip_too_short_to_analyse_gets_one_line(walk_bvh, tmp_path, capsys, frames):
+    """Below twice the AR spectrum's order the spectra and fits have nothing to stand on (two
+    frames crashed in a broadcast, none in a reduction): one line says how many it needs."""
+    with pytest.raises(MocodecError, match=f"at least 24 frames .*the clip has {frames}$"):
+        analyze(walk_bvh[:frames])
+    save(walk_bvh[:frames], tmp_path / "short.bvh")
+    assert main(["analyze", str(tmp_path / "short.bvh")]) == 2
+    assert capsys.readouterr().err.count("\n") == 1
+    analyze(walk_bvh[:24])

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from conftest import DATA
-from mocodec import load
+from mocodec import load, save
 from mocodec.cli import main
 
 
@@ -181,6 +181,8 @@ def test_a_clip_of_no_frames_codes_decodes_and_converts(tmp_path, capsys):
         assert main(["decode", str(tmp_path / f"{codec}.moc"), "-o", str(tmp_path / f"{codec}.bvh")]) == 0
         back = load(tmp_path / f"{codec}.bvh")
         assert back.num_frames == 0 and back.skeleton.names == load(empty).skeleton.names
+        assert main(["info", str(tmp_path / f"{codec}.moc")]) == 0
+        assert "vs 32-bit floats, no frames" in capsys.readouterr().out
     assert main(["convert", str(empty), str(tmp_path / "empty.amc")]) == 0
     assert main(["convert", str(tmp_path / "empty.amc"), str(tmp_path / "again.bvh")]) == 0
     assert load(tmp_path / "again.bvh").num_frames == 0
@@ -261,6 +263,19 @@ def test_truncate_command(tmp_path, capsys):
     assert main(["truncate", str(full), "--ratio", "25", "-o", str(tmp_path / "small.moc")]) == 0
     assert "ratio 2" in capsys.readouterr().out
     assert main(["decode", str(tmp_path / "small.moc"), "-o", str(tmp_path / "small.bvh")]) == 0
+
+
+def test_truncate_below_what_the_side_data_take_says_so(tmp_path, capsys):
+    """A short file cut to a size its skeleton and side data already pass: the search kept to
+    the rate knob's floor and says what it could not reach (it went under the floor and named
+    the knob, which the user never set)."""
+    save(load(DATA / "07_03.bvh")[:4], tmp_path / "short.bvh")
+    assert main(["encode", str(tmp_path / "short.bvh"), "-o", str(tmp_path / "s.moc"), "--codec", "spiht"]) == 0
+    capsys.readouterr()
+    assert main(["truncate", str(tmp_path / "s.moc"), "--ratio", "20", "-o", str(tmp_path / "t.moc")]) == 2
+    err = capsys.readouterr().err
+    assert "cannot cut to" in err and "bits_per_second" not in err and err.count("\n") == 1
+    assert not (tmp_path / "t.moc").exists()
 
 
 def test_skeleton_reference_on_the_command_line(tmp_path, capsys):

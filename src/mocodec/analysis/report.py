@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from mocodec.analysis import density, spectrum, stats, temporal
+from mocodec.errors import MocodecError
 from mocodec.jsonable import jsonable
 from mocodec.motion import Motion
 from mocodec.skeleton import BODY_PARTS
@@ -13,6 +14,7 @@ from mocodec.skeleton import BODY_PARTS
 DEFAULT_NOISE_DEG = 0.1  # assumed sensor noise (standard deviation) for table 5-4
 DEFAULT_NOISE_CM = 0.1
 CONSTANT = 1e-6
+MIN_FRAMES = 2 * spectrum.AR_ORDER  # shorter, the AR spectrum and the fits have nothing to stand on
 
 
 def group_dofs(motion: Motion) -> dict[str, np.ndarray]:
@@ -39,7 +41,13 @@ def _nanmedian(values: np.ndarray) -> float:
 
 
 def analyze(motion: Motion, noise_deg: float = DEFAULT_NOISE_DEG, noise_cm: float = DEFAULT_NOISE_CM) -> dict:
-    """Every number of the chapter-5 analysis, per DOF and per group."""
+    """Every number of the chapter-5 analysis, per DOF and per group; MocodecError on a clip
+    shorter than MIN_FRAMES (its spectra and fits have nothing to stand on)."""
+    if motion.num_frames < MIN_FRAMES:
+        raise MocodecError(
+            f"the analysis needs at least {MIN_FRAMES} frames (its AR spectrum is of order {spectrum.AR_ORDER}); "
+            f"the clip has {motion.num_frames}"
+        )
     sk, fps = motion.skeleton, motion.fps
     st = stats.dof_statistics(motion)
     bits = stats.resolution_bits(motion, noise_deg, noise_cm)

@@ -17,6 +17,8 @@ from scipy import linalg, signal
 
 from mocodec.analysis.temporal import autocorrelation
 
+AR_ORDER = 12  # the autoregressive spectrum's order
+
 
 @dataclass(frozen=True)
 class Spectrum:
@@ -64,7 +66,7 @@ def blackman_tukey(x: np.ndarray, fps: float, max_lag_s: float = 4.0) -> Spectru
     return Spectrum(np.fft.rfftfreq(size, 1.0 / fps), p.mean(axis=1))
 
 
-def ar_spectrum(x: np.ndarray, fps: float, order: int = 12, points: int = 1024) -> Spectrum:
+def ar_spectrum(x: np.ndarray, fps: float, order: int = AR_ORDER, points: int = 1024) -> Spectrum:
     """AR(``order``) PSD with coefficients from the autocorrelation (Yule-Walker) method,
     averaged over the columns (constant columns are skipped)."""
     x = _centred(x)

@@ -12,7 +12,14 @@ import time
 from pathlib import Path
 
 from mocodec import limits, moc, ratecontrol
-from mocodec.cli.options import add_codec_options, add_input_options, load_input, skeleton_from, target_of
+from mocodec.cli.options import (
+    add_codec_options,
+    add_input_options,
+    load_input,
+    rate_text,
+    skeleton_from,
+    target_of,
+)
 from mocodec.codecs import codec_class, codec_ids, get_codec
 from mocodec.errors import CodecError
 from mocodec.formats import save
@@ -61,10 +68,9 @@ def cmd_encode(args) -> int:
             exact_skeleton=args.exact_skeleton,
             jobs=args.jobs,
         )
-        rate = f"{size * 8 / motion.duration / 1000:.2f} kbit/s" if motion.duration else "no frames"
         line = (
             f"{target}: {motion.num_frames} frames, {size:,} bytes, ratio {motion.raw_bits / 8 / size:.2f} "
-            f"vs 32-bit floats, {rate}, {codec!r}, {time.perf_counter() - t0:.2f} s"
+            f"vs 32-bit floats, {rate_text(size, motion.duration)}, {codec!r}, {time.perf_counter() - t0:.2f} s"
         )
         _progress(k, len(inputs), src.name)
         print(line)
@@ -106,7 +112,7 @@ def cmd_truncate(args) -> int:
     raw = info.frames * info.skeleton.num_channels * 4
     print(
         f"{args.output}: {len(out):,} bytes (was {len(data):,}), ratio {raw / len(out):.2f} vs 32-bit floats, "
-        f"{len(out) * 8 * info.fps / max(info.frames, 1) / 1000:.2f} kbit/s"
+        f"{rate_text(len(out), info.frames / info.fps)}"
     )
     return 0
 
@@ -135,8 +141,7 @@ def evaluate(motion: Motion, args) -> str:
         ("ratio", f"{motion.raw_bits / 8 / len(data):.2f} : 1 vs 32-bit floats"),
         (
             "bit rate",
-            f"{len(data) * 8 / motion.duration / 1000:.2f} kbit/s "
-            f"({len(data) * 8 / motion.channels.size:.3f} bits per DOF sample)",
+            f"{rate_text(len(data), motion.duration)} ({len(data) * 8 / motion.channels.size:.3f} bits per DOF sample)",
         ),
         ("PSNR / VPSNR", f"{db_text(s['psnr_db'])} / {db_text(s['vpsnr_db'])} (mean over DOFs)"),
         ("joint error mean / max", f"{s['mean_joint_error_cm']:.4g} / {s['max_joint_error_cm']:.4g} cm"),

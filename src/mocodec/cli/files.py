@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mocodec.cli.options import add_codec_options, add_input_options, load_input, skeleton_from
+from mocodec.cli.options import add_codec_options, add_input_options, load_input, rate_text, skeleton_from
 from mocodec.codecs import checked_config
 from mocodec.data import SAMPLE_CLIP
 from mocodec.formats import load, save, with_units
@@ -66,7 +66,7 @@ def describe_moc(path: str, skeleton_path: str | None = None) -> str:
         f"skeleton    {len(sk)} joints, {sk.num_channels} channels",
         f"frames      {c.frames} at {c.fps:g} fps = {seconds:.2f} s, in {len(c.index)} chunks",
         f"size        {_human_bytes(c.size)}: ratio {raw_bytes / max(c.size, 1):.2f} vs 32-bit floats, "
-        f"{c.size * 8 / max(seconds, 1e-9) / 1000:.2f} kbit/s",
+        f"{rate_text(c.size, seconds)}",
     ]
     return "\n".join(lines)
 

@@ -109,3 +109,9 @@ def knobs_from(extra: list[str]) -> dict[str, str]:
 def target_of(args) -> tuple[str, float] | None:
     """The rate-control target given on the command line, as (name, value), or None."""
     return next(((dest, getattr(args, dest)) for _, dest, _ in TARGET_OPTIONS if getattr(args, dest) is not None), None)
+
+
+def rate_text(size_bytes: float, seconds: float) -> str:
+    """The bit rate of ``size_bytes`` over ``seconds`` as the command line prints it ("no
+    frames" for a clip of none, which has no rate)."""
+    return f"{size_bytes * 8 / seconds / 1000:.2f} kbit/s" if seconds > 0 else "no frames"

@@ -144,6 +144,15 @@ def test_a_clip_that_holds_still_round_trips(cid, clip):
 
 
 @pytest.mark.parametrize("cid", CODECS)
+def test_clips_of_no_one_and_two_frames_round_trip(cid, clip):
+    """A rig without a take (no frames), a single pose and two frames, through a file: the
+    gesture codec's one-frame clip, whose gesture segments were none, failed to reshape them."""
+    for frames in (0, 1, 2):
+        back = moc.unpack(moc.pack(clip[:frames], get_codec(cid)))
+        assert back.channels.shape == (frames, clip.num_channels) and np.isfinite(back.channels).all()
+
+
+@pytest.mark.parametrize("cid", CODECS)
 def test_config_round_trips_and_decides_equality(cid):
     codec = get_codec(cid)
     config = json.loads(json.dumps(codec.get_config()))

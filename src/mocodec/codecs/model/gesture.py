@@ -76,7 +76,8 @@ class GestureCodec(TabledCodec):
             at = segmentation.gesture_samples(xg, motion.fps, params).frames
             postures, _ = motiontables.nearest(vectors[k][at], tables.posture_vectors(motion.skeleton, groups, k))
             moves = tables.gestures[k]
-            segs = motiontables.gesture_segments(xg, at, tables.norm).reshape(len(at) - 1, -1)
+            segs = motiontables.gesture_segments(xg, at, tables.norm)
+            segs = segs.reshape(len(at) - 1, segs.size // max(len(at) - 1, 1))  # (a 1-frame clip: none)
             if len(moves) and len(segs):
                 best, error = motiontables.nearest(segs, moves.reshape(len(moves), -1), tables.weights(k))
             else:

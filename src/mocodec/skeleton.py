@@ -294,15 +294,18 @@ class Skeleton:
         """Same structure, names, channels, orders and limits; offsets and axes within ``atol``."""
         return self.difference(other, atol) is None
 
-    def difference(self, other: Skeleton, atol: float = 1e-6) -> str | None:
-        """A one-line description of the first difference from ``other``, or None."""
+    def difference(self, other: Skeleton, atol: float = 1e-6, end_site_names: bool = True) -> str | None:
+        """A one-line description of the first difference from ``other``, or None; with
+        ``end_site_names`` False, two end sites' names may differ (a BVH's end sites have none:
+        its reader names them after their parent, where an FBX or glTF named the leaf bone)."""
         if len(self) != len(other):
             return f"{len(self)} joints vs {len(other)}"
         if not np.isclose(self.units_per_metre, other.units_per_metre, rtol=1e-9):
             return f"units_per_metre {self.units_per_metre} vs {other.units_per_metre}"
-        for a, b in zip(self.joints, other.joints):
+        unnamed = self.end_sites & other.end_sites if not end_site_names else np.zeros(len(self), dtype=bool)
+        for a, b, free in zip(self.joints, other.joints, unnamed):
             for attr in ("name", "parent", "channels", "rotation_order"):
-                if getattr(a, attr) != getattr(b, attr):
+                if getattr(a, attr) != getattr(b, attr) and not (free and attr == "name"):
                     return f"joint {a.name!r}: {attr} {getattr(a, attr)!r} vs {getattr(b, attr)!r}"
             for attr in ("offset", "limits"):
                 x, y = np.asarray(getattr(a, attr), float), np.asarray(getattr(b, attr), float)

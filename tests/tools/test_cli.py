@@ -246,6 +246,20 @@ def test_compare_prints_every_measure(tmp_path, capsys):
     assert data["summary"]["max_joint_error_cm"] == 0 and data["summary"]["psnr_db"] is None  # lossless
 
 
+def test_compare_takes_a_bvh_whose_end_sites_lost_their_fbx_names(tmp_path, capsys):
+    """An FBX names its leaf bone ("Head"); BVH end sites have no name, and its reader calls
+    them after their parent: the converted file compares with its original (it was refused
+    as a different skeleton), and the skeletons still differ where names count."""
+    fbx = DATA.parent / "formats" / "fbx" / "nod.fbx"
+    assert main(["convert", str(fbx), str(tmp_path / "nod.bvh")]) == 0
+    original, converted = load(fbx).skeleton, load(tmp_path / "nod.bvh").skeleton
+    assert "name 'Head'" in original.difference(converted, atol=1e-4)
+    assert original.difference(converted, atol=1e-4, end_site_names=False) is None
+    capsys.readouterr()
+    assert main(["compare", str(fbx), str(tmp_path / "nod.bvh")]) == 0
+    assert "joint error" in capsys.readouterr().out
+
+
 def test_compare_rejects_mismatched_pairs(capsys):
     assert main(["compare", str(DATA / "07_03.bvh"), str(DATA / "07_03.amc")]) == 2
     err = capsys.readouterr().err

@@ -62,13 +62,15 @@ def add_commands(sub) -> None:
         description="Serves a page (three.js, no network needed) that plays the clip and its decoded "
         "version in sync, colours each decoded joint by its error, charts the error over "
         "time and shows ratio, bit rate, joint errors, PSNR and VPSNR; codec and knobs "
-        "can be changed in the page. Opens .bvh, .amc and .moc (a .moc file's motion is "
-        "the reference). With --relay, the page also watches a relay room live (every "
+        "can be changed in the page. Opens .bvh, .amc, .gltf, .glb, .fbx and .moc (a .moc "
+        "file's motion is the reference). With --relay, the page also watches a relay room live (every "
         "avatar and the bit rate it gets): the page joins the relay itself and decodes the streams "
         "in the browser (kinwave-live; streams of other codecs are listed, not drawn). Codec "
         "knobs as --name value.",
     )
-    p.add_argument("file", metavar="FILE", nargs="?", help=".bvh, .amc or .moc (optional with --relay)")
+    p.add_argument(
+        "file", metavar="FILE", nargs="?", help=".bvh, .amc, .gltf, .glb, .fbx or .moc (optional with --relay)"
+    )
     add_codec_options(p)
     p.add_argument("--port", type=int, default=8770, help="port (default 8770; 0: any free port)")
     p.add_argument("--host", default="127.0.0.1")

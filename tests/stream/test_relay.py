@@ -556,6 +556,26 @@ def test_a_sender_that_vanishes_ends_its_stream_for_viewers(walk_bvh):
     assert got[0].num_frames == half.first_frame + half.frames and waited < 5  # ended, not timed out
 
 
+def test_workers_on_a_port_in_use_say_so_and_exit():
+    """A worker that cannot listen (the port is another program's) reports its error: serve
+    prints it in one line and exits 2, stopping the other worker and its NATS server (it waited
+    for ever for the failed worker, which printed a traceback)."""
+    if shutil.which("nats-server", path="/usr/sbin:/usr/bin:/usr/local/bin") is None:
+        pytest.skip("nats-server is not installed (.ci/run installs Debian's nats-server)")
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        done = subprocess.run(
+            [sys.executable, "-m", "mocodec", "serve", "--port", str(port), "--secret", SECRET, "--workers", "2"],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.count("\n") == 1 and "address already in use" in done.stderr, done.stderr
+
+
 def test_workers_behind_one_port_share_their_rooms(walk_bvh):
     """``serve --workers 2`` (a NATS server started by serve): the kernel spreads connections
     over both workers, and every viewer gets the stream a sender sent to whichever worker."""

@@ -81,6 +81,26 @@ def test_user_errors_print_one_line_and_exit_2(argv, message, tmp_path, monkeypa
     assert proc.stderr.count("\n") == 1 and message in proc.stderr and "Traceback" not in proc.stderr
 
 
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["serve", "--port", "99999"], "argument --port: 99999 is out of range: at least 0, at most 65535"),
+        (["serve", "--tick-hz", "0"], "argument --tick-hz: 0 is out of range: above 0, at most 1000"),
+        (["serve", "--workers", "0"], "argument --workers: 0 is out of range: at least 1, at most 256"),
+        (["serve", "--max-bytes-per-s", "nan"], "argument --max-bytes-per-s: nan is out of range: above 0"),
+        (["token", "--room", "r", "--ttl", "-5"], "argument --ttl: -5 is out of range: above 0"),
+        (["view", "--port", "x"], "argument --port: 'x' is not an integer"),
+        (["subscribe", "--url", "u", "--room", "r", "--token", "t", "-o", "o.bvh", "--stream", "-1"], "--stream: -1"),
+    ],
+)
+def test_numbers_out_of_range_are_usage_errors(argv, message, capsys):
+    """A port of 99999 or a tick rate of 0 reached the server as a traceback (OverflowError,
+    ZeroDivisionError); they are usage errors that say the range."""
+    with pytest.raises(SystemExit) as exited:
+        main(argv)
+    assert exited.value.code == 2 and message in capsys.readouterr().err
+
+
 def test_help_on_every_command():
     from mocodec.cli import COMMANDS
 

@@ -4,6 +4,9 @@ command's parser uses them."""
 
 from __future__ import annotations
 
+import argparse
+import math
+
 from mocodec.codecs.registry import DEFAULT_CODEC
 from mocodec.errors import CodecError
 
@@ -115,3 +118,26 @@ def rate_text(size_bytes: float, seconds: float) -> str:
     """The bit rate of ``size_bytes`` over ``seconds`` as the command line prints it ("no
     frames" for a clip of none, which has no rate)."""
     return f"{size_bytes * 8 / seconds / 1000:.2f} kbit/s" if seconds > 0 else "no frames"
+
+
+def number_in(kind: type, low: float, high: float = math.inf, above: bool = False):
+    """An argparse type: a ``kind`` (int or float) from ``low`` (exclusive with ``above``) to
+    ``high``, else a one-line usage error that says the range (a port of 99999 or a tick rate
+    of 0 reached the server as a traceback)."""
+
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not {'an integer' if kind is int else 'a number'}") from None
+        if not (value > low if above else value >= low) or not value <= high or value != value:
+            where = f"above {low:g}" if above else f"at least {low:g}"
+            raise argparse.ArgumentTypeError(
+                f"{text} is out of range: {where}" + (f", at most {high:g}" if high < math.inf else "")
+            )
+        return value
+
+    return parse
+
+
+PORT = number_in(int, 0, 65535)  # a TCP port (0: any free one)

@@ -14,7 +14,7 @@ from mocodec.extras import require
 require("aiohttp", "stream", "the relay and its clients")
 
 from mocodec.cli.coding import configured  # noqa: E402
-from mocodec.cli.options import add_codec_options, add_input_options, load_input  # noqa: E402
+from mocodec.cli.options import PORT, add_codec_options, add_input_options, load_input, number_in  # noqa: E402
 from mocodec.errors import MocodecError  # noqa: E402
 from mocodec.formats import save  # noqa: E402
 from mocodec.stream import client, tokens  # noqa: E402
@@ -26,6 +26,10 @@ LATE_S = 1.0  # a codec that holds frames back longer than this is named when it
 
 
 SECRET_ENV = "MOCODEC_RELAY_SECRET"
+STREAM_ID = number_in(int, 0, 2**32 - 1)  # a packet's u32
+RATE = number_in(float, 0, above=True)  # rates, durations and speeds: a positive number
+MAX_WORKERS = 256
+MAX_TICK_HZ = 1000.0
 
 
 def secret_of(args) -> str:
@@ -186,30 +190,33 @@ def add_commands(sub) -> None:
         "viewer gets one batch, the embedded streams cut to its bandwidth by the crowd "
         "allocation (nearer and larger avatars get more). Publish and subscribe need a token from `mocodec token`.",
     )
-    p.add_argument("--port", type=int, default=8765)
+    p.add_argument("--port", type=PORT, default=8765)
     p.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1; 0.0.0.0: all)")
     add_secret_options(p)
     p.add_argument("--bus", metavar="nats://HOST:4222", help="share rooms with other relays through NATS")
     p.add_argument(
         "--workers",
-        type=int,
+        type=number_in(int, 1, MAX_WORKERS),
         default=1,
         help="relay processes behind the one port, sharing rooms through NATS (--bus, or a nats-server "
         "that serve starts on a free loopback port); default 1",
     )
     p.add_argument(
-        "--tick-hz", type=float, default=TICK_HZ, help=f"batches per second to each viewer (default {TICK_HZ:g})"
+        "--tick-hz",
+        type=number_in(float, 0, MAX_TICK_HZ, above=True),
+        default=TICK_HZ,
+        help=f"batches per second to each viewer (default {TICK_HZ:g})",
     )
-    p.add_argument("--max-message-bytes", type=int, default=Limits.max_message_bytes)
+    p.add_argument("--max-message-bytes", type=number_in(int, 1), default=Limits.max_message_bytes)
     p.add_argument(
         "--max-messages-per-s",
-        type=float,
+        type=RATE,
         default=Limits.publish_messages_per_s,
         help="per sending connection (over it: closed)",
     )
     p.add_argument(
         "--max-bytes-per-s",
-        type=float,
+        type=RATE,
         default=Limits.publish_bytes_per_s,
         help="per sending connection (over it: closed)",
     )
@@ -220,7 +227,7 @@ def add_commands(sub) -> None:
     add_secret_options(p)
     p.add_argument("--room", required=True)
     p.add_argument("--role", choices=tokens.ROLES, default="both", help="what it allows (default both)")
-    p.add_argument("--ttl", type=float, default=24 * 3600.0, help="lifetime in seconds (default a day)")
+    p.add_argument("--ttl", type=RATE, default=24 * 3600.0, help="lifetime in seconds (default a day)")
     p.set_defaults(func=cmd_token)
 
     p = sub.add_parser(
@@ -231,9 +238,9 @@ def add_commands(sub) -> None:
     )
     p.add_argument("file", metavar="FILE")
     _connection(p)
-    p.add_argument("--speed", type=float, default=1.0)
-    p.add_argument("--stream", type=int, default=0, help="stream id in the room (default 0)")
-    p.add_argument("--keyframe-s", type=float, default=1.0, help="seconds between keyframes (default 1)")
+    p.add_argument("--speed", type=RATE, default=1.0, help="times real time (default 1)")
+    p.add_argument("--stream", type=STREAM_ID, default=0, help="stream id in the room (default 0)")
+    p.add_argument("--keyframe-s", type=RATE, default=1.0, help="seconds between keyframes (default 1)")
     add_codec_options(p, PUBLISH_CODEC)
     add_input_options(p)
     p.set_defaults(func=cmd_publish, takes_knobs=True)
@@ -245,11 +252,11 @@ def add_commands(sub) -> None:
     )
     _connection(p)
     p.add_argument("-o", "--output", required=True, help="motion file to write (.bvh, .amc, .gltf or .glb)")
-    p.add_argument("--frames", type=int, help="stop after this many frames")
-    p.add_argument("--stream", type=int, help="stream id to record (default: the first to arrive)")
-    p.add_argument("--budget", type=float, default=0.0, help="this viewer's bandwidth in bit/s (0: all)")
+    p.add_argument("--frames", type=number_in(int, 1), help="stop after this many frames")
+    p.add_argument("--stream", type=STREAM_ID, help="stream id to record (default: the first to arrive)")
+    p.add_argument("--budget", type=number_in(float, 0), default=0.0, help="this viewer's bandwidth in bit/s (0: all)")
     p.add_argument("--camera", default="0,0,0", help="this viewer's camera x,y,z in metres (default 0,0,0)")
-    p.add_argument("--timeout", type=float, help="give up after this many seconds")
+    p.add_argument("--timeout", type=RATE, help="give up after this many seconds")
     p.set_defaults(func=cmd_subscribe)
 
 

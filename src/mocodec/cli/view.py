@@ -12,7 +12,7 @@ from mocodec.extras import require
 
 require("aiohttp", "view", "the viewer")
 
-from mocodec.cli.options import add_codec_options, target_of  # noqa: E402
+from mocodec.cli.options import PORT, add_codec_options, target_of  # noqa: E402
 from mocodec.errors import MocodecError  # noqa: E402
 from mocodec.viewer import study  # noqa: E402
 from mocodec.viewer.server import make_app, serve  # noqa: E402
@@ -72,7 +72,7 @@ def add_commands(sub) -> None:
         "file", metavar="FILE", nargs="?", help=".bvh, .amc, .gltf, .glb, .fbx or .moc (optional with --relay)"
     )
     add_codec_options(p)
-    p.add_argument("--port", type=int, default=8770, help="port (default 8770; 0: any free port)")
+    p.add_argument("--port", type=PORT, default=8770, help="port (default 8770; 0: any free port)")
     p.add_argument("--host", default="127.0.0.1")
     p.add_argument("--no-browser", action="store_true", help="do not open the default browser")
     p.add_argument("--asf", help="ASF skeleton of an .amc input (default: <subject>.asf beside it)")
@@ -96,7 +96,7 @@ def add_commands(sub) -> None:
     q.add_argument("config", metavar="STUDY.json")
     q.add_argument("--out", required=True, metavar="DIR", help="folder for the results files")
     q.add_argument("--participant", default="anonymous", help="a name or code for the results file")
-    q.add_argument("--port", type=int, default=8771)
+    q.add_argument("--port", type=PORT, default=8771)
     q.add_argument("--host", default="127.0.0.1")
     q.add_argument("--no-browser", action="store_true")
     q.set_defaults(func=cmd_study_run)

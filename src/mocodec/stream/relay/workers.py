@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import multiprocessing as mp
+import queue
 import shutil
 import signal
 import socket
@@ -21,6 +22,7 @@ from mocodec.errors import MocodecError
 from mocodec.stream.relay.limits import TICK_HZ, Limits
 
 NATS_PATHS = "/usr/sbin:/usr/bin:/usr/local/bin"
+WORKER_POLL_S = 0.5  # how often serve looks for a worker that died before it listened
 
 
 @contextlib.contextmanager
@@ -48,10 +50,41 @@ def nats_server() -> Iterator[str]:
 
 
 def _worker(host: str, port: int, secret: str, limits: Limits, bus_url: str, tick_hz: float, ready) -> None:
+    """One relay; it puts None on ``ready`` once it listens, or the one line of what stopped it
+    before (a port in use, a NATS server out of reach)."""
     from mocodec.stream.bus import NatsBus
     from mocodec.stream.relay.server import run
 
-    run(host, port, secret, limits, NatsBus(bus_url), tick_hz, reuse_port=True, listening=lambda: ready.put(True))
+    listening = False
+
+    def mark() -> None:
+        nonlocal listening
+        listening = True
+        ready.put(None)
+
+    try:
+        run(host, port, secret, limits, NatsBus(bus_url), tick_hz, reuse_port=True, listening=mark)
+    except (MocodecError, OSError) as e:
+        if listening:
+            raise
+        ready.put(str(e))
+
+
+def _await_workers(procs: list, ready) -> None:
+    """Until every worker listens; MocodecError with the first one's failure, or with its exit
+    code if one died without a word (the others are stopped by the caller)."""
+    waiting = len(procs)
+    while waiting:
+        try:
+            failure = ready.get(timeout=WORKER_POLL_S)
+        except queue.Empty:
+            dead = next((p for p in procs if p.exitcode is not None), None)
+            if dead is not None:
+                raise MocodecError(f"a relay worker stopped before it listened (exit code {dead.exitcode})") from None
+            continue
+        if failure is not None:
+            raise MocodecError(failure)
+        waiting -= 1
 
 
 def _stop(signum, frame) -> None:
@@ -85,8 +118,7 @@ def serve_workers(
         for proc in procs:
             proc.start()
         try:
-            for _ in procs:
-                ready.get()
+            _await_workers(procs, ready)
             if listening is not None:
                 listening()
             for proc in procs:

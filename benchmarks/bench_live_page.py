@@ -24,7 +24,7 @@ import numpy as np
 from common import free_port
 from relay_load import publisher, templates, wait_port
 
-SECRET = "bench"
+SECRET = "bench-live-page-relay-secret"
 PUBLISHERS = 2
 
 

@@ -21,6 +21,7 @@ from relay_load import publisher, templates, wait_port
 
 FIGURES = ROOT / "docs" / "figures"
 LIVE_AVATARS = 20
+RELAY_SECRET = "figure-relay-secret"
 
 
 @contextlib.contextmanager
@@ -67,8 +68,8 @@ def study(browser) -> Path:
 def live(browser) -> Path:
     from mocodec.stream import tokens
 
-    with served("serve", "--secret", "figure", page=False) as relay_port:
-        url, token = f"ws://127.0.0.1:{relay_port}", tokens.issue("figure", "load")
+    with served("serve", "--secret", RELAY_SECRET, page=False) as relay_port:
+        url, token = f"ws://127.0.0.1:{relay_port}", tokens.issue(RELAY_SECRET, "load")
         context = mp.get_context("spawn")
         sent = context.Queue()  # kept here: the sender unpickles it after start()
         sender = context.Process(

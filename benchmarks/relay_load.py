@@ -48,7 +48,7 @@ from mocodec.stream.live import MAX_MISSING
 from mocodec.stream.packets import KEYFRAME, MAX_REPAIRS, RESTART
 from mocodec.stream.relay import TICK_HZ
 
-SECRET = "load-test"
+SECRET = "load-test-relay-secret"
 RESUMES = KEYFRAME | RESTART  # the flags of a packet a receiver can start decoding from
 BINS_MS = 0.1  # latency histogram resolution
 MAX_MS = 5000.0

@@ -30,7 +30,7 @@ from mocodec.stream.relay.server import Relay, start
 
 pytestmark = pytest.mark.network  # a relay (and NATS) on loopback sockets
 
-SECRET = "test-secret"
+SECRET = "test-secret-of-the-relay-tests"
 
 
 @contextlib.asynccontextmanager

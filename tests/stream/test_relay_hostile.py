@@ -201,15 +201,33 @@ def test_a_watcher_survives_damaged_messages_and_streams(walk_bvh):
 def test_the_secret_comes_from_a_file_or_the_environment(tmp_path, capsys, monkeypatch):
     from mocodec.cli import main
 
-    (tmp_path / "secret").write_text("from-a-file\n")
+    (tmp_path / "secret").write_text("from-a-file-of-its-own\n")
     assert main(["token", "--secret-file", str(tmp_path / "secret"), "--room", "r"]) == 0
-    tokens.verify("from-a-file", capsys.readouterr().out.strip(), "r", "publish")
+    tokens.verify("from-a-file-of-its-own", capsys.readouterr().out.strip(), "r", "publish")
     monkeypatch.setenv("MOCODEC_RELAY_SECRET", "from-the-environment")
     assert main(["token", "--room", "r"]) == 0
     tokens.verify("from-the-environment", capsys.readouterr().out.strip(), "r", "publish")
     monkeypatch.delenv("MOCODEC_RELAY_SECRET")
     assert main(["token", "--room", "r"]) == 2
     assert "--secret-file" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("where", ["--secret", "--secret-file", "environment"])
+def test_a_secret_too_short_to_withstand_guessing_is_refused(tmp_path, capsys, monkeypatch, where):
+    """Anyone who sees one token (it rides in URLs) can try short secrets offline and then sign
+    tokens for every room: serve and token want 16 characters, wherever the secret comes from."""
+    from mocodec.cli import main
+
+    short = "fifteen-chars.."
+    (tmp_path / "secret").write_text(short)
+    argv = {"--secret": ["--secret", short], "--secret-file": ["--secret-file", str(tmp_path / "secret")]}
+    if where == "environment":
+        monkeypatch.setenv("MOCODEC_RELAY_SECRET", short)
+    for command in (["token", "--room", "r"], ["serve", "--port", "0"]):
+        assert main([*command, *argv.get(where, [])]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "has 15 characters, it needs at least 16" in err
+    assert main(["token", "--room", "r", "--secret", short + "!"]) == 0
 
 
 def test_a_header_with_a_hostile_reference_pose_closes_its_connection(walk_bvh):

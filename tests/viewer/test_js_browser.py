@@ -19,13 +19,14 @@ from mocodec import load
 from mocodec.motion import Motion
 
 MOC_CASE = DATA / "moc" / "dummy-root-bind"
+SECRET = "browser-tests-relay-secret"  # at least the 16 characters serve asks for
 
 
 @pytest.fixture
 def relay_port():
-    """A relay (secret "s") on a free port, stopped after the test."""
+    """A relay (secret SECRET) on a free port, stopped after the test."""
     port = free_port()
-    serve = [sys.executable, "-m", "mocodec", "serve", "--port", str(port), "--secret", "s"]
+    serve = [sys.executable, "-m", "mocodec", "serve", "--port", str(port), "--secret", SECRET]
     relay = subprocess.Popen(serve, stdout=subprocess.PIPE, text=True)
     try:
         assert "relay on" in relay.stdout.readline()
@@ -40,7 +41,7 @@ def test_a_relay_page_decodes_and_draws_two_live_avatars(browser, relay_port):
     from mocodec.stream import tokens
     from mocodec.stream.client import publish_clip
 
-    token = tokens.issue("s", "lobby")
+    token = tokens.issue(SECRET, "lobby")
     page = browser.new_page(viewport={"width": 800, "height": 600})
     errors: list[str] = []
     page.on("pageerror", lambda e: errors.append(str(e)))

@@ -18,6 +18,8 @@ from mocodec import Motion, load
 from mocodec.viewer.server import make_app
 from mocodec.viewer.session import ViewSession
 
+SECRET = "viewer-tests-relay-secret"  # at least the 16 characters serve asks for
+
 
 def positions(b64: str, frames: int, joints: int) -> np.ndarray:
     return np.frombuffer(base64.b64decode(b64), dtype="<f4").reshape(frames, joints, 3)
@@ -166,14 +168,14 @@ def test_the_page_watches_a_relay_room_live(browser):
 
     relay_port = free_port()
     relay = subprocess.Popen(
-        [sys.executable, "-m", "mocodec", "serve", "--port", str(relay_port), "--secret", "s"],
+        [sys.executable, "-m", "mocodec", "serve", "--port", str(relay_port), "--secret", SECRET],
         stdout=subprocess.PIPE,
         text=True,
     )
     try:
         assert "relay on" in relay.stdout.readline()
         relay_url = f"ws://127.0.0.1:{relay_port}"
-        tok = tokens.issue("s", "lobby")
+        tok = tokens.issue(SECRET, "lobby")
         with viewer_process("--relay", relay_url) as url:
             page = browser.new_page(viewport={"width": 1280, "height": 900})
             errors = []

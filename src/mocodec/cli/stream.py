@@ -26,6 +26,7 @@ LATE_S = 1.0  # a codec that holds frames back longer than this is named when it
 
 
 SECRET_ENV = "MOCODEC_RELAY_SECRET"
+MIN_SECRET_CHARS = 16
 STREAM_ID = number_in(int, 0, 2**32 - 1)  # a packet's u32
 RATE = number_in(float, 0, above=True)  # rates, durations and speeds: a positive number
 MAX_WORKERS = 256
@@ -34,7 +35,8 @@ MAX_TICK_HZ = 1000.0
 
 def secret_of(args) -> str:
     """The relay secret from ``--secret-file``, ``--secret`` (visible in ``ps``: for tests
-    and one-off use) or the environment (MOCODEC_RELAY_SECRET), in that order."""
+    and one-off use) or the environment (MOCODEC_RELAY_SECRET), in that order; at least
+    MIN_SECRET_CHARS long (a token seen in a URL lets anyone try short secrets offline)."""
     if args.secret_file:
         try:
             secret = Path(args.secret_file).read_text().strip()
@@ -42,10 +44,15 @@ def secret_of(args) -> str:
             raise MocodecError(f"{args.secret_file}: cannot read the secret ({e.strerror})") from None
         if not secret:
             raise MocodecError(f"{args.secret_file}: the secret file is empty")
-        return secret
-    secret = args.secret or os.environ.get(SECRET_ENV, "")
-    if not secret:
-        raise MocodecError(f"give the relay secret in a file (--secret-file), in {SECRET_ENV}, or with --secret")
+    else:
+        secret = args.secret or os.environ.get(SECRET_ENV, "")
+        if not secret:
+            raise MocodecError(f"give the relay secret in a file (--secret-file), in {SECRET_ENV}, or with --secret")
+    if len(secret) < MIN_SECRET_CHARS:
+        raise MocodecError(
+            f"the relay secret has {len(secret)} characters, it needs at least {MIN_SECRET_CHARS} (anyone who sees "
+            f"a token can try short ones offline): python -c 'import secrets; print(secrets.token_urlsafe(32))'"
+        )
     return secret
 
 

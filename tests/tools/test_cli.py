@@ -72,6 +72,24 @@ def test_convert_both_ways(tmp_path, capsys):
         (["info", "missing.bvh"], "missing.bvh: no such file"),
         (["convert", str(DATA / "09_02.bvh"), "out.xyz"], "expected .bvh, .amc, .gltf, .glb"),
         (["info", str(DATA / "07.asf")], "skeleton only"),
+        # checked before a recording, not after it; a NaN camera never reaches the relay
+        (["subscribe", "--url", "ws://127.0.0.1:1", "--room", "r", "--token", "t", "-o", "x.xyz"], "cannot write .xyz"),
+        (
+            [
+                "subscribe",
+                "--url",
+                "ws://127.0.0.1:1",
+                "--room",
+                "r",
+                "--token",
+                "t",
+                "-o",
+                "x.bvh",
+                "--camera",
+                "nan,0,0",
+            ],
+            "--camera must be finite",
+        ),
     ],
 )
 def test_user_errors_print_one_line_and_exit_2(argv, message, tmp_path, monkeypatch):

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
 import os
 import sys
 from pathlib import Path
@@ -16,7 +17,7 @@ require("aiohttp", "stream", "the relay and its clients")
 from mocodec.cli.coding import configured  # noqa: E402
 from mocodec.cli.options import PORT, add_codec_options, add_input_options, load_input, number_in  # noqa: E402
 from mocodec.errors import MocodecError  # noqa: E402
-from mocodec.formats import save  # noqa: E402
+from mocodec.formats import WRITABLE, save  # noqa: E402
 from mocodec.stream import client, tokens  # noqa: E402
 from mocodec.stream.relay import TICK_HZ, Limits  # noqa: E402
 from mocodec.stream.relay.server import run  # noqa: E402
@@ -153,8 +154,10 @@ def cmd_publish(args) -> int:
 
 
 def cmd_subscribe(args) -> int:
-    if args.frames is not None and args.frames < 1:
-        raise MocodecError(f"--frames must be at least 1, got {args.frames}")
+    if Path(args.output).suffix.lower() not in WRITABLE:  # before the recording, not after it
+        raise MocodecError(
+            f"{args.output}: cannot write {Path(args.output).suffix or 'no extension'}, expected {', '.join(WRITABLE)}"
+        )
     camera = _camera(args.camera)
 
     def joined() -> None:
@@ -187,6 +190,8 @@ def _camera(text: str) -> tuple[float, float, float]:
         x, y, z = (float(v) for v in text.split(","))
     except ValueError:
         raise MocodecError(f"--camera must be x,y,z in metres, got {text!r}") from None
+    if not all(map(math.isfinite, (x, y, z))):
+        raise MocodecError(f"--camera must be finite, got {text!r}")
     return x, y, z
 
 

@@ -250,6 +250,15 @@ def test_encode_decode_eval_codecs(tmp_path, capsys):
     assert "lossless" in capsys.readouterr().out
 
 
+def test_encode_refuses_two_inputs_that_would_write_one_file(tmp_path, capsys):
+    """``07_03.bvh`` and ``07_03.amc`` (or two folders' ``walk.bvh``) both make ``07_03.moc``:
+    the second replaced the first with exit 0; now nothing is written and the pair is named."""
+    out = tmp_path / "out"
+    out.mkdir()
+    assert main(["encode", str(DATA / "07_03.bvh"), str(DATA / "07_03.amc"), "-o", str(out)]) == 2
+    assert "would both be written to" in capsys.readouterr().err and not list(out.iterdir())
+
+
 def test_coding_errors_are_one_line(tmp_path, capsys):
     cases = [
         (["encode", str(DATA / "07_03.amc"), "-o", str(tmp_path / "x.moc"), "--codec", "nope"], "unknown codec"),

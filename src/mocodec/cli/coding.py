@@ -54,10 +54,15 @@ def cmd_encode(args) -> int:
     out = Path(args.output)
     if len(inputs) > 1 and not out.is_dir():
         raise CodecError(f"{out}: with several inputs, -o must be an existing directory")
-    for k, src in enumerate(inputs, 1):
+    targets = [out / f"{src.stem}.moc" if out.is_dir() else out for src in inputs]
+    first_of: dict[Path, Path] = {}
+    for src, target in zip(inputs, targets):  # before any is written: the later would replace the earlier
+        if target in first_of:
+            raise CodecError(f"{first_of[target]} and {src} would both be written to {target}")
+        first_of[target] = src
+    for k, (src, target) in enumerate(zip(inputs, targets), 1):
         motion = load_input(src, args)
         codec, _ = configured(args, motion)
-        target = out / f"{src.stem}.moc" if out.is_dir() else out
         t0 = time.perf_counter()
         size = moc.encode(
             motion,

@@ -54,6 +54,8 @@ def cmd_encode(args) -> int:
     out = Path(args.output)
     if len(inputs) > 1 and not out.is_dir():
         raise CodecError(f"{out}: with several inputs, -o must be an existing directory")
+    if not out.is_dir():
+        moc_name(out)
     targets = [out / f"{src.stem}.moc" if out.is_dir() else out for src in inputs]
     first_of: dict[Path, Path] = {}
     for src, target in zip(inputs, targets):  # before any is written: the later would replace the earlier
@@ -80,6 +82,14 @@ def cmd_encode(args) -> int:
         _progress(k, len(inputs), src.name)
         print(line)
     return 0
+
+
+def moc_name(path: Path) -> None:
+    """CodecError unless ``path`` is named .moc: a coded file written under a motion file's
+    name replaced the clip itself (``encode clip.bvh -o clip.bvh``)."""
+    if path.suffix.lower() != ".moc":
+        has = f"the extension {path.suffix}" if path.suffix else "no extension"
+        raise CodecError(f"{path}: name the coded file .moc (this name has {has})")
 
 
 def parse_frames(text: str | None) -> tuple[int, int] | None:
@@ -109,6 +119,7 @@ def cmd_decode(args) -> int:
 
 
 def cmd_truncate(args) -> int:
+    moc_name(Path(args.output))
     data = Path(args.input).read_bytes()
     skeleton = skeleton_from(args.skeleton)
     out = moc.truncate(data, ratio=args.ratio, bitrate=args.bitrate, name=args.input, skeleton=skeleton)

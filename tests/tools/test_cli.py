@@ -1,3 +1,4 @@
+import json
 import subprocess
 import sys
 
@@ -318,6 +319,18 @@ def test_compare_takes_a_bvh_whose_end_sites_lost_their_fbx_names(tmp_path, caps
     capsys.readouterr()
     assert main(["compare", str(fbx), str(tmp_path / "nod.bvh")]) == 0
     assert "joint error" in capsys.readouterr().out
+
+
+def test_compare_decodes_a_moc_file_itself(tmp_path, capsys):
+    """``compare clip.bvh clip.moc`` decodes the coded file (it was refused as an unknown file
+    type); one coded with --skeleton-ref takes the original's skeleton, and the bound holds."""
+    for extra in ([], ["--skeleton-ref"]):
+        coded = tmp_path / f"walk{len(extra)}.moc"
+        assert main(["encode", str(DATA / "07_03.bvh"), "-o", str(coded), "--max-error-cm", "1", *extra]) == 0
+        capsys.readouterr()
+        assert main(["compare", str(DATA / "07_03.bvh"), str(coded), "--json"]) == 0
+        summary = json.loads(capsys.readouterr().out)["summary"]
+        assert 0 < summary["max_joint_error_cm"] <= 1.0
 
 
 def test_compare_rejects_mismatched_pairs(capsys):

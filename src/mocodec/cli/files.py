@@ -124,8 +124,13 @@ def cmd_compare(args) -> int:
     from mocodec.metrics import compare
 
     original = load_input(args.original, args)
-    asf = args.decoded_asf or args.asf
-    decoded = load(args.decoded, asf=asf, fps=args.fps, animation=args.animation, units_per_metre=args.units)
+    if Path(args.decoded).suffix.lower() == ".moc":  # a coded file, decoded here
+        from mocodec import moc
+
+        decoded = moc.decode(args.decoded, skeleton=original.skeleton)
+    else:
+        asf = args.decoded_asf or args.asf
+        decoded = load(args.decoded, asf=asf, fps=args.fps, animation=args.animation, units_per_metre=args.units)
     if decoded.skeleton.units_per_metre != original.skeleton.units_per_metre:  # e.g. a BVH written in cm
         decoded = with_units(decoded, original.skeleton.units_per_metre)
     result = compare(original, decoded, shell_cm=args.shell_cm)
@@ -261,7 +266,12 @@ def add_commands(sub) -> None:
         "frame count.",
     )
     p.add_argument("original", metavar="ORIGINAL", help="motion file: .bvh, .amc, .gltf, .glb or .fbx")
-    p.add_argument("decoded", metavar="DECODED", help="motion file: .bvh, .amc, .gltf, .glb or .fbx")
+    p.add_argument(
+        "decoded",
+        metavar="DECODED",
+        help="motion file (.bvh, .amc, .gltf, .glb or .fbx) or a .moc file, decoded here (one coded "
+        "with --skeleton-ref takes ORIGINAL's skeleton)",
+    )
     p.add_argument("--decoded-asf", help="ASF skeleton of an .amc DECODED (default: as for ORIGINAL)")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument("--per-joint", action="store_true", help="also list errors per joint (and per DOF in JSON)")

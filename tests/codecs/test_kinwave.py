@@ -13,7 +13,7 @@ import pytest
 
 from mocodec import moc, ratecontrol, reexpress
 from mocodec.codecs import get_codec
-from mocodec.codecs.kinwave import encoder as kinwave_encoder
+from mocodec.codecs.kinwave import encoder as kinwave_encoder, search
 from mocodec.codecs.kinwave.body import three_angle_groups
 from mocodec.codecs.kinwave.search import BoundSearch
 from mocodec.codecs.shared import rotvec
@@ -191,14 +191,35 @@ def test_the_default_corrects_a_first_pass_over_the_bound_by_the_codes_to_blame(
     enc = BoundSearch(get_codec("kinwave", max_error_cm=0.5), walk_amc[:240])
     scale = enc.first_scale() * 1.2
     seen: dict = {}
-    corrected = enc._corrected_first(scale, 0.5, seen)
+    corrected, missed = enc._corrected_first(scale, 0.5, seen)
     first = seen[enc.codes(scale).tobytes()][1]
     errors = enc.pass_errors(first).max(axis=0)
-    assert errors.max() > 0.5 and corrected is not None and enc.pass_error(corrected) <= 0.5
+    assert errors.max() > 0.5 and corrected is not None and enc.pass_error(corrected) <= 0.5 and not missed
     assert (corrected.steps <= first.steps).all()
     worst = enc.moved_points[:, int(np.argmax(errors))]
     assert (corrected.steps[worst] < first.steps[worst]).all()
-    assert enc._corrected_first(enc.first_scale() * 0.5, 0.5, {}) is None
+    assert enc._corrected_first(enc.first_scale() * 0.5, 0.5, {}) == (None, False)
+    assert enc._corrected_first(enc.first_scale() * 64.0, 0.5, {}) == (None, True)  # too far to correct
+
+
+def test_a_default_landing_whose_corrections_all_miss_lands_again(walk_amc, monkeypatch):
+    """Where every correction of the first pass misses, the feedback's shape is what failed
+    (05_01.amc in Euler order XYZ landed 16% above the same motion in its own order): the
+    default lands again at MISSED_SHARE of the feedback and keeps the smaller body, which
+    holds the bound. Where a correction meets the bound there is no second landing."""
+    clip, codec = walk_amc[:240], get_codec("kinwave", max_error_cm=0.5)
+    shares = []
+    landing = search.BoundSearch.to_bound_with_share
+    monkeypatch.setattr(search.BoundSearch, "to_bound_with_share", lambda s, x: shares.append(x) or landing(s, x))
+    codec.encode(clip)
+    assert shares == []
+    monkeypatch.setattr(search, "CORRECTIONS", 0)  # a first pass over the bound misses ...
+    start = search.BoundSearch.first_scale
+    monkeypatch.setattr(search.BoundSearch, "first_scale", lambda s: 2.0 * start(s))  # ... as this one is
+    body = codec.encode(clip)
+    assert shares == [search.MISSED_SHARE]
+    assert len(body) <= len(landing(BoundSearch(codec, clip), search.MISSED_SHARE))
+    assert _errors(clip, codec.decode(body, clip.skeleton, clip.num_frames, clip.fps))["joint"] <= 0.5
 
 
 def test_the_frame_measures_are_numpys(walk_bvh):

@@ -26,6 +26,7 @@ JOINT_FEEDBACK = 1.0  # share of a joint's measured slack (in octaves) its steps
 SHORT_FRAMES = 512  # a body this short searches once per share of SHORT_SHARES, the smallest wins
 SHORT_SHARES = (JOINT_FEEDBACK, 0.5, 0.0)
 CORRECTIONS = 3  # passes that make the codes to blame for a first pass over a max bound finer (the default)
+MISSED_SHARE = 0.5  # ... where all of them miss, the default lands again at this joint feedback, the smaller kept
 SLACK_PASSES = 1  # rounds in which a max bound's final pass gives its slack away (use_slack)
 SLACK_TRIES = 3  # passes a round tries, halving the codes that move the points over the bound
 SEGMENT_SLACK_BELOW = 0.9  # ... with time-adaptive steps only when its worst error is under this share
@@ -157,26 +158,28 @@ class BoundSearch(Encoder):
                 x = x + float(np.clip((aim - y) / slope, -3.0, 3.0))
         return (lo[2] if lo else None), x
 
-    def _corrected_first(self, scale: float, bound: float, seen: dict[bytes, tuple[float, Pass]]) -> Pass | None:
+    def _corrected_first(
+        self, scale: float, bound: float, seen: dict[bytes, tuple[float, Pass]]
+    ) -> tuple[Pass | None, bool]:
         """At the default effort, the scale search's first pass at ``scale`` (kept in ``seen``
         for the search), and where it breaks a max bound, up to CORRECTIONS passes in which
         each code that moves a point over the bound goes finer by the 1/8 octaves of that
-        point's overshoot, the others as they were: the first of them that meets the bound, else
-        None (the scale search goes on). The max error jumps with single step codes, so a
-        first pass aimed near the bound breaks it on most clips; the codes to blame then move,
-        not every code, and the file lands smaller than where the scale search's next passes
-        take it (docs/kinwave.md)."""
+        point's overshoot, the others as they were: (the first of them that meets the bound,
+        else None: the scale search goes on; whether every correction missed). The max error
+        jumps with single step codes, so a first pass aimed near the bound breaks it on most
+        clips; the codes to blame then move, not every code, and the file lands smaller than
+        where the scale search's next passes take it (docs/kinwave.md)."""
         codes = self.codes(scale)
         ps = self.run_pass(codes)
         seen[codes.tobytes()] = (error := self.pass_error(ps), ps)
         if error <= bound:
-            return None
+            return None, False
         for _ in range(CORRECTIONS):
             finer = np.minimum(self._slack_codes(self.pass_errors(ps).max(axis=0), bound), 0)
             ps = self.run_pass(np.clip(ps.steps + finer, 0, 255).astype(np.uint8), ps.offsets)
             if self.pass_error(ps) <= bound:
-                return ps
-        return None
+                return ps, False
+        return None, True
 
     def use_slack(self, best: Pass, bound: float, below: float = math.inf) -> Pass:
         """Under a max bound, the final pass gives the slack to the codes whose points have it:
@@ -275,7 +278,7 @@ class BoundSearch(Encoder):
         # cost a pass each and bought 0.1-0.8% of the bytes (docs/kinwave.md)
         stop = DEFAULT_STOP if self.cfg["effort"] == 2 and self.cfg["error_measure"] != "mean" else 1.0
         seen: dict[bytes, tuple[float, Pass]] = {}
-        best = self._corrected_first(guess, bound, seen) if stop < 1.0 else None
+        best, missed = self._corrected_first(guess, bound, seen) if stop < 1.0 else (None, False)
         x = math.log(guess)
         if best is None:
             best, x = self._search(self.pass_error, bound, accept, guess, 1.0, stop=stop, seen=seen)
@@ -283,6 +286,8 @@ class BoundSearch(Encoder):
             if best is not None:
                 body = self.body(self.use_slack(best, bound) if self.cfg["effort"] >= 2 else best)
                 if self.error(self.decoded_body(body)) <= bound:  # the guarantee, on the real decoder
+                    if missed and self.feedback_share == JOINT_FEEDBACK and self.cfg["joint_feedback"]:
+                        return min(body, self.to_bound_with_share(MISSED_SHARE), key=len)
                     return body
             x -= math.log(2.0)
             ps = self.run_pass(self.codes(math.exp(x)))

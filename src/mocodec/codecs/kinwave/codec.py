@@ -145,7 +145,8 @@ class KinwaveCodec(Codec):
             int,
             2,
             "how hard a max-error bound's search works: 1 one search aiming at 85-100% of the bound, "
-            "no slack rounds (fastest); 2 one search at 95-100% and the slack rounds; 3 also three "
+            "no slack rounds (fastest); 2 one search at 90-100%, the codes to blame corrected, and the "
+            "slack rounds (a second landing where the corrections miss); 3 also three "
             "landings of a short body's joint feedback and segments of a quarter window, the "
             "smallest kept (smallest files; bytes and speed per level: docs/kinwave.md)",
             1,

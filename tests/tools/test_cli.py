@@ -71,6 +71,7 @@ def test_convert_both_ways(tmp_path, capsys):
     "argv, message",
     [
         (["info", "missing.bvh"], "missing.bvh: no such file"),
+        (["decode", "missing.moc", "-o", "x.bvh"], "error: missing.moc: No such file or directory"),  # not "[Errno 2]"
         (["convert", str(DATA / "09_02.bvh"), "out.xyz"], "expected .bvh, .amc, .gltf, .glb"),
         (["info", str(DATA / "07.asf")], "skeleton only"),
         # checked before a recording, not after it; a NaN camera never reaches the relay

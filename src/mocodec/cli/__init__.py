@@ -98,6 +98,10 @@ def _run(argv: list[str], command: str | None) -> int:
     except MocodecError as e:
         print(f"mocodec: error: {e}", file=sys.stderr)
         return 2
-    except (OSError, ValueError) as e:
+    except OSError as e:  # "missing.moc: No such file or directory", not "[Errno 2] ..."
+        where = f"{e.filename}: " if e.filename is not None else ""
+        print(f"mocodec: error: {where}{e.strerror or e}", file=sys.stderr)
+        return 2
+    except ValueError as e:
         print(f"mocodec: error: {e}", file=sys.stderr)
         return 2

@@ -213,9 +213,10 @@ def test_the_secret_comes_from_a_file_or_the_environment(tmp_path, capsys, monke
 
 
 @pytest.mark.parametrize("where", ["--secret", "--secret-file", "environment"])
-def test_a_secret_too_short_to_withstand_guessing_is_refused(tmp_path, capsys, monkeypatch, where):
+def test_a_secret_too_short_to_withstand_guessing_is_warned_of(tmp_path, capsys, monkeypatch, where):
     """Anyone who sees one token (it rides in URLs) can try short secrets offline and then sign
-    tokens for every room: serve and token want 16 characters, wherever the secret comes from."""
+    tokens for every room: under 16 characters, wherever the secret comes from, serve and token
+    say so on stderr (and still run: tests and local trials use short secrets)."""
     from mocodec.cli import main
 
     short = "fifteen-chars.."
@@ -223,11 +224,12 @@ def test_a_secret_too_short_to_withstand_guessing_is_refused(tmp_path, capsys, m
     argv = {"--secret": ["--secret", short], "--secret-file": ["--secret-file", str(tmp_path / "secret")]}
     if where == "environment":
         monkeypatch.setenv("MOCODEC_RELAY_SECRET", short)
-    for command in (["token", "--room", "r"], ["serve", "--port", "0"]):
-        assert main([*command, *argv.get(where, [])]) == 2
-        err = capsys.readouterr().err
-        assert err.count("\n") == 1 and "has 15 characters, it needs at least 16" in err
+    assert main(["token", "--room", "r", *argv.get(where, [])]) == 0
+    out, err = capsys.readouterr()
+    assert "warning: the relay secret has 15 characters, under 16" in err and err.count("\n") == 1
+    tokens.verify(short, out.strip(), "r", "publish")
     assert main(["token", "--room", "r", "--secret", short + "!"]) == 0
+    assert capsys.readouterr().err == ""
 
 
 def test_a_header_with_a_hostile_reference_pose_closes_its_connection(walk_bvh):

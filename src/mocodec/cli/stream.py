@@ -36,8 +36,9 @@ MAX_TICK_HZ = 1000.0
 
 def secret_of(args) -> str:
     """The relay secret from ``--secret-file``, ``--secret`` (visible in ``ps``: for tests
-    and one-off use) or the environment (MOCODEC_RELAY_SECRET), in that order; at least
-    MIN_SECRET_CHARS long (a token seen in a URL lets anyone try short secrets offline)."""
+    and one-off use) or the environment (MOCODEC_RELAY_SECRET), in that order; one under
+    MIN_SECRET_CHARS gets a warning (a token seen in a URL lets anyone try short secrets offline;
+    tests and local trials use short ones)."""
     if args.secret_file:
         try:
             secret = Path(args.secret_file).read_text().strip()
@@ -50,9 +51,11 @@ def secret_of(args) -> str:
         if not secret:
             raise MocodecError(f"give the relay secret in a file (--secret-file), in {SECRET_ENV}, or with --secret")
     if len(secret) < MIN_SECRET_CHARS:
-        raise MocodecError(
-            f"the relay secret has {len(secret)} characters, it needs at least {MIN_SECRET_CHARS} (anyone who sees "
-            f"a token can try short ones offline): python -c 'import secrets; print(secrets.token_urlsafe(32))'"
+        print(
+            f"mocodec: warning: the relay secret has {len(secret)} characters, under {MIN_SECRET_CHARS} (anyone who "
+            f"sees a token can try short ones offline): python -c 'import secrets; print(secrets.token_urlsafe(32))'",
+            file=sys.stderr,
+            flush=True,
         )
     return secret
 

@@ -22,7 +22,7 @@ from mocodec.cli.options import (
 )
 from mocodec.codecs import codec_class, codec_ids, get_codec
 from mocodec.errors import CodecError
-from mocodec.formats import save
+from mocodec.formats import READABLE, save
 from mocodec.formats.fileio import atomic_write_bytes
 from mocodec.metrics import compare
 from mocodec.metrics.compare import db_text
@@ -85,11 +85,10 @@ def cmd_encode(args) -> int:
 
 
 def moc_name(path: Path) -> None:
-    """CodecError unless ``path`` is named .moc: a coded file written under a motion file's
-    name replaced the clip itself (``encode clip.bvh -o clip.bvh``)."""
-    if path.suffix.lower() != ".moc":
-        has = f"the extension {path.suffix}" if path.suffix else "no extension"
-        raise CodecError(f"{path}: name the coded file .moc (this name has {has})")
+    """CodecError where ``path`` is named as a motion file (.bvh, .asf, ...): a coded file
+    written there replaced the clip itself (``encode clip.bvh -o clip.bvh``)."""
+    if path.suffix.lower() in (*READABLE, ".asf"):
+        raise CodecError(f"{path}: a coded file would replace a motion file there; name it .moc")
 
 
 def parse_frames(text: str | None) -> tuple[int, int] | None:

@@ -367,8 +367,11 @@ class Encoder:
         self.first_pass = passes[best]  # the search starts from it
 
     def starting_pass(self) -> Pass:
-        """The pass at the starting scale (the keyframes' trial may have run it already)."""
-        return self.first_pass or self.run_pass(self.codes(self.first_scale()))
+        """The pass at the starting scale, without joint offsets, run once (the keyframes' trial
+        may have run it; every landing of a body starts from it, and it is measured as it runs)."""
+        if self.first_pass is None:
+            self.first_pass = self.run_pass(self.codes(self.first_scale()))
+        return self.first_pass
 
     def _shape(self) -> tuple[np.ndarray, float]:
         """Steps (degrees per rotation joint, cm for translations) whose modelled bound is 1 cm.

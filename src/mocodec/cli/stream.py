@@ -17,7 +17,7 @@ require("aiohttp", "stream", "the relay and its clients")
 from mocodec.cli.coding import configured  # noqa: E402
 from mocodec.cli.options import PORT, add_codec_options, add_input_options, load_input, number_in  # noqa: E402
 from mocodec.errors import MocodecError  # noqa: E402
-from mocodec.formats import WRITABLE, save  # noqa: E402
+from mocodec.formats import check_writable, save  # noqa: E402
 from mocodec.stream import client, tokens  # noqa: E402
 from mocodec.stream.relay import TICK_HZ, Limits  # noqa: E402
 from mocodec.stream.relay.server import run  # noqa: E402
@@ -157,10 +157,7 @@ def cmd_publish(args) -> int:
 
 
 def cmd_subscribe(args) -> int:
-    if Path(args.output).suffix.lower() not in WRITABLE:  # before the recording, not after it
-        raise MocodecError(
-            f"{args.output}: cannot write {Path(args.output).suffix or 'no extension'}, expected {', '.join(WRITABLE)}"
-        )
+    check_writable(args.output)  # before the recording, not after it
     camera = _camera(args.camera)
 
     def joined() -> None:

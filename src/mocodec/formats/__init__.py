@@ -67,6 +67,7 @@ def save(
     ext = path.suffix.lower()
     if mesh is not None and ext not in (".gltf", ".glb"):
         raise ConversionError(f"{path}: a mesh is written to .gltf or .glb only, not {path.suffix or 'no extension'}")
+    check_writable(path)
     if ext == ".bvh":
         bvh_motion = to_bvh_form(motion)
         if guess_units_per_metre(bvh_motion.skeleton.span()) != bvh_motion.skeleton.units_per_metre:
@@ -77,16 +78,24 @@ def save(
         asf_path = Path(asf) if asf is not None else path.with_suffix(".asf")
         write_amc(to_asf_form(motion), path, asf_path)
         return [asf_path, path]
-    if ext in (".gltf", ".glb"):
-        write_gltf(motion, path, mesh=mesh)
-        return [path]
-    expected = ", ".join(WRITABLE)
-    raise ConversionError(f"{path}: cannot write {path.suffix or 'files without extension'}, expected {expected}")
+    write_gltf(motion, path, mesh=mesh)  # (.gltf or .glb: check_writable let no other through)
+    return [path]
+
+
+def check_writable(path: str | os.PathLike) -> Path:
+    """``path``, if :func:`save` writes its kind of file, else ConversionError (a command that
+    records or converts for long checks before it starts)."""
+    path = Path(path)
+    if path.suffix.lower() not in WRITABLE:
+        expected = ", ".join(WRITABLE)
+        raise ConversionError(f"{path}: cannot write {path.suffix or 'files without extension'}, expected {expected}")
+    return path
 
 
 __all__ = [
     "load",
     "save",
+    "check_writable",
     "read_bvh",
     "write_bvh",
     "read_asf",

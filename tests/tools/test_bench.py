@@ -287,6 +287,18 @@ def test_compress_dir_codes_a_library_and_resumes(tmp_path, capsys):
     assert "0 clips written" in capsys.readouterr().out
 
 
+def test_compress_dir_refuses_two_clips_that_would_write_one_file(tmp_path):
+    """07_03.bvh and 07_03.amc in one folder both make 07_03.moc: refused, naming both, with
+    nothing written."""
+    data = tmp_path / "lib"
+    data.mkdir()
+    for name in ("07_03.bvh", "07_03.amc", "07.asf"):
+        shutil.copy(DATA / name, data)
+    with pytest.raises(MocodecError, match=r"07_03\.(amc|bvh) and .*07_03\.(amc|bvh) would both be written to"):
+        compressdir.plan(data, tmp_path / "out", "kinwave")
+    assert not (tmp_path / "out").exists()
+
+
 def test_compress_dir_reports_a_bad_clip_and_writes_the_others(tmp_path, capsys):
     data = tmp_path / "lib"
     data.mkdir()

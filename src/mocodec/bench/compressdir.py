@@ -15,7 +15,7 @@ from mocodec.bench.runner import execute
 from mocodec.codecs import get_codec
 from mocodec.errors import MocodecError
 from mocodec.formats import load
-from mocodec.formats.fileio import atomic_write_bytes
+from mocodec.formats.fileio import atomic_write_bytes, one_source_each
 
 
 @dataclass(frozen=True)
@@ -58,14 +58,9 @@ def plan(in_dir, out_dir, codec: str, knobs: dict | None = None, goal=None) -> l
     get_codec(codec, **(knobs or {}))  # a bad codec or knob fails here, not in every worker
     if not Path(in_dir).is_dir():
         raise MocodecError(f"{in_dir}: not a folder")
-    tasks: list[FileTask] = []
-    seen: dict[str, str] = {}
-    for source, name in find_clips([in_dir]):
-        target = str(Path(out_dir) / Path(name).with_suffix(".moc"))
-        if target in seen:
-            raise MocodecError(f"{source} and {seen[target]} would both be written to {target}")
-        seen[target] = source
-        tasks.append(FileTask(source, target, codec, tuple(sorted((knobs or {}).items())), goal))
+    pairs = [(source, str(Path(out_dir) / Path(name).with_suffix(".moc"))) for source, name in find_clips([in_dir])]
+    one_source_each(pairs)
+    tasks = [FileTask(source, target, codec, tuple(sorted((knobs or {}).items())), goal) for source, target in pairs]
     if not tasks:
         raise MocodecError(f"no .bvh or .amc clips in {in_dir}")
     return tasks

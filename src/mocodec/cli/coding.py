@@ -23,7 +23,7 @@ from mocodec.cli.options import (
 from mocodec.codecs import codec_class, codec_ids, get_codec
 from mocodec.errors import CodecError
 from mocodec.formats import READABLE, save
-from mocodec.formats.fileio import atomic_write_bytes
+from mocodec.formats.fileio import atomic_write_bytes, one_source_each
 from mocodec.metrics import compare
 from mocodec.metrics.compare import db_text
 from mocodec.motion import Motion
@@ -57,11 +57,7 @@ def cmd_encode(args) -> int:
     if not out.is_dir():
         moc_name(out)
     targets = [out / f"{src.stem}.moc" if out.is_dir() else out for src in inputs]
-    first_of: dict[Path, Path] = {}
-    for src, target in zip(inputs, targets):  # before any is written: the later would replace the earlier
-        if target in first_of:
-            raise CodecError(f"{first_of[target]} and {src} would both be written to {target}")
-        first_of[target] = src
+    one_source_each(zip(inputs, targets))
     for k, (src, target) in enumerate(zip(inputs, targets), 1):
         motion = load_input(src, args)
         codec, _ = configured(args, motion)

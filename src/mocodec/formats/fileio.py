@@ -9,11 +9,12 @@ import stat
 import tempfile
 import time
 import warnings
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
 
-from mocodec.errors import FormatError
+from mocodec.errors import FormatError, MocodecError
 
 
 def read_bytes(path: str | os.PathLike, limit: int | None = None) -> bytes:
@@ -54,6 +55,17 @@ def read_text(path: str | os.PathLike) -> str:
             return data.decode("latin-1")
         except UnicodeDecodeError:  # pragma: no cover - latin-1 decodes every byte
             raise FormatError(path, None, f"not text: undecodable byte at offset {e.start}") from None
+
+
+def one_source_each(pairs: Iterable[tuple[object, object]]) -> None:
+    """MocodecError naming the first two ``(source, target)`` pairs with one target, before
+    anything is written: the later would replace the earlier (``walk.bvh`` and ``walk.amc``
+    both make ``walk.moc``)."""
+    first_of: dict[str, object] = {}
+    for source, target in pairs:
+        if str(target) in first_of:
+            raise MocodecError(f"{first_of[str(target)]} and {source} would both be written to {target}")
+        first_of[str(target)] = source
 
 
 def atomic_write(path: str | os.PathLike, text: str) -> None:

@@ -130,7 +130,7 @@ def number_in(kind: type, low: float, high: float = math.inf, above: bool = Fals
             value = kind(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{text!r} is not {'an integer' if kind is int else 'a number'}") from None
-        if not (value > low if above else value >= low) or not value <= high or value != value:
+        if not ((value > low if above else value >= low) and value <= high):  # (NaN fails both)
             where = f"above {low:g}" if above else f"at least {low:g}"
             raise argparse.ArgumentTypeError(
                 f"{text} is out of range: {where}" + (f", at most {high:g}" if high < math.inf else "")
